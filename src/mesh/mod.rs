@@ -1,0 +1,330 @@
+//! Stage 1b — triangle meshes (skin and skull surfaces, face scans): the data type, its checks,
+//! and OBJ/PLY input/output. Coordinates are LPS millimetres.
+
+pub mod obj;
+pub mod ply;
+
+use crate::error::{Error, Result};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// A per-element scalar column of a PLY file beyond the standard ones.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Column {
+    pub name: String,
+    pub values: Vec<f64>,
+}
+
+/// Optional `element edge` of a PLY file: vertex pairs with extra scalar columns
+/// (springs.ply uses `stiffness` and `kind`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Edges {
+    pub pairs: Vec<[u32; 2]>,
+    pub columns: Vec<Column>,
+}
+
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    pub vertices: Vec<[f64; 3]>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Optional per-vertex RGB colours.
+    pub colors: Option<Vec<[u8; 3]>>,
+    /// Extra per-vertex scalar properties (PLY only).
+    pub vertex_columns: Vec<Column>,
+    /// Optional edges (PLY only).
+    pub edges: Option<Edges>,
+}
+
+/// What [`Mesh::check`] found that is worth a warning but not an error.
+#[derive(Clone, Debug, Default)]
+pub struct MeshStats {
+    pub unreferenced_vertices: usize,
+    pub boundary_edges: usize,
+}
+
+pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+pub fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+pub fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+
+impl Mesh {
+    pub fn new(vertices: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Self {
+        Mesh { vertices, triangles, ..Default::default() }
+    }
+
+    /// Twice-area normal of triangle t (not normalised).
+    pub fn face_normal(&self, t: usize) -> [f64; 3] {
+        let [a, b, c] = self.triangles[t].map(|i| self.vertices[i as usize]);
+        cross(sub(b, a), sub(c, a))
+    }
+
+    pub fn area(&self) -> f64 {
+        (0..self.triangles.len()).map(|t| 0.5 * norm(self.face_normal(t))).sum()
+    }
+
+    /// Area-weighted vertex normals (MODEL.md §3), unit length; zero for isolated vertices.
+    pub fn vertex_normals(&self) -> Vec<[f64; 3]> {
+        let mut n = vec![[0.0; 3]; self.vertices.len()];
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let f = self.face_normal(t);
+            for &v in tri {
+                n[v as usize] = add(n[v as usize], f);
+            }
+        }
+        for v in &mut n {
+            let l = norm(*v);
+            if l > 0.0 {
+                *v = scale(*v, 1.0 / l);
+            }
+        }
+        n
+    }
+
+    /// Characteristic size: the bounding-box diagonal.
+    pub fn diagonal(&self) -> f64 {
+        let (lo, hi) = self.bounds();
+        norm(sub(hi, lo))
+    }
+
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for v in &self.vertices {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Reject what the model cannot use: no triangles, non-finite coordinates, indices out of
+    /// range, degenerate triangles, edges shared by more than two triangles, and neighbouring
+    /// triangles with opposite orientation. `path` names the source in the error.
+    pub fn check(&self, path: &Path) -> Result<MeshStats> {
+        if self.vertices.is_empty() || self.triangles.is_empty() {
+            return Err(Error::input(
+                path,
+                format!("empty mesh ({} vertices, {} triangles)", self.vertices.len(), self.triangles.len()),
+            ));
+        }
+        if let Some(i) = self.vertices.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
+            return Err(Error::input(path, format!("vertex {i} has a non-finite coordinate")));
+        }
+        let nv = self.vertices.len();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            if let Some(&bad) = tri.iter().find(|&&i| i as usize >= nv) {
+                return Err(Error::input(
+                    path,
+                    format!("triangle {t} uses vertex index {bad}, but there are {nv} vertices"),
+                ));
+            }
+        }
+        let diag = self.diagonal();
+        let tiny = (1e-12 * diag * diag).max(f64::MIN_POSITIVE);
+        let degenerate: Vec<usize> = (0..self.triangles.len())
+            .filter(|&t| {
+                let [a, b, c] = self.triangles[t];
+                a == b || b == c || a == c || norm(self.face_normal(t)) <= tiny
+            })
+            .collect();
+        if let Some(&first) = degenerate.first() {
+            return Err(Error::input(
+                path,
+                format!("{} degenerate (zero-area) triangles, the first is triangle {first}", degenerate.len()),
+            ));
+        }
+        // Directed edge → count; undirected edge → count.
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3);
+        let mut undirected: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3);
+        for tri in &self.triangles {
+            for e in 0..3 {
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                *directed.entry((a, b)).or_default() += 1;
+                *undirected.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+        }
+        if let Some((&(a, b), &n)) = undirected.iter().filter(|(_, n)| **n > 2).min() {
+            let count = undirected.values().filter(|n| **n > 2).count();
+            return Err(Error::input(
+                path,
+                format!("non-manifold: {count} edges shared by more than two triangles (edge {a}-{b} by {n})"),
+            ));
+        }
+        if let Some((&(a, b), _)) = directed.iter().filter(|(_, n)| **n > 1).min() {
+            return Err(Error::input(
+                path,
+                format!("inconsistent triangle orientation at edge {a}-{b} (neighbouring triangles wind the same way)"),
+            ));
+        }
+        let mut used = vec![false; nv];
+        for tri in &self.triangles {
+            for &v in tri {
+                used[v as usize] = true;
+            }
+        }
+        Ok(MeshStats {
+            unreferenced_vertices: used.iter().filter(|u| !**u).count(),
+            boundary_edges: undirected.values().filter(|n| **n == 1).count(),
+        })
+    }
+
+    /// Vertex → neighbouring vertices (one ring), sorted.
+    pub fn neighbours(&self) -> Vec<Vec<u32>> {
+        let mut nb = vec![Vec::new(); self.vertices.len()];
+        for tri in &self.triangles {
+            for e in 0..3 {
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                nb[a as usize].push(b);
+                nb[b as usize].push(a);
+            }
+        }
+        for l in &mut nb {
+            l.sort_unstable();
+            l.dedup();
+        }
+        nb
+    }
+
+    /// Drop vertices no triangle uses (keeping the order of the rest).
+    pub fn compact(&mut self) {
+        let mut map = vec![u32::MAX; self.vertices.len()];
+        for tri in &self.triangles {
+            for &v in tri {
+                map[v as usize] = 0;
+            }
+        }
+        let mut next = 0u32;
+        let mut keep = Vec::new();
+        for (i, m) in map.iter_mut().enumerate() {
+            if *m == 0 {
+                *m = next;
+                next += 1;
+                keep.push(i);
+            }
+        }
+        self.vertices = keep.iter().map(|&i| self.vertices[i]).collect();
+        if let Some(c) = &self.colors {
+            self.colors = Some(keep.iter().map(|&i| c[i]).collect());
+        }
+        for col in &mut self.vertex_columns {
+            col.values = keep.iter().map(|&i| col.values[i]).collect();
+        }
+        for tri in &mut self.triangles {
+            *tri = tri.map(|v| map[v as usize]);
+        }
+    }
+
+    /// Connected components by shared vertices: component id per triangle, and the count.
+    pub fn components(&self) -> (Vec<u32>, usize) {
+        let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
+        fn find(p: &mut [u32], mut x: u32) -> u32 {
+            while p[x as usize] != x {
+                p[x as usize] = p[p[x as usize] as usize];
+                x = p[x as usize];
+            }
+            x
+        }
+        for tri in &self.triangles {
+            let a = find(&mut parent, tri[0]);
+            for &v in &tri[1..] {
+                let b = find(&mut parent, v);
+                if a != b {
+                    parent[b as usize] = a;
+                }
+            }
+        }
+        let mut ids: HashMap<u32, u32> = HashMap::new();
+        let comp: Vec<u32> = self
+            .triangles
+            .iter()
+            .map(|tri| {
+                let r = find(&mut parent, tri[0]);
+                let n = ids.len() as u32;
+                *ids.entry(r).or_insert(n)
+            })
+            .collect();
+        (comp, ids.len())
+    }
+}
+
+/// Read OBJ or PLY by extension, then check it.
+pub fn read_mesh(path: &Path) -> Result<Mesh> {
+    if !path.is_file() {
+        return Err(Error::input(path, "no such file"));
+    }
+    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let mesh = match ext.as_str() {
+        "obj" => obj::read(path)?,
+        "ply" => ply::read(path)?,
+        _ => return Err(Error::input(path, "unknown mesh format (expected .obj or .ply)")),
+    };
+    mesh.check(path)?;
+    Ok(mesh)
+}
+
+/// Write OBJ or PLY (binary little-endian) by extension, atomically.
+pub fn write_mesh(mesh: &Mesh, path: &Path) -> Result<()> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+    match ext.as_str() {
+        "obj" => obj::write(mesh, path),
+        "ply" => ply::write(mesh, path, ply::Encoding::BinaryLittleEndian),
+        _ => Err(Error::output(path, "unknown mesh format (expected .obj or .ply)")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square() -> Mesh {
+        Mesh::new(
+            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![[0, 1, 2], [0, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn good_mesh_passes_and_counts_boundary() {
+        let s = square().check(Path::new("sq")).unwrap();
+        assert_eq!(s.boundary_edges, 4);
+        assert!((square().area() - 1.0).abs() < 1e-15);
+        let n = square().vertex_normals();
+        assert!(n.iter().all(|v| (v[2] - 1.0).abs() < 1e-15));
+    }
+
+    #[test]
+    fn bad_meshes_are_refused_with_reason() {
+        let p = Path::new("m.ply");
+        let mut m = square();
+        m.triangles.push([0, 1, 1]);
+        assert!(m.check(p).unwrap_err().to_string().contains("degenerate"));
+        let mut m = square();
+        m.vertices.push([0.5, 0.5, 1.0]);
+        m.triangles.push([0, 2, 4]);
+        assert!(m.check(p).unwrap_err().to_string().contains("non-manifold"));
+        let mut m = square();
+        m.triangles[1] = [0, 3, 2];
+        assert!(m.check(p).unwrap_err().to_string().contains("orientation"));
+        let mut m = square();
+        m.vertices[2][0] = f64::NAN;
+        assert!(m.check(p).unwrap_err().to_string().contains("non-finite"));
+        let mut m = square();
+        m.triangles[0][2] = 9;
+        assert!(m.check(p).unwrap_err().to_string().contains("index 9"));
+    }
+}

@@ -1,0 +1,300 @@
+//! PLY (ascii, binary little- and big-endian) through ply-rs-bw, with vertex colours, extra
+//! per-vertex scalar properties and an optional `edge` element with its own properties.
+
+use super::{Column, Edges, Mesh};
+use crate::error::{Error, Result};
+use crate::output::write_bytes_atomic;
+use ply_rs_bw::parser::Parser;
+use ply_rs_bw::ply::{Addable, DefaultElement, ElementDef, Ply, Property, PropertyDef, PropertyType, ScalarType};
+use ply_rs_bw::writer::Writer;
+use std::path::Path;
+
+pub use ply_rs_bw::ply::Encoding;
+
+fn scalar(p: &Property) -> Option<f64> {
+    Some(match *p {
+        Property::Char(v) => v as f64,
+        Property::UChar(v) => v as f64,
+        Property::Short(v) => v as f64,
+        Property::UShort(v) => v as f64,
+        Property::Int(v) => v as f64,
+        Property::UInt(v) => v as f64,
+        Property::Float(v) => v as f64,
+        Property::Double(v) => v,
+        _ => return None,
+    })
+}
+
+fn index_list(p: &Property) -> Option<Vec<i64>> {
+    Some(match p {
+        Property::ListChar(v) => v.iter().map(|&x| x as i64).collect(),
+        Property::ListUChar(v) => v.iter().map(|&x| x as i64).collect(),
+        Property::ListShort(v) => v.iter().map(|&x| x as i64).collect(),
+        Property::ListUShort(v) => v.iter().map(|&x| x as i64).collect(),
+        Property::ListInt(v) => v.iter().map(|&x| x as i64).collect(),
+        Property::ListUInt(v) => v.iter().map(|&x| x as i64).collect(),
+        _ => return None,
+    })
+}
+
+/// Refuse headers that promise more elements than the file has bytes (each element needs at
+/// least one byte), before the parser allocates for them.
+fn check_counts(path: &Path, bytes: &[u8]) -> Result<()> {
+    let end = bytes
+        .windows(10)
+        .position(|w| w == b"end_header")
+        .ok_or_else(|| Error::input(path, "not a PLY file (no end_header)"))?;
+    if !bytes.starts_with(b"ply") {
+        return Err(Error::input(path, "not a PLY file (missing 'ply' magic)"));
+    }
+    let header = String::from_utf8_lossy(&bytes[..end]);
+    let mut total: u128 = 0;
+    for line in header.lines() {
+        let w: Vec<&str> = line.split_whitespace().collect();
+        if w.len() == 3 && w[0] == "element" {
+            let n: u128 = w[2].parse().map_err(|_| Error::input(path, format!("bad element count in '{line}'")))?;
+            total += n;
+        }
+    }
+    if total > bytes.len() as u128 {
+        return Err(Error::input(
+            path,
+            format!("header declares {total} elements but the file has only {} bytes (truncated?)", bytes.len()),
+        ));
+    }
+    Ok(())
+}
+
+pub fn read(path: &Path) -> Result<Mesh> {
+    let bytes = std::fs::read(path).map_err(|e| Error::input(path, e))?;
+    check_counts(path, &bytes)?;
+    let parser = Parser::<DefaultElement>::new();
+    let ply = parser
+        .read_ply(&mut bytes.as_slice())
+        .map_err(|e| Error::input(path, format!("unreadable PLY ({e})")))?;
+    let verts = ply.payload.get("vertex").ok_or_else(|| Error::input(path, "no vertex element"))?;
+    let mut mesh = Mesh::default();
+    let coord = |v: &DefaultElement, k: &str, i: usize| -> Result<f64> {
+        v.get(k)
+            .and_then(scalar)
+            .ok_or_else(|| Error::input(path, format!("vertex {i} lacks a numeric '{k}'")))
+    };
+    for (i, v) in verts.iter().enumerate() {
+        mesh.vertices.push([coord(v, "x", i)?, coord(v, "y", i)?, coord(v, "z", i)?]);
+    }
+    if let Some(first) = verts.first() {
+        if ["red", "green", "blue"].iter().all(|k| first.contains_key(*k)) {
+            let c = |v: &DefaultElement, k: &str| v.get(k).and_then(scalar).unwrap_or(0.0).clamp(0.0, 255.0) as u8;
+            mesh.colors = Some(verts.iter().map(|v| [c(v, "red"), c(v, "green"), c(v, "blue")]).collect());
+        }
+        for (name, p) in first.iter() {
+            if ["x", "y", "z", "red", "green", "blue", "alpha"].contains(&name.as_str()) || scalar(p).is_none() {
+                continue;
+            }
+            let values = verts.iter().map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN)).collect();
+            mesh.vertex_columns.push(Column { name: name.clone(), values });
+        }
+    }
+    if let Some(faces) = ply.payload.get("face") {
+        for (f, face) in faces.iter().enumerate() {
+            let idx = face
+                .get("vertex_indices")
+                .or_else(|| face.get("vertex_index"))
+                .and_then(index_list)
+                .ok_or_else(|| Error::input(path, format!("face {f} has no vertex_indices list")))?;
+            if idx.len() < 3 {
+                return Err(Error::input(path, format!("face {f} has {} vertices", idx.len())));
+            }
+            if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= mesh.vertices.len()) {
+                return Err(Error::input(
+                    path,
+                    format!("face {f} uses vertex index {bad}, but there are {} vertices", mesh.vertices.len()),
+                ));
+            }
+            // Polygons become triangle fans.
+            for k in 1..idx.len() - 1 {
+                mesh.triangles.push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
+            }
+        }
+    }
+    if let Some(edges) = ply.payload.get("edge") {
+        let mut e = Edges::default();
+        for (n, ed) in edges.iter().enumerate() {
+            let a = ed.get("vertex1").and_then(scalar);
+            let b = ed.get("vertex2").and_then(scalar);
+            match (a, b) {
+                (Some(a), Some(b)) if a >= 0.0 && b >= 0.0 && (a as usize) < mesh.vertices.len() && (b as usize) < mesh.vertices.len() => {
+                    e.pairs.push([a as u32, b as u32])
+                }
+                _ => return Err(Error::input(path, format!("edge {n} has missing or out-of-range vertex1/vertex2"))),
+            }
+        }
+        if let Some(first) = edges.first() {
+            for (name, p) in first.iter() {
+                if name == "vertex1" || name == "vertex2" || scalar(p).is_none() {
+                    continue;
+                }
+                let values = edges.iter().map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN)).collect();
+                e.columns.push(Column { name: name.clone(), values });
+            }
+        }
+        mesh.edges = Some(e);
+    }
+    Ok(mesh)
+}
+
+fn def(name: &str, t: ScalarType) -> PropertyDef {
+    PropertyDef::new(name.to_string(), PropertyType::Scalar(t))
+}
+
+/// Columns named `kind`/`label` are written as uchar (CASE.md springs.ply), others as float.
+fn column_type(name: &str) -> ScalarType {
+    if name == "kind" || name == "label" { ScalarType::UChar } else { ScalarType::Float }
+}
+
+fn column_value(name: &str, v: f64) -> Property {
+    match column_type(name) {
+        ScalarType::UChar => Property::UChar(v.clamp(0.0, 255.0) as u8),
+        _ => Property::Float(v as f32),
+    }
+}
+
+/// Coordinates are written as double: the predicted face must keep sub-micron precision.
+pub fn to_ply(mesh: &Mesh, encoding: Encoding) -> Ply<DefaultElement> {
+    let mut ply = Ply::<DefaultElement>::new();
+    ply.header.encoding = encoding;
+    ply.header.comments.push("facesim: LPS frame, millimetres".to_string());
+    let mut vdef = ElementDef::new("vertex".to_string());
+    for k in ["x", "y", "z"] {
+        vdef.properties.add(def(k, ScalarType::Double));
+    }
+    if mesh.colors.is_some() {
+        for k in ["red", "green", "blue"] {
+            vdef.properties.add(def(k, ScalarType::UChar));
+        }
+    }
+    for c in &mesh.vertex_columns {
+        vdef.properties.add(def(&c.name, column_type(&c.name)));
+    }
+    ply.header.elements.add(vdef);
+    let mut verts = Vec::with_capacity(mesh.vertices.len());
+    for (i, v) in mesh.vertices.iter().enumerate() {
+        let mut e = DefaultElement::new();
+        e.insert("x".into(), Property::Double(v[0]));
+        e.insert("y".into(), Property::Double(v[1]));
+        e.insert("z".into(), Property::Double(v[2]));
+        if let Some(c) = &mesh.colors {
+            e.insert("red".into(), Property::UChar(c[i][0]));
+            e.insert("green".into(), Property::UChar(c[i][1]));
+            e.insert("blue".into(), Property::UChar(c[i][2]));
+        }
+        for c in &mesh.vertex_columns {
+            e.insert(c.name.clone(), column_value(&c.name, c.values[i]));
+        }
+        verts.push(e);
+    }
+    ply.payload.insert("vertex".into(), verts);
+    if !mesh.triangles.is_empty() || mesh.edges.is_none() {
+        let mut fdef = ElementDef::new("face".to_string());
+        fdef.properties.add(PropertyDef::new(
+            "vertex_indices".to_string(),
+            PropertyType::List(ScalarType::UChar, ScalarType::Int),
+        ));
+        ply.header.elements.add(fdef);
+        let faces = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let mut e = DefaultElement::new();
+                e.insert("vertex_indices".into(), Property::ListInt(t.iter().map(|&i| i as i32).collect()));
+                e
+            })
+            .collect();
+        ply.payload.insert("face".into(), faces);
+    }
+    if let Some(edges) = &mesh.edges {
+        let mut edef = ElementDef::new("edge".to_string());
+        edef.properties.add(def("vertex1", ScalarType::Int));
+        edef.properties.add(def("vertex2", ScalarType::Int));
+        for c in &edges.columns {
+            edef.properties.add(def(&c.name, column_type(&c.name)));
+        }
+        ply.header.elements.add(edef);
+        let list = edges
+            .pairs
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let mut e = DefaultElement::new();
+                e.insert("vertex1".into(), Property::Int(p[0] as i32));
+                e.insert("vertex2".into(), Property::Int(p[1] as i32));
+                for c in &edges.columns {
+                    e.insert(c.name.clone(), column_value(&c.name, c.values[i]));
+                }
+                e
+            })
+            .collect();
+        ply.payload.insert("edge".into(), list);
+    }
+    ply
+}
+
+pub fn write(mesh: &Mesh, path: &Path, encoding: Encoding) -> Result<()> {
+    let mut ply = to_ply(mesh, encoding);
+    write_bytes_atomic(path, |w| {
+        Writer::new()
+            .write_ply(&mut &mut *w, &mut ply)
+            .map(|_| ())
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Mesh {
+        let mut m = Mesh::new(
+            vec![[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [0.0, 2.25, -1.0], [1.0, 1.0, 1.0]],
+            vec![[0, 1, 2], [1, 3, 2]],
+        );
+        m.colors = Some(vec![[255, 0, 0], [0, 255, 0], [0, 0, 255], [7, 8, 9]]);
+        m.vertex_columns.push(Column { name: "dist".into(), values: vec![0.5, 1.0, 2.0, 4.0] });
+        m.edges = Some(Edges {
+            pairs: vec![[0, 3], [1, 2]],
+            columns: vec![
+                Column { name: "stiffness".into(), values: vec![0.25, 3.0] },
+                Column { name: "kind".into(), values: vec![0.0, 1.0] },
+            ],
+        });
+        m
+    }
+
+    #[test]
+    fn round_trip_every_encoding() {
+        let d = tempfile::tempdir().unwrap();
+        for enc in [Encoding::Ascii, Encoding::BinaryLittleEndian, Encoding::BinaryBigEndian] {
+            let p = d.path().join(format!("{enc:?}.ply"));
+            write(&sample(), &p, enc).unwrap();
+            let back = read(&p).unwrap();
+            assert_eq!(back, sample(), "{enc:?}");
+        }
+    }
+
+    #[test]
+    fn refuses_count_bomb_and_bad_index() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("bomb.ply");
+        std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nend_header\n").unwrap();
+        assert!(read(&p).unwrap_err().to_string().contains("declares"));
+        let p = d.path().join("idx.ply");
+        std::fs::write(
+            &p,
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+             element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+        )
+        .unwrap();
+        let e = read(&p).unwrap_err().to_string();
+        assert!(e.contains("idx.ply") && e.contains("index 7"), "{e}");
+    }
+}

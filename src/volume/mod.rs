@@ -1,0 +1,306 @@
+//! Stage 1a — the CT volume: voxels in Hounsfield units with a voxel-to-LPS affine (mm).
+//!
+//! Readers for NIfTI, DICOM series and InVesalius projects all produce a [`Volume`]; everything
+//! downstream works in the LPS world frame (CASE.md "Frames and units").
+
+pub mod dicom_io;
+pub mod inv3;
+pub mod nifti_io;
+
+use crate::error::{Error, Result};
+use serde::Serialize;
+use std::path::Path;
+
+/// Largest volume we agree to allocate (voxels). 1024³ f32 is 4 GiB: refuse anything larger
+/// before allocating, so a corrupt header cannot exhaust memory.
+pub const MAX_VOXELS: usize = 1 << 30;
+
+#[derive(Clone, Debug)]
+pub struct Volume {
+    /// Voxel counts along i, j, k.
+    pub dims: [usize; 3],
+    /// Voxel size along i, j, k in mm (all > 0).
+    pub spacing: [f64; 3],
+    /// LPS position (mm) of the centre of voxel (0, 0, 0).
+    pub origin: [f64; 3],
+    /// Unit LPS direction of the i, j, k axes: `direction[c]` is the direction of axis c.
+    pub direction: [[f64; 3]; 3],
+    /// HU values, i fastest: index = i + nx (j + ny k).
+    pub data: Vec<f32>,
+}
+
+/// `facesim inspect` output (CASE.md).
+#[derive(Serialize, Debug, PartialEq)]
+pub struct Inspect {
+    pub dims: [usize; 3],
+    pub spacing: [f64; 3],
+    pub origin: [f64; 3],
+    pub direction: [[f64; 3]; 3],
+    pub hu_min: f64,
+    pub hu_max: f64,
+    pub hu_mean: f64,
+}
+
+impl Volume {
+    /// Validate geometry and size; used by every reader before it allocates voxel data.
+    pub fn check_geometry(
+        path: &Path,
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        origin: [f64; 3],
+        direction: [[f64; 3]; 3],
+    ) -> Result<()> {
+        if dims.contains(&0) {
+            return Err(Error::input(path, format!("empty volume, dimensions {dims:?}")));
+        }
+        let n = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
+        match n {
+            Some(n) if n <= MAX_VOXELS => {}
+            _ => {
+                return Err(Error::input(
+                    path,
+                    format!("dimensions {dims:?} exceed the limit of {MAX_VOXELS} voxels"),
+                ));
+            }
+        }
+        if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+            return Err(Error::input(
+                path,
+                format!("voxel spacing {spacing:?} must be finite and positive"),
+            ));
+        }
+        if origin.iter().any(|o| !o.is_finite()) || direction.iter().flatten().any(|d| !d.is_finite()) {
+            return Err(Error::input(path, "non-finite origin or orientation"));
+        }
+        let det = det3(direction);
+        if det.abs() < 1e-3 {
+            return Err(Error::input(path, "degenerate orientation (axes are parallel)"));
+        }
+        Ok(())
+    }
+
+    pub fn len(&self) -> usize {
+        self.data.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.data.is_empty()
+    }
+
+    #[inline]
+    pub fn idx(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+
+    #[inline]
+    pub fn ijk(&self, idx: usize) -> [usize; 3] {
+        let nx = self.dims[0];
+        let ny = self.dims[1];
+        [idx % nx, (idx / nx) % ny, idx / (nx * ny)]
+    }
+
+    /// Continuous voxel coordinates → LPS mm.
+    pub fn to_world(&self, c: [f64; 3]) -> [f64; 3] {
+        let mut p = self.origin;
+        for (a, &ca) in c.iter().enumerate() {
+            for (r, pr) in p.iter_mut().enumerate() {
+                *pr += self.direction[a][r] * self.spacing[a] * ca;
+            }
+        }
+        p
+    }
+
+    /// LPS mm → continuous voxel coordinates.
+    pub fn to_voxel(&self, p: [f64; 3]) -> [f64; 3] {
+        let d = [p[0] - self.origin[0], p[1] - self.origin[1], p[2] - self.origin[2]];
+        let inv = inv3(self.direction);
+        let mut c = [0.0; 3];
+        for (a, ca) in c.iter_mut().enumerate() {
+            *ca = (inv[a][0] * d[0] + inv[a][1] * d[1] + inv[a][2] * d[2]) / self.spacing[a];
+        }
+        c
+    }
+
+    /// Trilinear interpolation at LPS point `p`; `outside` beyond the grid (clamped at the
+    /// outermost voxel centres, so the border half-voxel takes the border value).
+    pub fn sample(&self, p: [f64; 3], outside: f32) -> f32 {
+        sample_field(&self.data, self.dims, self.to_voxel(p), outside)
+    }
+
+    pub fn voxel_volume(&self) -> f64 {
+        self.spacing[0] * self.spacing[1] * self.spacing[2] * det3(self.direction).abs()
+    }
+
+    /// World-space bounding box of the voxel centres.
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for corner in 0..8 {
+            let c = [
+                if corner & 1 != 0 { (self.dims[0] - 1) as f64 } else { 0.0 },
+                if corner & 2 != 0 { (self.dims[1] - 1) as f64 } else { 0.0 },
+                if corner & 4 != 0 { (self.dims[2] - 1) as f64 } else { 0.0 },
+            ];
+            let p = self.to_world(c);
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        (lo, hi)
+    }
+
+    pub fn inspect(&self) -> Inspect {
+        let (mut lo, mut hi, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
+        for &v in &self.data {
+            let v = v as f64;
+            lo = lo.min(v);
+            hi = hi.max(v);
+            sum += v;
+        }
+        Inspect {
+            dims: self.dims,
+            spacing: self.spacing,
+            origin: self.origin,
+            direction: self.direction,
+            hu_min: lo,
+            hu_max: hi,
+            hu_mean: sum / self.data.len() as f64,
+        }
+    }
+
+    /// Reject NaN/infinite voxels: they would poison every threshold downstream.
+    pub fn check_finite(&self, path: &Path) -> Result<()> {
+        if let Some(i) = self.data.iter().position(|v| !v.is_finite()) {
+            return Err(Error::input(
+                path,
+                format!("non-finite voxel value at voxel {:?}", self.ijk(i)),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Trilinear interpolation in a scalar field laid out like [`Volume::data`], at continuous
+/// voxel coordinates `c`.
+pub fn sample_field(data: &[f32], dims: [usize; 3], c: [f64; 3], outside: f32) -> f32 {
+    let mut i0 = [0usize; 3];
+    let mut f = [0.0f64; 3];
+    for a in 0..3 {
+        let n = dims[a] as f64;
+        if !(c[a] > -0.5 && c[a] < n - 0.5) {
+            return outside;
+        }
+        let x = c[a].clamp(0.0, n - 1.0);
+        let b = (x.floor() as usize).min(dims[a].saturating_sub(2));
+        i0[a] = b;
+        f[a] = if dims[a] > 1 { x - b as f64 } else { 0.0 };
+    }
+    let nx = dims[0];
+    let nxy = dims[0] * dims[1];
+    let step = [
+        usize::from(dims[0] > 1),
+        if dims[1] > 1 { nx } else { 0 },
+        if dims[2] > 1 { nxy } else { 0 },
+    ];
+    let base = i0[0] + nx * i0[1] + nxy * i0[2];
+    let mut acc = 0.0f64;
+    for corner in 0..8 {
+        let mut w = 1.0;
+        let mut o = base;
+        for a in 0..3 {
+            if corner & (1 << a) != 0 {
+                w *= f[a];
+                o += step[a];
+            } else {
+                w *= 1.0 - f[a];
+            }
+        }
+        if w != 0.0 {
+            acc += w * data[o] as f64;
+        }
+    }
+    acc as f32
+}
+
+pub fn det3(m: [[f64; 3]; 3]) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+
+/// Inverse of the 3×3 matrix whose *columns* are `m[0], m[1], m[2]`; returned as rows:
+/// `inv[a]` is the row that extracts coordinate a.
+pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
+    // Columns a = m[0], b = m[1], c = m[2]: rows of the inverse are (b×c, c×a, a×b)/det.
+    let (a, b, c) = (m[0], m[1], m[2]);
+    let cross = |u: [f64; 3], v: [f64; 3]| {
+        [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+    };
+    let r0 = cross(b, c);
+    let det = a[0] * r0[0] + a[1] * r0[1] + a[2] * r0[2];
+    let r1 = cross(c, a);
+    let r2 = cross(a, b);
+    let s = 1.0 / det;
+    [
+        [r0[0] * s, r0[1] * s, r0[2] * s],
+        [r1[0] * s, r1[1] * s, r1[2] * s],
+        [r2[0] * s, r2[1] * s, r2[2] * s],
+    ]
+}
+
+/// Read any supported volume: `.nii`, `.nii.gz`, `.inv3`, or a directory holding one DICOM series.
+pub fn read_volume(path: &Path) -> Result<Volume> {
+    if !path.exists() {
+        return Err(Error::input(path, "no such file or directory"));
+    }
+    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let vol = if path.is_dir() {
+        dicom_io::read_series(path)?
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        nifti_io::read(path)?
+    } else if name.ends_with(".inv3") {
+        inv3::read(path)?
+    } else {
+        return Err(Error::input(
+            path,
+            "unknown volume format (expected .nii, .nii.gz, .inv3 or a DICOM series directory)",
+        ));
+    };
+    vol.check_finite(path)?;
+    Ok(vol)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn oblique() -> Volume {
+        let (c, s) = (0.6f64, 0.8f64);
+        Volume {
+            dims: [4, 5, 6],
+            spacing: [0.5, 1.0, 2.0],
+            origin: [10.0, -3.0, 7.0],
+            direction: [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, -1.0]],
+            data: (0..120).map(|i| i as f32).collect(),
+        }
+    }
+
+    #[test]
+    fn world_voxel_round_trip() {
+        let v = oblique();
+        let c = [1.3, 2.7, 4.1];
+        let back = v.to_voxel(v.to_world(c));
+        for a in 0..3 {
+            assert!((back[a] - c[a]).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn trilinear_reproduces_linear_field() {
+        // data = i + 4 j + 20 k is linear in the voxel coordinates, so trilinear is exact.
+        let v = oblique();
+        let c = [1.25, 3.5, 2.75];
+        let got = sample_field(&v.data, v.dims, c, f32::NAN) as f64;
+        assert!((got - (c[0] + 4.0 * c[1] + 20.0 * c[2])).abs() < 1e-4);
+        assert!(sample_field(&v.data, v.dims, [-0.6, 0.0, 0.0], -5.0) == -5.0);
+    }
+}
