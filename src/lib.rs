@@ -1,12 +1,21 @@
 //! facesim — predicting a patient's face after cranio-maxillofacial surgery, after
 //! Koch, Gross et al. 1996 ("Simulating Facial Surgery Using Finite Element Models").
 //!
-//! The modules follow the pipeline's stages:
-//! `volume` (read CT) → `segment` (tissues) → `surface` (skin and skull meshes) → … → `run`.
+//! The modules follow the pipeline's stages (docs/pipeline.md):
+//! `volume` (read CT) → `segment` (tissues) → `surface` (skin and skull meshes) → `run`.
+//! `mesh` reads and writes OBJ/PLY, `phantom` makes the analytic test head, `compare`
+//! measures mesh distances, `case` reads case.toml over `pipeline/defaults.toml`.
 
+pub mod case;
+pub mod compare;
 pub mod error;
 pub mod mesh;
 pub mod output;
+pub mod phantom;
+pub mod progress;
+pub mod run;
+pub mod segment;
+pub mod surface;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -1,3 +1,160 @@
-fn main() {
-    println!("Hello, world!");
+//! The `facesim` command line (CASE.md "Commands").
+
+use clap::{Parser, Subcommand};
+use facesim::error::{Error, Result};
+use facesim::progress::Progress;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "facesim",
+    version,
+    about = "Predict the face after cranio-maxillofacial surgery (Koch et al. 1996, extended)"
+)]
+struct Cli {
+    /// Worker threads (default: all cores).
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run the whole pipeline on a case directory (outputs in CASE_DIR/out by default).
+    Run {
+        case_dir: PathBuf,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Write a synthetic head case whose geometry is known exactly.
+    Phantom {
+        dir: PathBuf,
+        /// In-plane voxel size (mm).
+        #[arg(long, default_value_t = 1.5)]
+        spacing: f64,
+        /// Slice spacing (mm).
+        #[arg(long, default_value_t = 1.5)]
+        slice: f64,
+        /// Noise standard deviation (HU).
+        #[arg(long, default_value_t = 8.0)]
+        noise: f64,
+    },
+    /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
+    Inspect { path: PathBuf },
+    /// Distances between two meshes (OBJ or PLY).
+    Compare {
+        a: PathBuf,
+        b: PathBuf,
+        /// Print the full JSON (default: a short summary).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+fn main() -> ExitCode {
+    // Any panic left is a bug: one line, not a backtrace wall.
+    std::panic::set_hook(Box::new(|info| {
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        eprintln!(
+            "facesim: internal error{at}: {} (please report this with the case)",
+            msg.replace('\n', " ")
+        );
+    }));
+    let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global();
+    }
+    match std::panic::catch_unwind(|| dispatch(cli.cmd)) {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(e)) => {
+            eprintln!("facesim: {e}");
+            ExitCode::from(1)
+        }
+        Err(_) => ExitCode::from(2),
+    }
+}
+
+fn dispatch(cmd: Cmd) -> Result<()> {
+    match cmd {
+        Cmd::Run { case_dir, out } => {
+            let o = facesim::run::run(&case_dir, out.as_deref(), &Progress::auto())?;
+            let r = &o.report;
+            println!(
+                "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
+                r.name,
+                o.skin.vertices.len(),
+                o.skull.vertices.len(),
+                r.timings
+                    .get("total")
+                    .and_then(|v| v.as_f64())
+                    .unwrap_or(0.0),
+                o.out_dir.display()
+            );
+            for w in &r.warnings {
+                eprintln!("warning: {w}");
+            }
+            Ok(())
+        }
+        Cmd::Phantom {
+            dir,
+            spacing,
+            slice,
+            noise,
+        } => {
+            if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
+                return Err(Error::config(
+                    "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
+                ));
+            }
+            let opts = facesim::phantom::PhantomOptions {
+                spacing: [spacing, spacing, slice],
+                noise_hu: noise,
+                ..Default::default()
+            };
+            facesim::phantom::write_case(&dir, &opts)?;
+            println!("phantom case written to {}", dir.display());
+            Ok(())
+        }
+        Cmd::Inspect { path } => {
+            let v = facesim::volume::read_volume(&path)?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(&path, e))?
+            );
+            Ok(())
+        }
+        Cmd::Compare { a, b, json } => {
+            let ma = facesim::mesh::read_mesh(&a)?;
+            let mb = facesim::mesh::read_mesh(&b)?;
+            let c = facesim::compare::compare(&ma, &mb);
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&c).map_err(|e| Error::output(&a, e))?
+                );
+            } else {
+                println!(
+                    "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",
+                    c.mean, c.rms, c.max, c.pct_within_1mm, c.pct_within_2mm
+                );
+                if let (Some(m), Some(x)) = (c.vertex_mean, c.vertex_max) {
+                    println!("per vertex: mean {m:.4} mm, max {x:.4} mm");
+                }
+            }
+            Ok(())
+        }
+    }
 }

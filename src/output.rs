@@ -15,13 +15,19 @@ pub fn write_atomic<F>(dest: &Path, write: F) -> Result<()>
 where
     F: FnOnce(&Path) -> Result<()>,
 {
-    let dir = dest.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = dest.file_name().ok_or_else(|| Error::output(dest, "not a file name"))?;
+    let dir = dest
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = dest
+        .file_name()
+        .ok_or_else(|| Error::output(dest, "not a file name"))?;
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let tmp_dir: PathBuf = dir.join(format!(".facesim-tmp-{}-{n}", std::process::id()));
     std::fs::create_dir_all(&tmp_dir).map_err(|e| Error::output(dest, e))?;
     let tmp = tmp_dir.join(name);
-    let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, dest).map_err(|e| Error::output(dest, e)));
+    let result =
+        write(&tmp).and_then(|()| std::fs::rename(&tmp, dest).map_err(|e| Error::output(dest, e)));
     let _ = std::fs::remove_dir_all(&tmp_dir);
     result
 }

@@ -55,7 +55,11 @@ pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 pub fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
@@ -63,7 +67,11 @@ pub fn norm(a: [f64; 3]) -> f64 {
 
 impl Mesh {
     pub fn new(vertices: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Self {
-        Mesh { vertices, triangles, ..Default::default() }
+        Mesh {
+            vertices,
+            triangles,
+            ..Default::default()
+        }
     }
 
     /// Twice-area normal of triangle t (not normalised).
@@ -73,7 +81,9 @@ impl Mesh {
     }
 
     pub fn area(&self) -> f64 {
-        (0..self.triangles.len()).map(|t| 0.5 * norm(self.face_normal(t))).sum()
+        (0..self.triangles.len())
+            .map(|t| 0.5 * norm(self.face_normal(t)))
+            .sum()
     }
 
     /// Area-weighted vertex normals (MODEL.md §3), unit length; zero for isolated vertices.
@@ -119,11 +129,22 @@ impl Mesh {
         if self.vertices.is_empty() || self.triangles.is_empty() {
             return Err(Error::input(
                 path,
-                format!("empty mesh ({} vertices, {} triangles)", self.vertices.len(), self.triangles.len()),
+                format!(
+                    "empty mesh ({} vertices, {} triangles)",
+                    self.vertices.len(),
+                    self.triangles.len()
+                ),
             ));
         }
-        if let Some(i) = self.vertices.iter().position(|v| v.iter().any(|x| !x.is_finite())) {
-            return Err(Error::input(path, format!("vertex {i} has a non-finite coordinate")));
+        if let Some(i) = self
+            .vertices
+            .iter()
+            .position(|v| v.iter().any(|x| !x.is_finite()))
+        {
+            return Err(Error::input(
+                path,
+                format!("vertex {i} has a non-finite coordinate"),
+            ));
         }
         let nv = self.vertices.len();
         for (t, tri) in self.triangles.iter().enumerate() {
@@ -145,12 +166,17 @@ impl Mesh {
         if let Some(&first) = degenerate.first() {
             return Err(Error::input(
                 path,
-                format!("{} degenerate (zero-area) triangles, the first is triangle {first}", degenerate.len()),
+                format!(
+                    "{} degenerate (zero-area) triangles, the first is triangle {first}",
+                    degenerate.len()
+                ),
             ));
         }
         // Directed edge → count; undirected edge → count.
-        let mut directed: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3);
-        let mut undirected: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 3);
+        let mut directed: HashMap<(u32, u32), u32> =
+            HashMap::with_capacity(self.triangles.len() * 3);
+        let mut undirected: HashMap<(u32, u32), u32> =
+            HashMap::with_capacity(self.triangles.len() * 3);
         for tri in &self.triangles {
             for e in 0..3 {
                 let (a, b) = (tri[e], tri[(e + 1) % 3]);
@@ -162,13 +188,17 @@ impl Mesh {
             let count = undirected.values().filter(|n| **n > 2).count();
             return Err(Error::input(
                 path,
-                format!("non-manifold: {count} edges shared by more than two triangles (edge {a}-{b} by {n})"),
+                format!(
+                    "non-manifold: {count} edges shared by more than two triangles (edge {a}-{b} by {n})"
+                ),
             ));
         }
         if let Some((&(a, b), _)) = directed.iter().filter(|(_, n)| **n > 1).min() {
             return Err(Error::input(
                 path,
-                format!("inconsistent triangle orientation at edge {a}-{b} (neighbouring triangles wind the same way)"),
+                format!(
+                    "inconsistent triangle orientation at edge {a}-{b} (neighbouring triangles wind the same way)"
+                ),
             ));
         }
         let mut used = vec![false; nv];
@@ -267,11 +297,19 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
     if !path.is_file() {
         return Err(Error::input(path, "no such file"));
     }
-    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
     let mesh = match ext.as_str() {
         "obj" => obj::read(path)?,
         "ply" => ply::read(path)?,
-        _ => return Err(Error::input(path, "unknown mesh format (expected .obj or .ply)")),
+        _ => {
+            return Err(Error::input(
+                path,
+                "unknown mesh format (expected .obj or .ply)",
+            ));
+        }
     };
     mesh.check(path)?;
     Ok(mesh)
@@ -279,11 +317,17 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
 
 /// Write OBJ or PLY (binary little-endian) by extension, atomically.
 pub fn write_mesh(mesh: &Mesh, path: &Path) -> Result<()> {
-    let ext = path.extension().map(|e| e.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
     match ext.as_str() {
         "obj" => obj::write(mesh, path),
         "ply" => ply::write(mesh, path, ply::Encoding::BinaryLittleEndian),
-        _ => Err(Error::output(path, "unknown mesh format (expected .obj or .ply)")),
+        _ => Err(Error::output(
+            path,
+            "unknown mesh format (expected .obj or .ply)",
+        )),
     }
 }
 
@@ -293,7 +337,12 @@ mod tests {
 
     fn square() -> Mesh {
         Mesh::new(
-            vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]],
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
             vec![[0, 1, 2], [0, 2, 3]],
         )
     }

@@ -5,7 +5,9 @@ use super::{Column, Edges, Mesh};
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use ply_rs_bw::parser::Parser;
-use ply_rs_bw::ply::{Addable, DefaultElement, ElementDef, Ply, Property, PropertyDef, PropertyType, ScalarType};
+use ply_rs_bw::ply::{
+    Addable, DefaultElement, ElementDef, Ply, Property, PropertyDef, PropertyType, ScalarType,
+};
 use ply_rs_bw::writer::Writer;
 use std::path::Path;
 
@@ -52,14 +54,19 @@ fn check_counts(path: &Path, bytes: &[u8]) -> Result<()> {
     for line in header.lines() {
         let w: Vec<&str> = line.split_whitespace().collect();
         if w.len() == 3 && w[0] == "element" {
-            let n: u128 = w[2].parse().map_err(|_| Error::input(path, format!("bad element count in '{line}'")))?;
+            let n: u128 = w[2]
+                .parse()
+                .map_err(|_| Error::input(path, format!("bad element count in '{line}'")))?;
             total += n;
         }
     }
     if total > bytes.len() as u128 {
         return Err(Error::input(
             path,
-            format!("header declares {total} elements but the file has only {} bytes (truncated?)", bytes.len()),
+            format!(
+                "header declares {total} elements but the file has only {} bytes (truncated?)",
+                bytes.len()
+            ),
         ));
     }
     Ok(())
@@ -72,7 +79,10 @@ pub fn read(path: &Path) -> Result<Mesh> {
     let ply = parser
         .read_ply(&mut bytes.as_slice())
         .map_err(|e| Error::input(path, format!("unreadable PLY ({e})")))?;
-    let verts = ply.payload.get("vertex").ok_or_else(|| Error::input(path, "no vertex element"))?;
+    let verts = ply
+        .payload
+        .get("vertex")
+        .ok_or_else(|| Error::input(path, "no vertex element"))?;
     let mut mesh = Mesh::default();
     let coord = |v: &DefaultElement, k: &str, i: usize| -> Result<f64> {
         v.get(k)
@@ -80,19 +90,38 @@ pub fn read(path: &Path) -> Result<Mesh> {
             .ok_or_else(|| Error::input(path, format!("vertex {i} lacks a numeric '{k}'")))
     };
     for (i, v) in verts.iter().enumerate() {
-        mesh.vertices.push([coord(v, "x", i)?, coord(v, "y", i)?, coord(v, "z", i)?]);
+        mesh.vertices
+            .push([coord(v, "x", i)?, coord(v, "y", i)?, coord(v, "z", i)?]);
     }
     if let Some(first) = verts.first() {
-        if ["red", "green", "blue"].iter().all(|k| first.contains_key(*k)) {
-            let c = |v: &DefaultElement, k: &str| v.get(k).and_then(scalar).unwrap_or(0.0).clamp(0.0, 255.0) as u8;
-            mesh.colors = Some(verts.iter().map(|v| [c(v, "red"), c(v, "green"), c(v, "blue")]).collect());
+        if ["red", "green", "blue"]
+            .iter()
+            .all(|k| first.contains_key(*k))
+        {
+            let c = |v: &DefaultElement, k: &str| {
+                v.get(k).and_then(scalar).unwrap_or(0.0).clamp(0.0, 255.0) as u8
+            };
+            mesh.colors = Some(
+                verts
+                    .iter()
+                    .map(|v| [c(v, "red"), c(v, "green"), c(v, "blue")])
+                    .collect(),
+            );
         }
         for (name, p) in first.iter() {
-            if ["x", "y", "z", "red", "green", "blue", "alpha"].contains(&name.as_str()) || scalar(p).is_none() {
+            if ["x", "y", "z", "red", "green", "blue", "alpha"].contains(&name.as_str())
+                || scalar(p).is_none()
+            {
                 continue;
             }
-            let values = verts.iter().map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN)).collect();
-            mesh.vertex_columns.push(Column { name: name.clone(), values });
+            let values = verts
+                .iter()
+                .map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN))
+                .collect();
+            mesh.vertex_columns.push(Column {
+                name: name.clone(),
+                values,
+            });
         }
     }
     if let Some(faces) = ply.payload.get("face") {
@@ -101,19 +130,31 @@ pub fn read(path: &Path) -> Result<Mesh> {
                 .get("vertex_indices")
                 .or_else(|| face.get("vertex_index"))
                 .and_then(index_list)
-                .ok_or_else(|| Error::input(path, format!("face {f} has no vertex_indices list")))?;
+                .ok_or_else(|| {
+                    Error::input(path, format!("face {f} has no vertex_indices list"))
+                })?;
             if idx.len() < 3 {
-                return Err(Error::input(path, format!("face {f} has {} vertices", idx.len())));
-            }
-            if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= mesh.vertices.len()) {
                 return Err(Error::input(
                     path,
-                    format!("face {f} uses vertex index {bad}, but there are {} vertices", mesh.vertices.len()),
+                    format!("face {f} has {} vertices", idx.len()),
+                ));
+            }
+            if let Some(bad) = idx
+                .iter()
+                .find(|&&i| i < 0 || i as usize >= mesh.vertices.len())
+            {
+                return Err(Error::input(
+                    path,
+                    format!(
+                        "face {f} uses vertex index {bad}, but there are {} vertices",
+                        mesh.vertices.len()
+                    ),
                 ));
             }
             // Polygons become triangle fans.
             for k in 1..idx.len() - 1 {
-                mesh.triangles.push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
+                mesh.triangles
+                    .push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
             }
         }
     }
@@ -123,10 +164,20 @@ pub fn read(path: &Path) -> Result<Mesh> {
             let a = ed.get("vertex1").and_then(scalar);
             let b = ed.get("vertex2").and_then(scalar);
             match (a, b) {
-                (Some(a), Some(b)) if a >= 0.0 && b >= 0.0 && (a as usize) < mesh.vertices.len() && (b as usize) < mesh.vertices.len() => {
+                (Some(a), Some(b))
+                    if a >= 0.0
+                        && b >= 0.0
+                        && (a as usize) < mesh.vertices.len()
+                        && (b as usize) < mesh.vertices.len() =>
+                {
                     e.pairs.push([a as u32, b as u32])
                 }
-                _ => return Err(Error::input(path, format!("edge {n} has missing or out-of-range vertex1/vertex2"))),
+                _ => {
+                    return Err(Error::input(
+                        path,
+                        format!("edge {n} has missing or out-of-range vertex1/vertex2"),
+                    ));
+                }
             }
         }
         if let Some(first) = edges.first() {
@@ -134,8 +185,14 @@ pub fn read(path: &Path) -> Result<Mesh> {
                 if name == "vertex1" || name == "vertex2" || scalar(p).is_none() {
                     continue;
                 }
-                let values = edges.iter().map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN)).collect();
-                e.columns.push(Column { name: name.clone(), values });
+                let values = edges
+                    .iter()
+                    .map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN))
+                    .collect();
+                e.columns.push(Column {
+                    name: name.clone(),
+                    values,
+                });
             }
         }
         mesh.edges = Some(e);
@@ -149,7 +206,11 @@ fn def(name: &str, t: ScalarType) -> PropertyDef {
 
 /// Columns named `kind`/`label` are written as uchar (CASE.md springs.ply), others as float.
 fn column_type(name: &str) -> ScalarType {
-    if name == "kind" || name == "label" { ScalarType::UChar } else { ScalarType::Float }
+    if name == "kind" || name == "label" {
+        ScalarType::UChar
+    } else {
+        ScalarType::Float
+    }
 }
 
 fn column_value(name: &str, v: f64) -> Property {
@@ -163,7 +224,9 @@ fn column_value(name: &str, v: f64) -> Property {
 pub fn to_ply(mesh: &Mesh, encoding: Encoding) -> Ply<DefaultElement> {
     let mut ply = Ply::<DefaultElement>::new();
     ply.header.encoding = encoding;
-    ply.header.comments.push("facesim: LPS frame, millimetres".to_string());
+    ply.header
+        .comments
+        .push("facesim: LPS frame, millimetres".to_string());
     let mut vdef = ElementDef::new("vertex".to_string());
     for k in ["x", "y", "z"] {
         vdef.properties.add(def(k, ScalarType::Double));
@@ -206,7 +269,10 @@ pub fn to_ply(mesh: &Mesh, encoding: Encoding) -> Ply<DefaultElement> {
             .iter()
             .map(|t| {
                 let mut e = DefaultElement::new();
-                e.insert("vertex_indices".into(), Property::ListInt(t.iter().map(|&i| i as i32).collect()));
+                e.insert(
+                    "vertex_indices".into(),
+                    Property::ListInt(t.iter().map(|&i| i as i32).collect()),
+                );
                 e
             })
             .collect();
@@ -255,16 +321,30 @@ mod tests {
 
     fn sample() -> Mesh {
         let mut m = Mesh::new(
-            vec![[0.0, 0.0, 0.0], [1.5, 0.0, 0.0], [0.0, 2.25, -1.0], [1.0, 1.0, 1.0]],
+            vec![
+                [0.0, 0.0, 0.0],
+                [1.5, 0.0, 0.0],
+                [0.0, 2.25, -1.0],
+                [1.0, 1.0, 1.0],
+            ],
             vec![[0, 1, 2], [1, 3, 2]],
         );
         m.colors = Some(vec![[255, 0, 0], [0, 255, 0], [0, 0, 255], [7, 8, 9]]);
-        m.vertex_columns.push(Column { name: "dist".into(), values: vec![0.5, 1.0, 2.0, 4.0] });
+        m.vertex_columns.push(Column {
+            name: "dist".into(),
+            values: vec![0.5, 1.0, 2.0, 4.0],
+        });
         m.edges = Some(Edges {
             pairs: vec![[0, 3], [1, 2]],
             columns: vec![
-                Column { name: "stiffness".into(), values: vec![0.25, 3.0] },
-                Column { name: "kind".into(), values: vec![0.0, 1.0] },
+                Column {
+                    name: "stiffness".into(),
+                    values: vec![0.25, 3.0],
+                },
+                Column {
+                    name: "kind".into(),
+                    values: vec![0.0, 1.0],
+                },
             ],
         });
         m
@@ -273,7 +353,11 @@ mod tests {
     #[test]
     fn round_trip_every_encoding() {
         let d = tempfile::tempdir().unwrap();
-        for enc in [Encoding::Ascii, Encoding::BinaryLittleEndian, Encoding::BinaryBigEndian] {
+        for enc in [
+            Encoding::Ascii,
+            Encoding::BinaryLittleEndian,
+            Encoding::BinaryBigEndian,
+        ] {
             let p = d.path().join(format!("{enc:?}.ply"));
             write(&sample(), &p, enc).unwrap();
             let back = read(&p).unwrap();
@@ -285,7 +369,11 @@ mod tests {
     fn refuses_count_bomb_and_bad_index() {
         let d = tempfile::tempdir().unwrap();
         let p = d.path().join("bomb.ply");
-        std::fs::write(&p, "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nend_header\n").unwrap();
+        std::fs::write(
+            &p,
+            "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nend_header\n",
+        )
+        .unwrap();
         assert!(read(&p).unwrap_err().to_string().contains("declares"));
         let p = d.path().join("idx.ply");
         std::fs::write(

@@ -43,7 +43,13 @@ fn is_dicom_file(path: &Path) -> bool {
         .unwrap_or(false)
 }
 
-fn floats(obj: &InMemDicomObject, tag: dicom_core::Tag, name: &str, n: usize, path: &Path) -> Result<Vec<f64>> {
+fn floats(
+    obj: &InMemDicomObject,
+    tag: dicom_core::Tag,
+    name: &str,
+    n: usize,
+    path: &Path,
+) -> Result<Vec<f64>> {
     let e = obj
         .element_opt(tag)
         .ok()
@@ -53,7 +59,10 @@ fn floats(obj: &InMemDicomObject, tag: dicom_core::Tag, name: &str, n: usize, pa
         .to_multi_float64()
         .map_err(|_| Error::input(path, format!("unreadable {name}")))?;
     if v.len() < n || v.iter().take(n).any(|x| !x.is_finite()) {
-        return Err(Error::input(path, format!("{name} needs {n} finite numbers, got {v:?}")));
+        return Err(Error::input(
+            path,
+            format!("{name} needs {n} finite numbers, got {v:?}"),
+        ));
     }
     Ok(v[..n].to_vec())
 }
@@ -63,7 +72,11 @@ fn read_header(path: &Path) -> Result<SliceHeader> {
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
         .map_err(|e| Error::input(path, format!("unreadable DICOM file ({e})")))?;
-    let ts = obj.meta().transfer_syntax().trim_end_matches('\0').to_string();
+    let ts = obj
+        .meta()
+        .transfer_syntax()
+        .trim_end_matches('\0')
+        .to_string();
     let get_str = |tag| {
         obj.element_opt(tag)
             .ok()
@@ -84,10 +97,25 @@ fn read_header(path: &Path) -> Result<SliceHeader> {
     let rows = us(tags::ROWS, "Rows")?;
     let cols = us(tags::COLUMNS, "Columns")?;
     let sp = floats(&obj, tags::PIXEL_SPACING, "PixelSpacing", 2, path)?;
-    let iop = floats(&obj, tags::IMAGE_ORIENTATION_PATIENT, "ImageOrientationPatient", 6, path)?;
-    let ipp = floats(&obj, tags::IMAGE_POSITION_PATIENT, "ImagePositionPatient", 3, path)?;
+    let iop = floats(
+        &obj,
+        tags::IMAGE_ORIENTATION_PATIENT,
+        "ImageOrientationPatient",
+        6,
+        path,
+    )?;
+    let ipp = floats(
+        &obj,
+        tags::IMAGE_POSITION_PATIENT,
+        "ImagePositionPatient",
+        3,
+        path,
+    )?;
     if sp.iter().any(|s| *s <= 0.0) {
-        return Err(Error::input(path, format!("PixelSpacing {sp:?} must be positive")));
+        return Err(Error::input(
+            path,
+            format!("PixelSpacing {sp:?} must be positive"),
+        ));
     }
     Ok(SliceHeader {
         path: path.to_path_buf(),
@@ -111,30 +139,56 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| Error::input(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
+        .filter(|p| {
+            p.is_file()
+                && !p
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+        })
         .collect();
     files.sort();
     // Non-DICOM files (README, DICOMDIR without preamble, ...) are passed over; a file with the
     // DICM magic that does not parse is an error.
     let files: Vec<PathBuf> = files.into_iter().filter(|p| is_dicom_file(p)).collect();
     if files.is_empty() {
-        return Err(Error::input(dir, "no DICOM files (with the DICM preamble) in this directory"));
+        return Err(Error::input(
+            dir,
+            "no DICOM files (with the DICM preamble) in this directory",
+        ));
     }
-    let mut headers = files.iter().map(|p| read_header(p)).collect::<Result<Vec<_>>>()?;
+    let mut headers = files
+        .iter()
+        .map(|p| read_header(p))
+        .collect::<Result<Vec<_>>>()?;
 
     let mut series: BTreeMap<&str, (usize, &str)> = BTreeMap::new();
     for h in &headers {
-        let e = series.entry(h.series.as_str()).or_insert((0, h.series_desc.as_str()));
+        let e = series
+            .entry(h.series.as_str())
+            .or_insert((0, h.series_desc.as_str()));
         e.0 += 1;
     }
     if series.len() > 1 {
         let list: Vec<String> = series
             .iter()
-            .map(|(uid, (n, d))| format!("{uid} ({n} files{})", if d.is_empty() { String::new() } else { format!(", \"{d}\"") }))
+            .map(|(uid, (n, d))| {
+                format!(
+                    "{uid} ({n} files{})",
+                    if d.is_empty() {
+                        String::new()
+                    } else {
+                        format!(", \"{d}\"")
+                    }
+                )
+            })
             .collect();
         return Err(Error::input(
             dir,
-            format!("holds {} DICOM series, expected one: {}", series.len(), list.join("; ")),
+            format!(
+                "holds {} DICOM series, expected one: {}",
+                series.len(),
+                list.join("; ")
+            ),
         ));
     }
 
@@ -152,13 +206,23 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
         if h.rows != first.rows || h.cols != first.cols {
             return Err(Error::input(
                 &h.path,
-                format!("slice size {}x{} differs from {}x{} in {}", h.cols, h.rows, first.cols, first.rows, first.path.display()),
+                format!(
+                    "slice size {}x{} differs from {}x{} in {}",
+                    h.cols,
+                    h.rows,
+                    first.cols,
+                    first.rows,
+                    first.path.display()
+                ),
             ));
         }
         if (0..2).any(|a| (h.spacing[a] - first.spacing[a]).abs() > 1e-4 * first.spacing[a])
             || (0..6).any(|a| (h.iop[a] - first.iop[a]).abs() > 1e-4)
         {
-            return Err(Error::input(&h.path, "pixel spacing or orientation differs from the rest of the series"));
+            return Err(Error::input(
+                &h.path,
+                "pixel spacing or orientation differs from the rest of the series",
+            ));
         }
     }
     let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
@@ -174,7 +238,10 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
 
     let nz = headers.len();
     let slice_spacing = if nz > 1 {
-        let gaps: Vec<f64> = headers.windows(2).map(|w| pos(&w[1]) - pos(&w[0])).collect();
+        let gaps: Vec<f64> = headers
+            .windows(2)
+            .map(|w| pos(&w[1]) - pos(&w[0]))
+            .collect();
         for (w, g) in headers.windows(2).zip(&gaps) {
             if *g < 1e-3 {
                 return Err(Error::input(
@@ -210,8 +277,14 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
 
     let mut data = Vec::with_capacity(per_slice * nz);
     for h in &headers {
-        let obj = dicom_object::open_file(&h.path).map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
-        let slope = obj.element_opt(tags::RESCALE_SLOPE).ok().flatten().and_then(|e| e.to_float64().ok()).unwrap_or(1.0);
+        let obj = dicom_object::open_file(&h.path)
+            .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
+        let slope = obj
+            .element_opt(tags::RESCALE_SLOPE)
+            .ok()
+            .flatten()
+            .and_then(|e| e.to_float64().ok())
+            .unwrap_or(1.0);
         let inter = obj
             .element_opt(tags::RESCALE_INTERCEPT)
             .ok()
@@ -219,13 +292,19 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
             .and_then(|e| e.to_float64().ok())
             .unwrap_or(0.0);
         if !slope.is_finite() || !inter.is_finite() {
-            return Err(Error::input(&h.path, "non-finite RescaleSlope/RescaleIntercept"));
+            return Err(Error::input(
+                &h.path,
+                "non-finite RescaleSlope/RescaleIntercept",
+            ));
         }
         let pd = obj
             .decode_pixel_data()
             .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
         if pd.number_of_frames() != 1 || pd.samples_per_pixel() != 1 {
-            return Err(Error::input(&h.path, "expected one greyscale frame per file"));
+            return Err(Error::input(
+                &h.path,
+                "expected one greyscale frame per file",
+            ));
         }
         let raw: Vec<f32> = pd
             .to_vec_with_options(&ConvertOptions::new().with_modality_lut(ModalityLutOption::None))
@@ -233,12 +312,21 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
         if raw.len() != per_slice {
             return Err(Error::input(
                 &h.path,
-                format!("pixel data has {} values, Rows×Columns = {per_slice} (truncated?)", raw.len()),
+                format!(
+                    "pixel data has {} values, Rows×Columns = {per_slice} (truncated?)",
+                    raw.len()
+                ),
             ));
         }
         data.extend(raw.iter().map(|&v| (v as f64 * slope + inter) as f32));
     }
-    Ok(Volume { dims, spacing, origin, direction, data })
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+    })
 }
 
 fn ds(values: &[f64]) -> PrimitiveValue {
@@ -287,27 +375,71 @@ pub fn write_series(vol: &Volume, dest: &Path, series_uid_suffix: &str) -> Resul
                 obj.put(DataElement::new(tag, vr, v));
             };
             put(tags::SOP_CLASS_UID, VR::UI, PrimitiveValue::from(ct));
-            put(tags::SOP_INSTANCE_UID, VR::UI, PrimitiveValue::from(sop.as_str()));
-            put(tags::STUDY_INSTANCE_UID, VR::UI, PrimitiveValue::from(study.as_str()));
-            put(tags::SERIES_INSTANCE_UID, VR::UI, PrimitiveValue::from(series.as_str()));
-            put(tags::FRAME_OF_REFERENCE_UID, VR::UI, PrimitiveValue::from(frame.as_str()));
+            put(
+                tags::SOP_INSTANCE_UID,
+                VR::UI,
+                PrimitiveValue::from(sop.as_str()),
+            );
+            put(
+                tags::STUDY_INSTANCE_UID,
+                VR::UI,
+                PrimitiveValue::from(study.as_str()),
+            );
+            put(
+                tags::SERIES_INSTANCE_UID,
+                VR::UI,
+                PrimitiveValue::from(series.as_str()),
+            );
+            put(
+                tags::FRAME_OF_REFERENCE_UID,
+                VR::UI,
+                PrimitiveValue::from(frame.as_str()),
+            );
             put(tags::MODALITY, VR::CS, PrimitiveValue::from("CT"));
-            put(tags::PATIENT_NAME, VR::PN, PrimitiveValue::from("Phantom^Facesim"));
-            put(tags::PATIENT_ID, VR::LO, PrimitiveValue::from("FACESIM-PHANTOM"));
-            put(tags::SERIES_DESCRIPTION, VR::LO, PrimitiveValue::from("facesim phantom"));
-            put(tags::INSTANCE_NUMBER, VR::IS, PrimitiveValue::from(format!("{}", k + 1).as_str()));
+            put(
+                tags::PATIENT_NAME,
+                VR::PN,
+                PrimitiveValue::from("Phantom^Facesim"),
+            );
+            put(
+                tags::PATIENT_ID,
+                VR::LO,
+                PrimitiveValue::from("FACESIM-PHANTOM"),
+            );
+            put(
+                tags::SERIES_DESCRIPTION,
+                VR::LO,
+                PrimitiveValue::from("facesim phantom"),
+            );
+            put(
+                tags::INSTANCE_NUMBER,
+                VR::IS,
+                PrimitiveValue::from(format!("{}", k + 1).as_str()),
+            );
             put(tags::IMAGE_POSITION_PATIENT, VR::DS, ds(&ipp));
             put(tags::IMAGE_ORIENTATION_PATIENT, VR::DS, ds(&iop));
-            put(tags::PIXEL_SPACING, VR::DS, ds(&[vol.spacing[1], vol.spacing[0]]));
+            put(
+                tags::PIXEL_SPACING,
+                VR::DS,
+                ds(&[vol.spacing[1], vol.spacing[0]]),
+            );
             put(tags::SLICE_THICKNESS, VR::DS, ds(&[vol.spacing[2]]));
             put(tags::SAMPLES_PER_PIXEL, VR::US, PrimitiveValue::from(1u16));
-            put(tags::PHOTOMETRIC_INTERPRETATION, VR::CS, dicom_value!(Str, "MONOCHROME2"));
+            put(
+                tags::PHOTOMETRIC_INTERPRETATION,
+                VR::CS,
+                dicom_value!(Str, "MONOCHROME2"),
+            );
             put(tags::ROWS, VR::US, PrimitiveValue::from(ny as u16));
             put(tags::COLUMNS, VR::US, PrimitiveValue::from(nx as u16));
             put(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(16u16));
             put(tags::BITS_STORED, VR::US, PrimitiveValue::from(16u16));
             put(tags::HIGH_BIT, VR::US, PrimitiveValue::from(15u16));
-            put(tags::PIXEL_REPRESENTATION, VR::US, PrimitiveValue::from(1u16));
+            put(
+                tags::PIXEL_REPRESENTATION,
+                VR::US,
+                PrimitiveValue::from(1u16),
+            );
             put(tags::RESCALE_INTERCEPT, VR::DS, ds(&[0.0]));
             put(tags::RESCALE_SLOPE, VR::DS, ds(&[1.0]));
             let start = k * nx * ny;

@@ -15,13 +15,15 @@ use std::path::Path;
 
 pub fn read(path: &Path) -> Result<Volume> {
     let file = std::fs::File::open(path).map_err(|e| Error::input(path, e))?;
-    let mut archive = tar::Archive::new(flate2::read::GzDecoder::new(std::io::BufReader::new(file)));
+    let mut archive =
+        tar::Archive::new(flate2::read::GzDecoder::new(std::io::BufReader::new(file)));
     let mut files: HashMap<String, Vec<u8>> = HashMap::new();
     let entries = archive
         .entries()
         .map_err(|e| Error::input(path, format!("not a gzipped tar InVesalius project ({e})")))?;
     for entry in entries {
-        let mut entry = entry.map_err(|e| Error::input(path, format!("corrupt project archive ({e})")))?;
+        let mut entry =
+            entry.map_err(|e| Error::input(path, format!("corrupt project archive ({e})")))?;
         let name = entry
             .path()
             .ok()
@@ -33,7 +35,10 @@ pub fn read(path: &Path) -> Result<Volume> {
         }
         let size = entry.size();
         if size > (super::MAX_VOXELS as u64) * 8 {
-            return Err(Error::input(path, format!("member {name} is {size} bytes: too large")));
+            return Err(Error::input(
+                path,
+                format!("member {name} is {size} bytes: too large"),
+            ));
         }
         let mut buf = Vec::with_capacity(size as usize);
         entry
@@ -44,56 +49,106 @@ pub fn read(path: &Path) -> Result<Volume> {
     let main = files
         .get("main.plist")
         .ok_or_else(|| Error::input(path, "no main.plist in the project"))?;
-    let plist: plist::Value =
-        plist::from_bytes(main).map_err(|e| Error::input(path, format!("unreadable main.plist ({e})")))?;
-    let dict = plist.as_dictionary().ok_or_else(|| Error::input(path, "main.plist is not a dictionary"))?;
+    let plist: plist::Value = plist::from_bytes(main)
+        .map_err(|e| Error::input(path, format!("unreadable main.plist ({e})")))?;
+    let dict = plist
+        .as_dictionary()
+        .ok_or_else(|| Error::input(path, "main.plist is not a dictionary"))?;
     let matrix = dict
         .get("matrix")
         .and_then(|m| m.as_dictionary())
         .ok_or_else(|| Error::input(path, "main.plist has no matrix entry"))?;
-    let dtype = matrix.get("dtype").and_then(|v| v.as_string()).unwrap_or("int16");
-    let fname = matrix.get("filename").and_then(|v| v.as_string()).unwrap_or("matrix.dat");
+    let dtype = matrix
+        .get("dtype")
+        .and_then(|v| v.as_string())
+        .unwrap_or("int16");
+    let fname = matrix
+        .get("filename")
+        .and_then(|v| v.as_string())
+        .unwrap_or("matrix.dat");
     let shape: Vec<usize> = matrix
         .get("shape")
         .and_then(|v| v.as_array())
-        .map(|a| a.iter().filter_map(|x| x.as_signed_integer()).map(|x| x.max(0) as usize).collect())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_signed_integer())
+                .map(|x| x.max(0) as usize)
+                .collect()
+        })
         .unwrap_or_default();
     let spacing: Vec<f64> = dict
         .get("spacing")
         .and_then(|v| v.as_array())
-        .map(|a| a.iter().filter_map(|x| x.as_real().or(x.as_signed_integer().map(|i| i as f64))).collect())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_real().or(x.as_signed_integer().map(|i| i as f64)))
+                .collect()
+        })
         .unwrap_or_default();
     if shape.len() != 3 || spacing.len() != 3 {
-        return Err(Error::input(path, "main.plist needs a 3-element matrix shape and spacing"));
+        return Err(Error::input(
+            path,
+            "main.plist needs a 3-element matrix shape and spacing",
+        ));
     }
     let dims = [shape[2], shape[1], shape[0]];
     let spacing = [spacing[0], spacing[1], spacing[2]];
     let origin = [0.0, (dims[1].saturating_sub(1)) as f64 * spacing[1], 0.0];
     let direction = [[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]];
     Volume::check_geometry(path, dims, spacing, origin, direction)?;
-    let raw = files
-        .get(fname)
-        .ok_or_else(|| Error::input(path, format!("matrix file {fname} missing from the project")))?;
+    let raw = files.get(fname).ok_or_else(|| {
+        Error::input(
+            path,
+            format!("matrix file {fname} missing from the project"),
+        )
+    })?;
     let n = dims[0] * dims[1] * dims[2];
     let width = match dtype {
         "int16" | "uint16" => 2,
         "float32" | "int32" => 4,
         "uint8" | "int8" => 1,
-        other => return Err(Error::input(path, format!("unsupported matrix dtype {other}"))),
+        other => {
+            return Err(Error::input(
+                path,
+                format!("unsupported matrix dtype {other}"),
+            ));
+        }
     };
     if raw.len() != n * width {
         return Err(Error::input(
             path,
-            format!("matrix {fname} has {} bytes, shape {shape:?} of {dtype} needs {}", raw.len(), n * width),
+            format!(
+                "matrix {fname} has {} bytes, shape {shape:?} of {dtype} needs {}",
+                raw.len(),
+                n * width
+            ),
         ));
     }
     let data: Vec<f32> = match dtype {
-        "int16" => raw.chunks_exact(2).map(|c| i16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        "uint16" => raw.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]]) as f32).collect(),
-        "int32" => raw.chunks_exact(4).map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32).collect(),
-        "float32" => raw.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(),
+        "int16" => raw
+            .chunks_exact(2)
+            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        "uint16" => raw
+            .chunks_exact(2)
+            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
+            .collect(),
+        "int32" => raw
+            .chunks_exact(4)
+            .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32)
+            .collect(),
+        "float32" => raw
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect(),
         "uint8" => raw.iter().map(|&b| b as f32).collect(),
         _ => raw.iter().map(|&b| b as i8 as f32).collect(),
     };
-    Ok(Volume { dims, spacing, origin, direction, data })
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+    })
 }

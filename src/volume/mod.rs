@@ -51,7 +51,10 @@ impl Volume {
         direction: [[f64; 3]; 3],
     ) -> Result<()> {
         if dims.contains(&0) {
-            return Err(Error::input(path, format!("empty volume, dimensions {dims:?}")));
+            return Err(Error::input(
+                path,
+                format!("empty volume, dimensions {dims:?}"),
+            ));
         }
         let n = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d));
         match n {
@@ -69,12 +72,17 @@ impl Volume {
                 format!("voxel spacing {spacing:?} must be finite and positive"),
             ));
         }
-        if origin.iter().any(|o| !o.is_finite()) || direction.iter().flatten().any(|d| !d.is_finite()) {
+        if origin.iter().any(|o| !o.is_finite())
+            || direction.iter().flatten().any(|d| !d.is_finite())
+        {
             return Err(Error::input(path, "non-finite origin or orientation"));
         }
         let det = det3(direction);
         if det.abs() < 1e-3 {
-            return Err(Error::input(path, "degenerate orientation (axes are parallel)"));
+            return Err(Error::input(
+                path,
+                "degenerate orientation (axes are parallel)",
+            ));
         }
         Ok(())
     }
@@ -111,7 +119,11 @@ impl Volume {
 
     /// LPS mm → continuous voxel coordinates.
     pub fn to_voxel(&self, p: [f64; 3]) -> [f64; 3] {
-        let d = [p[0] - self.origin[0], p[1] - self.origin[1], p[2] - self.origin[2]];
+        let d = [
+            p[0] - self.origin[0],
+            p[1] - self.origin[1],
+            p[2] - self.origin[2],
+        ];
         let inv = inv3(self.direction);
         let mut c = [0.0; 3];
         for (a, ca) in c.iter_mut().enumerate() {
@@ -136,9 +148,21 @@ impl Volume {
         let mut hi = [f64::NEG_INFINITY; 3];
         for corner in 0..8 {
             let c = [
-                if corner & 1 != 0 { (self.dims[0] - 1) as f64 } else { 0.0 },
-                if corner & 2 != 0 { (self.dims[1] - 1) as f64 } else { 0.0 },
-                if corner & 4 != 0 { (self.dims[2] - 1) as f64 } else { 0.0 },
+                if corner & 1 != 0 {
+                    (self.dims[0] - 1) as f64
+                } else {
+                    0.0
+                },
+                if corner & 2 != 0 {
+                    (self.dims[1] - 1) as f64
+                } else {
+                    0.0
+                },
+                if corner & 4 != 0 {
+                    (self.dims[2] - 1) as f64
+                } else {
+                    0.0
+                },
             ];
             let p = self.to_world(c);
             for a in 0..3 {
@@ -223,7 +247,8 @@ pub fn sample_field(data: &[f32], dims: [usize; 3], c: [f64; 3], outside: f32) -
 }
 
 pub fn det3(m: [[f64; 3]; 3]) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
@@ -233,7 +258,11 @@ pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     // Columns a = m[0], b = m[1], c = m[2]: rows of the inverse are (b×c, c×a, a×b)/det.
     let (a, b, c) = (m[0], m[1], m[2]);
     let cross = |u: [f64; 3], v: [f64; 3]| {
-        [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]]
+        [
+            u[1] * v[2] - u[2] * v[1],
+            u[2] * v[0] - u[0] * v[2],
+            u[0] * v[1] - u[1] * v[0],
+        ]
     };
     let r0 = cross(b, c);
     let det = a[0] * r0[0] + a[1] * r0[1] + a[2] * r0[2];
@@ -252,7 +281,10 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
     if !path.exists() {
         return Err(Error::input(path, "no such file or directory"));
     }
-    let name = path.file_name().map(|n| n.to_string_lossy().to_lowercase()).unwrap_or_default();
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_lowercase())
+        .unwrap_or_default();
     let vol = if path.is_dir() {
         dicom_io::read_series(path)?
     } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {

@@ -26,9 +26,21 @@ pub fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
         let a = (1.0 - (b * b + c * c + d * d)).max(0.0).sqrt();
         let qfac = if h.pixdim[0] < 0.0 { -1.0 } else { 1.0 };
         let r = [
-            [a * a + b * b - c * c - d * d, 2.0 * (b * c - a * d), 2.0 * (b * d + a * c)],
-            [2.0 * (b * c + a * d), a * a + c * c - b * b - d * d, 2.0 * (c * d - a * b)],
-            [2.0 * (b * d - a * c), 2.0 * (c * d + a * b), a * a + d * d - c * c - b * b],
+            [
+                a * a + b * b - c * c - d * d,
+                2.0 * (b * c - a * d),
+                2.0 * (b * d + a * c),
+            ],
+            [
+                2.0 * (b * c + a * d),
+                a * a + c * c - b * b - d * d,
+                2.0 * (c * d - a * b),
+            ],
+            [
+                2.0 * (b * d - a * c),
+                2.0 * (c * d + a * b),
+                a * a + d * d - c * c - b * b,
+            ],
         ];
         let s = [dx, dy, dz * qfac];
         let o = [h.quatern_x as f64, h.quatern_y as f64, h.quatern_z as f64];
@@ -41,25 +53,45 @@ pub fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
         }
         return m;
     }
-    [[dx, 0.0, 0.0, 0.0], [0.0, dy, 0.0, 0.0], [0.0, 0.0, dz, 0.0]]
+    [
+        [dx, 0.0, 0.0, 0.0],
+        [0.0, dy, 0.0, 0.0],
+        [0.0, 0.0, dz, 0.0],
+    ]
 }
 
 /// Read the header only and check it: dimensions, spacing and type are validated before any
 /// voxel memory is allocated.
-fn read_checked_header(path: &Path) -> Result<(NiftiHeader, [usize; 3], [f64; 3], [f64; 3], [[f64; 3]; 3])> {
-    let h = NiftiHeader::from_file(path).map_err(|e| Error::input(path, format!("not a readable NIfTI-1 file ({e})")))?;
+fn read_checked_header(
+    path: &Path,
+) -> Result<(NiftiHeader, [usize; 3], [f64; 3], [f64; 3], [[f64; 3]; 3])> {
+    let h = NiftiHeader::from_file(path)
+        .map_err(|e| Error::input(path, format!("not a readable NIfTI-1 file ({e})")))?;
     let ndim = h.dim[0] as usize;
     if !(2..=7).contains(&ndim) {
-        return Err(Error::input(path, format!("invalid NIfTI dim[0] = {}", h.dim[0])));
+        return Err(Error::input(
+            path,
+            format!("invalid NIfTI dim[0] = {}", h.dim[0]),
+        ));
     }
-    let extra: usize = h.dim[4..=ndim.max(3)].iter().map(|&d| d.max(1) as usize).product();
+    let extra: usize = h.dim[4..=ndim.max(3)]
+        .iter()
+        .map(|&d| d.max(1) as usize)
+        .product();
     if ndim > 3 && extra != 1 {
         return Err(Error::input(
             path,
-            format!("{ndim}-D image {:?}: facesim needs one 3-D volume", &h.dim[1..=ndim]),
+            format!(
+                "{ndim}-D image {:?}: facesim needs one 3-D volume",
+                &h.dim[1..=ndim]
+            ),
         ));
     }
-    let dims = [h.dim[1] as usize, h.dim[2] as usize, if ndim >= 3 { h.dim[3] as usize } else { 1 }];
+    let dims = [
+        h.dim[1] as usize,
+        h.dim[2] as usize,
+        if ndim >= 3 { h.dim[3] as usize } else { 1 },
+    ];
     match h.data_type() {
         Ok(
             NiftiType::Uint8
@@ -71,15 +103,28 @@ fn read_checked_header(path: &Path) -> Result<(NiftiHeader, [usize; 3], [f64; 3]
             | NiftiType::Float32
             | NiftiType::Float64,
         ) => {}
-        Ok(t) => return Err(Error::input(path, format!("unsupported NIfTI datatype {t:?}"))),
-        Err(_) => return Err(Error::input(path, format!("unknown NIfTI datatype code {}", h.datatype))),
+        Ok(t) => {
+            return Err(Error::input(
+                path,
+                format!("unsupported NIfTI datatype {t:?}"),
+            ));
+        }
+        Err(_) => {
+            return Err(Error::input(
+                path,
+                format!("unknown NIfTI datatype code {}", h.datatype),
+            ));
+        }
     }
     if h.sform_code <= 0 {
         // pixdim is the spacing only when no sform is used.
         for a in 1..=3 {
             let p = h.pixdim[a];
             if !p.is_finite() || p <= 0.0 {
-                return Err(Error::input(path, format!("invalid voxel size pixdim[{a}] = {p}")));
+                return Err(Error::input(
+                    path,
+                    format!("invalid voxel size pixdim[{a}] = {p}"),
+                ));
             }
         }
     }
@@ -89,12 +134,20 @@ fn read_checked_header(path: &Path) -> Result<(NiftiHeader, [usize; 3], [f64; 3]
     let mut spacing = [0.0; 3];
     let mut direction = [[0.0; 3]; 3];
     for c in 0..3 {
-        let col = [ras[0][c] * sign[0], ras[1][c] * sign[1], ras[2][c] * sign[2]];
+        let col = [
+            ras[0][c] * sign[0],
+            ras[1][c] * sign[1],
+            ras[2][c] * sign[2],
+        ];
         let n = (col[0] * col[0] + col[1] * col[1] + col[2] * col[2]).sqrt();
         spacing[c] = n;
         direction[c] = if n > 0.0 { col.map(|x| x / n) } else { col };
     }
-    let origin = [ras[0][3] * sign[0], ras[1][3] * sign[1], ras[2][3] * sign[2]];
+    let origin = [
+        ras[0][3] * sign[0],
+        ras[1][3] * sign[1],
+        ras[2][3] * sign[2],
+    ];
     Volume::check_geometry(path, dims, spacing, origin, direction)?;
     if !h.scl_slope.is_finite() || !h.scl_inter.is_finite() {
         return Err(Error::input(path, "non-finite scl_slope/scl_inter"));
@@ -102,10 +155,14 @@ fn read_checked_header(path: &Path) -> Result<(NiftiHeader, [usize; 3], [f64; 3]
     // An uncompressed file shorter than its header promises is truncated: say so up front.
     let name = path.to_string_lossy().to_lowercase();
     if name.ends_with(".nii") {
-        let need = h.vox_offset.max(352.0) as u64 + (dims.iter().product::<usize>() as u64) * (h.bitpix.max(8) as u64 / 8);
+        let need = h.vox_offset.max(352.0) as u64
+            + (dims.iter().product::<usize>() as u64) * (h.bitpix.max(8) as u64 / 8);
         let have = std::fs::metadata(path).at(path)?.len();
         if have < need {
-            return Err(Error::input(path, format!("truncated: {have} bytes, the header needs {need}")));
+            return Err(Error::input(
+                path,
+                format!("truncated: {have} bytes, the header needs {need}"),
+            ));
         }
     }
     Ok((h, dims, spacing, origin, direction))
@@ -113,20 +170,32 @@ fn read_checked_header(path: &Path) -> Result<(NiftiHeader, [usize; 3], [f64; 3]
 
 pub fn read(path: &Path) -> Result<Volume> {
     let (_h, dims, spacing, origin, direction) = read_checked_header(path)?;
-    let obj = ReaderOptions::new()
-        .read_file(path)
-        .map_err(|e| Error::input(path, format!("cannot read NIfTI voxels ({e}); truncated or corrupt?")))?;
+    let obj = ReaderOptions::new().read_file(path).map_err(|e| {
+        Error::input(
+            path,
+            format!("cannot read NIfTI voxels ({e}); truncated or corrupt?"),
+        )
+    })?;
     // into_ndarray applies scl_slope/scl_inter (slope 0 → identity).
     let arr = obj
         .into_volume()
         .into_ndarray::<f32>()
         .map_err(|e| Error::input(path, format!("cannot decode NIfTI voxels ({e})")))?;
     if arr.len() != dims.iter().product::<usize>() {
-        return Err(Error::input(path, "voxel count does not match the header dimensions"));
+        return Err(Error::input(
+            path,
+            "voxel count does not match the header dimensions",
+        ));
     }
     // ndarray index is (i, j, k, ...); reversing the axes makes i the fastest in logical order.
     let data: Vec<f32> = arr.reversed_axes().iter().copied().collect();
-    Ok(Volume { dims, spacing, origin, direction, data })
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+    })
 }
 
 /// The header for an LPS volume written as NIfTI (sform, RAS, mm).
@@ -145,14 +214,26 @@ fn header_for(vol: &Volume) -> NiftiHeader {
     h.srow_z = rows[2];
     h.sform_code = 1; // scanner anatomical
     h.qform_code = 0;
-    h.pixdim = [1.0, vol.spacing[0] as f32, vol.spacing[1] as f32, vol.spacing[2] as f32, 1.0, 1.0, 1.0, 1.0];
+    h.pixdim = [
+        1.0,
+        vol.spacing[0] as f32,
+        vol.spacing[1] as f32,
+        vol.spacing[2] as f32,
+        1.0,
+        1.0,
+        1.0,
+        1.0,
+    ];
     h.xyzt_units = 2; // mm
     h
 }
 
 /// Write HU as int16 (CT) when every value is integral and in range, else float32.
 pub fn write(vol: &Volume, dest: &Path) -> Result<()> {
-    let integral = vol.data.iter().all(|v| v.fract() == 0.0 && (-32768.0..=32767.0).contains(v));
+    let integral = vol
+        .data
+        .iter()
+        .all(|v| v.fract() == 0.0 && (-32768.0..=32767.0).contains(v));
     if integral {
         let data: Vec<i16> = vol.data.iter().map(|&v| v as i16).collect();
         write_typed(vol, data, dest)
@@ -166,7 +247,11 @@ pub fn write_labels(vol: &Volume, labels: &[u8], dest: &Path) -> Result<()> {
     write_typed(vol, labels.to_vec(), dest)
 }
 
-fn write_typed<T: nifti::DataElement + bytemuck::Pod>(vol: &Volume, data: Vec<T>, dest: &Path) -> Result<()> {
+fn write_typed<T: nifti::DataElement + bytemuck::Pod>(
+    vol: &Volume,
+    data: Vec<T>,
+    dest: &Path,
+) -> Result<()> {
     let [nx, ny, nz] = vol.dims;
     let arr = ndarray::Array3::from_shape_vec((nz, ny, nx), data)
         .map_err(|e| Error::output(dest, e))?

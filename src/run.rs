@@ -1,0 +1,316 @@
+//! `facesim run`: the pipeline stages in order, with timings and a report.
+//!
+//! Implemented stages: read CT → segment → surfaces (or a registered face scan) → write.
+//! Springs, the C1 FEM and the solve are the next stages (issues 3–4); the report says so.
+
+use crate::case::{Case, ExtractMethod, Region};
+use crate::error::{Error, Result};
+use crate::mesh::{self, Mesh};
+use crate::progress::Progress;
+use crate::segment::{self, Segmentation};
+use crate::surface::{self, marching, rangescan, register};
+use crate::volume::{self, Volume};
+use serde::Serialize;
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+#[derive(Default, Serialize)]
+pub struct Report {
+    pub name: String,
+    pub case: String,
+    pub facesim_version: String,
+    /// Stage → wall time (s), in pipeline order.
+    pub timings: serde_json::Map<String, Value>,
+    pub counts: serde_json::Map<String, Value>,
+    pub segmentation: Option<segment::SegmentReport>,
+    pub surfaces: serde_json::Map<String, Value>,
+    pub registration: Option<register::Transform>,
+    pub parameters: Option<Case>,
+    pub warnings: Vec<String>,
+    pub stages_not_run: Vec<String>,
+}
+
+/// Everything the pipeline produced so far (kept in memory for tests and later stages).
+pub struct Outcome {
+    pub report: Report,
+    pub volume: Volume,
+    pub segmentation: Segmentation,
+    pub skin: Mesh,
+    pub skull: Mesh,
+    pub out_dir: PathBuf,
+}
+
+struct Timer<'a> {
+    report: &'a mut Report,
+}
+
+impl Timer<'_> {
+    fn time<T>(&mut self, stage: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let t = Instant::now();
+        let r = f()?;
+        self.report
+            .timings
+            .insert(stage.into(), json!(t.elapsed().as_secs_f64()));
+        Ok(r)
+    }
+}
+
+/// Drop connected pieces with fewer than `min_fraction` of the triangles (range-scan islands
+/// at the edge of the field of view, stray iso-surface bits). Returns how many were dropped.
+fn drop_small_components(m: &mut Mesh, min_fraction: f64) -> usize {
+    let (comp, n) = m.components();
+    if n <= 1 {
+        return 0;
+    }
+    let mut sizes = vec![0usize; n];
+    for &c in &comp {
+        sizes[c as usize] += 1;
+    }
+    let largest = sizes.iter().copied().max().unwrap_or(0);
+    let keep: Vec<bool> = sizes
+        .iter()
+        .map(|&s| s == largest || s as f64 >= min_fraction * m.triangles.len() as f64)
+        .collect();
+    let tris = std::mem::take(&mut m.triangles);
+    m.triangles = tris
+        .into_iter()
+        .zip(&comp)
+        .filter(|(_, c)| keep[**c as usize])
+        .map(|(t, _)| t)
+        .collect();
+    m.compact();
+    keep.iter().filter(|k| !**k).count()
+}
+
+fn check_regions_masks(case: &Case) -> Result<()> {
+    let masks = case
+        .surface
+        .movable
+        .iter()
+        .chain(case.osteotomy.iter().map(|o| &o.region));
+    for r in masks {
+        if let Region::Mask(p) = r {
+            if !p.is_file() {
+                return Err(Error::input(p, "region mask file not found"));
+            }
+        }
+    }
+    Ok(())
+}
+
+pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<Outcome> {
+    let t_total = Instant::now();
+    let (case, dir) = Case::load(case_path)?;
+    check_regions_masks(&case)?;
+    let out_dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| dir.join("out"));
+    if let Some(skin) = &case.skin {
+        if !skin.path.is_file() {
+            return Err(Error::input(&skin.path, "face scan not found"));
+        }
+    }
+    let mut report = Report {
+        name: case.name.clone().unwrap_or_else(|| {
+            dir.file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_default()
+        }),
+        case: dir.display().to_string(),
+        facesim_version: env!("CARGO_PKG_VERSION").into(),
+        ..Default::default()
+    };
+    let mut timer = Timer {
+        report: &mut report,
+    };
+
+    progress.stage("reading CT");
+    let vol = timer.time("read_ct", || volume::read_volume(&case.ct.path))?;
+    progress.stage("segmenting tissues");
+    let seg = timer.time("segment", || {
+        segment::segment(&vol, &case.tissue, &case.ct.path)
+    })?;
+
+    progress.stage("extracting surfaces");
+    let mut warnings = Vec::new();
+    let mut surf = serde_json::Map::new();
+    let (mut skin, mut skull, axis, r0) = timer.time("surfaces", || {
+        let skin_field = seg.skin_field(&vol);
+        let bone_field = seg.bone_field(&vol);
+        let iso_skin = seg.windows.head_threshold as f32;
+        let iso_bone = seg.windows.bone as f32;
+        match case.extract.method {
+            ExtractMethod::Rangescan => {
+                let z_step = if case.extract.z_step_mm > 0.0 { case.extract.z_step_mm } else { vol.spacing[2] };
+                let r = rangescan::scan(
+                    &vol,
+                    &skin_field,
+                    &bone_field,
+                    &seg.head,
+                    &rangescan::ScanParams {
+                        angle_step_deg: case.extract.angle_step_deg,
+                        z_step,
+                        skin_iso: iso_skin,
+                        bone_iso: iso_bone,
+                        max_skull_depth: case.springs.max_length_mm,
+                    },
+                );
+                surf.insert("method".into(), json!("rangescan"));
+                surf.insert("rays".into(), json!(r.rays));
+                surf.insert("skin_misses".into(), json!(r.skin_misses));
+                surf.insert("skull_misses".into(), json!(r.skull_misses));
+                surf.insert("axis_xy".into(), json!(r.axis));
+                surf.insert("r0".into(), json!(r.r0));
+                if r.skull_misses > 0 {
+                    warnings.push(format!(
+                        "{} range-scan rays found skin but no bone within {} mm (bone defect, thin bone, or the scan's edge)",
+                        r.skull_misses, case.springs.max_length_mm
+                    ));
+                }
+                Ok((r.skin, r.skull, r.axis, r.r0))
+            }
+            ExtractMethod::Marching => {
+                let mut skin = marching::extract(&vol, &skin_field, iso_skin);
+                let mut skull = marching::extract(&vol, &bone_field, iso_bone);
+                // The skin is one surface; skull pieces above 1% are kept (a separate mandible
+                // is a real piece).
+                let dropped = drop_small_components(&mut skin, 1.0);
+                if dropped > 0 {
+                    warnings.push(format!("skin iso-surface: dropped {dropped} pieces besides the largest"));
+                }
+                let (lo, hi) = vol.bounds();
+                let axis = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+                let r0 = 0.25 * ((hi[0] - lo[0]) + (hi[1] - lo[1]));
+                surface::cylindrical_uv(&mut skin, axis, r0);
+                surface::cylindrical_uv(&mut skull, axis, r0);
+                surf.insert("method".into(), json!("marching"));
+                Ok((skin, skull, axis, r0))
+            }
+        }
+    })?;
+    for (m, name) in [(&mut skin, "skin"), (&mut skull, "skull")] {
+        let dropped = drop_small_components(m, 0.01);
+        surf.insert(format!("{name}_islands_dropped"), json!(dropped));
+    }
+    timer.time("smooth_decimate", || {
+        for (m, name) in [(&mut skin, "skin"), (&mut skull, "skull")] {
+            surface::taubin_smooth(m, case.extract.smooth_iterations);
+            let err = surface::decimate(
+                m,
+                case.extract.decimate_target,
+                case.extract.decimate_max_error_mm,
+            );
+            if case.extract.decimate_target > 0 {
+                surf.insert(format!("{name}_decimation_error_mm"), json!(err));
+            }
+        }
+        Ok(())
+    })?;
+    skin.check(Path::new("extracted skin surface"))?;
+    skull.check(Path::new("extracted skull surface"))?;
+    surf.insert(
+        "extracted_skin_components".into(),
+        json!(skin.components().1),
+    );
+    surf.insert("skull_components".into(), json!(skull.components().1));
+
+    // A given face scan replaces the extracted skin (after registration).
+    let mut registration = None;
+    if let Some(scan) = &case.skin {
+        progress.stage("reading face scan");
+        let extracted = skin.clone();
+        skin = timer.time("read_scan", || {
+            let mut m = mesh::read_mesh(&scan.path)?;
+            if let Some(reg) = &case.registration {
+                let t = register::fit(&reg.scan, &reg.ct, reg.scale)?;
+                for v in &mut m.vertices {
+                    *v = t.apply(*v);
+                }
+                registration = Some(t);
+            }
+            let (lo, hi) = vol.bounds();
+            let inside = m.vertices.iter().filter(|v| (0..3).all(|a| v[a] >= lo[a] && v[a] <= hi[a])).count();
+            if (inside as f64) < 0.5 * m.vertices.len() as f64 {
+                return Err(Error::input(
+                    &scan.path,
+                    format!(
+                        "face scan does not overlap the CT: only {inside} of {} vertices lie inside the CT's field of view (missing or wrong [registration]?)",
+                        m.vertices.len()
+                    ),
+                ));
+            }
+            surface::cylindrical_uv(&mut m, axis, r0);
+            Ok(m)
+        })?;
+        let d = crate::compare::point_to_surface(&skin.vertices, &extracted);
+        let st = crate::compare::stats(&d);
+        if st.p90 > 3.0 {
+            warnings.push(format!(
+                "face scan is {:.1} mm (90th percentile) from the CT skin: check the registration",
+                st.p90
+            ));
+        }
+        surf.insert(
+            "scan_to_ct_skin_mm".into(),
+            serde_json::to_value(st).unwrap_or(Value::Null),
+        );
+    }
+    drop(timer);
+    report.registration = registration;
+
+    progress.stage("writing outputs");
+    let t = Instant::now();
+    std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
+    mesh::write_mesh(&skin, &out_dir.join("face_pre.obj"))?;
+    mesh::write_mesh(&skin, &out_dir.join("face_pre.ply"))?;
+    mesh::write_mesh(&skull, &out_dir.join("skull_pre.ply"))?;
+    volume::nifti_io::write_labels(&vol, &seg.labels, &out_dir.join("labels.nii.gz"))?;
+    report
+        .timings
+        .insert("write".into(), json!(t.elapsed().as_secs_f64()));
+    report
+        .timings
+        .insert("total".into(), json!(t_total.elapsed().as_secs_f64()));
+
+    report.counts.insert("voxels".into(), json!(vol.len()));
+    report.counts.insert("dims".into(), json!(vol.dims));
+    report
+        .counts
+        .insert("skin_vertices".into(), json!(skin.vertices.len()));
+    report
+        .counts
+        .insert("skin_triangles".into(), json!(skin.triangles.len()));
+    report
+        .counts
+        .insert("skull_vertices".into(), json!(skull.vertices.len()));
+    report
+        .counts
+        .insert("skull_triangles".into(), json!(skull.triangles.len()));
+    if seg.report.removed_components > 0 {
+        warnings.push(format!(
+            "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
+            seg.report.removed_components, seg.report.removed_voxels
+        ));
+    }
+    report.surfaces = surf;
+    report.segmentation = Some(seg.report.clone());
+    report.parameters = Some(case.clone());
+    report.warnings = warnings;
+    report.stages_not_run = ["springs", "fem", "osteotomy", "solve"]
+        .map(String::from)
+        .to_vec();
+    let text = serde_json::to_string_pretty(&report).map_err(|e| Error::output(&out_dir, e))?;
+    crate::output::write_bytes_atomic(&out_dir.join("report.json"), |w| {
+        w.write_all(text.as_bytes())
+    })?;
+    progress.done();
+    Ok(Outcome {
+        report,
+        volume: vol,
+        segmentation: seg,
+        skin,
+        skull,
+        out_dir,
+    })
+}

@@ -1,0 +1,650 @@
+//! Stage 2 — tissue segmentation by intensity (MODEL.md §1, Koch 1996 §2.3 and Table 1).
+//!
+//! 1. Head = the largest 6-connected component of HU > `head_threshold` (drops the CT table and
+//!    head rest, which touch the head only through air).
+//! 2. Outside air = non-head voxels connected to the volume border; other non-head voxels are
+//!    cavities (sinuses, airway).
+//! 3. HU windows (fixed, or fitted: a Gaussian mixture on the head's histogram, bounds where
+//!    neighbouring weighted components cross).
+//! 4. Bone = head voxels ≥ the bone bound, 26-connected pieces smaller than
+//!    `min_bone_component_mm3` dropped (they become soft tissue).
+//! 5. Skin = non-bone head voxels within `skin_thickness_mm` of the outside air (Euclidean
+//!    distance transform), and every non-bone voxel touching outside air (partial-volume
+//!    voxels whose HU fall below the fat window).
+
+use crate::case::{Tissue, TissueMethod};
+use crate::error::{Error, Result};
+use crate::volume::Volume;
+use rayon::prelude::*;
+use serde::Serialize;
+
+pub const AIR: u8 = 0;
+pub const SKIN: u8 = 1;
+pub const FAT_DARK: u8 = 2;
+pub const FAT_BRIGHT: u8 = 3;
+pub const MUSCLE: u8 = 4;
+pub const BONE: u8 = 5;
+pub const LABEL_NAMES: [&str; 6] = ["air", "skin", "fat_dark", "fat_bright", "muscle", "bone"];
+
+/// The HU window bounds actually used.
+#[derive(Clone, Debug, Serialize)]
+pub struct Windows {
+    pub head_threshold: f64,
+    pub fat_dark: f64,
+    pub fat_bright: f64,
+    pub soft: f64,
+    pub bone: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Gaussian {
+    pub name: &'static str,
+    pub weight: f64,
+    pub mean: f64,
+    pub sigma: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SegmentReport {
+    pub method: String,
+    pub windows: Windows,
+    /// The fitted mixture (method = "fit").
+    pub mixture: Option<Vec<Gaussian>>,
+    /// Where the weighted fat/soft and soft/bone components cross (method = "fit").
+    pub mixture_crossings: Option<[f64; 2]>,
+    pub head_voxels: usize,
+    /// Components above the head threshold that are not the head (table, head rest, ...).
+    pub removed_components: usize,
+    pub removed_voxels: usize,
+    pub bone_components_kept: usize,
+    pub bone_components_dropped: usize,
+    pub bone_voxels_dropped: usize,
+    pub cavity_voxels: usize,
+    /// Volume (mm³) per label, in LABEL_NAMES order.
+    pub volumes_mm3: Vec<(String, f64)>,
+}
+
+pub struct Segmentation {
+    pub labels: Vec<u8>,
+    /// Head component mask.
+    pub head: Vec<bool>,
+    pub windows: Windows,
+    pub report: SegmentReport,
+}
+
+impl Segmentation {
+    /// HU field for the skin iso-surface: voxels outside the head are clamped just below the
+    /// head threshold (not to −1000, which would shift the partial-volume boundary).
+    pub fn skin_field(&self, vol: &Volume) -> Vec<f32> {
+        let t = (self.windows.head_threshold - 1.0) as f32;
+        vol.data
+            .par_iter()
+            .zip(&self.head)
+            .map(|(&v, &h)| if h { v } else { v.min(t) })
+            .collect()
+    }
+
+    /// HU field for the skull iso-surface: only kept bone may exceed the bone bound.
+    pub fn bone_field(&self, vol: &Volume) -> Vec<f32> {
+        let t = (self.windows.bone - 1.0) as f32;
+        vol.data
+            .par_iter()
+            .zip(&self.labels)
+            .map(|(&v, &l)| if l == BONE { v } else { v.min(t) })
+            .collect()
+    }
+
+    pub fn count(&self, label: u8) -> usize {
+        self.labels.iter().filter(|&&l| l == label).count()
+    }
+}
+
+/// Connected components of `mask` (6- or 26-connectivity): component id per voxel (u32::MAX
+/// outside the mask) and each component's size.
+pub fn components(mask: &[bool], dims: [usize; 3], conn26: bool) -> (Vec<u32>, Vec<usize>) {
+    let [nx, ny, nz] = dims;
+    let mut parent: Vec<u32> = (0..mask.len() as u32).collect();
+    fn find(p: &mut [u32], mut x: u32) -> u32 {
+        while p[x as usize] != x {
+            let g = p[p[x as usize] as usize];
+            p[x as usize] = g;
+            x = g;
+        }
+        x
+    }
+    fn union(p: &mut [u32], a: u32, b: u32) {
+        let (ra, rb) = (find(p, a), find(p, b));
+        if ra != rb {
+            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
+            p[hi as usize] = lo;
+        }
+    }
+    // Backward neighbours: enough to visit each adjacency once.
+    let offsets: Vec<[i64; 3]> = if conn26 {
+        let mut v = Vec::new();
+        for dz in -1..=0i64 {
+            for dy in -1..=1i64 {
+                for dx in -1..=1i64 {
+                    if (dz, dy, dx) < (0, 0, 0) {
+                        v.push([dx, dy, dz]);
+                    }
+                }
+            }
+        }
+        v
+    } else {
+        vec![[-1, 0, 0], [0, -1, 0], [0, 0, -1]]
+    };
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let a = i + nx * (j + ny * k);
+                if !mask[a] {
+                    continue;
+                }
+                for o in &offsets {
+                    let (x, y, z) = (i as i64 + o[0], j as i64 + o[1], k as i64 + o[2]);
+                    if x < 0 || y < 0 || z < 0 || x >= nx as i64 || y >= ny as i64 {
+                        continue;
+                    }
+                    let b = x as usize + nx * (y as usize + ny * z as usize);
+                    if mask[b] {
+                        union(&mut parent, a as u32, b as u32);
+                    }
+                }
+            }
+        }
+    }
+    let mut id = vec![u32::MAX; mask.len()];
+    let mut root_id = vec![u32::MAX; mask.len()];
+    let mut sizes = Vec::new();
+    for a in 0..mask.len() {
+        if mask[a] {
+            let r = find(&mut parent, a as u32) as usize;
+            if root_id[r] == u32::MAX {
+                root_id[r] = sizes.len() as u32;
+                sizes.push(0);
+            }
+            id[a] = root_id[r];
+            sizes[root_id[r] as usize] += 1;
+        }
+    }
+    (id, sizes)
+}
+
+/// Squared Euclidean distance (mm²) from every voxel to the nearest voxel with `source` set
+/// (Felzenszwalb & Huttenlocher 2012, separable, exact; anisotropic spacing).
+pub fn distance_sq(source: &[bool], dims: [usize; 3], spacing: [f64; 3]) -> Vec<f32> {
+    let inf = f32::MAX / 4.0;
+    let mut d: Vec<f32> = source.iter().map(|&s| if s { 0.0 } else { inf }).collect();
+    let [nx, ny, nz] = dims;
+    for axis in 0..3 {
+        let (n, stride) = match axis {
+            0 => (nx, 1),
+            1 => (ny, nx),
+            _ => (nz, nx * ny),
+        };
+        let h2 = (spacing[axis] * spacing[axis]) as f32;
+        let lines: Vec<usize> = (0..nx * ny * nz)
+            .filter(|&s| (s / stride) % n == 0)
+            .collect();
+        let results: Vec<(usize, Vec<f32>)> = lines
+            .par_iter()
+            .map(|&start| {
+                let f: Vec<f32> = (0..n).map(|t| d[start + t * stride]).collect();
+                (start, edt_1d(&f, h2))
+            })
+            .collect();
+        for (start, line) in results {
+            for (t, v) in line.into_iter().enumerate() {
+                d[start + t * stride] = v;
+            }
+        }
+    }
+    d
+}
+
+/// 1-D lower envelope of parabolas: out[q] = min_p f[p] + h2 (q − p)².
+fn edt_1d(f: &[f32], h2: f32) -> Vec<f32> {
+    let n = f.len();
+    let big = f32::MAX / 4.0;
+    let mut v = vec![0usize; n];
+    let mut z = vec![0f64; n + 1];
+    let mut k = 0usize;
+    let mut out = vec![big; n];
+    let mut first = None;
+    for q in 0..n {
+        if f[q] < big {
+            first = Some(q);
+            break;
+        }
+    }
+    let Some(q0) = first else { return out };
+    v[0] = q0;
+    z[0] = f64::NEG_INFINITY;
+    z[1] = f64::INFINITY;
+    let h2 = h2 as f64;
+    for q in q0 + 1..n {
+        if f[q] >= big {
+            continue;
+        }
+        loop {
+            let p = v[k];
+            let s = ((f[q] as f64 + h2 * (q * q) as f64) - (f[p] as f64 + h2 * (p * p) as f64))
+                / (2.0 * h2 * (q as f64 - p as f64));
+            if s <= z[k] && k > 0 {
+                k -= 1;
+                continue;
+            }
+            if s <= z[k] {
+                // k == 0: replace.
+                v[0] = q;
+                z[0] = f64::NEG_INFINITY;
+                z[1] = f64::INFINITY;
+                break;
+            }
+            k += 1;
+            v[k] = q;
+            z[k] = s;
+            z[k + 1] = f64::INFINITY;
+            break;
+        }
+    }
+    k = 0;
+    for (q, o) in out.iter_mut().enumerate() {
+        while z[k + 1] < q as f64 {
+            k += 1;
+        }
+        let p = v[k];
+        *o = (f[p] as f64 + h2 * (q as f64 - p as f64).powi(2)) as f32;
+    }
+    out
+}
+
+/// Standard normal CDF (Abramowitz & Stegun 7.1.26 for erf, |error| < 1.5e-7).
+fn phi_cdf(x: f64) -> f64 {
+    let z = x.abs() / std::f64::consts::SQRT_2;
+    let t = 1.0 / (1.0 + 0.3275911 * z);
+    let poly = t
+        * (0.254829592
+            + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027 + t * 1.061405429))));
+    let erf = 1.0 - poly * (-z * z).exp();
+    if x >= 0.0 {
+        0.5 * (1.0 + erf)
+    } else {
+        0.5 * (1.0 - erf)
+    }
+}
+
+/// Density of a partial-volume voxel mixing classes with means a < b in uniform proportion,
+/// blurred by noise σ: (Φ((x−a)/σ) − Φ((x−b)/σ)) / (b − a) (Santago & Gage 1993).
+fn mixel_pdf(x: f64, a: f64, b: f64, sigma: f64) -> f64 {
+    let (lo, hi) = (a.min(b), a.max(b));
+    ((phi_cdf((x - lo) / sigma) - phi_cdf((x - hi) / sigma)) / (hi - lo).max(1e-9)).max(0.0)
+}
+
+/// EM fit of fat, soft and bone Gaussians to the histogram of head voxels, with partial-volume
+/// ("mixel") components between air–soft, fat–soft and soft–bone whose ranges follow the
+/// pure classes' means. Without the mixels, the many boundary voxels of a thin skull pull the
+/// bone component's mean far below pure bone. Returns the three Gaussians.
+fn fit_mixture(values: &[f32], t: &Tissue) -> Vec<Gaussian> {
+    let (lo, hi, bw) = (t.head_threshold, 2000.0, 5.0);
+    let nb = ((hi - lo) / bw) as usize;
+    let mut hist = vec![0f64; nb];
+    for &v in values {
+        let v = v as f64;
+        if v >= lo {
+            let b = (((v - lo) / bw) as usize).min(nb - 1);
+            hist[b] += 1.0;
+        }
+    }
+    let centre = |b: usize| lo + (b as f64 + 0.5) * bw;
+    let mut g = [
+        Gaussian {
+            name: "fat",
+            weight: 0.2,
+            mean: 0.5 * (t.fat_dark + t.soft),
+            sigma: 40.0,
+        },
+        Gaussian {
+            name: "soft",
+            weight: 0.4,
+            mean: 0.5 * (t.soft + t.bone),
+            sigma: 40.0,
+        },
+        Gaussian {
+            name: "bone",
+            weight: 0.1,
+            mean: t.bone + 600.0,
+            sigma: 250.0,
+        },
+    ];
+    // Mixel weights: air–soft, fat–soft, soft–bone.
+    let mut mw = [0.1, 0.1, 0.1];
+    let total: f64 = hist.iter().sum();
+    for _ in 0..300 {
+        let mut acc = [[0f64; 3]; 3]; // per Gaussian: Σr, Σr x, Σr x²
+        let mut macc = [0f64; 3];
+        let noise = g[1].sigma.max(bw);
+        for (b, &h) in hist.iter().enumerate() {
+            if h == 0.0 {
+                continue;
+            }
+            let x = centre(b);
+            let mut p = [0f64; 6];
+            for c in 0..3 {
+                p[c] = g[c].weight
+                    * (-(x - g[c].mean).powi(2) / (2.0 * g[c].sigma * g[c].sigma)).exp()
+                    / (g[c].sigma * (2.0 * std::f64::consts::PI).sqrt());
+            }
+            p[3] = mw[0] * mixel_pdf(x, lo, g[1].mean, noise);
+            p[4] = mw[1] * mixel_pdf(x, g[0].mean, g[1].mean, noise);
+            p[5] = mw[2] * mixel_pdf(x, g[1].mean, g[2].mean, noise);
+            let s: f64 = p.iter().sum::<f64>().max(1e-300);
+            for c in 0..3 {
+                let r = h * p[c] / s;
+                acc[c][0] += r;
+                acc[c][1] += r * x;
+                acc[c][2] += r * x * x;
+                macc[c] += h * p[3 + c] / s;
+            }
+        }
+        for c in 0..3 {
+            if acc[c][0] > 0.0 {
+                g[c].weight = acc[c][0] / total;
+                g[c].mean = acc[c][1] / acc[c][0];
+                g[c].sigma = (acc[c][2] / acc[c][0] - g[c].mean.powi(2))
+                    .max(bw * bw)
+                    .sqrt();
+            }
+            mw[c] = macc[c] / total;
+        }
+    }
+    g.to_vec()
+}
+
+/// Where w1 N(μ1,σ1) = w2 N(μ2,σ2), between the two means.
+fn crossing(a: &Gaussian, b: &Gaussian) -> f64 {
+    let f = |x: f64| {
+        a.weight / a.sigma * (-(x - a.mean).powi(2) / (2.0 * a.sigma * a.sigma)).exp()
+            - b.weight / b.sigma * (-(x - b.mean).powi(2) / (2.0 * b.sigma * b.sigma)).exp()
+    };
+    let (mut lo, mut hi) = (a.mean.min(b.mean), a.mean.max(b.mean));
+    if f(lo).signum() == f(hi).signum() {
+        return 0.5 * (lo + hi);
+    }
+    for _ in 0..100 {
+        let m = 0.5 * (lo + hi);
+        if f(m).signum() == f(lo).signum() {
+            lo = m
+        } else {
+            hi = m
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segmentation> {
+    let n = vol.len();
+    let dims = vol.dims;
+    let above: Vec<bool> = vol
+        .data
+        .par_iter()
+        .map(|&v| v as f64 > t.head_threshold)
+        .collect();
+    let (comp, sizes) = components(&above, dims, false);
+    let Some((head_id, &head_voxels)) = sizes.iter().enumerate().max_by_key(|(_, s)| **s) else {
+        return Err(Error::input(
+            name,
+            format!(
+                "no tissue above {} HU: no head in this CT",
+                t.head_threshold
+            ),
+        ));
+    };
+    let head: Vec<bool> = comp.par_iter().map(|&c| c == head_id as u32).collect();
+    drop(comp);
+    let removed_voxels = above.iter().filter(|&&a| a).count() - head_voxels;
+
+    // Outside air: flood from the border through non-head voxels.
+    let [nx, ny, nz] = dims;
+    let mut outside = vec![false; n];
+    let mut stack: Vec<usize> = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                if i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1 {
+                    let a = vol.idx(i, j, k);
+                    if !head[a] && !outside[a] {
+                        outside[a] = true;
+                        stack.push(a);
+                    }
+                }
+            }
+        }
+    }
+    while let Some(a) = stack.pop() {
+        let [i, j, k] = vol.ijk(a);
+        let mut visit = |b: usize| {
+            if !head[b] && !outside[b] {
+                outside[b] = true;
+                stack.push(b);
+            }
+        };
+        if i > 0 {
+            visit(a - 1)
+        }
+        if i + 1 < nx {
+            visit(a + 1)
+        }
+        if j > 0 {
+            visit(a - nx)
+        }
+        if j + 1 < ny {
+            visit(a + nx)
+        }
+        if k > 0 {
+            visit(a - nx * ny)
+        }
+        if k + 1 < nz {
+            visit(a + nx * ny)
+        }
+    }
+
+    let mut crossings = None;
+    let (windows, mixture) = match t.method {
+        TissueMethod::Windows => (
+            Windows {
+                head_threshold: t.head_threshold,
+                fat_dark: t.fat_dark,
+                fat_bright: t.fat_bright,
+                soft: t.soft,
+                bone: t.bone,
+            },
+            None,
+        ),
+        TissueMethod::Fit => {
+            let vals: Vec<f32> = vol
+                .data
+                .iter()
+                .zip(&head)
+                .filter(|(_, h)| **h)
+                .map(|(v, _)| *v)
+                .collect();
+            let g = fit_mixture(&vals, t);
+            // Bounds at the midpoints of neighbouring means, not where the weighted Gaussians
+            // cross: at a tissue boundary a voxel that is half one class and half the other has
+            // the mean of the two, so the midpoint is the unbiased partial-volume threshold. The
+            // crossing is Bayes-optimal only for pure voxels; with a narrow, heavy soft-tissue
+            // peak beside a broad bone component it sits near the soft peak and thickens bone
+            // (docs/segmentation.md). The crossings are reported for comparison.
+            let w = Windows {
+                head_threshold: t.head_threshold,
+                fat_dark: (g[0].mean - 3.0 * g[0].sigma).max(t.head_threshold + 1.0),
+                fat_bright: g[0].mean,
+                soft: 0.5 * (g[0].mean + g[1].mean),
+                bone: 0.5 * (g[1].mean + g[2].mean),
+            };
+            crossings = Some([crossing(&g[0], &g[1]), crossing(&g[1], &g[2])]);
+            let b = [w.head_threshold, w.fat_dark, w.fat_bright, w.soft, w.bone];
+            if b.windows(2).any(|p| !(p[0] < p[1])) || b.iter().any(|x| !x.is_finite()) {
+                return Err(Error::input(
+                    name,
+                    format!(
+                        "the tissue fit did not separate fat, soft tissue and bone (bounds {b:?}); use method = \"windows\""
+                    ),
+                ));
+            }
+            (w, Some(g))
+        }
+    };
+
+    // Bone pieces.
+    let bone_raw: Vec<bool> = vol
+        .data
+        .par_iter()
+        .zip(&head)
+        .map(|(&v, &h)| h && v as f64 >= windows.bone)
+        .collect();
+    let (bcomp, bsizes) = components(&bone_raw, dims, true);
+    let vv = vol.voxel_volume();
+    let keep: Vec<bool> = bsizes
+        .iter()
+        .map(|&s| s as f64 * vv >= t.min_bone_component_mm3)
+        .collect();
+    let bone_components_kept = keep.iter().filter(|k| **k).count();
+    if bone_components_kept == 0 {
+        return Err(Error::input(
+            name,
+            format!(
+                "no bone found (no piece of at least {} mm³ above {} HU): a CT with bone is needed",
+                t.min_bone_component_mm3, windows.bone
+            ),
+        ));
+    }
+    let bone_voxels_dropped: usize = bsizes
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| !**k)
+        .map(|(s, _)| s)
+        .sum();
+
+    let d2 = distance_sq(&outside, dims, vol.spacing);
+    // The surface lies about half a voxel in front of the nearest outside-air voxel centre.
+    let h = (vol.spacing[0] * vol.spacing[1] * vol.spacing[2]).cbrt();
+    let skin_d = t.skin_thickness_mm + 0.5 * h;
+    let touch = vol.spacing.iter().cloned().fold(0.0, f64::max) * 1.01;
+    let labels: Vec<u8> = (0..n)
+        .into_par_iter()
+        .map(|a| {
+            if !head[a] {
+                return AIR;
+            }
+            if bone_raw[a] && keep[bcomp[a] as usize] {
+                return BONE;
+            }
+            let hu = vol.data[a] as f64;
+            let d = (d2[a] as f64).sqrt();
+            if d <= touch
+                || (d <= skin_d && hu >= windows.soft)
+                || (d <= skin_d && hu < windows.fat_dark)
+            {
+                SKIN
+            } else if hu < windows.fat_dark {
+                AIR
+            } else if hu < windows.fat_bright {
+                FAT_DARK
+            } else if hu < windows.soft {
+                FAT_BRIGHT
+            } else {
+                MUSCLE
+            }
+        })
+        .collect();
+    let mut counts = [0usize; 6];
+    for &l in &labels {
+        counts[l as usize] += 1;
+    }
+    if counts[SKIN as usize] == 0 {
+        return Err(Error::input(
+            name,
+            "no skin found: the head touches the volume border everywhere",
+        ));
+    }
+    let cavity_voxels = (0..n).filter(|&a| !head[a] && !outside[a]).count();
+    let report = SegmentReport {
+        method: format!("{:?}", t.method).to_lowercase(),
+        windows: windows.clone(),
+        mixture: mixture.clone(),
+        mixture_crossings: crossings,
+        head_voxels,
+        removed_components: sizes.len() - 1,
+        removed_voxels,
+        bone_components_kept,
+        bone_components_dropped: keep.len() - bone_components_kept,
+        bone_voxels_dropped,
+        cavity_voxels,
+        volumes_mm3: LABEL_NAMES
+            .iter()
+            .zip(counts)
+            .map(|(n, c)| (n.to_string(), c as f64 * vv))
+            .collect(),
+    };
+    Ok(Segmentation {
+        labels,
+        head,
+        windows,
+        report,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distance_transform_is_exact_on_a_point() {
+        let dims = [9, 7, 5];
+        let mut src = vec![false; 9 * 7 * 5];
+        src[4 + 9 * (3 + 7 * 2)] = true;
+        let d = distance_sq(&src, dims, [1.0, 2.0, 0.5]);
+        for k in 0..5 {
+            for j in 0..7 {
+                for i in 0..9 {
+                    let e = ((i as f64 - 4.0) * 1.0).powi(2)
+                        + ((j as f64 - 3.0) * 2.0).powi(2)
+                        + ((k as f64 - 2.0) * 0.5).powi(2);
+                    assert!((d[i + 9 * (j + 7 * k)] as f64 - e).abs() < 1e-4);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn components_count_six_versus_26() {
+        // Two voxels touching only at a corner.
+        let dims = [2, 2, 2];
+        let mut m = vec![false; 8];
+        m[0] = true;
+        m[7] = true;
+        assert_eq!(components(&m, dims, false).1.len(), 2);
+        assert_eq!(components(&m, dims, true).1.len(), 1);
+    }
+
+    #[test]
+    fn mixture_crossing_is_midpoint_for_equal_gaussians() {
+        let a = Gaussian {
+            name: "a",
+            weight: 0.5,
+            mean: 0.0,
+            sigma: 10.0,
+        };
+        let b = Gaussian {
+            name: "b",
+            weight: 0.5,
+            mean: 100.0,
+            sigma: 10.0,
+        };
+        assert!((crossing(&a, &b) - 50.0).abs() < 1e-9);
+    }
+}

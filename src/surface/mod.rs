@@ -1,0 +1,149 @@
+//! Stage 3 — skin and skull surfaces (MODEL.md §2): the range scan (with its (u, v)
+//! parameterisation) or marching tetrahedra, then optional Taubin smoothing and adaptive
+//! decimation; a given face scan replaces the extracted skin after landmark registration.
+
+pub mod marching;
+pub mod rangescan;
+pub mod register;
+
+use crate::mesh::{Column, Mesh};
+
+/// Taubin λ|μ low-pass smoothing (Taubin 1995): a shrink step λ = 0.5 and an inflate step
+/// μ = −0.53 per iteration, umbrella Laplacian; boundary vertices stay fixed.
+pub fn taubin_smooth(mesh: &mut Mesh, iterations: usize) {
+    if iterations == 0 {
+        return;
+    }
+    let nb = mesh.neighbours();
+    let mut on_boundary = vec![false; mesh.vertices.len()];
+    let mut edge_count: std::collections::HashMap<(u32, u32), u32> =
+        std::collections::HashMap::new();
+    for t in &mesh.triangles {
+        for e in 0..3 {
+            let (a, b) = (t[e].min(t[(e + 1) % 3]), t[e].max(t[(e + 1) % 3]));
+            *edge_count.entry((a, b)).or_default() += 1;
+        }
+    }
+    for ((a, b), n) in edge_count {
+        if n == 1 {
+            on_boundary[a as usize] = true;
+            on_boundary[b as usize] = true;
+        }
+    }
+    for _ in 0..iterations {
+        for f in [0.5, -0.53] {
+            let old = mesh.vertices.clone();
+            for (i, v) in mesh.vertices.iter_mut().enumerate() {
+                if on_boundary[i] || nb[i].is_empty() {
+                    continue;
+                }
+                let mut c = [0.0; 3];
+                for &j in &nb[i] {
+                    for a in 0..3 {
+                        c[a] += old[j as usize][a];
+                    }
+                }
+                for a in 0..3 {
+                    v[a] += f * (c[a] / nb[i].len() as f64 - old[i][a]);
+                }
+            }
+        }
+    }
+}
+
+/// Adaptive decimation by quadric edge collapse (meshoptimizer's simplifier), to at most
+/// `target` triangles while the geometric error stays below `max_error` mm. Borders are locked
+/// so the mesh keeps its outline. Returns the error reached (mm).
+pub fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
+    if target == 0 || mesh.triangles.len() <= target {
+        return 0.0;
+    }
+    let pos: Vec<[f32; 3]> = mesh.vertices.iter().map(|v| v.map(|x| x as f32)).collect();
+    let bytes: &[u8] = bytemuck::cast_slice(&pos);
+    let Ok(adapter) = meshopt::VertexDataAdapter::new(bytes, 12, 0) else {
+        return 0.0;
+    };
+    let idx: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    let mut err = 0f32;
+    let out = meshopt::simplify(
+        &idx,
+        &adapter,
+        target * 3,
+        max_error as f32,
+        meshopt::SimplifyOptions::LockBorder | meshopt::SimplifyOptions::ErrorAbsolute,
+        Some(&mut err),
+    );
+    mesh.triangles = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+    mesh.compact();
+    err as f64
+}
+
+/// Cylindrical (u, v) = (R0·φ, z) about the vertical axis through `axis`, φ from −y towards +x
+/// (the parameterisation a given face scan gets, MODEL.md §2).
+pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
+    let (mut u, mut v) = (Vec::new(), Vec::new());
+    for p in &mesh.vertices {
+        u.push(r0 * (p[0] - axis[0]).atan2(-(p[1] - axis[1])));
+        v.push(p[2]);
+    }
+    mesh.vertex_columns
+        .retain(|c| c.name != "u" && c.name != "v");
+    mesh.vertex_columns.push(Column {
+        name: "u".into(),
+        values: u,
+    });
+    mesh.vertex_columns.push(Column {
+        name: "v".into(),
+        values: v,
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: usize, bump: f64) -> Mesh {
+        let mut v = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let (x, y) = (i as f64, j as f64);
+                let z = if i > 0 && j > 0 && i < n - 1 && j < n - 1 {
+                    bump * (((i + j) % 2) as f64 - 0.5)
+                } else {
+                    0.0
+                };
+                v.push([x, y, z]);
+            }
+        }
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = (j * n + i) as u32;
+                t.push([a, a + 1, a + n as u32]);
+                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
+            }
+        }
+        Mesh::new(v, t)
+    }
+
+    #[test]
+    fn taubin_removes_high_frequency_noise_and_keeps_border() {
+        let mut m = grid(12, 1.0);
+        let rough = |m: &Mesh| m.vertices.iter().map(|v| v[2].abs()).fold(0.0, f64::max);
+        let before = rough(&m);
+        taubin_smooth(&mut m, 10);
+        assert!(rough(&m) < 0.1 * before, "{} vs {before}", rough(&m));
+        assert_eq!(m.vertices[0], [0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn decimation_of_a_plane_is_exact_and_reaches_target() {
+        let mut m = grid(30, 0.0);
+        let err = decimate(&mut m, 200, 0.01);
+        assert!(m.triangles.len() <= 200, "{}", m.triangles.len());
+        assert!(err <= 0.01, "{err}");
+        assert!(m.vertices.iter().all(|v| v[2] == 0.0));
+        m.check(std::path::Path::new("plane")).unwrap();
+        assert!((m.area() - 29.0 * 29.0).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,220 @@
+//! The paper's simulated cylindrical range scan (Koch 1996 §2.4, MODEL.md §2).
+//!
+//! Rays in horizontal planes (constant LPS z) run from outside the head towards a vertical
+//! axis through the head's centroid, at angles φ_k = −π + (k + ½)Δφ measured from the anterior
+//! direction (−y) towards the patient's left (+x), so the seam (φ = ±π) is at the back of the
+//! head. The first air→tissue crossing of the skin field is the skin; continuing inwards, the
+//! first crossing of the bone field (within `max_skull_depth` of the skin) is the skull.
+//! Crossings are refined by bisection on the trilinear field. Each grid node keeps its
+//! parameter coordinates (u, v) = (R0·φ, z), R0 the mean skin radius.
+
+use crate::mesh::{Column, Mesh};
+use crate::volume::{Volume, sample_field};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+
+pub struct ScanParams {
+    pub angle_step_deg: f64,
+    /// Vertical step (mm).
+    pub z_step: f64,
+    pub skin_iso: f32,
+    pub bone_iso: f32,
+    /// Search depth for the skull below the skin (mm); deeper hits are treated as misses, so a
+    /// bone defect leaves a hole instead of a spike to the far side of the skull.
+    pub max_skull_depth: f64,
+}
+
+pub struct ScanResult {
+    pub skin: Mesh,
+    pub skull: Mesh,
+    /// Axis (x, y) of the scan and the parameter radius R0.
+    pub axis: [f64; 2],
+    pub r0: f64,
+    pub rays: usize,
+    pub skin_misses: usize,
+    pub skull_misses: usize,
+}
+
+/// Find the first crossing of `iso` (from below to above) along p(t) = o + t·d for t in
+/// [t0, t1], stepping by `dt`, refined by bisection.
+fn first_crossing(
+    field: &[f32],
+    vol: &Volume,
+    o: [f64; 3],
+    d: [f64; 3],
+    t0: f64,
+    t1: f64,
+    dt: f64,
+    iso: f32,
+) -> Option<f64> {
+    let at = |t: f64| {
+        let p = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
+        sample_field(field, vol.dims, vol.to_voxel(p), f32::MIN)
+    };
+    let mut prev_t = t0;
+    let mut prev = at(t0);
+    let mut t = t0;
+    while t < t1 {
+        t = (t + dt).min(t1);
+        let v = at(t);
+        if prev < iso && v >= iso {
+            let (mut lo, mut hi) = (prev_t, t);
+            for _ in 0..30 {
+                let m = 0.5 * (lo + hi);
+                if at(m) >= iso { hi = m } else { lo = m }
+            }
+            return Some(0.5 * (lo + hi));
+        }
+        prev_t = t;
+        prev = v;
+    }
+    None
+}
+
+pub fn scan(
+    vol: &Volume,
+    skin_field: &[f32],
+    bone_field: &[f32],
+    head: &[bool],
+    p: &ScanParams,
+) -> ScanResult {
+    // Axis through the centroid of the head; radius bound from the head's extent.
+    let (mut sx, mut sy, mut cnt) = (0.0, 0.0, 0usize);
+    let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
+    for (a, &h) in head.iter().enumerate() {
+        if h {
+            let w = vol.to_world(vol.ijk(a).map(|x| x as f64));
+            sx += w[0];
+            sy += w[1];
+            cnt += 1;
+            zmin = zmin.min(w[2]);
+            zmax = zmax.max(w[2]);
+        }
+    }
+    let axis = [sx / cnt.max(1) as f64, sy / cnt.max(1) as f64];
+    let (lo, hi) = vol.bounds();
+    let rmax = [lo[0] - axis[0], hi[0] - axis[0]]
+        .iter()
+        .flat_map(|dx| [lo[1] - axis[1], hi[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
+        .fold(0.0, f64::max);
+    let nphi = (360.0 / p.angle_step_deg).round().max(8.0) as usize;
+    let dphi = 2.0 * PI / nphi as f64;
+    let nz = ((zmax - zmin) / p.z_step).floor() as usize + 1;
+    let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
+
+    // One row per z; each node: (skin point, skull point).
+    type Hit = Option<[f64; 3]>;
+    let rows: Vec<Vec<(Hit, Hit)>> = (0..nz)
+        .into_par_iter()
+        .map(|r| {
+            let z = zmin + r as f64 * p.z_step;
+            (0..nphi)
+                .map(|k| {
+                    let phi = -PI + (k as f64 + 0.5) * dphi;
+                    let o = [axis[0] + rmax * phi.sin(), axis[1] - rmax * phi.cos(), z];
+                    let d = [-phi.sin(), phi.cos(), 0.0];
+                    let Some(ts) =
+                        first_crossing(skin_field, vol, o, d, 0.0, rmax, step, p.skin_iso)
+                    else {
+                        return (None, None);
+                    };
+                    let skin = [o[0] + ts * d[0], o[1] + ts * d[1], o[2]];
+                    let skull = first_crossing(
+                        bone_field,
+                        vol,
+                        o,
+                        d,
+                        ts,
+                        (ts + p.max_skull_depth).min(rmax),
+                        step,
+                        p.bone_iso,
+                    )
+                    .map(|tb| [o[0] + tb * d[0], o[1] + tb * d[1], o[2]]);
+                    (Some(skin), skull)
+                })
+                .collect()
+        })
+        .collect();
+
+    let hits: Vec<f64> = rows
+        .iter()
+        .flatten()
+        .filter_map(|(s, _)| {
+            s.map(|s| ((s[0] - axis[0]).powi(2) + (s[1] - axis[1]).powi(2)).sqrt())
+        })
+        .collect();
+    let r0 = if hits.is_empty() {
+        1.0
+    } else {
+        hits.iter().sum::<f64>() / hits.len() as f64
+    };
+    let rays = nz * nphi;
+    let skin_misses = rows.iter().flatten().filter(|(s, _)| s.is_none()).count();
+    let skull_misses = rows
+        .iter()
+        .flatten()
+        .filter(|(s, b)| s.is_some() && b.is_none())
+        .count();
+    let build = |pick: &dyn Fn(&(Hit, Hit)) -> Hit| -> Mesh {
+        let mut index = vec![u32::MAX; rays];
+        let mut verts = Vec::new();
+        let mut u = Vec::new();
+        let mut v = Vec::new();
+        for (r, row) in rows.iter().enumerate() {
+            for (k, node) in row.iter().enumerate() {
+                if let Some(x) = pick(node) {
+                    index[r * nphi + k] = verts.len() as u32;
+                    verts.push(x);
+                    u.push(r0 * (-PI + (k as f64 + 0.5) * dphi));
+                    v.push(zmin + r as f64 * p.z_step);
+                }
+            }
+        }
+        let mut tris = Vec::new();
+        for r in 0..nz.saturating_sub(1) {
+            // No wrap across the seam at the back (k = nphi−1 → 0): u is discontinuous there.
+            for k in 0..nphi - 1 {
+                let a = index[r * nphi + k];
+                let b = index[r * nphi + k + 1];
+                let c = index[(r + 1) * nphi + k];
+                let d = index[(r + 1) * nphi + k + 1];
+                // φ grows towards +x and z upwards: (a, b, c) winds with the normal outwards.
+                match (a != u32::MAX, b != u32::MAX, c != u32::MAX, d != u32::MAX) {
+                    (true, true, true, true) => {
+                        tris.push([a, b, c]);
+                        tris.push([b, d, c]);
+                    }
+                    (true, true, true, false) => tris.push([a, b, c]),
+                    (true, true, false, true) => tris.push([a, b, d]),
+                    (true, false, true, true) => tris.push([a, d, c]),
+                    (false, true, true, true) => tris.push([b, d, c]),
+                    _ => {}
+                }
+            }
+        }
+        let mut m = Mesh::new(verts, tris);
+        m.vertex_columns = vec![
+            Column {
+                name: "u".into(),
+                values: u,
+            },
+            Column {
+                name: "v".into(),
+                values: v,
+            },
+        ];
+        m.compact();
+        m
+    };
+    let skin = build(&|n| n.0);
+    let skull = build(&|n| n.1);
+    ScanResult {
+        skin,
+        skull,
+        axis,
+        r0,
+        rays,
+        skin_misses,
+        skull_misses,
+    }
+}

@@ -1,0 +1,89 @@
+//! Shared test fixtures: one phantom case per test binary, the real CT, and a CLI runner.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// A phantom case (1.5 mm voxels), written once per test binary.
+pub fn phantom_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = tempfile::Builder::new()
+            .prefix("facesim-phantom")
+            .tempdir()
+            .unwrap()
+            .keep();
+        facesim::phantom::write_case(&d, &facesim::phantom::PhantomOptions::default()).unwrap();
+        d
+    })
+}
+
+/// The real CT, fetched by data-samples/fetch-real.sh (the README's test command runs it first).
+pub fn real_ct() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("data-samples/real/Cranium.inv3");
+    assert!(
+        p.is_file(),
+        "{} missing: run data-samples/fetch-real.sh (the README's test command does)",
+        p.display()
+    );
+    p
+}
+
+pub struct CliResult {
+    pub code: i32,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+pub fn facesim(args: &[&str]) -> CliResult {
+    let out = Command::new(env!("CARGO_BIN_EXE_facesim"))
+        .args(args)
+        .output()
+        .unwrap();
+    CliResult {
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// Assert the CLI failed with one line on stderr that names `file` and contains `problem`.
+pub fn assert_clean_failure(r: &CliResult, file: &str, problem: &str) {
+    assert_ne!(r.code, 0, "expected failure, got success: {}", r.stdout);
+    let lines: Vec<&str> = r.stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "expected one error line, got: {:?}",
+        r.stderr
+    );
+    assert!(
+        lines[0].contains(file),
+        "error does not name {file}: {}",
+        lines[0]
+    );
+    assert!(
+        lines[0].to_lowercase().contains(&problem.to_lowercase()),
+        "error does not say '{problem}': {}",
+        lines[0]
+    );
+    assert!(!lines[0].contains("internal error"), "{}", lines[0]);
+}
+
+/// Every file below `dir` with its bytes (to prove nothing changed).
+pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut v = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                v.extend(snapshot(&p));
+            } else {
+                v.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    v.sort();
+    v
+}
