@@ -133,7 +133,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     })?;
 
     progress.stage("extracting surfaces");
-    let mut warnings = Vec::new();
+    let mut warnings = seg.report.warnings.clone();
     let mut surf = serde_json::Map::new();
     let (mut skin, mut skull, axis, r0) = timer.time("surfaces", || {
         let skin_field = seg.skin_field(&vol);
@@ -196,13 +196,21 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     timer.time("smooth_decimate", || {
         for (m, name) in [(&mut skin, "skin"), (&mut skull, "skull")] {
             surface::taubin_smooth(m, case.extract.smooth_iterations);
-            let err = surface::decimate(
-                m,
-                case.extract.decimate_target,
-                case.extract.decimate_max_error_mm,
-            );
             if case.extract.decimate_target > 0 {
-                surf.insert(format!("{name}_decimation_error_mm"), json!(err));
+                let before = m.clone();
+                let err = surface::decimate(
+                    m,
+                    case.extract.decimate_target,
+                    case.extract.decimate_max_error_mm,
+                );
+                // Edge collapse is not guaranteed to keep a mesh manifold (thin iso-surface
+                // features can pinch); a broken result is not used.
+                if let Err(e) = m.check(Path::new(name)) {
+                    warnings.push(format!("decimation of the {name} was undone: {e}"));
+                    *m = before;
+                } else {
+                    surf.insert(format!("{name}_decimation_error_mm"), json!(err));
+                }
             }
         }
         Ok(())

@@ -62,6 +62,7 @@ pub struct SegmentReport {
     pub cavity_voxels: usize,
     /// Volume (mm³) per label, in LABEL_NAMES order.
     pub volumes_mm3: Vec<(String, f64)>,
+    pub warnings: Vec<String>,
 }
 
 pub struct Segmentation {
@@ -291,14 +292,24 @@ fn fit_mixture(values: &[f32], t: &Tissue) -> Vec<Gaussian> {
     let (lo, hi, bw) = (t.head_threshold, 2000.0, 5.0);
     let nb = ((hi - lo) / bw) as usize;
     let mut hist = vec![0f64; nb];
+    // Values beyond `hi` (dense enamel, metal, saturated detectors) are left out rather than
+    // piled into the last bin, where they would make a spike for a component to collapse onto.
     for &v in values {
         let v = v as f64;
-        if v >= lo {
-            let b = (((v - lo) / bw) as usize).min(nb - 1);
-            hist[b] += 1.0;
+        if v >= lo && v < hi {
+            hist[((v - lo) / bw) as usize] += 1.0;
         }
     }
     let centre = |b: usize| lo + (b as f64 + 0.5) * bw;
+    // Each class's mean stays inside its literature window and its spread below a cap: the fit
+    // adapts the windows to this scanner, it does not relabel tissues (on real heads the fat
+    // peak is a shoulder of the brain's, and an unconstrained fit drifts onto the brain; a
+    // bone σ floor keeps bone off narrow spikes of dental fillings).
+    let range = [
+        (t.fat_dark, t.soft, 5.0, 60.0),
+        (t.soft, t.bone, 5.0, 60.0),
+        (t.bone, hi, 50.0, 600.0),
+    ];
     let mut g = [
         Gaussian {
             name: "fat",
@@ -357,8 +368,14 @@ fn fit_mixture(values: &[f32], t: &Tissue) -> Vec<Gaussian> {
                     .max(bw * bw)
                     .sqrt();
             }
+            g[c].mean = g[c].mean.clamp(range[c].0, range[c].1);
+            g[c].sigma = g[c].sigma.clamp(range[c].2, range[c].3);
             mw[c] = macc[c] / total;
         }
+        // A boundary cannot hold more voxels than the classes it separates (else a flat mixel
+        // swallows a broad class such as real bone, whose HU spread is wide and flat).
+        mw[1] = mw[1].min(g[0].weight.min(g[1].weight));
+        mw[2] = mw[2].min(g[2].weight);
     }
     g.to_vec()
 }
@@ -452,6 +469,7 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
     }
 
     let mut crossings = None;
+    let mut fit_warnings = Vec::new();
     let (windows, mixture) = match t.method {
         TissueMethod::Windows => (
             Windows {
@@ -486,6 +504,15 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
                 bone: 0.5 * (g[1].mean + g[2].mean),
             };
             crossings = Some([crossing(&g[0], &g[1]), crossing(&g[1], &g[2])]);
+            let bounds = [(t.fat_dark, t.soft), (t.soft, t.bone), (t.bone, 2000.0)];
+            for (c, (lo, hi)) in g.iter().zip(bounds) {
+                if c.mean <= lo + 1e-9 || c.mean >= hi - 1e-9 {
+                    fit_warnings.push(format!(
+                        "tissue fit: the {} component has no peak of its own inside [{lo}, {hi}] HU (its mean sits at the bound); its window is a guess",
+                        c.name
+                    ));
+                }
+            }
             let b = [w.head_threshold, w.fat_dark, w.fat_bright, w.soft, w.bone];
             if b.windows(2).any(|p| !(p[0] < p[1])) || b.iter().any(|x| !x.is_finite()) {
                 return Err(Error::input(
@@ -584,6 +611,7 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
         bone_components_dropped: keep.len() - bone_components_kept,
         bone_voxels_dropped,
         cavity_voxels,
+        warnings: fit_warnings,
         volumes_mm3: LABEL_NAMES
             .iter()
             .zip(counts)

@@ -75,7 +75,67 @@ pub fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
     );
     mesh.triangles = out.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
     mesh.compact();
+    flip_slivers(mesh);
     err as f64
+}
+
+/// Remove zero-area slivers (the collapse can leave a vertex on its neighbour's edge) by
+/// flipping each sliver's longest edge: for sliver (a, b, c) with c on ab and neighbour
+/// (b, a, d), the quad a→d→b→c becomes (a, d, c) and (d, b, c). Returns the flips made.
+pub fn flip_slivers(mesh: &mut Mesh) -> usize {
+    use crate::mesh::{cross, norm, sub};
+    let diag = mesh.diagonal();
+    let tiny = 1e-12 * diag * diag; // the same bound as Mesh::check
+    let mut flips = 0;
+    for _pass in 0..4 {
+        let mut edge_owner: std::collections::HashMap<(u32, u32), usize> =
+            std::collections::HashMap::new();
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            for e in 0..3 {
+                edge_owner.insert((tri[e], tri[(e + 1) % 3]), t);
+            }
+        }
+        let mut changed = false;
+        for t in 0..mesh.triangles.len() {
+            let tri = mesh.triangles[t];
+            let p = tri.map(|i| mesh.vertices[i as usize]);
+            if norm(cross(sub(p[1], p[0]), sub(p[2], p[0]))) > tiny {
+                continue;
+            }
+            // Longest edge (a → b), opposite vertex c.
+            let e = (0..3)
+                .max_by(|&i, &j| {
+                    norm(sub(p[(i + 1) % 3], p[i])).total_cmp(&norm(sub(p[(j + 1) % 3], p[j])))
+                })
+                .unwrap_or(0);
+            let (a, b, c) = (tri[e], tri[(e + 1) % 3], tri[(e + 2) % 3]);
+            let Some(&n) = edge_owner.get(&(b, a)) else {
+                continue;
+            };
+            let nt = mesh.triangles[n];
+            let Some(&d) = nt.iter().find(|&&v| v != a && v != b) else {
+                continue;
+            };
+            if d == c || edge_owner.contains_key(&(c, d)) || edge_owner.contains_key(&(d, c)) {
+                continue;
+            }
+            mesh.triangles[t] = [a, d, c];
+            mesh.triangles[n] = [d, b, c];
+            for (tt, tri) in [(t, [a, d, c]), (n, [d, b, c])] {
+                for k in 0..3 {
+                    edge_owner.insert((tri[k], tri[(k + 1) % 3]), tt);
+                }
+            }
+            edge_owner.remove(&(a, b));
+            edge_owner.remove(&(b, a));
+            flips += 1;
+            changed = true;
+        }
+        if !changed {
+            break;
+        }
+    }
+    flips
 }
 
 /// Cylindrical (u, v) = (R0·φ, z) about the vertical axis through `axis`, φ from −y towards +x
@@ -134,6 +194,25 @@ mod tests {
         taubin_smooth(&mut m, 10);
         assert!(rough(&m) < 0.1 * before, "{} vs {before}", rough(&m));
         assert_eq!(m.vertices[0], [0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn a_sliver_is_flipped_away() {
+        // c = (1, 0) lies on edge ab of triangle (a, b, c); d is above.
+        let mut m = Mesh::new(
+            vec![
+                [0.0, 0.0, 0.0],
+                [2.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [1.0, -1.0, 0.0],
+            ],
+            vec![[0, 1, 2], [1, 0, 3], [0, 2, 4], [2, 1, 4]],
+        );
+        assert!(m.check(std::path::Path::new("s")).is_err());
+        assert_eq!(flip_slivers(&mut m), 1);
+        m.check(std::path::Path::new("s")).unwrap();
+        assert!((m.area() - 2.0).abs() < 1e-12);
     }
 
     #[test]
