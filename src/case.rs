@@ -279,10 +279,11 @@ impl Case {
             return bad("[tissue.stiffness] values must be finite and positive".into());
         }
         let e = &self.extract;
-        if !(e.angle_step_deg > 0.0 && e.angle_step_deg <= 30.0)
-            || !(e.z_step_mm >= 0.0)
-            || !(e.decimate_max_error_mm > 0.0)
-        {
+        let ok = e.angle_step_deg > 0.0
+            && e.angle_step_deg <= 30.0
+            && e.z_step_mm >= 0.0
+            && e.decimate_max_error_mm > 0.0;
+        if !ok {
             return bad("[extract] angle_step_deg must be in (0, 30], z_step_mm >= 0, decimate_max_error_mm > 0".into());
         }
         if !(self.springs.max_length_mm > 0.0) {

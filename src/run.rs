@@ -90,10 +90,10 @@ fn check_regions_masks(case: &Case) -> Result<()> {
         .iter()
         .chain(case.osteotomy.iter().map(|o| &o.region));
     for r in masks {
-        if let Region::Mask(p) = r {
-            if !p.is_file() {
-                return Err(Error::input(p, "region mask file not found"));
-            }
+        if let Region::Mask(p) = r
+            && !p.is_file()
+        {
+            return Err(Error::input(p, "region mask file not found"));
         }
     }
     Ok(())
@@ -106,10 +106,10 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     let out_dir = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| dir.join("out"));
-    if let Some(skin) = &case.skin {
-        if !skin.path.is_file() {
-            return Err(Error::input(&skin.path, "face scan not found"));
-        }
+    if let Some(skin) = &case.skin
+        && !skin.path.is_file()
+    {
+        return Err(Error::input(&skin.path, "face scan not found"));
     }
     let mut report = Report {
         name: case.name.clone().unwrap_or_else(|| {
@@ -264,7 +264,6 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             serde_json::to_value(st).unwrap_or(Value::Null),
         );
     }
-    drop(timer);
     report.registration = registration;
 
     progress.stage("writing outputs");

@@ -1,4 +1,10 @@
-//! Wavefront OBJ through tobj (positions, faces, optional `v x y z r g b` colours).
+//! Wavefront OBJ: `v x y z [r g b]` and `f a b c …` (with `a/t/n` forms, negative indices and
+//! polygons fanned into triangles). Other statements are ignored.
+//!
+//! Read by hand rather than with tobj: tobj renumbers vertices in the order faces first use
+//! them, drops unreferenced ones and stores f32, but CASE.md requires `face_pre` to keep the
+//! file's vertices in the file's order, and predicted displacements are compared at the
+//! micrometre level. The writer prints shortest-round-trip f64, so OBJ round trips exactly.
 
 use super::Mesh;
 use crate::error::{Error, Result};
@@ -6,42 +12,75 @@ use crate::output::write_bytes_atomic;
 use std::path::Path;
 
 pub fn read(path: &Path) -> Result<Mesh> {
-    let opts = tobj::LoadOptions {
-        triangulate: true,
-        single_index: false,
-        ignore_points: true,
-        ignore_lines: true,
-    };
-    let (models, _) = tobj::load_obj(path, &opts)
-        .map_err(|e| Error::input(path, format!("unreadable OBJ ({e})")))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::input(path, e))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|_| Error::input(path, "not a text OBJ file (invalid UTF-8)"))?;
     let mut mesh = Mesh::default();
-    let mut colors = Vec::new();
-    for m in &models {
-        let base = mesh.vertices.len();
-        let p = &m.mesh.positions;
-        let nv = p.len() / 3;
-        mesh.vertices
-            .extend((0..nv).map(|i| [p[3 * i] as f64, p[3 * i + 1] as f64, p[3 * i + 2] as f64]));
-        let c = &m.mesh.vertex_color;
-        if c.len() == p.len() {
-            colors.extend(
-                (0..nv).map(|i| {
-                    [0, 1, 2].map(|k| (c[3 * i + k].clamp(0.0, 1.0) * 255.0).round() as u8)
-                }),
-            );
-        }
-        for t in m.mesh.indices.chunks_exact(3) {
-            if let Some(&bad) = t.iter().find(|&&i| i as usize >= nv) {
-                return Err(Error::input(
-                    path,
-                    format!(
-                        "face uses vertex index {}, but there are {nv} vertices",
-                        bad + 1
-                    ),
-                ));
+    let mut colors: Vec<[u8; 3]> = Vec::new();
+    let mut faces: Vec<(usize, Vec<i64>)> = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let lineno = n + 1;
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("v") => {
+                let vals: Vec<f64> = w
+                    .map(|x| x.parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| {
+                        Error::input(path, format!("line {lineno}: bad vertex '{line}'"))
+                    })?;
+                if vals.len() < 3 {
+                    return Err(Error::input(
+                        path,
+                        format!("line {lineno}: a vertex needs x y z"),
+                    ));
+                }
+                mesh.vertices.push([vals[0], vals[1], vals[2]]);
+                if vals.len() >= 6 {
+                    colors.push(
+                        [vals[3], vals[4], vals[5]]
+                            .map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8),
+                    );
+                }
             }
+            Some("f") => {
+                let idx: Vec<i64> = w
+                    .map(|x| x.split('/').next().unwrap_or("").parse::<i64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| Error::input(path, format!("line {lineno}: bad face '{line}'")))?;
+                if idx.len() < 3 {
+                    return Err(Error::input(
+                        path,
+                        format!("line {lineno}: a face needs 3 vertices"),
+                    ));
+                }
+                faces.push((lineno, idx));
+            }
+            _ => {}
+        }
+    }
+    let nv = mesh.vertices.len() as i64;
+    for (lineno, idx) in faces {
+        // OBJ indices are 1-based; negative ones count back from the end.
+        let resolved: Vec<u32> = idx
+            .iter()
+            .map(|&i| {
+                let r = if i > 0 { i - 1 } else { nv + i };
+                if i == 0 || r < 0 || r >= nv {
+                    Err(Error::input(
+                        path,
+                        format!(
+                            "line {lineno}: face uses vertex index {i}, but there are {nv} vertices"
+                        ),
+                    ))
+                } else {
+                    Ok(r as u32)
+                }
+            })
+            .collect::<Result<_>>()?;
+        for k in 1..resolved.len() - 1 {
             mesh.triangles
-                .push([t[0], t[1], t[2]].map(|i| (i as usize + base) as u32));
+                .push([resolved[0], resolved[k], resolved[k + 1]]);
         }
     }
     if !colors.is_empty() && colors.len() == mesh.vertices.len() {
@@ -54,11 +93,11 @@ pub fn write(mesh: &Mesh, path: &Path) -> Result<()> {
     write_bytes_atomic(path, |w| {
         writeln!(w, "# facesim: LPS frame, millimetres")?;
         for (i, v) in mesh.vertices.iter().enumerate() {
-            // 17 significant digits: OBJ round trips bit-exactly.
+            // `{}` on f64 prints the shortest string that parses back to the same number.
             match &mesh.colors {
                 Some(c) => writeln!(
                     w,
-                    "v {:e} {:e} {:e} {:.6} {:.6} {:.6}",
+                    "v {} {} {} {:.6} {:.6} {:.6}",
                     v[0],
                     v[1],
                     v[2],
@@ -66,7 +105,7 @@ pub fn write(mesh: &Mesh, path: &Path) -> Result<()> {
                     c[i][1] as f64 / 255.0,
                     c[i][2] as f64 / 255.0
                 )?,
-                None => writeln!(w, "v {:e} {:e} {:e}", v[0], v[1], v[2])?,
+                None => writeln!(w, "v {} {} {}", v[0], v[1], v[2])?,
             }
         }
         for t in &mesh.triangles {
@@ -74,4 +113,24 @@ pub fn write(mesh: &Mesh, path: &Path) -> Result<()> {
         }
         Ok(())
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keeps_file_order_precision_and_colours() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("m.obj");
+        std::fs::write(&p, "# x\nv 0.1 0.2 0.3 1 0 0\nv 1e-7 2 3 0 1 0\nv 5 6 7.000000000001 0 0 1\nv 9 9 9 0 0 0\nf 3/1/1 -4 2\n").unwrap();
+        let m = read(&p).unwrap();
+        assert_eq!(m.vertices[0], [0.1, 0.2, 0.3]);
+        assert_eq!(m.vertices[2][2], 7.000000000001);
+        assert_eq!(m.triangles, vec![[2, 0, 1]]);
+        assert_eq!(m.colors.as_ref().unwrap()[1], [0, 255, 0]);
+        let q = d.path().join("back.obj");
+        write(&m, &q).unwrap();
+        assert_eq!(read(&q).unwrap(), m);
+    }
 }

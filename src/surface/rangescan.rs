@@ -37,6 +37,7 @@ pub struct ScanResult {
 
 /// Find the first crossing of `iso` (from below to above) along p(t) = o + t·d for t in
 /// [t0, t1], stepping by `dt`, refined by bisection.
+#[allow(clippy::too_many_arguments)] // a ray, its interval and step, the field and level
 fn first_crossing(
     field: &[f32],
     vol: &Volume,

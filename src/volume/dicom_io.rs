@@ -250,15 +250,14 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
                 ));
             }
         }
-        let mut sorted = gaps.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
+        // A missing slice only ever widens a gap, so the smallest gap is the series' spacing.
+        let step = gaps.iter().cloned().fold(f64::INFINITY, f64::min);
         for (w, g) in headers.windows(2).zip(&gaps) {
-            if (g - median).abs() > 0.05 * median + 1e-3 {
+            if (g - step).abs() > 0.05 * step + 1e-3 {
                 return Err(Error::input(
                     &w[1].path,
                     format!(
-                        "uneven slice spacing: {g:.3} mm from the previous slice, {median:.3} mm elsewhere (missing slice?)"
+                        "gap of {g:.3} mm before this slice, {step:.3} mm elsewhere: missing slice or uneven slice spacing"
                     ),
                 ));
             }

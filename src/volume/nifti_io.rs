@@ -62,9 +62,10 @@ pub fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
 
 /// Read the header only and check it: dimensions, spacing and type are validated before any
 /// voxel memory is allocated.
-fn read_checked_header(
-    path: &Path,
-) -> Result<(NiftiHeader, [usize; 3], [f64; 3], [f64; 3], [[f64; 3]; 3])> {
+/// dims, spacing, origin, direction of a checked header.
+type Geometry = ([usize; 3], [f64; 3], [f64; 3], [[f64; 3]; 3]);
+
+fn read_checked_header(path: &Path) -> Result<Geometry> {
     let h = NiftiHeader::from_file(path)
         .map_err(|e| Error::input(path, format!("not a readable NIfTI-1 file ({e})")))?;
     let ndim = h.dim[0] as usize;
@@ -165,11 +166,11 @@ fn read_checked_header(
             ));
         }
     }
-    Ok((h, dims, spacing, origin, direction))
+    Ok((dims, spacing, origin, direction))
 }
 
 pub fn read(path: &Path) -> Result<Volume> {
-    let (_h, dims, spacing, origin, direction) = read_checked_header(path)?;
+    let (dims, spacing, origin, direction) = read_checked_header(path)?;
     let obj = ReaderOptions::new().read_file(path).map_err(|e| {
         Error::input(
             path,

@@ -1,0 +1,268 @@
+//! `facesim run` and `facesim compare` through the real CLI: good runs write every output,
+//! bad inputs fail with one line naming the file, and nothing is written or changed.
+
+mod common;
+
+use common::{assert_clean_failure, facesim, phantom_dir, snapshot};
+use std::path::{Path, PathBuf};
+
+/// A case directory whose case.toml points at the shared phantom CT, with `extra` appended.
+fn case_with(extra: &str) -> PathBuf {
+    let d = tempfile::Builder::new()
+        .prefix("facesim-case")
+        .tempdir()
+        .unwrap()
+        .keep();
+    let ct = phantom_dir().join("ct.nii.gz");
+    std::fs::write(
+        d.join("case.toml"),
+        format!("name = \"t\"\n[ct]\npath = \"{}\"\n{extra}", ct.display()),
+    )
+    .unwrap();
+    d
+}
+
+fn run(case: &Path) -> common::CliResult {
+    facesim(&["run", case.to_str().unwrap()])
+}
+
+/// The run failed cleanly and left no output directory behind.
+fn fails_writing_nothing(case: &Path, file: &str, problem: &str) {
+    let before = snapshot(case);
+    let r = run(case);
+    assert_clean_failure(&r, file, problem);
+    assert!(
+        !case.join("out").exists(),
+        "an output directory was created"
+    );
+    assert_eq!(snapshot(case), before, "the case directory changed");
+}
+
+#[test]
+fn phantom_case_runs_and_writes_every_output() {
+    let r = facesim(&[
+        "run",
+        phantom_dir().to_str().unwrap(),
+        "--out",
+        phantom_dir().join("run1").to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let out = phantom_dir().join("run1");
+    for f in [
+        "face_pre.obj",
+        "face_pre.ply",
+        "skull_pre.ply",
+        "labels.nii.gz",
+        "report.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    for stage in [
+        "read_ct",
+        "segment",
+        "surfaces",
+        "read_scan",
+        "write",
+        "total",
+    ] {
+        assert!(
+            report["timings"][stage].as_f64().unwrap() >= 0.0,
+            "timing {stage}"
+        );
+    }
+    // The given face scan is the face, vertex for vertex (CASE.md: same vertices, same order).
+    let scan = facesim::mesh::read_mesh(&phantom_dir().join("face.ply")).unwrap();
+    let pre = facesim::mesh::read_mesh(&out.join("face_pre.ply")).unwrap();
+    assert!(
+        scan.vertices == pre.vertices,
+        "face_pre is not the scan's vertices in order"
+    );
+    let obj = facesim::mesh::read_mesh(&out.join("face_pre.obj")).unwrap();
+    assert!(
+        obj.triangles == pre.triangles && obj.vertices == pre.vertices,
+        "OBJ and PLY differ"
+    );
+    // The labels read back on the CT's grid with the six classes.
+    let labels = facesim::volume::read_volume(&out.join("labels.nii.gz")).unwrap();
+    let ct = facesim::volume::read_volume(&phantom_dir().join("ct.nii.gz")).unwrap();
+    assert_eq!(labels.dims, ct.dims);
+    assert_eq!(labels.data.iter().cloned().fold(0.0, f32::max), 5.0);
+
+    // Running again gives byte-identical meshes (determinism with rayon).
+    let r = facesim(&[
+        "run",
+        phantom_dir().to_str().unwrap(),
+        "--out",
+        phantom_dir().join("run2").to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0);
+    for f in ["face_pre.ply", "skull_pre.ply", "labels.nii.gz"] {
+        assert_eq!(
+            std::fs::read(out.join(f)).unwrap(),
+            std::fs::read(phantom_dir().join("run2").join(f)).unwrap(),
+            "{f}"
+        );
+    }
+}
+
+#[test]
+fn compare_reports_distances_and_refuses_bad_meshes() {
+    let face = phantom_dir().join("face.ply");
+    let r = facesim(&[
+        "compare",
+        face.to_str().unwrap(),
+        face.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let j: serde_json::Value = serde_json::from_str(&r.stdout).unwrap();
+    for k in [
+        "mean",
+        "rms",
+        "max",
+        "pct_within_1mm",
+        "pct_within_2mm",
+        "vertex_mean",
+        "vertex_max",
+    ] {
+        assert!(j[k].is_number(), "{k}");
+    }
+    assert_eq!(j["max"].as_f64().unwrap(), 0.0);
+    assert_eq!(j["pct_within_1mm"].as_f64().unwrap(), 100.0);
+
+    let d = tempfile::tempdir().unwrap();
+    let bad = d.path().join("garbage.ply");
+    std::fs::write(&bad, [0u8, 159, 146, 150, 1, 2, 3]).unwrap();
+    assert_clean_failure(
+        &facesim(&["compare", face.to_str().unwrap(), bad.to_str().unwrap()]),
+        "garbage.ply",
+        "PLY",
+    );
+}
+
+#[test]
+fn bad_case_files_fail_before_anything_is_written() {
+    let c = case_with("[springs]\nmax_lenght_mm = 30.0\n");
+    fails_writing_nothing(&c, "case.toml", "max_lenght_mm");
+
+    let c = case_with("[surface]\nalpha = \"soft\"\n");
+    fails_writing_nothing(&c, "case.toml", "");
+
+    let c = case_with(
+        "[[osteotomy]]\nname = \"m\"\nregion = { box = { min = [0, 0, 0], max = [1, 1, 1] } }\ntranslate = [0, nan, 0]\n",
+    );
+    fails_writing_nothing(&c, "case.toml", "finite");
+
+    let c =
+        case_with("[registration]\nscan = [[0, 0, 0], [1, 0, 0]]\nct = [[0, 0, 0], [1, 0, 0]]\n");
+    fails_writing_nothing(&c, "case.toml", "landmark");
+
+    let d = tempfile::tempdir().unwrap();
+    std::fs::write(
+        d.path().join("case.toml"),
+        "[ct]\npath = \"nowhere.nii.gz\"\n",
+    )
+    .unwrap();
+    fails_writing_nothing(d.path(), "nowhere.nii.gz", "no such file");
+
+    let r = facesim(&["run", "/definitely/not/a/case"]);
+    assert_clean_failure(&r, "/definitely/not/a/case", "no such file");
+}
+
+#[test]
+fn bad_face_scans_fail_with_the_scan_named() {
+    let write_case = |name: &str, body: &[u8], extra: &str| {
+        let c = case_with(&format!("[skin]\npath = \"{name}\"\n{extra}"));
+        std::fs::write(c.join(name), body).unwrap();
+        c
+    };
+    let tri = |verts: &str, faces: &str| format!("{verts}{faces}").into_bytes();
+    // Three vertices on the phantom's face and one triangle, as OBJ.
+    let v = "v 0 -80 0\nv 10 -79 0\nv 0 -80 10\nv 10 -79 10\n";
+
+    fails_writing_nothing(&write_case("empty.obj", b"", ""), "empty.obj", "empty mesh");
+    fails_writing_nothing(
+        &write_case(
+            "nan.obj",
+            &tri("v 0 -80 0\nv nan -79 0\nv 0 -80 10\n", "f 1 2 3\n"),
+            "",
+        ),
+        "nan.obj",
+        "non-finite",
+    );
+    fails_writing_nothing(
+        &write_case("index.obj", &tri(v, "f 1 2 9\n"), ""),
+        "index.obj",
+        "",
+    );
+    fails_writing_nothing(
+        &write_case("degenerate.obj", &tri(v, "f 1 2 3\nf 2 2 4\n"), ""),
+        "degenerate.obj",
+        "degenerate",
+    );
+    let nm = "v 0 -80 0\nv 10 -80 0\nv 0 -80 10\nv 0 -70 -10\nv 5 -90 5\n";
+    fails_writing_nothing(
+        &write_case(
+            "nonmanifold.obj",
+            &tri(nm, "f 1 2 3\nf 2 1 4\nf 1 2 5\n"),
+            "",
+        ),
+        "nonmanifold.obj",
+        "non-manifold",
+    );
+    fails_writing_nothing(
+        &write_case(
+            "garbage.ply",
+            b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n\x00\x01",
+            "",
+        ),
+        "garbage.ply",
+        "",
+    );
+    fails_writing_nothing(&write_case("truncated.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n\x00\x00", ""), "truncated.ply", "");
+    // A scan 1 m away from the CT.
+    let far = "v 1000 -80 0\nv 1010 -79 0\nv 1000 -80 10\nv 1010 -79 10\n";
+    fails_writing_nothing(
+        &write_case("far.obj", &tri(far, "f 1 2 3\nf 2 4 3\n"), ""),
+        "far.obj",
+        "does not overlap",
+    );
+}
+
+#[test]
+fn a_failed_run_leaves_previous_outputs_intact() {
+    let c = case_with("");
+    assert_eq!(run(&c).code, 0);
+    let before = snapshot(&c.join("out"));
+    // Now break the case (a scan that does not exist) and run again.
+    let text =
+        std::fs::read_to_string(c.join("case.toml")).unwrap() + "[skin]\npath = \"gone.ply\"\n";
+    std::fs::write(c.join("case.toml"), text).unwrap();
+    assert_clean_failure(&run(&c), "gone.ply", "not found");
+    assert_eq!(snapshot(&c.join("out")), before);
+}
+
+#[test]
+fn a_ct_without_bone_is_refused() {
+    // A ball of soft tissue: a head with no skull.
+    let n = 40;
+    let mut v = facesim::volume::Volume {
+        dims: [n, n, n],
+        spacing: [2.0; 3],
+        origin: [-39.0; 3],
+        direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        data: vec![-1000.0; n * n * n],
+    };
+    for a in 0..v.data.len() {
+        let p = v.to_world(v.ijk(a).map(|x| x as f64));
+        if (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() < 30.0 {
+            v.data[a] = 40.0;
+        }
+    }
+    let d = tempfile::tempdir().unwrap();
+    facesim::volume::nifti_io::write(&v, &d.path().join("soft.nii.gz")).unwrap();
+    std::fs::write(d.path().join("case.toml"), "[ct]\npath = \"soft.nii.gz\"\n").unwrap();
+    fails_writing_nothing(d.path(), "soft.nii.gz", "no bone");
+}
