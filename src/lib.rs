@@ -18,6 +18,7 @@ pub mod mesh;
 pub mod output;
 pub mod phantom;
 pub mod progress;
+pub mod render;
 pub mod run;
 pub mod segment;
 pub mod surface;

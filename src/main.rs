@@ -43,6 +43,18 @@ enum Cmd {
     },
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
+    /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
+    Render {
+        #[arg(required = true)]
+        meshes: Vec<PathBuf>,
+        #[arg(long, short)]
+        out: PathBuf,
+        #[arg(long, value_enum, default_value = "front")]
+        view: facesim::render::View,
+        /// Image width and height in pixels.
+        #[arg(long, default_value_t = 800)]
+        size: usize,
+    },
     /// Distances between two meshes (OBJ or PLY).
     Compare {
         a: PathBuf,
@@ -134,6 +146,16 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 "{}",
                 serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(&path, e))?
             );
+            Ok(())
+        }
+        Cmd::Render { meshes, out, view, size } => {
+            if !(16..=8192).contains(&size) {
+                return Err(Error::config("render: --size must be between 16 and 8192"));
+            }
+            let loaded = meshes.iter().map(|p| facesim::mesh::read_mesh(p)).collect::<Result<Vec<_>>>()?;
+            let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
+            let img = facesim::render::render(&refs, view, size);
+            facesim::render::write_png(&img, size, &out)?;
             Ok(())
         }
         Cmd::Compare { a, b, json } => {
