@@ -148,11 +148,19 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             );
             Ok(())
         }
-        Cmd::Render { meshes, out, view, size } => {
+        Cmd::Render {
+            meshes,
+            out,
+            view,
+            size,
+        } => {
             if !(16..=8192).contains(&size) {
                 return Err(Error::config("render: --size must be between 16 and 8192"));
             }
-            let loaded = meshes.iter().map(|p| facesim::mesh::read_mesh(p)).collect::<Result<Vec<_>>>()?;
+            let loaded = meshes
+                .iter()
+                .map(|p| facesim::mesh::read_mesh(p))
+                .collect::<Result<Vec<_>>>()?;
             let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
             let img = facesim::render::render(&refs, view, size);
             facesim::render::write_png(&img, size, &out)?;

@@ -52,7 +52,11 @@ pub fn render(meshes: &[&Mesh], view: View, size: usize) -> Vec<u8> {
     let mut img = vec![255u8; size * size * 3];
     let mut depth = vec![f64::NEG_INFINITY; size * size];
     let light = {
-        let l = [c[0] + 0.3 * u[0] - 0.3 * r[0], c[1] + 0.3 * u[1] - 0.3 * r[1], c[2] + 0.3 * u[2] - 0.3 * r[2]];
+        let l = [
+            c[0] + 0.3 * u[0] - 0.3 * r[0],
+            c[1] + 0.3 * u[1] - 0.3 * r[1],
+            c[2] + 0.3 * u[2] - 0.3 * r[2],
+        ];
         let n = norm(l);
         l.map(|x| x / n)
     };
@@ -79,14 +83,35 @@ pub fn render(meshes: &[&Mesh], view: View, size: usize) -> Vec<u8> {
                 None => [225.0, 190.0, 160.0],
             };
             let q = p.map(px);
-            let xmin = q.iter().map(|v| v.0).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-            let xmax = q.iter().map(|v| v.0).fold(f64::NEG_INFINITY, f64::max).ceil().min(size as f64 - 1.0);
-            let ymin = q.iter().map(|v| v.1).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-            let ymax = q.iter().map(|v| v.1).fold(f64::NEG_INFINITY, f64::max).ceil().min(size as f64 - 1.0);
+            let xmin = q
+                .iter()
+                .map(|v| v.0)
+                .fold(f64::INFINITY, f64::min)
+                .floor()
+                .max(0.0) as usize;
+            let xmax = q
+                .iter()
+                .map(|v| v.0)
+                .fold(f64::NEG_INFINITY, f64::max)
+                .ceil()
+                .min(size as f64 - 1.0);
+            let ymin = q
+                .iter()
+                .map(|v| v.1)
+                .fold(f64::INFINITY, f64::min)
+                .floor()
+                .max(0.0) as usize;
+            let ymax = q
+                .iter()
+                .map(|v| v.1)
+                .fold(f64::NEG_INFINITY, f64::max)
+                .ceil()
+                .min(size as f64 - 1.0);
             if xmax < 0.0 || ymax < 0.0 {
                 continue;
             }
-            let area = (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
+            let area =
+                (q[1].0 - q[0].0) * (q[2].1 - q[0].1) - (q[2].0 - q[0].0) * (q[1].1 - q[0].1);
             if area.abs() < 1e-12 {
                 continue;
             }
@@ -120,7 +145,9 @@ pub fn write_png(rgb: &[u8], size: usize, dest: &Path) -> Result<()> {
         enc.set_color(png::ColorType::Rgb);
         enc.set_depth(png::BitDepth::Eight);
         let mut writer = enc.write_header().map_err(std::io::Error::other)?;
-        writer.write_image_data(rgb).map_err(std::io::Error::other)?;
+        writer
+            .write_image_data(rgb)
+            .map_err(std::io::Error::other)?;
         writer.finish().map_err(std::io::Error::other)
     })
     .map_err(|e| Error::output(dest, e))

@@ -266,3 +266,71 @@ fn a_ct_without_bone_is_refused() {
     std::fs::write(d.path().join("case.toml"), "[ct]\npath = \"soft.nii.gz\"\n").unwrap();
     fails_writing_nothing(d.path(), "soft.nii.gz", "no bone");
 }
+
+#[test]
+fn a_moved_scan_is_registered_back_by_landmarks() {
+    // Move the phantom's face scan by a known rigid motion, give four landmark pairs, and the
+    // pipeline must put it back: face_pre = the original scan to rounding, residual ≈ 0.
+    let scan = facesim::mesh::read_mesh(&phantom_dir().join("face.ply")).unwrap();
+    let (c, s) = (10f64.to_radians().cos(), 10f64.to_radians().sin());
+    let mv = |p: [f64; 3]| {
+        [
+            c * p[0] - s * p[1] + 20.0,
+            s * p[0] + c * p[1] - 35.0,
+            p[2] + 7.5,
+        ]
+    };
+    let mut moved = scan.clone();
+    moved.vertices = scan.vertices.iter().map(|p| mv(*p)).collect();
+    let ct_pts = [
+        [0.0, -98.0, 0.0],
+        [40.0, -69.0, 20.0],
+        [-40.0, -69.0, -20.0],
+        [0.0, -80.0, 35.0],
+    ];
+    let fmt = |pts: Vec<[f64; 3]>| {
+        pts.iter()
+            .map(|p| format!("[{}, {}, {}]", p[0], p[1], p[2]))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let c_dir = case_with(&format!(
+        "[skin]\npath = \"moved.ply\"\n[registration]\nscan = [{}]\nct = [{}]\n",
+        fmt(ct_pts.iter().map(|p| mv(*p)).collect()),
+        fmt(ct_pts.to_vec())
+    ));
+    facesim::mesh::ply::write(
+        &moved,
+        &c_dir.join("moved.ply"),
+        facesim::mesh::ply::Encoding::Ascii,
+    )
+    .unwrap();
+    let r = run(&c_dir);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let pre = facesim::mesh::read_mesh(&c_dir.join("out/face_pre.ply")).unwrap();
+    let worst = pre
+        .vertices
+        .iter()
+        .zip(&scan.vertices)
+        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-6,
+        "registered scan is {worst} mm from the original"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(c_dir.join("out/report.json")).unwrap())
+            .unwrap();
+    assert!(report["registration"]["rms_residual"].as_f64().unwrap() < 1e-6);
+    // Without the registration, the moved scan is far from the CT skin and the report warns.
+    let c2 = case_with("[skin]\npath = \"moved.ply\"\n");
+    facesim::mesh::ply::write(
+        &moved,
+        &c2.join("moved.ply"),
+        facesim::mesh::ply::Encoding::Ascii,
+    )
+    .unwrap();
+    let r = run(&c2);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.contains("check the registration"), "{}", r.stderr);
+}
