@@ -14,6 +14,7 @@
 pub mod case;
 pub mod compare;
 pub mod error;
+pub mod fem;
 pub mod mesh;
 pub mod output;
 pub mod phantom;

@@ -1,0 +1,298 @@
+//! Global C1 surface system (Koch eq. 6, 15–16): DOF numbering, parallel assembly of one scalar
+//! K shared by x, y and z, Dirichlet conditions, and faer's sparse Cholesky factored once and
+//! solved for several right-hand sides.
+//!
+//! DOF numbering: vertex k owns 3k (value), 3k+1 (∂u), 3k+2 (∂v); edge e owns 3·nv + e (the
+//! cross-boundary derivative along the edge's global normal, eq. 11).
+
+use super::element::{Element, Material, NDOF};
+use crate::error::{Error, Result};
+use faer::Side;
+use faer::linalg::solvers::Solve;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMat, Triplet};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// One element's global DOFs, stiffness and load.
+type ElementSystem = ([usize; NDOF], [[f64; NDOF]; NDOF], [f64; NDOF]);
+
+pub struct FemMesh {
+    pub uv: Vec<[f64; 2]>,
+    pub tris: Vec<[u32; 3]>,
+    /// Edges as (low, high) vertex pairs.
+    pub edges: Vec<[u32; 2]>,
+    /// Per triangle, the global edge of its local edges (0: corners 0–1, 1: 1–2, 2: 2–0).
+    pub tri_edges: Vec<[u32; 3]>,
+    /// Triangles per edge (1 on the boundary, 2 inside).
+    pub edge_tris: Vec<u8>,
+    pub elements: Vec<Element>,
+}
+
+impl FemMesh {
+    pub fn new(uv: Vec<[f64; 2]>, tris: Vec<[u32; 3]>) -> Result<FemMesh> {
+        let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut edges = Vec::new();
+        let mut edge_tris = Vec::new();
+        let mut tri_edges = Vec::with_capacity(tris.len());
+        for t in &tris {
+            let mut te = [0u32; 3];
+            for e in 0..3 {
+                let (a, b) = (t[e].min(t[(e + 1) % 3]), t[e].max(t[(e + 1) % 3]));
+                let id = *index.entry((a, b)).or_insert_with(|| {
+                    edges.push([a, b]);
+                    edge_tris.push(0u8);
+                    (edges.len() - 1) as u32
+                });
+                edge_tris[id as usize] = edge_tris[id as usize].saturating_add(1);
+                te[e] = id;
+            }
+            tri_edges.push(te);
+        }
+        let elements = tris
+            .par_iter()
+            .map(|t| Element::new(t.map(|i| uv[i as usize])))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(FemMesh {
+            uv,
+            tris,
+            edges,
+            tri_edges,
+            edge_tris,
+            elements,
+        })
+    }
+
+    pub fn ndof(&self) -> usize {
+        3 * self.uv.len() + self.edges.len()
+    }
+
+    /// Global DOFs of triangle t in the element's local order.
+    pub fn element_dofs(&self, t: usize) -> [usize; NDOF] {
+        let tri = self.tris[t];
+        let nv3 = 3 * self.uv.len();
+        let e = self.tri_edges[t];
+        let v = |k: usize| 3 * tri[k] as usize;
+        [
+            v(0),
+            v(0) + 1,
+            v(0) + 2,
+            v(1),
+            v(1) + 1,
+            v(1) + 2,
+            v(2),
+            v(2) + 1,
+            v(2) + 2,
+            nv3 + e[0] as usize,
+            nv3 + e[1] as usize,
+            nv3 + e[2] as usize,
+        ]
+    }
+
+    /// Evaluate the C1 field with global DOFs `a` in triangle t at local (ξ, η).
+    pub fn eval(&self, a: &[f64], t: usize, xi: f64, eta: f64) -> [f64; 6] {
+        let phi = self.elements[t].shape(xi, eta);
+        let d = self.element_dofs(t);
+        let mut w = [0.0; 6];
+        for j in 0..NDOF {
+            for k in 0..6 {
+                w[k] += a[d[j]] * phi[j][k];
+            }
+        }
+        w
+    }
+
+    /// Assemble K (upper triangle kept in full, both halves) and F for a uniform load q, with
+    /// per-element materials, in parallel. Returns summed triplets and F.
+    pub fn assemble(
+        &self,
+        material: &(dyn Fn(usize) -> Material + Sync),
+        q: f64,
+        quad: usize,
+    ) -> (Vec<(usize, usize, f64)>, Vec<f64>) {
+        let rule = super::quadrature::triangle_rule(quad);
+        let per: Vec<ElementSystem> = (0..self.tris.len())
+            .into_par_iter()
+            .map(|t| {
+                let (k, f) = self.elements[t].integrate(&material(t), q, &rule);
+                (self.element_dofs(t), k, f)
+            })
+            .collect();
+        let mut trip = Vec::with_capacity(per.len() * NDOF * NDOF);
+        let mut f = vec![0.0; self.ndof()];
+        for (d, k, fe) in &per {
+            for i in 0..NDOF {
+                f[d[i]] += fe[i];
+                for j in 0..NDOF {
+                    trip.push((d[i], d[j], k[i][j]));
+                }
+            }
+        }
+        (sum_duplicates(trip), f)
+    }
+}
+
+impl FemMesh {
+    /// Refuse constraints that leave K singular, before factoring (a Cholesky of a singular
+    /// matrix in floating point may "succeed" with tiny pivots). Per connected piece of the
+    /// mesh the null space of the energy is: nothing with a foundation; the constants when
+    /// some element stretches (α ≠ 0); the linear fields for pure bending. They are removed by
+    /// one fixed value, or by one vertex with value and gradient fixed, respectively.
+    pub fn check_constraints(
+        &self,
+        material: &(dyn Fn(usize) -> Material + Sync),
+        fixed: &[bool],
+    ) -> Result<()> {
+        let nv = self.uv.len();
+        let mut parent: Vec<usize> = (0..nv).collect();
+        fn find(p: &mut [usize], mut x: usize) -> usize {
+            while p[x] != x {
+                p[x] = p[p[x]];
+                x = p[x];
+            }
+            x
+        }
+        for t in &self.tris {
+            let a = find(&mut parent, t[0] as usize);
+            for &v in &t[1..] {
+                let b = find(&mut parent, v as usize);
+                parent[b] = a;
+            }
+        }
+        // Per piece: (has foundation, has stretching, has bending, a value fixed, a vertex fully fixed).
+        let mut piece: HashMap<usize, [bool; 5]> = HashMap::new();
+        for (t, tri) in self.tris.iter().enumerate() {
+            let m = material(t);
+            let e = piece.entry(find(&mut parent, tri[0] as usize)).or_default();
+            e[0] |= m.foundation > 0.0;
+            e[1] |= m.alpha.iter().any(|a| *a != 0.0);
+            e[2] |= m.beta.iter().any(|b| *b != 0.0);
+        }
+        for v in 0..nv {
+            if let Some(e) = piece.get_mut(&find(&mut parent, v)) {
+                e[3] |= fixed[3 * v];
+                e[4] |= fixed[3 * v] && fixed[3 * v + 1] && fixed[3 * v + 2];
+            }
+        }
+        for (root, [found, stretch, bend, value, full]) in piece {
+            let ok = found
+                || (stretch && bend && value)
+                || (bend && full)
+                || (stretch && !bend && value);
+            if !ok {
+                return Err(Error::Numerical(format!(
+                    "the surface stiffness matrix is singular: the piece of the skin mesh containing vertex {root} has no rigid node \
+                     (mark part of it rigid with [surface] movable, or give it α, β > 0)"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Sort by (column, row) and add up repeated entries.
+fn sum_duplicates(mut t: Vec<(usize, usize, f64)>) -> Vec<(usize, usize, f64)> {
+    t.par_sort_unstable_by_key(|&(r, c, _)| (c, r));
+    let mut out: Vec<(usize, usize, f64)> = Vec::with_capacity(t.len() / 4);
+    for (r, c, v) in t {
+        match out.last_mut() {
+            Some(last) if last.0 == r && last.1 == c => last.2 += v,
+            _ => out.push((r, c, v)),
+        }
+    }
+    out
+}
+
+/// K y = b on the free DOFs, with the fixed ones prescribed; factored once.
+pub struct System {
+    pub n: usize,
+    /// Global DOF → free index (usize::MAX for fixed DOFs).
+    pub free_index: Vec<usize>,
+    pub free: Vec<usize>,
+    /// K entries coupling a free row to a fixed column (free row index, global col, value).
+    coupling: Vec<(usize, usize, f64)>,
+    /// The full K (global triplets), kept for products such as F_init = K a_init.
+    pub k: Vec<(usize, usize, f64)>,
+    llt: Llt<usize, f64>,
+    pub nnz_lower: usize,
+}
+
+impl System {
+    /// Factor K restricted to the DOFs not in `fixed`.
+    pub fn new(n: usize, k: Vec<(usize, usize, f64)>, fixed: &[bool]) -> Result<System> {
+        let mut free_index = vec![usize::MAX; n];
+        let mut free = Vec::new();
+        for g in 0..n {
+            if !fixed[g] {
+                free_index[g] = free.len();
+                free.push(g);
+            }
+        }
+        let mut lower = Vec::new();
+        let mut coupling = Vec::new();
+        for &(r, c, v) in &k {
+            let (fr, fc) = (free_index[r], free_index[c]);
+            if fr != usize::MAX && fc != usize::MAX {
+                if fr >= fc {
+                    lower.push(Triplet::new(fr, fc, v));
+                }
+            } else if fr != usize::MAX {
+                coupling.push((fr, c, v));
+            }
+        }
+        let nf = free.len();
+        let nnz_lower = lower.len();
+        let mat = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &lower)
+            .map_err(|e| Error::Numerical(format!("sparse matrix: {e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower)
+            .map_err(|e| Error::Numerical(format!("symbolic Cholesky: {e:?}")))?;
+        let llt = Llt::try_new_with_symbolic(symbolic, mat.as_ref(), Side::Lower).map_err(|e| {
+            Error::Numerical(format!(
+                "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
+            ))
+        })?;
+        Ok(System {
+            n,
+            free_index,
+            free,
+            coupling,
+            k,
+            llt,
+            nnz_lower,
+        })
+    }
+
+    /// Solve K a = f for each right-hand side, with a = `prescribed` on the fixed DOFs.
+    pub fn solve(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        let nf = self.free.len();
+        let m = rhs.len();
+        let mut b = faer::Mat::<f64>::zeros(nf, m);
+        for c in 0..m {
+            for (i, &g) in self.free.iter().enumerate() {
+                b[(i, c)] = rhs[c][g];
+            }
+            for &(fr, gc, v) in &self.coupling {
+                b[(fr, c)] -= v * prescribed[c][gc];
+            }
+        }
+        let x = self.llt.solve(&b);
+        (0..m)
+            .map(|c| {
+                let mut a = prescribed[c].clone();
+                for (i, &g) in self.free.iter().enumerate() {
+                    a[g] = x[(i, c)];
+                }
+                a
+            })
+            .collect()
+    }
+}
+
+/// y = K x for global triplets.
+pub fn multiply(k: &[(usize, usize, f64)], x: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    for &(r, c, v) in k {
+        y[r] += v * x[c];
+    }
+    y
+}
