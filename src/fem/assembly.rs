@@ -102,19 +102,17 @@ impl FemMesh {
         w
     }
 
-    /// Assemble K (upper triangle kept in full, both halves) and F for a uniform load q, with
-    /// per-element materials, in parallel. Returns summed triplets and F.
+    /// Assemble K (both halves) and F for a uniform load q, with per-element materials, in
+    /// parallel, from the precomputed reference moments. Returns summed triplets and F.
     pub fn assemble(
         &self,
         material: &(dyn Fn(usize) -> Material + Sync),
         q: f64,
-        quad: usize,
     ) -> (Vec<(usize, usize, f64)>, Vec<f64>) {
-        let rule = super::quadrature::triangle_rule(quad);
         let per: Vec<ElementSystem> = (0..self.tris.len())
             .into_par_iter()
             .map(|t| {
-                let (k, f) = self.elements[t].integrate(&material(t), q, &rule);
+                let (k, f) = self.elements[t].stiffness_fast(&material(t), q);
                 (self.element_dofs(t), k, f)
             })
             .collect();
