@@ -212,6 +212,8 @@ pub struct System {
     /// The full K (global triplets), kept for products such as F_init = K a_init.
     pub k: Vec<(usize, usize, f64)>,
     llt: Llt<usize, f64>,
+    /// Symbolic analysis (ordering, elimination tree), reused when only values change.
+    symbolic: SymbolicLlt<usize>,
     pub nnz_lower: usize,
 }
 
@@ -226,25 +228,11 @@ impl System {
                 free.push(g);
             }
         }
-        let mut lower = Vec::new();
-        let mut coupling = Vec::new();
-        for &(r, c, v) in &k {
-            let (fr, fc) = (free_index[r], free_index[c]);
-            if fr != usize::MAX && fc != usize::MAX {
-                if fr >= fc {
-                    lower.push(Triplet::new(fr, fc, v));
-                }
-            } else if fr != usize::MAX {
-                coupling.push((fr, c, v));
-            }
-        }
-        let nf = free.len();
-        let nnz_lower = lower.len();
-        let mat = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &lower)
-            .map_err(|e| Error::Numerical(format!("sparse matrix: {e:?}")))?;
+        let (mat, coupling) = split(&k, &free_index, free.len())?;
+        let nnz_lower = mat.compute_nnz();
         let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower)
             .map_err(|e| Error::Numerical(format!("symbolic Cholesky: {e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(symbolic, mat.as_ref(), Side::Lower).map_err(|e| {
+        let llt = Llt::try_new_with_symbolic(symbolic.clone(), mat.as_ref(), Side::Lower).map_err(|e| {
             Error::Numerical(format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
             ))
@@ -256,8 +244,29 @@ impl System {
             coupling,
             k,
             llt,
+            symbolic,
             nnz_lower,
         })
+    }
+
+    /// Refactor after K's values changed on the same pattern (new α/β, spring stiffness),
+    /// reusing the symbolic analysis.
+    pub fn refactor(&mut self, k: Vec<(usize, usize, f64)>) -> Result<()> {
+        let (mat, coupling) = split(&k, &self.free_index, self.free.len())?;
+        if mat.compute_nnz() != self.nnz_lower {
+            return Err(Error::Numerical(
+                "refactor: the sparsity pattern changed".into(),
+            ));
+        }
+        self.llt = Llt::try_new_with_symbolic(self.symbolic.clone(), mat.as_ref(), Side::Lower)
+            .map_err(|e| {
+                Error::Numerical(format!(
+                    "the surface stiffness matrix is not positive definite ({e:?})"
+                ))
+            })?;
+        self.coupling = coupling;
+        self.k = k;
+        Ok(())
     }
 
     /// Solve K a = f for each right-hand side, with a = `prescribed` on the fixed DOFs.
@@ -284,6 +293,45 @@ impl System {
             })
             .collect()
     }
+}
+
+/// The free–free lower triangle as a sparse matrix, and the free-row/fixed-column couplings.
+type Split = (SparseColMat<usize, f64>, Vec<(usize, usize, f64)>);
+
+fn split(k: &[(usize, usize, f64)], free_index: &[usize], nf: usize) -> Result<Split> {
+    let mut lower = Vec::new();
+    let mut coupling = Vec::new();
+    for &(r, c, v) in k {
+        let (fr, fc) = (free_index[r], free_index[c]);
+        if fr != usize::MAX && fc != usize::MAX {
+            if fr >= fc {
+                lower.push(Triplet::new(fr, fc, v));
+            }
+        } else if fr != usize::MAX {
+            coupling.push((fr, c, v));
+        }
+    }
+    let mat = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &lower)
+        .map_err(|e| Error::Numerical(format!("sparse matrix: {e:?}")))?;
+    Ok((mat, coupling))
+}
+
+/// Boundary conditions from rigid vertices (Koch §4.1): a rigid vertex has value and gradient
+/// fixed; an edge's cross-boundary derivative is fixed when both its ends are rigid.
+pub fn rigid_dofs(mesh: &FemMesh, rigid: &[bool]) -> Vec<bool> {
+    let mut fixed = vec![false; mesh.ndof()];
+    for (v, &r) in rigid.iter().enumerate() {
+        if r {
+            fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
+        }
+    }
+    let nv3 = 3 * mesh.uv.len();
+    for (e, ed) in mesh.edges.iter().enumerate() {
+        if rigid[ed[0] as usize] && rigid[ed[1] as usize] {
+            fixed[nv3 + e] = true;
+        }
+    }
+    fixed
 }
 
 /// y = K x for global triplets.

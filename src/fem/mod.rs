@@ -3,4 +3,5 @@
 pub mod assembly;
 pub mod element;
 pub mod jet;
+pub mod preload;
 pub mod quadrature;

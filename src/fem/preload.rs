@@ -1,0 +1,190 @@
+//! Preloading (Koch §4.3, MODEL.md §5) and sampling the C1 surface (Koch Fig. 12).
+//!
+//! a_init: corner values are the mesh vertices; corner gradients and edge cross-boundary
+//! derivatives come from least-squares quadratic fits in (u, v) over the neighbourhood, so a
+//! planar or quadratic surface is reproduced exactly (the paper's eq. 18 gives only unit
+//! directions). F_init = K a_init (eq. 17) makes the pre-operative face an equilibrium.
+
+use super::assembly::FemMesh;
+use super::element::edge_normal;
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use nalgebra::{DMatrix, DVector};
+use std::collections::HashMap;
+
+fn rings(mesh: &FemMesh) -> Vec<Vec<u32>> {
+    let mut nb = vec![Vec::new(); mesh.uv.len()];
+    for t in &mesh.tris {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            nb[a as usize].push(b);
+            nb[b as usize].push(a);
+        }
+    }
+    for l in &mut nb {
+        l.sort_unstable();
+        l.dedup();
+    }
+    nb
+}
+
+/// Least-squares fit of c0 + c1 du + c2 dv + c3 du² + c4 du dv + c5 dv² (du, dv from `at`,
+/// scaled by h) to `pts`; with `value` given, c0 is fixed to it. Returns (value, ∂u, ∂v) at `at`,
+/// or None when the points cannot determine a quadratic.
+fn fit(pts: &[([f64; 2], f64)], at: [f64; 2], value: Option<f64>) -> Option<[f64; 3]> {
+    let h = pts
+        .iter()
+        .map(|(p, _)| ((p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2)).sqrt())
+        .fold(0.0, f64::max);
+    if h == 0.0 {
+        return None;
+    }
+    let cols = if value.is_some() { 5 } else { 6 };
+    if pts.len() < cols {
+        return None;
+    }
+    let mut a = DMatrix::<f64>::zeros(pts.len(), cols);
+    let mut b = DVector::<f64>::zeros(pts.len());
+    for (r, (p, y)) in pts.iter().enumerate() {
+        let (x1, x2) = ((p[0] - at[0]) / h, (p[1] - at[1]) / h);
+        let row = [1.0, x1, x2, x1 * x1, x1 * x2, x2 * x2];
+        let skip = usize::from(value.is_some());
+        for c in 0..cols {
+            a[(r, c)] = row[c + skip];
+        }
+        b[r] = y - value.unwrap_or(0.0);
+    }
+    let svd = a.svd(true, true);
+    let sv = &svd.singular_values;
+    if sv.min() <= 1e-9 * sv.max() {
+        return None;
+    }
+    let c = svd.solve(&b, 1e-12).ok()?;
+    Some(match value {
+        Some(v) => [v, c[0] / h, c[1] / h],
+        None => [c[0], c[1] / h, c[2] / h],
+    })
+}
+
+/// Initial DOFs for one coordinate field given at the vertices.
+pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
+    let nb = rings(mesh);
+    let nv = mesh.uv.len();
+    let mut a = vec![0.0; mesh.ndof()];
+    // Neighbourhood: the 1-ring, widened to the 2-ring when it cannot fix a quadratic.
+    let hood = |seed: &[u32], wide: bool| -> Vec<u32> {
+        let mut s: Vec<u32> = seed.to_vec();
+        for &v in seed {
+            s.extend(&nb[v as usize]);
+            if wide {
+                for &w in &nb[v as usize] {
+                    s.extend(&nb[w as usize]);
+                }
+            }
+        }
+        s.sort_unstable();
+        s.dedup();
+        s
+    };
+    let gradient = |seed: &[u32], at: [f64; 2], value: Option<f64>| -> Option<[f64; 3]> {
+        for wide in [false, true] {
+            let pts: Vec<([f64; 2], f64)> = hood(seed, wide)
+                .iter()
+                .map(|&v| (mesh.uv[v as usize], values[v as usize]))
+                .collect();
+            if let Some(g) = fit(&pts, at, value) {
+                return Some(g);
+            }
+        }
+        None
+    };
+    for v in 0..nv {
+        let g = gradient(&[v as u32], mesh.uv[v], Some(values[v])).ok_or_else(|| {
+            Error::Numerical(format!(
+                "preloading: vertex {v} has too few neighbours to fit its tangent plane"
+            ))
+        })?;
+        a[3 * v] = values[v];
+        a[3 * v + 1] = g[1];
+        a[3 * v + 2] = g[2];
+    }
+    for (e, ed) in mesh.edges.iter().enumerate() {
+        let (p, q) = (mesh.uv[ed[0] as usize], mesh.uv[ed[1] as usize]);
+        let mid = [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])];
+        let g = gradient(&[ed[0], ed[1]], mid, None).ok_or_else(|| {
+            Error::Numerical(format!(
+                "preloading: edge {e} has too few neighbours for a fit"
+            ))
+        })?;
+        let n = edge_normal(p, q);
+        a[3 * nv + e] = g[1] * n[0] + g[2] * n[1];
+    }
+    Ok(a)
+}
+
+/// Sample the C1 surface (DOFs for x, y, z) on each triangle split into `level`² triangles,
+/// sharing vertices along edges (Koch Fig. 12). `level` = 1 gives the input mesh's vertices.
+pub fn sample(mesh: &FemMesh, a: &[Vec<f64>; 3], level: usize) -> Mesh {
+    let level = level.max(1);
+    // Vertex key: corner (vertex id), edge point (edge id, steps from its lower vertex), or
+    // interior (triangle, i, j).
+    #[derive(Hash, PartialEq, Eq)]
+    enum Key {
+        Corner(u32),
+        Edge(u32, usize),
+        Inner(usize, usize, usize),
+    }
+    let mut ids: HashMap<Key, u32> = HashMap::new();
+    let mut verts: Vec<[f64; 3]> = Vec::new();
+    let mut tris = Vec::new();
+    for (t, tri) in mesh.tris.iter().enumerate() {
+        let mut local = vec![vec![0u32; level + 1]; level + 1];
+        for j in 0..=level {
+            for i in 0..=(level - j) {
+                let k = level - i - j; // weight of corner 0
+                let key = if i == 0 && j == 0 {
+                    Key::Corner(tri[0])
+                } else if i == level {
+                    Key::Corner(tri[1])
+                } else if j == level {
+                    Key::Corner(tri[2])
+                } else if j == 0 {
+                    edge_key(mesh, t, 0, i, level)
+                } else if k == 0 {
+                    edge_key(mesh, t, 1, j, level)
+                } else if i == 0 {
+                    edge_key(mesh, t, 2, k, level)
+                } else {
+                    Key::Inner(t, i, j)
+                };
+                let id = *ids.entry(key).or_insert_with(|| {
+                    let (xi, eta) = (i as f64 / level as f64, j as f64 / level as f64);
+                    let p = [0, 1, 2].map(|c| mesh.eval(&a[c], t, xi, eta)[0]);
+                    verts.push(p);
+                    (verts.len() - 1) as u32
+                });
+                local[j][i] = id;
+            }
+        }
+        for j in 0..level {
+            for i in 0..(level - j) {
+                tris.push([local[j][i], local[j][i + 1], local[j + 1][i]]);
+                if i + j + 1 < level {
+                    tris.push([local[j][i + 1], local[j + 1][i + 1], local[j + 1][i]]);
+                }
+            }
+        }
+    }
+    fn edge_key(mesh: &FemMesh, t: usize, e: usize, step: usize, level: usize) -> Key {
+        // `step` counts from local corner e towards corner e+1; re-count from the edge's lower vertex.
+        let tri = mesh.tris[t];
+        let id = mesh.tri_edges[t][e];
+        let from_low = if tri[e] < tri[(e + 1) % 3] {
+            step
+        } else {
+            level - step
+        };
+        Key::Edge(id, from_low)
+    }
+    Mesh::new(verts, tris)
+}
