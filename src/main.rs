@@ -43,6 +43,14 @@ enum Cmd {
     },
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
+    /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh.
+    Bench {
+        #[arg(value_parser = ["fem"])]
+        what: String,
+        /// Triangles in the mesh.
+        #[arg(long, default_value_t = 40000)]
+        triangles: usize,
+    },
     /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
     Render {
         #[arg(required = true)]
@@ -145,6 +153,19 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             println!(
                 "{}",
                 serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(&path, e))?
+            );
+            Ok(())
+        }
+        Cmd::Bench { what: _, triangles } => {
+            if !(2..=20_000_000).contains(&triangles) {
+                return Err(Error::config(
+                    "bench: --triangles must be between 2 and 20000000",
+                ));
+            }
+            let b = facesim::fem::bench::run(triangles)?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&b).map_err(|e| Error::config(e))?
             );
             Ok(())
         }

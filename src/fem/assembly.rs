@@ -102,8 +102,8 @@ impl FemMesh {
         w
     }
 
-    /// Assemble K (both halves) and F for a uniform load q, with per-element materials, in
-    /// parallel, from the precomputed reference moments. Returns summed triplets and F.
+    /// Assemble K (its lower triangle) and F for a uniform load q, with per-element materials,
+    /// in parallel, from the precomputed reference moments. Returns summed triplets and F.
     pub fn assemble(
         &self,
         material: &(dyn Fn(usize) -> Material + Sync),
@@ -122,7 +122,10 @@ impl FemMesh {
             for i in 0..NDOF {
                 f[d[i]] += fe[i];
                 for j in 0..NDOF {
-                    trip.push((d[i], d[j], k[i][j]));
+                    // K is symmetric: keep the lower triangle (row ≥ column) only.
+                    if d[i] >= d[j] {
+                        trip.push((d[i], d[j], k[i][j]));
+                    }
                 }
             }
         }
@@ -209,7 +212,7 @@ pub struct System {
     pub free: Vec<usize>,
     /// K entries coupling a free row to a fixed column (free row index, global col, value).
     coupling: Vec<(usize, usize, f64)>,
-    /// The full K (global triplets), kept for products such as F_init = K a_init.
+    /// K's lower triangle (global triplets), kept for products such as F_init = K a_init.
     pub k: Vec<(usize, usize, f64)>,
     llt: Llt<usize, f64>,
     /// Symbolic analysis (ordering, elimination tree), reused when only values change.
@@ -247,6 +250,19 @@ impl System {
             symbolic,
             nnz_lower,
         })
+    }
+
+    /// Nonzeros of the Cholesky factor L (a separate symbolic analysis; for reports).
+    pub fn factor_nnz(&self) -> Result<usize> {
+        let (mat, _) = split(&self.k, &self.free_index, self.free.len())?;
+        let s = faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
+            mat.symbolic(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| Error::Numerical(format!("symbolic Cholesky: {e:?}")))?;
+        Ok(s.len_val())
     }
 
     /// Refactor after K's values changed on the same pattern (new α/β, spring stiffness),
@@ -303,12 +319,12 @@ fn split(k: &[(usize, usize, f64)], free_index: &[usize], nf: usize) -> Result<S
     let mut coupling = Vec::new();
     for &(r, c, v) in k {
         let (fr, fc) = (free_index[r], free_index[c]);
-        if fr != usize::MAX && fc != usize::MAX {
-            if fr >= fc {
-                lower.push(Triplet::new(fr, fc, v));
-            }
-        } else if fr != usize::MAX {
-            coupling.push((fr, c, v));
+        match (fr != usize::MAX, fc != usize::MAX) {
+            // Free indices increase with global ones, so r ≥ c gives fr ≥ fc.
+            (true, true) => lower.push(Triplet::new(fr, fc, v)),
+            (true, false) => coupling.push((fr, c, v)),
+            (false, true) => coupling.push((fc, r, v)),
+            (false, false) => {}
         }
     }
     let mat = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &lower)
@@ -334,11 +350,14 @@ pub fn rigid_dofs(mesh: &FemMesh, rigid: &[bool]) -> Vec<bool> {
     fixed
 }
 
-/// y = K x for global triplets.
+/// y = K x for K given by its lower-triangle triplets.
 pub fn multiply(k: &[(usize, usize, f64)], x: &[f64]) -> Vec<f64> {
     let mut y = vec![0.0; x.len()];
     for &(r, c, v) in k {
         y[r] += v * x[c];
+        if r != c {
+            y[c] += v * x[r];
+        }
     }
     y
 }
