@@ -165,7 +165,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             let b = facesim::fem::bench::run(triangles)?;
             println!(
                 "{}",
-                serde_json::to_string_pretty(&b).map_err(|e| Error::config(e))?
+                serde_json::to_string_pretty(&b).map_err(Error::config)?
             );
             Ok(())
         }

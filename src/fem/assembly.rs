@@ -231,6 +231,11 @@ impl System {
                 free.push(g);
             }
         }
+        // faer's own multithreading of the sparse factorisation and triangular solves costs more
+        // than it gains at these sizes on 2 cores (40k triangles: factor 0.48 s sequential vs
+        // 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s; docs/fem.md), so faer runs
+        // sequentially while rayon parallelises element work.
+        faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
         let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower)
