@@ -50,6 +50,9 @@ enum Cmd {
         /// Triangles in the mesh.
         #[arg(long, default_value_t = 40000)]
         triangles: usize,
+        /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.py).
+        #[arg(long)]
+        export: Option<PathBuf>,
     },
     /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
     Render {
@@ -156,13 +159,17 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             );
             Ok(())
         }
-        Cmd::Bench { what: _, triangles } => {
+        Cmd::Bench {
+            what: _,
+            triangles,
+            export,
+        } => {
             if !(2..=20_000_000).contains(&triangles) {
                 return Err(Error::config(
                     "bench: --triangles must be between 2 and 20000000",
                 ));
             }
-            let b = facesim::fem::bench::run(triangles)?;
+            let b = facesim::fem::bench::run(triangles, export.as_deref())?;
             println!(
                 "{}",
                 serde_json::to_string_pretty(&b).map_err(Error::config)?

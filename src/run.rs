@@ -215,6 +215,9 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         }
         Ok(())
     })?;
+    if case.surface.parameterization == crate::case::Parameterization::Planar {
+        surface::planar_uv(&mut skin);
+    }
     skin.check(Path::new("extracted skin surface"))?;
     skull.check(Path::new("extracted skull surface"))?;
     surf.insert(
@@ -248,7 +251,10 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
                     ),
                 ));
             }
-            surface::cylindrical_uv(&mut m, axis, r0);
+            match case.surface.parameterization {
+                crate::case::Parameterization::Cylindrical => surface::cylindrical_uv(&mut m, axis, r0),
+                crate::case::Parameterization::Planar => surface::planar_uv(&mut m),
+            }
             Ok(m)
         })?;
         let d = crate::compare::point_to_surface(&skin.vertices, &extracted);

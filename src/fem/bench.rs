@@ -33,7 +33,9 @@ pub fn peak_rss_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
-pub fn run(target_triangles: usize) -> Result<FemBench> {
+/// `export`: also write the factored matrix (free–free lower triangle) as Matrix Market, for
+/// timing another sparse Cholesky on the same matrix (benches/cholmod_compare.py).
+pub fn run(target_triangles: usize, export: Option<&std::path::Path>) -> Result<FemBench> {
     let n = ((target_triangles as f64 / 2.0).sqrt().round() as usize).max(2);
     // A jittered planar grid, 1 mm cells, alternating diagonals.
     let mut seed = 12345u64;
@@ -94,6 +96,25 @@ pub fn run(target_triangles: usize) -> Result<FemBench> {
         return Err(Error::Numerical(
             "benchmark solve produced non-finite values".into(),
         ));
+    }
+    if let Some(path) = export {
+        let entries: Vec<(usize, usize, f64)> = sys
+            .k
+            .iter()
+            .filter_map(|&(r, c, v)| {
+                let (fr, fc) = (sys.free_index[r], sys.free_index[c]);
+                (fr != usize::MAX && fc != usize::MAX).then_some((fr, fc, v))
+            })
+            .collect();
+        let nf = sys.free.len();
+        crate::output::write_bytes_atomic(path, |w| {
+            writeln!(w, "%%MatrixMarket matrix coordinate real symmetric")?;
+            writeln!(w, "{nf} {nf} {}", entries.len())?;
+            for (r, c, v) in &entries {
+                writeln!(w, "{} {} {v:e}", r + 1, c + 1)?;
+            }
+            Ok(())
+        })?;
     }
     // Factor size, from a separate symbolic analysis (not timed).
     let (lower, _) = (sys.nnz_lower, ());

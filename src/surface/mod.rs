@@ -158,6 +158,54 @@ pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
     });
 }
 
+/// Planar (u, v): orthogonal projection on the least-squares plane of the vertices (for
+/// patch-like surfaces, CASE.md `parameterization = "planar"`). u runs along the direction of
+/// largest spread, v completes a right-handed frame with the plane normal pointing to the side
+/// the triangles face on average.
+pub fn planar_uv(mesh: &mut Mesh) {
+    use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+    let n = mesh.vertices.len().max(1) as f64;
+    let c = mesh
+        .vertices
+        .iter()
+        .fold(Vector3::zeros(), |a, p| a + Vector3::new(p[0], p[1], p[2]))
+        / n;
+    let mut cov = Matrix3::zeros();
+    for p in &mesh.vertices {
+        let d = Vector3::new(p[0], p[1], p[2]) - c;
+        cov += d * d.transpose();
+    }
+    let eig = SymmetricEigen::new(cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let e1: Vector3<f64> = eig.eigenvectors.column(order[0]).into();
+    let mut normal: Vector3<f64> = eig.eigenvectors.column(order[2]).into();
+    let facing = (0..mesh.triangles.len()).fold(Vector3::zeros(), |a, t| {
+        let f = mesh.face_normal(t);
+        a + Vector3::new(f[0], f[1], f[2])
+    });
+    if normal.dot(&facing) < 0.0 {
+        normal = -normal;
+    }
+    let e2 = normal.cross(&e1);
+    let (mut u, mut v) = (Vec::new(), Vec::new());
+    for p in &mesh.vertices {
+        let d = Vector3::new(p[0], p[1], p[2]) - c;
+        u.push(d.dot(&e1));
+        v.push(d.dot(&e2));
+    }
+    mesh.vertex_columns
+        .retain(|c| c.name != "u" && c.name != "v");
+    mesh.vertex_columns.push(Column {
+        name: "u".into(),
+        values: u,
+    });
+    mesh.vertex_columns.push(Column {
+        name: "v".into(),
+        values: v,
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -194,6 +242,47 @@ mod tests {
         taubin_smooth(&mut m, 10);
         assert!(rough(&m) < 0.1 * before, "{} vs {before}", rough(&m));
         assert_eq!(m.vertices[0], [0.0, 0.0, 0.0]);
+    }
+
+    #[test]
+    fn planar_parameterisation_of_a_tilted_plane_is_an_isometry() {
+        let mut m = grid(6, 0.0);
+        // Tilt the plane: rotate about x by 30°, then shift.
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        for p in &mut m.vertices {
+            *p = [
+                p[0] + 5.0,
+                c * p[1] - s * p[2] - 2.0,
+                s * p[1] + c * p[2] + 1.0,
+            ];
+        }
+        planar_uv(&mut m);
+        let u = &m
+            .vertex_columns
+            .iter()
+            .find(|c| c.name == "u")
+            .unwrap()
+            .values;
+        let v = &m
+            .vertex_columns
+            .iter()
+            .find(|c| c.name == "v")
+            .unwrap()
+            .values;
+        for t in &m.triangles {
+            for e in 0..3 {
+                let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
+                let d3 = crate::mesh::norm(crate::mesh::sub(m.vertices[a], m.vertices[b]));
+                let d2 = ((u[a] - u[b]).powi(2) + (v[a] - v[b]).powi(2)).sqrt();
+                assert!((d3 - d2).abs() < 1e-12);
+            }
+        }
+        // Orientation kept: (u, v) triangles wind like the mesh (positive area).
+        for t in &m.triangles {
+            let [a, b, c] = t.map(|i| i as usize);
+            let area = (u[b] - u[a]) * (v[c] - v[a]) - (u[c] - u[a]) * (v[b] - v[a]);
+            assert!(area > 0.0);
+        }
     }
 
     #[test]
