@@ -192,6 +192,11 @@ pub enum SolveModel {
 pub struct Solve {
     pub model: SolveModel,
     pub steps: usize,
+    /// Spring stiffness per unit relative stiffness c per mm² (equilibrium model).
+    pub k_c: f64,
+    /// Force scale k_c of eq. 20 for the koch1996 model (forces are loads there, not springs,
+    /// so the scale is a different quantity; docs/pipeline.md).
+    pub koch_k_c: f64,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -295,6 +300,13 @@ impl Case {
             && self.surface.beta >= 0.0)
         {
             return bad("[surface] alpha and beta must be finite and >= 0".into());
+        }
+        if !(self.solve.k_c.is_finite()
+            && self.solve.k_c > 0.0
+            && self.solve.koch_k_c.is_finite()
+            && self.solve.koch_k_c > 0.0)
+        {
+            return bad("[solve] k_c and koch_k_c must be finite and positive".into());
         }
         if self.solve.steps == 0 {
             return bad("[solve] steps must be at least 1".into());

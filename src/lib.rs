@@ -16,12 +16,15 @@ pub mod compare;
 pub mod error;
 pub mod fem;
 pub mod mesh;
+pub mod osteotomy;
 pub mod output;
 pub mod phantom;
 pub mod progress;
 pub mod render;
 pub mod run;
 pub mod segment;
+pub mod solve;
+pub mod springs;
 pub mod surface;
 pub mod volume;
 

@@ -27,6 +27,11 @@ pub struct Report {
     pub surfaces: serde_json::Map<String, Value>,
     pub registration: Option<register::Transform>,
     pub parameters: Option<Case>,
+    pub springs: Option<crate::springs::SpringReport>,
+    pub solve: Option<Vec<crate::solve::StepRecord>>,
+    /// Displacement |x_post − x_pre| over the skin (mm): max, mean, and the colour scale of
+    /// face_displacement.ply (viridis, 0 → max).
+    pub displacement: serde_json::Map<String, Value>,
     pub warnings: Vec<String>,
     pub stages_not_run: Vec<String>,
 }
@@ -34,6 +39,8 @@ pub struct Report {
 /// Everything the pipeline produced so far (kept in memory for tests and later stages).
 pub struct Outcome {
     pub report: Report,
+    /// The predicted skin, same vertex order as `skin`.
+    pub face_post: Mesh,
     pub volume: Volume,
     pub segmentation: Segmentation,
     pub skin: Mesh,
@@ -54,6 +61,25 @@ impl Timer<'_> {
             .insert(stage.into(), json!(t.elapsed().as_secs_f64()));
         Ok(r)
     }
+}
+
+/// Viridis colour map (matplotlib's, 9 control points, linear in between) at t ∈ [0, 1].
+pub fn viridis(t: f64) -> [u8; 3] {
+    const C: [[f64; 3]; 9] = [
+        [68.0, 1.0, 84.0],
+        [71.0, 44.0, 122.0],
+        [59.0, 81.0, 139.0],
+        [44.0, 113.0, 142.0],
+        [33.0, 144.0, 141.0],
+        [39.0, 173.0, 129.0],
+        [92.0, 200.0, 99.0],
+        [170.0, 220.0, 50.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let x = t.clamp(0.0, 1.0) * 8.0;
+    let i = (x.floor() as usize).min(7);
+    let f = x - i as f64;
+    [0, 1, 2].map(|k| (C[i][k] + f * (C[i + 1][k] - C[i][k])).round() as u8)
 }
 
 /// Drop connected pieces with fewer than `min_fraction` of the triangles (range-scan islands
@@ -272,9 +298,151 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     }
     report.registration = registration;
 
+    progress.stage("tracing springs");
+    let t = Instant::now();
+    let bone_field = seg.bone_field(&vol);
+    let springs = crate::springs::trace(
+        &skin,
+        &vol,
+        &seg,
+        &bone_field,
+        &case.springs,
+        &case.tissue.stiffness,
+    );
+    drop(bone_field);
+    report
+        .timings
+        .insert("springs".into(), json!(t.elapsed().as_secs_f64()));
+    let spring_report = springs.report(&skin);
+    if springs.attachments.is_empty() {
+        return Err(Error::Numerical(format!(
+            "no skin vertex found bone within {} mm along its inward normal: raise [springs] max_length_mm or check the [tissue] bone window",
+            case.springs.max_length_mm
+        )));
+    }
+    if spring_report.misses > 0 {
+        warnings.push(format!(
+            "{} skin vertices found no bone within {} mm (no spring); centred at {:?}",
+            spring_report.misses,
+            case.springs.max_length_mm,
+            spring_report
+                .miss_centroid
+                .map(|c| c.map(|x| (x * 10.0).round() / 10.0))
+        ));
+    }
+    let plan = crate::osteotomy::Plan::new(&case.osteotomy)?;
+    plan.check_selects(&springs.attachments, "spring attachments")?;
+    let rigid: Vec<bool> = skin
+        .vertices
+        .iter()
+        .map(|p| match &case.surface.movable {
+            Some(r) => !crate::osteotomy::inside(r, None, *p),
+            None => false,
+        })
+        .collect();
+    progress.stage("solving");
+    let t = Instant::now();
+    let params = crate::solve::Params {
+        model: case.solve.model,
+        steps: case.solve.steps,
+        alpha: case.surface.alpha,
+        beta: case.surface.beta,
+        k_c: if case.solve.model == crate::case::SolveModel::Koch1996 {
+            case.solve.koch_k_c
+        } else {
+            case.solve.k_c
+        },
+        tolerance: 1e-6,
+        max_iterations: 30,
+    };
+    // No bone moves: the preloaded skin is an equilibrium by construction (F_init = K a_init),
+    // so the prediction is the pre-operative face; skip the factorisation.
+    let sol = if plan.is_empty() {
+        warnings.push(
+            "no [[osteotomy]] in the case: the predicted face is the pre-operative face".into(),
+        );
+        None
+    } else {
+        Some(crate::solve::solve(
+            &skin, &springs, &plan, &rigid, &params,
+        )?)
+    };
+    report
+        .timings
+        .insert("solve".into(), json!(t.elapsed().as_secs_f64()));
+    let mut face_post = skin.clone();
+    if let Some(sol) = &sol {
+        face_post.vertices = sol.positions.clone();
+    }
+    face_post.colors = None;
+    let dist: Vec<f64> = skin
+        .vertices
+        .iter()
+        .zip(&face_post.vertices)
+        .map(|(a, b)| mesh::norm(mesh::sub(*a, *b)))
+        .collect();
+    let dmax = dist.iter().cloned().fold(0.0, f64::max);
+    let dmean = dist.iter().sum::<f64>() / dist.len().max(1) as f64;
+    report.displacement.insert("max".into(), json!(dmax));
+    report.displacement.insert("mean".into(), json!(dmean));
+    report
+        .displacement
+        .insert("colour_scale_mm".into(), json!([0.0, dmax]));
+    report
+        .displacement
+        .insert("colour_map".into(), json!("viridis"));
+    report
+        .counts
+        .insert("springs_main".into(), json!(spring_report.main));
+    report
+        .counts
+        .insert("springs_strut".into(), json!(spring_report.struts));
+    report.counts.insert(
+        "unknowns".into(),
+        json!(sol.as_ref().map_or(0, |s| s.unknowns)),
+    );
+    report.springs = Some(spring_report);
+    report.solve = sol.as_ref().map(|s| s.history.clone());
+
     progress.stage("writing outputs");
     let t = Instant::now();
     std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
+    mesh::write_mesh(&face_post, &out_dir.join("face_post.obj"))?;
+    mesh::write_mesh(&face_post, &out_dir.join("face_post.ply"))?;
+    if let (Some(sol), true) = (&sol, case.output.subdivide > 1) {
+        let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
+        mesh::write_mesh(&fine, &out_dir.join("face_post_fine.ply"))?;
+    }
+    let mut coloured = face_post.clone();
+    coloured.colors = Some(
+        dist.iter()
+            .map(|d| viridis(if dmax > 0.0 { d / dmax } else { 0.0 }))
+            .collect(),
+    );
+    coloured.vertex_columns.push(mesh::Column {
+        name: "displacement".into(),
+        values: dist.clone(),
+    });
+    mesh::write_mesh(&coloured, &out_dir.join("face_displacement.ply"))?;
+    let mut skull_post = skull.clone();
+    skull_post.vertices = plan.apply(&skull.vertices, 1.0).0;
+    mesh::write_mesh(&skull_post, &out_dir.join("skull_post.ply"))?;
+    mesh::ply::write(
+        &springs.to_mesh(&skin),
+        &out_dir.join("springs.ply"),
+        mesh::ply::Encoding::BinaryLittleEndian,
+    )?;
+    crate::output::write_bytes_atomic(&out_dir.join("displacement.csv"), |w| {
+        writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
+        for (i, (p, q)) in skin.vertices.iter().zip(&face_post.vertices).enumerate() {
+            writeln!(
+                w,
+                "{i},{},{},{},{},{},{},{}",
+                p[0], p[1], p[2], q[0], q[1], q[2], dist[i]
+            )?;
+        }
+        Ok(())
+    })?;
     mesh::write_mesh(&skin, &out_dir.join("face_pre.obj"))?;
     mesh::write_mesh(&skin, &out_dir.join("face_pre.ply"))?;
     mesh::write_mesh(&skull, &out_dir.join("skull_pre.ply"))?;
@@ -310,9 +478,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     report.segmentation = Some(seg.report.clone());
     report.parameters = Some(case.clone());
     report.warnings = warnings;
-    report.stages_not_run = ["springs", "fem", "osteotomy", "solve"]
-        .map(String::from)
-        .to_vec();
+    report.stages_not_run = Vec::new();
     let text = serde_json::to_string_pretty(&report).map_err(|e| Error::output(&out_dir, e))?;
     crate::output::write_bytes_atomic(&out_dir.join("report.json"), |w| {
         w.write_all(text.as_bytes())
@@ -320,6 +486,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     progress.done();
     Ok(Outcome {
         report,
+        face_post,
         volume: vol,
         segmentation: seg,
         skin,

@@ -193,7 +193,9 @@ impl FemMesh {
 
 /// Sort by (column, row) and add up repeated entries.
 fn sum_duplicates(mut t: Vec<(usize, usize, f64)>) -> Vec<(usize, usize, f64)> {
-    t.par_sort_unstable_by_key(|&(r, c, _)| (c, r));
+    // Stable: repeated entries are summed in element order, so results are bit-identical
+    // from run to run whatever the thread count.
+    t.par_sort_by_key(|&(r, c, _)| (c, r));
     let mut out: Vec<(usize, usize, f64)> = Vec::with_capacity(t.len() / 4);
     for (r, c, v) in t {
         match out.last_mut() {

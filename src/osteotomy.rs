@@ -1,0 +1,137 @@
+//! Stage 6a — bone moves (CASE.md `[[osteotomy]]`, Koch §4.4): each segment moves the skull points
+//! inside its region by a rigid transform p' = R (p − pivot) + pivot + translate, with
+//! R = Rz·Ry·Rx (rotate about x, then y, then z; degrees). Segments apply in order, each to the
+//! points inside its region at their current position.
+
+use crate::case::{Osteotomy, Region};
+use crate::error::{Error, Result};
+use crate::volume::Volume;
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+pub struct Plan {
+    steps: Vec<(Osteotomy, Option<Volume>)>,
+}
+
+fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
+    let [a, b, c] = deg.map(f64::to_radians);
+    let rx = [
+        [1.0, 0.0, 0.0],
+        [0.0, a.cos(), -a.sin()],
+        [0.0, a.sin(), a.cos()],
+    ];
+    let ry = [
+        [b.cos(), 0.0, b.sin()],
+        [0.0, 1.0, 0.0],
+        [-b.sin(), 0.0, b.cos()],
+    ];
+    let rz = [
+        [c.cos(), -c.sin(), 0.0],
+        [c.sin(), c.cos(), 0.0],
+        [0.0, 0.0, 1.0],
+    ];
+    let mul = |p: [[f64; 3]; 3], q: [[f64; 3]; 3]| {
+        let mut r = [[0.0; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                r[i][j] = (0..3).map(|k| p[i][k] * q[k][j]).sum();
+            }
+        }
+        r
+    };
+    mul(rz, mul(ry, rx))
+}
+
+/// Whether p is inside a region; masks are non-zero voxels (nearest voxel).
+pub fn inside(region: &Region, mask: Option<&Volume>, p: [f64; 3]) -> bool {
+    match (region, mask) {
+        (Region::Mask(_), Some(m)) => {
+            let c = m.to_voxel(p).map(|x| x.round());
+            if (0..3).any(|a| c[a] < 0.0 || c[a] >= m.dims[a] as f64) {
+                return false;
+            }
+            m.data[m.idx(c[0] as usize, c[1] as usize, c[2] as usize)] != 0.0
+        }
+        _ => region.contains(p),
+    }
+}
+
+impl Plan {
+    pub fn new(osteotomies: &[Osteotomy]) -> Result<Plan> {
+        let mut masks: HashMap<PathBuf, Volume> = HashMap::new();
+        let mut steps = Vec::new();
+        for o in osteotomies {
+            let mask = match &o.region {
+                Region::Mask(p) => {
+                    if !masks.contains_key(p) {
+                        masks.insert(p.clone(), crate::volume::read_volume(p)?);
+                    }
+                    masks.get(p).cloned()
+                }
+                _ => None,
+            };
+            steps.push((o.clone(), mask));
+        }
+        Ok(Plan { steps })
+    }
+
+    /// Move points; `scale` ∈ [0, 1] applies a fraction of every move (load increments:
+    /// translation and rotation angles scaled). Returns the moved points and, per point,
+    /// whether any segment moved it.
+    pub fn apply(&self, points: &[[f64; 3]], scale: f64) -> (Vec<[f64; 3]>, Vec<bool>) {
+        let mut out = points.to_vec();
+        let mut moved = vec![false; points.len()];
+        for (o, mask) in &self.steps {
+            let r = rotation(o.rotate_deg.map(|d| d * scale));
+            for (p, m) in out.iter_mut().zip(moved.iter_mut()) {
+                if inside(&o.region, mask.as_ref(), *p) {
+                    let d = [p[0] - o.pivot[0], p[1] - o.pivot[1], p[2] - o.pivot[2]];
+                    for a in 0..3 {
+                        p[a] = (0..3).map(|k| r[a][k] * d[k]).sum::<f64>()
+                            + o.pivot[a]
+                            + scale * o.translate[a];
+                    }
+                    *m = true;
+                }
+            }
+        }
+        (out, moved)
+    }
+
+    /// Each segment must select something, or the plan is surely wrong.
+    pub fn check_selects(&self, points: &[[f64; 3]], what: &str) -> Result<()> {
+        for (o, mask) in &self.steps {
+            if !points.iter().any(|p| inside(&o.region, mask.as_ref(), *p)) {
+                return Err(Error::config(format!(
+                    "case.toml: osteotomy '{}': its region contains none of the {} {what}",
+                    o.name,
+                    points.len()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.steps.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rotation_order_is_x_then_y_then_z() {
+        // x axis rotated 90° about z → y axis; about y first (90°) → −z, then about z stays −z.
+        let r = rotation([0.0, 90.0, 90.0]);
+        let v = [1.0, 0.0, 0.0];
+        let w: Vec<f64> = (0..3)
+            .map(|a| (0..3).map(|k| r[a][k] * v[k]).sum())
+            .collect();
+        assert!(
+            (w[0]).abs() < 1e-12 && (w[1]).abs() < 1e-12 && (w[2] + 1.0).abs() < 1e-12,
+            "{w:?}"
+        );
+    }
+}

@@ -1,0 +1,324 @@
+//! Stage 6b — the predicted face (Koch §4.4–4.5, MODEL.md §6).
+//!
+//! Both models start from the preloaded C1 skin (a_init, F_init = K a_init) with rigid nodes
+//! outside `[surface] movable`, and move the spring attachments by the plan in `steps` load
+//! increments.
+//!
+//! - `koch1996`: eq. 20–23. f_def,i = k_c k_i Σ_j c_ij (|s_ij| − |s_ij − t^j|) (s_ij − t^j)/|s_ij − t^j|
+//!   with s_ij − t^j the current spring vector (skin now − moved attachment) and |s_ij| its
+//!   pre-operative length; F_def (eq. 22) is evaluated lumped at the value DOFs (k_i already
+//!   carries the area); K a = F_init + F_def (eq. 23), forces recomputed at each increment.
+//! - `equilibrium`: minimise E(a) = ½ (a − a_init)ᵀ K (a − a_init) + Σ ½ k_c k_i c (|x_i − x_b'| − L0)²
+//!   over the three coordinate fields together, by Newton per increment. The spring Hessian
+//!   k c [n nᵀ + (1 − L0/L)(I − n nᵀ)] couples x, y, z at a vertex. The exact tangent is used when
+//!   it is positive definite; otherwise compressed springs' negative lateral part is dropped for
+//!   that iteration (a positive definite modified Newton step). Converged when |r|/|r0| or
+//!   |Δa|/|a − a_init| falls below the tolerance; not converging within the iteration limit is
+//!   an error, never a silent result.
+
+use crate::case::SolveModel;
+use crate::error::{Error, Result};
+use crate::fem::assembly::{FemMesh, System, multiply, rigid_dofs};
+use crate::fem::element::Material;
+use crate::fem::preload::initial_dofs;
+use crate::mesh::{Mesh, norm, sub};
+use crate::osteotomy::Plan;
+use crate::springs::SpringSet;
+use serde::Serialize;
+
+pub struct Params {
+    pub model: SolveModel,
+    pub steps: usize,
+    pub alpha: f64,
+    pub beta: f64,
+    /// Force scale k_c (eq. 20): spring stiffness per unit c per mm² of skin.
+    pub k_c: f64,
+    pub tolerance: f64,
+    pub max_iterations: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StepRecord {
+    pub step: usize,
+    pub iterations: usize,
+    pub residual_history: Vec<f64>,
+    pub max_displacement_mm: f64,
+}
+
+pub struct Solution {
+    pub fem: FemMesh,
+    /// DOFs of x, y, z.
+    pub a: [Vec<f64>; 3],
+    pub positions: Vec<[f64; 3]>,
+    pub history: Vec<StepRecord>,
+    pub unknowns: usize,
+}
+
+fn column(mesh: &Mesh, name: &str) -> Result<Vec<f64>> {
+    mesh.vertex_columns
+        .iter()
+        .find(|c| c.name == name)
+        .map(|c| c.values.clone())
+        .ok_or_else(|| {
+            Error::config(format!(
+                "the skin mesh has no '{name}' parameter coordinate"
+            ))
+        })
+}
+
+pub fn solve(
+    skin: &Mesh,
+    springs: &SpringSet,
+    plan: &Plan,
+    rigid: &[bool],
+    p: &Params,
+) -> Result<Solution> {
+    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
+    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
+    let fem = FemMesh::new(uv, skin.triangles.clone())?;
+    let nd = fem.ndof();
+    let field = |c: usize| {
+        initial_dofs(
+            &fem,
+            &skin.vertices.iter().map(|x| x[c]).collect::<Vec<_>>(),
+        )
+    };
+    let a_init: [Vec<f64>; 3] = [field(0)?, field(1)?, field(2)?];
+    let mat = Material::isotropic(p.alpha, p.beta);
+    let fixed = rigid_dofs(&fem, rigid);
+    let (k, _) = fem.assemble(&|_| mat, 0.0);
+    let nv = skin.vertices.len();
+    let weight: Vec<f64> = springs
+        .springs
+        .iter()
+        .map(|s| p.k_c * springs.k[s.skin] * s.c)
+        .collect();
+    let value_dof = |i: usize| 3 * i;
+    let mut a = a_init.clone();
+    let mut history = Vec::new();
+    let max_move = {
+        let (moved, _) = plan.apply(&springs.attachments, 1.0);
+        moved
+            .iter()
+            .zip(&springs.attachments)
+            .map(|(p, q)| norm(sub(*p, *q)))
+            .fold(0.0, f64::max)
+    };
+    let disp = |a: &[Vec<f64>; 3]| {
+        (0..nv)
+            .map(|i| norm([0, 1, 2].map(|c| a[c][value_dof(i)] - a_init[c][value_dof(i)])))
+            .fold(0.0, f64::max)
+    };
+    match p.model {
+        SolveModel::Koch1996 => {
+            fem.check_constraints(&|_| mat, &fixed)?;
+            let sys = System::new(nd, k.clone(), &fixed)?;
+            let f_init: Vec<Vec<f64>> = a_init.iter().map(|x| multiply(&k, x)).collect();
+            for step in 1..=p.steps {
+                let (xb, _) = plan.apply(&springs.attachments, step as f64 / p.steps as f64);
+                let mut f = f_init.clone();
+                for (s, w) in springs.springs.iter().zip(&weight) {
+                    let xs = [0, 1, 2].map(|c| a[c][value_dof(s.skin)]);
+                    let d = sub(xs, xb[s.bone]);
+                    let l = norm(d).max(1e-12);
+                    for c in 0..3 {
+                        f[c][value_dof(s.skin)] += w * (s.rest - l) * d[c] / l;
+                    }
+                }
+                let sol = sys.solve(&f, &a_init);
+                a = [sol[0].clone(), sol[1].clone(), sol[2].clone()];
+                // eq. 23 with forces taken at the current shape is a fixed-point iteration: it
+                // diverges when the springs are much stiffer than the skin. The skin cannot
+                // follow the bone by more than the bone moves plus its own size; beyond that the
+                // iteration has diverged.
+                let bound = 2.0 * max_move + 10.0;
+                let d = disp(&a);
+                if !d.is_finite() || d > bound {
+                    return Err(Error::Numerical(format!(
+                        "koch1996 diverged at load step {step}/{}: skin displacement {d:.3e} mm exceeds {bound:.1} mm (bone moves at most {max_move:.1} mm); lower [solve] k_c, raise [surface] alpha/beta or use model = \"equilibrium\"",
+                        p.steps
+                    )));
+                }
+                history.push(StepRecord {
+                    step,
+                    iterations: 1,
+                    residual_history: vec![],
+                    max_displacement_mm: disp(&a),
+                });
+            }
+            let positions = (0..nv)
+                .map(|i| [0, 1, 2].map(|c| a[c][value_dof(i)]))
+                .collect();
+            Ok(Solution {
+                fem,
+                a,
+                positions,
+                history,
+                unknowns: 3 * (nd - fixed.iter().filter(|f| **f).count()),
+            })
+        }
+        SolveModel::Equilibrium => {
+            // Stacked unknowns: coordinate c of DOF g at c·nd + g.
+            let fixed3: Vec<bool> = (0..3 * nd).map(|i| fixed[i % nd]).collect();
+            let spring_vertices: Vec<usize> = {
+                let mut v: Vec<usize> = springs.springs.iter().map(|s| s.skin).collect();
+                v.sort_unstable();
+                v.dedup();
+                v
+            };
+            let build = |hess: &[[[f64; 3]; 3]]| -> Vec<(usize, usize, f64)> {
+                let mut t = Vec::with_capacity(3 * k.len() + 6 * spring_vertices.len());
+                for c in 0..3 {
+                    t.extend(
+                        k.iter()
+                            .map(|&(r, col, val)| (c * nd + r, c * nd + col, val)),
+                    );
+                }
+                for (n, &i) in spring_vertices.iter().enumerate() {
+                    let g = value_dof(i);
+                    for r in 0..3 {
+                        for c in 0..=r {
+                            t.push((r * nd + g, c * nd + g, hess[n][r][c]));
+                        }
+                    }
+                }
+                t
+            };
+            let slot: std::collections::HashMap<usize, usize> = spring_vertices
+                .iter()
+                .enumerate()
+                .map(|(n, &i)| (i, n))
+                .collect();
+            // Gradient and modified Newton Hessian of the spring energy at the current a.
+            let springs_at = |a: &[Vec<f64>; 3], xb: &[[f64; 3]]| {
+                let mut grad = [vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]];
+                let mut hess = vec![[[0.0; 3]; 3]; spring_vertices.len()];
+                let mut clamped = vec![[[0.0; 3]; 3]; spring_vertices.len()];
+                for (s, w) in springs.springs.iter().zip(&weight) {
+                    let g = value_dof(s.skin);
+                    let xs = [0, 1, 2].map(|c| a[c][g]);
+                    let d = sub(xs, xb[s.bone]);
+                    let l = norm(d).max(1e-12);
+                    let n = d.map(|x| x / l);
+                    let geo = 1.0 - s.rest / l;
+                    let (h, hc) = (&mut hess[slot[&s.skin]], &mut clamped[slot[&s.skin]]);
+                    for r in 0..3 {
+                        grad[r][g] += w * (l - s.rest) * n[r];
+                        for c in 0..3 {
+                            let id = if r == c { 1.0 } else { 0.0 };
+                            h[r][c] += w * (n[r] * n[c] + geo * (id - n[r] * n[c]));
+                            hc[r][c] += w * (n[r] * n[c] + geo.max(0.0) * (id - n[r] * n[c]));
+                        }
+                    }
+                }
+                (grad, hess, clamped)
+            };
+            let (_, _, h0) = springs_at(&a, &springs.attachments);
+            let mut sys = System::new(3 * nd, build(&h0), &fixed3).map_err(|e| {
+                Error::Numerical(format!(
+                    "{e} (equilibrium model: no rigid node and too few springs to hold the skin)"
+                ))
+            })?;
+            let zero = vec![0.0; 3 * nd];
+            for step in 1..=p.steps {
+                let (xb, _) = plan.apply(&springs.attachments, step as f64 / p.steps as f64);
+                let mut res_hist = Vec::new();
+                let mut r0 = None;
+                let mut converged = false;
+                let mut it = 0;
+                while it < p.max_iterations {
+                    it += 1;
+                    let (grad, hess, clamped) = springs_at(&a, &xb);
+                    let mut r = vec![0.0; 3 * nd];
+                    for c in 0..3 {
+                        let da: Vec<f64> =
+                            a[c].iter().zip(&a_init[c]).map(|(x, y)| x - y).collect();
+                        let kd = multiply(&k, &da);
+                        for g in 0..nd {
+                            if !fixed[g] {
+                                r[c * nd + g] = kd[g] + grad[c][g];
+                            }
+                        }
+                    }
+                    let rn = r.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    let r0v = *r0.get_or_insert(rn);
+                    res_hist.push(rn);
+                    let scale = springs
+                        .springs
+                        .iter()
+                        .zip(&weight)
+                        .map(|(s, w)| w * s.rest)
+                        .fold(0.0, f64::max)
+                        .max(1e-300);
+                    if rn <= p.tolerance * r0v.max(1e-12 * scale) {
+                        converged = true;
+                        break;
+                    }
+                    // The exact tangent when it is positive definite (quadratic convergence);
+                    // where compressed springs make it indefinite, their negative lateral part is
+                    // dropped (a positive definite modified Newton step).
+                    if sys.refactor(build(&hess)).is_err() {
+                        sys.refactor(build(&clamped))?;
+                    }
+                    let neg: Vec<f64> = r.iter().map(|x| -x).collect();
+                    let d = sys.solve(&[neg], std::slice::from_ref(&zero)).remove(0);
+                    for c in 0..3 {
+                        for g in 0..nd {
+                            a[c][g] += d[c * nd + g];
+                        }
+                    }
+                    let dn = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    let un = (0..3)
+                        .flat_map(|c| {
+                            a[c].iter()
+                                .zip(&a_init[c])
+                                .map(|(x, y)| (x - y) * (x - y))
+                                .collect::<Vec<_>>()
+                        })
+                        .sum::<f64>()
+                        .sqrt();
+                    if !dn.is_finite() {
+                        return Err(Error::Numerical(format!(
+                            "equilibrium Newton diverged at step {step}, iteration {it}"
+                        )));
+                    }
+                    if dn <= p.tolerance * un.max(1e-12) {
+                        converged = true;
+                        res_hist.push(rn);
+                        break;
+                    }
+                }
+                if !converged {
+                    return Err(Error::Numerical(format!(
+                        "equilibrium Newton did not converge in {} iterations at load step {step}/{} (residual {:.2e} of {:.2e}; history {}); try more [solve] steps",
+                        p.max_iterations,
+                        p.steps,
+                        res_hist.last().copied().unwrap_or(f64::NAN),
+                        r0.unwrap_or(f64::NAN),
+                        res_hist
+                            .iter()
+                            .map(|x| format!("{x:.1e}"))
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    )));
+                }
+                history.push(StepRecord {
+                    step,
+                    iterations: it,
+                    residual_history: res_hist,
+                    max_displacement_mm: disp(&a),
+                });
+            }
+            let unknowns = 3 * nd - fixed3.iter().filter(|f| **f).count();
+            Ok(Solution {
+                fem,
+                a: a.clone(),
+                positions: (0..nv)
+                    .map(|i| [0, 1, 2].map(|c| a[c][value_dof(i)]))
+                    .collect(),
+                history,
+                unknowns,
+            })
+        }
+    }
+}

@@ -1,0 +1,107 @@
+//! Springs, bone moves and the predicted face on the phantom (issue 4, first part).
+
+mod common;
+
+use common::phantom_dir;
+use std::path::PathBuf;
+
+fn case(extra: &str) -> PathBuf {
+    let d = tempfile::Builder::new()
+        .prefix("facesim-predict")
+        .tempdir()
+        .unwrap()
+        .keep();
+    let ct = phantom_dir().join("ct.nii.gz");
+    let scan = phantom_dir().join("face.ply");
+    std::fs::write(
+        d.join("case.toml"),
+        format!(
+            "name = \"p\"\n[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n{extra}",
+            ct.display(),
+            scan.display()
+        ),
+    )
+    .unwrap();
+    d
+}
+
+fn run(extra: &str) -> facesim::run::Outcome {
+    facesim::run::run(&case(extra), None, &facesim::progress::Progress::quiet()).unwrap()
+}
+
+#[test]
+fn main_springs_span_the_analytic_soft_tissue_thickness() {
+    // Away from the nose and the bone cuts the skin is 13 mm (80 − 67) from the outer skull.
+    let o = run("");
+    let springs = facesim::springs::trace(
+        &o.skin,
+        &o.volume,
+        &o.segmentation,
+        &o.segmentation.bone_field(&o.volume),
+        &facesim::case::Case::parse("[ct]\npath = \"x.nii\"\n", std::path::Path::new("c"))
+            .unwrap()
+            .springs,
+        &facesim::case::Case::parse("[ct]\npath = \"x.nii\"\n", std::path::Path::new("c"))
+            .unwrap()
+            .tissue
+            .stiffness,
+    );
+    let lens: Vec<f64> = springs
+        .springs
+        .iter()
+        .filter(|s| s.kind == facesim::springs::Kind::Main)
+        .filter(|s| {
+            let p = o.skin.vertices[s.skin];
+            p[2] > 10.0
+                && p[2] < 35.0
+                && facesim::phantom::nose(facesim::phantom::phi_of(p), p[2]) < 0.01
+        })
+        .map(|s| s.rest)
+        .collect();
+    let mean = lens.iter().sum::<f64>() / lens.len() as f64;
+    let worst = lens.iter().map(|l| (l - 13.0).abs()).fold(0.0, f64::max);
+    println!(
+        "{} main springs: mean length {mean:.3} mm, worst deviation {worst:.3} mm (analytic 13)",
+        lens.len()
+    );
+    assert!(lens.len() > 100);
+    assert!((mean - 13.0).abs() < 0.3 && worst < 1.0);
+}
+
+#[test]
+fn no_bone_move_leaves_the_face_unchanged_in_both_models() {
+    for model in ["equilibrium", "koch1996"] {
+        let o = run(&format!(
+            "[surface]\nmovable = {{ sphere = {{ center = [0.0, -60.0, -45.0], radius = 70.0 }} }}\n[solve]\nmodel = \"{model}\"\n[[osteotomy]]\nname = \"none\"\nregion = {{ box = {{ min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] }} }}\ntranslate = [0.0, 0.0, 0.0]\n"
+        ));
+        let worst = o
+            .skin
+            .vertices
+            .iter()
+            .zip(&o.face_post.vertices)
+            .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+            .fold(0.0, f64::max);
+        println!("{model}: max |post − pre| = {worst:.2e} mm");
+        assert!(worst < 1e-6, "{model}: {worst}");
+    }
+}
+
+#[test]
+fn whole_skull_translated_moves_the_skin_rigidly() {
+    // Every skin node movable (no [surface] movable), every attachment moved by t.
+    let t = [1.0, -2.0, 0.5];
+    let o = run(&format!(
+        "[[osteotomy]]\nname = \"skull\"\nregion = {{ box = {{ min = [-500.0, -500.0, -500.0], max = [500.0, 500.0, 500.0] }} }}\ntranslate = [{}, {}, {}]\n",
+        t[0], t[1], t[2]
+    ));
+    let tn = facesim::mesh::norm(t);
+    let worst = o
+        .skin
+        .vertices
+        .iter()
+        .zip(&o.face_post.vertices)
+        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(facesim::mesh::sub(*b, *a), t)))
+        .fold(0.0, f64::max);
+    println!("rigid translation: worst deviation {worst:.2e} mm of a {tn:.3} mm move");
+    assert!(worst < 1e-3 * tn, "{worst}");
+}
