@@ -184,3 +184,49 @@ fn real_ct_decimation_reaches_its_target_or_is_undone_with_a_warning() {
     );
     assert!(undone || m.skin.triangles.len() <= 100000);
 }
+
+#[test]
+fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_the_forehead() {
+    let ct = common::real_ct();
+    let case_dir = ct.parent().unwrap();
+    let out = tempfile::tempdir().unwrap();
+    let o = facesim::run::run(case_dir, Some(out.path()), &Progress::quiet()).unwrap();
+    let pre = &o.skin.vertices;
+    let post = &o.face_post.vertices;
+    let tip = (0..pre.len())
+        .min_by(|&a, &b| pre[a][1].total_cmp(&pre[b][1]))
+        .unwrap();
+    let xc = pre[tip][0];
+    let front = |z0: f64, z1: f64| {
+        (0..pre.len())
+            .filter(|&i| (pre[i][0] - xc).abs() < 3.0 && pre[i][2] >= z0 && pre[i][2] <= z1)
+            .min_by(|&a, &b| pre[a][1].total_cmp(&pre[b][1]))
+            .unwrap()
+    };
+    let (lip, forehead) = (front(8.0, 20.0), front(110.0, 130.0));
+    let dy = |i: usize| pre[i][1] - post[i][1]; // anterior movement (−y), mm
+    println!(
+        "5 mm maxillary advancement: upper lip {:.2} mm, nose tip {:.2} mm, forehead {:.2e} mm",
+        dy(lip),
+        dy(tip),
+        dy(forehead)
+    );
+    assert!(
+        dy(lip) > 1.0 && dy(lip) > 2.0 * dy(tip),
+        "lip {} nose {}",
+        dy(lip),
+        dy(tip)
+    );
+    assert!(dy(forehead).abs() < 1e-6);
+    for f in [
+        "face_post.obj",
+        "face_post.ply",
+        "face_post_fine.ply",
+        "skull_post.ply",
+        "springs.ply",
+        "displacement.csv",
+        "face_displacement.ply",
+    ] {
+        assert!(out.path().join(f).is_file(), "{f}");
+    }
+}
