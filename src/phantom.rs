@@ -341,9 +341,15 @@ pub fn face_scan(step_mm: f64) -> Mesh {
             let b = a + 1;
             let c = a + nphi as u32;
             let d = c + 1;
-            // Outward normals: φ grows towards +x (patient left), z up.
-            tris.push([a, c, b]);
-            tris.push([b, c, d]);
+            // Outward normals: φ grows towards +x (patient left), z up. The diagonals mirror
+            // about the mid-sagittal plane, so the mesh is as symmetric as the head.
+            if 2 * i + 1 < nphi - 1 {
+                tris.push([a, c, b]);
+                tris.push([b, c, d]);
+            } else {
+                tris.push([a, c, d]);
+                tris.push([a, d, b]);
+            }
         }
     }
     let mut m = Mesh::new(verts, tris);

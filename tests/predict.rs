@@ -105,3 +105,79 @@ fn whole_skull_translated_moves_the_skin_rigidly() {
     println!("rigid translation: worst deviation {worst:.2e} mm of a {tn:.3} mm move");
     assert!(worst < 1e-3 * tn, "{worst}");
 }
+
+fn displacement(o: &facesim::run::Outcome) -> Vec<[f64; 3]> {
+    o.skin
+        .vertices
+        .iter()
+        .zip(&o.face_post.vertices)
+        .map(|(a, b)| facesim::mesh::sub(*b, *a))
+        .collect()
+}
+
+const MANDIBLE: &str = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n[[osteotomy]]\nname = \"mandible\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n";
+
+#[test]
+fn small_moves_give_displacements_linear_in_the_move() {
+    let a = run(&format!("{MANDIBLE}translate = [0.0, -0.05, 0.0]\n"));
+    let b = run(&format!("{MANDIBLE}translate = [0.0, -0.1, 0.0]\n"));
+    let (da, db) = (displacement(&a), displacement(&b));
+    let scale = db
+        .iter()
+        .map(|d| facesim::mesh::norm(*d))
+        .fold(0.0, f64::max);
+    let worst = da
+        .iter()
+        .zip(&db)
+        .map(|(x, y)| facesim::mesh::norm(facesim::mesh::sub(*y, facesim::mesh::scale(*x, 2.0))))
+        .fold(0.0, f64::max);
+    println!(
+        "0.05 → 0.1 mm: max |d(2m) − 2 d(m)| = {worst:.2e} mm of max |d| {scale:.3} mm ({:.3}%)",
+        100.0 * worst / scale
+    );
+    assert!(scale > 0.08 && worst < 0.01 * scale);
+}
+
+#[test]
+fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
+    // A noise-free phantom on a grid symmetric about x = 0 (2 mm: x from −92 to 92).
+    let dir = tempfile::Builder::new()
+        .prefix("facesim-sym")
+        .tempdir()
+        .unwrap()
+        .keep();
+    let opts = facesim::phantom::PhantomOptions {
+        spacing: [2.0, 2.0, 2.0],
+        noise_hu: 0.0,
+        ..Default::default()
+    };
+    facesim::phantom::write_case(&dir, &opts).unwrap();
+    let o = facesim::run::run(&dir, None, &facesim::progress::Progress::quiet()).unwrap();
+    let d = displacement(&o);
+    let v = &o.skin.vertices;
+    let scale = d
+        .iter()
+        .map(|x| facesim::mesh::norm(*x))
+        .fold(0.0, f64::max);
+    let mut worst = 0.0f64;
+    for i in 0..v.len() {
+        let m = [-v[i][0], v[i][1], v[i][2]];
+        let j = (0..v.len())
+            .min_by(|&a, &b| {
+                facesim::mesh::norm(facesim::mesh::sub(v[a], m))
+                    .total_cmp(&facesim::mesh::norm(facesim::mesh::sub(v[b], m)))
+            })
+            .unwrap();
+        assert!(
+            facesim::mesh::norm(facesim::mesh::sub(v[j], m)) < 1e-6,
+            "scan not symmetric at {i}"
+        );
+        let mirrored = [-d[j][0], d[j][1], d[j][2]];
+        worst = worst.max(facesim::mesh::norm(facesim::mesh::sub(d[i], mirrored)));
+    }
+    println!(
+        "mirror symmetry: worst |d_i − M d_mirror(i)| = {worst:.3e} mm of max |d| {scale:.3} mm ({:.2}%)",
+        100.0 * worst / scale
+    );
+    assert!(scale > 5.0 && worst < 0.05 * scale);
+}
