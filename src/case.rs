@@ -115,6 +115,18 @@ pub struct Surface {
     pub parameterization: Parameterization,
     #[serde(default)]
     pub movable: Option<Region>,
+    /// Per-region stretching/bending (`[[surface.region]]`), applied by triangle centroid; later
+    /// entries win where regions overlap.
+    #[serde(default, rename = "region")]
+    pub regions: Vec<SurfaceRegion>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceRegion {
+    pub shape: Region,
+    pub alpha: f64,
+    pub beta: f64,
 }
 
 /// Region shapes (CASE.md), used by `movable` and `osteotomy.region`.
@@ -325,6 +337,15 @@ impl Case {
         }
         if let Some(m) = &self.surface.movable {
             m.validate("[surface] movable")?;
+        }
+        for r in &self.surface.regions {
+            r.shape.validate("[[surface.region]] shape")?;
+            if !(r.alpha.is_finite() && r.alpha >= 0.0 && r.beta.is_finite() && r.beta >= 0.0) {
+                return bad("[[surface.region]] alpha and beta must be finite and >= 0".into());
+            }
+            if matches!(r.shape, Region::Mask(_)) {
+                return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
+            }
         }
         for o in &self.osteotomy {
             o.region.validate(&format!("osteotomy '{}'", o.name))?;

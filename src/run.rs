@@ -347,6 +347,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         steps: case.solve.steps,
         alpha: case.surface.alpha,
         beta: case.surface.beta,
+        regions: case.surface.regions.clone(),
         k_c: if case.solve.model == crate::case::SolveModel::Koch1996 {
             case.solve.koch_k_c
         } else {

@@ -31,6 +31,8 @@ pub struct Params {
     pub steps: usize,
     pub alpha: f64,
     pub beta: f64,
+    /// Per-region (α, β) overrides, later ones winning.
+    pub regions: Vec<crate::case::SurfaceRegion>,
     /// Force scale k_c (eq. 20): spring stiffness per unit c per mm² of skin.
     pub k_c: f64,
     pub tolerance: f64,
@@ -84,9 +86,30 @@ pub fn solve(
         )
     };
     let a_init: [Vec<f64>; 3] = [field(0)?, field(1)?, field(2)?];
-    let mat = Material::isotropic(p.alpha, p.beta);
+    // Per-element (α, β): the defaults, or the last [[surface.region]] containing the triangle's
+    // centroid (Koch §4.2).
+    let mats: Vec<Material> = skin
+        .triangles
+        .iter()
+        .map(|t| {
+            let c = t
+                .iter()
+                .fold([0.0; 3], |a, &v| {
+                    crate::mesh::add(a, skin.vertices[v as usize])
+                })
+                .map(|x| x / 3.0);
+            let (al, be) = p
+                .regions
+                .iter()
+                .rev()
+                .find(|r| crate::osteotomy::inside(&r.shape, None, c))
+                .map_or((p.alpha, p.beta), |r| (r.alpha, r.beta));
+            Material::isotropic(al, be)
+        })
+        .collect();
+    let material = |t: usize| mats[t];
     let fixed = rigid_dofs(&fem, rigid);
-    let (k, _) = fem.assemble(&|_| mat, 0.0);
+    let (k, _) = fem.assemble(&material, 0.0);
     let nv = skin.vertices.len();
     let weight: Vec<f64> = springs
         .springs
@@ -111,7 +134,7 @@ pub fn solve(
     };
     match p.model {
         SolveModel::Koch1996 => {
-            fem.check_constraints(&|_| mat, &fixed)?;
+            fem.check_constraints(&material, &fixed)?;
             let sys = System::new(nd, k.clone(), &fixed)?;
             let f_init: Vec<Vec<f64>> = a_init.iter().map(|x| multiply(&k, x)).collect();
             for step in 1..=p.steps {

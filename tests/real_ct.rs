@@ -230,3 +230,38 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         assert!(out.path().join(f).is_file(), "{f}");
     }
 }
+
+#[test]
+fn a_stiffer_nose_region_deforms_less() {
+    // Per-region α/β (Koch §4.2: higher values for cartilage, e.g. the nose): a stiff nose is
+    // carried along more as a unit, so the displacement varies less across it.
+    let ct = common::real_ct();
+    let base = std::fs::read_to_string(ct.parent().unwrap().join("case.toml")).unwrap();
+    let run_with = |extra: &str| {
+        let d = tempfile::tempdir().unwrap();
+        let text = base.replace(
+            "path = \"Cranium.inv3\"",
+            &format!("path = \"{}\"", ct.display()),
+        ) + extra;
+        std::fs::write(d.path().join("case.toml"), text).unwrap();
+        let o = facesim::run::run(d.path(), None, &Progress::quiet()).unwrap();
+        let v = &o.skin.vertices;
+        let tip = (0..v.len())
+            .min_by(|&a, &b| v[a][1].total_cmp(&v[b][1]))
+            .unwrap();
+        let d = |i: usize| facesim::mesh::sub(o.face_post.vertices[i], v[i]);
+        let spread = (0..v.len())
+            .filter(|&i| facesim::mesh::norm(facesim::mesh::sub(v[i], v[tip])) < 10.0)
+            .map(|i| facesim::mesh::norm(facesim::mesh::sub(d(i), d(tip))))
+            .fold(0.0, f64::max);
+        (facesim::mesh::norm(d(tip)), spread)
+    };
+    let (soft_tip, soft) = run_with("");
+    let (stiff_tip, stiff) = run_with(
+        "\n[[surface.region]]\nshape = { sphere = { center = [122.7, 10.9, 34.5], radius = 20.0 } }\nalpha = 1.0\nbeta = 10.0\n",
+    );
+    println!(
+        "nose within 10 mm of the tip: displacement spread {soft:.3} mm (tip {soft_tip:.3}) default, {stiff:.3} mm (tip {stiff_tip:.3}) stiff"
+    );
+    assert!(stiff < 0.8 * soft, "{stiff} vs {soft}");
+}
