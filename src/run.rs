@@ -321,13 +321,22 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         )));
     }
     if spring_report.misses > 0 {
+        let places: Vec<String> = spring_report
+            .miss_regions
+            .iter()
+            .take(3)
+            .map(|r| {
+                format!(
+                    "{} around ({:.0}, {:.0}, {:.0})",
+                    r.vertices, r.centroid[0], r.centroid[1], r.centroid[2]
+                )
+            })
+            .collect();
         warnings.push(format!(
-            "{} skin vertices found no bone within {} mm (no spring); centred at {:?}",
+            "{} skin vertices found no bone within {} mm (no spring); largest patches (LPS mm): {}",
             spring_report.misses,
             case.springs.max_length_mm,
-            spring_report
-                .miss_centroid
-                .map(|c| c.map(|x| (x * 10.0).round() / 10.0))
+            places.join("; ")
         ));
     }
     let plan = crate::osteotomy::Plan::new(&case.osteotomy)?;

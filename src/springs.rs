@@ -46,6 +46,13 @@ pub struct SpringSet {
 }
 
 #[derive(Clone, Debug, Serialize)]
+pub struct MissRegion {
+    pub vertices: usize,
+    pub centroid: [f64; 3],
+    pub bounds: ([f64; 3], [f64; 3]),
+}
+
+#[derive(Clone, Debug, Serialize)]
 pub struct SpringReport {
     pub main: usize,
     pub struts: usize,
@@ -53,6 +60,9 @@ pub struct SpringReport {
     /// Centroid and bounding box (LPS mm) of the skin vertices whose ray found no bone.
     pub miss_centroid: Option<[f64; 3]>,
     pub miss_bounds: Option<([f64; 3], [f64; 3])>,
+    /// The misses as connected patches of the skin mesh, largest first (at most 8): where the
+    /// rays found no bone (a bone defect, the nose tip, ears, the field of view's edge).
+    pub miss_regions: Vec<MissRegion>,
     pub length_mm: [f64; 3],
     pub stiffness: [f64; 3],
 }
@@ -265,7 +275,66 @@ impl SpringSet {
             }
             (Some(c), Some((lo, hi)))
         };
+        // Connected patches of missing vertices (mesh edges between two misses).
+        let missing: std::collections::HashSet<usize> = self.misses.iter().copied().collect();
+        let mut parent: std::collections::HashMap<usize, usize> =
+            self.misses.iter().map(|&i| (i, i)).collect();
+        fn find(p: &mut std::collections::HashMap<usize, usize>, mut x: usize) -> usize {
+            while p[&x] != x {
+                let g = p[&p[&x]];
+                p.insert(x, g);
+                x = g;
+            }
+            x
+        }
+        for t in &mesh.triangles {
+            for e in 0..3 {
+                let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
+                if missing.contains(&a) && missing.contains(&b) {
+                    let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+                    if ra != rb {
+                        parent.insert(rb, ra);
+                    }
+                }
+            }
+        }
+        let mut groups: std::collections::HashMap<usize, Vec<usize>> =
+            std::collections::HashMap::new();
+        for &i in &self.misses {
+            let r = find(&mut parent, i);
+            groups.entry(r).or_default().push(i);
+        }
+        let mut miss_regions: Vec<MissRegion> = groups
+            .values()
+            .map(|g| {
+                let n = g.len() as f64;
+                let c = g
+                    .iter()
+                    .fold([0.0; 3], |a, &i| add(a, mesh.vertices[i]))
+                    .map(|x| x / n);
+                let mut lo = [f64::INFINITY; 3];
+                let mut hi = [f64::NEG_INFINITY; 3];
+                for &i in g {
+                    for a in 0..3 {
+                        lo[a] = lo[a].min(mesh.vertices[i][a]);
+                        hi[a] = hi[a].max(mesh.vertices[i][a]);
+                    }
+                }
+                MissRegion {
+                    vertices: g.len(),
+                    centroid: c,
+                    bounds: (lo, hi),
+                }
+            })
+            .collect();
+        miss_regions.sort_by(|a, b| {
+            b.vertices
+                .cmp(&a.vertices)
+                .then(a.centroid[2].total_cmp(&b.centroid[2]))
+        });
+        miss_regions.truncate(8);
         SpringReport {
+            miss_regions,
             main: main.len(),
             struts: self.springs.len() - main.len(),
             misses: self.misses.len(),
