@@ -12,22 +12,6 @@ use crate::mesh::Mesh;
 use nalgebra::{DMatrix, DVector};
 use std::collections::HashMap;
 
-fn rings(mesh: &FemMesh) -> Vec<Vec<u32>> {
-    let mut nb = vec![Vec::new(); mesh.uv.len()];
-    for t in &mesh.tris {
-        for e in 0..3 {
-            let (a, b) = (t[e], t[(e + 1) % 3]);
-            nb[a as usize].push(b);
-            nb[b as usize].push(a);
-        }
-    }
-    for l in &mut nb {
-        l.sort_unstable();
-        l.dedup();
-    }
-    nb
-}
-
 /// Least-squares fit of c0 + c1 du + c2 dv + c3 du² + c4 du dv + c5 dv² (du, dv from `at`,
 /// scaled by h) to `pts`; with `value` given, c0 is fixed to it. Returns (value, ∂u, ∂v) at `at`,
 /// or None when the points cannot determine a quadratic.
@@ -68,7 +52,7 @@ fn fit(pts: &[([f64; 2], f64)], at: [f64; 2], value: Option<f64>) -> Option<[f64
 
 /// Initial DOFs for one coordinate field given at the vertices.
 pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
-    let nb = rings(mesh);
+    let nb = crate::mesh::one_rings(mesh.uv.len(), &mesh.tris);
     let nv = mesh.uv.len();
     let mut a = vec![0.0; mesh.ndof()];
     // Neighbourhood: the 1-ring, widened to the 2-ring when it cannot fix a quadratic.

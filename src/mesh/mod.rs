@@ -215,19 +215,7 @@ impl Mesh {
 
     /// Vertex → neighbouring vertices (one ring), sorted.
     pub fn neighbours(&self) -> Vec<Vec<u32>> {
-        let mut nb = vec![Vec::new(); self.vertices.len()];
-        for tri in &self.triangles {
-            for e in 0..3 {
-                let (a, b) = (tri[e], tri[(e + 1) % 3]);
-                nb[a as usize].push(b);
-                nb[b as usize].push(a);
-            }
-        }
-        for l in &mut nb {
-            l.sort_unstable();
-            l.dedup();
-        }
-        nb
+        one_rings(self.vertices.len(), &self.triangles)
     }
 
     /// Drop vertices no triangle uses (keeping the order of the rest).
@@ -290,6 +278,23 @@ impl Mesh {
             .collect();
         (comp, ids.len())
     }
+}
+
+/// Vertex → neighbouring vertices (one ring, sorted) of `n` vertices joined by `triangles`.
+pub fn one_rings(n: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
+    let mut nb = vec![Vec::new(); n];
+    for tri in triangles {
+        for e in 0..3 {
+            let (a, b) = (tri[e], tri[(e + 1) % 3]);
+            nb[a as usize].push(b);
+            nb[b as usize].push(a);
+        }
+    }
+    for l in &mut nb {
+        l.sort_unstable();
+        l.dedup();
+    }
+    nb
 }
 
 /// Read OBJ or PLY by extension, then check it.

@@ -138,14 +138,8 @@ pub fn flip_slivers(mesh: &mut Mesh) -> usize {
     flips
 }
 
-/// Cylindrical (u, v) = (R0·φ, z) about the vertical axis through `axis`, φ from −y towards +x
-/// (the parameterisation a given face scan gets, MODEL.md §2).
-pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
-    let (mut u, mut v) = (Vec::new(), Vec::new());
-    for p in &mesh.vertices {
-        u.push(r0 * (p[0] - axis[0]).atan2(-(p[1] - axis[1])));
-        v.push(p[2]);
-    }
+/// Replace the mesh's `u`, `v` vertex columns (the FEM's parameter coordinates).
+fn set_uv(mesh: &mut Mesh, u: Vec<f64>, v: Vec<f64>) {
     mesh.vertex_columns
         .retain(|c| c.name != "u" && c.name != "v");
     mesh.vertex_columns.push(Column {
@@ -156,6 +150,17 @@ pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
         name: "v".into(),
         values: v,
     });
+}
+
+/// Cylindrical (u, v) = (R0·φ, z) about the vertical axis through `axis`, φ from −y towards +x
+/// (the parameterisation a given face scan gets, MODEL.md §2).
+pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
+    let (mut u, mut v) = (Vec::new(), Vec::new());
+    for p in &mesh.vertices {
+        u.push(r0 * (p[0] - axis[0]).atan2(-(p[1] - axis[1])));
+        v.push(p[2]);
+    }
+    set_uv(mesh, u, v);
 }
 
 /// Planar (u, v): orthogonal projection on the least-squares plane of the vertices (for
@@ -194,16 +199,7 @@ pub fn planar_uv(mesh: &mut Mesh) {
         u.push(d.dot(&e1));
         v.push(d.dot(&e2));
     }
-    mesh.vertex_columns
-        .retain(|c| c.name != "u" && c.name != "v");
-    mesh.vertex_columns.push(Column {
-        name: "u".into(),
-        values: u,
-    });
-    mesh.vertex_columns.push(Column {
-        name: "v".into(),
-        values: v,
-    });
+    set_uv(mesh, u, v);
 }
 
 #[cfg(test)]
