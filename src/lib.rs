@@ -13,6 +13,7 @@
 
 pub mod case;
 pub mod compare;
+pub mod dynamics;
 pub mod error;
 pub mod fem;
 pub mod mesh;

@@ -1,0 +1,341 @@
+//! Linear elastodynamics for the solver study (Alterovitz & Goldberg 2003, MODEL.md §8; issue 5,
+//! first part): small-strain FEM of the 2-D block benchmark on bilinear quads in **plane strain**,
+//! consistent and lumped mass, Rayleigh damping C = αM + βK, and four integrators — implicit
+//! Newmark (average acceleration), explicit Newmark (central difference) with consistent mass,
+//! explicit with lumped mass, and quasi-static. Explicit integration that blows up is detected
+//! and reported as "diverged at step N (t = …)", never NaN output.
+//!
+//! The benchmark systems are small (a 1 m block on an n×n grid), so dense Cholesky factors are
+//! used; each integrator factors its matrix once.
+
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// Material parameters (SI units: Pa, –, kg/m³).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct MaterialSi {
+    pub e: f64,
+    pub nu: f64,
+    pub rho: f64,
+}
+
+/// MP1 (E 200 Pa, ν 0.47, ρ 2000) and MP2 (prostate: E 60 kPa, ν 0.495, ρ 1140).
+pub const MP1: MaterialSi = MaterialSi {
+    e: 200.0,
+    nu: 0.47,
+    rho: 2000.0,
+};
+pub const MP2: MaterialSi = MaterialSi {
+    e: 60_000.0,
+    nu: 0.495,
+    rho: 1140.0,
+};
+
+/// The 1 m × 1 m block on an n×n grid of bilinear quads: top, bottom and left edges fixed; the
+/// needle at the middle node of the right edge moves left at 0.08 m/s for 2 s, then holds.
+pub struct Block {
+    pub n: usize,
+    pub k: DMatrix<f64>,
+    pub m_consistent: DMatrix<f64>,
+    pub m_lumped: DVector<f64>,
+    /// Free DOFs (2 per node, x then y) and the needle's DOF (x of the right-edge midpoint).
+    pub free: Vec<usize>,
+    pub needle: usize,
+}
+
+impl Block {
+    pub fn new(n: usize, mat: MaterialSi) -> Block {
+        assert!(
+            n >= 2 && n.is_multiple_of(2),
+            "an even grid puts a node at the right edge's middle"
+        );
+        let h = 1.0 / n as f64;
+        let nn = (n + 1) * (n + 1);
+        let nd = 2 * nn;
+        let (e, nu) = (mat.e, mat.nu);
+        let f = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
+        let d = [
+            [f * (1.0 - nu), f * nu, 0.0],
+            [f * nu, f * (1.0 - nu), 0.0],
+            [0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0],
+        ];
+        let g = 1.0 / 3f64.sqrt();
+        let gauss = [(-g, -g), (g, -g), (g, g), (-g, g)];
+        let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+        // Element matrices (all elements are the same square).
+        let mut ke = [[0.0; 8]; 8];
+        let mut me = [[0.0; 8]; 8];
+        let jac = h / 2.0; // dx/dξ
+        for &(xi, eta) in &gauss {
+            let nvals: Vec<f64> = corners
+                .iter()
+                .map(|&(a, b)| 0.25 * (1.0 + a * xi) * (1.0 + b * eta))
+                .collect();
+            let dx: Vec<f64> = corners
+                .iter()
+                .map(|&(a, b)| 0.25 * a * (1.0 + b * eta) / jac)
+                .collect();
+            let dy: Vec<f64> = corners
+                .iter()
+                .map(|&(a, b)| 0.25 * b * (1.0 + a * xi) / jac)
+                .collect();
+            let w = jac * jac; // weights are 1 for the 2-point rule
+            // B: strain (εxx, εyy, γxy) from (u1x, u1y, …).
+            let mut b = [[0.0; 8]; 3];
+            for a in 0..4 {
+                b[0][2 * a] = dx[a];
+                b[1][2 * a + 1] = dy[a];
+                b[2][2 * a] = dy[a];
+                b[2][2 * a + 1] = dx[a];
+            }
+            for i in 0..8 {
+                for j in 0..8 {
+                    let mut s = 0.0;
+                    for p in 0..3 {
+                        for q in 0..3 {
+                            s += b[p][i] * d[p][q] * b[q][j];
+                        }
+                    }
+                    ke[i][j] += w * s;
+                    if i % 2 == j % 2 {
+                        me[i][j] += w * mat.rho * nvals[i / 2] * nvals[j / 2];
+                    }
+                }
+            }
+        }
+        let mut k = DMatrix::zeros(nd, nd);
+        let mut m = DMatrix::zeros(nd, nd);
+        let node = |i: usize, j: usize| j * (n + 1) + i;
+        for j in 0..n {
+            for i in 0..n {
+                let nodes = [
+                    node(i, j),
+                    node(i + 1, j),
+                    node(i + 1, j + 1),
+                    node(i, j + 1),
+                ];
+                let dofs: Vec<usize> = nodes.iter().flat_map(|&v| [2 * v, 2 * v + 1]).collect();
+                for a in 0..8 {
+                    for b in 0..8 {
+                        k[(dofs[a], dofs[b])] += ke[a][b];
+                        m[(dofs[a], dofs[b])] += me[a][b];
+                    }
+                }
+            }
+        }
+        let m_lumped = DVector::from_iterator(nd, (0..nd).map(|r| m.row(r).sum()));
+        let needle = 2 * node(n, n / 2);
+        let mut free = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let fixed_node = j == 0 || j == n || i == 0;
+                for c in 0..2 {
+                    let dof = 2 * node(i, j) + c;
+                    if !fixed_node && dof != needle {
+                        free.push(dof);
+                    }
+                }
+            }
+        }
+        Block {
+            n,
+            k,
+            m_consistent: m,
+            m_lumped,
+            free,
+            needle,
+        }
+    }
+
+    /// Needle displacement (x, m) at time t: −0.08 t for t ≤ 2 s, then held at −0.16.
+    pub fn needle_at(t: f64) -> f64 {
+        -0.08 * t.min(2.0)
+    }
+
+    fn sub(&self, a: &DMatrix<f64>) -> DMatrix<f64> {
+        DMatrix::from_fn(self.free.len(), self.free.len(), |i, j| {
+            a[(self.free[i], self.free[j])]
+        })
+    }
+
+    fn coupling(&self, a: &DMatrix<f64>) -> DVector<f64> {
+        DVector::from_iterator(
+            self.free.len(),
+            self.free.iter().map(|&i| a[(i, self.needle)]),
+        )
+    }
+}
+
+/// r ↦ M⁻¹ r.
+type MassSolve = Box<dyn Fn(&DVector<f64>) -> DVector<f64>>;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub enum Integrator {
+    ImplicitNewmark,
+    ExplicitConsistent,
+    ExplicitLumped,
+    QuasiStatic,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Run {
+    pub integrator: Integrator,
+    pub h: f64,
+    /// Full displacement vectors per step (empty when diverged before the first).
+    pub history: Vec<Vec<f64>>,
+    /// "diverged at step N (t = … s)" when the integration blew up.
+    pub diverged: Option<String>,
+}
+
+/// Integrate `steps` steps of size h with Rayleigh damping (α, β). Divergence: a non-finite value
+/// or a displacement beyond 100 m (the block is 1 m; the needle moves 0.16 m).
+pub fn integrate(
+    block: &Block,
+    integrator: Integrator,
+    h: f64,
+    steps: usize,
+    rayleigh: (f64, f64),
+) -> Run {
+    let nf = block.free.len();
+    let (ra, rb) = rayleigh;
+    let kff = block.sub(&block.k);
+    let kfp = block.coupling(&block.k);
+    let mc = block.sub(&block.m_consistent);
+    let mcp = block.coupling(&block.m_consistent);
+    let ml = DVector::from_iterator(nf, block.free.iter().map(|&i| block.m_lumped[i]));
+    let lumped = integrator == Integrator::ExplicitLumped;
+    let mff = if lumped {
+        DMatrix::from_diagonal(&ml)
+    } else {
+        mc.clone()
+    };
+    let mfp = if lumped { DVector::zeros(nf) } else { mcp };
+    let cff = &mff * ra + &kff * rb;
+    let cfp = &mfp * ra + &kfp * rb;
+    let (mut u, mut v) = (DVector::<f64>::zeros(nf), DVector::<f64>::zeros(nf));
+    // Forces on the free DOFs from the prescribed needle (its acceleration is zero between the
+    // start and stop instants).
+    let load = |t: f64| {
+        let g = Block::needle_at(t);
+        let gd = if t < 2.0 { -0.08 } else { 0.0 };
+        -(&kfp * g) - (&cfp * gd)
+    };
+    let full = |u: &DVector<f64>, t: f64| {
+        let mut x = vec![0.0; block.k.nrows()];
+        for (i, &d) in block.free.iter().enumerate() {
+            x[d] = u[i];
+        }
+        x[block.needle] = Block::needle_at(t);
+        x
+    };
+    let mut run = Run {
+        integrator,
+        h,
+        history: Vec::with_capacity(steps),
+        diverged: None,
+    };
+    let chol = |m: DMatrix<f64>| {
+        m.cholesky()
+            .expect("benchmark matrices are positive definite")
+    };
+    match integrator {
+        Integrator::QuasiStatic => {
+            let kc = chol(kff.clone());
+            for s in 1..=steps {
+                let t = s as f64 * h;
+                let g = Block::needle_at(t);
+                u = kc.solve(&(-(&kfp * g)));
+                run.history.push(full(&u, t));
+            }
+        }
+        Integrator::ImplicitNewmark => {
+            let (beta, gamma) = (0.25, 0.5);
+            let keff = chol(&kff + &cff * (gamma / (beta * h)) + &mff * (1.0 / (beta * h * h)));
+            let mc0 = chol(mff.clone());
+            let mut a = mc0.solve(&(load(0.0) - &cff * &v - &kff * &u));
+            for s in 1..=steps {
+                let t = s as f64 * h;
+                let rhs = load(t)
+                    + &mff
+                        * (&u * (1.0 / (beta * h * h))
+                            + &v * (1.0 / (beta * h))
+                            + &a * (1.0 / (2.0 * beta) - 1.0))
+                    + &cff
+                        * (&u * (gamma / (beta * h))
+                            + &v * (gamma / beta - 1.0)
+                            + &a * (h * (gamma / (2.0 * beta) - 1.0)));
+                let un = keff.solve(&rhs);
+                let an = (&un - &u) * (1.0 / (beta * h * h))
+                    - &v * (1.0 / (beta * h))
+                    - &a * (1.0 / (2.0 * beta) - 1.0);
+                let vn = &v + &a * (h * (1.0 - gamma)) + &an * (h * gamma);
+                u = un;
+                v = vn;
+                a = an;
+                run.history.push(full(&u, t));
+            }
+        }
+        Integrator::ExplicitConsistent | Integrator::ExplicitLumped => {
+            // Central difference: u_{n+1} = u_n + h v_n + h²/2 a_n; damping taken at the
+            // predicted velocity so that lumped mass stays explicit (a diagonal solve).
+            let minv: MassSolve = if lumped {
+                let inv = ml.map(|x| 1.0 / x);
+                Box::new(move |r: &DVector<f64>| r.component_mul(&inv))
+            } else {
+                let mc0 = chol(mff.clone());
+                Box::new(move |r: &DVector<f64>| mc0.solve(r))
+            };
+            let mut a = minv(&(load(0.0) - &cff * &v - &kff * &u));
+            for s in 1..=steps {
+                let t = s as f64 * h;
+                u = &u + &v * h + &a * (0.5 * h * h);
+                let vp = &v + &a * (0.5 * h);
+                a = minv(&(load(t) - &cff * &vp - &kff * &u));
+                v = vp + &a * (0.5 * h);
+                if u.iter().any(|x| !x.is_finite() || x.abs() > 100.0) {
+                    run.diverged = Some(format!("diverged at step {s} (t = {t:.3} s)"));
+                    break;
+                }
+                run.history.push(full(&u, t));
+            }
+        }
+    }
+    run
+}
+
+/// Largest generalised eigenvalue ω² of (K, M) on the free DOFs, by power iteration on M⁻¹K;
+/// the undamped central-difference stability limit is h_crit = 2/ω.
+pub fn critical_step(block: &Block, lumped: bool) -> f64 {
+    let kff = block.sub(&block.k);
+    let nf = block.free.len();
+    let ml = DVector::from_iterator(nf, block.free.iter().map(|&i| block.m_lumped[i]));
+    let mc = block
+        .sub(&block.m_consistent)
+        .cholesky()
+        .expect("positive definite mass");
+    let mut x = DVector::from_fn(nf, |i, _| 1.0 + ((i * 7919) % 13) as f64 / 13.0);
+    let mut lambda = 0.0;
+    for _ in 0..2000 {
+        let y = &kff * &x;
+        let z = if lumped {
+            y.component_div(&ml)
+        } else {
+            mc.solve(&y)
+        };
+        let l = z.norm() / x.norm();
+        x = &z / z.norm();
+        if (l - lambda).abs() < 1e-12 * l {
+            lambda = l;
+            break;
+        }
+        lambda = l;
+    }
+    2.0 / lambda.sqrt()
+}
+
+/// Relative energy norm ‖u' − u‖_K / ‖u‖_K (Alterovitz & Goldberg's first metric).
+pub fn relative_energy_error(block: &Block, u: &[f64], reference: &[f64]) -> f64 {
+    let du = DVector::from_iterator(u.len(), u.iter().zip(reference).map(|(a, b)| a - b));
+    let r = DVector::from_column_slice(reference);
+    ((du.transpose() * &block.k * &du)[0] / (r.transpose() * &block.k * &r)[0].max(1e-300)).sqrt()
+}
