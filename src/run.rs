@@ -161,9 +161,10 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     progress.stage("extracting surfaces");
     let mut warnings = seg.report.warnings.clone();
     let mut surf = serde_json::Map::new();
+    // The cleaned bone field serves the skull surface and, later, the spring tracer.
+    let bone_field = seg.bone_field(&vol);
     let (mut skin, mut skull, axis, r0) = timer.time("surfaces", || {
         let skin_field = seg.skin_field(&vol);
-        let bone_field = seg.bone_field(&vol);
         let iso_skin = seg.windows.head_threshold as f32;
         let iso_bone = seg.windows.bone as f32;
         match case.extract.method {
@@ -300,7 +301,6 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
 
     progress.stage("tracing springs");
     let t = Instant::now();
-    let bone_field = seg.bone_field(&vol);
     let springs = crate::springs::trace(
         &skin,
         &vol,
