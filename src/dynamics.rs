@@ -30,6 +30,12 @@ pub const MP2: MaterialSi = MaterialSi {
     nu: 0.495,
     rho: 1140.0,
 };
+/// MP3, the rod (E 7000 Pa, ν 0.2, ρ 10000).
+pub const MP3: MaterialSi = MaterialSi {
+    e: 7000.0,
+    nu: 0.2,
+    rho: 10_000.0,
+};
 
 /// The 1 m × 1 m block on an n×n grid of bilinear quads: top, bottom and left edges fixed; the
 /// needle at the middle node of the right edge moves left at 0.08 m/s for 2 s, then holds.
@@ -38,9 +44,11 @@ pub struct Block {
     pub k: DMatrix<f64>,
     pub m_consistent: DMatrix<f64>,
     pub m_lumped: DVector<f64>,
-    /// Free DOFs (2 per node, x then y) and the needle's DOF (x of the right-edge midpoint).
+    /// Free DOFs and the needle's DOF (x of the right-edge midpoint; none for the rod).
     pub free: Vec<usize>,
-    pub needle: usize,
+    pub needle: Option<usize>,
+    /// Constant body force on every DOF (gravity; zero for the block).
+    pub body_force: DVector<f64>,
 }
 
 impl Block {
@@ -137,13 +145,143 @@ impl Block {
                 }
             }
         }
+        let body_force = DVector::zeros(nd);
         Block {
             n,
             k,
             m_consistent: m,
             m_lumped,
             free,
-            needle,
+            needle: Some(needle),
+            body_force,
+        }
+    }
+
+    /// The 3-D rod (MP3 benchmark): 0.25 × 0.5 × 0.25 m (long along y), trilinear hexes on an
+    /// nx × ny × nz grid, the y = 0 face fixed, gravity `g` (m/s²) along −z.
+    pub fn rod(nx: usize, ny: usize, nz: usize, mat: MaterialSi, g: f64) -> Block {
+        let size = [0.25, 0.5, 0.25];
+        let h = [
+            size[0] / nx as f64,
+            size[1] / ny as f64,
+            size[2] / nz as f64,
+        ];
+        let (e, nu) = (mat.e, mat.nu);
+        let lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+        let mu = e / (2.0 * (1.0 + nu));
+        let mut d = [[0.0; 6]; 6];
+        for i in 0..3 {
+            for j in 0..3 {
+                d[i][j] = lam + if i == j { 2.0 * mu } else { 0.0 };
+            }
+            d[i + 3][i + 3] = mu;
+        }
+        let gp = 1.0 / 3f64.sqrt();
+        let corners: Vec<[f64; 3]> = (0..8)
+            .map(|c| {
+                [
+                    if c & 1 != 0 { 1.0 } else { -1.0 },
+                    if c & 2 != 0 { 1.0 } else { -1.0 },
+                    if c & 4 != 0 { 1.0 } else { -1.0 },
+                ]
+            })
+            .collect();
+        let jac = [h[0] / 2.0, h[1] / 2.0, h[2] / 2.0];
+        let w = jac[0] * jac[1] * jac[2];
+        let mut ke = vec![[0.0; 24]; 24];
+        let mut me = vec![[0.0; 24]; 24];
+        for q in &corners {
+            let x = [q[0] * gp, q[1] * gp, q[2] * gp];
+            let nval: Vec<f64> = corners
+                .iter()
+                .map(|c| (0..3).map(|a| 0.5 * (1.0 + c[a] * x[a])).product())
+                .collect();
+            let grad: Vec<[f64; 3]> = corners
+                .iter()
+                .map(|c| {
+                    let f = |a: usize| 0.5 * (1.0 + c[a] * x[a]);
+                    [
+                        0.5 * c[0] * f(1) * f(2) / jac[0],
+                        0.5 * c[1] * f(0) * f(2) / jac[1],
+                        0.5 * c[2] * f(0) * f(1) / jac[2],
+                    ]
+                })
+                .collect();
+            // B: (εxx, εyy, εzz, γxy, γyz, γzx) from (u1x, u1y, u1z, …).
+            let mut b = vec![[0.0; 24]; 6];
+            for a in 0..8 {
+                let [gx, gy, gz] = grad[a];
+                b[0][3 * a] = gx;
+                b[1][3 * a + 1] = gy;
+                b[2][3 * a + 2] = gz;
+                b[3][3 * a] = gy;
+                b[3][3 * a + 1] = gx;
+                b[4][3 * a + 1] = gz;
+                b[4][3 * a + 2] = gy;
+                b[5][3 * a] = gz;
+                b[5][3 * a + 2] = gx;
+            }
+            for i in 0..24 {
+                for j in 0..24 {
+                    let mut sum = 0.0;
+                    for p in 0..6 {
+                        for r in 0..6 {
+                            sum += b[p][i] * d[p][r] * b[r][j];
+                        }
+                    }
+                    ke[i][j] += w * sum;
+                    if i % 3 == j % 3 {
+                        me[i][j] += w * mat.rho * nval[i / 3] * nval[j / 3];
+                    }
+                }
+            }
+        }
+        let node = |i: usize, j: usize, k: usize| (k * (ny + 1) + j) * (nx + 1) + i;
+        let nn = (nx + 1) * (ny + 1) * (nz + 1);
+        let nd = 3 * nn;
+        let mut kg = DMatrix::zeros(nd, nd);
+        let mut mg = DMatrix::zeros(nd, nd);
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let dofs: Vec<usize> = (0..8)
+                        .map(|c| node(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)))
+                        .flat_map(|v| [3 * v, 3 * v + 1, 3 * v + 2])
+                        .collect();
+                    for a in 0..24 {
+                        for bb in 0..24 {
+                            kg[(dofs[a], dofs[bb])] += ke[a][bb];
+                            mg[(dofs[a], dofs[bb])] += me[a][bb];
+                        }
+                    }
+                }
+            }
+        }
+        let m_lumped = DVector::from_iterator(nd, (0..nd).map(|r| mg.row(r).sum()));
+        // Gravity: the consistent body force ρ g ∫ N = (row sums of M) · g on the z DOFs.
+        let body_force = DVector::from_iterator(
+            nd,
+            (0..nd).map(|r| if r % 3 == 2 { -g * m_lumped[r] } else { 0.0 }),
+        );
+        let mut free = Vec::new();
+        for k in 0..=nz {
+            for j in 0..=ny {
+                for i in 0..=nx {
+                    if j > 0 {
+                        let v = node(i, j, k);
+                        free.extend([3 * v, 3 * v + 1, 3 * v + 2]);
+                    }
+                }
+            }
+        }
+        Block {
+            n: ny,
+            k: kg,
+            m_consistent: mg,
+            m_lumped,
+            free,
+            needle: None,
+            body_force,
         }
     }
 
@@ -159,10 +297,20 @@ impl Block {
     }
 
     fn coupling(&self, a: &DMatrix<f64>) -> DVector<f64> {
-        DVector::from_iterator(
-            self.free.len(),
-            self.free.iter().map(|&i| a[(i, self.needle)]),
-        )
+        match self.needle {
+            Some(nd) => {
+                DVector::from_iterator(self.free.len(), self.free.iter().map(|&i| a[(i, nd)]))
+            }
+            None => DVector::zeros(self.free.len()),
+        }
+    }
+
+    /// Prescribed needle displacement and velocity at t (zero without a needle).
+    fn needle_motion(&self, t: f64) -> (f64, f64) {
+        match self.needle {
+            Some(_) => (Block::needle_at(t), if t < 2.0 { -0.08 } else { 0.0 }),
+            None => (0.0, 0.0),
+        }
     }
 }
 
@@ -215,17 +363,19 @@ pub fn integrate(
     let (mut u, mut v) = (DVector::<f64>::zeros(nf), DVector::<f64>::zeros(nf));
     // Forces on the free DOFs from the prescribed needle (its acceleration is zero between the
     // start and stop instants).
+    let body = DVector::from_iterator(nf, block.free.iter().map(|&i| block.body_force[i]));
     let load = |t: f64| {
-        let g = Block::needle_at(t);
-        let gd = if t < 2.0 { -0.08 } else { 0.0 };
-        -(&kfp * g) - (&cfp * gd)
+        let (g, gd) = block.needle_motion(t);
+        &body - (&kfp * g) - (&cfp * gd)
     };
     let full = |u: &DVector<f64>, t: f64| {
         let mut x = vec![0.0; block.k.nrows()];
         for (i, &d) in block.free.iter().enumerate() {
             x[d] = u[i];
         }
-        x[block.needle] = Block::needle_at(t);
+        if let Some(nd) = block.needle {
+            x[nd] = Block::needle_at(t);
+        }
         x
     };
     let mut run = Run {
@@ -243,8 +393,8 @@ pub fn integrate(
             let kc = chol(kff.clone());
             for s in 1..=steps {
                 let t = s as f64 * h;
-                let g = Block::needle_at(t);
-                u = kc.solve(&(-(&kfp * g)));
+                let (g, _) = block.needle_motion(t);
+                u = kc.solve(&(&body - (&kfp * g)));
                 run.history.push(full(&u, t));
             }
         }
