@@ -145,7 +145,7 @@ fn the_rod_under_gravity_settles_to_the_static_deflection_in_every_integrator() 
     // Euler–Bernoulli cantilever under self-weight: δ = q L⁴ / (8 E I), q = ρ g A. The rod is
     // stubby (L/h = 2) and the mesh coarse, so shear and discretisation move the FE value by a
     // few per cent; the check is that gravity, mass and stiffness are assembled at the right scale.
-    let (q, l, i) = (MP3.rho * 0.05 * 0.25 * 0.25, 0.5, 0.25f64.powi(4) / 12.0);
+    let (q, l, i) = (MP3.rho * 0.05 * 0.25 * 0.25, 0.5f64, 0.25f64.powi(4) / 12.0);
     let beam = q * l.powi(4) / (8.0 * MP3.e * i);
     println!(
         "Euler–Bernoulli tip deflection {beam:.4e} m (FE / beam = {:.3})",
