@@ -325,6 +325,16 @@ pub enum Integrator {
     QuasiStatic,
 }
 
+impl Integrator {
+    /// Every integrator, the implicit reference first.
+    pub const ALL: [Integrator; 4] = [
+        Integrator::ImplicitNewmark,
+        Integrator::ExplicitConsistent,
+        Integrator::ExplicitLumped,
+        Integrator::QuasiStatic,
+    ];
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Run {
     pub integrator: Integrator,

@@ -243,6 +243,15 @@ pub fn solve(
                 ))
             })?;
             let zero = vec![0.0; 3 * nd];
+            // Largest spring force scale, for the absolute floor of the residual test (computed
+            // once, not per iteration).
+            let scale = springs
+                .springs
+                .iter()
+                .zip(&weight)
+                .map(|(s, w)| w * s.rest)
+                .fold(0.0, f64::max)
+                .max(1e-300);
             for step in 1..=p.steps {
                 let (xb, _) = plan.apply(&springs.attachments, step as f64 / p.steps as f64);
                 let mut res_hist = Vec::new();
@@ -266,13 +275,6 @@ pub fn solve(
                     let rn = r.iter().map(|x| x * x).sum::<f64>().sqrt();
                     let r0v = *r0.get_or_insert(rn);
                     res_hist.push(rn);
-                    let scale = springs
-                        .springs
-                        .iter()
-                        .zip(&weight)
-                        .map(|(s, w)| w * s.rest)
-                        .fold(0.0, f64::max)
-                        .max(1e-300);
                     if rn <= p.tolerance * r0v.max(1e-12 * scale) {
                         converged = true;
                         break;

@@ -63,15 +63,10 @@ fn explicit_is_bounded_below_the_critical_step_and_diverges_above_it() {
 fn all_integrators_settle_to_the_same_static_state_and_explicit_consistent_is_closest() {
     let b = Block::new(8, MP1);
     let steps = 600; // 20 s: 2 s of needle motion, then settling
-    let runs: Vec<_> = [
-        Integrator::ImplicitNewmark,
-        Integrator::ExplicitConsistent,
-        Integrator::ExplicitLumped,
-        Integrator::QuasiStatic,
-    ]
-    .into_iter()
-    .map(|i| integrate(&b, i, H, steps, RAYLEIGH))
-    .collect();
+    let runs: Vec<_> = Integrator::ALL
+        .into_iter()
+        .map(|i| integrate(&b, i, H, steps, RAYLEIGH))
+        .collect();
     for r in &runs {
         assert!(r.diverged.is_none(), "{:?}: {:?}", r.integrator, r.diverged);
     }
@@ -126,15 +121,10 @@ fn the_rod_under_gravity_settles_to_the_static_deflection_in_every_integrator() 
     use facesim::dynamics::MP3;
     let rod = Block::rod(2, 4, 2, MP3, 0.05);
     let steps = 900; // 30 s at h = 1/30
-    let runs: Vec<_> = [
-        Integrator::ImplicitNewmark,
-        Integrator::ExplicitConsistent,
-        Integrator::ExplicitLumped,
-        Integrator::QuasiStatic,
-    ]
-    .into_iter()
-    .map(|i| integrate(&rod, i, H, steps, RAYLEIGH))
-    .collect();
+    let runs: Vec<_> = Integrator::ALL
+        .into_iter()
+        .map(|i| integrate(&rod, i, H, steps, RAYLEIGH))
+        .collect();
     let static_end = runs[3].history.last().unwrap();
     let tip = static_end.iter().fold(0.0f64, |m, x| m.max(x.abs()));
     println!(
