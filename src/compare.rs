@@ -40,6 +40,20 @@ pub fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -
     add(a, add(scale(ab, vb * denom), scale(ac, vc * denom)))
 }
 
+/// Barycentric coordinates of p (on or near the triangle's plane) in triangle abc.
+pub fn barycentric(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+    let (v0, v1, v2) = (sub(b, a), sub(c, a), sub(p, a));
+    let (d00, d01, d11) = (dot(v0, v0), dot(v0, v1), dot(v1, v1));
+    let (d20, d21) = (dot(v2, v0), dot(v2, v1));
+    let den = d00 * d11 - d01 * d01;
+    if den.abs() < 1e-300 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d11 * d20 - d01 * d21) / den;
+    let w = (d00 * d21 - d01 * d20) / den;
+    [1.0 - v - w, v, w]
+}
+
 /// A uniform grid of triangle buckets for closest-point queries.
 pub struct SurfaceIndex<'a> {
     mesh: &'a Mesh,
@@ -106,8 +120,14 @@ impl<'a> SurfaceIndex<'a> {
 
     /// Distance from p to the surface and the closest point.
     pub fn closest(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        let (d, q, _) = self.closest_triangle(p);
+        (d, q)
+    }
+
+    /// Distance, closest point and the triangle it lies on.
+    pub fn closest_triangle(&self, p: [f64; 3]) -> (f64, [f64; 3], usize) {
         let c = [0, 1, 2].map(|a| ((p[a] - self.origin[a]) / self.cell).floor() as i64);
-        let mut best = (f64::INFINITY, p);
+        let mut best = (f64::INFINITY, p, 0);
         // Search shells of cells; once a hit is closer than the shell's inner distance, stop.
         let far = [0, 1, 2].map(|a| c[a].abs()).into_iter().max().unwrap_or(0) + self.span;
         for r in 0..=far {
@@ -126,7 +146,7 @@ impl<'a> SurfaceIndex<'a> {
                                 let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
                                 let d = norm(sub(p, q));
                                 if d < best.0 {
-                                    best = (d, q);
+                                    best = (d, q, t as usize);
                                 }
                             }
                         }

@@ -49,6 +49,15 @@ pub struct Block {
     pub needle: Option<usize>,
     /// Constant body force on every DOF (gravity; zero for the block).
     pub body_force: DVector<f64>,
+    /// 2 (block, plane strain) or 3 (rod).
+    pub dim: usize,
+    /// Undeformed node positions (m; z = 0 in 2-D).
+    pub coords: Vec<[f64; 3]>,
+    /// Each node's share of the undeformed area/volume (nodal quadrature weights).
+    pub node_weights: Vec<f64>,
+    /// The boundary: the outline's nodes counter-clockwise (2-D) or triangles (3-D).
+    pub outline: Vec<usize>,
+    pub boundary_triangles: Vec<[usize; 3]>,
 }
 
 impl Block {
@@ -146,6 +155,14 @@ impl Block {
             }
         }
         let body_force = DVector::zeros(nd);
+        let coords = (0..nn)
+            .map(|v| [(v % (n + 1)) as f64 * h, (v / (n + 1)) as f64 * h, 0.0])
+            .collect();
+        let node_weights = (0..nn).map(|v| m_lumped[2 * v] / mat.rho).collect();
+        let mut outline: Vec<usize> = (0..=n).map(|i| node(i, 0)).collect();
+        outline.extend((1..=n).map(|j| node(n, j)));
+        outline.extend((0..n).rev().map(|i| node(i, n)));
+        outline.extend((1..n).rev().map(|j| node(0, j)));
         Block {
             n,
             k,
@@ -154,6 +171,11 @@ impl Block {
             free,
             needle: Some(needle),
             body_force,
+            dim: 2,
+            coords,
+            node_weights,
+            outline,
+            boundary_triangles: Vec::new(),
         }
     }
 
@@ -274,6 +296,58 @@ impl Block {
                 }
             }
         }
+        let coords = (0..nn)
+            .map(|v| {
+                let (i, j, k) = (
+                    v % (nx + 1),
+                    (v / (nx + 1)) % (ny + 1),
+                    v / ((nx + 1) * (ny + 1)),
+                );
+                [i as f64 * h[0], j as f64 * h[1], k as f64 * h[2]]
+            })
+            .collect();
+        let node_weights = (0..nn).map(|v| m_lumped[3 * v] / mat.rho).collect();
+        // Boundary quads of the grid, two triangles each (orientation is irrelevant to the
+        // ray-integrated volumes; `enclosed_volume` takes the absolute value).
+        let mut boundary_triangles = Vec::new();
+        let mut quad = |q: [usize; 4]| {
+            boundary_triangles.push([q[0], q[1], q[2]]);
+            boundary_triangles.push([q[0], q[2], q[3]]);
+        };
+        for j in 0..ny {
+            for k in 0..nz {
+                for i in [0, nx] {
+                    quad([
+                        node(i, j, k),
+                        node(i, j + 1, k),
+                        node(i, j + 1, k + 1),
+                        node(i, j, k + 1),
+                    ]);
+                }
+            }
+            for i in 0..nx {
+                for k in [0, nz] {
+                    quad([
+                        node(i, j, k),
+                        node(i + 1, j, k),
+                        node(i + 1, j + 1, k),
+                        node(i, j + 1, k),
+                    ]);
+                }
+            }
+        }
+        for i in 0..nx {
+            for k in 0..nz {
+                for j in [0, ny] {
+                    quad([
+                        node(i, j, k),
+                        node(i + 1, j, k),
+                        node(i + 1, j, k + 1),
+                        node(i, j, k + 1),
+                    ]);
+                }
+            }
+        }
         Block {
             n: ny,
             k: kg,
@@ -282,7 +356,28 @@ impl Block {
             free,
             needle: None,
             body_force,
+            dim: 3,
+            coords,
+            node_weights,
+            outline: Vec::new(),
+            boundary_triangles,
         }
+    }
+
+    /// Deformed node positions for a full displacement vector.
+    pub fn deformed(&self, u: &[f64]) -> Vec<[f64; 3]> {
+        let d = self.dim;
+        self.coords
+            .iter()
+            .enumerate()
+            .map(|(v, p)| {
+                let mut q = *p;
+                for c in 0..d {
+                    q[c] += u[d * v + c];
+                }
+                q
+            })
+            .collect()
     }
 
     /// Needle displacement (x, m) at time t: −0.08 t for t ≤ 2 s, then held at −0.16.

@@ -16,6 +16,7 @@ pub mod compare;
 pub mod dynamics;
 pub mod error;
 pub mod fem;
+pub mod memory;
 pub mod mesh;
 pub mod osteotomy;
 pub mod output;
@@ -26,6 +27,7 @@ pub mod run;
 pub mod segment;
 pub mod solve;
 pub mod springs;
+pub mod study;
 pub mod surface;
 pub mod volume;
 

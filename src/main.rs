@@ -6,6 +6,10 @@ use facesim::progress::Progress;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+// Counts heap bytes for the study's peak-memory column (two relaxed atomics per allocation).
+#[global_allocator]
+static ALLOC: facesim::memory::Counting = facesim::memory::Counting;
+
 #[derive(Parser)]
 #[command(
     name = "facesim",
@@ -65,6 +69,17 @@ enum Cmd {
         /// Image width and height in pixels.
         #[arg(long, default_value_t = 800)]
         size: usize,
+    },
+    /// Speed against accuracy: the integrator benchmarks, stability, and the face baselines
+    /// (tables, charts and summary.md in OUT_DIR).
+    Study {
+        out_dir: PathBuf,
+        /// A reduced study (coarser benchmarks, the phantom only, fewer resolutions): < 2 min.
+        #[arg(long)]
+        quick: bool,
+        /// Face cases (default: data-samples/phantom, plus data-samples/real when fetched).
+        #[arg(long = "case")]
+        cases: Vec<PathBuf>,
     },
     /// Distances between two meshes (OBJ or PLY).
     Compare {
@@ -192,6 +207,25 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
             let img = facesim::render::render(&refs, view, size);
             facesim::render::write_png(&img, size, &out)?;
+            Ok(())
+        }
+        Cmd::Study {
+            out_dir,
+            quick,
+            cases,
+        } => {
+            let cases = if cases.is_empty() {
+                facesim::study::default_cases(quick)
+            } else {
+                cases
+            };
+            let s = facesim::study::run(&out_dir, quick, &cases, &Progress::auto())?;
+            println!(
+                "study written to {} in {:.1} s ({} face rows); see summary.md",
+                out_dir.display(),
+                s.wall_s,
+                s.face.len()
+            );
             Ok(())
         }
         Cmd::Compare { a, b, json } => {

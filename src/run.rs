@@ -125,32 +125,34 @@ fn check_regions_masks(case: &Case) -> Result<()> {
     Ok(())
 }
 
-pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<Outcome> {
-    let t_total = Instant::now();
-    let (case, dir) = Case::load(case_path)?;
-    check_regions_masks(&case)?;
-    let out_dir = out
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| dir.join("out"));
+/// Everything the models need, before any solve: the CT, its tissues, the skin (extracted or
+/// the registered scan) and skull, the springs, the bone-move plan, the rigid skin vertices and
+/// the solver parameters. `run` and `facesim study` share it.
+pub struct Scene {
+    pub vol: Volume,
+    pub seg: Segmentation,
+    pub skin: Mesh,
+    pub skull: Mesh,
+    pub springs: crate::springs::SpringSet,
+    pub spring_report: crate::springs::SpringReport,
+    pub plan: crate::osteotomy::Plan,
+    pub rigid: Vec<bool>,
+    pub params: crate::solve::Params,
+    /// Cylinder axis (x, y) and radius of the (u, v) parameterisation.
+    pub axis: [f64; 2],
+    pub r0: f64,
+}
+
+/// Stages 1–4 (read, segment, extract, springs) and the plan; timings, surface facts and
+/// warnings go into `report`.
+pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<Scene> {
+    check_regions_masks(case)?;
     if let Some(skin) = &case.skin
         && !skin.path.is_file()
     {
         return Err(Error::input(&skin.path, "face scan not found"));
     }
-    let mut report = Report {
-        name: case.name.clone().unwrap_or_else(|| {
-            dir.file_name()
-                .map(|n| n.to_string_lossy().to_string())
-                .unwrap_or_default()
-        }),
-        case: dir.display().to_string(),
-        facesim_version: env!("CARGO_PKG_VERSION").into(),
-        ..Default::default()
-    };
-    let mut timer = Timer {
-        report: &mut report,
-    };
-
+    let mut timer = Timer { report };
     progress.stage("reading CT");
     let vol = timer.time("read_ct", || volume::read_volume(&case.ct.path))?;
     progress.stage("segmenting tissues");
@@ -297,7 +299,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             serde_json::to_value(st).unwrap_or(Value::Null),
         );
     }
-    report.registration = registration;
+    timer.report.registration = registration;
 
     progress.stage("tracing springs");
     let t = Instant::now();
@@ -310,7 +312,8 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         &case.tissue.stiffness,
     );
     drop(bone_field);
-    report
+    timer
+        .report
         .timings
         .insert("springs".into(), json!(t.elapsed().as_secs_f64()));
     let spring_report = springs.report(&skin);
@@ -349,8 +352,6 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             None => false,
         })
         .collect();
-    progress.stage("solving");
-    let t = Instant::now();
     let params = crate::solve::Params {
         model: case.solve.model,
         steps: case.solve.steps,
@@ -365,6 +366,54 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         tolerance: 1e-6,
         max_iterations: 30,
     };
+    timer.report.surfaces = surf;
+    timer.report.warnings = warnings;
+    Ok(Scene {
+        vol,
+        seg,
+        skin,
+        skull,
+        springs,
+        spring_report,
+        plan,
+        rigid,
+        params,
+        axis,
+        r0,
+    })
+}
+
+pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<Outcome> {
+    let t_total = Instant::now();
+    let (case, dir) = Case::load(case_path)?;
+    let out_dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| dir.join("out"));
+    let mut report = Report {
+        name: case.name.clone().unwrap_or_else(|| {
+            dir.file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_default()
+        }),
+        case: dir.display().to_string(),
+        facesim_version: env!("CARGO_PKG_VERSION").into(),
+        ..Default::default()
+    };
+    let Scene {
+        vol,
+        seg,
+        skin,
+        skull,
+        springs,
+        spring_report,
+        plan,
+        rigid,
+        params,
+        ..
+    } = prepare(&case, progress, &mut report)?;
+    let mut warnings = std::mem::take(&mut report.warnings);
+    progress.stage("solving");
+    let t = Instant::now();
     // No bone moves: the preloaded skin is an equilibrium by construction (F_init = K a_init),
     // so the prediction is the pre-operative face; skip the factorisation.
     let sol = if plan.is_empty() {
@@ -484,7 +533,6 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             seg.report.removed_components, seg.report.removed_voxels
         ));
     }
-    report.surfaces = surf;
     report.segmentation = Some(seg.report.clone());
     report.parameters = Some(case.clone());
     report.warnings = warnings;

@@ -49,6 +49,36 @@ impl FemMesh {
             }
             tri_edges.push(te);
         }
+        // A (u, v) map that folds (some triangles flipped against the rest) gives overlapping
+        // elements and an indefinite or meaningless system: say so rather than fail in the factor.
+        let signed: Vec<f64> = tris
+            .iter()
+            .map(|t| {
+                let [p, q, r] = t.map(|i| uv[i as usize]);
+                (q[0] - p[0]) * (r[1] - p[1]) - (r[0] - p[0]) * (q[1] - p[1])
+            })
+            .collect();
+        let positive = signed.iter().filter(|a| **a > 0.0).count();
+        let flipped = if 2 * positive >= signed.len() {
+            signed.len() - positive
+        } else {
+            positive
+        };
+        if flipped > 0 {
+            let sign = if 2 * positive >= signed.len() {
+                -1.0
+            } else {
+                1.0
+            };
+            let t = signed.iter().position(|a| a * sign >= 0.0).unwrap_or(0);
+            let v = tris[t][0] as usize;
+            return Err(Error::Numerical(format!(
+                "the (u, v) parameterisation folds over at {flipped} of {} triangles (first: triangle {t}, at u = {:.1}, v = {:.1}): use [surface] parameterization = \"planar\", a finer or less decimated skin, or restrict [surface] movable",
+                tris.len(),
+                uv[v][0],
+                uv[v][1]
+            )));
+        }
         let elements = tris
             .par_iter()
             .map(|t| Element::new(t.map(|i| uv[i as usize])))

@@ -55,24 +55,23 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
     let nb = crate::mesh::one_rings(mesh.uv.len(), &mesh.tris);
     let nv = mesh.uv.len();
     let mut a = vec![0.0; mesh.ndof()];
-    // Neighbourhood: the 1-ring, widened to the 2-ring when it cannot fix a quadratic.
-    let hood = |seed: &[u32], wide: bool| -> Vec<u32> {
+    // Neighbourhood: the 1-ring, widened ring by ring (up to the 3-ring) while it cannot fix a
+    // quadratic (decimated meshes have low-valence vertices whose 1-ring is degenerate in (u, v)).
+    let hood = |seed: &[u32], rings: usize| -> Vec<u32> {
         let mut s: Vec<u32> = seed.to_vec();
-        for &v in seed {
-            s.extend(&nb[v as usize]);
-            if wide {
-                for &w in &nb[v as usize] {
-                    s.extend(&nb[w as usize]);
-                }
+        for _ in 0..rings {
+            let frontier = s.clone();
+            for &v in &frontier {
+                s.extend(&nb[v as usize]);
             }
+            s.sort_unstable();
+            s.dedup();
         }
-        s.sort_unstable();
-        s.dedup();
         s
     };
     let gradient = |seed: &[u32], at: [f64; 2], value: Option<f64>| -> Option<[f64; 3]> {
-        for wide in [false, true] {
-            let pts: Vec<([f64; 2], f64)> = hood(seed, wide)
+        for rings in 1..=3 {
+            let pts: Vec<([f64; 2], f64)> = hood(seed, rings)
                 .iter()
                 .map(|&v| (mesh.uv[v as usize], values[v as usize]))
                 .collect();

@@ -1,0 +1,56 @@
+//! Heap accounting for the study's peak-memory column: a global allocator wrapper that counts
+//! live bytes and their high-water mark. The `facesim` binary installs it; the library only
+//! reads it (without it installed, `installed()` is false and no memory figure is reported).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
+
+static LIVE: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+pub struct Counting;
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            let now = LIVE.fetch_add(layout.size(), Relaxed) + layout.size();
+            PEAK.fetch_max(now, Relaxed);
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) };
+        LIVE.fetch_sub(layout.size(), Relaxed);
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            if new_size >= layout.size() {
+                let now =
+                    LIVE.fetch_add(new_size - layout.size(), Relaxed) + new_size - layout.size();
+                PEAK.fetch_max(now, Relaxed);
+            } else {
+                LIVE.fetch_sub(layout.size() - new_size, Relaxed);
+            }
+        }
+        p
+    }
+}
+
+/// Whether the counting allocator is in use (any allocation has been counted).
+pub fn installed() -> bool {
+    PEAK.load(Relaxed) > 0
+}
+
+/// Start a measurement: the high-water mark is reset to the live bytes, which are returned.
+pub fn start() -> usize {
+    let live = LIVE.load(Relaxed);
+    PEAK.store(live, Relaxed);
+    live
+}
+
+/// Peak heap bytes above `base` since `start()`; None without the counting allocator.
+pub fn peak_since(base: usize) -> Option<usize> {
+    installed().then(|| PEAK.load(Relaxed).saturating_sub(base))
+}
