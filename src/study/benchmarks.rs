@@ -17,7 +17,7 @@ pub const RAYLEIGH: (f64, f64) = (1.0, 0.1);
 /// Rod gravity (MODEL.md §8: 5 cm/s²).
 pub const ROD_G: f64 = 0.05;
 /// Rays per side for the 3-D surface error.
-const RAY_GRID: usize = 48;
+const RAY_GRID: usize = 96;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Series {

@@ -241,7 +241,7 @@ pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) ->
             .x_desc("run time (s, springs + model + solve)")
             .y_desc("mean distance to reference (mm)")
             .x_label_formatter(&|v| format!("{v:.2}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.2}"))
             .draw()?;
         let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
         let front: Vec<(f64, f64)> = pareto(&xy).into_iter().map(|i| xy[i]).collect();

@@ -252,6 +252,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                     &scene.plan,
                     &rigid,
                     case.surface.alpha,
+                    case.surface.beta,
                     case.solve.k_c,
                     1e-5,
                     if quick { 60_000 } else { 200_000 },
@@ -334,10 +335,12 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                     &case.tissue.stiffness,
                     &scene.plan,
                     &ref_mesh.vertices,
-                    s,
-                    depth + s,
-                    kind,
-                    0.45,
+                    volumetric::Options {
+                        spacing: s,
+                        max_depth_mm: depth + s,
+                        kind,
+                        nu: 0.45,
+                    },
                 )
             });
             let mut row = FaceRow {

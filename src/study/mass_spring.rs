@@ -5,7 +5,8 @@
 //!
 //! Edge stiffness k_ij = α (cot θ + cot θ')/2 (clamped at 0): the cotangent discretisation of the
 //! same stretching energy α/2 ∫|∇x|² the C1 element integrates, so both models share α; springs
-//! only resist stretch along the edge and there is no bending term — that is the model.
+//! only resist stretch along the edge. Flexion springs across each interior edge (β/ℓ²) stand
+//! in for bending.
 //!
 //! Equilibrium by damped Verlet (dynamic relaxation): x⁺ = x + (1 − ζ)(x − x⁻) + h² F/m with
 //! lumped masses m_i = k_i (area), the step h = 0.9 × 2/√λ_max (λ_max bounded by Gershgorin on
@@ -37,6 +38,7 @@ pub fn relax(
     plan: &Plan,
     rigid: &[bool],
     alpha: f64,
+    beta: f64,
     k_c: f64,
     tolerance: f64,
     max_iterations: usize,
@@ -60,7 +62,30 @@ pub fn relax(
             (a, b, k.max(0.0), norm(sub(x0[a], x0[b])))
         })
         .collect();
-    edges.sort_by(|p, q| (p.0, p.1).cmp(&(q.0, q.1)));
+    // Flexion springs across every interior edge, joining the two opposite vertices: without
+    // them a patch with no skull spring (ears, the nose tip) folds freely, since isometric
+    // bending costs an edge-only net nothing. Stiffness β/ℓ² (ℓ the shared edge): the bending
+    // modulus over the squared length scale, a heuristic stated as such.
+    let mut opposite: std::collections::HashMap<(u32, u32), Vec<u32>> =
+        std::collections::HashMap::new();
+    for t in &skin.triangles {
+        for k in 0..3 {
+            let (a, b, c) = (t[k], t[(k + 1) % 3], t[(k + 2) % 3]);
+            opposite.entry((b.min(c), b.max(c))).or_default().push(a);
+        }
+    }
+    for ((b, c), opp) in opposite {
+        if let [p, q] = opp[..] {
+            let l2 = crate::mesh::dot(
+                sub(x0[b as usize], x0[c as usize]),
+                sub(x0[b as usize], x0[c as usize]),
+            )
+            .max(1e-12);
+            let (p, q) = (p.min(q) as usize, p.max(q) as usize);
+            edges.push((p, q, beta / l2, norm(sub(x0[p], x0[q]))));
+        }
+    }
+    edges.sort_by(|p, q| (p.0, p.1).cmp(&(q.0, q.1)).then(p.2.total_cmp(&q.2)));
     let (xb, _) = plan.apply(&springs.attachments, 1.0);
     let weight: Vec<f64> = springs
         .springs

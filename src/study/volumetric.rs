@@ -29,6 +29,15 @@ pub enum Kind {
     Tetrahedra,
 }
 
+/// Lattice spacing (mm), depth of the facial tissue kept (mm), model and Poisson ratio (tets).
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    pub spacing: f64,
+    pub max_depth_mm: f64,
+    pub kind: Kind,
+    pub nu: f64,
+}
+
 pub struct Prediction {
     /// Displacement (mm) per requested point.
     pub displacement: Vec<[f64; 3]>,
@@ -226,11 +235,14 @@ pub fn predict(
     stiffness: &Stiffness,
     plan: &Plan,
     points: &[[f64; 3]],
-    spacing: f64,
-    max_depth_mm: f64,
-    kind: Kind,
-    nu: f64,
+    opts: Options,
 ) -> Result<Prediction> {
+    let Options {
+        spacing,
+        max_depth_mm,
+        kind,
+        nu,
+    } = opts;
     let mut lat = Lattice::new(vol, seg, spacing);
     lat.keep_facial_tissue(max_depth_mm);
     let d = lat.dims;
@@ -378,16 +390,24 @@ pub fn predict(
         }
     }
     let nn = nodes.len();
-    // A tiny tie of every free node to its rest position (1e-9 of the largest diagonal) removes
-    // the lattice's zero-energy modes at the tissue's edge without changing the answer.
+    // A weak isotropic coupling along every edge of the model (1e-9 of the largest diagonal)
+    // removes the lattice's zero-energy modes at the tissue's edge; unlike a tie to the rest
+    // position it stores no energy under a rigid translation, so it cannot bias one.
     let mut diag_max = 0.0f64;
     for &(r, c, v) in &t {
         if r == c {
             diag_max = diag_max.max(v);
         }
     }
-    for g in 0..3 * nn {
-        t.push((g, g, 1e-9 * diag_max));
+    let eps = 1e-9 * diag_max;
+    for &(a, b) in &couple {
+        let (ia, ib) = (index[a], index[b]);
+        if ia == usize::MAX || ib == usize::MAX {
+            continue;
+        }
+        for e in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+            spring(&mut t, ia, ib, eps, e);
+        }
     }
     let mut fixed = vec![false; 3 * nn];
     let mut prescribed = vec![0.0; 3 * nn];
