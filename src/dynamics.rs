@@ -5,8 +5,8 @@
 //! explicit with lumped mass, and quasi-static. Explicit integration that blows up is detected
 //! and reported as "diverged at step N (t = …)", never NaN output.
 //!
-//! The benchmark systems are small (a 1 m block on an n×n grid), so dense Cholesky factors are
-//! used; each integrator factors its matrix once.
+//! Matrices are kept dense for the products (the benchmark grids are small); every linear solve
+//! goes through a faer sparse Cholesky factored once per integrator run.
 
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -409,6 +409,40 @@ impl Block {
     }
 }
 
+/// A symmetric positive definite matrix factored once by faer's sparse Cholesky (the
+/// benchmark matrices are banded: a dense factor would waste O(n³) on zeros).
+struct SpdFactor {
+    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+}
+
+impl SpdFactor {
+    fn new(m: &DMatrix<f64>) -> SpdFactor {
+        use faer::sparse::{SparseColMat, Triplet};
+        let n = m.nrows();
+        let mut t = Vec::new();
+        for c in 0..n {
+            for r in c..n {
+                if m[(r, c)] != 0.0 {
+                    t.push(Triplet::new(r, c, m[(r, c)]));
+                }
+            }
+        }
+        let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t)
+            .expect("triplets within bounds");
+        let llt = a
+            .sp_cholesky(faer::Side::Lower)
+            .expect("benchmark matrices (K, M, Newmark's K_eff) are positive definite");
+        SpdFactor { llt }
+    }
+
+    fn solve(&self, b: &DVector<f64>) -> DVector<f64> {
+        use faer::linalg::solvers::Solve;
+        let rhs = faer::Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
+        let x = self.llt.solve(&rhs);
+        DVector::from_fn(b.len(), |i, _| x[(i, 0)])
+    }
+}
+
 /// r ↦ M⁻¹ r.
 type MassSolve = Box<dyn Fn(&DVector<f64>) -> DVector<f64>>;
 
@@ -489,10 +523,7 @@ pub fn integrate(
         history: Vec::with_capacity(steps),
         diverged: None,
     };
-    let chol = |m: DMatrix<f64>| {
-        m.cholesky()
-            .expect("benchmark matrices are positive definite")
-    };
+    let chol = |m: DMatrix<f64>| SpdFactor::new(&m);
     match integrator {
         Integrator::QuasiStatic => {
             let kc = chol(kff.clone());
@@ -564,10 +595,7 @@ pub fn critical_step(block: &Block, lumped: bool) -> f64 {
     let kff = block.sub(&block.k);
     let nf = block.free.len();
     let ml = DVector::from_iterator(nf, block.free.iter().map(|&i| block.m_lumped[i]));
-    let mc = block
-        .sub(&block.m_consistent)
-        .cholesky()
-        .expect("positive definite mass");
+    let mc = SpdFactor::new(&block.sub(&block.m_consistent));
     let mut x = DVector::from_fn(nf, |i, _| 1.0 + ((i * 7919) % 13) as f64 / 13.0);
     let mut lambda = 0.0;
     for _ in 0..2000 {
