@@ -9,7 +9,8 @@
 //! fixed-point iteration with its own bias. The other families solve different physics; their
 //! distance to the reference is model disagreement, not error against the patient.
 //!
-//! Distances are taken on the reference's vertices: each is projected to the closest point of a
+//! Distances are taken on the reference's movable vertices (outside `[surface] movable` every
+//! model keeps the skin fixed): each is projected to the closest point of a
 //! method's pre-operative skin, the method's displacement is interpolated there (barycentric),
 //! and |d_method − d_ref| is the vertex's distance (mm). Volumetric methods are interpolated at
 //! the vertices directly.
@@ -148,23 +149,44 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
         label: format!("{nt} tri"),
         skin: native.clone(),
     });
-    let divisors: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
-    for &dv in divisors {
-        // Edge collapse can fold the (u, v) map at a few triangles; back off the target until it
-        // does not (FemMesh::new refuses folded maps).
-        let mut target = nt / dv;
-        for _ in 0..6 {
-            let mut m = native.clone();
-            surface::decimate(&mut m, target, 5.0);
-            let m = with_uv(m, &case, &scene);
-            if m.check(Path::new("decimated skin")).is_ok() && uv_folds(&m) == 0 {
-                levels.push(Level {
-                    label: format!("{} tri", m.triangles.len()),
-                    skin: m,
-                });
-                break;
+    if case.skin.is_none() && case.extract.method == crate::case::ExtractMethod::Rangescan {
+        // An extracted skin is coarsened the way a user would: a coarser range scan (angle and
+        // slice steps × f). Its (θ, z) grid cannot fold in (u, v), unlike a decimation of it.
+        let factors: &[f64] = if quick { &[2.0] } else { &[1.5, 2.0, 3.0] };
+        for &f in factors {
+            let mut c = case.clone();
+            c.extract.angle_step_deg *= f;
+            let z = if case.extract.z_step_mm > 0.0 {
+                case.extract.z_step_mm
+            } else {
+                scene.vol.spacing[2]
+            };
+            c.extract.z_step_mm = z * f;
+            let coarse = prepare(&c, &Progress::quiet(), &mut Report::default())?;
+            levels.push(Level {
+                label: format!("{} tri", coarse.skin.triangles.len()),
+                skin: coarse.skin,
+            });
+        }
+    } else {
+        let divisors: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
+        for &dv in divisors {
+            // Edge collapse can fold the (u, v) map at a few triangles; back off the target
+            // until it does not (FemMesh::new refuses folded maps).
+            let mut target = nt / dv;
+            for _ in 0..6 {
+                let mut m = native.clone();
+                surface::decimate(&mut m, target, 5.0);
+                let m = with_uv(m, &case, &scene);
+                if m.check(Path::new("decimated skin")).is_ok() && uv_folds(&m) == 0 {
+                    levels.push(Level {
+                        label: format!("{} tri", m.triangles.len()),
+                        skin: m,
+                    });
+                    break;
+                }
+                target = target * 5 / 4;
             }
-            target = target * 5 / 4;
         }
     }
     let bone_field = scene.seg.bone_field(&scene.vol);
@@ -313,7 +335,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
         ));
     };
     // Volumetric models.
-    let spacings: &[f64] = if quick { &[4.0] } else { &[3.0, 4.0, 6.0] };
+    let spacings: &[f64] = if quick { &[4.0] } else { &[4.0, 6.0, 8.0] };
     for &s in spacings {
         for (kind, method, family) in [
             (
@@ -373,7 +395,9 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
             rows.push(row);
         }
     }
-    // Distances on the reference vertices.
+    // Distances on the reference vertices the plan can move (rigid skin is identical in every
+    // model by construction and would only dilute the statistics).
+    let ref_rigid = rigid_of(&ref_mesh);
     for (row, answer) in answers {
         let d_at_ref: Vec<[f64; 3]> = match answer {
             Answer::AtReference(d) => d,
@@ -399,12 +423,14 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
         let dist: Vec<f64> = d_at_ref
             .iter()
             .zip(&ref_d)
-            .map(|(a, b)| crate::mesh::norm(sub(*a, *b)))
+            .zip(&ref_rigid)
+            .filter(|(_, r)| !**r)
+            .map(|((a, b), _)| crate::mesh::norm(sub(*a, *b)))
             .collect();
         rows[row].distance = Some(stats(&dist));
     }
     for row in rows.iter_mut().filter(|r| r.is_reference) {
-        row.distance = Some(stats(&vec![0.0; ref_mesh.vertices.len()]));
+        row.distance = Some(stats(&[0.0]));
     }
     Ok(rows)
 }
