@@ -54,3 +54,37 @@ impl<T, E: std::fmt::Display> Context<T> for std::result::Result<T, E> {
         self.map_err(|e| Error::input(path, e))
     }
 }
+
+thread_local! {
+    static GUARDED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Whether the current thread is inside [`guard`] (the CLI's panic hook stays silent there:
+/// the panic becomes an ordinary input error).
+pub fn in_guard() -> bool {
+    GUARDED.with(|g| g.get())
+}
+
+/// Run a reader that leans on third-party parsers (NIfTI, DICOM, PLY, tar, plist). Should one of
+/// them panic on malformed bytes, the panic is caught and reported as a one-line error about the
+/// file — a hostile input must never crash the tool. Our own code is held to no panics by the
+/// fuzz tests (docs/reliability.md); this is the second line of defence.
+pub fn guard<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    let was = GUARDED.with(|g| g.replace(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    GUARDED.with(|g| g.set(was));
+    match r {
+        Ok(r) => r,
+        Err(p) => {
+            let msg = p
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| p.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "unknown".into());
+            Err(Error::input(
+                path,
+                format!("malformed file: the parser gave up ({msg})"),
+            ))
+        }
+    }
+}

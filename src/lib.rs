@@ -10,6 +10,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Numerics index arrays by axis and node; iterator rewrites would hide the maths.
 #![allow(clippy::needless_range_loop)]
+// No unwrap/expect outside tests: input-dependent failures are errors, not panics (issue 7).
+#![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod case;
 pub mod compare;

@@ -1,5 +1,7 @@
 //! The `facesim` command line (CASE.md "Commands").
 
+#![deny(clippy::unwrap_used, clippy::expect_used)]
+
 use clap::{Parser, Subcommand};
 use facesim::error::{Error, Result};
 use facesim::progress::Progress;
@@ -91,9 +93,16 @@ enum Cmd {
     },
 }
 
+/// What the command works on, for the internal-error message.
+static SUBJECT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
 fn main() -> ExitCode {
     // Any panic left is a bug: one line, not a backtrace wall.
     std::panic::set_hook(Box::new(|info| {
+        // Inside a guarded reader the panic becomes an ordinary one-line input error.
+        if facesim::error::in_guard() {
+            return;
+        }
         let msg = info
             .payload()
             .downcast_ref::<&str>()
@@ -104,12 +113,28 @@ fn main() -> ExitCode {
             .location()
             .map(|l| format!(" at {}:{}", l.file(), l.line()))
             .unwrap_or_default();
+        let subject = SUBJECT
+            .get()
+            .map(|s| format!(" while working on {s}"))
+            .unwrap_or_default();
         eprintln!(
-            "facesim: internal error{at}: {} (please report this with the case)",
+            "facesim: internal error{subject}{at}: {} (please report this with the case)",
             msg.replace('\n', " ")
         );
     }));
     let cli = Cli::parse();
+    let subject = match &cli.cmd {
+        Cmd::Run { case_dir, .. } => Some(case_dir.display().to_string()),
+        Cmd::Inspect { path } => Some(path.display().to_string()),
+        Cmd::Study { out_dir, .. } => Some(format!("the study into {}", out_dir.display())),
+        Cmd::Compare { a, b, .. } => Some(format!("{} and {}", a.display(), b.display())),
+        Cmd::Render { meshes, .. } => meshes.first().map(|m| m.display().to_string()),
+        Cmd::Phantom { dir, .. } => Some(dir.display().to_string()),
+        Cmd::Bench { .. } => None,
+    };
+    if let Some(s) = subject {
+        let _ = SUBJECT.set(s);
+    }
     if let Some(n) = cli.threads {
         let _ = rayon::ThreadPoolBuilder::new()
             .num_threads(n.max(1))

@@ -422,9 +422,15 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         );
         None
     } else {
-        Some(crate::solve::solve(
-            &skin, &springs, &plan, &rigid, &params,
-        )?)
+        // An impossible plan is the case file's fault: name it.
+        Some(
+            crate::solve::solve(&skin, &springs, &plan, &rigid, &params).map_err(|e| match e {
+                Error::Config(m) if m.starts_with("impossible plan") => {
+                    Error::input(dir.join("case.toml"), m)
+                }
+                other => other,
+            })?,
+        )
     };
     report
         .timings

@@ -306,16 +306,14 @@ pub fn read_mesh(path: &Path) -> Result<Mesh> {
         .extension()
         .map(|e| e.to_string_lossy().to_lowercase())
         .unwrap_or_default();
-    let mesh = match ext.as_str() {
-        "obj" => obj::read(path)?,
-        "ply" => ply::read(path)?,
-        _ => {
-            return Err(Error::input(
-                path,
-                "unknown mesh format (expected .obj or .ply)",
-            ));
-        }
-    };
+    let mesh = crate::error::guard(path, || match ext.as_str() {
+        "obj" => obj::read(path),
+        "ply" => ply::read(path),
+        _ => Err(Error::input(
+            path,
+            "unknown mesh format (expected .obj or .ply)",
+        )),
+    })?;
     mesh.check(path)?;
     Ok(mesh)
 }

@@ -42,6 +42,9 @@ pub struct FaceRow {
     /// Distances to the reference on its vertices (mm); None for a failed method.
     pub distance: Option<DistanceStats>,
     pub is_reference: bool,
+    /// Mean |displacement| (mm) the method predicts over the reference's movable vertices (a
+    /// method that predicted no change would be this far from a method that did).
+    pub mean_displacement_mm: Option<f64>,
     /// What went wrong (diverged, did not converge), or a remark.
     pub note: Option<String>,
 }
@@ -238,6 +241,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 peak_mb: peak.zip(m_springs).map(|(a, b)| a.max(b)),
                 distance: None,
                 is_reference: li == 0 && model == SolveModel::Equilibrium,
+                mean_displacement_mm: None,
                 note: None,
             };
             match sol {
@@ -305,6 +309,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 peak_mb: peak,
                 distance: None,
                 is_reference: false,
+                mean_displacement_mm: None,
                 note,
             });
         }
@@ -375,6 +380,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 peak_mb: peak,
                 distance: None,
                 is_reference: false,
+                mean_displacement_mm: None,
                 note: None,
             };
             match r {
@@ -428,11 +434,23 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
             .map(|((a, b), _)| crate::mesh::norm(sub(*a, *b)))
             .collect();
         rows[row].distance = Some(stats(&dist));
+        rows[row].mean_displacement_mm = Some(mean_norm(&d_at_ref, &ref_rigid));
     }
     for row in rows.iter_mut().filter(|r| r.is_reference) {
         row.distance = Some(stats(&[0.0]));
+        row.mean_displacement_mm = Some(mean_norm(&ref_d, &ref_rigid));
     }
     Ok(rows)
+}
+
+fn mean_norm(d: &[[f64; 3]], rigid: &[bool]) -> f64 {
+    let v: Vec<f64> = d
+        .iter()
+        .zip(rigid)
+        .filter(|(_, r)| !**r)
+        .map(|(d, _)| crate::mesh::norm(*d))
+        .collect();
+    v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
 fn model_name(m: SolveModel) -> &'static str {

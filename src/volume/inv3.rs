@@ -40,8 +40,11 @@ pub fn read(path: &Path) -> Result<Volume> {
                 format!("member {name} is {size} bytes: too large"),
             ));
         }
-        let mut buf = Vec::with_capacity(size as usize);
-        entry
+        // The size is the archive's claim: read at most that much, without reserving it first
+        // (a corrupt header must not make us allocate gigabytes).
+        let mut buf = Vec::new();
+        (&mut entry)
+            .take(size)
             .read_to_end(&mut buf)
             .map_err(|e| Error::input(path, format!("corrupt project archive at {name} ({e})")))?;
         files.insert(name, buf);

@@ -285,18 +285,20 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
         .file_name()
         .map(|n| n.to_string_lossy().to_lowercase())
         .unwrap_or_default();
-    let vol = if path.is_dir() {
-        dicom_io::read_series(path)?
-    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        nifti_io::read(path)?
-    } else if name.ends_with(".inv3") {
-        inv3::read(path)?
-    } else {
-        return Err(Error::input(
-            path,
-            "unknown volume format (expected .nii, .nii.gz, .inv3 or a DICOM series directory)",
-        ));
-    };
+    let vol = crate::error::guard(path, || {
+        if path.is_dir() {
+            dicom_io::read_series(path)
+        } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+            nifti_io::read(path)
+        } else if name.ends_with(".inv3") {
+            inv3::read(path)
+        } else {
+            Err(Error::input(
+                path,
+                "unknown volume format (expected .nii, .nii.gz, .inv3 or a DICOM series directory)",
+            ))
+        }
+    })?;
     vol.check_finite(path)?;
     Ok(vol)
 }
