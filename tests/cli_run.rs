@@ -334,3 +334,33 @@ fn a_moved_scan_is_registered_back_by_landmarks() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert!(r.stderr.contains("check the registration"), "{}", r.stderr);
 }
+
+#[test]
+fn impossible_plans_and_empty_cts_are_refused() {
+    // A segment that selects nothing.
+    let c = case_with(
+        "[[osteotomy]]\nname = \"nowhere\"\nregion = { box = { min = [500, 500, 500], max = [501, 501, 501] } }\ntranslate = [0, -5, 0]\n",
+    );
+    fails_writing_nothing(&c, "case.toml", "contains none");
+    // A movable-region mask that does not exist.
+    let c = case_with("[surface]\nmovable = { mask = \"nomask.nii.gz\" }\n");
+    fails_writing_nothing(&c, "nomask.nii.gz", "not found");
+    // The mandible moved 40 mm forward through 13 mm of soft tissue (cm typed as mm, say).
+    let c = case_with(
+        "[[osteotomy]]\nname = \"mandible\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\ntranslate = [0.0, -40.0, 0.0]\n",
+    );
+    fails_writing_nothing(&c, "case.toml", "moves through the skin");
+    // A CT of air only: no head, no skin.
+    let n = 24;
+    let v = facesim::volume::Volume {
+        dims: [n, n, n],
+        spacing: [2.0; 3],
+        origin: [-23.0; 3],
+        direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        data: vec![-1000.0; n * n * n],
+    };
+    let d = tempfile::tempdir().unwrap();
+    facesim::volume::nifti_io::write(&v, &d.path().join("air.nii.gz")).unwrap();
+    std::fs::write(d.path().join("case.toml"), "[ct]\npath = \"air.nii.gz\"\n").unwrap();
+    fails_writing_nothing(d.path(), "air.nii.gz", "");
+}

@@ -91,7 +91,7 @@ pub fn machine() -> Machine {
     }
 }
 
-fn findings(benches: &[Benchmark], quick: bool) -> Findings {
+fn findings(benches: &[Benchmark]) -> Findings {
     let mut worst: f64 = 0.0;
     let mut orderings = Vec::new();
     for b in benches {
@@ -130,7 +130,7 @@ fn findings(benches: &[Benchmark], quick: bool) -> Findings {
             });
         }
     }
-    let n = if quick { 8 } else { 16 };
+    let n = 8;
     let (b1, b2) = (Block::new(n, MP1), Block::new(n, MP2));
     let stat = |b: &Block| {
         crate::dynamics::integrate(b, Integrator::QuasiStatic, 100.0, 1, benchmarks::RAYLEIGH)
@@ -170,7 +170,7 @@ pub fn run(out: &Path, quick: bool, cases: &[PathBuf], progress: &Progress) -> R
     let benches = benchmarks::all(quick);
     progress.stage("study: stability (critical steps)");
     let stability = benchmarks::stability(quick);
-    let found = findings(&benches, quick);
+    let found = findings(&benches);
     let mut face = Vec::new();
     for c in cases {
         face.extend(face::study_case(c, quick, progress)?);
