@@ -49,10 +49,17 @@ enum Cmd {
     },
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
-    /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh.
+    /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
+    /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out).
     Bench {
-        #[arg(value_parser = ["fem"])]
+        #[arg(value_parser = ["fem", "scaling"])]
         what: String,
+        /// Output directory for `scaling`.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// `scaling`: two small sizes per series only.
+        #[arg(long)]
+        quick: bool,
         /// Triangles in the mesh.
         #[arg(long, default_value_t = 40000)]
         triangles: usize,
@@ -200,9 +207,20 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             Ok(())
         }
         Cmd::Bench {
-            what: _,
-            triangles,
-            export,
+            what, out, quick, ..
+        } if what == "scaling" => {
+            let out = out.ok_or_else(|| Error::config("bench scaling: --out DIR is required"))?;
+            let s = facesim::scaling::run(&out, quick, &Progress::auto())?;
+            for f in &s.fits {
+                println!(
+                    "{:5} {:18} exponent {:5.2}  largest {:.3} s",
+                    f.series, f.stage, f.exponent, f.largest_wall_s
+                );
+            }
+            Ok(())
+        }
+        Cmd::Bench {
+            triangles, export, ..
         } => {
             if !(2..=20_000_000).contains(&triangles) {
                 return Err(Error::config(

@@ -13,7 +13,6 @@ use crate::volume::{self, Volume};
 use serde::Serialize;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 #[derive(Default, Serialize)]
 pub struct Report {
@@ -22,6 +21,8 @@ pub struct Report {
     pub facesim_version: String,
     /// Stage → wall time (s), in pipeline order.
     pub timings: serde_json::Map<String, Value>,
+    /// Stage → wall time, CPU time (all threads) and peak heap above the stage's start.
+    pub stage_costs: serde_json::Map<String, Value>,
     pub counts: serde_json::Map<String, Value>,
     pub segmentation: Option<segment::SegmentReport>,
     pub surfaces: serde_json::Map<String, Value>,
@@ -34,6 +35,14 @@ pub struct Report {
     pub displacement: serde_json::Map<String, Value>,
     pub warnings: Vec<String>,
     pub stages_not_run: Vec<String>,
+}
+
+impl Report {
+    fn record(&mut self, stage: &str, c: crate::meter::StageCost) {
+        self.timings.insert(stage.into(), json!(c.wall_s));
+        self.stage_costs
+            .insert(stage.into(), serde_json::to_value(c).unwrap_or(Value::Null));
+    }
 }
 
 /// Everything the pipeline produced so far (kept in memory for tests and later stages).
@@ -54,11 +63,9 @@ struct Timer<'a> {
 
 impl Timer<'_> {
     fn time<T>(&mut self, stage: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
-        let t = Instant::now();
+        let m = crate::meter::Meter::start();
         let r = f()?;
-        self.report
-            .timings
-            .insert(stage.into(), json!(t.elapsed().as_secs_f64()));
+        self.report.record(stage, m.stop());
         Ok(r)
     }
 }
@@ -302,7 +309,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
     timer.report.registration = registration;
 
     progress.stage("tracing springs");
-    let t = Instant::now();
+    let meter = crate::meter::Meter::start();
     let springs = crate::springs::trace(
         &skin,
         &vol,
@@ -312,10 +319,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         &case.tissue.stiffness,
     );
     drop(bone_field);
-    timer
-        .report
-        .timings
-        .insert("springs".into(), json!(t.elapsed().as_secs_f64()));
+    timer.report.record("springs", meter.stop());
     let spring_report = springs.report(&skin);
     if springs.attachments.is_empty() {
         return Err(Error::Numerical(format!(
@@ -384,7 +388,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
 }
 
 pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<Outcome> {
-    let t_total = Instant::now();
+    let total = crate::meter::Meter::start();
     let (case, dir) = Case::load(case_path)?;
     let out_dir = out
         .map(Path::to_path_buf)
@@ -413,7 +417,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     } = prepare(&case, progress, &mut report)?;
     let mut warnings = std::mem::take(&mut report.warnings);
     progress.stage("solving");
-    let t = Instant::now();
+    let meter = crate::meter::Meter::start();
     // No bone moves: the preloaded skin is an equilibrium by construction (F_init = K a_init),
     // so the prediction is the pre-operative face; skip the factorisation.
     let sol = if plan.is_empty() {
@@ -432,9 +436,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             })?,
         )
     };
-    report
-        .timings
-        .insert("solve".into(), json!(t.elapsed().as_secs_f64()));
+    report.record("solve", meter.stop());
     let mut face_post = skin.clone();
     if let Some(sol) = &sol {
         face_post.vertices = sol.positions.clone();
@@ -470,7 +472,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     report.solve = sol.as_ref().map(|s| s.history.clone());
 
     progress.stage("writing outputs");
-    let t = Instant::now();
+    let meter = crate::meter::Meter::start();
     std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
     mesh::write_mesh(&face_post, &out_dir.join("face_post.obj"))?;
     mesh::write_mesh(&face_post, &out_dir.join("face_post.ply"))?;
@@ -512,12 +514,19 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     mesh::write_mesh(&skin, &out_dir.join("face_pre.ply"))?;
     mesh::write_mesh(&skull, &out_dir.join("skull_pre.ply"))?;
     volume::nifti_io::write_labels(&vol, &seg.labels, &out_dir.join("labels.nii.gz"))?;
+    report.record("write", meter.stop());
+    // Stage meters reset the heap high-water mark, so the whole run's peak is the process's
+    // resident maximum instead.
+    report.record(
+        "total",
+        crate::meter::StageCost {
+            peak_heap_mb: None,
+            ..total.stop()
+        },
+    );
     report
-        .timings
-        .insert("write".into(), json!(t.elapsed().as_secs_f64()));
-    report
-        .timings
-        .insert("total".into(), json!(t_total.elapsed().as_secs_f64()));
+        .counts
+        .insert("max_rss_mb".into(), json!(crate::meter::max_rss_mb()));
 
     report.counts.insert("voxels".into(), json!(vol.len()));
     report.counts.insert("dims".into(), json!(vol.dims));

@@ -289,3 +289,82 @@ pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) ->
         &|r| draw(r, case, &pts, &families, reference),
     )
 }
+
+/// Log-log lines (size, seconds), one per labelled series.
+pub fn loglog(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    xlabel: &str,
+    lines: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        title: &str,
+        xlabel: &str,
+        lines: &[(String, Vec<(f64, f64)>)],
+    ) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let all: Vec<(f64, f64)> = lines
+            .iter()
+            .flat_map(|l| l.1.iter().copied())
+            .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+            .collect();
+        let (x0, x1, y0, y1) = all.iter().fold(
+            (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64),
+            |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+        );
+        let (x0, x1, y0, y1) = if all.is_empty() {
+            (1.0, 10.0, 1e-3, 1.0)
+        } else {
+            (x0 / 1.3, x1 * 1.3, y0 / 2.0, y1 * 2.0)
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc(xlabel)
+            .y_desc("wall time (s)")
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()?;
+        for (i, (label, pts)) in lines.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let pts: Vec<(f64, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                });
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    both(
+        dir,
+        stem,
+        (1000, 700),
+        &|r| draw(r, title, xlabel, lines),
+        &|r| draw(r, title, xlabel, lines),
+    )
+}
