@@ -257,3 +257,22 @@ fn write(out: &Path, s: &Scaling) -> Result<()> {
     md.push_str("\n![ct](scaling_ct.png)\n![mesh](scaling_mesh.png)\n");
     write_bytes_atomic(&out.join("summary.md"), |w| w.write_all(md.as_bytes()))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exponent_of_a_power_law_is_exact() {
+        let pts: Vec<(f64, f64)> = [1e3, 1e4, 1e5, 1e6]
+            .iter()
+            .map(|&x| (x, 3.0 * f64::powf(x, 1.37)))
+            .collect();
+        assert!((exponent(&pts) - 1.37).abs() < 1e-12);
+        // x log x between 1e3 and 1e6 reads as an exponent a little above 1.
+        let nlogn: Vec<(f64, f64)> = [1e3, 1e6].iter().map(|&x| (x, x * f64::ln(x))).collect();
+        let e = exponent(&nlogn);
+        assert!(e > 1.0 && e < 1.15, "{e}");
+        assert!(exponent(&pts[..1]).is_nan());
+    }
+}

@@ -7,7 +7,7 @@
 use super::Volume;
 use crate::error::{Context, Error, Result};
 use crate::output::write_atomic;
-use nifti::{IntoNdArray, NiftiHeader, NiftiObject, NiftiType, ReaderOptions};
+use nifti::{IntoNdArray, NiftiHeader, NiftiObject, NiftiType, NiftiVolume, ReaderOptions};
 use std::path::Path;
 
 /// Voxel→RAS affine (3×4, rows) of a header, by the CASE.md precedence.
@@ -177,6 +177,32 @@ pub fn read(path: &Path) -> Result<Volume> {
             format!("cannot read NIfTI voxels ({e}); truncated or corrupt?"),
         )
     })?;
+    // A .nii.gz whose stream ends early decompresses to fewer bytes than the header promises;
+    // the nifti crate would panic converting it (found by tests/fuzz.rs), so check first.
+    let shape: Vec<u64> = obj.volume().dim().iter().map(|&d| d as u64).collect();
+    let n_crate = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
+    if n_crate != Some(dims.iter().product::<usize>() as u64) {
+        return Err(Error::input(
+            path,
+            format!("inconsistent NIfTI dimensions {shape:?} (header checked as {dims:?})"),
+        ));
+    }
+    let need = dims.iter().product::<usize>() * obj.volume().data_type().size_of();
+    let have = obj.volume().raw_data().len();
+    if have < need {
+        return Err(Error::input(
+            path,
+            format!("truncated: {have} bytes of voxel data, the header needs {need}"),
+        ));
+    }
+    // A partial trailing value makes the crate's byte swapping panic (also found by fuzzing).
+    let size = obj.volume().data_type().size_of().max(1);
+    if have % size != 0 {
+        return Err(Error::input(
+            path,
+            format!("{have} bytes of voxel data are not a whole number of {size}-byte values"),
+        ));
+    }
     // into_ndarray applies scl_slope/scl_inter (slope 0 → identity).
     let arr = obj
         .into_volume()
