@@ -255,6 +255,12 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         surface::planar_uv(&mut skin);
     }
     skin.check(Path::new("extracted skin surface"))?;
+    if skull.triangles.is_empty() {
+        return Err(Error::Numerical(format!(
+            "no skull surface: no bone found within {} mm of the skin; raise [springs] max_length_mm or check the [tissue] bone window",
+            case.springs.max_length_mm
+        )));
+    }
     skull.check(Path::new("extracted skull surface"))?;
     surf.insert(
         "extracted_skin_components".into(),

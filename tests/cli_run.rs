@@ -364,3 +364,31 @@ fn impossible_plans_and_empty_cts_are_refused() {
     std::fs::write(d.path().join("case.toml"), "[ct]\npath = \"air.nii.gz\"\n").unwrap();
     fails_writing_nothing(d.path(), "air.nii.gz", "");
 }
+
+#[test]
+fn numerical_faults_are_reported_with_what_to_change() {
+    // Every spring misses: bone is never within half a millimetre of the skin.
+    let c = case_with("[springs]\nmax_length_mm = 0.5\n");
+    let r = run(&c);
+    assert_ne!(r.code, 0);
+    assert_eq!(r.stderr.trim().lines().count(), 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("numerical failure") && r.stderr.contains("max_length_mm"),
+        "{}",
+        r.stderr
+    );
+    assert!(!c.join("out").exists());
+    // koch1996 with no rigid skin: K alone has rigid-body modes (singular).
+    let c = case_with(
+        "[surface]\nmovable = { sphere = { center = [0.0, 0.0, 0.0], radius = 5000.0 } }\n[solve]\nmodel = \"koch1996\"\n[[osteotomy]]\nname = \"mandible\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\ntranslate = [0.0, -6.0, 0.0]\n",
+    );
+    let r = run(&c);
+    assert_ne!(r.code, 0);
+    assert_eq!(r.stderr.trim().lines().count(), 1, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("numerical failure") && r.stderr.contains("rigid"),
+        "{}",
+        r.stderr
+    );
+    assert!(!c.join("out").exists());
+}
