@@ -209,6 +209,9 @@ pub struct Solve {
     /// Force scale k_c of eq. 20 for the koch1996 model (forces are loads there, not springs,
     /// so the scale is a different quantity; docs/pipeline.md).
     pub koch_k_c: f64,
+    /// Solve only on the movable skin and its ring of rigid neighbours (exact: elements whose
+    /// DOFs are all fixed add nothing). Off solves on the whole skin.
+    pub restrict: bool,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

@@ -375,6 +375,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         },
         tolerance: 1e-6,
         max_iterations: 30,
+        restrict: case.solve.restrict,
     };
     timer.report.surfaces = surf;
     timer.report.warnings = warnings;

@@ -37,6 +37,8 @@ pub struct Params {
     pub k_c: f64,
     pub tolerance: f64,
     pub max_iterations: usize,
+    /// Solve only on the skin the bone moves can reach (exact; `[solve] restrict`).
+    pub restrict: bool,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -137,6 +139,87 @@ fn check_plan_reach(skin: &Mesh, springs: &SpringSet, plan: &Plan) -> Result<()>
     Ok(())
 }
 
+/// The skin the bone moves can reach: the movable vertices, their rigid neighbours (so every free
+/// DOF keeps its whole fitting neighbourhood) and every triangle touching them. Triangles whose
+/// twelve DOFs are all fixed add nothing to the equilibrium of the free ones, so solving on this
+/// piece is exact; on the real CT it is a fraction of the face (MODEL.md §6, issue 6).
+struct Restriction {
+    skin: Mesh,
+    springs: SpringSet,
+    rigid: Vec<bool>,
+    /// Sub-mesh vertex → full-mesh vertex (increasing, so edge orientation is preserved).
+    to_full: Vec<usize>,
+}
+
+impl Restriction {
+    fn new(skin: &Mesh, springs: &SpringSet, rigid: &[bool]) -> Option<Restriction> {
+        let nv = skin.vertices.len();
+        let mut near: Vec<bool> = rigid.iter().map(|r| !r).collect();
+        for t in &skin.triangles {
+            if t.iter().any(|&v| !rigid[v as usize]) {
+                for &v in t {
+                    near[v as usize] = true;
+                }
+            }
+        }
+        let keep: Vec<&[u32; 3]> = skin
+            .triangles
+            .iter()
+            .filter(|t| t.iter().any(|&v| near[v as usize]))
+            .collect();
+        if keep.len() == skin.triangles.len() || keep.is_empty() {
+            return None;
+        }
+        let mut used = vec![false; nv];
+        for t in &keep {
+            for &v in *t {
+                used[v as usize] = true;
+            }
+        }
+        let to_full: Vec<usize> = (0..nv).filter(|&v| used[v]).collect();
+        let mut to_sub = vec![u32::MAX; nv];
+        for (i, &v) in to_full.iter().enumerate() {
+            to_sub[v] = i as u32;
+        }
+        let mut sub = Mesh::new(
+            to_full.iter().map(|&v| skin.vertices[v]).collect(),
+            keep.iter().map(|t| t.map(|v| to_sub[v as usize])).collect(),
+        );
+        sub.vertex_columns = skin
+            .vertex_columns
+            .iter()
+            .map(|c| crate::mesh::Column {
+                name: c.name.clone(),
+                values: to_full.iter().map(|&v| c.values[v]).collect(),
+            })
+            .collect();
+        let sub_springs = SpringSet {
+            attachment_of: to_full.iter().map(|&v| springs.attachment_of[v]).collect(),
+            attachments: springs.attachments.clone(),
+            springs: springs
+                .springs
+                .iter()
+                .filter(|s| used[s.skin])
+                .map(|s| crate::springs::Spring {
+                    skin: to_sub[s.skin] as usize,
+                    ..s.clone()
+                })
+                .collect(),
+            k: to_full.iter().map(|&v| springs.k[v]).collect(),
+            misses: Vec::new(),
+        };
+        Some(Restriction {
+            skin: sub,
+            springs: sub_springs,
+            rigid: to_full.iter().map(|&v| rigid[v]).collect(),
+            to_full,
+        })
+    }
+}
+
+/// Solve for the predicted face: on the reachable piece of the skin when `[solve] restrict` is on
+/// and part of the skin is rigid (exact), else on the whole mesh. The returned C1 field covers the
+/// whole face either way (the rigid part keeps its preloaded DOFs).
 pub fn solve(
     skin: &Mesh,
     springs: &SpringSet,
@@ -145,6 +228,77 @@ pub fn solve(
     p: &Params,
 ) -> Result<Solution> {
     check_plan_reach(skin, springs, plan)?;
+    let Some(r) = p
+        .restrict
+        .then(|| Restriction::new(skin, springs, rigid))
+        .flatten()
+    else {
+        return solve_mesh(skin, springs, plan, rigid, p);
+    };
+    let s = solve_mesh(&r.skin, &r.springs, plan, &r.rigid, p)?;
+    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
+    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
+    let fem = FemMesh::new(uv, skin.triangles.clone())?;
+    let mut a: [Vec<f64>; 3] = [
+        initial_dofs(
+            &fem,
+            &skin.vertices.iter().map(|x| x[0]).collect::<Vec<_>>(),
+        )?,
+        initial_dofs(
+            &fem,
+            &skin.vertices.iter().map(|x| x[1]).collect::<Vec<_>>(),
+        )?,
+        initial_dofs(
+            &fem,
+            &skin.vertices.iter().map(|x| x[2]).collect::<Vec<_>>(),
+        )?,
+    ];
+    let edge_index: std::collections::HashMap<[u32; 2], usize> =
+        fem.edges.iter().enumerate().map(|(i, e)| (*e, i)).collect();
+    let (nv_sub, nv) = (r.skin.vertices.len(), skin.vertices.len());
+    for c in 0..3 {
+        // Only the free DOFs come from the piece: fixed ones keep the whole face's preload
+        // (the piece's fits at its edge see a truncated neighbourhood).
+        for (i, &g) in r.to_full.iter().enumerate() {
+            if !r.rigid[i] {
+                for k in 0..3 {
+                    a[c][3 * g + k] = s.a[c][3 * i + k];
+                }
+            }
+        }
+        for (e, ed) in s.fem.edges.iter().enumerate() {
+            if r.rigid[ed[0] as usize] && r.rigid[ed[1] as usize] {
+                continue;
+            }
+            let full = [
+                r.to_full[ed[0] as usize] as u32,
+                r.to_full[ed[1] as usize] as u32,
+            ];
+            if let Some(&fe) = edge_index.get(&full) {
+                a[c][3 * nv + fe] = s.a[c][3 * nv_sub + e];
+            }
+        }
+    }
+    let mut positions = skin.vertices.clone();
+    for (i, &g) in r.to_full.iter().enumerate() {
+        positions[g] = s.positions[i];
+    }
+    Ok(Solution {
+        fem,
+        a,
+        positions,
+        history: s.history,
+        unknowns: s.unknowns,
+    })
+}
+
+fn solve_mesh(
+    skin: &Mesh,
+    springs: &SpringSet,
+    plan: &Plan,
+    rigid: &[bool],
+    p: &Params,
+) -> Result<Solution> {
     let (u, v) = (column(skin, "u")?, column(skin, "v")?);
     let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
     let fem = FemMesh::new(uv, skin.triangles.clone())?;

@@ -10,6 +10,7 @@ use super::element::edge_normal;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Least-squares fit of c0 + c1 du + c2 dv + c3 du² + c4 du dv + c5 dv² (du, dv from `at`,
@@ -81,27 +82,40 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
         }
         None
     };
-    for v in 0..nv {
-        let g = gradient(&[v as u32], mesh.uv[v], Some(values[v])).ok_or_else(|| {
-            Error::Numerical(format!(
-                "preloading: vertex {v} has too few neighbours to fit its tangent plane"
-            ))
-        })?;
+    // Every fit is independent: in parallel (results land by index, so they are the same for
+    // any thread count).
+    let corner: Vec<[f64; 3]> = (0..nv)
+        .into_par_iter()
+        .map(|v| {
+            gradient(&[v as u32], mesh.uv[v], Some(values[v])).ok_or_else(|| {
+                Error::Numerical(format!(
+                    "preloading: vertex {v} has too few neighbours to fit its tangent plane"
+                ))
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    for (v, g) in corner.iter().enumerate() {
         a[3 * v] = values[v];
         a[3 * v + 1] = g[1];
         a[3 * v + 2] = g[2];
     }
-    for (e, ed) in mesh.edges.iter().enumerate() {
-        let (p, q) = (mesh.uv[ed[0] as usize], mesh.uv[ed[1] as usize]);
-        let mid = [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])];
-        let g = gradient(&[ed[0], ed[1]], mid, None).ok_or_else(|| {
-            Error::Numerical(format!(
-                "preloading: edge {e} has too few neighbours for a fit"
-            ))
-        })?;
-        let n = edge_normal(p, q);
-        a[3 * nv + e] = g[1] * n[0] + g[2] * n[1];
-    }
+    let cross: Vec<f64> = mesh
+        .edges
+        .par_iter()
+        .enumerate()
+        .map(|(e, ed)| {
+            let (p, q) = (mesh.uv[ed[0] as usize], mesh.uv[ed[1] as usize]);
+            let mid = [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])];
+            let g = gradient(&[ed[0], ed[1]], mid, None).ok_or_else(|| {
+                Error::Numerical(format!(
+                    "preloading: edge {e} has too few neighbours for a fit"
+                ))
+            })?;
+            let n = edge_normal(p, q);
+            Ok(g[1] * n[0] + g[2] * n[1])
+        })
+        .collect::<Result<Vec<_>>>()?;
+    a[3 * nv..3 * nv + cross.len()].copy_from_slice(&cross);
     Ok(a)
 }
 
