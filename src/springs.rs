@@ -69,7 +69,7 @@ pub struct SpringReport {
 
 /// Relative stiffness of a label (bone is the end of a spring; air inside the head, e.g. a
 /// sinus on the way, gets the softest tissue's value).
-fn tissue_c(label: u8, s: &Stiffness) -> f64 {
+pub(crate) fn tissue_c(label: u8, s: &Stiffness) -> f64 {
     match label {
         segment::SKIN => s.skin,
         segment::MUSCLE => s.muscle,

@@ -45,13 +45,12 @@ pub struct Prediction {
     pub unknowns: usize,
 }
 
+/// The spring tracer's relative stiffness for soft tissue; 0 for air and bone (no node or a
+/// Dirichlet node).
 fn tissue_c(label: u8, s: &Stiffness) -> f64 {
     match label {
-        segment::SKIN => s.skin,
-        segment::MUSCLE => s.muscle,
-        segment::FAT_DARK => s.fat_dark,
-        segment::FAT_BRIGHT => s.fat_bright,
-        _ => 0.0,
+        0 | segment::BONE => 0.0,
+        l => crate::springs::tissue_c(l, s),
     }
 }
 
@@ -360,15 +359,9 @@ pub fn predict(
             }
         }
         Kind::Tetrahedra => {
-            // Kuhn split of the cube: six tetrahedra around the main diagonal 0–7.
-            const KUHN: [[usize; 4]; 6] = [
-                [0, 1, 3, 7],
-                [0, 1, 5, 7],
-                [0, 2, 3, 7],
-                [0, 2, 6, 7],
-                [0, 4, 5, 7],
-                [0, 4, 6, 7],
-            ];
+            // Kuhn split of the cube: six tetrahedra around the main diagonal 0–7 (the same
+            // split marching tetrahedra uses).
+            use crate::surface::marching::TETS as KUHN;
             for &i in &cubes {
                 let (x, y, z) = (i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1]));
                 let cs: Vec<usize> = (0..8)

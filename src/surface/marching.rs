@@ -19,8 +19,9 @@ const CORNER: [[usize; 3]; 8] = [
     [0, 1, 1],
     [1, 1, 1],
 ];
-/// Kuhn tetrahedra: paths 0 → 7 through the cube's corners.
-const TETS: [[usize; 4]; 6] = [
+/// Kuhn tetrahedra: paths 0 → 7 through the cube's corners (corner bit 0 = +i, 1 = +j, 2 = +k;
+/// also the volumetric FEM's split in `study::volumetric`).
+pub const TETS: [[usize; 4]; 6] = [
     [0, 1, 3, 7],
     [0, 1, 5, 7],
     [0, 2, 3, 7],
