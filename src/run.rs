@@ -437,7 +437,12 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         Some(
             crate::solve::solve(&skin, &springs, &plan, &rigid, &params).map_err(|e| match e {
                 Error::Config(m) if m.starts_with("impossible plan") => {
-                    Error::input(dir.join("case.toml"), m)
+                    let file = if case_path.is_dir() {
+                        case_path.join("case.toml")
+                    } else {
+                        case_path.to_path_buf()
+                    };
+                    Error::input(file, m)
                 }
                 other => other,
             })?,
