@@ -217,6 +217,21 @@ impl Restriction {
     }
 }
 
+/// The skin's C1 mesh over its (u, v) columns and the preloaded DOFs a_init of x, y, z (§5).
+fn preloaded(skin: &Mesh) -> Result<(FemMesh, [Vec<f64>; 3])> {
+    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
+    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
+    let fem = FemMesh::new(uv, skin.triangles.clone())?;
+    let field = |c: usize| {
+        initial_dofs(
+            &fem,
+            &skin.vertices.iter().map(|x| x[c]).collect::<Vec<_>>(),
+        )
+    };
+    let a = [field(0)?, field(1)?, field(2)?];
+    Ok((fem, a))
+}
+
 /// Solve for the predicted face: on the reachable piece of the skin when `[solve] restrict` is on
 /// and part of the skin is rigid (exact), else on the whole mesh. The returned C1 field covers the
 /// whole face either way (the rigid part keeps its preloaded DOFs).
@@ -236,23 +251,7 @@ pub fn solve(
         return solve_mesh(skin, springs, plan, rigid, p);
     };
     let s = solve_mesh(&r.skin, &r.springs, plan, &r.rigid, p)?;
-    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
-    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
-    let fem = FemMesh::new(uv, skin.triangles.clone())?;
-    let mut a: [Vec<f64>; 3] = [
-        initial_dofs(
-            &fem,
-            &skin.vertices.iter().map(|x| x[0]).collect::<Vec<_>>(),
-        )?,
-        initial_dofs(
-            &fem,
-            &skin.vertices.iter().map(|x| x[1]).collect::<Vec<_>>(),
-        )?,
-        initial_dofs(
-            &fem,
-            &skin.vertices.iter().map(|x| x[2]).collect::<Vec<_>>(),
-        )?,
-    ];
+    let (fem, mut a) = preloaded(skin)?;
     let edge_index: std::collections::HashMap<[u32; 2], usize> =
         fem.edges.iter().enumerate().map(|(i, e)| (*e, i)).collect();
     let (nv_sub, nv) = (r.skin.vertices.len(), skin.vertices.len());
@@ -299,17 +298,8 @@ fn solve_mesh(
     rigid: &[bool],
     p: &Params,
 ) -> Result<Solution> {
-    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
-    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
-    let fem = FemMesh::new(uv, skin.triangles.clone())?;
+    let (fem, a_init) = preloaded(skin)?;
     let nd = fem.ndof();
-    let field = |c: usize| {
-        initial_dofs(
-            &fem,
-            &skin.vertices.iter().map(|x| x[c]).collect::<Vec<_>>(),
-        )
-    };
-    let a_init: [Vec<f64>; 3] = [field(0)?, field(1)?, field(2)?];
     // Per-element (α, β): the defaults, or the last [[surface.region]] containing the triangle's
     // centroid (Koch §4.2).
     let mats: Vec<Material> = skin
