@@ -188,16 +188,7 @@ impl Block {
             size[1] / ny as f64,
             size[2] / nz as f64,
         ];
-        let (e, nu) = (mat.e, mat.nu);
-        let lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-        let mu = e / (2.0 * (1.0 + nu));
-        let mut d = [[0.0; 6]; 6];
-        for i in 0..3 {
-            for j in 0..3 {
-                d[i][j] = lam + if i == j { 2.0 * mu } else { 0.0 };
-            }
-            d[i + 3][i + 3] = mu;
-        }
+        let d = isotropic_3d(mat.e, mat.nu);
         let gp = 1.0 / 3f64.sqrt();
         let corners: Vec<[f64; 3]> = (0..8)
             .map(|c| {
@@ -232,16 +223,10 @@ impl Block {
             // B: (εxx, εyy, εzz, γxy, γyz, γzx) from (u1x, u1y, u1z, …).
             let mut b = vec![[0.0; 24]; 6];
             for a in 0..8 {
-                let [gx, gy, gz] = grad[a];
-                b[0][3 * a] = gx;
-                b[1][3 * a + 1] = gy;
-                b[2][3 * a + 2] = gz;
-                b[3][3 * a] = gy;
-                b[3][3 * a + 1] = gx;
-                b[4][3 * a + 1] = gz;
-                b[4][3 * a + 2] = gy;
-                b[5][3 * a] = gz;
-                b[5][3 * a + 2] = gx;
+                let ba = strain_rows_3d(grad[a]);
+                for r in 0..6 {
+                    b[r][3 * a..3 * a + 3].copy_from_slice(&ba[r]);
+                }
             }
             for i in 0..24 {
                 for j in 0..24 {
@@ -407,6 +392,34 @@ impl Block {
             None => (0.0, 0.0),
         }
     }
+}
+
+/// Isotropic linear elasticity in 3-D, Voigt order (εxx, εyy, εzz, γxy, γyz, γzx): Lamé λ, μ
+/// from E and ν. Shared by the rod's hexes and the study's tetrahedra.
+pub fn isotropic_3d(e: f64, nu: f64) -> [[f64; 6]; 6] {
+    let lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let mu = e / (2.0 * (1.0 + nu));
+    let mut d = [[0.0; 6]; 6];
+    for i in 0..3 {
+        for j in 0..3 {
+            d[i][j] = lam + if i == j { 2.0 * mu } else { 0.0 };
+        }
+        d[i + 3][i + 3] = mu;
+    }
+    d
+}
+
+/// One node's 6×3 block of the strain–displacement matrix B (same Voigt order) from the
+/// gradient of its shape function.
+pub fn strain_rows_3d([gx, gy, gz]: [f64; 3]) -> [[f64; 3]; 6] {
+    [
+        [gx, 0.0, 0.0],
+        [0.0, gy, 0.0],
+        [0.0, 0.0, gz],
+        [gy, gx, 0.0],
+        [0.0, gz, gy],
+        [gz, 0.0, gx],
+    ]
 }
 
 /// A symmetric positive definite matrix factored once by faer's sparse Cholesky (the

@@ -26,7 +26,6 @@ use crate::run::{Report, Scene, prepare};
 use crate::surface;
 use serde::Serialize;
 use std::path::Path;
-use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct FaceRow {
@@ -114,13 +113,12 @@ fn uv_folds(m: &Mesh) -> usize {
     pos.min(m.triangles.len() - pos)
 }
 
+/// (result, wall seconds, peak heap MB) of `f`, by the same meter as the pipeline's stages.
 fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, Option<f64>) {
-    let base = crate::memory::start();
-    let t = Instant::now();
+    let m = crate::meter::Meter::start();
     let r = f();
-    let wall = t.elapsed().as_secs_f64();
-    let peak = crate::memory::peak_since(base).map(|b| b as f64 / 1e6);
-    (r, wall, peak)
+    let c = m.stop();
+    (r, c.wall_s, c.peak_heap_mb)
 }
 
 /// Run every method on the case at `case_path`.

@@ -197,26 +197,15 @@ fn tetra(t: &mut Vec<(usize, usize, f64)>, nodes: [usize; 4], x: [[f64; 3]; 4], 
     }
     let mut b = SMatrix::<f64, 6, 12>::zeros();
     for a in 0..4 {
-        let [gx, gy, gz] = g[a];
-        b[(0, 3 * a)] = gx;
-        b[(1, 3 * a + 1)] = gy;
-        b[(2, 3 * a + 2)] = gz;
-        b[(3, 3 * a)] = gy;
-        b[(3, 3 * a + 1)] = gx;
-        b[(4, 3 * a + 1)] = gz;
-        b[(4, 3 * a + 2)] = gy;
-        b[(5, 3 * a)] = gz;
-        b[(5, 3 * a + 2)] = gx;
-    }
-    let lam = e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu));
-    let mu = e / (2.0 * (1.0 + nu));
-    let mut d = SMatrix::<f64, 6, 6>::zeros();
-    for i in 0..3 {
-        for j in 0..3 {
-            d[(i, j)] = lam + if i == j { 2.0 * mu } else { 0.0 };
+        let ba = crate::dynamics::strain_rows_3d(g[a]);
+        for r in 0..6 {
+            for c in 0..3 {
+                b[(r, 3 * a + c)] = ba[r][c];
+            }
         }
-        d[(i + 3, i + 3)] = mu;
     }
+    let iso = crate::dynamics::isotropic_3d(e, nu);
+    let d = SMatrix::<f64, 6, 6>::from_fn(|i, j| iso[i][j]);
     let k = b.transpose() * d * b * vol;
     for i in 0..12 {
         for j in 0..=i {
