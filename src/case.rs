@@ -212,6 +212,14 @@ pub struct Solve {
     /// Solve only on the movable skin and its ring of rigid neighbours (exact: elements whose
     /// DOFs are all fixed add nothing). Off solves on the whole skin.
     pub restrict: bool,
+    /// Solve on a copy of the skin decimated to this many triangles and carry the full skin
+    /// along by shell embedding (paper 002), when the skin has more than twice as many.
+    /// 0 = always solve on the skin as given.
+    pub coarse_triangles: usize,
+    /// Depth of the embedding shell below the coarse skin (mm).
+    pub shell_mm: f64,
+    /// Poisson ratio of the shell's thickness rule (paper 002 eq. 2), in [0, 0.5].
+    pub shell_poisson: f64,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -322,6 +330,15 @@ impl Case {
             && self.solve.koch_k_c > 0.0)
         {
             return bad("[solve] k_c and koch_k_c must be finite and positive".into());
+        }
+        if !(self.solve.shell_mm > 0.0
+            && self.solve.shell_mm.is_finite()
+            && (0.0..=0.5).contains(&self.solve.shell_poisson))
+        {
+            return bad("[solve] shell_mm must be positive and shell_poisson in [0, 0.5]".into());
+        }
+        if self.solve.coarse_triangles > 0 && self.solve.coarse_triangles < 200 {
+            return bad("[solve] coarse_triangles must be 0 (off) or at least 200".into());
         }
         if self.solve.steps == 0 {
             return bad("[solve] steps must be at least 1".into());

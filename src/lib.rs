@@ -16,6 +16,7 @@
 pub mod case;
 pub mod compare;
 pub mod dynamics;
+pub mod embed;
 pub mod error;
 pub mod fem;
 pub mod memory;

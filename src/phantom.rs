@@ -240,6 +240,8 @@ pub struct PhantomOptions {
     pub supersample: usize,
     /// Standard deviation of the deterministic noise (HU).
     pub noise_hu: f64,
+    /// Vertex spacing of the face scan (mm); 3 mm gives ~5 k vertices.
+    pub scan_step_mm: f64,
 }
 
 impl Default for PhantomOptions {
@@ -248,6 +250,7 @@ impl Default for PhantomOptions {
             spacing: [1.5, 1.5, 1.5],
             supersample: 3,
             noise_hu: 8.0,
+            scan_step_mm: 3.0,
         }
     }
 }
@@ -400,8 +403,12 @@ pub fn write_case(dir: &std::path::Path, opts: &PhantomOptions) -> Result<()> {
     let vol = ct(opts);
     crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
     crate::volume::dicom_io::write_series(&vol, &dir.join("ct_dicom"), "1")?;
-    // A 3 mm scan: ~5 k vertices, enough for the face's shape and cheap to solve.
-    let step = 3.0;
+    let step = opts.scan_step_mm;
+    if !(step >= 0.1) {
+        return Err(Error::config(format!(
+            "phantom face scan step {step} mm must be at least 0.1 mm"
+        )));
+    }
     crate::mesh::ply::write(
         &face_scan(step),
         &dir.join("face.ply"),

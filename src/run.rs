@@ -148,6 +148,9 @@ pub struct Scene {
     /// Cylinder axis (x, y) and radius of the (u, v) parameterisation.
     pub axis: [f64; 2],
     pub r0: f64,
+    /// The skin as given, when the models run on a coarse copy of it (`skin`) and it is carried
+    /// along by shell embedding ([solve] coarse_triangles).
+    pub fine: Option<Mesh>,
 }
 
 /// Stages 1–4 (read, segment, extract, springs) and the plan; timings, surface facts and
@@ -314,8 +317,41 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
     }
     timer.report.registration = registration;
 
+    // A dense skin is solved on a coarse copy and carried along afterwards (issue 6).
+    let target = case.solve.coarse_triangles;
+    let mut fine = None;
+    if target > 0 && skin.triangles.len() > 2 * target {
+        progress.stage("coarsening the skin");
+        let coarse = timer.time("coarsen", || {
+            Ok(surface::resample_uv(&skin, target)
+                .filter(|m| m.check(Path::new("coarse skin")).is_ok() && surface::uv_folds(m) == 0))
+        })?;
+        match coarse {
+            Some(c) => {
+                surf.insert(
+                    "coarse".into(),
+                    json!({"triangles": c.triangles.len(), "vertices": c.vertices.len(),
+                           "fine_triangles": skin.triangles.len(), "fine_vertices": skin.vertices.len()}),
+                );
+                fine = Some(std::mem::replace(&mut skin, c));
+            }
+            None => warnings.push(format!(
+                "[solve] coarse_triangles = {target}: could not resample the {}-triangle skin on a (u, v) grid; solved on the full skin",
+                skin.triangles.len()
+            )),
+        }
+    }
+    let rigid: Vec<bool> = skin
+        .vertices
+        .iter()
+        .map(|p| match &case.surface.movable {
+            Some(r) => !crate::osteotomy::inside(r, None, *p),
+            None => false,
+        })
+        .collect();
     progress.stage("tracing springs");
     let meter = crate::meter::Meter::start();
+    let want = crate::springs::wanted(&rigid, case.solve.restrict);
     let springs = crate::springs::trace(
         &skin,
         &vol,
@@ -323,6 +359,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         &bone_field,
         &case.springs,
         &case.tissue.stiffness,
+        want.as_deref(),
     );
     drop(bone_field);
     timer.report.record("springs", meter.stop());
@@ -353,15 +390,14 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         ));
     }
     let plan = crate::osteotomy::Plan::new(&case.osteotomy)?;
-    plan.check_selects(&springs.attachments, "spring attachments")?;
-    let rigid: Vec<bool> = skin
-        .vertices
-        .iter()
-        .map(|p| match &case.surface.movable {
-            Some(r) => !crate::osteotomy::inside(r, None, *p),
-            None => false,
-        })
-        .collect();
+    plan.check_selects(
+        &springs.attachments,
+        if want.is_some() {
+            "spring attachments under the movable skin ([surface] movable)"
+        } else {
+            "spring attachments"
+        },
+    )?;
     let params = crate::solve::Params {
         model: case.solve.model,
         steps: case.solve.steps,
@@ -391,6 +427,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
         params,
         axis,
         r0,
+        fine,
     })
 }
 
@@ -420,6 +457,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         plan,
         rigid,
         params,
+        fine,
         ..
     } = prepare(&case, progress, &mut report)?;
     let mut warnings = std::mem::take(&mut report.warnings);
@@ -453,6 +491,48 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
     if let Some(sol) = &sol {
         face_post.vertices = sol.positions.clone();
     }
+    // The coarse model's answer carried to the full skin (paper 002); from here on `skin` is
+    // the full skin again.
+    let coarse_skin = skin;
+    let embedded = fine.is_some();
+    let skin = match fine {
+        None => coarse_skin.clone(),
+        Some(fine) => {
+            progress.stage("carrying the full skin along");
+            let meter = crate::meter::Meter::start();
+            let inward = -crate::springs::outward_sign(&coarse_skin, &vol, &seg.labels);
+            let shell = crate::embed::Shell::new(
+                &coarse_skin,
+                case.solve.shell_mm,
+                inward,
+                case.solve.shell_poisson,
+                &rigid,
+            )?;
+            let e = shell.embed(&fine.vertices);
+            let carried = shell.carry(&e, &shell.deform(&face_post.vertices));
+            // Fine vertices outside [surface] movable are rigid, exactly as in a full solve.
+            let mut post = fine.clone();
+            for (i, p) in post.vertices.iter_mut().enumerate() {
+                let movable = case
+                    .surface
+                    .movable
+                    .as_ref()
+                    .is_none_or(|r| crate::osteotomy::inside(r, None, *p));
+                if movable {
+                    *p = carried[i];
+                }
+            }
+            let st = crate::compare::stats(&e.distance);
+            report.surfaces.insert(
+                "embedding".into(),
+                json!({"shell_mm": case.solve.shell_mm, "poisson": case.solve.shell_poisson,
+                       "fine_to_coarse_mm": st}),
+            );
+            face_post = post;
+            report.record("embed", meter.stop());
+            fine
+        }
+    };
     face_post.colors = None;
     let dist: Vec<f64> = skin
         .vertices
@@ -480,18 +560,16 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         "unknowns".into(),
         json!(sol.as_ref().map_or(0, |s| s.unknowns)),
     );
+    report.counts.insert(
+        "solved_vertices".into(),
+        json!(sol.as_ref().map_or(0, |s| s.solved_vertices)),
+    );
     report.springs = Some(spring_report);
     report.solve = sol.as_ref().map(|s| s.history.clone());
 
     progress.stage("writing outputs");
     let meter = crate::meter::Meter::start();
     std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
-    mesh::write_mesh(&face_post, &out_dir.join("face_post.obj"))?;
-    mesh::write_mesh(&face_post, &out_dir.join("face_post.ply"))?;
-    if let (Some(sol), true) = (&sol, case.output.subdivide > 1) {
-        let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
-        mesh::write_mesh(&fine, &out_dir.join("face_post_fine.ply"))?;
-    }
     let mut coloured = face_post.clone();
     coloured.colors = Some(
         dist.iter()
@@ -502,30 +580,66 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         name: "displacement".into(),
         values: dist.clone(),
     });
-    mesh::write_mesh(&coloured, &out_dir.join("face_displacement.ply"))?;
     let mut skull_post = skull.clone();
     skull_post.vertices = plan.apply(&skull.vertices, 1.0).0;
-    mesh::write_mesh(&skull_post, &out_dir.join("skull_post.ply"))?;
-    mesh::ply::write(
-        &springs.to_mesh(&skin),
-        &out_dir.join("springs.ply"),
-        mesh::ply::Encoding::BinaryLittleEndian,
-    )?;
-    crate::output::write_bytes_atomic(&out_dir.join("displacement.csv"), |w| {
-        writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
-        for (i, (p, q)) in skin.vertices.iter().zip(&face_post.vertices).enumerate() {
-            writeln!(
-                w,
-                "{i},{},{},{},{},{},{},{}",
-                p[0], p[1], p[2], q[0], q[1], q[2], dist[i]
-            )?;
-        }
-        Ok(())
-    })?;
-    mesh::write_mesh(&skin, &out_dir.join("face_pre.obj"))?;
-    mesh::write_mesh(&skin, &out_dir.join("face_pre.ply"))?;
-    mesh::write_mesh(&skull, &out_dir.join("skull_pre.ply"))?;
-    volume::nifti_io::write_labels(&vol, &seg.labels, &out_dir.join("labels.nii.gz"))?;
+    // The files are independent (each written to a temporary name and renamed), so they are
+    // written in parallel; the first error is reported.
+    type Job<'a> = Box<dyn FnOnce() -> Result<()> + Send + Sync + 'a>;
+    let o = &out_dir;
+    let jobs: Vec<Job> = vec![
+        Box::new(|| mesh::write_mesh(&face_post, &o.join("face_post.obj"))),
+        Box::new(|| mesh::write_mesh(&face_post, &o.join("face_post.ply"))),
+        // The C1 surface sampled finer than the solved mesh; with a coarse model the carried
+        // full skin is the fine output instead.
+        Box::new(|| match (&sol, case.output.subdivide > 1 && !embedded) {
+            (Some(sol), true) => {
+                let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
+                mesh::write_mesh(&fine, &o.join("face_post_fine.ply"))
+            }
+            _ => Ok(()),
+        }),
+        Box::new(|| mesh::write_mesh(&coloured, &o.join("face_displacement.ply"))),
+        // With a coarse model, the mesh that was solved (pre-operative skin → its answer).
+        Box::new(|| match (&sol, embedded) {
+            (Some(sol), true) => {
+                let mut m = coarse_skin.clone();
+                m.vertices = sol.positions.clone();
+                mesh::write_mesh(&m, &o.join("face_post_coarse.ply"))
+            }
+            _ => Ok(()),
+        }),
+        Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
+        Box::new(|| {
+            mesh::ply::write(
+                &springs.to_mesh(&coarse_skin),
+                &o.join("springs.ply"),
+                mesh::ply::Encoding::BinaryLittleEndian,
+            )
+        }),
+        Box::new(|| {
+            crate::output::write_bytes_atomic(&o.join("displacement.csv"), |w| {
+                writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
+                for (i, (p, q)) in skin.vertices.iter().zip(&face_post.vertices).enumerate() {
+                    writeln!(
+                        w,
+                        "{i},{},{},{},{},{},{},{}",
+                        p[0], p[1], p[2], q[0], q[1], q[2], dist[i]
+                    )?;
+                }
+                Ok(())
+            })
+        }),
+        Box::new(|| mesh::write_mesh(&skin, &o.join("face_pre.obj"))),
+        Box::new(|| mesh::write_mesh(&skin, &o.join("face_pre.ply"))),
+        Box::new(|| mesh::write_mesh(&skull, &o.join("skull_pre.ply"))),
+        Box::new(|| volume::nifti_io::write_labels(&vol, &seg.labels, &o.join("labels.nii.gz"))),
+    ];
+    {
+        use rayon::prelude::*;
+        jobs.into_par_iter()
+            .map(|j| j())
+            .collect::<Result<Vec<()>>>()?;
+    }
     report.record("write", meter.stop());
     // Stage meters reset the heap high-water mark, so the whole run's peak is the process's
     // resident maximum instead.

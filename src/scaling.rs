@@ -89,6 +89,7 @@ pub fn run(out: &Path, quick: bool, progress: &Progress) -> Result<Scaling> {
             // Partial-volume supersampling is for accuracy tests; it would dominate here.
             supersample: 1,
             noise_hu: 8.0,
+            scan_step_mm: 1.5,
         });
         let voxels = vol.len() as f64;
         let t = std::time::Instant::now();

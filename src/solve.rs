@@ -20,7 +20,7 @@ use crate::case::SolveModel;
 use crate::error::{Error, Result};
 use crate::fem::assembly::{FemMesh, System, multiply, rigid_dofs};
 use crate::fem::element::Material;
-use crate::fem::preload::initial_dofs;
+use crate::fem::preload::initial_dofs_fields;
 use crate::mesh::{Mesh, norm, sub};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
@@ -46,6 +46,8 @@ pub struct StepRecord {
     pub step: usize,
     pub iterations: usize,
     pub residual_history: Vec<f64>,
+    /// Tangent factorisations in this step (equilibrium model; 0 = the previous one was reused).
+    pub factorizations: usize,
     pub max_displacement_mm: f64,
 }
 
@@ -56,6 +58,8 @@ pub struct Solution {
     pub positions: Vec<[f64; 3]>,
     pub history: Vec<StepRecord>,
     pub unknowns: usize,
+    /// Skin vertices in the mesh the equations were assembled on (the restricted piece or all).
+    pub solved_vertices: usize,
 }
 
 fn column(mesh: &Mesh, name: &str) -> Result<Vec<f64>> {
@@ -222,13 +226,10 @@ fn preloaded(skin: &Mesh) -> Result<(FemMesh, [Vec<f64>; 3])> {
     let (u, v) = (column(skin, "u")?, column(skin, "v")?);
     let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
     let fem = FemMesh::new(uv, skin.triangles.clone())?;
-    let field = |c: usize| {
-        initial_dofs(
-            &fem,
-            &skin.vertices.iter().map(|x| x[c]).collect::<Vec<_>>(),
-        )
-    };
-    let a = [field(0)?, field(1)?, field(2)?];
+    let xyz: [Vec<f64>; 3] = [0, 1, 2].map(|c| skin.vertices.iter().map(|x| x[c]).collect());
+    let mut a = initial_dofs_fields(&fem, &[&xyz[0], &xyz[1], &xyz[2]])?.into_iter();
+    let mut next = || a.next().unwrap_or_default();
+    let a = [next(), next(), next()];
     Ok((fem, a))
 }
 
@@ -248,13 +249,44 @@ pub fn solve(
         .then(|| Restriction::new(skin, springs, rigid))
         .flatten()
     else {
-        return solve_mesh(skin, springs, plan, rigid, p);
+        return solve_mesh(skin, springs, plan, rigid, p, None);
     };
-    let s = solve_mesh(&r.skin, &r.springs, plan, &r.rigid, p)?;
+    // One preload, of the whole face: the piece takes its DOFs from it, so its fixed rim holds
+    // exactly the values the whole-face field keeps there (fits at the piece's edge would see a
+    // truncated neighbourhood) and the restricted solve equals the whole-mesh one.
     let (fem, mut a) = preloaded(skin)?;
     let edge_index: std::collections::HashMap<[u32; 2], usize> =
         fem.edges.iter().enumerate().map(|(i, e)| (*e, i)).collect();
     let (nv_sub, nv) = (r.skin.vertices.len(), skin.vertices.len());
+    let piece = {
+        let (u, v) = (column(&r.skin, "u")?, column(&r.skin, "v")?);
+        let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
+        FemMesh::new(uv, r.skin.triangles.clone())?
+    };
+    let a_piece = [0, 1, 2].map(|c| {
+        let mut x = vec![0.0; piece.ndof()];
+        for (i, &g) in r.to_full.iter().enumerate() {
+            x[3 * i..3 * i + 3].copy_from_slice(&a[c][3 * g..3 * g + 3]);
+        }
+        for (e, ed) in piece.edges.iter().enumerate() {
+            let full = [
+                r.to_full[ed[0] as usize] as u32,
+                r.to_full[ed[1] as usize] as u32,
+            ];
+            if let Some(&fe) = edge_index.get(&full) {
+                x[3 * nv_sub + e] = a[c][3 * nv + fe];
+            }
+        }
+        x
+    });
+    let s = solve_mesh(
+        &r.skin,
+        &r.springs,
+        plan,
+        &r.rigid,
+        p,
+        Some((piece, a_piece)),
+    )?;
     for c in 0..3 {
         // Only the free DOFs come from the piece: fixed ones keep the whole face's preload
         // (the piece's fits at its edge see a truncated neighbourhood).
@@ -288,6 +320,7 @@ pub fn solve(
         positions,
         history: s.history,
         unknowns: s.unknowns,
+        solved_vertices: s.solved_vertices,
     })
 }
 
@@ -297,8 +330,12 @@ fn solve_mesh(
     plan: &Plan,
     rigid: &[bool],
     p: &Params,
+    pre: Option<(FemMesh, [Vec<f64>; 3])>,
 ) -> Result<Solution> {
-    let (fem, a_init) = preloaded(skin)?;
+    let (fem, a_init) = match pre {
+        Some(x) => x,
+        None => preloaded(skin)?,
+    };
     let nd = fem.ndof();
     // Per-element (α, β): the defaults, or the last [[surface.region]] containing the triangle's
     // centroid (Koch §4.2).
@@ -380,6 +417,7 @@ fn solve_mesh(
                     step,
                     iterations: 1,
                     residual_history: vec![],
+                    factorizations: 0,
                     max_displacement_mm: disp(&a),
                 });
             }
@@ -393,6 +431,7 @@ fn solve_mesh(
                 positions,
                 history,
                 unknowns: 3 * (nd - fixed.iter().filter(|f| **f).count()),
+                solved_vertices: nv,
             })
         }
         SolveModel::Equilibrium => {
@@ -467,11 +506,24 @@ fn solve_mesh(
                 .map(|(s, w)| w * s.rest)
                 .fold(0.0, f64::max)
                 .max(1e-300);
+            let mut previous_step = a.clone();
             for step in 1..=p.steps {
                 let (xb, _) = plan.apply(&springs.attachments, step as f64 / p.steps as f64);
+                // Predictor: the load increments are equal, so start from the last state plus
+                // the last increment's change (the response is close to linear per increment).
+                let here = a.clone();
+                if step > 1 {
+                    for c in 0..3 {
+                        for g in 0..nd {
+                            a[c][g] += a[c][g] - previous_step[c][g];
+                        }
+                    }
+                }
+                previous_step = here;
                 let mut res_hist = Vec::new();
                 let mut r0 = None;
                 let mut converged = false;
+                let mut factorizations = 0;
                 let mut it = 0;
                 while it < p.max_iterations {
                     it += 1;
@@ -489,16 +541,24 @@ fn solve_mesh(
                     }
                     let rn = r.iter().map(|x| x * x).sum::<f64>().sqrt();
                     let r0v = *r0.get_or_insert(rn);
+                    let previous = res_hist.last().copied();
                     res_hist.push(rn);
                     if rn <= p.tolerance * r0v.max(1e-12 * scale) {
                         converged = true;
                         break;
                     }
-                    // The exact tangent when it is positive definite (quadratic convergence);
-                    // where compressed springs make it indefinite, their negative lateral part is
-                    // dropped (a positive definite modified Newton step).
-                    if sys.refactor(build(&hess)).is_err() {
-                        sys.refactor(build(&clamped))?;
+                    // The factorisation is the expensive part (~90 % of a Newton iteration), so
+                    // a tangent is kept while it still contracts the residual by RHO per
+                    // iteration (modified Newton) and refactored at the current state when it
+                    // does not. The fresh tangent is exact when positive definite (quadratic
+                    // convergence); where compressed springs make it indefinite, their negative
+                    // lateral part is dropped (a positive definite modified Newton step).
+                    const RHO: f64 = 0.25;
+                    if previous.is_some_and(|q| rn > RHO * q) {
+                        if sys.refactor(build(&hess)).is_err() {
+                            sys.refactor(build(&clamped))?;
+                        }
+                        factorizations += 1;
                     }
                     let neg: Vec<f64> = r.iter().map(|x| -x).collect();
                     let d = sys.solve(&[neg], std::slice::from_ref(&zero)).remove(0);
@@ -546,6 +606,7 @@ fn solve_mesh(
                     step,
                     iterations: it,
                     residual_history: res_hist,
+                    factorizations,
                     max_displacement_mm: disp(&a),
                 });
             }
@@ -560,6 +621,7 @@ fn solve_mesh(
                 positions,
                 history,
                 unknowns,
+                solved_vertices: nv,
             })
         }
     }

@@ -118,27 +118,25 @@ fn compliance(
         .sum()
 }
 
-/// Outward normals: flip the mesh's normals if most of them point into tissue.
-fn outward_normals(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> Vec<[f64; 3]> {
+/// +1 when the mesh's (counter-clockwise) vertex normals point out of the head, −1 when they
+/// point into tissue (probed in the label volume two voxels either side).
+pub fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
     let n = mesh.vertex_normals();
     let probe = 2.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
-    let out = mesh
-        .vertices
-        .iter()
-        .zip(&n)
-        .filter(|(p, d)| label_at(vol, labels, add(**p, scale(**d, probe))) == segment::AIR)
-        .count();
-    let inn = mesh
-        .vertices
-        .iter()
-        .zip(&n)
-        .filter(|(p, d)| label_at(vol, labels, add(**p, scale(**d, -probe))) == segment::AIR)
-        .count();
-    if inn > out {
-        n.iter().map(|v| scale(*v, -1.0)).collect()
-    } else {
-        n
-    }
+    let air = |d: f64| {
+        mesh.vertices
+            .iter()
+            .zip(&n)
+            .filter(|(p, v)| label_at(vol, labels, add(**p, scale(**v, d * probe))) == segment::AIR)
+            .count()
+    };
+    if air(-1.0) > air(1.0) { -1.0 } else { 1.0 }
+}
+
+/// Outward normals: flip the mesh's normals if most of them point into tissue.
+fn outward_normals(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> Vec<[f64; 3]> {
+    let s = outward_sign(mesh, vol, labels);
+    mesh.vertex_normals().iter().map(|v| scale(*v, s)).collect()
 }
 
 pub fn trace(
@@ -148,8 +146,28 @@ pub fn trace(
     bone_field: &[f32],
     params: &SpringParams,
     stiffness: &Stiffness,
+    want: Option<&[bool]>,
 ) -> SpringSet {
     let labels = &seg.labels;
+    // `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
+    // moves can reach). Their struts end at their neighbours' attachments, so those are traced
+    // too; every other vertex gets no spring and is not counted as a miss.
+    let nb = mesh.neighbours();
+    let traced: Vec<bool> = match want {
+        None => vec![true; mesh.vertices.len()],
+        Some(w) => {
+            let mut t = w.to_vec();
+            for (i, &wi) in w.iter().enumerate() {
+                if wi {
+                    for &j in &nb[i] {
+                        t[j as usize] = true;
+                    }
+                }
+            }
+            t
+        }
+    };
+    let wanted = |i: usize| want.is_none_or(|w| w[i]);
     let iso = seg.windows.bone as f32;
     let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let normals = outward_normals(mesh, vol, labels);
@@ -160,7 +178,11 @@ pub fn trace(
         .vertices
         .par_iter()
         .zip(&normals)
-        .map(|(&xs, &n)| {
+        .zip(&traced)
+        .map(|((&xs, &n), &traced)| {
+            if !traced {
+                return None;
+            }
             let d = scale(n, -1.0);
             let mut t = 0.0;
             while t < params.max_length_mm {
@@ -191,12 +213,12 @@ pub fn trace(
                 attachment_of[i] = Some(attachments.len());
                 attachments.push(*p);
             }
-            None => misses.push(i),
+            None if traced[i] => misses.push(i),
+            None => {}
         }
     }
-    let nb = mesh.neighbours();
     let mut pairs: Vec<(usize, usize, Kind)> = Vec::new();
-    for i in 0..mesh.vertices.len() {
+    for i in (0..mesh.vertices.len()).filter(|&i| wanted(i)) {
         if let Some(b) = attachment_of[i] {
             pairs.push((i, b, Kind::Main));
         }
@@ -239,6 +261,13 @@ pub fn trace(
         k,
         misses,
     }
+}
+
+/// The vertices whose springs a solve uses: with `[solve] restrict` on and part of the skin
+/// rigid, the movable ones (a rigid vertex's DOFs are fixed, so its springs act on nothing);
+/// otherwise all (None).
+pub fn wanted(rigid: &[bool], restrict: bool) -> Option<Vec<bool>> {
+    (restrict && rigid.iter().any(|r| *r)).then(|| rigid.iter().map(|r| !r).collect())
 }
 
 impl SpringSet {

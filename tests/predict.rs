@@ -45,6 +45,7 @@ fn main_springs_span_the_analytic_soft_tissue_thickness() {
             .unwrap()
             .tissue
             .stiffness,
+        None,
     );
     let lens: Vec<f64> = springs
         .springs
@@ -266,4 +267,131 @@ fn two_mesh_densities_give_the_same_displacement_field() {
         let mean = sum / n as f64;
         assert!(mean < 0.05 * scale && worst < 0.25 * scale, "{model}");
     }
+}
+
+#[test]
+fn the_restricted_solve_equals_the_whole_mesh_solve() {
+    // [solve] restrict solves only the movable skin plus a rigid ring and traces springs only
+    // from the movable vertices (issue 6). Triangles and springs whose DOFs are all fixed add
+    // nothing to the free equations, so both must give the same face — to the Newton tolerance.
+    let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
+                [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
+                translate = [0.0, -6.0, 0.0]\n";
+    let on = run(&format!("{plan}[solve]\nrestrict = true\n"));
+    let off = run(&format!("{plan}[solve]\nrestrict = false\n"));
+    assert_eq!(on.face_post.vertices.len(), off.face_post.vertices.len());
+    let worst = on
+        .face_post
+        .vertices
+        .iter()
+        .zip(&off.face_post.vertices)
+        .map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>().sqrt())
+        .fold(0.0, f64::max);
+    let moved = displacement(&off)
+        .iter()
+        .map(|d| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt())
+        .fold(0.0, f64::max);
+    assert!(moved > 1.0, "the plan must move the face ({moved} mm)");
+    assert!(
+        worst < 1e-4 * moved,
+        "restricted vs whole mesh differ by {worst} mm (max move {moved} mm)"
+    );
+    // Fewer unknowns and fewer springs traced.
+    let count = |o: &facesim::run::Outcome, k: &str| o.report.counts[k].as_u64().unwrap();
+    assert_eq!(count(&on, "unknowns"), count(&off, "unknowns"));
+    assert!(count(&on, "solved_vertices") < count(&off, "solved_vertices"));
+    assert!(count(&on, "springs_main") < count(&off, "springs_main"));
+}
+
+/// A phantom case with a 1.5 mm face scan (~40 k triangles) and `extra` case.toml lines.
+fn dense_case(extra: &str) -> PathBuf {
+    let d = tempfile::Builder::new()
+        .prefix("facesim-dense")
+        .tempdir()
+        .unwrap()
+        .keep();
+    facesim::mesh::ply::write(
+        &facesim::phantom::face_scan(1.5),
+        &d.join("face.ply"),
+        facesim::mesh::ply::Encoding::BinaryLittleEndian,
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("case.toml"),
+        format!(
+            "name = \"dense\"\n[ct]\npath = \"{}\"\n[skin]\npath = \"face.ply\"\n{extra}",
+            phantom_dir().join("ct.nii.gz").display()
+        ),
+    )
+    .unwrap();
+    d
+}
+
+#[test]
+fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
+    // [solve] coarse_triangles: solve on a (u, v) resampling of the scan and carry every scan
+    // vertex along in the embedding shell (paper 002). Exact invariants of the whole chain: a
+    // translation of all bone moves the full scan by that translation (a rigid motion of the
+    // coarse skin moves the shell rigidly), and outside [surface] movable nothing moves.
+    let t = [1.0, -2.0, 0.5];
+    let skull = format!(
+        "[[osteotomy]]\nname = \"skull\"\nregion = {{ box = {{ min = [-500.0, -500.0, -500.0], max = [500.0, 500.0, 500.0] }} }}\ntranslate = [{}, {}, {}]\n",
+        t[0], t[1], t[2]
+    );
+    let dir = dense_case(&format!("{skull}[solve]\ncoarse_triangles = 4000\n"));
+    let o = facesim::run::run(&dir, None, &facesim::progress::Progress::quiet()).unwrap();
+    let coarse = &o.report.surfaces["coarse"];
+    let (nc, nf) = (
+        coarse["triangles"].as_u64().unwrap(),
+        coarse["fine_triangles"].as_u64().unwrap(),
+    );
+    assert!(
+        nf > 30_000 && (3_000..6_000).contains(&nc),
+        "coarse {nc} of {nf}"
+    );
+    assert_eq!(
+        o.face_post.triangles.len() as u64,
+        nf,
+        "the output is the full scan"
+    );
+    assert!(dir.join("out/face_post_coarse.ply").is_file());
+    let tn = facesim::mesh::norm(t);
+    let worst = o
+        .skin
+        .vertices
+        .iter()
+        .zip(&o.face_post.vertices)
+        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(facesim::mesh::sub(*b, *a), t)))
+        .fold(0.0, f64::max);
+    assert!(
+        worst < 1e-3 * tn,
+        "coarse + embedding, rigid translation: {worst} mm"
+    );
+
+    // A jaw advancement with a movable region: rigid scan vertices stay bit-identical, and the
+    // scan follows the chin forwards.
+    let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
+                [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
+                translate = [0.0, -6.0, 0.0]\n[solve]\ncoarse_triangles = 4000\n";
+    let o = facesim::run::run(
+        &dense_case(plan),
+        None,
+        &facesim::progress::Progress::quiet(),
+    )
+    .unwrap();
+    let inside = |p: &[f64; 3]| {
+        (p[0]).powi(2) + (p[1] + 60.0).powi(2) + (p[2] + 45.0).powi(2) <= 70.0f64.powi(2)
+    };
+    let mut forward = 0;
+    for (a, b) in o.skin.vertices.iter().zip(&o.face_post.vertices) {
+        if !inside(a) {
+            assert_eq!(a, b, "a rigid scan vertex moved");
+        } else if b[1] < a[1] - 1.0 {
+            forward += 1;
+        }
+    }
+    assert!(
+        forward > 1000,
+        "only {forward} scan vertices moved forwards by more than 1 mm"
+    );
 }

@@ -9,35 +9,45 @@ use super::assembly::FemMesh;
 use super::element::edge_normal;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Least-squares fit of c0 + c1 du + c2 dv + c3 du² + c4 du dv + c5 dv² (du, dv from `at`,
-/// scaled by h) to `pts`; with `value` given, c0 is fixed to it. Returns (value, ∂u, ∂v) at `at`,
-/// or None when the points cannot determine a quadratic.
-fn fit(pts: &[([f64; 2], f64)], at: [f64; 2], value: Option<f64>) -> Option<[f64; 3]> {
-    let h = pts
+/// scaled by h) to the values `ys[f][i]` of each field f at the points `uv[i]`; with `value`
+/// given (one per field), c0 is fixed to it. One SVD of the design matrix serves every field.
+/// Returns (value, ∂u, ∂v) at `at` per field, or None when the points cannot determine a
+/// quadratic.
+fn fit(
+    uv: &[[f64; 2]],
+    ys: &[Vec<f64>],
+    at: [f64; 2],
+    value: Option<&[f64]>,
+) -> Option<Vec<[f64; 3]>> {
+    let h = uv
         .iter()
-        .map(|(p, _)| ((p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2)).sqrt())
+        .map(|p| ((p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2)).sqrt())
         .fold(0.0, f64::max);
     if h == 0.0 {
         return None;
     }
     let cols = if value.is_some() { 5 } else { 6 };
-    if pts.len() < cols {
+    if uv.len() < cols {
         return None;
     }
-    let mut a = DMatrix::<f64>::zeros(pts.len(), cols);
-    let mut b = DVector::<f64>::zeros(pts.len());
-    for (r, (p, y)) in pts.iter().enumerate() {
+    let nf = ys.len();
+    let mut a = DMatrix::<f64>::zeros(uv.len(), cols);
+    let mut b = DMatrix::<f64>::zeros(uv.len(), nf);
+    let skip = usize::from(value.is_some());
+    for (r, p) in uv.iter().enumerate() {
         let (x1, x2) = ((p[0] - at[0]) / h, (p[1] - at[1]) / h);
         let row = [1.0, x1, x2, x1 * x1, x1 * x2, x2 * x2];
-        let skip = usize::from(value.is_some());
         for c in 0..cols {
             a[(r, c)] = row[c + skip];
         }
-        b[r] = y - value.unwrap_or(0.0);
+        for f in 0..nf {
+            b[(r, f)] = ys[f][r] - value.map_or(0.0, |v| v[f]);
+        }
     }
     let svd = a.svd(true, true);
     let sv = &svd.singular_values;
@@ -45,17 +55,27 @@ fn fit(pts: &[([f64; 2], f64)], at: [f64; 2], value: Option<f64>) -> Option<[f64
         return None;
     }
     let c = svd.solve(&b, 1e-12).ok()?;
-    Some(match value {
-        Some(v) => [v, c[0] / h, c[1] / h],
-        None => [c[0], c[1] / h, c[2] / h],
-    })
+    Some(
+        (0..nf)
+            .map(|f| match value {
+                Some(v) => [v[f], c[(0, f)] / h, c[(1, f)] / h],
+                None => [c[(0, f)], c[(1, f)] / h, c[(2, f)] / h],
+            })
+            .collect(),
+    )
 }
 
 /// Initial DOFs for one coordinate field given at the vertices.
 pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
+    Ok(initial_dofs_fields(mesh, &[values])?.remove(0))
+}
+
+/// Initial DOFs for several fields over the same mesh (x, y, z of the skin): the fits share
+/// their neighbourhoods and design matrices, so three fields cost one SVD per fit.
+pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
     let nb = crate::mesh::one_rings(mesh.uv.len(), &mesh.tris);
     let nv = mesh.uv.len();
-    let mut a = vec![0.0; mesh.ndof()];
+    let nf = fields.len();
     // Neighbourhood: the 1-ring, widened ring by ring (up to the 3-ring) while it cannot fix a
     // quadratic (decimated meshes have low-valence vertices whose 1-ring is degenerate in (u, v)).
     let hood = |seed: &[u32], rings: usize| -> Vec<u32> {
@@ -70,13 +90,15 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
         }
         s
     };
-    let gradient = |seed: &[u32], at: [f64; 2], value: Option<f64>| -> Option<[f64; 3]> {
+    let gradient = |seed: &[u32], at: [f64; 2], value: Option<&[f64]>| -> Option<Vec<[f64; 3]>> {
         for rings in 1..=3 {
-            let pts: Vec<([f64; 2], f64)> = hood(seed, rings)
+            let h = hood(seed, rings);
+            let uv: Vec<[f64; 2]> = h.iter().map(|&v| mesh.uv[v as usize]).collect();
+            let ys: Vec<Vec<f64>> = fields
                 .iter()
-                .map(|&v| (mesh.uv[v as usize], values[v as usize]))
+                .map(|f| h.iter().map(|&v| f[v as usize]).collect())
                 .collect();
-            if let Some(g) = fit(&pts, at, value) {
+            if let Some(g) = fit(&uv, &ys, at, value) {
                 return Some(g);
             }
         }
@@ -84,22 +106,18 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
     };
     // Every fit is independent: in parallel (results land by index, so they are the same for
     // any thread count).
-    let corner: Vec<[f64; 3]> = (0..nv)
+    let corner: Vec<Vec<[f64; 3]>> = (0..nv)
         .into_par_iter()
         .map(|v| {
-            gradient(&[v as u32], mesh.uv[v], Some(values[v])).ok_or_else(|| {
+            let vals: Vec<f64> = fields.iter().map(|f| f[v]).collect();
+            gradient(&[v as u32], mesh.uv[v], Some(&vals)).ok_or_else(|| {
                 Error::Numerical(format!(
                     "preloading: vertex {v} has too few neighbours to fit its tangent plane"
                 ))
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    for (v, g) in corner.iter().enumerate() {
-        a[3 * v] = values[v];
-        a[3 * v + 1] = g[1];
-        a[3 * v + 2] = g[2];
-    }
-    let cross: Vec<f64> = mesh
+    let cross: Vec<Vec<f64>> = mesh
         .edges
         .par_iter()
         .enumerate()
@@ -112,11 +130,23 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
                 ))
             })?;
             let n = edge_normal(p, q);
-            Ok(g[1] * n[0] + g[2] * n[1])
+            Ok(g.iter().map(|g| g[1] * n[0] + g[2] * n[1]).collect())
         })
         .collect::<Result<Vec<_>>>()?;
-    a[3 * nv..3 * nv + cross.len()].copy_from_slice(&cross);
-    Ok(a)
+    Ok((0..nf)
+        .map(|f| {
+            let mut a = vec![0.0; mesh.ndof()];
+            for (v, g) in corner.iter().enumerate() {
+                a[3 * v] = fields[f][v];
+                a[3 * v + 1] = g[f][1];
+                a[3 * v + 2] = g[f][2];
+            }
+            for (e, c) in cross.iter().enumerate() {
+                a[3 * nv + e] = c[f];
+            }
+            a
+        })
+        .collect())
 }
 
 /// Sample the C1 surface (DOFs for x, y, z) on each triangle split into `level`² triangles,

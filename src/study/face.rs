@@ -91,28 +91,6 @@ fn with_uv(mut m: Mesh, case: &Case, scene: &Scene) -> Mesh {
     m
 }
 
-/// Triangles whose (u, v) orientation disagrees with the majority.
-fn uv_folds(m: &Mesh) -> usize {
-    let col = |n: &str| {
-        m.vertex_columns
-            .iter()
-            .find(|c| c.name == n)
-            .map(|c| &c.values)
-    };
-    let (Some(u), Some(v)) = (col("u"), col("v")) else {
-        return 0;
-    };
-    let pos = m
-        .triangles
-        .iter()
-        .filter(|t| {
-            let [a, b, c] = t.map(|i| i as usize);
-            (u[b] - u[a]) * (v[c] - v[a]) - (u[c] - u[a]) * (v[b] - v[a]) > 0.0
-        })
-        .count();
-    pos.min(m.triangles.len() - pos)
-}
-
 /// (result, wall seconds, peak heap MB) of `f`, by the same meter as the pipeline's stages.
 fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, Option<f64>) {
     let m = crate::meter::Meter::start();
@@ -172,21 +150,13 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
     } else {
         let divisors: &[usize] = if quick { &[2, 4] } else { &[2, 4, 8] };
         for &dv in divisors {
-            // Edge collapse can fold the (u, v) map at a few triangles; back off the target
-            // until it does not (FemMesh::new refuses folded maps).
-            let mut target = nt / dv;
-            for _ in 0..6 {
-                let mut m = native.clone();
-                surface::decimate(&mut m, target, 5.0);
-                let m = with_uv(m, &case, &scene);
-                if m.check(Path::new("decimated skin")).is_ok() && uv_folds(&m) == 0 {
-                    levels.push(Level {
-                        label: format!("{} tri", m.triangles.len()),
-                        skin: m,
-                    });
-                    break;
-                }
-                target = target * 5 / 4;
+            if let Some(m) = surface::decimate_unfolded(&native, nt / dv, |m| {
+                *m = with_uv(std::mem::take(m), &case, &scene)
+            }) {
+                levels.push(Level {
+                    label: format!("{} tri", m.triangles.len()),
+                    skin: m,
+                });
             }
         }
     }
@@ -205,6 +175,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
     let mut reference: Option<(Mesh, Vec<[f64; 3]>)> = None;
     let mut native_springs = None;
     for (li, level) in levels.iter().enumerate() {
+        let rigid = rigid_of(&level.skin);
         let (springs, t_springs, m_springs) = timed(|| {
             crate::springs::trace(
                 &level.skin,
@@ -213,9 +184,9 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 &bone_field,
                 &case.springs,
                 &case.tissue.stiffness,
+                crate::springs::wanted(&rigid, case.solve.restrict).as_deref(),
             )
         });
-        let rigid = rigid_of(&level.skin);
         for model in [SolveModel::Equilibrium, SolveModel::Koch1996] {
             progress.stage(&format!("study {name}: C1 {model:?} at {}", level.label));
             let params = crate::solve::Params {
@@ -242,6 +213,53 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 mean_displacement_mm: None,
                 note: None,
             };
+            // A coarse level's equilibrium answer carried to the reference skin by the shell
+            // embedding the product uses for dense scans ([solve] coarse_triangles, paper 002).
+            let embedded_row = match (&sol, li > 0 && model == SolveModel::Equilibrium) {
+                (Ok(sol), true) => {
+                    let (carried, t_embed, m_embed) = timed(|| {
+                        let inward = -crate::springs::outward_sign(
+                            &level.skin,
+                            &scene.vol,
+                            &scene.seg.labels,
+                        );
+                        let shell = crate::embed::Shell::new(
+                            &level.skin,
+                            case.solve.shell_mm,
+                            inward,
+                            case.solve.shell_poisson,
+                            &rigid,
+                        )?;
+                        let e = shell.embed(&levels[0].skin.vertices);
+                        Ok::<_, Error>(shell.carry(&e, &shell.deform(&sol.positions)))
+                    });
+                    let mut r = FaceRow {
+                        method: "C1 equilibrium + shell embedding".into(),
+                        wall_s: wall + t_springs + t_embed,
+                        peak_mb: peak.zip(m_embed).map(|(a, b)| a.max(b)),
+                        is_reference: false,
+                        unknowns: sol.unknowns,
+                        ..row.clone()
+                    };
+                    match carried {
+                        Ok(c) => {
+                            let ref_rigid = rigid_of(&levels[0].skin);
+                            let d: Vec<[f64; 3]> = c
+                                .iter()
+                                .zip(&levels[0].skin.vertices)
+                                .zip(&ref_rigid)
+                                .map(|((p, q), r)| if *r { [0.0; 3] } else { sub(*p, *q) })
+                                .collect();
+                            Some((r, Some(Answer::AtReference(d))))
+                        }
+                        Err(e) => {
+                            r.note = Some(e.to_string());
+                            Some((r, None))
+                        }
+                    }
+                }
+                _ => None,
+            };
             match sol {
                 Ok(sol) => {
                     row.unknowns = sol.unknowns;
@@ -265,6 +283,12 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
                 }
             }
             rows.push(row);
+            if let Some((r, answer)) = embedded_row {
+                if let Some(a) = answer {
+                    answers.push((rows.len(), a));
+                }
+                rows.push(r);
+            }
         }
         // Punak's mass-spring on the native mesh and the coarsest one.
         if li + 1 == levels.len() || level.skin.triangles.len() == nt {
