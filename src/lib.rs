@@ -13,6 +13,7 @@
 // No unwrap/expect outside tests: input-dependent failures are errors, not panics (issue 7).
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod bench_embed;
 pub mod case;
 pub mod compare;
 pub mod dynamics;

@@ -53,14 +53,15 @@ enum Cmd {
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
     /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
-    /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out).
+    /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
+    /// `embed` = a dense face scan solved whole against coarse models + shell embedding.
     Bench {
-        #[arg(value_parser = ["fem", "scaling"])]
+        #[arg(value_parser = ["fem", "scaling", "embed"])]
         what: String,
-        /// Output directory for `scaling`.
+        /// Output directory for `scaling` and `embed`.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// `scaling`: two small sizes per series only.
+        /// `scaling`, `embed`: small sizes only.
         #[arg(long)]
         quick: bool,
         /// Triangles in the mesh.
@@ -220,6 +221,25 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 println!(
                     "{:5} {:18} exponent {:5.2}  largest {:.3} s",
                     f.series, f.stage, f.exponent, f.largest_wall_s
+                );
+            }
+            Ok(())
+        }
+        Cmd::Bench {
+            what, out, quick, ..
+        } if what == "embed" => {
+            let out = out.ok_or_else(|| Error::config("bench embed: --out DIR is required"))?;
+            let b = facesim::bench_embed::run(&out, quick, &Progress::auto())?;
+            for r in &b.rows {
+                let d = r.distance.as_ref();
+                println!(
+                    "{:42} {:>10} {:8.2} s  mean {:.3} mm  p90 {:.3} mm  max {:.3} mm",
+                    r.method,
+                    r.resolution,
+                    r.wall_s,
+                    d.map_or(f64::NAN, |d| d.mean),
+                    d.map_or(f64::NAN, |d| d.p90),
+                    d.map_or(f64::NAN, |d| d.max)
                 );
             }
             Ok(())
