@@ -33,6 +33,9 @@ pub fn run(out: &Path, quick: bool, progress: &Progress) -> Result<EmbedBench> {
     std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
     let work = out.join(format!(".facesim-embed-{}", std::process::id()));
     std::fs::create_dir_all(&work).map_err(|e| Error::output(&work, e))?;
+    // The case files name the CT and scan by absolute path (a relative one would be taken
+    // relative to the case directory).
+    let work = std::path::absolute(&work).map_err(|e| Error::output(&work, e))?;
     let ct = work.join("ct.nii.gz");
     crate::volume::nifti_io::write(
         &crate::phantom::ct(&crate::phantom::PhantomOptions::default()),
