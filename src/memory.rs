@@ -15,7 +15,11 @@ unsafe impl GlobalAlloc for Counting {
         let p = unsafe { System.alloc(layout) };
         if !p.is_null() {
             let now = LIVE.fetch_add(layout.size(), Relaxed) + layout.size();
-            PEAK.fetch_max(now, Relaxed);
+            // A plain load first: the read-modify-write only when this is a new peak (rare), so
+            // threads do not fight over the cache line on every allocation.
+            if now > PEAK.load(Relaxed) {
+                PEAK.fetch_max(now, Relaxed);
+            }
         }
         p
     }
@@ -29,7 +33,9 @@ unsafe impl GlobalAlloc for Counting {
             if new_size >= layout.size() {
                 let now =
                     LIVE.fetch_add(new_size - layout.size(), Relaxed) + new_size - layout.size();
-                PEAK.fetch_max(now, Relaxed);
+                if now > PEAK.load(Relaxed) {
+                    PEAK.fetch_max(now, Relaxed);
+                }
             } else {
                 LIVE.fetch_sub(layout.size() - new_size, Relaxed);
             }
