@@ -142,12 +142,16 @@ impl Shell {
             let f = cross(sub(p[1], p[0]), sub(p[2], p[0]));
             let nn = scale(unit(f), inward);
             let oc = scale(add(add(o[0], o[1]), o[2]), 1.0 / 3.0);
-            // h: distance from the offset triangle's centre to the base triangle's plane.
+            // h: distance from the offset triangle's centre to the base triangle's plane. At a
+            // crease of the coarse skin (vertex normals far from the face normal, e.g. at a
+            // nostril or an ear on an extracted skin) it can come out tiny or negative; there
+            // the reference tetrahedron takes the shell's nominal depth instead.
             let d = dot(sub(oc, p[0]), nn);
+            let d = if d > 0.1 * thickness { d } else { thickness };
             let (e, a) = reference_edges(p, inward, d);
-            let Some(inv) = e.try_inverse().filter(|_| a > 0.0 && d > 0.0) else {
+            let Some(inv) = e.try_inverse().filter(|_| a > 0.0) else {
                 return Err(Error::Numerical(format!(
-                    "shell embedding: triangle {ti} has zero area or its offset lies outside it"
+                    "shell embedding: triangle {ti} of the coarse skin has zero area"
                 )));
             };
             area.push(a);

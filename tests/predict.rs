@@ -87,22 +87,31 @@ fn no_bone_move_leaves_the_face_unchanged_in_both_models() {
     }
 }
 
-#[test]
-fn whole_skull_translated_moves_the_skin_rigidly() {
-    // Every skin node movable (no [surface] movable), every attachment moved by t.
-    let t = [1.0, -2.0, 0.5];
-    let o = run(&format!(
+/// An osteotomy moving all bone by `t`.
+fn whole_skull(t: [f64; 3]) -> String {
+    format!(
         "[[osteotomy]]\nname = \"skull\"\nregion = {{ box = {{ min = [-500.0, -500.0, -500.0], max = [500.0, 500.0, 500.0] }} }}\ntranslate = [{}, {}, {}]\n",
         t[0], t[1], t[2]
-    ));
-    let tn = facesim::mesh::norm(t);
-    let worst = o
-        .skin
+    )
+}
+
+/// Worst |(x_post − x_pre) − t| over the skin (mm).
+fn translation_error(o: &facesim::run::Outcome, t: [f64; 3]) -> f64 {
+    o.skin
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
         .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(facesim::mesh::sub(*b, *a), t)))
-        .fold(0.0, f64::max);
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn whole_skull_translated_moves_the_skin_rigidly() {
+    // Every skin node movable (no [surface] movable), every attachment moved by t.
+    let t = [1.0, -2.0, 0.5];
+    let o = run(&whole_skull(t));
+    let tn = facesim::mesh::norm(t);
+    let worst = translation_error(&o, t);
     println!("rigid translation: worst deviation {worst:.2e} mm of a {tn:.3} mm move");
     assert!(worst < 1e-3 * tn, "{worst}");
 }
@@ -334,10 +343,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     // translation of all bone moves the full scan by that translation (a rigid motion of the
     // coarse skin moves the shell rigidly), and outside [surface] movable nothing moves.
     let t = [1.0, -2.0, 0.5];
-    let skull = format!(
-        "[[osteotomy]]\nname = \"skull\"\nregion = {{ box = {{ min = [-500.0, -500.0, -500.0], max = [500.0, 500.0, 500.0] }} }}\ntranslate = [{}, {}, {}]\n",
-        t[0], t[1], t[2]
-    );
+    let skull = whole_skull(t);
     let dir = dense_case(&format!("{skull}[solve]\ncoarse_triangles = 4000\n"));
     let o = facesim::run::run(&dir, None, &facesim::progress::Progress::quiet()).unwrap();
     let coarse = &o.report.surfaces["coarse"];
@@ -356,13 +362,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     );
     assert!(dir.join("out/face_post_coarse.ply").is_file());
     let tn = facesim::mesh::norm(t);
-    let worst = o
-        .skin
-        .vertices
-        .iter()
-        .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(facesim::mesh::sub(*b, *a), t)))
-        .fold(0.0, f64::max);
+    let worst = translation_error(&o, t);
     assert!(
         worst < 1e-3 * tn,
         "coarse + embedding, rigid translation: {worst} mm"
