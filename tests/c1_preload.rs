@@ -27,15 +27,7 @@ fn jittered_grid(n: usize, seed: u64) -> FemMesh {
             uv.push([i as f64 + d[0], j as f64 + d[1]]);
         }
     }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    let mut tris = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            tris.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            tris.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    FemMesh::new(uv, tris).unwrap()
+    FemMesh::new(uv, common::grid_triangles(n)).unwrap()
 }
 
 fn quad(p: [f64; 2]) -> [f64; 3] {

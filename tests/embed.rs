@@ -1,6 +1,8 @@
 //! The shell embedding (paper 002) that carries a fine skin along a coarse solve (issue 6):
 //! exact invariants — rest shape, rigid motions, the Poisson thickness rule (eq. 2).
 
+mod common;
+
 use facesim::embed::Shell;
 use facesim::mesh::Mesh;
 
@@ -18,15 +20,7 @@ fn grid(n: usize, size: f64) -> Mesh {
             ]);
         }
     }
-    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
-    let mut t = Vec::new();
-    for j in 0..n {
-        for i in 0..n {
-            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
-            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
-        }
-    }
-    Mesh::new(v, t)
+    Mesh::new(v, common::grid_triangles(n))
 }
 
 /// A closed-ish curved patch: the grid wrapped onto a cylinder of radius 40 mm.

@@ -87,3 +87,17 @@ pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     v.sort();
     v
 }
+
+/// Triangles of an n×n grid of (n+1)² vertices numbered row by row, two per cell,
+/// counter-clockwise in the grid's own (i, j) orientation.
+pub fn grid_triangles(n: usize) -> Vec<[u32; 3]> {
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let mut t = Vec::with_capacity(2 * n * n);
+    for j in 0..n {
+        for i in 0..n {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    t
+}
