@@ -177,31 +177,46 @@ pub fn components(mask: &[bool], dims: [usize; 3], conn26: bool) -> (Vec<u32>, V
 /// (Felzenszwalb & Huttenlocher 2012, separable, exact; anisotropic spacing).
 pub fn distance_sq(source: &[bool], dims: [usize; 3], spacing: [f64; 3]) -> Vec<f32> {
     let inf = f32::MAX / 4.0;
-    let mut d: Vec<f32> = source.iter().map(|&s| if s { 0.0 } else { inf }).collect();
+    let mut d: Vec<f32> = source
+        .par_iter()
+        .map(|&s| if s { 0.0 } else { inf })
+        .collect();
     let [nx, ny, nz] = dims;
-    for axis in 0..3 {
-        let (n, stride) = match axis {
-            0 => (nx, 1),
-            1 => (ny, nx),
-            _ => (nz, nx * ny),
-        };
-        let h2 = (spacing[axis] * spacing[axis]) as f32;
-        let lines: Vec<usize> = (0..nx * ny * nz)
-            .filter(|&s| (s / stride) % n == 0)
-            .collect();
-        let results: Vec<(usize, Vec<f32>)> = lines
-            .par_iter()
-            .map(|&start| {
-                let f: Vec<f32> = (0..n).map(|t| d[start + t * stride]).collect();
-                (start, edt_1d(&f, h2))
-            })
-            .collect();
-        for (start, line) in results {
-            for (t, v) in line.into_iter().enumerate() {
-                d[start + t * stride] = v;
+    let slice = nx * ny;
+    if slice == 0 || nz == 0 {
+        return d;
+    }
+    let h2 = spacing.map(|s| (s * s) as f32);
+    // x and y lines lie within one z slice: slices in parallel, in place (no pass over the
+    // voxels to find where lines start, no per-line result kept for a serial write-back).
+    d.par_chunks_mut(slice).for_each(|sl| {
+        for row in sl.chunks_mut(nx) {
+            let out = edt_1d(row, h2[0]);
+            row.copy_from_slice(&out);
+        }
+        let mut f = vec![0f32; ny];
+        for i in 0..nx {
+            for (j, x) in f.iter_mut().enumerate() {
+                *x = sl[i + j * nx];
+            }
+            for (j, v) in edt_1d(&f, h2[1]).into_iter().enumerate() {
+                sl[i + j * nx] = v;
             }
         }
-    }
+    });
+    // z lines cross the slices: each (i, j) column in parallel, written back slice by slice.
+    let cols: Vec<Vec<f32>> = (0..slice)
+        .into_par_iter()
+        .map(|c| {
+            let f: Vec<f32> = (0..nz).map(|k| d[c + k * slice]).collect();
+            edt_1d(&f, h2[2])
+        })
+        .collect();
+    d.par_chunks_mut(slice).enumerate().for_each(|(k, sl)| {
+        for (c, v) in sl.iter_mut().enumerate() {
+            *v = cols[c][k];
+        }
+    });
     d
 }
 
@@ -645,6 +660,34 @@ mod tests {
                     assert!((d[i + 9 * (j + 7 * k)] as f64 - e).abs() < 1e-4);
                 }
             }
+        }
+    }
+
+    #[test]
+    fn distance_transform_matches_brute_force_on_scattered_sources() {
+        let dims = [11, 6, 8];
+        let n = 11 * 6 * 8;
+        let sp = [0.7, 1.3, 2.0];
+        let src: Vec<bool> = (0..n).map(|a| (a * 37 + 11) % 53 == 0).collect();
+        let d = distance_sq(&src, dims, sp);
+        let pos = |a: usize| {
+            let (i, j, k) = (a % 11, (a / 11) % 6, a / 66);
+            [i as f64 * sp[0], j as f64 * sp[1], k as f64 * sp[2]]
+        };
+        for a in 0..n {
+            let p = pos(a);
+            let e = (0..n)
+                .filter(|&b| src[b])
+                .map(|b| {
+                    let q = pos(b);
+                    (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>()
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                (d[a] as f64 - e).abs() < 1e-3 * e.max(1.0),
+                "voxel {a}: {} vs {e}",
+                d[a]
+            );
         }
     }
 
