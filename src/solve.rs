@@ -516,6 +516,7 @@ fn solve_mesh(
                 })?
             };
             let k_rows = Csr::symmetric(nd, &k);
+            let zero_nd = vec![vec![0.0; nd]; 3];
             // The coupled tangent, factored only when conjugate gradients fail to converge.
             let mut direct: Option<System> = None;
             let zero = vec![0.0; 3 * nd];
@@ -551,15 +552,17 @@ fn solve_mesh(
                 while it < p.max_iterations {
                     it += 1;
                     let (grad, hess, clamped) = springs_at(&a, &xb);
-                    let mut r = vec![0.0; 3 * nd];
+                    let da: Vec<f64> = (0..3)
+                        .flat_map(|c| a[c].iter().zip(&a_init[c]).map(|(x, y)| x - y))
+                        .collect();
+                    let mut r = k_rows.apply3(&da, nd);
                     for c in 0..3 {
-                        let da: Vec<f64> =
-                            a[c].iter().zip(&a_init[c]).map(|(x, y)| x - y).collect();
-                        let kd = multiply(&k, &da);
                         for g in 0..nd {
-                            if !fixed[g] {
-                                r[c * nd + g] = kd[g] + grad[c][g];
-                            }
+                            r[c * nd + g] = if fixed[g] {
+                                0.0
+                            } else {
+                                r[c * nd + g] + grad[c][g]
+                            };
                         }
                     }
                     let rn = r.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -579,14 +582,7 @@ fn solve_mesh(
                     let apply_p = |v: &[f64]| -> Vec<f64> {
                         let rhs: Vec<Vec<f64>> =
                             (0..3).map(|c| v[c * nd..(c + 1) * nd].to_vec()).collect();
-                        let z = precond.solve(
-                            &rhs,
-                            &[
-                                zero[..nd].to_vec(),
-                                zero[..nd].to_vec(),
-                                zero[..nd].to_vec(),
-                            ],
-                        );
+                        let z = precond.solve(&rhs, &zero_nd);
                         z.concat()
                     };
                     let apply_a = |h: &[[[f64; 3]; 3]], v: &[f64]| -> Vec<f64> {
