@@ -132,6 +132,18 @@ fn check_regions_masks(case: &Case) -> Result<()> {
     Ok(())
 }
 
+/// Per vertex: true when it lies outside `[surface] movable` (rigid skin); all false without a
+/// movable region.
+pub fn rigid_mask(case: &Case, vertices: &[[f64; 3]]) -> Vec<bool> {
+    vertices
+        .iter()
+        .map(|p| match &case.surface.movable {
+            Some(r) => !crate::osteotomy::inside(r, None, *p),
+            None => false,
+        })
+        .collect()
+}
+
 /// Everything the models need, before any solve: the CT, its tissues, the skin (extracted or
 /// the registered scan) and skull, the springs, the bone-move plan, the rigid skin vertices and
 /// the solver parameters. `run` and `facesim study` share it.
@@ -341,14 +353,7 @@ pub fn prepare(case: &Case, progress: &Progress, report: &mut Report) -> Result<
             )),
         }
     }
-    let rigid: Vec<bool> = skin
-        .vertices
-        .iter()
-        .map(|p| match &case.surface.movable {
-            Some(r) => !crate::osteotomy::inside(r, None, *p),
-            None => false,
-        })
-        .collect();
+    let rigid = rigid_mask(case, &skin.vertices);
     progress.stage("tracing springs");
     let meter = crate::meter::Meter::start();
     let want = crate::springs::wanted(&rigid, case.solve.restrict);
@@ -492,17 +497,15 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         face_post.vertices = sol.positions.clone();
     }
     // The coarse model's answer carried to the full skin (paper 002); from here on `skin` is
-    // the full skin again.
-    let coarse_skin = skin;
-    let embedded = fine.is_some();
-    let skin = match fine {
-        None => coarse_skin.clone(),
+    // the full skin again and `coarse` the mesh that was solved, if it differs.
+    let (skin, coarse) = match fine {
+        None => (skin, None),
         Some(fine) => {
             progress.stage("carrying the full skin along");
             let meter = crate::meter::Meter::start();
-            let inward = -crate::springs::outward_sign(&coarse_skin, &vol, &seg.labels);
+            let inward = -crate::springs::outward_sign(&skin, &vol, &seg.labels);
             let shell = crate::embed::Shell::new(
-                &coarse_skin,
+                &skin,
                 case.solve.shell_mm,
                 inward,
                 case.solve.shell_poisson,
@@ -512,14 +515,14 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             let carried = shell.carry(&e, &shell.deform(&face_post.vertices));
             // Fine vertices outside [surface] movable are rigid, exactly as in a full solve.
             let mut post = fine.clone();
-            for (i, p) in post.vertices.iter_mut().enumerate() {
-                let movable = case
-                    .surface
-                    .movable
-                    .as_ref()
-                    .is_none_or(|r| crate::osteotomy::inside(r, None, *p));
-                if movable {
-                    *p = carried[i];
+            for ((p, c), r) in post
+                .vertices
+                .iter_mut()
+                .zip(carried)
+                .zip(rigid_mask(&case, &fine.vertices))
+            {
+                if !r {
+                    *p = c;
                 }
             }
             let st = crate::compare::stats(&e.distance);
@@ -530,9 +533,11 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
             );
             face_post = post;
             report.record("embed", meter.stop());
-            fine
+            (fine, Some(skin))
         }
     };
+    let embedded = coarse.is_some();
+    let solved_skin = coarse.as_ref().unwrap_or(&skin);
     face_post.colors = None;
     let dist: Vec<f64> = skin
         .vertices
@@ -602,7 +607,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         // With a coarse model, the mesh that was solved (pre-operative skin → its answer).
         Box::new(|| match (&sol, embedded) {
             (Some(sol), true) => {
-                let mut m = coarse_skin.clone();
+                let mut m = solved_skin.clone();
                 m.vertices = sol.positions.clone();
                 mesh::write_mesh(&m, &o.join("face_post_coarse.ply"))
             }
@@ -611,7 +616,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
         Box::new(|| {
             mesh::ply::write(
-                &springs.to_mesh(&coarse_skin),
+                &springs.to_mesh(solved_skin),
                 &o.join("springs.ply"),
                 mesh::ply::Encoding::BinaryLittleEndian,
             )

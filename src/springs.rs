@@ -121,12 +121,16 @@ fn compliance(
 /// +1 when the mesh's (counter-clockwise) vertex normals point out of the head, −1 when they
 /// point into tissue (probed in the label volume two voxels either side).
 pub fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
-    let n = mesh.vertex_normals();
+    sign_of_normals(mesh, &mesh.vertex_normals(), vol, labels)
+}
+
+/// `outward_sign` for normals `n` already computed.
+fn sign_of_normals(mesh: &Mesh, n: &[[f64; 3]], vol: &Volume, labels: &[u8]) -> f64 {
     let probe = 2.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
     let air = |d: f64| {
         mesh.vertices
             .iter()
-            .zip(&n)
+            .zip(n)
             .filter(|(p, v)| label_at(vol, labels, add(**p, scale(**v, d * probe))) == segment::AIR)
             .count()
     };
@@ -135,8 +139,9 @@ pub fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
 
 /// Outward normals: flip the mesh's normals if most of them point into tissue.
 fn outward_normals(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> Vec<[f64; 3]> {
-    let s = outward_sign(mesh, vol, labels);
-    mesh.vertex_normals().iter().map(|v| scale(*v, s)).collect()
+    let n = mesh.vertex_normals();
+    let s = sign_of_normals(mesh, &n, vol, labels);
+    n.iter().map(|v| scale(*v, s)).collect()
 }
 
 pub fn trace(

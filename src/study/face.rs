@@ -161,15 +161,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
         }
     }
     let bone_field = scene.seg.bone_field(&scene.vol);
-    let rigid_of = |m: &Mesh| -> Vec<bool> {
-        m.vertices
-            .iter()
-            .map(|p| match &case.surface.movable {
-                Some(r) => !crate::osteotomy::inside(r, None, *p),
-                None => false,
-            })
-            .collect()
-    };
+    let rigid_of = |m: &Mesh| crate::run::rigid_mask(&case, &m.vertices);
     let mut rows: Vec<FaceRow> = Vec::new();
     let mut answers: Vec<(usize, Answer)> = Vec::new();
     let mut reference: Option<(Mesh, Vec<[f64; 3]>)> = None;
