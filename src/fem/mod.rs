@@ -4,5 +4,6 @@ pub mod assembly;
 pub mod bench;
 pub mod element;
 pub mod jet;
+pub mod precond;
 pub mod preload;
 pub mod quadrature;
