@@ -12,6 +12,12 @@
 //!    distance transform), and every non-bone voxel touching outside air (partial-volume
 //!    voxels whose HU fall below the fat window).
 
+pub mod distance;
+pub mod runs;
+
+pub use distance::{distance_sq, distance_sq_within};
+pub use runs::{Runs, components};
+
 use crate::case::{Tissue, TissueMethod};
 use crate::error::{Error, Result};
 use crate::volume::Volume;
@@ -100,183 +106,6 @@ impl Segmentation {
     }
 }
 
-/// Connected components of `mask` (6- or 26-connectivity): component id per voxel (u32::MAX
-/// outside the mask) and each component's size.
-pub fn components(mask: &[bool], dims: [usize; 3], conn26: bool) -> (Vec<u32>, Vec<usize>) {
-    let [nx, ny, nz] = dims;
-    let mut parent: Vec<u32> = (0..mask.len() as u32).collect();
-    fn find(p: &mut [u32], mut x: u32) -> u32 {
-        while p[x as usize] != x {
-            let g = p[p[x as usize] as usize];
-            p[x as usize] = g;
-            x = g;
-        }
-        x
-    }
-    fn union(p: &mut [u32], a: u32, b: u32) {
-        let (ra, rb) = (find(p, a), find(p, b));
-        if ra != rb {
-            let (lo, hi) = if ra < rb { (ra, rb) } else { (rb, ra) };
-            p[hi as usize] = lo;
-        }
-    }
-    // Backward neighbours: enough to visit each adjacency once.
-    let offsets: Vec<[i64; 3]> = if conn26 {
-        let mut v = Vec::new();
-        for dz in -1..=0i64 {
-            for dy in -1..=1i64 {
-                for dx in -1..=1i64 {
-                    if (dz, dy, dx) < (0, 0, 0) {
-                        v.push([dx, dy, dz]);
-                    }
-                }
-            }
-        }
-        v
-    } else {
-        vec![[-1, 0, 0], [0, -1, 0], [0, 0, -1]]
-    };
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                let a = i + nx * (j + ny * k);
-                if !mask[a] {
-                    continue;
-                }
-                for o in &offsets {
-                    let (x, y, z) = (i as i64 + o[0], j as i64 + o[1], k as i64 + o[2]);
-                    if x < 0 || y < 0 || z < 0 || x >= nx as i64 || y >= ny as i64 {
-                        continue;
-                    }
-                    let b = x as usize + nx * (y as usize + ny * z as usize);
-                    if mask[b] {
-                        union(&mut parent, a as u32, b as u32);
-                    }
-                }
-            }
-        }
-    }
-    let mut id = vec![u32::MAX; mask.len()];
-    let mut root_id = vec![u32::MAX; mask.len()];
-    let mut sizes = Vec::new();
-    for a in 0..mask.len() {
-        if mask[a] {
-            let r = find(&mut parent, a as u32) as usize;
-            if root_id[r] == u32::MAX {
-                root_id[r] = sizes.len() as u32;
-                sizes.push(0);
-            }
-            id[a] = root_id[r];
-            sizes[root_id[r] as usize] += 1;
-        }
-    }
-    (id, sizes)
-}
-
-/// Squared Euclidean distance (mm²) from every voxel to the nearest voxel with `source` set
-/// (Felzenszwalb & Huttenlocher 2012, separable, exact; anisotropic spacing).
-pub fn distance_sq(source: &[bool], dims: [usize; 3], spacing: [f64; 3]) -> Vec<f32> {
-    let inf = f32::MAX / 4.0;
-    let mut d: Vec<f32> = source
-        .par_iter()
-        .map(|&s| if s { 0.0 } else { inf })
-        .collect();
-    let [nx, ny, nz] = dims;
-    let slice = nx * ny;
-    if slice == 0 || nz == 0 {
-        return d;
-    }
-    let h2 = spacing.map(|s| (s * s) as f32);
-    // x and y lines lie within one z slice: slices in parallel, in place (no pass over the
-    // voxels to find where lines start, no per-line result kept for a serial write-back).
-    d.par_chunks_mut(slice).for_each(|sl| {
-        for row in sl.chunks_mut(nx) {
-            let out = edt_1d(row, h2[0]);
-            row.copy_from_slice(&out);
-        }
-        let mut f = vec![0f32; ny];
-        for i in 0..nx {
-            for (j, x) in f.iter_mut().enumerate() {
-                *x = sl[i + j * nx];
-            }
-            for (j, v) in edt_1d(&f, h2[1]).into_iter().enumerate() {
-                sl[i + j * nx] = v;
-            }
-        }
-    });
-    // z lines cross the slices: each (i, j) column in parallel, written back slice by slice.
-    let cols: Vec<Vec<f32>> = (0..slice)
-        .into_par_iter()
-        .map(|c| {
-            let f: Vec<f32> = (0..nz).map(|k| d[c + k * slice]).collect();
-            edt_1d(&f, h2[2])
-        })
-        .collect();
-    d.par_chunks_mut(slice).enumerate().for_each(|(k, sl)| {
-        for (c, v) in sl.iter_mut().enumerate() {
-            *v = cols[c][k];
-        }
-    });
-    d
-}
-
-/// 1-D lower envelope of parabolas: out[q] = min_p f[p] + h2 (q − p)².
-fn edt_1d(f: &[f32], h2: f32) -> Vec<f32> {
-    let n = f.len();
-    let big = f32::MAX / 4.0;
-    let mut v = vec![0usize; n];
-    let mut z = vec![0f64; n + 1];
-    let mut k = 0usize;
-    let mut out = vec![big; n];
-    let mut first = None;
-    for q in 0..n {
-        if f[q] < big {
-            first = Some(q);
-            break;
-        }
-    }
-    let Some(q0) = first else { return out };
-    v[0] = q0;
-    z[0] = f64::NEG_INFINITY;
-    z[1] = f64::INFINITY;
-    let h2 = h2 as f64;
-    for q in q0 + 1..n {
-        if f[q] >= big {
-            continue;
-        }
-        loop {
-            let p = v[k];
-            let s = ((f[q] as f64 + h2 * (q * q) as f64) - (f[p] as f64 + h2 * (p * p) as f64))
-                / (2.0 * h2 * (q as f64 - p as f64));
-            if s <= z[k] && k > 0 {
-                k -= 1;
-                continue;
-            }
-            if s <= z[k] {
-                // k == 0: replace.
-                v[0] = q;
-                z[0] = f64::NEG_INFINITY;
-                z[1] = f64::INFINITY;
-                break;
-            }
-            k += 1;
-            v[k] = q;
-            z[k] = s;
-            z[k + 1] = f64::INFINITY;
-            break;
-        }
-    }
-    k = 0;
-    for (q, o) in out.iter_mut().enumerate() {
-        while z[k + 1] < q as f64 {
-            k += 1;
-        }
-        let p = v[k];
-        *o = (f[p] as f64 + h2 * (q as f64 - p as f64).powi(2)) as f32;
-    }
-    out
-}
-
 /// Standard normal CDF (Abramowitz & Stegun 7.1.26 for erf, |error| < 1.5e-7).
 fn phi_cdf(x: f64) -> f64 {
     let z = x.abs() / std::f64::consts::SQRT_2;
@@ -303,18 +132,49 @@ fn mixel_pdf(x: f64, a: f64, b: f64, sigma: f64) -> f64 {
 /// ("mixel") components between air–soft, fat–soft and soft–bone whose ranges follow the
 /// pure classes' means. Without the mixels, the many boundary voxels of a thin skull pull the
 /// bone component's mean far below pure bone. Returns the three Gaussians.
-fn fit_mixture(values: &[f32], t: &Tissue) -> Vec<Gaussian> {
-    let (lo, hi, bw) = (t.head_threshold, 2000.0, 5.0);
+/// Histogram bins of the mixture fit: 5 HU wide from the head threshold to 2000 HU.
+const FIT_BIN_HU: f64 = 5.0;
+const FIT_TOP_HU: f64 = 2000.0;
+
+/// Histogram of the head voxels' HU for the mixture fit (slices in parallel).
+fn head_histogram(vol: &Volume, head: &Runs, t: &Tissue) -> Vec<f64> {
+    let (lo, hi, bw) = (t.head_threshold, FIT_TOP_HU, FIT_BIN_HU);
     let nb = ((hi - lo) / bw) as usize;
-    let mut hist = vec![0f64; nb];
-    // Values beyond `hi` (dense enamel, metal, saturated detectors) are left out rather than
-    // piled into the last bin, where they would make a spike for a component to collapse onto.
-    for &v in values {
-        let v = v as f64;
-        if v >= lo && v < hi {
-            hist[((v - lo) / bw) as usize] += 1.0;
-        }
-    }
+    let [nx, ny, nz] = vol.dims;
+    (0..nz)
+        .into_par_iter()
+        .fold(
+            || vec![0f64; nb],
+            |mut hist, k| {
+                for j in 0..ny {
+                    let r = j + ny * k;
+                    for q in &head.runs[head.row_start[r]..head.row_start[r + 1]] {
+                        let base = nx * r;
+                        for &v in &vol.data[base + q[0] as usize..base + q[1] as usize] {
+                            // Values beyond `hi` (dense enamel, metal, saturated detectors) are
+                            // left out rather than piled into the last bin, where they would
+                            // make a spike for a component to collapse onto.
+                            let v = v as f64;
+                            if v >= lo && v < hi {
+                                hist[(((v - lo) / bw) as usize).min(nb - 1)] += 1.0;
+                            }
+                        }
+                    }
+                }
+                hist
+            },
+        )
+        .reduce(
+            || vec![0f64; nb],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        )
+}
+
+fn fit_mixture(hist: &[f64], t: &Tissue) -> Vec<Gaussian> {
+    let (lo, hi, bw) = (t.head_threshold, FIT_TOP_HU, FIT_BIN_HU);
     let centre = |b: usize| lo + (b as f64 + 0.5) * bw;
     // Each class's mean stays inside its literature window and its spread below a cap: the fit
     // adapts the windows to this scanner, it does not relabel tissues (on real heads the fat
@@ -419,12 +279,9 @@ fn crossing(a: &Gaussian, b: &Gaussian) -> f64 {
 pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segmentation> {
     let n = vol.len();
     let dims = vol.dims;
-    let above: Vec<bool> = vol
-        .data
-        .par_iter()
-        .map(|&v| v as f64 > t.head_threshold)
-        .collect();
-    let (comp, sizes) = components(&above, dims, false);
+    // Masks as runs along x (src/segment/runs.rs): components without per-voxel labels.
+    let above = Runs::find(dims, |a| vol.data[a] as f64 > t.head_threshold);
+    let (comp, sizes) = above.components(false);
     let Some((head_id, &head_voxels)) = sizes.iter().enumerate().max_by_key(|(_, s)| **s) else {
         return Err(Error::input(
             name,
@@ -434,54 +291,30 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
             ),
         ));
     };
-    let head: Vec<bool> = comp.par_iter().map(|&c| c == head_id as u32).collect();
-    drop(comp);
-    let removed_voxels = above.iter().filter(|&&a| a).count() - head_voxels;
+    let head_runs = above.filter(|q| comp[q] == head_id as u32);
+    let removed_voxels = above.voxels() - head_voxels;
+    drop((above, comp));
+    let head = head_runs.paint();
 
-    // Outside air: flood from the border through non-head voxels.
+    // Outside air: the components of the non-head voxels that touch the volume border; the
+    // others are cavities (sinuses, airway).
     let [nx, ny, nz] = dims;
-    let mut outside = vec![false; n];
-    let mut stack: Vec<usize> = Vec::new();
-    for k in 0..nz {
-        for j in 0..ny {
-            for i in 0..nx {
-                if i == 0 || j == 0 || k == 0 || i == nx - 1 || j == ny - 1 || k == nz - 1 {
-                    let a = vol.idx(i, j, k);
-                    if !head[a] && !outside[a] {
-                        outside[a] = true;
-                        stack.push(a);
-                    }
-                }
+    let air = head_runs.complement();
+    let (air_comp, air_sizes) = air.components(false);
+    let mut border = vec![false; air_sizes.len()];
+    for r in 0..air.row_start.len() - 1 {
+        let (j, k) = air.row(r);
+        let edge_row = j == 0 || k == 0 || j + 1 == ny || k + 1 == nz;
+        for q in air.row_start[r]..air.row_start[r + 1] {
+            let [x0, x1] = air.runs[q];
+            if edge_row || x0 == 0 || x1 as usize == nx {
+                border[air_comp[q] as usize] = true;
             }
         }
     }
-    while let Some(a) = stack.pop() {
-        let [i, j, k] = vol.ijk(a);
-        let mut visit = |b: usize| {
-            if !head[b] && !outside[b] {
-                outside[b] = true;
-                stack.push(b);
-            }
-        };
-        if i > 0 {
-            visit(a - 1)
-        }
-        if i + 1 < nx {
-            visit(a + 1)
-        }
-        if j > 0 {
-            visit(a - nx)
-        }
-        if j + 1 < ny {
-            visit(a + nx)
-        }
-        if k > 0 {
-            visit(a - nx * ny)
-        }
-        if k + 1 < nz {
-            visit(a + nx * ny)
-        }
-    }
+    let outside_runs = air.filter(|q| border[air_comp[q] as usize]);
+    let cavity_voxels = air.voxels() - outside_runs.voxels();
+    drop((air, air_comp));
 
     let mut crossings = None;
     let mut fit_warnings = Vec::new();
@@ -497,14 +330,7 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
             None,
         ),
         TissueMethod::Fit => {
-            let vals: Vec<f32> = vol
-                .data
-                .iter()
-                .zip(&head)
-                .filter(|(_, h)| **h)
-                .map(|(v, _)| *v)
-                .collect();
-            let g = fit_mixture(&vals, t);
+            let g = fit_mixture(&head_histogram(vol, &head_runs, t), t);
             // Bounds at the midpoints of neighbouring means, not where the weighted Gaussians
             // cross: at a tissue boundary a voxel that is half one class and half the other has
             // the mean of the two, so the midpoint is the unbiased partial-volume threshold. The
@@ -541,14 +367,9 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
         }
     };
 
-    // Bone pieces.
-    let bone_raw: Vec<bool> = vol
-        .data
-        .par_iter()
-        .zip(&head)
-        .map(|(&v, &h)| h && v as f64 >= windows.bone)
-        .collect();
-    let (bcomp, bsizes) = components(&bone_raw, dims, true);
+    // Bone pieces (26-connected runs of head voxels at or above the bone bound).
+    let bone_runs = Runs::find(dims, |a| head[a] && vol.data[a] as f64 >= windows.bone);
+    let (bcomp, bsizes) = bone_runs.components(true);
     let vv = vol.voxel_volume();
     let keep: Vec<bool> = bsizes
         .iter()
@@ -570,20 +391,26 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
         .filter(|(_, k)| !**k)
         .map(|(s, _)| s)
         .sum();
+    let bone = bone_runs.filter(|q| keep[bcomp[q] as usize]);
+    drop((bone_runs, bcomp));
 
-    let d2 = distance_sq(&outside, dims, vol.spacing);
     // The surface lies about half a voxel in front of the nearest outside-air voxel centre.
     let h = (vol.spacing[0] * vol.spacing[1] * vol.spacing[2]).cbrt();
     let skin_d = t.skin_thickness_mm + 0.5 * h;
     let touch = vol.spacing.iter().cloned().fold(0.0, f64::max) * 1.01;
-    let labels: Vec<u8> = (0..n)
+    // Only distances up to the skin layer's depth matter: the transform is cut there.
+    let band = skin_d.max(touch) * 1.001;
+    let d2 = distance_sq_within(
+        &outside_runs.paint(),
+        dims,
+        vol.spacing,
+        (band * band) as f32,
+    );
+    let mut labels: Vec<u8> = (0..n)
         .into_par_iter()
         .map(|a| {
             if !head[a] {
                 return AIR;
-            }
-            if bone_raw[a] && keep[bcomp[a] as usize] {
-                return BONE;
             }
             let hu = vol.data[a] as f64;
             let d = (d2[a] as f64).sqrt();
@@ -603,17 +430,37 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
             }
         })
         .collect();
-    let mut counts = [0usize; 6];
-    for &l in &labels {
-        counts[l as usize] += 1;
+    drop(d2);
+    // Kept bone overrides the soft-tissue classes.
+    if nx * ny > 0 {
+        labels
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, sl)| {
+                for j in 0..ny {
+                    let r = j + ny * k;
+                    for q in &bone.runs[bone.row_start[r]..bone.row_start[r + 1]] {
+                        sl[nx * j + q[0] as usize..nx * j + q[1] as usize].fill(BONE);
+                    }
+                }
+            });
     }
+    let counts = labels
+        .par_chunks(1 << 16)
+        .map(|c| {
+            let mut k = [0usize; 6];
+            for &l in c {
+                k[l as usize] += 1;
+            }
+            k
+        })
+        .reduce(|| [0; 6], |a, b| std::array::from_fn(|i| a[i] + b[i]));
     if counts[SKIN as usize] == 0 {
         return Err(Error::input(
             name,
             "no skin found: the head touches the volume border everywhere",
         ));
     }
-    let cavity_voxels = (0..n).filter(|&a| !head[a] && !outside[a]).count();
     let report = SegmentReport {
         method: format!("{:?}", t.method).to_lowercase(),
         windows: windows.clone(),
@@ -644,52 +491,6 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn distance_transform_is_exact_on_a_point() {
-        let dims = [9, 7, 5];
-        let mut src = vec![false; 9 * 7 * 5];
-        src[4 + 9 * (3 + 7 * 2)] = true;
-        let d = distance_sq(&src, dims, [1.0, 2.0, 0.5]);
-        for k in 0..5 {
-            for j in 0..7 {
-                for i in 0..9 {
-                    let e = ((i as f64 - 4.0) * 1.0).powi(2)
-                        + ((j as f64 - 3.0) * 2.0).powi(2)
-                        + ((k as f64 - 2.0) * 0.5).powi(2);
-                    assert!((d[i + 9 * (j + 7 * k)] as f64 - e).abs() < 1e-4);
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn distance_transform_matches_brute_force_on_scattered_sources() {
-        let dims = [11, 6, 8];
-        let n = 11 * 6 * 8;
-        let sp = [0.7, 1.3, 2.0];
-        let src: Vec<bool> = (0..n).map(|a| (a * 37 + 11) % 53 == 0).collect();
-        let d = distance_sq(&src, dims, sp);
-        let pos = |a: usize| {
-            let (i, j, k) = (a % 11, (a / 11) % 6, a / 66);
-            [i as f64 * sp[0], j as f64 * sp[1], k as f64 * sp[2]]
-        };
-        for a in 0..n {
-            let p = pos(a);
-            let e = (0..n)
-                .filter(|&b| src[b])
-                .map(|b| {
-                    let q = pos(b);
-                    (0..3).map(|c| (p[c] - q[c]).powi(2)).sum::<f64>()
-                })
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                (d[a] as f64 - e).abs() < 1e-3 * e.max(1.0),
-                "voxel {a}: {} vs {e}",
-                d[a]
-            );
-        }
-    }
 
     #[test]
     fn components_count_six_versus_26() {
