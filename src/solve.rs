@@ -596,9 +596,7 @@ fn solve_mesh(
                     // Newton step). If they stall, the coupled tangent is factored instead; that
                     // factor is kept while it contracts the residual 4× per iteration.
                     const RHO: f64 = 0.25;
-                    let apply_p = |v: &[f64]| -> Vec<f64> {
-                        precond.apply(0, v)
-                    };
+                    let apply_p = |v: &[f64]| -> Vec<f64> { precond.apply(0, v) };
                     let apply_a = |h: &[[[f64; 3]; 3]], v: &[f64]| -> Vec<f64> {
                         let mut y = k_rows.apply3(v, nd);
                         for (n, &i) in spring_vertices.iter().enumerate() {

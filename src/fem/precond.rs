@@ -11,7 +11,8 @@
 use crate::error::{Error, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMat, Triplet};
 use faer::{Conj, Par, Side};
@@ -37,9 +38,8 @@ fn factor<T: faer::traits::ComplexField + Copy>(
 ) -> Option<Vec<T>> {
     let m = SparseColMat::<usize, T>::try_new_from_triplets(nf, nf, t).ok()?;
     let mut values = vec![T::zero_impl(); symbolic.len_val()];
-    let mut mem = MemBuffer::new(
-        symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default()),
-    );
+    let mut mem =
+        MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default()));
     symbolic
         .factorize_numeric_llt(
             &mut values,
