@@ -11,7 +11,7 @@
 use crate::case::{Springs as SpringParams, Stiffness};
 use crate::mesh::{Column, Edges, Mesh, add, norm, scale, sub};
 use crate::segment::{self, Segmentation};
-use crate::volume::{Volume, sample_field};
+use crate::volume::{Volume, VoxelMap, sample_field};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -79,18 +79,17 @@ pub(crate) fn tissue_c(label: u8, s: &Stiffness) -> f64 {
     }
 }
 
-fn label_at(vol: &Volume, labels: &[u8], p: [f64; 3]) -> u8 {
-    let c = vol.to_voxel(p);
-    let idx: Option<Vec<usize>> = (0..3)
-        .map(|a| {
-            let r = c[a].round();
-            (r >= 0.0 && r < vol.dims[a] as f64).then_some(r as usize)
-        })
-        .collect();
-    match idx {
-        Some(i) => labels[vol.idx(i[0], i[1], i[2])],
-        None => segment::AIR,
+fn label_at(map: &VoxelMap, vol: &Volume, labels: &[u8], p: [f64; 3]) -> u8 {
+    let c = map.to_voxel(p);
+    let mut i = [0usize; 3];
+    for a in 0..3 {
+        let r = c[a].round();
+        if !(r >= 0.0 && r < vol.dims[a] as f64) {
+            return segment::AIR;
+        }
+        i[a] = r as usize;
     }
+    labels[vol.idx(i[0], i[1], i[2])]
 }
 
 /// Σ l_h / c_h along the segment a → b, sampled every `step`.
@@ -102,13 +101,14 @@ fn compliance(
     step: f64,
     st: &Stiffness,
 ) -> f64 {
+    let map = vol.voxel_map();
     let l = norm(sub(b, a));
     let n = (l / step).ceil().max(1.0) as usize;
     let h = l / n as f64;
     (0..n)
         .map(|k| {
             let p = add(a, scale(sub(b, a), (k as f64 + 0.5) / n as f64));
-            let lab = label_at(vol, labels, p);
+            let lab = label_at(&map, vol, labels, p);
             if lab == segment::BONE {
                 0.0
             } else {
@@ -127,11 +127,14 @@ pub fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
 /// `outward_sign` for normals `n` already computed.
 fn sign_of_normals(mesh: &Mesh, n: &[[f64; 3]], vol: &Volume, labels: &[u8]) -> f64 {
     let probe = 2.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
+    let map = vol.voxel_map();
     let air = |d: f64| {
         mesh.vertices
             .iter()
             .zip(n)
-            .filter(|(p, v)| label_at(vol, labels, add(**p, scale(**v, d * probe))) == segment::AIR)
+            .filter(|(p, v)| {
+                label_at(&map, vol, labels, add(**p, scale(**v, d * probe))) == segment::AIR
+            })
             .count()
     };
     if air(-1.0) > air(1.0) { -1.0 } else { 1.0 }
@@ -176,8 +179,9 @@ pub fn trace(
     let iso = seg.windows.bone as f32;
     let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let normals = outward_normals(mesh, vol, labels);
+    let map = vol.voxel_map();
     let bone_at =
-        |p: [f64; 3]| sample_field(bone_field, vol.dims, vol.to_voxel(p), f32::MIN) >= iso;
+        |p: [f64; 3]| sample_field(bone_field, vol.dims, map.to_voxel(p), f32::MIN) >= iso;
     // Main springs: march inwards to the first bone.
     let hits: Vec<Option<[f64; 3]>> = mesh
         .vertices

@@ -36,7 +36,7 @@ pub struct ScanResult {
 }
 
 /// Find the first crossing of `iso` (from below to above) along p(t) = o + t·d for t in
-/// [t0, t1], stepping by `dt`, refined by bisection.
+/// [t0 + skip, t1], stepping by `dt` from t0, refined by bisection.
 #[allow(clippy::too_many_arguments)] // a ray, its interval and step, the field and level
 fn first_crossing(
     field: &[f32],
@@ -44,19 +44,24 @@ fn first_crossing(
     o: [f64; 3],
     d: [f64; 3],
     t0: f64,
+    skip: f64,
     t1: f64,
     dt: f64,
     iso: f32,
 ) -> Option<f64> {
+    let map = vol.voxel_map();
     let at = |t: f64| {
         let p = [o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2]];
-        sample_field(field, vol.dims, vol.to_voxel(p), f32::MIN)
+        sample_field(field, vol.dims, map.to_voxel(p), f32::MIN)
     };
-    let mut prev_t = t0;
-    let mut prev = at(t0);
-    let mut t = t0;
-    while t < t1 {
-        t = (t + dt).min(t1);
+    // Samples at t0 + k·dt (not accumulated), so a ray started further in (`skip`) samples
+    // exactly the points a ray from t0 would.
+    let mut k = (skip / dt).floor().max(0.0) as usize;
+    let mut prev_t = t0 + k as f64 * dt;
+    let mut prev = at(prev_t);
+    while prev_t < t1 {
+        k += 1;
+        let t = (t0 + k as f64 * dt).min(t1);
         let v = at(t);
         if prev < iso && v >= iso {
             let (mut lo, mut hi) = (prev_t, t);
@@ -79,25 +84,78 @@ pub fn scan(
     head: &[bool],
     p: &ScanParams,
 ) -> ScanResult {
-    // Axis through the centroid of the head; radius bound from the head's extent.
-    let (mut sx, mut sy, mut cnt) = (0.0, 0.0, 0usize);
-    let (mut zmin, mut zmax) = (f64::INFINITY, f64::NEG_INFINITY);
-    for (a, &h) in head.iter().enumerate() {
-        if h {
-            let w = vol.to_world(vol.ijk(a).map(|x| x as f64));
-            sx += w[0];
-            sy += w[1];
-            cnt += 1;
-            zmin = zmin.min(w[2]);
-            zmax = zmax.max(w[2]);
-        }
-    }
+    // Axis through the centroid of the head, the head's z range and horizontal bounding box
+    // (slices in parallel).
+    let [nx, ny, _] = vol.dims;
+    let slice = nx * ny;
+    let (sx, sy, cnt, zmin, zmax, bmin, bmax) = head
+        .par_chunks(slice.max(1))
+        .enumerate()
+        .map(|(k, sl)| {
+            let mut acc = (
+                0.0,
+                0.0,
+                0usize,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                [f64::INFINITY; 2],
+                [f64::NEG_INFINITY; 2],
+            );
+            for (a, &h) in sl.iter().enumerate() {
+                if h {
+                    let w = vol.to_world([(a % nx) as f64, (a / nx) as f64, k as f64]);
+                    acc.0 += w[0];
+                    acc.1 += w[1];
+                    acc.2 += 1;
+                    acc.3 = acc.3.min(w[2]);
+                    acc.4 = acc.4.max(w[2]);
+                    for c in 0..2 {
+                        acc.5[c] = acc.5[c].min(w[c]);
+                        acc.6[c] = acc.6[c].max(w[c]);
+                    }
+                }
+            }
+            acc
+        })
+        .reduce(
+            || {
+                (
+                    0.0,
+                    0.0,
+                    0,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    [f64::INFINITY; 2],
+                    [f64::NEG_INFINITY; 2],
+                )
+            },
+            |a, b| {
+                (
+                    a.0 + b.0,
+                    a.1 + b.1,
+                    a.2 + b.2,
+                    a.3.min(b.3),
+                    a.4.max(b.4),
+                    [a.5[0].min(b.5[0]), a.5[1].min(b.5[1])],
+                    [a.6[0].max(b.6[0]), a.6[1].max(b.6[1])],
+                )
+            },
+        );
     let axis = [sx / cnt.max(1) as f64, sy / cnt.max(1) as f64];
     let (lo, hi) = vol.bounds();
     let rmax = [lo[0] - axis[0], hi[0] - axis[0]]
         .iter()
         .flat_map(|dx| [lo[1] - axis[1], hi[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
         .fold(0.0, f64::max);
+    // Rays start just outside the head's bounding box (the skin field is below the iso level
+    // everywhere else): a trilinear sample sees voxels within one spacing per axis.
+    let margin = 3.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
+    let rhead = [bmin[0] - axis[0], bmax[0] - axis[0]]
+        .iter()
+        .flat_map(|dx| [bmin[1] - axis[1], bmax[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
+        .fold(0.0, f64::max)
+        + margin;
+    let t_start = (rmax - rhead).max(0.0);
     let nphi = (360.0 / p.angle_step_deg).round().max(8.0) as usize;
     let dphi = 2.0 * PI / nphi as f64;
     let nz = ((zmax - zmin) / p.z_step).floor() as usize + 1;
@@ -115,7 +173,7 @@ pub fn scan(
                     let o = [axis[0] + rmax * phi.sin(), axis[1] - rmax * phi.cos(), z];
                     let d = [-phi.sin(), phi.cos(), 0.0];
                     let Some(ts) =
-                        first_crossing(skin_field, vol, o, d, 0.0, rmax, step, p.skin_iso)
+                        first_crossing(skin_field, vol, o, d, 0.0, t_start, rmax, step, p.skin_iso)
                     else {
                         return (None, None);
                     };
@@ -126,6 +184,7 @@ pub fn scan(
                         o,
                         d,
                         ts,
+                        0.0,
                         (ts + p.max_skull_depth).min(rmax),
                         step,
                         p.bone_iso,

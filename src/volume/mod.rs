@@ -117,6 +117,16 @@ impl Volume {
         p
     }
 
+    /// The LPS mm → voxel map with the direction matrix inverted once, for loops that map many
+    /// points (ray marching, spring tracing); gives exactly `to_voxel`'s values.
+    pub fn voxel_map(&self) -> VoxelMap {
+        VoxelMap {
+            origin: self.origin,
+            inv: inv3(self.direction),
+            spacing: self.spacing,
+        }
+    }
+
     /// LPS mm → continuous voxel coordinates.
     pub fn to_voxel(&self, p: [f64; 3]) -> [f64; 3] {
         let d = [
@@ -206,6 +216,31 @@ impl Volume {
 
 /// Trilinear interpolation in a scalar field laid out like [`Volume::data`], at continuous
 /// voxel coordinates `c`.
+/// LPS mm → continuous voxel coordinates of one volume (see `Volume::voxel_map`).
+#[derive(Clone, Copy, Debug)]
+pub struct VoxelMap {
+    origin: [f64; 3],
+    inv: [[f64; 3]; 3],
+    spacing: [f64; 3],
+}
+
+impl VoxelMap {
+    #[inline]
+    pub fn to_voxel(&self, p: [f64; 3]) -> [f64; 3] {
+        let d = [
+            p[0] - self.origin[0],
+            p[1] - self.origin[1],
+            p[2] - self.origin[2],
+        ];
+        let inv = &self.inv;
+        let mut c = [0.0; 3];
+        for (a, ca) in c.iter_mut().enumerate() {
+            *ca = (inv[a][0] * d[0] + inv[a][1] * d[1] + inv[a][2] * d[2]) / self.spacing[a];
+        }
+        c
+    }
+}
+
 pub fn sample_field(data: &[f32], dims: [usize; 3], c: [f64; 3], outside: f32) -> f32 {
     let mut i0 = [0usize; 3];
     let mut f = [0.0f64; 3];
