@@ -55,19 +55,26 @@ pub fn distance_sq_within(
                     }
                 }
             }
+            // y lines in tiles of 16 columns (one cache line of each row per tile).
+            const W: usize = 16;
             let mut line = Lines::new(ny);
-            for i in 0..nx {
-                let mut any = false;
+            let mut tile = vec![0f32; W * ny];
+            for i0 in (0..nx).step_by(W) {
+                let w = W.min(nx - i0);
                 for j in 0..ny {
-                    let x = sl[i + j * nx];
-                    line.f[j] = x;
-                    any |= x < INF;
+                    tile[j * W..j * W + w].copy_from_slice(&sl[j * nx + i0..j * nx + i0 + w]);
                 }
-                if any {
+                for c in 0..w {
+                    if !line.load((0..ny).map(|j| tile[j * W + c])) {
+                        continue;
+                    }
                     line.transform(h2[1]);
                     for j in 0..ny {
-                        sl[i + j * nx] = cut(line.out[j]);
+                        tile[j * W + c] = cut(line.out[j]);
                     }
+                }
+                for j in 0..ny {
+                    sl[j * nx + i0..j * nx + i0 + w].copy_from_slice(&tile[j * W..j * W + w]);
                 }
             }
         });
@@ -77,24 +84,17 @@ pub fn distance_sq_within(
     (0..ny).into_par_iter().for_each(|j| {
         let shared = &shared;
         let mut block = vec![0f32; nz * nx];
-        let mut any = vec![false; nx];
         for k in 0..nz {
             let at = j * nx + k * slice;
             // SAFETY: row j of every slice belongs to this task alone; no other task reads or
             // writes it.
             let row = unsafe { std::slice::from_raw_parts(shared.0.add(at), nx) };
             block[k * nx..(k + 1) * nx].copy_from_slice(row);
-            for i in 0..nx {
-                any[i] |= row[i] < INF;
-            }
         }
         let mut line = Lines::new(nz);
         for i in 0..nx {
-            if !any[i] {
+            if !line.load((0..nz).map(|k| block[k * nx + i])) {
                 continue;
-            }
-            for k in 0..nz {
-                line.f[k] = block[k * nx + i];
             }
             line.transform(h2[2]);
             for k in 0..nz {
@@ -133,6 +133,18 @@ impl Lines {
         }
     }
 
+    /// Load a line; false when the transform would return it unchanged (all sources, or
+    /// nothing finite).
+    fn load(&mut self, values: impl Iterator<Item = f32>) -> bool {
+        let (mut finite, mut nonzero) = (false, false);
+        for (f, x) in self.f.iter_mut().zip(values) {
+            *f = x;
+            finite |= x < INF;
+            nonzero |= x != 0.0;
+        }
+        finite && nonzero
+    }
+
     /// Lower envelope of parabolas: out[q] = min_p f[p] + h2 (q − p)², skipping infinite f.
     fn transform(&mut self, h2: f32) {
         let (f, v, z) = (&self.f, &mut self.v, &mut self.z);
@@ -147,7 +159,9 @@ impl Lines {
         z[1] = f64::INFINITY;
         let h2 = h2 as f64;
         for q in q0 + 1..n {
-            if f[q] >= INF {
+            // Inside a run of sources (zeros) only the run's ends can be nearest to a point
+            // outside it, and inside it the answer is 0: long runs of air cost no divisions.
+            if f[q] >= INF || (f[q] == 0.0 && f[q - 1] == 0.0 && q + 1 < n && f[q + 1] == 0.0) {
                 continue;
             }
             let fq = f[q] as f64 + h2 * (q * q) as f64;
@@ -175,6 +189,10 @@ impl Lines {
         for (q, o) in self.out.iter_mut().enumerate() {
             while z[k + 1] < q as f64 {
                 k += 1;
+            }
+            if f[q] == 0.0 {
+                *o = 0.0;
+                continue;
             }
             let p = v[k];
             *o = (f[p] as f64 + h2 * (q as f64 - p as f64).powi(2)) as f32;
