@@ -36,33 +36,93 @@ fn fit(
         return None;
     }
     let nf = ys.len();
-    let mut a = DMatrix::<f64>::zeros(uv.len(), cols);
-    let mut b = DMatrix::<f64>::zeros(uv.len(), nf);
     let skip = usize::from(value.is_some());
-    for (r, p) in uv.iter().enumerate() {
+    let row = |r: usize| {
+        let p = uv[r];
         let (x1, x2) = ((p[0] - at[0]) / h, (p[1] - at[1]) / h);
-        let row = [1.0, x1, x2, x1 * x1, x1 * x2, x2 * x2];
-        for c in 0..cols {
-            a[(r, c)] = row[c + skip];
+        [1.0, x1, x2, x1 * x1, x1 * x2, x2 * x2]
+    };
+    let rhs = |r: usize, f: usize| ys[f][r] - value.map_or(0.0, |v| v[f]);
+    let c = normal_equations(uv.len(), cols, skip, nf, &row, &rhs).or_else(|| {
+        // Poorly conditioned neighbourhoods: the SVD, which also tells a rank-deficient one.
+        let mut a = DMatrix::<f64>::zeros(uv.len(), cols);
+        let mut b = DMatrix::<f64>::zeros(uv.len(), nf);
+        for r in 0..uv.len() {
+            let w = row(r);
+            for c in 0..cols {
+                a[(r, c)] = w[c + skip];
+            }
+            for f in 0..nf {
+                b[(r, f)] = rhs(r, f);
+            }
         }
-        for f in 0..nf {
-            b[(r, f)] = ys[f][r] - value.map_or(0.0, |v| v[f]);
+        let svd = a.svd(true, true);
+        let sv = &svd.singular_values;
+        if sv.min() <= 1e-9 * sv.max() {
+            return None;
         }
-    }
-    let svd = a.svd(true, true);
-    let sv = &svd.singular_values;
-    if sv.min() <= 1e-9 * sv.max() {
-        return None;
-    }
-    let c = svd.solve(&b, 1e-12).ok()?;
+        let c = svd.solve(&b, 1e-12).ok()?;
+        Some((0..nf).map(|f| [c[(0, f)], c[(1, f)], c[(2, f)]]).collect())
+    })?;
     Some(
         (0..nf)
             .map(|f| match value {
-                Some(v) => [v[f], c[(0, f)] / h, c[(1, f)] / h],
-                None => [c[(0, f)], c[(1, f)] / h, c[(2, f)] / h],
+                Some(v) => [v[f], c[f][0] / h, c[f][1] / h],
+                None => [c[f][0], c[f][1] / h, c[f][2] / h],
             })
             .collect(),
     )
+}
+
+/// The first three least-squares coefficients per field from the normal equations AᵀA c = Aᵀb
+/// (A: rows `row(r)[skip..skip + cols]`), on the stack: most fits are well conditioned, and
+/// this avoids the SVD's heap matrices. None when AᵀA's condition number exceeds 1e6 (A's
+/// exceeds 1e3, where squaring it would cost accuracy): the caller then uses the SVD.
+fn normal_equations(
+    rows: usize,
+    cols: usize,
+    skip: usize,
+    nf: usize,
+    row: &dyn Fn(usize) -> [f64; 6],
+    rhs: &dyn Fn(usize, usize) -> f64,
+) -> Option<Vec<[f64; 3]>> {
+    if nf > 3 {
+        return None;
+    }
+    let mut m = nalgebra::Matrix6::<f64>::zeros();
+    let mut b = nalgebra::Matrix6x3::<f64>::zeros();
+    for r in 0..rows {
+        let w = row(r);
+        for i in 0..cols {
+            for j in 0..=i {
+                m[(i, j)] += w[i + skip] * w[j + skip];
+            }
+            for f in 0..nf {
+                b[(i, f)] += w[i + skip] * rhs(r, f);
+            }
+        }
+    }
+    // An unused sixth unknown (value given) gets an identity row so the 6×6 system stays
+    // regular; it is excluded from the conditioning test.
+    for i in cols..6 {
+        m[(i, i)] = 1.0;
+    }
+    for i in 0..6 {
+        for j in 0..i {
+            m[(j, i)] = m[(i, j)];
+        }
+    }
+    // (The identity row adds the eigenvalue 1, inside the used block's range: its largest
+    // eigenvalue is at least ½ since the farthest point has x1² + x2² = 1.)
+    let ev = nalgebra::SymmetricEigen::new(m).eigenvalues;
+    let (lo, hi) = ev.iter().fold((f64::INFINITY, 0.0f64), |(a, b), &x| {
+        (a.min(x), b.max(x.abs()))
+    });
+    if !(lo > 1e-6 * hi) {
+        return None;
+    }
+    let c = m.cholesky()?.solve(&b);
+    Some((0..nf).map(|f| [c[(0, f)], c[(1, f)], c[(2, f)]]).collect())
 }
 
 /// Initial DOFs for one coordinate field given at the vertices.
@@ -214,4 +274,47 @@ pub fn sample(mesh: &FemMesh, a: &[Vec<f64>; 3], level: usize) -> Mesh {
         Key::Edge(id, from_low)
     }
     Mesh::new(verts, tris)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Least squares by SVD, the reference for the normal-equation path.
+    fn svd_coefficients(rows: &[[f64; 6]], cols: usize, skip: usize, b: &[f64]) -> Vec<f64> {
+        let a = DMatrix::from_fn(rows.len(), cols, |r, c| rows[r][c + skip]);
+        let b = DMatrix::from_fn(rows.len(), 1, |r, _| b[r]);
+        let c = a.svd(true, true).solve(&b, 1e-14).unwrap();
+        (0..3).map(|i| c[(i, 0)]).collect()
+    }
+
+    #[test]
+    fn normal_equations_agree_with_the_svd_and_refuse_degenerate_points() {
+        // A ring of 9 points around the origin (scaled to the unit disc), noisy values.
+        let pts: Vec<[f64; 2]> = (0..9)
+            .map(|i| {
+                let t = i as f64 * 0.7 + 0.3;
+                let r = 0.4 + 0.6 * ((i * 5 % 9) as f64 / 8.0);
+                [r * t.cos(), r * t.sin()]
+            })
+            .collect();
+        let row = |p: [f64; 2]| [1.0, p[0], p[1], p[0] * p[0], p[0] * p[1], p[1] * p[1]];
+        let rows: Vec<[f64; 6]> = pts.iter().map(|&p| row(p)).collect();
+        let b: Vec<f64> = (0..9).map(|i| ((i * 7 % 5) as f64 - 2.0) * 0.3).collect();
+        for (cols, skip) in [(6, 0), (5, 1)] {
+            let c = normal_equations(9, cols, skip, 1, &|r| rows[r], &|r, _| b[r]).unwrap();
+            let reference = svd_coefficients(&rows, cols, skip, &b);
+            for i in 0..3 {
+                assert!(
+                    (c[0][i] - reference[i]).abs() < 1e-10,
+                    "{cols}: {c:?} vs {reference:?}"
+                );
+            }
+        }
+        // Points on a line cannot fix a quadratic in two variables.
+        let line: Vec<[f64; 6]> = (0..9)
+            .map(|i| row([i as f64 / 8.0, 0.5 * i as f64 / 8.0]))
+            .collect();
+        assert!(normal_equations(9, 6, 0, 1, &|r| line[r], &|r, _| b[r]).is_none());
+    }
 }
