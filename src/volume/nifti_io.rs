@@ -171,12 +171,28 @@ fn read_checked_header(path: &Path) -> Result<Geometry> {
 
 pub fn read(path: &Path) -> Result<Volume> {
     let (dims, spacing, origin, direction) = read_checked_header(path)?;
-    let obj = ReaderOptions::new().read_file(path).map_err(|e| {
+    let unreadable = |e: nifti::NiftiError| {
         Error::input(
             path,
             format!("cannot read NIfTI voxels ({e}); truncated or corrupt?"),
         )
-    })?;
+    };
+    let gz = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    let obj = if gz {
+        // The whole gzip stream is inflated here, so its CRC-32 and length trailer are checked:
+        // the nifti crate stops reading once it has the voxels, and a corrupted stream that
+        // still inflates would pass unnoticed.
+        let file = std::fs::File::open(path).map_err(|e| Error::input(path, e.to_string()))?;
+        let mut inflate = flate2::read::MultiGzDecoder::new(std::io::BufReader::new(file));
+        let obj = nifti::InMemNiftiObject::from_reader(&mut inflate).map_err(unreadable)?;
+        std::io::copy(&mut inflate, &mut std::io::sink())
+            .map_err(|e| Error::input(path, format!("corrupt gzip stream ({e})")))?;
+        obj
+    } else {
+        ReaderOptions::new().read_file(path).map_err(unreadable)?
+    };
     // A .nii.gz whose stream ends early decompresses to fewer bytes than the header promises;
     // the nifti crate would panic converting it (found by tests/fuzz.rs), so check first.
     let shape: Vec<u64> = obj.volume().dim().iter().map(|&d| d as u64).collect();
