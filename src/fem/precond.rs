@@ -63,14 +63,7 @@ impl Precond {
         diagonals: &[Vec<f64>],
         fixed: &[bool],
     ) -> Result<Precond> {
-        let mut free_index = vec![usize::MAX; n];
-        let mut free = Vec::new();
-        for g in 0..n {
-            if !fixed[g] {
-                free_index[g] = free.len();
-                free.push(g);
-            }
-        }
+        let (free_index, free) = super::assembly::free_dofs(&fixed[..n]);
         let nf = free.len();
         let mut triplets: Vec<(usize, usize, f64)> = k
             .iter()

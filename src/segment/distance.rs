@@ -65,13 +65,7 @@ pub fn distance_sq_within(
                     tile[j * W..j * W + w].copy_from_slice(&sl[j * nx + i0..j * nx + i0 + w]);
                 }
                 for c in 0..w {
-                    if !line.load((0..ny).map(|j| tile[j * W + c])) {
-                        continue;
-                    }
-                    line.transform(h2[1]);
-                    for j in 0..ny {
-                        tile[j * W + c] = cut(line.out[j]);
-                    }
+                    line.strided(&mut tile, c, W, h2[1], cut);
                 }
                 for j in 0..ny {
                     sl[j * nx + i0..j * nx + i0 + w].copy_from_slice(&tile[j * W..j * W + w]);
@@ -93,13 +87,7 @@ pub fn distance_sq_within(
         }
         let mut line = Lines::new(nz);
         for i in 0..nx {
-            if !line.load((0..nz).map(|k| block[k * nx + i])) {
-                continue;
-            }
-            line.transform(h2[2]);
-            for k in 0..nz {
-                block[k * nx + i] = cut(line.out[k]);
-            }
+            line.strided(&mut block, i, nx, h2[2], cut);
         }
         for k in 0..nz {
             let at = j * nx + k * slice;
@@ -130,6 +118,26 @@ impl Lines {
             out: vec![0.0; n],
             v: vec![0; n],
             z: vec![0.0; n + 1],
+        }
+    }
+
+    /// Transform the line buf[first + q·stride] (q < the line length) in place, each result
+    /// passed through `cut`; lines the transform would leave unchanged are skipped.
+    fn strided(
+        &mut self,
+        buf: &mut [f32],
+        first: usize,
+        stride: usize,
+        h2: f32,
+        cut: impl Fn(f32) -> f32,
+    ) {
+        let n = self.f.len();
+        if !self.load((0..n).map(|q| buf[first + q * stride])) {
+            return;
+        }
+        self.transform(h2);
+        for q in 0..n {
+            buf[first + q * stride] = cut(self.out[q]);
         }
     }
 
