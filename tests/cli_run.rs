@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 fn case_with(extra: &str) -> PathBuf {
     let d = tempfile::Builder::new()
         .prefix("facesim-case")
-        .tempdir()
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
         .unwrap()
         .keep();
     let ct = phantom_dir().join("ct.nii.gz");

@@ -70,7 +70,7 @@ fn extracted_skin(method: ExtractMethod, ct: &str) -> facesim::run::Outcome {
     // Kept (not deleted on drop) so the outputs can be inspected after a failure.
     let dir = tempfile::Builder::new()
         .prefix("facesim-run")
-        .tempdir()
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
         .unwrap()
         .keep();
     let dir = &dir;

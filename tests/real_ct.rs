@@ -14,7 +14,7 @@ fn run_real(extra: &str) -> facesim::run::Outcome {
     let ct = common::real_ct();
     let dir = tempfile::Builder::new()
         .prefix("facesim-real")
-        .tempdir()
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
         .unwrap()
         .keep();
     std::fs::write(

@@ -11,7 +11,7 @@ pub fn phantom_dir() -> &'static Path {
     DIR.get_or_init(|| {
         let d = tempfile::Builder::new()
             .prefix("facesim-phantom")
-            .tempdir()
+            .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
             .unwrap()
             .keep();
         facesim::phantom::write_case(&d, &facesim::phantom::PhantomOptions::default()).unwrap();
