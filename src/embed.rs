@@ -283,6 +283,26 @@ impl Shell {
             .collect()
     }
 
+    /// Carry `fine` (points on or near the pre-operative skin `coarse` that was solved) to where
+    /// the solved positions `solved` of `coarse`'s vertices take them: the shell built inward
+    /// from `coarse` (depth and Poisson ratio from `[solve]`, `fixed` vertices held), the points
+    /// embedded in it at rest and carried with its deformation. Returns the carried points and
+    /// the embedding (its distances tell how far the points lay from the coarse skin).
+    pub fn carry_skin(
+        coarse: &Mesh,
+        solved: &[[f64; 3]],
+        fine: &[[f64; 3]],
+        scene: (&crate::volume::Volume, &[u8]),
+        solve: &crate::case::Solve,
+        fixed: &[bool],
+    ) -> Result<(Vec<[f64; 3]>, Embedding)> {
+        let inward = -crate::springs::outward_sign(coarse, scene.0, scene.1);
+        let shell = Shell::new(coarse, solve.shell_mm, inward, solve.shell_poisson, fixed)?;
+        let e = shell.embed(fine);
+        let carried = shell.carry(&e, &shell.deform(solved));
+        Ok((carried, e))
+    }
+
     /// Rest shell vertices (base then offset), e.g. to write the shell for inspection.
     pub fn rest(&self) -> &[[f64; 3]] {
         &self.rest

@@ -503,16 +503,14 @@ pub fn run(case_path: &Path, out: Option<&Path>, progress: &Progress) -> Result<
         Some(fine) => {
             progress.stage("carrying the full skin along");
             let meter = crate::meter::Meter::start();
-            let inward = -crate::springs::outward_sign(&skin, &vol, &seg.labels);
-            let shell = crate::embed::Shell::new(
+            let (carried, e) = crate::embed::Shell::carry_skin(
                 &skin,
-                case.solve.shell_mm,
-                inward,
-                case.solve.shell_poisson,
+                &face_post.vertices,
+                &fine.vertices,
+                (&vol, &seg.labels),
+                &case.solve,
                 &rigid,
             )?;
-            let e = shell.embed(&fine.vertices);
-            let carried = shell.carry(&e, &shell.deform(&face_post.vertices));
             // Fine vertices outside [surface] movable are rigid, exactly as in a full solve.
             let mut post = fine.clone();
             for ((p, c), r) in post

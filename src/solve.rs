@@ -76,16 +76,18 @@ pub struct Solution {
     pub solved_vertices: usize,
 }
 
-fn column(mesh: &Mesh, name: &str) -> Result<Vec<f64>> {
-    mesh.vertex_columns
-        .iter()
-        .find(|c| c.name == name)
-        .map(|c| c.values.clone())
-        .ok_or_else(|| {
+/// The C1 mesh over the skin's (u, v) parameter columns.
+fn fem_mesh(skin: &Mesh) -> Result<FemMesh> {
+    let column = |name: &str| {
+        skin.column(name).ok_or_else(|| {
             Error::config(format!(
                 "the skin mesh has no '{name}' parameter coordinate"
             ))
         })
+    };
+    let (u, v) = (column("u")?, column("v")?);
+    let uv: Vec<[f64; 2]> = u.iter().zip(v).map(|(a, b)| [*a, *b]).collect();
+    FemMesh::new(uv, skin.triangles.clone())
 }
 
 /// A plan that moves bone through the skin is impossible, whatever the tissue: after the solve,
@@ -237,9 +239,7 @@ impl Restriction {
 
 /// The skin's C1 mesh over its (u, v) columns and the preloaded DOFs a_init of x, y, z (§5).
 fn preloaded(skin: &Mesh) -> Result<(FemMesh, [Vec<f64>; 3])> {
-    let (u, v) = (column(skin, "u")?, column(skin, "v")?);
-    let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
-    let fem = FemMesh::new(uv, skin.triangles.clone())?;
+    let fem = fem_mesh(skin)?;
     let xyz: [Vec<f64>; 3] = [0, 1, 2].map(|c| skin.vertices.iter().map(|x| x[c]).collect());
     let mut a = initial_dofs_fields(&fem, &[&xyz[0], &xyz[1], &xyz[2]])?.into_iter();
     let mut next = || a.next().unwrap_or_default();
@@ -272,11 +272,7 @@ pub fn solve(
     let edge_index: std::collections::HashMap<[u32; 2], usize> =
         fem.edges.iter().enumerate().map(|(i, e)| (*e, i)).collect();
     let (nv_sub, nv) = (r.skin.vertices.len(), skin.vertices.len());
-    let piece = {
-        let (u, v) = (column(&r.skin, "u")?, column(&r.skin, "v")?);
-        let uv: Vec<[f64; 2]> = u.iter().zip(&v).map(|(a, b)| [*a, *b]).collect();
-        FemMesh::new(uv, r.skin.triangles.clone())?
-    };
+    let piece = fem_mesh(&r.skin)?;
     let a_piece = [0, 1, 2].map(|c| {
         let mut x = vec![0.0; piece.ndof()];
         for (i, &g) in r.to_full.iter().enumerate() {
@@ -518,7 +514,7 @@ fn solve_mesh(
                 for (n, &i) in spring_vertices.iter().enumerate() {
                     d[value_dof(i)] = (h0[n][0][0] + h0[n][1][1] + h0[n][2][2]) / 3.0;
                 }
-                Precond::new(nd, &k, &[d], &fixed).map_err(|e| {
+                Precond::new(nd, &k, &d, &fixed).map_err(|e| {
                     Error::Numerical(format!(
                         "{e} (equilibrium model: no rigid node and too few springs to hold the skin)"
                     ))
@@ -592,11 +588,11 @@ fn solve_mesh(
                     }
                     // Newton step: conjugate gradients on the tangent (exact when positive
                     // definite, else with compressed springs' negative lateral part dropped),
-                    // preconditioned by the decoupled factor, to 1e-3 of the residual (an inexact
-                    // Newton step). If they stall, the coupled tangent is factored instead; that
+                    // preconditioned by the decoupled factor, to `cg_tol` of the residual (an
+                    // inexact Newton step). If they stall, the coupled tangent is factored instead; that
                     // factor is kept while it contracts the residual 4× per iteration.
                     const RHO: f64 = 0.25;
-                    let apply_p = |v: &[f64]| -> Vec<f64> { precond.apply(0, v) };
+                    let apply_p = |v: &[f64]| -> Vec<f64> { precond.apply(v) };
                     let apply_a = |h: &[[[f64; 3]; 3]], v: &[f64]| -> Vec<f64> {
                         let mut y = k_rows.apply3(v, nd);
                         for (n, &i) in spring_vertices.iter().enumerate() {

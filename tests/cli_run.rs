@@ -8,11 +8,7 @@ use std::path::{Path, PathBuf};
 
 /// A case directory whose case.toml points at the shared phantom CT, with `extra` appended.
 fn case_with(extra: &str) -> PathBuf {
-    let d = tempfile::Builder::new()
-        .prefix("facesim-case")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let d = common::kept_dir("facesim-case");
     let ct = phantom_dir().join("ct.nii.gz");
     std::fs::write(
         d.join("case.toml"),

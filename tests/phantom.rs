@@ -67,12 +67,7 @@ fn segmentation_volumes_match_the_analytic_phantom_fit() {
 
 /// Run the pipeline on the phantom with the skin extracted from the CT (no scan).
 fn extracted_skin(method: ExtractMethod, ct: &str) -> facesim::run::Outcome {
-    // Kept (not deleted on drop) so the outputs can be inspected after a failure.
-    let dir = tempfile::Builder::new()
-        .prefix("facesim-run")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let dir = common::kept_dir("facesim-run");
     let dir = &dir;
     let m = if method == ExtractMethod::Marching {
         "marching"

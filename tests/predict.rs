@@ -6,11 +6,7 @@ use common::phantom_dir;
 use std::path::PathBuf;
 
 fn case(extra: &str) -> PathBuf {
-    let d = tempfile::Builder::new()
-        .prefix("facesim-predict")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let d = common::kept_dir("facesim-predict");
     let ct = phantom_dir().join("ct.nii.gz");
     let scan = phantom_dir().join("face.ply");
     std::fs::write(
@@ -156,11 +152,7 @@ fn small_moves_give_displacements_linear_in_the_move() {
 #[test]
 fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
     // A noise-free phantom on a grid symmetric about x = 0 (2 mm: x from −92 to 92).
-    let dir = tempfile::Builder::new()
-        .prefix("facesim-sym")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let dir = common::kept_dir("facesim-sym");
     let opts = facesim::phantom::PhantomOptions {
         spacing: [2.0, 2.0, 2.0],
         noise_hu: 0.0,
@@ -222,11 +214,7 @@ fn two_mesh_densities_give_the_same_displacement_field() {
     // area independent of the mesh, so the displacement fields agree where they overlap.
     for model in ["equilibrium", "koch1996"] {
         let run_scan = |step: f64| {
-            let d = tempfile::Builder::new()
-                .prefix("facesim-density")
-                .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-                .unwrap()
-                .keep();
+            let d = common::kept_dir("facesim-density");
             facesim::mesh::ply::write(
                 &facesim::phantom::face_scan(step),
                 &d.join("scan.ply"),
@@ -345,11 +333,7 @@ fn the_predicted_face_does_not_depend_on_the_load_increments() {
 
 /// A phantom case with a 1.5 mm face scan (~40 k triangles) and `extra` case.toml lines.
 fn dense_case(extra: &str) -> PathBuf {
-    let d = tempfile::Builder::new()
-        .prefix("facesim-dense")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let d = common::kept_dir("facesim-dense");
     facesim::mesh::ply::write(
         &facesim::phantom::face_scan(1.5),
         &d.join("face.ply"),

@@ -12,11 +12,7 @@ use std::path::Path;
 
 fn run_real(extra: &str) -> facesim::run::Outcome {
     let ct = common::real_ct();
-    let dir = tempfile::Builder::new()
-        .prefix("facesim-real")
-        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-        .unwrap()
-        .keep();
+    let dir = common::kept_dir("facesim-real");
     std::fs::write(
         dir.join("case.toml"),
         format!("[ct]\npath = \"{}\"\n{extra}", ct.display()),

@@ -15,7 +15,7 @@ use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
     factorize_symbolic_cholesky,
 };
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::{SparseColMat, SparseColMatRef, Triplet};
 use faer::{Conj, Par, Side};
 
 enum Values {
@@ -28,23 +28,22 @@ pub struct Precond {
     /// Free DOFs in increasing order (fixed DOFs get zero).
     free: Vec<usize>,
     symbolic: SymbolicCholesky<usize>,
-    /// One factor per diagonal added to K (same pattern, one symbolic analysis).
-    values: Vec<Values>,
+    values: Values,
 }
 
+/// The numeric Cholesky factor of `m` on `symbolic`'s pattern, or None if `m` is not
+/// (numerically) positive definite.
 fn factor<T: faer::traits::ComplexField + Copy>(
     symbolic: &SymbolicCholesky<usize>,
-    nf: usize,
-    t: &[Triplet<usize, usize, T>],
+    m: SparseColMatRef<'_, usize, T>,
 ) -> Option<Vec<T>> {
-    let m = SparseColMat::<usize, T>::try_new_from_triplets(nf, nf, t).ok()?;
     let mut values = vec![T::zero_impl(); symbolic.len_val()];
     let mut mem =
         MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default()));
     symbolic
         .factorize_numeric_llt(
             &mut values,
-            m.as_ref(),
+            m,
             Side::Lower,
             Default::default(),
             Par::Seq,
@@ -56,62 +55,48 @@ fn factor<T: faer::traits::ComplexField + Copy>(
 }
 
 impl Precond {
-    /// Factor the free–free block of K + diag(d) for each d in `diagonals` (K as lower-triangle
-    /// triplets, duplicates summed; each d has one entry per DOF).
-    pub fn new(
-        n: usize,
-        k: &[(usize, usize, f64)],
-        diagonals: &[Vec<f64>],
-        fixed: &[bool],
-    ) -> Result<Precond> {
+    /// Factor the free–free block of K + diag(d) (K as lower-triangle triplets, duplicates
+    /// summed; d with one entry per DOF).
+    pub fn new(n: usize, k: &[(usize, usize, f64)], d: &[f64], fixed: &[bool]) -> Result<Precond> {
         let (free_index, free) = super::assembly::free_dofs(&fixed[..n]);
         let nf = free.len();
-        let mut triplets: Vec<(usize, usize, f64)> = k
+        let triplets: Vec<(usize, usize, f64)> = k
             .iter()
             .filter_map(|&(r, c, v)| {
                 let (fr, fc) = (free_index[r], free_index[c]);
                 (fr != usize::MAX && fc != usize::MAX).then(|| (fr.max(fc), fr.min(fc), v))
             })
+            .chain(free.iter().enumerate().map(|(i, &g)| (i, i, d[g])))
             .collect();
-        let base = triplets.len();
-        triplets.extend((0..nf).map(|i| (i, i, 0.0)));
         let bad = |e: String| Error::Numerical(format!("preconditioner: {e}"));
-        let double: Vec<Triplet<usize, usize, f64>> = triplets
+        let single: Vec<Triplet<usize, usize, f32>> = triplets
             .iter()
-            .map(|&(r, c, v)| Triplet::new(r, c, v))
+            .map(|&(r, c, v)| Triplet::new(r, c, v as f32))
             .collect();
-        let pattern = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &double)
+        let m32 = SparseColMat::<usize, f32>::try_new_from_triplets(nf, nf, &single)
             .map_err(|e| bad(format!("{e:?}")))?;
         let symbolic = factorize_symbolic_cholesky(
-            pattern.symbolic(),
+            m32.symbolic(),
             Side::Lower,
             SymmetricOrdering::Amd,
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| bad(format!("symbolic Cholesky: {e:?}")))?;
-        let mut values = Vec::new();
-        for d in diagonals {
-            for (i, &g) in free.iter().enumerate() {
-                triplets[base + i].2 = d[g];
+        let values = match factor(&symbolic, m32.as_ref()) {
+            Some(v) => Values::Single(v),
+            None => {
+                let double: Vec<Triplet<usize, usize, f64>> = triplets
+                    .iter()
+                    .map(|&(r, c, v)| Triplet::new(r, c, v))
+                    .collect();
+                let m64 = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &double)
+                    .map_err(|e| bad(format!("{e:?}")))?;
+                Values::Double(
+                    factor(&symbolic, m64.as_ref())
+                        .ok_or_else(|| bad("the matrix is not positive definite".into()))?,
+                )
             }
-            let single: Vec<Triplet<usize, usize, f32>> = triplets
-                .iter()
-                .map(|&(r, c, v)| Triplet::new(r, c, v as f32))
-                .collect();
-            values.push(match factor(&symbolic, nf, &single) {
-                Some(v) => Values::Single(v),
-                None => {
-                    let double: Vec<Triplet<usize, usize, f64>> = triplets
-                        .iter()
-                        .map(|&(r, c, v)| Triplet::new(r, c, v))
-                        .collect();
-                    Values::Double(
-                        factor(&symbolic, nf, &double)
-                            .ok_or_else(|| bad("the matrix is not positive definite".into()))?,
-                    )
-                }
-            });
-        }
+        };
         Ok(Precond {
             n,
             free,
@@ -120,10 +105,9 @@ impl Precond {
         })
     }
 
-    /// z = (K + diag(d_which))⁻¹ v for `v` holding m fields of n DOFs stacked; zero on the fixed
-    /// DOFs.
-    pub fn apply(&self, which: usize, v: &[f64]) -> Vec<f64> {
-        match &self.values[which] {
+    /// z = (K + diag(d))⁻¹ v for `v` holding m fields of n DOFs stacked; zero on the fixed DOFs.
+    pub fn apply(&self, v: &[f64]) -> Vec<f64> {
+        match &self.values {
             Values::Single(x) => self.apply_with(x, v, |a| a as f32, |a| a as f64),
             Values::Double(x) => self.apply_with(x, v, |a| a, |a| a),
         }

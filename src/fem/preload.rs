@@ -15,7 +15,7 @@ use std::collections::HashMap;
 
 /// Least-squares fit of c0 + c1 du + c2 dv + c3 du² + c4 du dv + c5 dv² (du, dv from `at`,
 /// scaled by h) to the values `ys[f][i]` of each field f at the points `uv[i]`; with `value`
-/// given (one per field), c0 is fixed to it. One SVD of the design matrix serves every field.
+/// given (one per field), c0 is fixed to it. One solve with the design matrix serves every field.
 /// Returns (value, ∂u, ∂v) at `at` per field, or None when the points cannot determine a
 /// quadratic.
 fn fit(
@@ -103,7 +103,7 @@ fn normal_equations(
         }
     }
     // An unused sixth unknown (value given) gets an identity row so the 6×6 system stays
-    // regular; it is excluded from the conditioning test.
+    // regular.
     for i in cols..6 {
         m[(i, i)] = 1.0;
     }
@@ -131,7 +131,7 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
 }
 
 /// Initial DOFs for several fields over the same mesh (x, y, z of the skin): the fits share
-/// their neighbourhoods and design matrices, so three fields cost one SVD per fit.
+/// their neighbourhoods and design matrices, so three fields cost one least-squares solve per fit.
 pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
     let nb = crate::mesh::one_rings(mesh.uv.len(), &mesh.tris);
     let nv = mesh.uv.len();

@@ -74,6 +74,14 @@ impl Mesh {
         }
     }
 
+    /// The values of the vertex column `name` (e.g. the (u, v) parameter coordinates).
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.vertex_columns
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.values.as_slice())
+    }
+
     /// Twice-area normal of triangle t (not normalised).
     pub fn face_normal(&self, t: usize) -> [f64; 3] {
         let [a, b, c] = self.triangles[t].map(|i| self.vertices[i as usize]);

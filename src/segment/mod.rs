@@ -128,10 +128,6 @@ fn mixel_pdf(x: f64, a: f64, b: f64, sigma: f64) -> f64 {
     ((phi_cdf((x - lo) / sigma) - phi_cdf((x - hi) / sigma)) / (hi - lo).max(1e-9)).max(0.0)
 }
 
-/// EM fit of fat, soft and bone Gaussians to the histogram of head voxels, with partial-volume
-/// ("mixel") components between air–soft, fat–soft and soft–bone whose ranges follow the
-/// pure classes' means. Without the mixels, the many boundary voxels of a thin skull pull the
-/// bone component's mean far below pure bone. Returns the three Gaussians.
 /// Histogram bins of the mixture fit: 5 HU wide from the head threshold to 2000 HU.
 const FIT_BIN_HU: f64 = 5.0;
 const FIT_TOP_HU: f64 = 2000.0;
@@ -148,7 +144,7 @@ fn head_histogram(vol: &Volume, head: &Runs, t: &Tissue) -> Vec<f64> {
             |mut hist, k| {
                 for j in 0..ny {
                     let r = j + ny * k;
-                    for q in &head.runs[head.row_start[r]..head.row_start[r + 1]] {
+                    for q in head.runs_in_row(r) {
                         let base = nx * r;
                         for &v in &vol.data[base + q[0] as usize..base + q[1] as usize] {
                             // Values beyond `hi` (dense enamel, metal, saturated detectors) are
@@ -173,6 +169,10 @@ fn head_histogram(vol: &Volume, head: &Runs, t: &Tissue) -> Vec<f64> {
         )
 }
 
+/// EM fit of fat, soft and bone Gaussians to the histogram of head voxels, with partial-volume
+/// ("mixel") components between air–soft, fat–soft and soft–bone whose ranges follow the
+/// pure classes' means. Without the mixels, the many boundary voxels of a thin skull pull the
+/// bone component's mean far below pure bone. Returns the three Gaussians.
 fn fit_mixture(hist: &[f64], t: &Tissue) -> Vec<Gaussian> {
     let (lo, hi, bw) = (t.head_threshold, FIT_TOP_HU, FIT_BIN_HU);
     let centre = |b: usize| lo + (b as f64 + 0.5) * bw;
@@ -432,19 +432,7 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
         .collect();
     drop(d2);
     // Kept bone overrides the soft-tissue classes.
-    if nx * ny > 0 {
-        labels
-            .par_chunks_mut(nx * ny)
-            .enumerate()
-            .for_each(|(k, sl)| {
-                for j in 0..ny {
-                    let r = j + ny * k;
-                    for q in &bone.runs[bone.row_start[r]..bone.row_start[r + 1]] {
-                        sl[nx * j + q[0] as usize..nx * j + q[1] as usize].fill(BONE);
-                    }
-                }
-            });
-    }
+    bone.paint_into(&mut labels, BONE);
     let counts = labels
         .par_chunks(1 << 16)
         .map(|c| {

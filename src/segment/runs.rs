@@ -93,7 +93,7 @@ impl Runs {
         row_start.push(0);
         for r in 0..self.row_start.len() - 1 {
             let mut x = 0;
-            for q in &self.runs[self.row_start[r]..self.row_start[r + 1]] {
+            for q in self.runs_in_row(r) {
                 if q[0] > x {
                     runs.push([x, q[0]]);
                 }
@@ -120,22 +120,35 @@ impl Runs {
         (r % self.dims[1], r / self.dims[1])
     }
 
-    /// The mask as one bool per voxel (slices painted in parallel).
+    /// The runs of run-row r = j + ny·k.
+    pub fn runs_in_row(&self, r: usize) -> &[[u32; 2]] {
+        &self.runs[self.row_start[r]..self.row_start[r + 1]]
+    }
+
+    /// The mask as one bool per voxel.
     pub fn paint(&self) -> Vec<bool> {
-        let [nx, ny, _] = self.dims;
-        let mut m = vec![false; nx * ny * self.dims[2]];
-        if nx * ny == 0 {
-            return m;
-        }
-        m.par_chunks_mut(nx * ny).enumerate().for_each(|(k, sl)| {
-            for j in 0..ny {
-                let r = j + ny * k;
-                for q in &self.runs[self.row_start[r]..self.row_start[r + 1]] {
-                    sl[nx * j + q[0] as usize..nx * j + q[1] as usize].fill(true);
-                }
-            }
-        });
+        let mut m = vec![false; self.dims.iter().product()];
+        self.paint_into(&mut m, true);
         m
+    }
+
+    /// Set `value` at every voxel of the mask in `field` (one entry per voxel; slices in
+    /// parallel).
+    pub fn paint_into<T: Copy + Send + Sync>(&self, field: &mut [T], value: T) {
+        let [nx, ny, _] = self.dims;
+        if nx * ny == 0 {
+            return;
+        }
+        field
+            .par_chunks_mut(nx * ny)
+            .enumerate()
+            .for_each(|(k, sl)| {
+                for j in 0..ny {
+                    for q in self.runs_in_row(j + ny * k) {
+                        sl[nx * j + q[0] as usize..nx * j + q[1] as usize].fill(value);
+                    }
+                }
+            });
     }
 
     /// Connected components (6- or 26-connectivity): component id per run and each

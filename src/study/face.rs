@@ -210,20 +210,15 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &Progress) -> Result<
             let embedded_row = match (&sol, li > 0 && model == SolveModel::Equilibrium) {
                 (Ok(sol), true) => {
                     let (carried, t_embed, m_embed) = timed(|| {
-                        let inward = -crate::springs::outward_sign(
+                        crate::embed::Shell::carry_skin(
                             &level.skin,
-                            &scene.vol,
-                            &scene.seg.labels,
-                        );
-                        let shell = crate::embed::Shell::new(
-                            &level.skin,
-                            case.solve.shell_mm,
-                            inward,
-                            case.solve.shell_poisson,
+                            &sol.positions,
+                            &levels[0].skin.vertices,
+                            (&scene.vol, &scene.seg.labels),
+                            &case.solve,
                             &rigid,
-                        )?;
-                        let e = shell.embed(&levels[0].skin.vertices);
-                        Ok::<_, Error>(shell.carry(&e, &shell.deform(&sol.positions)))
+                        )
+                        .map(|(c, _)| c)
                     });
                     let mut r = FaceRow {
                         method: "C1 equilibrium + shell embedding".into(),

@@ -82,13 +82,7 @@ pub fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
 
 /// Triangles whose (u, v) orientation disagrees with the majority (a fold of the map).
 pub fn uv_folds(m: &Mesh) -> usize {
-    let col = |n: &str| {
-        m.vertex_columns
-            .iter()
-            .find(|c| c.name == n)
-            .map(|c| &c.values)
-    };
-    let (Some(u), Some(v)) = (col("u"), col("v")) else {
+    let (Some(u), Some(v)) = (m.column("u"), m.column("v")) else {
         return 0;
     };
     let pos = m
@@ -128,13 +122,7 @@ pub fn decimate_unfolded(mesh: &Mesh, target: usize, uv: impl Fn(&mut Mesh)) -> 
 /// are dropped, and only the largest connected piece is kept. None without u, v columns or when
 /// nothing is left.
 pub fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
-    let col = |n: &str| {
-        mesh.vertex_columns
-            .iter()
-            .find(|c| c.name == n)
-            .map(|c| &c.values)
-    };
-    let (u, v) = (col("u")?, col("v")?);
+    let (u, v) = (mesh.column("u")?, mesh.column("v")?);
     let uv = |i: u32| [u[i as usize], v[i as usize]];
     let signed = |t: &[u32; 3]| {
         let [a, b, c] = t.map(uv);
@@ -217,20 +205,15 @@ pub fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
     }
     let vertices: Vec<[f64; 3]> = nodes.iter().map(|p| p.unwrap_or([0.0; 3])).collect();
     let mut m = Mesh::new(vertices, tris);
-    m.vertex_columns = vec![
-        crate::mesh::Column {
-            name: "u".into(),
-            values: (0..n[0] * n[1])
-                .map(|k| lo[0] + (k % n[0]) as f64 * step)
-                .collect(),
-        },
-        crate::mesh::Column {
-            name: "v".into(),
-            values: (0..n[0] * n[1])
-                .map(|k| lo[1] + (k / n[0]) as f64 * step)
-                .collect(),
-        },
-    ];
+    set_uv(
+        &mut m,
+        (0..n[0] * n[1])
+            .map(|k| lo[0] + (k % n[0]) as f64 * step)
+            .collect(),
+        (0..n[0] * n[1])
+            .map(|k| lo[1] + (k / n[0]) as f64 * step)
+            .collect(),
+    );
     let (comp, count) = m.components();
     if count > 1 {
         let mut size = vec![0usize; count];
@@ -424,18 +407,7 @@ mod tests {
             ];
         }
         planar_uv(&mut m);
-        let u = &m
-            .vertex_columns
-            .iter()
-            .find(|c| c.name == "u")
-            .unwrap()
-            .values;
-        let v = &m
-            .vertex_columns
-            .iter()
-            .find(|c| c.name == "v")
-            .unwrap()
-            .values;
+        let (u, v) = (m.column("u").unwrap(), m.column("v").unwrap());
         for t in &m.triangles {
             for e in 0..3 {
                 let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);

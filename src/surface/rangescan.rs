@@ -77,6 +77,52 @@ fn first_crossing(
     None
 }
 
+/// Count, coordinate sums and bounding box of a set of points.
+struct Extent {
+    count: usize,
+    sum: [f64; 2],
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Extent {
+    fn empty() -> Extent {
+        Extent {
+            count: 0,
+            sum: [0.0; 2],
+            lo: [f64::INFINITY; 3],
+            hi: [f64::NEG_INFINITY; 3],
+        }
+    }
+
+    fn add(&mut self, w: [f64; 3]) {
+        self.count += 1;
+        self.sum[0] += w[0];
+        self.sum[1] += w[1];
+        for c in 0..3 {
+            self.lo[c] = self.lo[c].min(w[c]);
+            self.hi[c] = self.hi[c].max(w[c]);
+        }
+    }
+
+    fn merge(a: Extent, b: Extent) -> Extent {
+        Extent {
+            count: a.count + b.count,
+            sum: [a.sum[0] + b.sum[0], a.sum[1] + b.sum[1]],
+            lo: std::array::from_fn(|c| a.lo[c].min(b.lo[c])),
+            hi: std::array::from_fn(|c| a.hi[c].max(b.hi[c])),
+        }
+    }
+}
+
+/// Largest horizontal distance from `axis` (x, y) to a corner of the box [lo, hi].
+fn corner_radius(lo: [f64; 3], hi: [f64; 3], axis: [f64; 2]) -> f64 {
+    [lo[0] - axis[0], hi[0] - axis[0]]
+        .iter()
+        .flat_map(|dx| [lo[1] - axis[1], hi[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
+        .fold(0.0, f64::max)
+}
+
 pub fn scan(
     vol: &Volume,
     skin_field: &[f32],
@@ -87,74 +133,30 @@ pub fn scan(
     // Axis through the centroid of the head, the head's z range and horizontal bounding box
     // (slices in parallel).
     let [nx, ny, _] = vol.dims;
-    let slice = nx * ny;
-    let (sx, sy, cnt, zmin, zmax, bmin, bmax) = head
-        .par_chunks(slice.max(1))
+    let ext = head
+        .par_chunks((nx * ny).max(1))
         .enumerate()
         .map(|(k, sl)| {
-            let mut acc = (
-                0.0,
-                0.0,
-                0usize,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                [f64::INFINITY; 2],
-                [f64::NEG_INFINITY; 2],
-            );
+            let mut e = Extent::empty();
             for (a, &h) in sl.iter().enumerate() {
                 if h {
-                    let w = vol.to_world([(a % nx) as f64, (a / nx) as f64, k as f64]);
-                    acc.0 += w[0];
-                    acc.1 += w[1];
-                    acc.2 += 1;
-                    acc.3 = acc.3.min(w[2]);
-                    acc.4 = acc.4.max(w[2]);
-                    for c in 0..2 {
-                        acc.5[c] = acc.5[c].min(w[c]);
-                        acc.6[c] = acc.6[c].max(w[c]);
-                    }
+                    e.add(vol.to_world([(a % nx) as f64, (a / nx) as f64, k as f64]));
                 }
             }
-            acc
+            e
         })
-        .reduce(
-            || {
-                (
-                    0.0,
-                    0.0,
-                    0,
-                    f64::INFINITY,
-                    f64::NEG_INFINITY,
-                    [f64::INFINITY; 2],
-                    [f64::NEG_INFINITY; 2],
-                )
-            },
-            |a, b| {
-                (
-                    a.0 + b.0,
-                    a.1 + b.1,
-                    a.2 + b.2,
-                    a.3.min(b.3),
-                    a.4.max(b.4),
-                    [a.5[0].min(b.5[0]), a.5[1].min(b.5[1])],
-                    [a.6[0].max(b.6[0]), a.6[1].max(b.6[1])],
-                )
-            },
-        );
-    let axis = [sx / cnt.max(1) as f64, sy / cnt.max(1) as f64];
+        .reduce(Extent::empty, Extent::merge);
+    let axis = [
+        ext.sum[0] / ext.count.max(1) as f64,
+        ext.sum[1] / ext.count.max(1) as f64,
+    ];
+    let (zmin, zmax) = (ext.lo[2], ext.hi[2]);
     let (lo, hi) = vol.bounds();
-    let rmax = [lo[0] - axis[0], hi[0] - axis[0]]
-        .iter()
-        .flat_map(|dx| [lo[1] - axis[1], hi[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
-        .fold(0.0, f64::max);
+    let rmax = corner_radius(lo, hi, axis);
     // Rays start just outside the head's bounding box (the skin field is below the iso level
     // everywhere else): a trilinear sample sees voxels within one spacing per axis.
     let margin = 3.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
-    let rhead = [bmin[0] - axis[0], bmax[0] - axis[0]]
-        .iter()
-        .flat_map(|dx| [bmin[1] - axis[1], bmax[1] - axis[1]].map(|dy| (dx * dx + dy * dy).sqrt()))
-        .fold(0.0, f64::max)
-        + margin;
+    let rhead = corner_radius(ext.lo, ext.hi, axis) + margin;
     let t_start = (rmax - rhead).max(0.0);
     let nphi = (360.0 / p.angle_step_deg).round().max(8.0) as usize;
     let dphi = 2.0 * PI / nphi as f64;

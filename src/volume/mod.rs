@@ -118,7 +118,7 @@ impl Volume {
     }
 
     /// The LPS mm → voxel map with the direction matrix inverted once, for loops that map many
-    /// points (ray marching, spring tracing); gives exactly `to_voxel`'s values.
+    /// points (ray marching, spring tracing).
     pub fn voxel_map(&self) -> VoxelMap {
         VoxelMap {
             origin: self.origin,
@@ -129,17 +129,7 @@ impl Volume {
 
     /// LPS mm → continuous voxel coordinates.
     pub fn to_voxel(&self, p: [f64; 3]) -> [f64; 3] {
-        let d = [
-            p[0] - self.origin[0],
-            p[1] - self.origin[1],
-            p[2] - self.origin[2],
-        ];
-        let inv = inv3(self.direction);
-        let mut c = [0.0; 3];
-        for (a, ca) in c.iter_mut().enumerate() {
-            *ca = (inv[a][0] * d[0] + inv[a][1] * d[1] + inv[a][2] * d[2]) / self.spacing[a];
-        }
-        c
+        self.voxel_map().to_voxel(p)
     }
 
     /// Trilinear interpolation at LPS point `p`; `outside` beyond the grid (clamped at the

@@ -5,15 +5,21 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
 
+/// A new directory under target/tmp (`CARGO_TARGET_TMPDIR`) that outlives the test, so a failing
+/// run's outputs can be inspected; `cargo clean` removes it.
+pub fn kept_dir(prefix: &str) -> PathBuf {
+    tempfile::Builder::new()
+        .prefix(prefix)
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+        .unwrap()
+        .keep()
+}
+
 /// A phantom case (1.5 mm voxels), written once per test binary.
 pub fn phantom_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let d = tempfile::Builder::new()
-            .prefix("facesim-phantom")
-            .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
-            .unwrap()
-            .keep();
+        let d = kept_dir("facesim-phantom");
         facesim::phantom::write_case(&d, &facesim::phantom::PhantomOptions::default()).unwrap();
         d
     })
