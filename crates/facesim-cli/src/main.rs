@@ -1,0 +1,324 @@
+//! The `facesim` command line (CASE.md "Commands").
+
+#![deny(clippy::unwrap_used, clippy::expect_used)]
+
+use clap::{Parser, Subcommand};
+use facesim::error::{Error, Result};
+use progress::Progress;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+mod progress;
+mod render;
+
+// Counts heap bytes for report.json's and the study's peak-memory figures (two relaxed atomics
+// per allocation).
+#[global_allocator]
+static ALLOC: facesim_lab::memory::Counting = facesim_lab::memory::Counting;
+
+#[derive(Parser)]
+#[command(
+    name = "facesim",
+    version,
+    about = "Predict the face after cranio-maxillofacial surgery (Koch et al. 1996, extended)"
+)]
+struct Cli {
+    /// Worker threads (default: all cores).
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Run the whole pipeline on a case directory (outputs in CASE_DIR/out by default).
+    Run {
+        case_dir: PathBuf,
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Write a synthetic head case whose geometry is known exactly.
+    Phantom {
+        dir: PathBuf,
+        /// In-plane voxel size (mm).
+        #[arg(long, default_value_t = 1.5)]
+        spacing: f64,
+        /// Slice spacing (mm).
+        #[arg(long, default_value_t = 1.5)]
+        slice: f64,
+        /// Noise standard deviation (HU).
+        #[arg(long, default_value_t = 8.0)]
+        noise: f64,
+        /// Vertex spacing of the face scan (mm): 3 → ~5 k vertices, 0.75 → ~80 k.
+        #[arg(long, default_value_t = 3.0)]
+        scan_step: f64,
+    },
+    /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
+    Inspect { path: PathBuf },
+    /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
+    /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
+    /// `embed` = a dense face scan solved whole against coarse models + shell embedding.
+    Bench {
+        #[arg(value_parser = ["fem", "scaling", "embed"])]
+        what: String,
+        /// Output directory for `scaling` and `embed`.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// `scaling`, `embed`: small sizes only.
+        #[arg(long)]
+        quick: bool,
+        /// Triangles in the mesh.
+        #[arg(long, default_value_t = 40000)]
+        triangles: usize,
+        /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.py).
+        #[arg(long)]
+        export: Option<PathBuf>,
+    },
+    /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
+    Render {
+        #[arg(required = true)]
+        meshes: Vec<PathBuf>,
+        #[arg(long, short)]
+        out: PathBuf,
+        #[arg(long, value_enum, default_value = "front")]
+        view: render::View,
+        /// Image width and height in pixels.
+        #[arg(long, default_value_t = 800)]
+        size: usize,
+    },
+    /// Speed against accuracy: the integrator benchmarks, stability, and the face baselines
+    /// (tables, charts and summary.md in OUT_DIR).
+    Study {
+        out_dir: PathBuf,
+        /// A reduced study (coarser benchmarks, the phantom only, fewer resolutions): < 2 min.
+        #[arg(long)]
+        quick: bool,
+        /// Face cases (default: data-samples/phantom, plus data-samples/real when fetched).
+        #[arg(long = "case")]
+        cases: Vec<PathBuf>,
+    },
+    /// Distances between two meshes (OBJ or PLY).
+    Compare {
+        a: PathBuf,
+        b: PathBuf,
+        /// Print the full JSON (default: a short summary).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// What the command works on, for the internal-error message.
+static SUBJECT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+
+fn main() -> ExitCode {
+    // Any panic left is a bug: one line, not a backtrace wall.
+    std::panic::set_hook(Box::new(|info| {
+        // Inside a guarded reader the panic becomes an ordinary one-line input error.
+        if facesim::error::in_guard() {
+            return;
+        }
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "unknown panic".into());
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        let subject = SUBJECT
+            .get()
+            .map(|s| format!(" while working on {s}"))
+            .unwrap_or_default();
+        eprintln!(
+            "facesim: internal error{subject}{at}: {} (please report this with the case)",
+            msg.replace('\n', " ")
+        );
+    }));
+    let cli = Cli::parse();
+    let subject = match &cli.cmd {
+        Cmd::Run { case_dir, .. } => Some(case_dir.display().to_string()),
+        Cmd::Inspect { path } => Some(path.display().to_string()),
+        Cmd::Study { out_dir, .. } => Some(format!("the study into {}", out_dir.display())),
+        Cmd::Compare { a, b, .. } => Some(format!("{} and {}", a.display(), b.display())),
+        Cmd::Render { meshes, .. } => meshes.first().map(|m| m.display().to_string()),
+        Cmd::Phantom { dir, .. } => Some(dir.display().to_string()),
+        Cmd::Bench { .. } => None,
+    };
+    if let Some(s) = subject {
+        let _ = SUBJECT.set(s);
+    }
+    if let Some(n) = cli.threads {
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global();
+    }
+    match std::panic::catch_unwind(|| dispatch(cli.cmd)) {
+        Ok(Ok(())) => ExitCode::SUCCESS,
+        Ok(Err(e)) => {
+            eprintln!("facesim: {e}");
+            ExitCode::from(1)
+        }
+        Err(_) => ExitCode::from(2),
+    }
+}
+
+fn dispatch(cmd: Cmd) -> Result<()> {
+    match cmd {
+        Cmd::Run { case_dir, out } => {
+            let o = facesim::run::run(&case_dir, out.as_deref(), &Progress::auto())?;
+            let r = &o.report;
+            println!(
+                "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
+                r.name,
+                o.skin.vertices.len(),
+                o.skull.vertices.len(),
+                r.timings
+                    .get("total")
+                    .and_then(|v| v.as_f64())
+                    .unwrap_or(0.0),
+                o.out_dir.display()
+            );
+            for w in &r.warnings {
+                eprintln!("warning: {w}");
+            }
+            Ok(())
+        }
+        Cmd::Phantom {
+            dir,
+            spacing,
+            slice,
+            noise,
+            scan_step,
+        } => {
+            if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
+                return Err(Error::config(
+                    "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
+                ));
+            }
+            let opts = facesim::phantom::PhantomOptions {
+                spacing: [spacing, spacing, slice],
+                noise_hu: noise,
+                scan_step_mm: scan_step,
+                ..Default::default()
+            };
+            facesim::phantom::write_case(&dir, &opts)?;
+            println!("phantom case written to {}", dir.display());
+            Ok(())
+        }
+        Cmd::Inspect { path } => {
+            let v = facesim::volume::read_volume(&path)?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(&path, e))?
+            );
+            Ok(())
+        }
+        Cmd::Bench {
+            what, out, quick, ..
+        } if what == "scaling" => {
+            let out = out.ok_or_else(|| Error::config("bench scaling: --out DIR is required"))?;
+            let s = facesim_lab::scaling::run(&out, quick, &Progress::auto())?;
+            for f in &s.fits {
+                println!(
+                    "{:5} {:18} exponent {:5.2}  largest {:.3} s",
+                    f.series, f.stage, f.exponent, f.largest_wall_s
+                );
+            }
+            Ok(())
+        }
+        Cmd::Bench {
+            what, out, quick, ..
+        } if what == "embed" => {
+            let out = out.ok_or_else(|| Error::config("bench embed: --out DIR is required"))?;
+            let b = facesim_lab::bench_embed::run(&out, quick, &Progress::auto())?;
+            for r in &b.rows {
+                let d = r.distance.as_ref();
+                println!(
+                    "{:42} {:>10} {:8.2} s  mean {:.3} mm  p90 {:.3} mm  max {:.3} mm",
+                    r.method,
+                    r.resolution,
+                    r.wall_s,
+                    d.map_or(f64::NAN, |d| d.mean),
+                    d.map_or(f64::NAN, |d| d.p90),
+                    d.map_or(f64::NAN, |d| d.max)
+                );
+            }
+            Ok(())
+        }
+        Cmd::Bench {
+            triangles, export, ..
+        } => {
+            if !(2..=20_000_000).contains(&triangles) {
+                return Err(Error::config(
+                    "bench: --triangles must be between 2 and 20000000",
+                ));
+            }
+            let b = facesim_lab::bench_fem::run(triangles, export.as_deref())?;
+            println!(
+                "{}",
+                serde_json::to_string_pretty(&b).map_err(Error::config)?
+            );
+            Ok(())
+        }
+        Cmd::Render {
+            meshes,
+            out,
+            view,
+            size,
+        } => {
+            if !(16..=8192).contains(&size) {
+                return Err(Error::config("render: --size must be between 16 and 8192"));
+            }
+            let loaded = meshes
+                .iter()
+                .map(|p| facesim::mesh::read_mesh(p))
+                .collect::<Result<Vec<_>>>()?;
+            let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
+            let img = render::render(&refs, view, size);
+            render::write_png(&img, size, &out)?;
+            Ok(())
+        }
+        Cmd::Study {
+            out_dir,
+            quick,
+            cases,
+        } => {
+            let cases = if cases.is_empty() {
+                facesim_lab::study::default_cases(quick)
+            } else {
+                cases
+            };
+            let s = facesim_lab::study::run(&out_dir, quick, &cases, &Progress::auto())?;
+            println!(
+                "study written to {} in {:.1} s ({} face rows); see summary.md",
+                out_dir.display(),
+                s.wall_s,
+                s.face.len()
+            );
+            Ok(())
+        }
+        Cmd::Compare { a, b, json } => {
+            let ma = facesim::mesh::read_mesh(&a)?;
+            let mb = facesim::mesh::read_mesh(&b)?;
+            let c = facesim::compare::compare(&ma, &mb);
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&c).map_err(|e| Error::output(&a, e))?
+                );
+            } else {
+                println!(
+                    "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",
+                    c.mean, c.rms, c.max, c.pct_within_1mm, c.pct_within_2mm
+                );
+                if let (Some(m), Some(x)) = (c.vertex_mean, c.vertex_max) {
+                    println!("per vertex: mean {m:.4} mm, max {x:.4} mm");
+                }
+            }
+            Ok(())
+        }
+    }
+}

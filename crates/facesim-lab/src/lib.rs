@@ -1,0 +1,16 @@
+//! The facesim laboratory: what measures the product rather than being it — the solver study
+//! (integrators, stability, face baselines, charts), the benchmarks (`bench fem`, `scaling`,
+//! `embed`), linear elastodynamics, and the counting allocator behind the peak-memory figures.
+//! The `facesim` command line forwards `study` and `bench` here.
+
+// `!(x > 0.0)` is deliberate: it rejects NaN, which `x <= 0.0` would let through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+// Numerics index arrays by axis and node; iterator rewrites would hide the maths.
+#![allow(clippy::needless_range_loop)]
+
+pub mod bench_embed;
+pub mod bench_fem;
+pub mod dynamics;
+pub mod memory;
+pub mod scaling;
+pub mod study;

@@ -1,0 +1,370 @@
+//! The study's charts, each written as SVG and PNG (plotters; text in the PNGs with the bundled
+//! DejaVu Sans, so no system font library is needed).
+
+use super::benchmarks::Benchmark;
+use super::face::FaceRow;
+use crate::dynamics::Integrator;
+use facesim::error::{Error, Result};
+use facesim::output::write_atomic;
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+use std::sync::Once;
+
+static FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans.ttf");
+
+fn register_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+}
+
+const PALETTE: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+];
+
+type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
+
+/// Draw with `draw` into `<stem>.svg` and `<stem>.png` (atomically).
+fn both(
+    dir: &Path,
+    stem: &str,
+    size: (u32, u32),
+    draw: &dyn Fn(DrawingArea<SVGBackend, Shift>) -> DrawResult,
+    draw_png: &dyn Fn(DrawingArea<BitMapBackend, Shift>) -> DrawResult,
+) -> Result<()> {
+    register_font();
+    let svg = dir.join(format!("{stem}.svg"));
+    write_atomic(&svg, |tmp| {
+        let root = SVGBackend::new(tmp, size).into_drawing_area();
+        draw(root).map_err(|e| Error::output(&svg, e.to_string()))
+    })?;
+    let png = dir.join(format!("{stem}.png"));
+    write_atomic(&png, |tmp| {
+        let root = BitMapBackend::new(tmp, size).into_drawing_area();
+        draw_png(root).map_err(|e| Error::output(&png, e.to_string()))
+    })
+}
+
+fn integrator_name(i: Integrator) -> &'static str {
+    match i {
+        Integrator::ImplicitNewmark => "implicit Newmark",
+        Integrator::ExplicitConsistent => "explicit, consistent mass",
+        Integrator::ExplicitLumped => "explicit, lumped mass",
+        Integrator::QuasiStatic => "quasi-static",
+    }
+}
+
+/// Error over time for one benchmark: three panels (energy, surface, interior), one line per
+/// integrator against the implicit reference; a diverged run ends in a cross and says where.
+pub fn error_over_time(dir: &Path, stem: &str, b: &Benchmark) -> Result<()> {
+    fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, b: &Benchmark) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let (title, body) = root.split_vertically(40);
+        title.titled(
+            &format!(
+                "{} ({}, h = 1/30 s): error against implicit Newmark",
+                b.name, b.mesh
+            ),
+            ("sans-serif", 20),
+        )?;
+        let panels = body.split_evenly((1, 3));
+        let t_end = b.steps as f64 * b.h;
+        for (k, (panel, metric)) in panels
+            .iter()
+            .zip(["relative energy norm", "surface error", "interior error"])
+            .enumerate()
+        {
+            let get = |s: &super::benchmarks::Series| -> Vec<f64> {
+                match k {
+                    0 => s.energy.clone(),
+                    1 => s.surface.clone(),
+                    _ => s.interior.clone(),
+                }
+            };
+            let mut lo = f64::INFINITY;
+            let mut hi = 0.0f64;
+            for s in b.series.iter().skip(1) {
+                for v in get(s).into_iter().filter(|v| *v > 0.0 && v.is_finite()) {
+                    lo = lo.min(v);
+                    hi = hi.max(v);
+                }
+            }
+            if !(hi > 0.0) {
+                lo = 1e-6;
+                hi = 1.0;
+            }
+            let lo = lo.max(hi * 1e-8);
+            let mut chart = ChartBuilder::on(panel)
+                .caption(metric, ("sans-serif", 16))
+                .margin(8)
+                .x_label_area_size(35)
+                .y_label_area_size(60)
+                .build_cartesian_2d(0.0..t_end, (lo * 0.8..hi * 1.25).log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc("t (s)")
+                .y_label_formatter(&|v| format!("{v:.0e}"))
+                .draw()?;
+            for (i, s) in b.series.iter().enumerate().skip(1) {
+                let color = PALETTE[i % PALETTE.len()];
+                let vals = get(s);
+                let pts: Vec<(f64, f64)> = s
+                    .time
+                    .iter()
+                    .zip(&vals)
+                    .map(|(t, v)| (*t, v.max(lo)))
+                    .collect();
+                let label = match &s.diverged {
+                    Some(d) => format!("{} — {d}", integrator_name(s.integrator)),
+                    None => integrator_name(s.integrator).to_string(),
+                };
+                chart
+                    .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                    .label(label)
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                    });
+                if s.diverged.is_some() {
+                    let at = pts.last().copied().unwrap_or((0.0, hi));
+                    chart.draw_series(std::iter::once(Cross::new(at, 8, color.stroke_width(3))))?;
+                }
+            }
+            if k == 0 {
+                chart
+                    .configure_series_labels()
+                    .background_style(WHITE.mix(0.85))
+                    .border_style(BLACK)
+                    .label_font(("sans-serif", 12))
+                    .position(SeriesLabelPosition::LowerRight)
+                    .draw()?;
+            }
+        }
+        root.present()?;
+        Ok(())
+    }
+    both(dir, stem, (1500, 480), &|r| draw(r, b), &|r| draw(r, b))
+}
+
+/// Indices of the Pareto-optimal rows (no other row is both faster and closer), by time.
+pub fn pareto(points: &[(f64, f64)]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..points.len()).collect();
+    idx.sort_by(|&a, &b| {
+        points[a]
+            .0
+            .total_cmp(&points[b].0)
+            .then(points[a].1.total_cmp(&points[b].1))
+    });
+    let mut best = f64::INFINITY;
+    let mut front = Vec::new();
+    for i in idx {
+        if points[i].1 < best {
+            best = points[i].1;
+            front.push(i);
+        }
+    }
+    front
+}
+
+/// Accuracy (mean distance to the reference, log) against run time (log) for one face case,
+/// a point per method and resolution, the Pareto front joined.
+pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) -> Result<()> {
+    let pts: Vec<(f64, f64, &FaceRow)> = rows
+        .iter()
+        .filter(|r| !r.is_reference)
+        .filter_map(|r| {
+            r.distance
+                .as_ref()
+                .map(|d| (r.wall_s.max(1e-4), d.mean.max(1e-4), r))
+        })
+        .collect();
+    let families: Vec<String> = {
+        let mut f: Vec<String> = pts.iter().map(|p| p.2.method.clone()).collect();
+        f.dedup();
+        let mut seen = Vec::new();
+        for x in f {
+            if !seen.contains(&x) {
+                seen.push(x);
+            }
+        }
+        seen
+    };
+    let reference = rows.iter().find(|r| r.is_reference);
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        case: &str,
+        pts: &[(f64, f64, &FaceRow)],
+        families: &[String],
+        reference: Option<&FaceRow>,
+    ) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let (xmin, xmax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.0), b.max(p.0))
+        });
+        let (ymin, ymax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.1), b.max(p.1))
+        });
+        let (xmin, xmax, ymin, ymax) = if pts.is_empty() {
+            (0.01, 10.0, 0.01, 10.0)
+        } else {
+            (xmin / 1.6, xmax * 1.6, ymin / 1.6, ymax * 1.6)
+        };
+        let caption = match reference {
+            Some(r) => format!(
+                "{case}: accuracy vs run time (reference: {} at {}, {:.2} s)",
+                r.method, r.resolution, r.wall_s
+            ),
+            None => format!("{case}: accuracy vs run time"),
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(caption, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((xmin..xmax).log_scale(), (ymin..ymax).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("run time (s, springs + model + solve)")
+            .y_desc("mean distance to reference (mm)")
+            .x_label_formatter(&|v| format!("{v:.2}"))
+            .y_label_formatter(&|v| format!("{v:.2}"))
+            .draw()?;
+        let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
+        let front: Vec<(f64, f64)> = pareto(&xy).into_iter().map(|i| xy[i]).collect();
+        chart
+            .draw_series(LineSeries::new(
+                front.clone(),
+                BLACK.mix(0.6).stroke_width(2),
+            ))?
+            .label("Pareto front")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.stroke_width(2)));
+        for (fi, fam) in families.iter().enumerate() {
+            let color = PALETTE[fi % PALETTE.len()];
+            let mine: Vec<&(f64, f64, &FaceRow)> =
+                pts.iter().filter(|p| &p.2.method == fam).collect();
+            chart
+                .draw_series(
+                    mine.iter()
+                        .map(|p| Circle::new((p.0, p.1), 6, color.filled())),
+                )?
+                .label(fam.clone())
+                .legend(move |(x, y)| Circle::new((x + 9, y), 5, color.filled()));
+            for p in &mine {
+                chart.draw_series(std::iter::once(Text::new(
+                    p.2.resolution.clone(),
+                    (p.0 * 1.06, p.1 * 1.04),
+                    ("sans-serif", 11),
+                )))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    both(
+        dir,
+        stem,
+        (1100, 750),
+        &|r| draw(r, case, &pts, &families, reference),
+        &|r| draw(r, case, &pts, &families, reference),
+    )
+}
+
+/// Log-log lines (size, seconds), one per labelled series.
+pub fn loglog(
+    dir: &Path,
+    stem: &str,
+    title: &str,
+    xlabel: &str,
+    lines: &[(String, Vec<(f64, f64)>)],
+) -> Result<()> {
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        title: &str,
+        xlabel: &str,
+        lines: &[(String, Vec<(f64, f64)>)],
+    ) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let all: Vec<(f64, f64)> = lines
+            .iter()
+            .flat_map(|l| l.1.iter().copied())
+            .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+            .collect();
+        let (x0, x1, y0, y1) = all.iter().fold(
+            (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64),
+            |(a, b, c, d), p| (a.min(p.0), b.max(p.0), c.min(p.1), d.max(p.1)),
+        );
+        let (x0, x1, y0, y1) = if all.is_empty() {
+            (1.0, 10.0, 1e-3, 1.0)
+        } else {
+            (x0 / 1.3, x1 * 1.3, y0 / 2.0, y1 * 2.0)
+        };
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc(xlabel)
+            .y_desc("wall time (s)")
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()?;
+        for (i, (label, pts)) in lines.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let pts: Vec<(f64, f64)> = pts
+                .iter()
+                .copied()
+                .filter(|p| p.0 > 0.0 && p.1 > 0.0)
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                });
+            chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    both(
+        dir,
+        stem,
+        (1000, 700),
+        &|r| draw(r, title, xlabel, lines),
+        &|r| draw(r, title, xlabel, lines),
+    )
+}

@@ -1,0 +1,478 @@
+//! Volumetric baselines on the CT grid, resampled to a lattice of spacing `s` mm (node = lattice
+//! point; label = the CT label at that point):
+//!
+//! - **voxel lattice mass-spring**: springs between each soft-tissue node and its 26 neighbours,
+//!   stiffness in series of the two nodes' tissue stiffness ([tissue.stiffness], harmonic mean)
+//!   scaled by s/|d| (longer diagonals are softer), linearised about the rest state (k e eᵀ);
+//! - **linear tetrahedral FEM**: each lattice cube whose 8 corners are tissue or bone split into
+//!   six Kuhn tetrahedra, linear elasticity with E from the tissue stiffness and ν (default 0.45:
+//!   near-incompressible soft tissue locks linear tets as ν → 0.5 — the study shows it).
+//!
+//! The model is the soft tissue between skin and skull: soft nodes reached from the air side
+//! through soft tissue within the springs' depth (the brain behind the skull is dropped).
+//! Bone nodes are Dirichlet nodes moved by the plan (the rigid motion of their segment, zero for
+//! bone that stays); air has no nodes. The static equilibrium K_ff u_f = −K_fp u_p is solved with
+//! faer's sparse Cholesky. Only the pieces of tissue connected to bone are kept (anything else
+//! floats). Skin vertices take the displacement of the lattice by trilinear interpolation over
+//! the cell's corners that carry nodes (weights renormalised; nearest node if none).
+
+use facesim::case::Stiffness;
+use facesim::error::{Error, Result};
+use facesim::fem::assembly::System;
+use facesim::osteotomy::Plan;
+use facesim::segment::{self, Segmentation};
+use facesim::volume::Volume;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Lattice,
+    Tetrahedra,
+}
+
+/// Lattice spacing (mm), depth of the facial tissue kept (mm), model and Poisson ratio (tets).
+#[derive(Clone, Copy, Debug)]
+pub struct Options {
+    pub spacing: f64,
+    pub max_depth_mm: f64,
+    pub kind: Kind,
+    pub nu: f64,
+}
+
+pub struct Prediction {
+    /// Displacement (mm) per requested point.
+    pub displacement: Vec<[f64; 3]>,
+    pub nodes: usize,
+    pub unknowns: usize,
+}
+
+/// The spring tracer's relative stiffness for soft tissue; 0 for air and bone (no node or a
+/// Dirichlet node).
+fn tissue_c(label: u8, s: &Stiffness) -> f64 {
+    match label {
+        0 | segment::BONE => 0.0,
+        l => facesim::springs::tissue_c(l, s),
+    }
+}
+
+struct Lattice {
+    dims: [usize; 3],
+    origin: [f64; 3],
+    s: f64,
+    /// Label per lattice point (0 = air / no node).
+    label: Vec<u8>,
+}
+
+impl Lattice {
+    fn new(vol: &Volume, seg: &Segmentation, s: f64) -> Lattice {
+        let (lo, hi) = vol.bounds();
+        let dims = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / s).floor() as usize + 1);
+        let n = dims[0] * dims[1] * dims[2];
+        let label = (0..n)
+            .map(|i| {
+                let p = [
+                    lo[0] + (i % dims[0]) as f64 * s,
+                    lo[1] + ((i / dims[0]) % dims[1]) as f64 * s,
+                    lo[2] + (i / (dims[0] * dims[1])) as f64 * s,
+                ];
+                let c = vol.to_voxel(p);
+                let v = [0, 1, 2].map(|a| c[a].round());
+                if (0..3).all(|a| v[a] >= 0.0 && (v[a] as usize) < vol.dims[a]) {
+                    let idx = vol.idx(v[0] as usize, v[1] as usize, v[2] as usize);
+                    if seg.head[idx] { seg.labels[idx] } else { 0 }
+                } else {
+                    0
+                }
+            })
+            .collect();
+        Lattice {
+            dims,
+            origin: lo,
+            s,
+            label,
+        }
+    }
+
+    fn pos(&self, i: usize) -> [f64; 3] {
+        let d = self.dims;
+        [
+            self.origin[0] + (i % d[0]) as f64 * self.s,
+            self.origin[1] + ((i / d[0]) % d[1]) as f64 * self.s,
+            self.origin[2] + (i / (d[0] * d[1])) as f64 * self.s,
+        ]
+    }
+
+    fn at(&self, x: usize, y: usize, z: usize) -> usize {
+        (z * self.dims[1] + y) * self.dims[0] + x
+    }
+
+    /// Keep only the soft tissue between skin and skull: breadth-first from the soft nodes that
+    /// touch air, through soft nodes, to a depth of `max_depth` (Chebyshev steps × s). The brain
+    /// and other tissue behind bone are not part of the face model.
+    fn keep_facial_tissue(&mut self, max_depth: f64) {
+        let d = self.dims;
+        let n = self.label.len();
+        let soft = |l: u8| l != 0 && l != segment::BONE;
+        let mut depth = vec![u32::MAX; n];
+        let mut queue = std::collections::VecDeque::new();
+        let neighbours = |i: usize, diag: bool| {
+            let (x, y, z) = (
+                (i % d[0]) as i64,
+                ((i / d[0]) % d[1]) as i64,
+                (i / (d[0] * d[1])) as i64,
+            );
+            let mut out = Vec::with_capacity(26);
+            for dz in -1..=1i64 {
+                for dy in -1..=1i64 {
+                    for dx in -1..=1i64 {
+                        let m = dx.abs() + dy.abs() + dz.abs();
+                        if m == 0 || (!diag && m > 1) {
+                            continue;
+                        }
+                        let q = [x + dx, y + dy, z + dz];
+                        if (0..3).all(|a| q[a] >= 0 && q[a] < d[a] as i64) {
+                            out.push((q[2] as usize * d[1] + q[1] as usize) * d[0] + q[0] as usize);
+                        }
+                    }
+                }
+            }
+            out
+        };
+        for i in 0..n {
+            if soft(self.label[i]) && neighbours(i, false).iter().any(|&j| self.label[j] == 0) {
+                depth[i] = 0;
+                queue.push_back(i);
+            }
+        }
+        let limit = (max_depth / self.s).ceil() as u32;
+        while let Some(i) = queue.pop_front() {
+            if depth[i] >= limit {
+                continue;
+            }
+            for j in neighbours(i, true) {
+                if soft(self.label[j]) && depth[j] == u32::MAX {
+                    depth[j] = depth[i] + 1;
+                    queue.push_back(j);
+                }
+            }
+        }
+        for i in 0..n {
+            if soft(self.label[i]) && depth[i] == u32::MAX {
+                self.label[i] = 0;
+            }
+        }
+    }
+}
+
+/// Lower-triangle triplets of k e eᵀ between nodes a and b (node indices into the unknowns).
+fn spring(t: &mut Vec<(usize, usize, f64)>, a: usize, b: usize, k: f64, e: [f64; 3]) {
+    for r in 0..3 {
+        for c in 0..3 {
+            let v = k * e[r] * e[c];
+            for (i, j, sgn) in [(a, a, 1.0), (b, b, 1.0), (a, b, -1.0), (b, a, -1.0)] {
+                let (gr, gc) = (3 * i + r, 3 * j + c);
+                if gr >= gc {
+                    t.push((gr, gc, sgn * v));
+                }
+            }
+        }
+    }
+}
+
+/// Element stiffness of a linear tetrahedron (constant strain), 12×12, lower triplets.
+fn tetra(t: &mut Vec<(usize, usize, f64)>, nodes: [usize; 4], x: [[f64; 3]; 4], e: f64, nu: f64) {
+    use nalgebra::{Matrix3, SMatrix};
+    let m = Matrix3::from_fn(|r, c| x[c + 1][r] - x[0][r]);
+    let det = m.determinant();
+    let Some(inv) = m.try_inverse() else { return };
+    let vol = det.abs() / 6.0;
+    // Gradients of the barycentric shape functions.
+    let mut g = [[0.0; 3]; 4];
+    for a in 0..3 {
+        for k in 0..3 {
+            g[a + 1][k] = inv[(a, k)];
+        }
+    }
+    for k in 0..3 {
+        g[0][k] = -(g[1][k] + g[2][k] + g[3][k]);
+    }
+    let mut b = SMatrix::<f64, 6, 12>::zeros();
+    for a in 0..4 {
+        let ba = crate::dynamics::strain_rows_3d(g[a]);
+        for r in 0..6 {
+            for c in 0..3 {
+                b[(r, 3 * a + c)] = ba[r][c];
+            }
+        }
+    }
+    let iso = crate::dynamics::isotropic_3d(e, nu);
+    let d = SMatrix::<f64, 6, 6>::from_fn(|i, j| iso[i][j]);
+    let k = b.transpose() * d * b * vol;
+    for i in 0..12 {
+        for j in 0..=i {
+            let (gi, gj) = (3 * nodes[i / 3] + i % 3, 3 * nodes[j / 3] + j % 3);
+            let (r, c) = if gi >= gj { (gi, gj) } else { (gj, gi) };
+            t.push((r, c, k[(i, j)]));
+        }
+    }
+}
+
+/// Solve the volumetric model and return the displacement at `points` (the skin vertices).
+pub fn predict(
+    vol: &Volume,
+    seg: &Segmentation,
+    stiffness: &Stiffness,
+    plan: &Plan,
+    points: &[[f64; 3]],
+    opts: Options,
+) -> Result<Prediction> {
+    let Options {
+        spacing,
+        max_depth_mm,
+        kind,
+        nu,
+    } = opts;
+    let mut lat = Lattice::new(vol, seg, spacing);
+    lat.keep_facial_tissue(max_depth_mm);
+    let d = lat.dims;
+    let n = lat.label.len();
+    let is_node = |i: usize| lat.label[i] != 0;
+    let is_bone = |i: usize| lat.label[i] == segment::BONE;
+    // Edges of the model (pairs of lattice points coupled by a spring or an element).
+    let mut couple: Vec<(usize, usize)> = Vec::new();
+    let mut cubes: Vec<usize> = Vec::new();
+    let offsets: Vec<[i64; 3]> = (0..27)
+        .map(|c| [c % 3 - 1, (c / 3) % 3 - 1, c / 9 - 1])
+        .filter(|o| o.iter().any(|&x| x != 0))
+        .map(|o| o.map(|x| x as i64))
+        .collect();
+    for z in 0..d[2] {
+        for y in 0..d[1] {
+            for x in 0..d[0] {
+                let i = lat.at(x, y, z);
+                if !is_node(i) {
+                    continue;
+                }
+                match kind {
+                    Kind::Lattice => {
+                        for o in &offsets {
+                            let q = [x as i64 + o[0], y as i64 + o[1], z as i64 + o[2]];
+                            if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
+                                continue;
+                            }
+                            let j = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
+                            if j > i && is_node(j) && !(is_bone(i) && is_bone(j)) {
+                                couple.push((i, j));
+                            }
+                        }
+                    }
+                    Kind::Tetrahedra => {
+                        if x + 1 < d[0] && y + 1 < d[1] && z + 1 < d[2] {
+                            let corners = (0..8)
+                                .map(|c| lat.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)));
+                            let cs: Vec<usize> = corners.collect();
+                            if cs.iter().all(|&c| is_node(c)) && !cs.iter().all(|&c| is_bone(c)) {
+                                cubes.push(i);
+                                for a in 0..8 {
+                                    for b in a + 1..8 {
+                                        couple.push((cs[a], cs[b]));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // Keep the tissue connected to bone: union–find over the couplings.
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn find(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for &(a, b) in &couple {
+        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+        if ra != rb {
+            parent[ra] = rb;
+        }
+    }
+    let mut anchored = vec![false; n];
+    let mut touched = vec![false; n];
+    for &(a, b) in &couple {
+        touched[a] = true;
+        touched[b] = true;
+    }
+    for i in 0..n {
+        if touched[i] && is_bone(i) {
+            let r = find(&mut parent, i);
+            anchored[r] = true;
+        }
+    }
+    let mut index = vec![usize::MAX; n];
+    let mut nodes = Vec::new();
+    for i in 0..n {
+        if touched[i] && anchored[find(&mut parent, i)] {
+            index[i] = nodes.len();
+            nodes.push(i);
+        }
+    }
+    if nodes.iter().all(|&i| is_bone(i)) {
+        return Err(Error::Numerical(
+            "volumetric model: no soft tissue is connected to bone at this lattice spacing".into(),
+        ));
+    }
+    let pos: Vec<[f64; 3]> = nodes.iter().map(|&i| lat.pos(i)).collect();
+    let mut t: Vec<(usize, usize, f64)> = Vec::new();
+    let c_of = |i: usize| tissue_c(lat.label[i], stiffness);
+    match kind {
+        Kind::Lattice => {
+            for &(a, b) in &couple {
+                let (ia, ib) = (index[a], index[b]);
+                if ia == usize::MAX || ib == usize::MAX {
+                    continue;
+                }
+                let (ca, cb) = (c_of(a), c_of(b));
+                // Series stiffness of the two half-springs (a bone end is rigid).
+                let c = match (ca > 0.0, cb > 0.0) {
+                    (true, true) => 2.0 * ca * cb / (ca + cb),
+                    (true, false) => ca,
+                    (false, true) => cb,
+                    _ => continue,
+                };
+                let dv = facesim::mesh::sub(pos[ib], pos[ia]);
+                let l = facesim::mesh::norm(dv);
+                spring(&mut t, ia, ib, c * spacing / l, dv.map(|x| x / l));
+            }
+        }
+        Kind::Tetrahedra => {
+            // Kuhn split of the cube: six tetrahedra around the main diagonal 0–7 (the same
+            // split marching tetrahedra uses).
+            use facesim::surface::marching::TETS as KUHN;
+            for &i in &cubes {
+                let (x, y, z) = (i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1]));
+                let cs: Vec<usize> = (0..8)
+                    .map(|c| lat.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)))
+                    .collect();
+                if cs.iter().any(|&c| index[c] == usize::MAX) {
+                    continue;
+                }
+                for tet in KUHN {
+                    let g = tet.map(|c| cs[c]);
+                    let soft: Vec<f64> = g.iter().map(|&c| c_of(c)).filter(|&c| c > 0.0).collect();
+                    if soft.is_empty() {
+                        continue;
+                    }
+                    let e = soft.iter().sum::<f64>() / soft.len() as f64;
+                    tetra(&mut t, g.map(|c| index[c]), g.map(|c| pos[index[c]]), e, nu);
+                }
+            }
+        }
+    }
+    let nn = nodes.len();
+    // A weak isotropic coupling along every edge of the model (1e-9 of the largest diagonal)
+    // removes the lattice's zero-energy modes at the tissue's edge; unlike a tie to the rest
+    // position it stores no energy under a rigid translation, so it cannot bias one.
+    let mut diag_max = 0.0f64;
+    for &(r, c, v) in &t {
+        if r == c {
+            diag_max = diag_max.max(v);
+        }
+    }
+    let eps = 1e-9 * diag_max;
+    for &(a, b) in &couple {
+        let (ia, ib) = (index[a], index[b]);
+        if ia == usize::MAX || ib == usize::MAX {
+            continue;
+        }
+        for e in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
+            spring(&mut t, ia, ib, eps, e);
+        }
+    }
+    let mut fixed = vec![false; 3 * nn];
+    let mut prescribed = vec![0.0; 3 * nn];
+    let bone_pts: Vec<[f64; 3]> = nodes
+        .iter()
+        .zip(&pos)
+        .filter(|(i, _)| is_bone(**i))
+        .map(|(_, p)| *p)
+        .collect();
+    let (moved, _) = plan.apply(&bone_pts, 1.0);
+    let mut k = 0;
+    for (a, &i) in nodes.iter().enumerate() {
+        if is_bone(i) {
+            for c in 0..3 {
+                fixed[3 * a + c] = true;
+                prescribed[3 * a + c] = moved[k][c] - pos[a][c];
+            }
+            k += 1;
+        }
+    }
+    let sys = System::new(3 * nn, t, &fixed)
+        .map_err(|e| Error::Numerical(format!("volumetric model: {e}")))?;
+    let unknowns = sys.free.len();
+    let u = sys.solve(&[vec![0.0; 3 * nn]], &[prescribed]).remove(0);
+    if u.iter().any(|x| !x.is_finite()) {
+        return Err(Error::Numerical(
+            "volumetric model: the solve returned non-finite displacements".into(),
+        ));
+    }
+    // Interpolate at the points.
+    let disp_at = |p: [f64; 3]| {
+        let c = [0, 1, 2].map(|a| (p[a] - lat.origin[a]) / spacing);
+        let base = c.map(|x| x.floor() as i64);
+        let f = [0, 1, 2].map(|a| c[a] - base[a] as f64);
+        let mut acc = [0.0; 3];
+        let mut wsum = 0.0;
+        for corner in 0..8 {
+            let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+            let q = [0, 1, 2].map(|a| base[a] + o[a] as i64);
+            if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
+                continue;
+            }
+            let gi = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
+            if index[gi] == usize::MAX {
+                continue;
+            }
+            let w: f64 = (0..3)
+                .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+                .product::<f64>()
+                .max(1e-12);
+            for k in 0..3 {
+                acc[k] += w * u[3 * index[gi] + k];
+            }
+            wsum += w;
+        }
+        if wsum > 0.0 {
+            return acc.map(|x| x / wsum);
+        }
+        // Nearest node within two cells.
+        let mut best = (f64::INFINITY, [0.0; 3]);
+        for dz in -2..=3i64 {
+            for dy in -2..=3i64 {
+                for dx in -2..=3i64 {
+                    let q = [base[0] + dx, base[1] + dy, base[2] + dz];
+                    if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
+                        continue;
+                    }
+                    let gi = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
+                    if index[gi] == usize::MAX {
+                        continue;
+                    }
+                    let dist = facesim::mesh::norm(facesim::mesh::sub(lat.pos(gi), p));
+                    if dist < best.0 {
+                        best = (dist, [0, 1, 2].map(|k| u[3 * index[gi] + k]));
+                    }
+                }
+            }
+        }
+        best.1
+    };
+    Ok(Prediction {
+        displacement: points.iter().map(|&p| disp_at(p)).collect(),
+        nodes: nn,
+        unknowns,
+    })
+}

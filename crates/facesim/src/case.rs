@@ -1,0 +1,446 @@
+//! The case directory (CASE.md): case.toml merged over pipeline/defaults.toml, validated.
+//!
+//! Unknown keys and wrong types are errors that name case.toml and the key; relative paths are
+//! resolved against the case directory.
+
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The documented defaults, compiled in so the binary works from any directory.
+pub const DEFAULTS_TOML: &str = include_str!("../../../pipeline/defaults.toml");
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Case {
+    #[serde(default)]
+    pub name: Option<String>,
+    pub ct: PathSection,
+    #[serde(default)]
+    pub skin: Option<PathSection>,
+    #[serde(default)]
+    pub registration: Option<Registration>,
+    pub tissue: Tissue,
+    pub extract: Extract,
+    pub springs: Springs,
+    pub surface: Surface,
+    #[serde(default)]
+    pub osteotomy: Vec<Osteotomy>,
+    pub solve: Solve,
+    pub output: Output,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathSection {
+    pub path: PathBuf,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Registration {
+    pub scan: Vec<[f64; 3]>,
+    pub ct: Vec<[f64; 3]>,
+    #[serde(default)]
+    pub scale: bool,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TissueMethod {
+    Windows,
+    Fit,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stiffness {
+    pub skin: f64,
+    pub muscle: f64,
+    pub fat_dark: f64,
+    pub fat_bright: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tissue {
+    pub method: TissueMethod,
+    pub head_threshold: f64,
+    pub skin_thickness_mm: f64,
+    pub min_bone_component_mm3: f64,
+    pub fat_dark: f64,
+    pub fat_bright: f64,
+    pub soft: f64,
+    pub bone: f64,
+    pub stiffness: Stiffness,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtractMethod {
+    Rangescan,
+    Marching,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Extract {
+    pub method: ExtractMethod,
+    pub angle_step_deg: f64,
+    pub z_step_mm: f64,
+    pub smooth_iterations: usize,
+    pub decimate_target: usize,
+    pub decimate_max_error_mm: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Springs {
+    pub max_length_mm: f64,
+    pub struts: bool,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Parameterization {
+    Cylindrical,
+    Planar,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Surface {
+    pub alpha: f64,
+    pub beta: f64,
+    pub parameterization: Parameterization,
+    #[serde(default)]
+    pub movable: Option<Region>,
+    /// Per-region stretching/bending (`[[surface.region]]`), applied by triangle centroid; later
+    /// entries win where regions overlap.
+    #[serde(default, rename = "region")]
+    pub regions: Vec<SurfaceRegion>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceRegion {
+    pub shape: Region,
+    pub alpha: f64,
+    pub beta: f64,
+}
+
+/// Region shapes (CASE.md), used by `movable` and `osteotomy.region`.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case", deny_unknown_fields)]
+pub enum Region {
+    Box { min: [f64; 3], max: [f64; 3] },
+    Sphere { center: [f64; 3], radius: f64 },
+    HalfSpace { point: [f64; 3], normal: [f64; 3] },
+    Mask(PathBuf),
+}
+
+impl Region {
+    /// Whether p (LPS mm) is inside; masks are resolved by the caller.
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        match self {
+            Region::Box { min, max } => (0..3).all(|a| p[a] >= min[a] && p[a] <= max[a]),
+            Region::Sphere { center, radius } => {
+                let d: f64 = (0..3).map(|a| (p[a] - center[a]).powi(2)).sum();
+                d <= radius * radius
+            }
+            Region::HalfSpace { point, normal } => {
+                (0..3).map(|a| (p[a] - point[a]) * normal[a]).sum::<f64>() >= 0.0
+            }
+            Region::Mask(_) => false,
+        }
+    }
+
+    fn validate(&self, what: &str) -> Result<()> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let ok = match self {
+            Region::Box { min, max } => {
+                finite(min) && finite(max) && (0..3).all(|a| min[a] <= max[a])
+            }
+            Region::Sphere { center, radius } => {
+                finite(center) && radius.is_finite() && *radius > 0.0
+            }
+            Region::HalfSpace { point, normal } => {
+                finite(point) && finite(normal) && normal.iter().any(|x| *x != 0.0)
+            }
+            Region::Mask(_) => true,
+        };
+        if ok {
+            Ok(())
+        } else {
+            Err(Error::config(format!(
+                "case.toml: {what}: region {self:?} is empty or not finite"
+            )))
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Osteotomy {
+    pub name: String,
+    pub region: Region,
+    #[serde(default)]
+    pub translate: [f64; 3],
+    #[serde(default)]
+    pub rotate_deg: [f64; 3],
+    #[serde(default)]
+    pub pivot: [f64; 3],
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum SolveModel {
+    Equilibrium,
+    Koch1996,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Solve {
+    pub model: SolveModel,
+    pub steps: usize,
+    /// Spring stiffness per unit relative stiffness c per mm² (equilibrium model).
+    pub k_c: f64,
+    /// Force scale k_c of eq. 20 for the koch1996 model (forces are loads there, not springs,
+    /// so the scale is a different quantity; docs/pipeline.md).
+    pub koch_k_c: f64,
+    /// Solve only on the movable skin and its ring of rigid neighbours (exact: elements whose
+    /// DOFs are all fixed add nothing). Off solves on the whole skin.
+    pub restrict: bool,
+    /// Solve on a copy of the skin decimated to this many triangles and carry the full skin
+    /// along by shell embedding (paper 002), when the skin has more than twice as many.
+    /// 0 = always solve on the skin as given.
+    pub coarse_triangles: usize,
+    /// Depth of the embedding shell below the coarse skin (mm).
+    pub shell_mm: f64,
+    /// Poisson ratio of the shell's thickness rule (paper 002 eq. 2), in [0, 0.5].
+    pub shell_poisson: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    pub subdivide: usize,
+}
+
+/// Recursively lay `over` on top of `base` (tables merge, everything else replaces).
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+impl Case {
+    /// Parse case text (as if from `path`) over the defaults.
+    pub fn parse(text: &str, path: &Path) -> Result<Case> {
+        let mut base: toml::Table = toml::from_str(DEFAULTS_TOML)
+            .map_err(|e| Error::config(format!("pipeline/defaults.toml: {e}")))?;
+        let over: toml::Table =
+            toml::from_str(text).map_err(|e| Error::input(path, e.message()))?;
+        merge(&mut base, over);
+        let case: Case = toml::Value::Table(base)
+            .try_into()
+            .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
+        case.validate(path)?;
+        Ok(case)
+    }
+
+    /// Load `CASE_DIR/case.toml` (or a .toml file given directly), resolving paths.
+    pub fn load(case: &Path) -> Result<(Case, PathBuf)> {
+        let (file, dir) = if case.is_dir() {
+            (case.join("case.toml"), case.to_path_buf())
+        } else {
+            (
+                case.to_path_buf(),
+                case.parent().map(Path::to_path_buf).unwrap_or_default(),
+            )
+        };
+        let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
+        let mut c = Case::parse(&text, &file)?;
+        let resolve = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        };
+        resolve(&mut c.ct.path);
+        if let Some(s) = &mut c.skin {
+            resolve(&mut s.path);
+        }
+        if let Some(Region::Mask(p)) = &mut c.surface.movable {
+            resolve(p);
+        }
+        for o in &mut c.osteotomy {
+            if let Region::Mask(p) = &mut o.region {
+                resolve(p);
+            }
+        }
+        Ok((c, dir))
+    }
+
+    fn validate(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
+        let t = &self.tissue;
+        let bounds = [t.head_threshold, t.fat_dark, t.fat_bright, t.soft, t.bone];
+        if bounds.iter().any(|b| !b.is_finite()) || bounds.windows(2).any(|w| w[0] >= w[1]) {
+            return bad(format!(
+                "[tissue] needs head_threshold < fat_dark < fat_bright < soft < bone, got {bounds:?}"
+            ));
+        }
+        if !(t.skin_thickness_mm > 0.0) {
+            return bad("[tissue] skin_thickness_mm must be positive".into());
+        }
+        let s = &t.stiffness;
+        if [s.skin, s.muscle, s.fat_dark, s.fat_bright]
+            .iter()
+            .any(|k| !(k.is_finite() && *k > 0.0))
+        {
+            return bad("[tissue.stiffness] values must be finite and positive".into());
+        }
+        let e = &self.extract;
+        let ok = e.angle_step_deg > 0.0
+            && e.angle_step_deg <= 30.0
+            && e.z_step_mm >= 0.0
+            && e.decimate_max_error_mm > 0.0;
+        if !ok {
+            return bad("[extract] angle_step_deg must be in (0, 30], z_step_mm >= 0, decimate_max_error_mm > 0".into());
+        }
+        if !(self.springs.max_length_mm > 0.0) {
+            return bad("[springs] max_length_mm must be positive".into());
+        }
+        if !(self.surface.alpha.is_finite()
+            && self.surface.alpha >= 0.0
+            && self.surface.beta.is_finite()
+            && self.surface.beta >= 0.0)
+        {
+            return bad("[surface] alpha and beta must be finite and >= 0".into());
+        }
+        if !(self.solve.k_c.is_finite()
+            && self.solve.k_c > 0.0
+            && self.solve.koch_k_c.is_finite()
+            && self.solve.koch_k_c > 0.0)
+        {
+            return bad("[solve] k_c and koch_k_c must be finite and positive".into());
+        }
+        if !(self.solve.shell_mm > 0.0
+            && self.solve.shell_mm.is_finite()
+            && (0.0..=0.5).contains(&self.solve.shell_poisson))
+        {
+            return bad("[solve] shell_mm must be positive and shell_poisson in [0, 0.5]".into());
+        }
+        if self.solve.coarse_triangles > 0 && self.solve.coarse_triangles < 200 {
+            return bad("[solve] coarse_triangles must be 0 (off) or at least 200".into());
+        }
+        if self.solve.steps == 0 {
+            return bad("[solve] steps must be at least 1".into());
+        }
+        if let Some(r) = &self.registration {
+            if r.scan.len() != r.ct.len() || r.scan.len() < 3 {
+                return bad(format!(
+                    "[registration] needs >= 3 landmark pairs, got {} scan and {} ct points",
+                    r.scan.len(),
+                    r.ct.len()
+                ));
+            }
+            if r.scan.iter().chain(&r.ct).flatten().any(|x| !x.is_finite()) {
+                return bad("[registration] landmarks must be finite".into());
+            }
+        }
+        if let Some(m) = &self.surface.movable {
+            m.validate("[surface] movable")?;
+        }
+        for r in &self.surface.regions {
+            r.shape.validate("[[surface.region]] shape")?;
+            if !(r.alpha.is_finite() && r.alpha >= 0.0 && r.beta.is_finite() && r.beta >= 0.0) {
+                return bad("[[surface.region]] alpha and beta must be finite and >= 0".into());
+            }
+            if matches!(r.shape, Region::Mask(_)) {
+                return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
+            }
+        }
+        for o in &self.osteotomy {
+            o.region.validate(&format!("osteotomy '{}'", o.name))?;
+            if o.translate
+                .iter()
+                .chain(&o.rotate_deg)
+                .chain(&o.pivot)
+                .any(|x| !x.is_finite())
+            {
+                return bad(format!(
+                    "osteotomy '{}': translate, rotate_deg and pivot must be finite",
+                    o.name
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: &str = "[ct]\npath = \"ct.nii.gz\"\n";
+
+    #[test]
+    fn defaults_fill_in_and_overrides_apply() {
+        let c = Case::parse(
+            &format!("{MIN}[tissue]\nmethod = \"fit\"\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.tissue.method, TissueMethod::Fit);
+        assert_eq!(c.tissue.bone, 300.0);
+        assert_eq!(c.solve.model, SolveModel::Equilibrium);
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_name_the_key() {
+        let e = Case::parse(
+            &format!("{MIN}[springs]\nmax_lenght_mm = 3.0\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("case.toml") && e.contains("max_lenght_mm"),
+            "{e}"
+        );
+        let e = Case::parse(
+            &format!("{MIN}[surface]\nalpha = \"x\"\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("case.toml"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn regions_parse_and_select() {
+        let c = Case::parse(
+            &format!(
+                "{MIN}[[osteotomy]]\nname = \"m\"\nregion = {{ half_space = {{ point = [0,0,0], normal = [0,0,-1] }} }}\ntranslate = [0,-6,0]\n"
+            ),
+            Path::new("case.toml"),
+        )
+        .unwrap();
+        assert!(c.osteotomy[0].region.contains([0.0, 0.0, -1.0]));
+        assert!(!c.osteotomy[0].region.contains([0.0, 0.0, 1.0]));
+        let e = Case::parse(
+            &format!("{MIN}[[osteotomy]]\nname = \"m\"\nregion = {{ sphere = {{ center = [0,0,0], radius = -1 }} }}\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("osteotomy 'm'"));
+    }
+}

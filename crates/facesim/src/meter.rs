@@ -1,0 +1,68 @@
+//! The one measure of a stage's cost: wall time, CPU time (user + system, all threads, from
+//! getrusage) and peak heap above the live heap at the start — the latter only when the caller
+//! supplies a [`HeapProbe`] (the laboratory's counting allocator; the library installs no global
+//! allocator). Stages are measured one after another, never nested.
+
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct StageCost {
+    pub wall_s: f64,
+    pub cpu_s: f64,
+    pub peak_heap_mb: Option<f64>,
+}
+
+/// Live and peak heap bytes, from whatever counts them (a global allocator in a binary).
+pub trait HeapProbe: Sync {
+    /// Reset the high-water mark to the live bytes and return them.
+    fn mark(&self) -> usize;
+    /// Peak bytes above `base` since the last `mark`.
+    fn peak_since(&self, base: usize) -> usize;
+}
+
+pub struct Meter<'a> {
+    wall: Instant,
+    cpu: f64,
+    heap: Option<(&'a dyn HeapProbe, usize)>,
+}
+
+/// User + system CPU seconds of the whole process so far.
+pub fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage writes into the zeroed struct we pass and reads nothing else.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return 0.0;
+    }
+    let tv = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    tv(u.ru_utime) + tv(u.ru_stime)
+}
+
+/// Peak resident set size of the process so far (MB): the whole run's peak, which stage meters
+/// cannot give (each resets the heap high-water mark).
+pub fn max_rss_mb() -> f64 {
+    // SAFETY: as above.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) } != 0 {
+        return 0.0;
+    }
+    u.ru_maxrss as f64 / 1024.0
+}
+
+impl<'a> Meter<'a> {
+    pub fn start(heap: Option<&'a dyn HeapProbe>) -> Meter<'a> {
+        Meter {
+            heap: heap.map(|h| (h, h.mark())),
+            cpu: cpu_seconds(),
+            wall: Instant::now(),
+        }
+    }
+
+    pub fn stop(&self) -> StageCost {
+        StageCost {
+            wall_s: self.wall.elapsed().as_secs_f64(),
+            cpu_s: cpu_seconds() - self.cpu,
+            peak_heap_mb: self.heap.map(|(h, base)| h.peak_since(base) as f64 / 1e6),
+        }
+    }
+}

@@ -1,0 +1,111 @@
+//! Shared test fixtures: one phantom case per test binary, the real CT, and a CLI runner.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
+
+/// A new directory under target/tmp (`CARGO_TARGET_TMPDIR`) that outlives the test, so a failing
+/// run's outputs can be inspected; `cargo clean` removes it.
+pub fn kept_dir(prefix: &str) -> PathBuf {
+    tempfile::Builder::new()
+        .prefix(prefix)
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+        .unwrap()
+        .keep()
+}
+
+/// A phantom case (1.5 mm voxels), written once per test binary.
+pub fn phantom_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = kept_dir("facesim-phantom");
+        facesim::phantom::write_case(&d, &facesim::phantom::PhantomOptions::default()).unwrap();
+        d
+    })
+}
+
+/// The real CT, fetched by data-samples/fetch-real.sh (the README's test command runs it first).
+pub fn real_ct() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real/Cranium.inv3");
+    assert!(
+        p.is_file(),
+        "{} missing: run data-samples/fetch-real.sh (the README's test command does)",
+        p.display()
+    );
+    p
+}
+
+pub struct CliResult {
+    pub code: i32,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+pub fn facesim(args: &[&str]) -> CliResult {
+    // Only the command line's own tests (crates/facesim-cli) have the binary.
+    let bin = option_env!("CARGO_BIN_EXE_facesim").expect("the facesim binary: a facesim-cli test");
+    let out = Command::new(bin)
+        .args(args)
+        .output()
+        .unwrap();
+    CliResult {
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// Assert the CLI failed with one line on stderr that names `file` and contains `problem`.
+pub fn assert_clean_failure(r: &CliResult, file: &str, problem: &str) {
+    assert_ne!(r.code, 0, "expected failure, got success: {}", r.stdout);
+    let lines: Vec<&str> = r.stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "expected one error line, got: {:?}",
+        r.stderr
+    );
+    assert!(
+        lines[0].contains(file),
+        "error does not name {file}: {}",
+        lines[0]
+    );
+    assert!(
+        lines[0].to_lowercase().contains(&problem.to_lowercase()),
+        "error does not say '{problem}': {}",
+        lines[0]
+    );
+    assert!(!lines[0].contains("internal error"), "{}", lines[0]);
+}
+
+/// Every file below `dir` with its bytes (to prove nothing changed).
+pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut v = Vec::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        for e in rd.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                v.extend(snapshot(&p));
+            } else {
+                v.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    v.sort();
+    v
+}
+
+/// Triangles of an n×n grid of (n+1)² vertices numbered row by row, two per cell,
+/// counter-clockwise in the grid's own (i, j) orientation.
+pub fn grid_triangles(n: usize) -> Vec<[u32; 3]> {
+    let id = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let mut t = Vec::with_capacity(2 * n * n);
+    for j in 0..n {
+        for i in 0..n {
+            t.push([id(i, j), id(i + 1, j), id(i + 1, j + 1)]);
+            t.push([id(i, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    t
+}

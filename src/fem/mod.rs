@@ -1,9 +1,0 @@
-//! Stage 5 — the C1 triangular surface finite element model (Koch et al. 1996 §3–4.3).
-
-pub mod assembly;
-pub mod bench;
-pub mod element;
-pub mod jet;
-pub mod precond;
-pub mod preload;
-pub mod quadrature;
