@@ -282,9 +282,10 @@ fn fuzz_ply() {
 
 #[test]
 fn fuzz_case_toml() {
-    let seed =
-        std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom/case.toml"))
-            .unwrap();
+    let seed = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom/case.toml"),
+    )
+    .unwrap();
     fuzz(
         "case.toml",
         "case.toml",

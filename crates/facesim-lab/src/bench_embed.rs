@@ -10,12 +10,12 @@
 //! already takes minutes and 6.6 GB). Writes embed.json, embed.csv, summary.md and the
 //! accuracy-vs-time chart.
 
+use crate::study::face::FaceRow;
 use facesim::compare::stats;
 use facesim::error::{Error, Result};
 use facesim::mesh::{norm, sub};
-use facesim::output::write_bytes_atomic;
 use facesim::observe::Observer;
-use crate::study::face::FaceRow;
+use facesim::output::write_bytes_atomic;
 use serde::Serialize;
 use std::path::Path;
 

@@ -1,9 +1,9 @@
 //! `facesim bench fem`: assembly + factorisation + three solves of the C1 surface system on a
 //! planar mesh of a given size (the numbers in docs/fem.md).
 
+use facesim::error::{Error, NumericalKind, Result};
 use facesim::fem::assembly::{FemMesh, System, rigid_dofs};
 use facesim::fem::element::Material;
-use facesim::error::{Error, Result};
 use serde::Serialize;
 use std::time::Instant;
 
@@ -93,8 +93,9 @@ pub fn run(target_triangles: usize, export: Option<&std::path::Path>) -> Result<
     );
     let t_so = t3.elapsed().as_secs_f64();
     if x.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(Error::Numerical(
-            "benchmark solve produced non-finite values".into(),
+        return Err(Error::numerical(
+            NumericalKind::Diverged,
+            "benchmark solve produced non-finite values",
         ));
     }
     if let Some(path) = export {

@@ -11,8 +11,8 @@
 //! scaling.csv, summary.md and log-log charts (SVG + PNG).
 
 use facesim::error::{Error, Result};
-use facesim::output::write_bytes_atomic;
 use facesim::observe::Observer;
+use facesim::output::write_bytes_atomic;
 use serde::Serialize;
 use std::path::Path;
 

@@ -20,7 +20,7 @@
 //! - The dynamic part of the paper (§3, vibration around the goal positions) does not apply to a
 //!   static prediction and is not built.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::mesh::{Mesh, add, cross, dot, norm, scale, sub};
 use nalgebra::Matrix3;
@@ -122,10 +122,13 @@ impl Shell {
                 .try_inverse()
                 .filter(|_| det.abs() > 1e-12 * thickness.powi(3));
             let Some(inv) = inv else {
-                return Err(Error::Numerical(format!(
-                    "shell embedding: prism tetrahedron {k} (triangle {}) is flat; the coarse skin has a zero-area triangle",
-                    k / 3
-                )));
+                return Err(Error::numerical(
+                    NumericalKind::DegenerateElement,
+                    format!(
+                        "shell embedding: prism tetrahedron {k} (triangle {}) is flat; the coarse skin has a zero-area triangle",
+                        k / 3
+                    ),
+                ));
             };
             // F = Σ_{a<3} (q_a − q_3) r_aᵀ with r_a row a of M⁻¹, so g_a = r_a, g_3 = −Σ r_a.
             let r = [0, 1, 2].map(|a| [inv[(a, 0)], inv[(a, 1)], inv[(a, 2)]]);
@@ -150,9 +153,10 @@ impl Shell {
             let d = if d > 0.1 * thickness { d } else { thickness };
             let (e, a) = reference_edges(p, inward, d);
             let Some(inv) = e.try_inverse().filter(|_| a > 0.0) else {
-                return Err(Error::Numerical(format!(
-                    "shell embedding: triangle {ti} of the coarse skin has zero area"
-                )));
+                return Err(Error::numerical(
+                    NumericalKind::DegenerateElement,
+                    format!("shell embedding: triangle {ti} of the coarse skin has zero area"),
+                ));
             };
             area.push(a);
             h.push(d);
@@ -174,7 +178,10 @@ impl Shell {
         let mut fixed_all = vec![true; n];
         fixed_all.extend((0..n).map(|i| fixed.get(i).copied().unwrap_or(false)));
         let system = System::new(2 * n, trip, &fixed_all).map_err(|e| {
-            Error::Numerical(format!("shell embedding: offset fit is singular ({e})"))
+            Error::numerical(
+                NumericalKind::Singular,
+                format!("shell embedding: offset fit is singular ({e})"),
+            )
         })?;
         Ok(Shell {
             n,

@@ -1,5 +1,8 @@
-//! One error type for the whole pipeline. Every user-facing error is one line that names the
-//! file (when there is one) and the problem, so the CLI can print it as is.
+//! One error type for the whole pipeline, structured so that a library caller can match on what
+//! went wrong (a bad file, a bad parameter, a skin surface the model cannot use, an impossible
+//! plan, a numerical failure and its kind) without reading message text. Every error still
+//! displays as one line that names the file (when there is one) and the problem, so the CLI
+//! prints it as is.
 
 use std::path::{Path, PathBuf};
 
@@ -11,12 +14,35 @@ pub enum Error {
     /// A case or parameter that is inconsistent or impossible.
     #[error("{0}")]
     Config(String),
-    /// A numerical failure reported as a result (singular system, divergence, no convergence).
-    #[error("numerical failure: {0}")]
-    Numerical(String),
+    /// The skin surface cannot carry the C1 model (its (u, v) map folds, an element is
+    /// degenerate, a vertex has too few neighbours): a property of the input surface, not a
+    /// numerical failure. The pipeline names the surface's source with [`Error::in_file`].
+    #[error("{0}")]
+    Surface(String),
+    /// The plan moves bone where no skin can follow (through the skin; wrong units or
+    /// direction). `file` is the case file once the pipeline knows it.
+    #[error("{}impossible plan: {msg}", file.as_ref().map(|f| format!("{}: ", f.display())).unwrap_or_default())]
+    ImpossiblePlan { file: Option<PathBuf>, msg: String },
+    /// A numerical failure reported as a result, never a crash or a silent wrong answer.
+    #[error("numerical failure: {msg}")]
+    Numerical { kind: NumericalKind, msg: String },
     /// Writing an output failed.
     #[error("{}: cannot write: {msg}", path.display())]
     Output { path: PathBuf, msg: String },
+}
+
+/// What kind of numerical failure: a caller may retry differently (more load steps for
+/// `NotConverged`, rigid nodes for `Singular`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NumericalKind {
+    /// A system matrix is singular or not positive definite.
+    Singular,
+    /// An iteration did not reach its tolerance within its limit.
+    NotConverged,
+    /// An iteration blew up (non-finite values, growing residual).
+    Diverged,
+    /// An element is flat or inverted.
+    DegenerateElement,
 }
 
 pub type Result<T> = std::result::Result<T, Error>;
@@ -36,6 +62,37 @@ impl Error {
     }
     pub fn config(msg: impl std::fmt::Display) -> Self {
         Error::Config(one_line(&msg.to_string()))
+    }
+    pub fn numerical(kind: NumericalKind, msg: impl std::fmt::Display) -> Self {
+        Error::Numerical {
+            kind,
+            msg: one_line(&msg.to_string()),
+        }
+    }
+    pub fn surface(msg: impl std::fmt::Display) -> Self {
+        Error::Surface(one_line(&msg.to_string()))
+    }
+    pub fn impossible_plan(msg: impl std::fmt::Display) -> Self {
+        Error::ImpossiblePlan {
+            file: None,
+            msg: one_line(&msg.to_string()),
+        }
+    }
+
+    /// Name the file an input-shaped error comes from: a surface problem becomes an input error
+    /// about `file`, an impossible plan names `file`; other errors are returned as they are.
+    pub fn in_file(self, file: impl AsRef<Path>) -> Self {
+        match self {
+            Error::Surface(msg) => Error::Input {
+                path: file.as_ref().to_path_buf(),
+                msg,
+            },
+            Error::ImpossiblePlan { file: None, msg } => Error::ImpossiblePlan {
+                file: Some(file.as_ref().to_path_buf()),
+                msg,
+            },
+            other => other,
+        }
     }
 }
 

@@ -274,10 +274,13 @@ pub fn prepare(case: &Case, obs: &dyn Observer, report: &mut Report) -> Result<S
     }
     skin.check(Path::new("extracted skin surface"))?;
     if skull.triangles.is_empty() {
-        return Err(Error::Numerical(format!(
-            "no skull surface: no bone found within {} mm of the skin; raise [springs] max_length_mm or check the [tissue] bone window",
-            case.springs.max_length_mm
-        )));
+        return Err(Error::input(
+            &case.ct.path,
+            format!(
+                "no skull surface: no bone found within {} mm of the skin; raise [springs] max_length_mm or check the [tissue] bone window",
+                case.springs.max_length_mm
+            ),
+        ));
     }
     skull.check(Path::new("extracted skull surface"))?;
     surf.insert(
@@ -373,10 +376,13 @@ pub fn prepare(case: &Case, obs: &dyn Observer, report: &mut Report) -> Result<S
     timer.report.record("springs", meter.stop());
     let spring_report = springs.report(&skin);
     if springs.attachments.is_empty() {
-        return Err(Error::Numerical(format!(
-            "no skin vertex found bone within {} mm along its inward normal: raise [springs] max_length_mm or check the [tissue] bone window",
-            case.springs.max_length_mm
-        )));
+        return Err(Error::input(
+            &case.ct.path,
+            format!(
+                "no skin vertex found bone within {} mm along its inward normal: raise [springs] max_length_mm or check the [tissue] bone window",
+                case.springs.max_length_mm
+            ),
+        ));
     }
     if spring_report.misses > 0 {
         let places: Vec<String> = spring_report
@@ -479,18 +485,18 @@ pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<O
         );
         None
     } else {
-        // An impossible plan is the case file's fault: name it.
+        // An impossible plan is the case file's fault, a surface the model cannot use is its
+        // source's: name them.
+        let case_file = if case_path.is_dir() {
+            case_path.join("case.toml")
+        } else {
+            case_path.to_path_buf()
+        };
+        let skin_source = case.skin.as_ref().map_or(&case.ct.path, |s| &s.path);
         Some(
             crate::solve::solve(&skin, &springs, &plan, &rigid, &params).map_err(|e| match e {
-                Error::Config(m) if m.starts_with("impossible plan") => {
-                    let file = if case_path.is_dir() {
-                        case_path.join("case.toml")
-                    } else {
-                        case_path.to_path_buf()
-                    };
-                    Error::input(file, m)
-                }
-                other => other,
+                Error::ImpossiblePlan { .. } => e.in_file(&case_file),
+                other => other.in_file(skin_source),
             })?,
         )
     };

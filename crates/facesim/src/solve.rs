@@ -24,7 +24,7 @@
 //!   limit is an error, never a silent result.
 
 use crate::case::SolveModel;
-use crate::error::{Error, Result};
+use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::{FemMesh, System, multiply, rigid_dofs};
 use crate::fem::element::Material;
 use crate::fem::precond::Precond;
@@ -118,8 +118,8 @@ fn check_not_through_skin(
     }
     if let Some((v, along)) = worst {
         let p = skin.vertices[v];
-        return Err(Error::config(format!(
-            "impossible plan: the bone moves through the skin at {flipped} skin vertices (worst at ({:.0}, {:.0}, {:.0}) LPS mm, {:.1} mm beyond it); check the osteotomy's translate (mm) and rotate_deg (degrees)",
+        return Err(Error::impossible_plan(format!(
+            "the bone moves through the skin at {flipped} skin vertices (worst at ({:.0}, {:.0}, {:.0}) LPS mm, {:.1} mm beyond it); check the osteotomy's translate (mm) and rotate_deg (degrees)",
             p[0], p[1], p[2], -along
         )));
     }
@@ -151,8 +151,8 @@ fn check_plan_reach(skin: &Mesh, springs: &SpringSet, plan: &Plan) -> Result<()>
     }
     if let Some((v, beyond, l)) = worst {
         let p = skin.vertices[v];
-        return Err(Error::config(format!(
-            "impossible plan: the bone moves through the skin at {count} skin vertices (worst at ({:.0}, {:.0}, {:.0}) LPS mm: {beyond:.1} mm beyond the skin, where the soft tissue is {l:.1} mm thick); check the osteotomy's translate (mm), rotate_deg (degrees) and direction (LPS: −y is anterior)",
+        return Err(Error::impossible_plan(format!(
+            "the bone moves through the skin at {count} skin vertices (worst at ({:.0}, {:.0}, {:.0}) LPS mm: {beyond:.1} mm beyond the skin, where the soft tissue is {l:.1} mm thick); check the osteotomy's translate (mm), rotate_deg (degrees) and direction (LPS: −y is anterior)",
             p[0], p[1], p[2]
         )));
     }
@@ -418,10 +418,13 @@ fn solve_mesh(
                 let bound = 2.0 * max_move + 10.0;
                 let d = disp(&a);
                 if !d.is_finite() || d > bound {
-                    return Err(Error::Numerical(format!(
-                        "koch1996 diverged at load step {step}/{}: skin displacement {d:.3e} mm exceeds {bound:.1} mm (bone moves at most {max_move:.1} mm); lower [solve] k_c, raise [surface] alpha/beta or use model = \"equilibrium\"",
-                        p.steps
-                    )));
+                    return Err(Error::numerical(
+                        NumericalKind::Diverged,
+                        format!(
+                            "koch1996 diverged at load step {step}/{}: skin displacement {d:.3e} mm exceeds {bound:.1} mm (bone moves at most {max_move:.1} mm); lower [solve] k_c, raise [surface] alpha/beta or use model = \"equilibrium\"",
+                            p.steps
+                        ),
+                    ));
                 }
                 history.push(StepRecord {
                     step,
@@ -515,7 +518,7 @@ fn solve_mesh(
                     d[value_dof(i)] = (h0[n][0][0] + h0[n][1][1] + h0[n][2][2]) / 3.0;
                 }
                 Precond::new(nd, &k, &d, &fixed).map_err(|e| {
-                    Error::Numerical(format!(
+                    Error::numerical(NumericalKind::Singular, format!(
                         "{e} (equilibrium model: no rigid node and too few springs to hold the skin)"
                     ))
                 })?
@@ -657,9 +660,10 @@ fn solve_mesh(
                         .sum::<f64>()
                         .sqrt();
                     if !dn.is_finite() {
-                        return Err(Error::Numerical(format!(
-                            "equilibrium Newton diverged at step {step}, iteration {it}"
-                        )));
+                        return Err(Error::numerical(
+                            NumericalKind::Diverged,
+                            format!("equilibrium Newton diverged at step {step}, iteration {it}"),
+                        ));
                     }
                     if dn <= tol_here * un.max(1e-12) {
                         converged = true;
@@ -668,18 +672,21 @@ fn solve_mesh(
                     }
                 }
                 if !converged {
-                    return Err(Error::Numerical(format!(
-                        "equilibrium Newton did not converge in {} iterations at load step {step}/{} (residual {:.2e} of {:.2e}; history {}); try more [solve] steps",
-                        p.max_iterations,
-                        p.steps,
-                        res_hist.last().copied().unwrap_or(f64::NAN),
-                        r0.unwrap_or(f64::NAN),
-                        res_hist
-                            .iter()
-                            .map(|x| format!("{x:.1e}"))
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    )));
+                    return Err(Error::numerical(
+                        NumericalKind::NotConverged,
+                        format!(
+                            "equilibrium Newton did not converge in {} iterations at load step {step}/{} (residual {:.2e} of {:.2e}; history {}); try more [solve] steps",
+                            p.max_iterations,
+                            p.steps,
+                            res_hist.last().copied().unwrap_or(f64::NAN),
+                            r0.unwrap_or(f64::NAN),
+                            res_hist
+                                .iter()
+                                .map(|x| format!("{x:.1e}"))
+                                .collect::<Vec<_>>()
+                                .join(" ")
+                        ),
+                    ));
                 }
                 history.push(StepRecord {
                     step,

@@ -388,12 +388,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
                 [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
                 translate = [0.0, -6.0, 0.0]\n[solve]\ncoarse_triangles = 4000\n";
-    let o = facesim::run::run(
-        &dense_case(plan),
-        None,
-        &facesim::observe::Quiet,
-    )
-    .unwrap();
+    let o = facesim::run::run(&dense_case(plan), None, &facesim::observe::Quiet).unwrap();
     let inside = |p: &[f64; 3]| {
         (p[0]).powi(2) + (p[1] + 60.0).powi(2) + (p[2] + 45.0).powi(2) <= 70.0f64.powi(2)
     };

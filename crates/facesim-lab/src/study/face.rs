@@ -19,7 +19,7 @@ use super::mass_spring;
 use super::volumetric::{self, Kind};
 use facesim::case::{Case, Parameterization, SolveModel};
 use facesim::compare::{DistanceStats, SurfaceIndex, barycentric, stats};
-use facesim::error::{Error, Result};
+use facesim::error::{Error, NumericalKind, Result};
 use facesim::mesh::{Mesh, sub};
 use facesim::observe::Observer;
 use facesim::run::{Report, Scene, prepare};
@@ -190,8 +190,9 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
                 regions: scene.params.regions.clone(),
                 ..scene.params
             };
-            let (sol, wall, peak) =
-                timed(|| facesim::solve::solve(&level.skin, &springs, &scene.plan, &rigid, &params));
+            let (sol, wall, peak) = timed(|| {
+                facesim::solve::solve(&level.skin, &springs, &scene.plan, &rigid, &params)
+            });
             let mut row = FaceRow {
                 case: name.clone(),
                 method: format!("C1 {}", model_name(model)),
@@ -344,8 +345,9 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
         .unwrap_or(case.springs.max_length_mm);
     drop(native_springs);
     let Some((ref_mesh, ref_d)) = reference else {
-        return Err(Error::Numerical(
-            "the reference solve produced nothing".into(),
+        return Err(Error::numerical(
+            NumericalKind::NotConverged,
+            "the reference solve produced nothing",
         ));
     };
     // Volumetric models.

@@ -20,11 +20,11 @@ pub mod metrics;
 pub mod volumetric;
 
 use crate::dynamics::{Block, Integrator, MP1, MP2, relative_energy_error};
-use facesim::error::{Error, Result};
-use facesim::output::write_bytes_atomic;
-use facesim::observe::Observer;
 use benchmarks::{Benchmark, Series, StabilityRow};
 use face::FaceRow;
+use facesim::error::{Error, Result};
+use facesim::observe::Observer;
+use facesim::output::write_bytes_atomic;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

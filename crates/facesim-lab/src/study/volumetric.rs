@@ -17,7 +17,7 @@
 //! the cell's corners that carry nodes (weights renormalised; nearest node if none).
 
 use facesim::case::Stiffness;
-use facesim::error::{Error, Result};
+use facesim::error::{Error, NumericalKind, Result};
 use facesim::fem::assembly::System;
 use facesim::osteotomy::Plan;
 use facesim::segment::{self, Segmentation};
@@ -320,8 +320,9 @@ pub fn predict(
         }
     }
     if nodes.iter().all(|&i| is_bone(i)) {
-        return Err(Error::Numerical(
-            "volumetric model: no soft tissue is connected to bone at this lattice spacing".into(),
+        return Err(Error::numerical(
+            NumericalKind::Singular,
+            "volumetric model: no soft tissue is connected to bone at this lattice spacing",
         ));
     }
     let pos: Vec<[f64; 3]> = nodes.iter().map(|&i| lat.pos(i)).collect();
@@ -411,12 +412,13 @@ pub fn predict(
         }
     }
     let sys = System::new(3 * nn, t, &fixed)
-        .map_err(|e| Error::Numerical(format!("volumetric model: {e}")))?;
+        .map_err(|e| Error::numerical(NumericalKind::Singular, format!("volumetric model: {e}")))?;
     let unknowns = sys.free.len();
     let u = sys.solve(&[vec![0.0; 3 * nn]], &[prescribed]).remove(0);
     if u.iter().any(|x| !x.is_finite()) {
-        return Err(Error::Numerical(
-            "volumetric model: the solve returned non-finite displacements".into(),
+        return Err(Error::numerical(
+            NumericalKind::Diverged,
+            "volumetric model: the solve returned non-finite displacements",
         ));
     }
     // Interpolate at the points.

@@ -6,7 +6,7 @@
 //! cross-boundary derivative along the edge's global normal, eq. 11).
 
 use super::element::{Element, Material, NDOF};
-use crate::error::{Error, Result};
+use crate::error::{Error, NumericalKind, Result};
 use faer::Side;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
@@ -72,7 +72,7 @@ impl FemMesh {
             };
             let t = signed.iter().position(|a| a * sign >= 0.0).unwrap_or(0);
             let v = tris[t][0] as usize;
-            return Err(Error::Numerical(format!(
+            return Err(Error::surface(format!(
                 "the (u, v) parameterisation folds over at {flipped} of {} triangles (first: triangle {t}, at u = {:.1}, v = {:.1}): use [surface] parameterization = \"planar\", a finer or less decimated skin, or restrict [surface] movable",
                 tris.len(),
                 uv[v][0],
@@ -279,10 +279,13 @@ impl FemMesh {
                 || (bend && full)
                 || (stretch && !bend && value);
             if !ok {
-                return Err(Error::Numerical(format!(
-                    "the surface stiffness matrix is singular: the piece of the skin mesh containing vertex {root} has no rigid node \
+                return Err(Error::numerical(
+                    NumericalKind::Singular,
+                    format!(
+                        "the surface stiffness matrix is singular: the piece of the skin mesh containing vertex {root} has no rigid node \
                      (mark part of it rigid with [surface] movable, or give it α, β > 0)"
-                )));
+                    ),
+                ));
             }
         }
         Ok(())
@@ -332,10 +335,11 @@ impl System {
         faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
-        let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower)
-            .map_err(|e| Error::Numerical(format!("symbolic Cholesky: {e:?}")))?;
+        let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower).map_err(|e| {
+            Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
+        })?;
         let llt = Llt::try_new_with_symbolic(symbolic.clone(), mat.as_ref(), Side::Lower).map_err(|e| {
-            Error::Numerical(format!(
+            Error::numerical(NumericalKind::Singular, format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
             ))
         })?;
@@ -360,7 +364,9 @@ impl System {
             Default::default(),
             Default::default(),
         )
-        .map_err(|e| Error::Numerical(format!("symbolic Cholesky: {e:?}")))?;
+        .map_err(|e| {
+            Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
+        })?;
         Ok(s.len_val())
     }
 
@@ -369,15 +375,17 @@ impl System {
     pub fn refactor(&mut self, k: Vec<(usize, usize, f64)>) -> Result<()> {
         let (mat, coupling) = split(&k, &self.free_index, self.free.len())?;
         if mat.compute_nnz() != self.nnz_lower {
-            return Err(Error::Numerical(
-                "refactor: the sparsity pattern changed".into(),
+            return Err(Error::numerical(
+                NumericalKind::Singular,
+                "refactor: the sparsity pattern changed",
             ));
         }
         self.llt = Llt::try_new_with_symbolic(self.symbolic.clone(), mat.as_ref(), Side::Lower)
             .map_err(|e| {
-                Error::Numerical(format!(
-                    "the surface stiffness matrix is not positive definite ({e:?})"
-                ))
+                Error::numerical(
+                    NumericalKind::Singular,
+                    format!("the surface stiffness matrix is not positive definite ({e:?})"),
+                )
             })?;
         self.coupling = coupling;
         self.k = k;
@@ -440,7 +448,7 @@ fn split(k: &[(usize, usize, f64)], free_index: &[usize], nf: usize) -> Result<S
         }
     }
     let mat = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &lower)
-        .map_err(|e| Error::Numerical(format!("sparse matrix: {e:?}")))?;
+        .map_err(|e| Error::numerical(NumericalKind::Singular, format!("sparse matrix: {e:?}")))?;
     Ok((mat, coupling))
 }
 

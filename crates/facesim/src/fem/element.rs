@@ -181,7 +181,7 @@ impl Element {
         let det = e1[0] * e2[1] - e2[0] * e1[1];
         let scale = (e1[0] * e1[0] + e1[1] * e1[1]).max(e2[0] * e2[0] + e2[1] * e2[1]);
         if !(det.abs() > 1e-12 * scale) {
-            return Err(Error::Numerical(format!(
+            return Err(Error::surface(format!(
                 "degenerate element in the (u, v) parameterisation: corners {p:?}"
             )));
         }
@@ -216,7 +216,7 @@ impl Element {
             }
         }
         el.coef = d.try_inverse().ok_or_else(|| {
-            Error::Numerical(format!(
+            Error::surface(format!(
                 "C1 element DOF matrix is singular for corners {p:?}"
             ))
         })?;

@@ -9,7 +9,7 @@
 //! operator and the residual test stay in f64). If the f32 factorisation breaks down (a matrix too
 //! ill-conditioned for 7 digits), the f64 factor is used instead.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NumericalKind, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
@@ -68,7 +68,8 @@ impl Precond {
             })
             .chain(free.iter().enumerate().map(|(i, &g)| (i, i, d[g])))
             .collect();
-        let bad = |e: String| Error::Numerical(format!("preconditioner: {e}"));
+        let bad =
+            |e: String| Error::numerical(NumericalKind::Singular, format!("preconditioner: {e}"));
         let single: Vec<Triplet<usize, usize, f32>> = triplets
             .iter()
             .map(|&(r, c, v)| Triplet::new(r, c, v as f32))

@@ -171,7 +171,7 @@ pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<
         .map(|v| {
             let vals: Vec<f64> = fields.iter().map(|f| f[v]).collect();
             gradient(&[v as u32], mesh.uv[v], Some(&vals)).ok_or_else(|| {
-                Error::Numerical(format!(
+                Error::surface(format!(
                     "preloading: vertex {v} has too few neighbours to fit its tangent plane"
                 ))
             })
@@ -185,7 +185,7 @@ pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<
             let (p, q) = (mesh.uv[ed[0] as usize], mesh.uv[ed[1] as usize]);
             let mid = [0.5 * (p[0] + q[0]), 0.5 * (p[1] + q[1])];
             let g = gradient(&[ed[0], ed[1]], mid, None).ok_or_else(|| {
-                Error::Numerical(format!(
+                Error::surface(format!(
                     "preloading: edge {e} has too few neighbours for a fit"
                 ))
             })?;

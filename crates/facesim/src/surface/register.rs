@@ -1,7 +1,7 @@
 //! Landmark registration of a face scan to the CT: least-squares rigid or similarity transform
 //! (Umeyama 1991, closed form by SVD of the cross-covariance), x_ct ≈ s R x_scan + t.
 
-use crate::error::{Error, Result};
+use crate::error::{Error, NumericalKind, Result};
 use nalgebra::{Matrix3, Vector3};
 
 #[derive(Clone, Debug, serde::Serialize)]
@@ -45,7 +45,10 @@ pub fn fit(scan: &[[f64; 3]], ct: &[[f64; 3]], allow_scale: bool) -> Result<Tran
     var_s /= n as f64;
     let svd = cov.svd(true, true);
     let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
-        return Err(Error::Numerical("registration SVD failed".into()));
+        return Err(Error::numerical(
+            NumericalKind::Singular,
+            "registration SVD failed",
+        ));
     };
     let mut d = Matrix3::identity();
     if (u * vt).determinant() < 0.0 {

@@ -45,10 +45,7 @@ pub struct CliResult {
 pub fn facesim(args: &[&str]) -> CliResult {
     // Only the command line's own tests (crates/facesim-cli) have the binary.
     let bin = option_env!("CARGO_BIN_EXE_facesim").expect("the facesim binary: a facesim-cli test");
-    let out = Command::new(bin)
-        .args(args)
-        .output()
-        .unwrap();
+    let out = Command::new(bin).args(args).output().unwrap();
     CliResult {
         code: out.status.code().unwrap_or(-1),
         stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
