@@ -168,17 +168,14 @@ fn main() -> ExitCode {
 fn dispatch(cmd: Cmd) -> Result<()> {
     match cmd {
         Cmd::Run { case_dir, out } => {
-            let o = facesim::run::run(&case_dir, out.as_deref(), &Progress::auto())?;
+            let o = facesim::pipeline::run(&case_dir, out.as_deref(), &Progress::auto())?;
             let r = &o.report;
             println!(
                 "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
                 r.name,
                 o.skin.vertices.len(),
                 o.skull.vertices.len(),
-                r.timings
-                    .get("total")
-                    .and_then(|v| v.as_f64())
-                    .unwrap_or(0.0),
+                r.costs.wall_s(facesim::report::Stage::Total),
                 o.out_dir.display()
             );
             for w in &r.warnings {

@@ -48,7 +48,7 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<EmbedBenc
     };
     let mut rows = Vec::new();
     let mut runs = Vec::new();
-    let one = |scan_step: f64, target: usize, struts: bool| -> Result<facesim::run::Outcome> {
+    let one = |scan_step: f64, target: usize, struts: bool| -> Result<facesim::pipeline::Outcome> {
         let dir = work.join(format!("scan_{scan_step}_{target}_{struts}"));
         std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
         let scan = work.join(format!("face_{scan_step}.ply"));
@@ -80,14 +80,15 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<EmbedBenc
                 format!("coarse {target}")
             }
         ));
-        let o = facesim::run::run(&dir, None, &facesim::observe::Quiet)?;
+        let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
         let _ = std::fs::remove_dir_all(dir.join("out"));
         Ok(o)
     };
-    let wall = |o: &facesim::run::Outcome| {
-        o.report.stage_costs["total"]["wall_s"]
-            .as_f64()
-            .unwrap_or(f64::NAN)
+    let wall = |o: &facesim::pipeline::Outcome| {
+        o.report
+            .costs
+            .get(facesim::report::Stage::Total)
+            .map_or(f64::NAN, |c| c.wall_s)
     };
     let movable = |p: &[f64; 3]| norm(sub(*p, MOVABLE.0)) <= MOVABLE.1;
     for struts in [true, false] {
@@ -107,14 +108,14 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<EmbedBenc
         let nt = full.skin.triangles.len();
         let row = |method: String,
                    res: String,
-                   o: &facesim::run::Outcome,
+                   o: &facesim::pipeline::Outcome,
                    dist: Vec<f64>,
                    reference: bool| FaceRow {
             case: format!("phantom, {step} mm scan ({nt} tri)"),
             method,
             family: "C1 surface FEM".into(),
             resolution: res,
-            unknowns: o.report.counts["unknowns"].as_u64().unwrap_or(0) as usize,
+            unknowns: o.report.counts.unknowns,
             wall_s: wall(o),
             peak_mb: Some(facesim::meter::max_rss_mb()),
             distance: Some(stats(&dist)),
@@ -138,9 +139,7 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<EmbedBenc
         ));
         for &c in coarse {
             let o = one(step, c, struts)?;
-            let solved = o.report.surfaces["coarse"]["triangles"]
-                .as_u64()
-                .unwrap_or(0) as usize;
+            let solved = o.report.surfaces.coarse.as_ref().map_or(0, |c| c.triangles);
             let dist: Vec<f64> = o
                 .skin
                 .vertices
@@ -168,9 +167,7 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<EmbedBenc
     if !quick {
         // ~500 k scan vertices on a 20 k model: cost only.
         let o = one(0.3, 20_000, true)?;
-        let solved = o.report.surfaces["coarse"]["triangles"]
-            .as_u64()
-            .unwrap_or(0) as usize;
+        let solved = o.report.surfaces.coarse.as_ref().map_or(0, |c| c.triangles);
         runs.push((
             o.skin.vertices.len(),
             solved,

@@ -108,15 +108,11 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<Scaling> 
         progress.started(&format!(
             "scaling: facesim run at {s} mm ({voxels:.0} voxels)"
         ));
-        let o = facesim::run::run(&dir, None, &facesim::observe::Quiet)?;
-        for (stage, c) in &o.report.stage_costs {
-            let c: facesim::meter::StageCost = match serde_json::from_value(c.clone()) {
-                Ok(c) => c,
-                Err(_) => continue,
-            };
+        let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
+        for (stage, c) in &o.report.costs.0 {
             points.push(Point {
                 series: "ct".into(),
-                stage: stage.clone(),
+                stage: stage.key().into(),
                 size: voxels,
                 wall_s: c.wall_s,
                 cpu_s: c.cpu_s,

@@ -1,7 +1,7 @@
 //! `facesim study --quick` end to end (issue 5), and exact invariants of the face baselines.
 
 use facesim::case::{Case, Osteotomy, Region};
-use facesim::run::{Report, prepare};
+use facesim::pipeline::prepare_case;
 use facesim_lab::study::{mass_spring, volumetric};
 use serde_json::Value;
 use std::path::Path;
@@ -211,16 +211,15 @@ fn a_rigid_translation_of_all_bone_translates_the_skin_in_every_baseline() {
         pivot: [0.0; 3],
     }];
     case.surface.movable = None;
-    let mut report = Report::default();
-    let scene = prepare(&case, &facesim::observe::Quiet, &mut report).unwrap();
+    let scene = prepare_case(&case, &facesim::observe::Quiet).unwrap();
     let tn = (t.iter().map(|x| x * x).sum::<f64>()).sqrt();
     for kind in [volumetric::Kind::Lattice, volumetric::Kind::Tetrahedra] {
         let p = volumetric::predict(
             &scene.vol,
             &scene.seg,
             &case.tissue.stiffness,
-            &scene.plan,
-            &scene.skin.vertices,
+            &scene.model.plan,
+            &scene.face.skin.vertices,
             volumetric::Options {
                 spacing: 6.0,
                 max_depth_mm: 20.0,
@@ -240,11 +239,11 @@ fn a_rigid_translation_of_all_bone_translates_the_skin_in_every_baseline() {
         );
         assert!(worst < 1e-6 * tn, "{kind:?}: {worst}");
     }
-    let rigid = vec![false; scene.skin.vertices.len()];
+    let rigid = vec![false; scene.face.skin.vertices.len()];
     let r = mass_spring::relax(
-        &scene.skin,
-        &scene.springs,
-        &scene.plan,
+        &scene.face.skin,
+        &scene.model.springs,
+        &scene.model.plan,
         &rigid,
         case.surface.alpha,
         case.surface.beta,
@@ -255,7 +254,7 @@ fn a_rigid_translation_of_all_bone_translates_the_skin_in_every_baseline() {
     let worst = r
         .positions
         .iter()
-        .zip(&scene.skin.vertices)
+        .zip(&scene.face.skin.vertices)
         .map(|(p, q)| {
             (0..3)
                 .map(|c| (p[c] - q[c] - t[c]).powi(2))

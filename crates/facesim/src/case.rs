@@ -136,11 +136,55 @@ pub enum Region {
     Box { min: [f64; 3], max: [f64; 3] },
     Sphere { center: [f64; 3], radius: f64 },
     HalfSpace { point: [f64; 3], normal: [f64; 3] },
-    Mask(PathBuf),
+    Mask(Mask),
+}
+
+/// A `mask = "file.nii.gz"` region: its path as written in case.toml and, once the pipeline has
+/// read it (`Case::read_masks`, at the input edge), its voxels. Serialised as the path alone.
+#[derive(Clone, Deserialize, Serialize)]
+#[serde(from = "PathBuf", into = "PathBuf")]
+pub struct Mask {
+    pub path: PathBuf,
+    pub voxels: Option<std::sync::Arc<crate::volume::Volume>>,
+}
+
+impl From<PathBuf> for Mask {
+    fn from(path: PathBuf) -> Mask {
+        Mask { path, voxels: None }
+    }
+}
+
+impl From<Mask> for PathBuf {
+    fn from(m: Mask) -> PathBuf {
+        m.path
+    }
+}
+
+impl std::fmt::Debug for Mask {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Mask({:?})", self.path)
+    }
+}
+
+impl Mask {
+    /// Non-zero voxel nearest to p; false outside the mask's grid.
+    fn contains(&self, p: [f64; 3]) -> bool {
+        let Some(m) = &self.voxels else {
+            // Masks are read before any stage runs (Case::read_masks); an unread mask selecting
+            // nothing would silently make every vertex rigid, as it once did.
+            debug_assert!(false, "mask {} used before it was read", self.path.display());
+            return false;
+        };
+        let c = m.to_voxel(p).map(|x| x.round());
+        if (0..3).any(|a| c[a] < 0.0 || c[a] >= m.dims[a] as f64) {
+            return false;
+        }
+        m.data[m.idx(c[0] as usize, c[1] as usize, c[2] as usize)] != 0.0
+    }
 }
 
 impl Region {
-    /// Whether p (LPS mm) is inside; masks are resolved by the caller.
+    /// Whether p (LPS mm) is inside; a mask must have been read (`Case::read_masks`).
     pub fn contains(&self, p: [f64; 3]) -> bool {
         match self {
             Region::Box { min, max } => (0..3).all(|a| p[a] >= min[a] && p[a] <= max[a]),
@@ -151,7 +195,7 @@ impl Region {
             Region::HalfSpace { point, normal } => {
                 (0..3).map(|a| (p[a] - point[a]) * normal[a]).sum::<f64>() >= 0.0
             }
-            Region::Mask(_) => false,
+            Region::Mask(m) => m.contains(p),
         }
     }
 
@@ -276,15 +320,45 @@ impl Case {
         if let Some(s) = &mut c.skin {
             resolve(&mut s.path);
         }
-        if let Some(Region::Mask(p)) = &mut c.surface.movable {
-            resolve(p);
-        }
-        for o in &mut c.osteotomy {
-            if let Region::Mask(p) = &mut o.region {
-                resolve(p);
+        for r in c.regions_mut() {
+            if let Region::Mask(m) = r {
+                resolve(&mut m.path);
             }
         }
         Ok((c, dir))
+    }
+
+    /// The regions that may be masks: `[surface] movable` and each osteotomy's region.
+    fn regions_mut(&mut self) -> impl Iterator<Item = &mut Region> {
+        self.surface
+            .movable
+            .iter_mut()
+            .chain(self.osteotomy.iter_mut().map(|o| &mut o.region))
+    }
+
+    /// Read every mask region's voxels (once per file): the pipeline's input edge, so that no
+    /// stage reads files and `Region::contains` is right for masks.
+    pub fn read_masks(&mut self) -> Result<()> {
+        let mut read: Vec<(PathBuf, std::sync::Arc<crate::volume::Volume>)> = Vec::new();
+        for r in self.regions_mut() {
+            let Region::Mask(m) = r else { continue };
+            if m.voxels.is_some() {
+                continue;
+            }
+            if !m.path.is_file() {
+                return Err(Error::input(&m.path, "region mask file not found"));
+            }
+            let v = match read.iter().find(|(p, _)| *p == m.path) {
+                Some((_, v)) => v.clone(),
+                None => {
+                    let v = std::sync::Arc::new(crate::volume::read_volume(&m.path)?);
+                    read.push((m.path.clone(), v.clone()));
+                    v
+                }
+            };
+            m.voxels = Some(v);
+        }
+        Ok(())
     }
 
     fn validate(&self, path: &Path) -> Result<()> {

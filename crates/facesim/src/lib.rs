@@ -1,10 +1,13 @@
 //! facesim — predicting a patient's face after cranio-maxillofacial surgery, after
 //! Koch, Gross et al. 1996 ("Simulating Facial Surgery Using Finite Element Models").
 //!
-//! The modules follow the pipeline's stages (docs/pipeline.md):
-//! `volume` (read CT) → `segment` (tissues) → `surface` (skin and skull meshes) → `run`.
-//! `mesh` reads and writes OBJ/PLY, `phantom` makes the analytic test head, `compare`
-//! measures mesh distances, `case` reads case.toml over `pipeline/defaults.toml`.
+//! `pipeline` runs the stages in order, as typed functions (docs/architecture.md): `case` reads
+//! case.toml over pipeline/defaults.toml; `volume` reads the CT; `segment` finds the tissues;
+//! `surface` makes skin and skull meshes; `springs`, `fem`, `osteotomy` and `solve` make and solve
+//! the C1 model (docs/pipeline.md); `embed` carries a dense skin along a coarse model;
+//! `pipeline::outputs` writes every file, `report` is report.json. `mesh` reads and writes
+//! OBJ/PLY, `phantom` makes the analytic test head, `compare` measures mesh distances,
+//! `observe` and `meter` report progress and cost.
 
 // `!(x > 0.0)` is deliberate: it rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -24,7 +27,8 @@ pub mod observe;
 pub mod osteotomy;
 pub mod output;
 pub mod phantom;
-pub mod run;
+pub mod pipeline;
+pub mod report;
 pub mod segment;
 pub mod solve;
 pub mod springs;

@@ -6,11 +6,9 @@
 use crate::case::{Osteotomy, Region};
 use crate::error::{Error, Result};
 use crate::volume::Volume;
-use std::collections::HashMap;
-use std::path::PathBuf;
 
 pub struct Plan {
-    steps: Vec<(Osteotomy, Option<Volume>)>,
+    steps: Vec<Osteotomy>,
 }
 
 fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
@@ -42,37 +40,18 @@ fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
     mul(rz, mul(ry, rx))
 }
 
-/// Whether p is inside a region; masks are non-zero voxels (nearest voxel).
-pub fn inside(region: &Region, mask: Option<&Volume>, p: [f64; 3]) -> bool {
-    match (region, mask) {
-        (Region::Mask(_), Some(m)) => {
-            let c = m.to_voxel(p).map(|x| x.round());
-            if (0..3).any(|a| c[a] < 0.0 || c[a] >= m.dims[a] as f64) {
-                return false;
-            }
-            m.data[m.idx(c[0] as usize, c[1] as usize, c[2] as usize)] != 0.0
-        }
-        _ => region.contains(p),
-    }
+/// Whether p is inside a region (masks: their non-zero voxels, read by `Case::read_masks`).
+/// The second argument is unused and goes with the next clean-up of the callers.
+pub fn inside(region: &Region, _unused: Option<&Volume>, p: [f64; 3]) -> bool {
+    region.contains(p)
 }
 
 impl Plan {
+    /// The plan of `osteotomies`, whose mask regions have been read (`Case::read_masks`).
     pub fn new(osteotomies: &[Osteotomy]) -> Result<Plan> {
-        let mut masks: HashMap<PathBuf, Volume> = HashMap::new();
-        let mut steps = Vec::new();
-        for o in osteotomies {
-            let mask = match &o.region {
-                Region::Mask(p) => {
-                    if !masks.contains_key(p) {
-                        masks.insert(p.clone(), crate::volume::read_volume(p)?);
-                    }
-                    masks.get(p).cloned()
-                }
-                _ => None,
-            };
-            steps.push((o.clone(), mask));
-        }
-        Ok(Plan { steps })
+        Ok(Plan {
+            steps: osteotomies.to_vec(),
+        })
     }
 
     /// Move points; `scale` ∈ [0, 1] applies a fraction of every move (load increments:
@@ -81,10 +60,10 @@ impl Plan {
     pub fn apply(&self, points: &[[f64; 3]], scale: f64) -> (Vec<[f64; 3]>, Vec<bool>) {
         let mut out = points.to_vec();
         let mut moved = vec![false; points.len()];
-        for (o, mask) in &self.steps {
+        for o in &self.steps {
             let r = rotation(o.rotate_deg.map(|d| d * scale));
             for (p, m) in out.iter_mut().zip(moved.iter_mut()) {
-                if inside(&o.region, mask.as_ref(), *p) {
+                if o.region.contains(*p) {
                     let d = [p[0] - o.pivot[0], p[1] - o.pivot[1], p[2] - o.pivot[2]];
                     for a in 0..3 {
                         p[a] = (0..3).map(|k| r[a][k] * d[k]).sum::<f64>()
@@ -100,8 +79,8 @@ impl Plan {
 
     /// Each segment must select something, or the plan is surely wrong.
     pub fn check_selects(&self, points: &[[f64; 3]], what: &str) -> Result<()> {
-        for (o, mask) in &self.steps {
-            if !points.iter().any(|p| inside(&o.region, mask.as_ref(), *p)) {
+        for o in &self.steps {
+            if !points.iter().any(|p| o.region.contains(*p)) {
                 return Err(Error::config(format!(
                     "case.toml: osteotomy '{}': its region contains none of the {} {what}",
                     o.name,

@@ -22,7 +22,7 @@ use facesim::compare::{DistanceStats, SurfaceIndex, barycentric, stats};
 use facesim::error::{Error, NumericalKind, Result};
 use facesim::mesh::{Mesh, sub};
 use facesim::observe::Observer;
-use facesim::run::{Report, Scene, prepare};
+use facesim::pipeline::{Scene, prepare_case};
 use facesim::surface;
 use serde::Serialize;
 use std::path::Path;
@@ -85,7 +85,7 @@ struct Level {
 
 fn with_uv(mut m: Mesh, case: &Case, scene: &Scene) -> Mesh {
     match case.surface.parameterization {
-        Parameterization::Cylindrical => surface::cylindrical_uv(&mut m, scene.axis, scene.r0),
+        Parameterization::Cylindrical => surface::cylindrical_uv(&mut m, scene.face.axis, scene.face.r0),
         Parameterization::Planar => surface::planar_uv(&mut m),
     }
     m
@@ -106,15 +106,15 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
         .name
         .clone()
         .unwrap_or_else(|| dir.display().to_string());
-    let mut report = Report::default();
-    let scene = prepare(&case, &facesim::observe::Quiet, &mut report)?;
-    if scene.plan.is_empty() {
+    let scene = prepare_case(&case, &facesim::observe::Quiet)?;
+    let case = scene.case.clone();
+    if scene.model.plan.is_empty() {
         return Err(Error::config(format!(
             "{}: the study needs a case with at least one [[osteotomy]]",
             dir.display()
         )));
     }
-    let native = scene.skin.clone();
+    let native = scene.face.skin.clone();
     let nt = native.triangles.len();
     // Resolutions, finest first (the reference).
     let mut levels: Vec<Level> = Vec::new();
@@ -141,10 +141,10 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
                 scene.vol.spacing[2]
             };
             c.extract.z_step_mm = z * f;
-            let coarse = prepare(&c, &facesim::observe::Quiet, &mut Report::default())?;
+            let coarse = prepare_case(&c, &facesim::observe::Quiet)?;
             levels.push(Level {
-                label: format!("{} tri", coarse.skin.triangles.len()),
-                skin: coarse.skin,
+                label: format!("{} tri", coarse.face.skin.triangles.len()),
+                skin: coarse.face.skin,
             });
         }
     } else {
@@ -161,7 +161,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
         }
     }
     let bone_field = scene.seg.bone_field(&scene.vol);
-    let rigid_of = |m: &Mesh| facesim::run::rigid_mask(&case, &m.vertices);
+    let rigid_of = |m: &Mesh| facesim::pipeline::model::rigid_mask(&case, &m.vertices);
     let mut rows: Vec<FaceRow> = Vec::new();
     let mut answers: Vec<(usize, Answer)> = Vec::new();
     let mut reference: Option<(Mesh, Vec<[f64; 3]>)> = None;
@@ -187,11 +187,11 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
                     SolveModel::Koch1996 => case.solve.koch_k_c,
                     SolveModel::Equilibrium => case.solve.k_c,
                 },
-                regions: scene.params.regions.clone(),
-                ..scene.params
+                regions: scene.model.params.regions.clone(),
+                ..scene.model.params
             };
             let (sol, wall, peak) = timed(|| {
-                facesim::solve::solve(&level.skin, &springs, &scene.plan, &rigid, &params)
+                facesim::solve::solve(&level.skin, &springs, &scene.model.plan, &rigid, &params)
             });
             let mut row = FaceRow {
                 case: name.clone(),
@@ -285,7 +285,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
                 mass_spring::relax(
                     &level.skin,
                     &springs,
-                    &scene.plan,
+                    &scene.model.plan,
                     &rigid,
                     case.surface.alpha,
                     case.surface.beta,
@@ -371,7 +371,7 @@ pub fn study_case(case_path: &Path, quick: bool, progress: &dyn Observer) -> Res
                     &scene.vol,
                     &scene.seg,
                     &case.tissue.stiffness,
-                    &scene.plan,
+                    &scene.model.plan,
                     &ref_mesh.vertices,
                     volumetric::Options {
                         spacing: s,

@@ -1,0 +1,70 @@
+//! Stage 1, the input edge: the case file, the CT, a face scan and region masks are read here and
+//! nowhere else, after checking that every named file exists (a missing scan is reported before
+//! the CT is read).
+
+use super::Recorder;
+use crate::case::Case;
+use crate::error::{Error, Result};
+use crate::mesh::{self, Mesh};
+use crate::report::Stage;
+use crate::volume::{self, Volume};
+use std::path::{Path, PathBuf};
+
+/// What the stages start from: the case (with its mask regions read), the CT in HU and LPS mm,
+/// and the face scan as given (not yet registered).
+pub struct Inputs {
+    pub case: Case,
+    pub ct: Volume,
+    pub scan: Option<Mesh>,
+}
+
+/// Where a case came from, for naming files in errors and in the report.
+#[derive(Clone, Debug)]
+pub struct CaseFiles {
+    pub dir: PathBuf,
+    /// case.toml (or the .toml file given).
+    pub case_file: PathBuf,
+    /// The file the skin comes from: the face scan, else the CT it is extracted from.
+    pub skin_source: PathBuf,
+}
+
+/// Load `CASE_DIR/case.toml` (or a .toml file) and read everything it names.
+pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)> {
+    let (case, dir) = Case::load(case_path)?;
+    let case_file = if case_path.is_dir() {
+        case_path.join("case.toml")
+    } else {
+        case_path.to_path_buf()
+    };
+    let skin_source = case.skin.as_ref().map_or(&case.ct.path, |s| &s.path).clone();
+    let inputs = read_case(case, rec)?;
+    Ok((
+        inputs,
+        CaseFiles {
+            dir,
+            case_file,
+            skin_source,
+        },
+    ))
+}
+
+/// Read the files a case built in memory names (paths absolute or relative to the working
+/// directory).
+pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
+    case.read_masks()?;
+    if let Some(skin) = &case.skin
+        && !skin.path.is_file()
+    {
+        return Err(Error::input(&skin.path, "face scan not found"));
+    }
+    let ct = rec.time(Stage::ReadCt, "reading CT", || {
+        volume::read_volume(&case.ct.path)
+    })?;
+    let scan = match &case.skin {
+        Some(s) => Some(rec.time(Stage::ReadScan, "reading face scan", || {
+            mesh::read_mesh(&s.path)
+        })?),
+        None => None,
+    };
+    Ok(Inputs { case, ct, scan })
+}

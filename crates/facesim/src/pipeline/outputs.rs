@@ -1,0 +1,187 @@
+//! The one module that writes a run's files (CASE.md "Outputs"): each to a temporary name and
+//! renamed, independent files in parallel, report.json last.
+
+use super::predict::Prediction;
+use super::{Recorder, Scene};
+use crate::case::Case;
+use crate::error::{Error, Result};
+use crate::mesh::{self, Mesh};
+use crate::output::write_bytes_atomic;
+use crate::report::{Counts, Displacement, Report, Stage};
+use crate::volume;
+use std::path::Path;
+
+/// Viridis colour map (matplotlib's, 9 control points, linear in between) at t ∈ [0, 1].
+pub fn viridis(t: f64) -> [u8; 3] {
+    const C: [[f64; 3]; 9] = [
+        [68.0, 1.0, 84.0],
+        [71.0, 44.0, 122.0],
+        [59.0, 81.0, 139.0],
+        [44.0, 113.0, 142.0],
+        [33.0, 144.0, 141.0],
+        [39.0, 173.0, 129.0],
+        [92.0, 200.0, 99.0],
+        [170.0, 220.0, 50.0],
+        [253.0, 231.0, 37.0],
+    ];
+    let x = t.clamp(0.0, 1.0) * 8.0;
+    let i = (x.floor() as usize).min(7);
+    let f = x - i as f64;
+    [0, 1, 2].map(|k| (C[i][k] + f * (C[i + 1][k] - C[i][k])).round() as u8)
+}
+
+/// |x_post − x_pre| per skin vertex (mm).
+pub fn displacement(p: &Prediction) -> Vec<f64> {
+    p.skin
+        .vertices
+        .iter()
+        .zip(&p.face_post.vertices)
+        .map(|(a, b)| mesh::norm(mesh::sub(*a, *b)))
+        .collect()
+}
+
+fn max_of(d: &[f64]) -> f64 {
+    d.iter().cloned().fold(0.0, f64::max)
+}
+
+/// The predicted face coloured by its displacement (viridis, 0 → max) with a `displacement`
+/// vertex column.
+fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
+    let dmax = max_of(dist);
+    let mut m = p.face_post.clone();
+    m.colors = Some(
+        dist.iter()
+            .map(|d| viridis(if dmax > 0.0 { d / dmax } else { 0.0 }))
+            .collect(),
+    );
+    m.vertex_columns.push(mesh::Column {
+        name: "displacement".into(),
+        values: dist.to_vec(),
+    });
+    m
+}
+
+fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
+    write_bytes_atomic(dest, |w| {
+        writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
+        for (i, (a, b)) in p.skin.vertices.iter().zip(&p.face_post.vertices).enumerate() {
+            writeln!(
+                w,
+                "{i},{},{},{},{},{},{},{}",
+                a[0], a[1], a[2], b[0], b[1], b[2], dist[i]
+            )?;
+        }
+        Ok(())
+    })
+}
+
+/// Every output file but report.json, into `dir` (created if needed).
+pub fn write(dir: &Path, scene: &Scene, p: &Prediction, case: &Case, rec: &mut Recorder) -> Result<()> {
+    rec.time(Stage::Write, "writing outputs", || write_files(dir, scene, p, case))
+}
+
+fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let dist = displacement(p);
+    let coloured = coloured_face(p, &dist);
+    let skull = &scene.face.skull;
+    let mut skull_post = skull.clone();
+    skull_post.vertices = scene.model.plan.apply(&skull.vertices, 1.0).0;
+    let solved_skin = p.coarse.as_ref().unwrap_or(&p.skin);
+    // The files are independent (each written to a temporary name and renamed), so they are
+    // written in parallel; the first error is reported.
+    type Job<'a> = Box<dyn FnOnce() -> Result<()> + Send + Sync + 'a>;
+    let o = dir;
+    let jobs: Vec<Job> = vec![
+        Box::new(|| mesh::write_mesh(&p.face_post, &o.join("face_post.obj"))),
+        Box::new(|| mesh::write_mesh(&p.face_post, &o.join("face_post.ply"))),
+        // The C1 surface sampled finer than the solved mesh; with a coarse model the carried
+        // full skin is the fine output instead.
+        Box::new(|| match (&p.solution, case.output.subdivide > 1 && p.coarse.is_none()) {
+            (Some(sol), true) => {
+                let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
+                mesh::write_mesh(&fine, &o.join("face_post_fine.ply"))
+            }
+            _ => Ok(()),
+        }),
+        Box::new(|| mesh::write_mesh(&coloured, &o.join("face_displacement.ply"))),
+        // With a coarse model, the mesh that was solved (pre-operative skin → its answer).
+        Box::new(|| match (&p.solution, &p.coarse) {
+            (Some(sol), Some(coarse)) => {
+                let mut m = coarse.clone();
+                m.vertices = sol.positions.clone();
+                mesh::write_mesh(&m, &o.join("face_post_coarse.ply"))
+            }
+            _ => Ok(()),
+        }),
+        Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
+        Box::new(|| {
+            mesh::ply::write(
+                &scene.model.springs.to_mesh(solved_skin),
+                &o.join("springs.ply"),
+                mesh::ply::Encoding::BinaryLittleEndian,
+            )
+        }),
+        Box::new(|| displacement_csv(&o.join("displacement.csv"), p, &dist)),
+        Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
+        Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.ply"))),
+        Box::new(|| mesh::write_mesh(skull, &o.join("skull_pre.ply"))),
+        Box::new(|| volume::nifti_io::write_labels(&scene.vol, &scene.seg.labels, &o.join("labels.nii.gz"))),
+    ];
+    use rayon::prelude::*;
+    jobs.into_par_iter().map(|j| j()).collect::<Result<Vec<()>>>()?;
+    Ok(())
+}
+
+/// Fill the report from the run's stages (costs, counts, sections, warnings).
+pub fn fill_report(report: &mut Report, scene: &Scene, p: &Prediction, case: &Case, rec: Recorder) {
+    let dist = displacement(p);
+    let dmax = max_of(&dist);
+    report.displacement = Displacement {
+        max: dmax,
+        mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
+        colour_scale_mm: [0.0, dmax],
+        colour_map: "viridis",
+    };
+    let (seg, skull) = (&scene.seg, &scene.face.skull);
+    report.counts = Counts {
+        voxels: scene.vol.len(),
+        dims: scene.vol.dims,
+        skin_vertices: p.skin.vertices.len(),
+        skin_triangles: p.skin.triangles.len(),
+        skull_vertices: skull.vertices.len(),
+        skull_triangles: skull.triangles.len(),
+        springs_main: scene.model.spring_report.main,
+        springs_strut: scene.model.spring_report.struts,
+        unknowns: p.solution.as_ref().map_or(0, |s| s.unknowns),
+        solved_vertices: p.solution.as_ref().map_or(0, |s| s.solved_vertices),
+        max_rss_mb: crate::meter::max_rss_mb(),
+    };
+    report.surfaces = scene.face.report.clone();
+    report.surfaces.embedding = p.embedding.clone();
+    report.registration = scene.face.registration.clone();
+    report.springs = Some(scene.model.spring_report.clone());
+    report.solve = p.solution.as_ref().map(|s| s.history.clone());
+    report.segmentation = Some(seg.report.clone());
+    report.parameters = Some(case.clone());
+    let Recorder {
+        costs,
+        mut warnings,
+        skipped,
+        ..
+    } = rec;
+    if seg.report.removed_components > 0 {
+        warnings.push(format!(
+            "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
+            seg.report.removed_components, seg.report.removed_voxels
+        ));
+    }
+    report.costs = costs;
+    report.warnings = warnings;
+    report.stages_not_run = skipped;
+}
+
+pub fn write_report(dir: &Path, report: &Report) -> Result<()> {
+    let text = serde_json::to_string_pretty(report).map_err(|e| Error::output(dir, e))?;
+    write_bytes_atomic(&dir.join("report.json"), |w| w.write_all(text.as_bytes()))
+}

@@ -1,0 +1,197 @@
+//! report.json as types (CASE.md: parameters, per-stage `timings`, counts, the displacement
+//! summary, warnings). Every section is a struct; stage costs are kept in pipeline order.
+
+use crate::case::Case;
+use crate::compare::DistanceStats;
+use crate::meter::StageCost;
+use crate::segment::SegmentReport;
+use crate::solve::StepRecord;
+use crate::springs::SpringReport;
+use crate::surface::register::Transform;
+use serde::ser::{SerializeMap, Serializer};
+use serde::Serialize;
+
+/// A pipeline stage, as named in report.json's `timings` and `stage_costs`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    ReadCt,
+    Segment,
+    Surfaces,
+    SmoothDecimate,
+    ReadScan,
+    PlaceScan,
+    Coarsen,
+    Springs,
+    Solve,
+    Embed,
+    Write,
+    Total,
+}
+
+impl Stage {
+    pub fn key(self) -> &'static str {
+        match self {
+            Stage::ReadCt => "read_ct",
+            Stage::Segment => "segment",
+            Stage::Surfaces => "surfaces",
+            Stage::SmoothDecimate => "smooth_decimate",
+            Stage::ReadScan => "read_scan",
+            Stage::PlaceScan => "place_scan",
+            Stage::Coarsen => "coarsen",
+            Stage::Springs => "springs",
+            Stage::Solve => "solve",
+            Stage::Embed => "embed",
+            Stage::Write => "write",
+            Stage::Total => "total",
+        }
+    }
+}
+
+/// Stage costs in the order the stages ran; written as two maps, `timings` (stage → wall
+/// seconds) and `stage_costs` (stage → wall, CPU, peak heap).
+#[derive(Clone, Debug, Default)]
+pub struct Costs(pub Vec<(Stage, StageCost)>);
+
+impl Costs {
+    pub fn get(&self, stage: Stage) -> Option<&StageCost> {
+        self.0.iter().find(|(s, _)| *s == stage).map(|(_, c)| c)
+    }
+    /// Wall seconds of `stage` (0 when it did not run).
+    pub fn wall_s(&self, stage: Stage) -> f64 {
+        self.get(stage).map_or(0.0, |c| c.wall_s)
+    }
+}
+
+impl Serialize for Costs {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        struct Walls<'a>(&'a [(Stage, StageCost)]);
+        impl Serialize for Walls<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut m = s.serialize_map(Some(self.0.len()))?;
+                for (k, c) in self.0 {
+                    m.serialize_entry(k.key(), &c.wall_s)?;
+                }
+                m.end()
+            }
+        }
+        struct Full<'a>(&'a [(Stage, StageCost)]);
+        impl Serialize for Full<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut m = s.serialize_map(Some(self.0.len()))?;
+                for (k, c) in self.0 {
+                    m.serialize_entry(k.key(), c)?;
+                }
+                m.end()
+            }
+        }
+        let mut m = s.serialize_map(Some(2))?;
+        m.serialize_entry("timings", &Walls(&self.0))?;
+        m.serialize_entry("stage_costs", &Full(&self.0))?;
+        m.end()
+    }
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Counts {
+    pub voxels: usize,
+    pub dims: [usize; 3],
+    pub skin_vertices: usize,
+    pub skin_triangles: usize,
+    pub skull_vertices: usize,
+    pub skull_triangles: usize,
+    pub springs_main: usize,
+    pub springs_strut: usize,
+    /// Free unknowns of the solved system (0 when nothing was solved).
+    pub unknowns: usize,
+    /// Skin vertices in the mesh the equations were assembled on.
+    pub solved_vertices: usize,
+    /// The process's peak resident set (MB) at the end of the run.
+    pub max_rss_mb: f64,
+}
+
+/// How the skin and skull were made, and what was dropped or changed on the way.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct SurfaceReport {
+    /// "rangescan" or "marching".
+    pub method: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rays: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_misses: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skull_misses: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axis_xy: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub r0: Option<f64>,
+    pub skin_islands_dropped: usize,
+    pub skull_islands_dropped: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_decimation_error_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skull_decimation_error_mm: Option<f64>,
+    pub extracted_skin_components: usize,
+    pub skull_components: usize,
+    /// A given face scan's distance to the CT's skin.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scan_to_ct_skin_mm: Option<DistanceStats>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coarse: Option<CoarseReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub embedding: Option<EmbeddingReport>,
+}
+
+/// The coarse copy a dense skin was solved on (`[solve] coarse_triangles`).
+#[derive(Clone, Debug, Serialize)]
+pub struct CoarseReport {
+    pub triangles: usize,
+    pub vertices: usize,
+    pub fine_triangles: usize,
+    pub fine_vertices: usize,
+}
+
+/// The shell embedding that carried the full skin along the coarse answer.
+#[derive(Clone, Debug, Serialize)]
+pub struct EmbeddingReport {
+    pub shell_mm: f64,
+    pub poisson: f64,
+    pub fine_to_coarse_mm: DistanceStats,
+}
+
+/// |x_post − x_pre| over the skin (mm), and the colour scale of face_displacement.ply.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Displacement {
+    pub max: f64,
+    pub mean: f64,
+    pub colour_scale_mm: [f64; 2],
+    pub colour_map: &'static str,
+}
+
+/// A stage that did not run for this case, and why.
+#[derive(Clone, Debug, Serialize, PartialEq, Eq)]
+pub struct Skipped {
+    pub stage: &'static str,
+    pub reason: String,
+}
+
+#[derive(Debug, Default, Serialize)]
+pub struct Report {
+    pub name: String,
+    pub case: String,
+    pub facesim_version: String,
+    #[serde(flatten)]
+    pub costs: Costs,
+    pub counts: Counts,
+    pub segmentation: Option<SegmentReport>,
+    pub surfaces: SurfaceReport,
+    pub registration: Option<Transform>,
+    pub parameters: Option<Case>,
+    pub springs: Option<SpringReport>,
+    pub solve: Option<Vec<StepRecord>>,
+    pub displacement: Displacement,
+    pub warnings: Vec<String>,
+    /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
+    /// coarsening or embedding, ...).
+    pub stages_not_run: Vec<Skipped>,
+}
