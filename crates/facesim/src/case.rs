@@ -172,7 +172,11 @@ impl Mask {
         let Some(m) = &self.voxels else {
             // Masks are read before any stage runs (Case::read_masks); an unread mask selecting
             // nothing would silently make every vertex rigid, as it once did.
-            debug_assert!(false, "mask {} used before it was read", self.path.display());
+            debug_assert!(
+                false,
+                "mask {} used before it was read",
+                self.path.display()
+            );
             return false;
         };
         let c = m.to_voxel(p).map(|x| x.round());
@@ -272,6 +276,104 @@ pub struct Output {
     pub subdivide: usize,
 }
 
+// Rust defaults, equal to pipeline/defaults.toml (tested): a caller builds a case in memory with
+// `Case { ct: PathSection { path }, ..Case::default() }` and no case.toml.
+impl Default for Case {
+    fn default() -> Case {
+        Case {
+            name: None,
+            ct: PathSection {
+                path: PathBuf::new(),
+            },
+            skin: None,
+            registration: None,
+            tissue: Tissue::default(),
+            extract: Extract::default(),
+            springs: Springs::default(),
+            surface: Surface::default(),
+            osteotomy: Vec::new(),
+            solve: Solve::default(),
+            output: Output::default(),
+        }
+    }
+}
+
+impl Default for Tissue {
+    fn default() -> Tissue {
+        Tissue {
+            method: TissueMethod::Windows,
+            head_threshold: -500.0,
+            skin_thickness_mm: 2.0,
+            min_bone_component_mm3: 500.0,
+            fat_dark: -190.0,
+            fat_bright: -100.0,
+            soft: -30.0,
+            bone: 300.0,
+            stiffness: Stiffness {
+                skin: 200.0,
+                muscle: 100.0,
+                fat_dark: 10.0,
+                fat_bright: 20.0,
+            },
+        }
+    }
+}
+
+impl Default for Extract {
+    fn default() -> Extract {
+        Extract {
+            method: ExtractMethod::Rangescan,
+            angle_step_deg: 2.0,
+            z_step_mm: 0.0,
+            smooth_iterations: 0,
+            decimate_target: 0,
+            decimate_max_error_mm: 0.5,
+        }
+    }
+}
+
+impl Default for Springs {
+    fn default() -> Springs {
+        Springs {
+            max_length_mm: 40.0,
+            struts: true,
+        }
+    }
+}
+
+impl Default for Surface {
+    fn default() -> Surface {
+        Surface {
+            alpha: 0.01,
+            beta: 0.02,
+            parameterization: Parameterization::Cylindrical,
+            movable: None,
+            regions: Vec::new(),
+        }
+    }
+}
+
+impl Default for Solve {
+    fn default() -> Solve {
+        Solve {
+            model: SolveModel::Equilibrium,
+            steps: 4,
+            k_c: 2.5e-6,
+            koch_k_c: 1e-8,
+            restrict: true,
+            coarse_triangles: 0,
+            shell_mm: 3.0,
+            shell_poisson: 0.45,
+        }
+    }
+}
+
+impl Default for Output {
+    fn default() -> Output {
+        Output { subdivide: 2 }
+    }
+}
+
 /// Recursively lay `over` on top of `base` (tables merge, everything else replaces).
 fn merge(base: &mut toml::Table, over: toml::Table) {
     for (k, v) in over {
@@ -361,7 +463,8 @@ impl Case {
         Ok(())
     }
 
-    fn validate(&self, path: &Path) -> Result<()> {
+    /// Check every value's range; errors name `path` (case.toml) and the key.
+    pub fn validate(&self, path: &Path) -> Result<()> {
         let bad = |msg: String| Err(Error::input(path, msg));
         let t = &self.tissue;
         let bounds = [t.head_threshold, t.fat_dark, t.fat_bright, t.soft, t.bone];
@@ -464,6 +567,20 @@ mod tests {
     use super::*;
 
     const MIN: &str = "[ct]\npath = \"ct.nii.gz\"\n";
+
+    #[test]
+    fn rust_defaults_equal_defaults_toml() {
+        let parsed = Case::parse(MIN, Path::new("case.toml")).unwrap();
+        let built = Case {
+            ct: PathSection {
+                path: "ct.nii.gz".into(),
+            },
+            ..Case::default()
+        };
+        let json = |c: &Case| serde_json::to_value(c).unwrap();
+        assert_eq!(json(&built), json(&parsed));
+        built.validate(Path::new("in memory")).unwrap();
+    }
 
     #[test]
     fn defaults_fill_in_and_overrides_apply() {

@@ -8,8 +8,8 @@ use crate::segment::SegmentReport;
 use crate::solve::StepRecord;
 use crate::springs::SpringReport;
 use crate::surface::register::Transform;
-use serde::ser::{SerializeMap, Serializer};
 use serde::Serialize;
+use serde::ser::{SerializeMap, Serializer};
 
 /// A pipeline stage, as named in report.json's `timings` and `stage_costs`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]

@@ -85,7 +85,9 @@ struct Level {
 
 fn with_uv(mut m: Mesh, case: &Case, scene: &Scene) -> Mesh {
     match case.surface.parameterization {
-        Parameterization::Cylindrical => surface::cylindrical_uv(&mut m, scene.face.axis, scene.face.r0),
+        Parameterization::Cylindrical => {
+            surface::cylindrical_uv(&mut m, scene.face.axis, scene.face.r0)
+        }
         Parameterization::Planar => surface::planar_uv(&mut m),
     }
     m

@@ -45,7 +45,8 @@ pub fn place(
             let (m, t) = rec.time(Stage::PlaceScan, "placing the face scan", || {
                 place_scan(scan, ct, case, axis, r0)
             })?;
-            let st = crate::compare::stats(&crate::compare::point_to_surface(&m.vertices, &extracted));
+            let st =
+                crate::compare::stats(&crate::compare::point_to_surface(&m.vertices, &extracted));
             if st.p90 > 3.0 {
                 rec.warn(format!(
                     "face scan is {:.1} mm (90th percentile) from the CT skin: check the registration",
@@ -92,7 +93,10 @@ fn place_scan(
         .filter(|v| (0..3).all(|a| v[a] >= lo[a] && v[a] <= hi[a]))
         .count();
     if (inside as f64) < 0.5 * m.vertices.len() as f64 {
-        let path = case.skin.as_ref().map_or(Path::new("face scan"), |s| &s.path);
+        let path = case
+            .skin
+            .as_ref()
+            .map_or(Path::new("face scan"), |s| &s.path);
         return Err(Error::input(
             path,
             format!(

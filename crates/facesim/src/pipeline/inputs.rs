@@ -28,6 +28,21 @@ pub struct CaseFiles {
     pub skin_source: PathBuf,
 }
 
+impl CaseFiles {
+    /// For a case built in memory: no case file; the directory is the working directory.
+    pub fn in_memory(case: &Case) -> CaseFiles {
+        CaseFiles {
+            dir: PathBuf::from("."),
+            case_file: PathBuf::from("the case (built in memory)"),
+            skin_source: case
+                .skin
+                .as_ref()
+                .map_or(&case.ct.path, |s| &s.path)
+                .clone(),
+        }
+    }
+}
+
 /// Load `CASE_DIR/case.toml` (or a .toml file) and read everything it names.
 pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)> {
     let (case, dir) = Case::load(case_path)?;
@@ -36,7 +51,11 @@ pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)>
     } else {
         case_path.to_path_buf()
     };
-    let skin_source = case.skin.as_ref().map_or(&case.ct.path, |s| &s.path).clone();
+    let skin_source = case
+        .skin
+        .as_ref()
+        .map_or(&case.ct.path, |s| &s.path)
+        .clone();
     let inputs = read_case(case, rec)?;
     Ok((
         inputs,

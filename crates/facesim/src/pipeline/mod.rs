@@ -50,7 +50,12 @@ impl<'a> Recorder<'a> {
     }
 
     /// Run `f` as `stage`, announced as `what` on the observer, and record its cost.
-    pub fn time<T>(&mut self, stage: Stage, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    pub fn time<T>(
+        &mut self,
+        stage: Stage,
+        what: &str,
+        f: impl FnOnce() -> Result<T>,
+    ) -> Result<T> {
         if !what.is_empty() {
             self.obs.started(what);
         }
@@ -141,6 +146,28 @@ pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<O
     let out_dir = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| files.dir.join("out"));
+    finish(inputs, &files, &out_dir, total, rec)
+}
+
+/// Run a case built in memory (`Case { ct, ..Case::default() }`; paths absolute or relative to
+/// the working directory) and write its outputs into `out_dir`.
+pub fn run_case(case: Case, out_dir: &Path, obs: &dyn Observer) -> Result<Outcome> {
+    let total = Meter::start(obs.heap());
+    let mut rec = Recorder::new(obs);
+    let files = inputs::CaseFiles::in_memory(&case);
+    let inputs = inputs::read_case(case, &mut rec)?;
+    finish(inputs, &files, out_dir, total, rec)
+}
+
+/// Stages 2–5, the outputs and report.json, for read inputs.
+fn finish(
+    inputs: inputs::Inputs,
+    files: &inputs::CaseFiles,
+    out_dir: &Path,
+    total: Meter,
+    mut rec: Recorder,
+) -> Result<Outcome> {
+    let obs = rec.obs;
     let mut report = Report {
         name: inputs.case.name.clone().unwrap_or_else(|| {
             files
@@ -155,8 +182,8 @@ pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<O
     };
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
-    let prediction = predict::predict(&scene, case, &files, &mut rec)?;
-    outputs::write(&out_dir, &scene, &prediction, case, &mut rec)?;
+    let prediction = predict::predict(&scene, case, files, &mut rec)?;
+    outputs::write(out_dir, &scene, &prediction, case, &mut rec)?;
     rec.costs.0.push((
         Stage::Total,
         // Stage meters reset the heap high-water mark, so the whole run's peak is the
@@ -167,7 +194,7 @@ pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<O
         },
     ));
     outputs::fill_report(&mut report, &scene, &prediction, case, rec);
-    outputs::write_report(&out_dir, &report)?;
+    outputs::write_report(out_dir, &report)?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;
     Ok(Outcome {
@@ -177,6 +204,6 @@ pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<O
         segmentation: seg,
         skin: prediction.skin,
         skull: face.skull,
-        out_dir,
+        out_dir: out_dir.to_path_buf(),
     })
 }

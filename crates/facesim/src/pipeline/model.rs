@@ -26,7 +26,12 @@ pub struct Model {
 pub fn rigid_mask(case: &Case, vertices: &[[f64; 3]]) -> Vec<bool> {
     vertices
         .iter()
-        .map(|p| case.surface.movable.as_ref().is_some_and(|r| !r.contains(*p)))
+        .map(|p| {
+            case.surface
+                .movable
+                .as_ref()
+                .is_some_and(|r| !r.contains(*p))
+        })
         .collect()
 }
 

@@ -64,7 +64,13 @@ fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
 fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
     write_bytes_atomic(dest, |w| {
         writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
-        for (i, (a, b)) in p.skin.vertices.iter().zip(&p.face_post.vertices).enumerate() {
+        for (i, (a, b)) in p
+            .skin
+            .vertices
+            .iter()
+            .zip(&p.face_post.vertices)
+            .enumerate()
+        {
             writeln!(
                 w,
                 "{i},{},{},{},{},{},{},{}",
@@ -76,8 +82,16 @@ fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
 }
 
 /// Every output file but report.json, into `dir` (created if needed).
-pub fn write(dir: &Path, scene: &Scene, p: &Prediction, case: &Case, rec: &mut Recorder) -> Result<()> {
-    rec.time(Stage::Write, "writing outputs", || write_files(dir, scene, p, case))
+pub fn write(
+    dir: &Path,
+    scene: &Scene,
+    p: &Prediction,
+    case: &Case,
+    rec: &mut Recorder,
+) -> Result<()> {
+    rec.time(Stage::Write, "writing outputs", || {
+        write_files(dir, scene, p, case)
+    })
 }
 
 fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result<()> {
@@ -97,13 +111,15 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result
         Box::new(|| mesh::write_mesh(&p.face_post, &o.join("face_post.ply"))),
         // The C1 surface sampled finer than the solved mesh; with a coarse model the carried
         // full skin is the fine output instead.
-        Box::new(|| match (&p.solution, case.output.subdivide > 1 && p.coarse.is_none()) {
-            (Some(sol), true) => {
-                let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
-                mesh::write_mesh(&fine, &o.join("face_post_fine.ply"))
-            }
-            _ => Ok(()),
-        }),
+        Box::new(
+            || match (&p.solution, case.output.subdivide > 1 && p.coarse.is_none()) {
+                (Some(sol), true) => {
+                    let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
+                    mesh::write_mesh(&fine, &o.join("face_post_fine.ply"))
+                }
+                _ => Ok(()),
+            },
+        ),
         Box::new(|| mesh::write_mesh(&coloured, &o.join("face_displacement.ply"))),
         // With a coarse model, the mesh that was solved (pre-operative skin → its answer).
         Box::new(|| match (&p.solution, &p.coarse) {
@@ -126,10 +142,14 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.ply"))),
         Box::new(|| mesh::write_mesh(skull, &o.join("skull_pre.ply"))),
-        Box::new(|| volume::nifti_io::write_labels(&scene.vol, &scene.seg.labels, &o.join("labels.nii.gz"))),
+        Box::new(|| {
+            volume::nifti_io::write_labels(&scene.vol, &scene.seg.labels, &o.join("labels.nii.gz"))
+        }),
     ];
     use rayon::prelude::*;
-    jobs.into_par_iter().map(|j| j()).collect::<Result<Vec<()>>>()?;
+    jobs.into_par_iter()
+        .map(|j| j())
+        .collect::<Result<Vec<()>>>()?;
     Ok(())
 }
 

@@ -22,7 +22,12 @@ pub struct Prediction {
     pub embedding: Option<EmbeddingReport>,
 }
 
-pub fn predict(scene: &Scene, case: &Case, files: &CaseFiles, rec: &mut Recorder) -> Result<Prediction> {
+pub fn predict(
+    scene: &Scene,
+    case: &Case,
+    files: &CaseFiles,
+    rec: &mut Recorder,
+) -> Result<Prediction> {
     let (face, model) = (&scene.face, &scene.model);
     let solution = rec.time(Stage::Solve, "solving", || solve(scene, files))?;
     if solution.is_none() {

@@ -32,12 +32,13 @@ pub fn extract(
 ) -> Result<Surfaces> {
     let mut report = SurfaceReport::default();
     let mut notes = Vec::new();
-    let (mut skin, mut skull, axis, r0) = rec.time(Stage::Surfaces, "extracting surfaces", || {
-        Ok(match case.extract.method {
-            ExtractMethod::Rangescan => range_scan(ct, seg, bone_field, case, &mut report),
-            ExtractMethod::Marching => march(ct, seg, bone_field, &mut report, &mut notes),
-        })
-    })?;
+    let (mut skin, mut skull, axis, r0) =
+        rec.time(Stage::Surfaces, "extracting surfaces", || {
+            Ok(match case.extract.method {
+                ExtractMethod::Rangescan => range_scan(ct, seg, bone_field, case, &mut report),
+                ExtractMethod::Marching => march(ct, seg, bone_field, &mut report, &mut notes),
+            })
+        })?;
     if let Some(w) = range_scan_warning(&report, case) {
         rec.warn(w);
     }
@@ -45,7 +46,12 @@ pub fn extract(
     report.skin_islands_dropped = drop_small_components(&mut skin, 0.01);
     report.skull_islands_dropped = drop_small_components(&mut skull, 0.01);
     let warnings = rec.time(Stage::SmoothDecimate, "", || {
-        Ok(smooth_and_decimate(&mut skin, &mut skull, case, &mut report))
+        Ok(smooth_and_decimate(
+            &mut skin,
+            &mut skull,
+            case,
+            &mut report,
+        ))
     })?;
     warnings.into_iter().for_each(|w| rec.warn(w));
     if case.surface.parameterization == Parameterization::Planar {
@@ -145,7 +151,12 @@ fn march(
 }
 
 /// Taubin smoothing and decimation of both surfaces; returns warnings.
-fn smooth_and_decimate(skin: &mut Mesh, skull: &mut Mesh, case: &Case, report: &mut SurfaceReport) -> Vec<String> {
+fn smooth_and_decimate(
+    skin: &mut Mesh,
+    skull: &mut Mesh,
+    case: &Case,
+    report: &mut SurfaceReport,
+) -> Vec<String> {
     let mut warnings = Vec::new();
     for (m, name) in [(skin, "skin"), (skull, "skull")] {
         surface::taubin_smooth(m, case.extract.smooth_iterations);
@@ -153,7 +164,11 @@ fn smooth_and_decimate(skin: &mut Mesh, skull: &mut Mesh, case: &Case, report: &
             continue;
         }
         let before = m.clone();
-        let err = surface::decimate(m, case.extract.decimate_target, case.extract.decimate_max_error_mm);
+        let err = surface::decimate(
+            m,
+            case.extract.decimate_target,
+            case.extract.decimate_max_error_mm,
+        );
         // Edge collapse is not guaranteed to keep a mesh manifold (thin iso-surface features
         // can pinch); a broken result is not used.
         if let Err(e) = m.check(Path::new(name)) {
