@@ -1,10 +1,12 @@
 //! `facesim run` and `facesim compare` through the real CLI: good runs write every output,
 //! bad inputs fail with one line naming the file, and nothing is written or changed.
 
+mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use common::{assert_clean_failure, facesim, phantom_dir, snapshot};
+use cli::{assert_clean_failure, facesim};
+use common::{phantom_dir, snapshot};
 use std::path::{Path, PathBuf};
 
 /// A case directory whose case.toml points at the shared phantom CT, with `extra` appended.
@@ -19,7 +21,7 @@ fn case_with(extra: &str) -> PathBuf {
     d
 }
 
-fn run(case: &Path) -> common::CliResult {
+fn run(case: &Path) -> cli::CliResult {
     facesim(&["run", case.to_str().unwrap()])
 }
 

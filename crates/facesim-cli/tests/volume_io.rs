@@ -1,10 +1,12 @@
 //! Volume readers: the same CT as NIfTI and as a DICOM series inspects the same, geometry
 //! round-trips through both writers, and broken files give one clear line.
 
+mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use common::{assert_clean_failure, facesim, phantom_dir};
+use cli::{assert_clean_failure, facesim};
+use common::phantom_dir;
 use facesim::volume::{Volume, dicom_io, nifti_io, read_volume};
 use std::path::Path;
 

@@ -1,8 +1,8 @@
-//! Shared test fixtures: one phantom case per test binary, the real CT, and a CLI runner.
+//! Shared test fixtures (also used by crates/facesim-cli and crates/facesim-lab tests): one
+//! phantom case per test binary, the real CT, snapshots and grids.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 /// A new directory under target/tmp (`CARGO_TARGET_TMPDIR`) that outlives the test, so a failing
@@ -34,46 +34,6 @@ pub fn real_ct() -> PathBuf {
         p.display()
     );
     p
-}
-
-pub struct CliResult {
-    pub code: i32,
-    pub stdout: String,
-    pub stderr: String,
-}
-
-pub fn facesim(args: &[&str]) -> CliResult {
-    // Only the command line's own tests (crates/facesim-cli) have the binary.
-    let bin = option_env!("CARGO_BIN_EXE_facesim").expect("the facesim binary: a facesim-cli test");
-    let out = Command::new(bin).args(args).output().unwrap();
-    CliResult {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
-        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
-    }
-}
-
-/// Assert the CLI failed with one line on stderr that names `file` and contains `problem`.
-pub fn assert_clean_failure(r: &CliResult, file: &str, problem: &str) {
-    assert_ne!(r.code, 0, "expected failure, got success: {}", r.stdout);
-    let lines: Vec<&str> = r.stderr.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "expected one error line, got: {:?}",
-        r.stderr
-    );
-    assert!(
-        lines[0].contains(file),
-        "error does not name {file}: {}",
-        lines[0]
-    );
-    assert!(
-        lines[0].to_lowercase().contains(&problem.to_lowercase()),
-        "error does not say '{problem}': {}",
-        lines[0]
-    );
-    assert!(!lines[0].contains("internal error"), "{}", lines[0]);
 }
 
 /// Every file below `dir` with its bytes (to prove nothing changed).
