@@ -5,7 +5,7 @@
 use clap::{Parser, Subcommand};
 use facesim::error::{Error, Result};
 use progress::Progress;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 mod progress;
@@ -165,157 +165,178 @@ fn main() -> ExitCode {
     }
 }
 
+/// One line per subcommand: the work is in the `cmd_*` functions below.
 fn dispatch(cmd: Cmd) -> Result<()> {
     match cmd {
-        Cmd::Run { case_dir, out } => {
-            let o = facesim::pipeline::run(&case_dir, out.as_deref(), &Progress::auto())?;
-            let r = &o.report;
-            println!(
-                "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
-                r.name,
-                o.skin.vertices.len(),
-                o.skull.vertices.len(),
-                r.costs.wall_s(facesim::report::Stage::Total),
-                o.out_dir.display()
-            );
-            for w in &r.warnings {
-                eprintln!("warning: {w}");
-            }
-            Ok(())
-        }
+        Cmd::Run { case_dir, out } => cmd_run(&case_dir, out.as_deref()),
         Cmd::Phantom {
             dir,
             spacing,
             slice,
             noise,
             scan_step,
-        } => {
-            if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
-                return Err(Error::config(
-                    "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
-                ));
-            }
-            let opts = facesim::phantom::PhantomOptions {
-                spacing: [spacing, spacing, slice],
-                noise_hu: noise,
-                scan_step_mm: scan_step,
-                ..Default::default()
-            };
-            facesim::phantom::write_case(&dir, &opts)?;
-            println!("phantom case written to {}", dir.display());
-            Ok(())
-        }
-        Cmd::Inspect { path } => {
-            let v = facesim::volume::read_volume(&path)?;
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(&path, e))?
-            );
-            Ok(())
-        }
+        } => cmd_phantom(&dir, spacing, slice, noise, scan_step),
+        Cmd::Inspect { path } => cmd_inspect(&path),
         Cmd::Bench {
-            what, out, quick, ..
-        } if what == "scaling" => {
-            let out = out.ok_or_else(|| Error::config("bench scaling: --out DIR is required"))?;
-            let s = facesim_lab::scaling::run(&out, quick, &Progress::auto())?;
-            for f in &s.fits {
-                println!(
-                    "{:5} {:18} exponent {:5.2}  largest {:.3} s",
-                    f.series, f.stage, f.exponent, f.largest_wall_s
-                );
-            }
-            Ok(())
-        }
-        Cmd::Bench {
-            what, out, quick, ..
-        } if what == "embed" => {
-            let out = out.ok_or_else(|| Error::config("bench embed: --out DIR is required"))?;
-            let b = facesim_lab::bench_embed::run(&out, quick, &Progress::auto())?;
-            for r in &b.rows {
-                let d = r.distance.as_ref();
-                println!(
-                    "{:42} {:>10} {:8.2} s  mean {:.3} mm  p90 {:.3} mm  max {:.3} mm",
-                    r.method,
-                    r.resolution,
-                    r.wall_s,
-                    d.map_or(f64::NAN, |d| d.mean),
-                    d.map_or(f64::NAN, |d| d.p90),
-                    d.map_or(f64::NAN, |d| d.max)
-                );
-            }
-            Ok(())
-        }
-        Cmd::Bench {
-            triangles, export, ..
-        } => {
-            if !(2..=20_000_000).contains(&triangles) {
-                return Err(Error::config(
-                    "bench: --triangles must be between 2 and 20000000",
-                ));
-            }
-            let b = facesim_lab::bench_fem::run(triangles, export.as_deref())?;
-            println!(
-                "{}",
-                serde_json::to_string_pretty(&b).map_err(Error::config)?
-            );
-            Ok(())
-        }
+            what,
+            out,
+            quick,
+            triangles,
+            export,
+        } => match what.as_str() {
+            "scaling" => cmd_bench_scaling(out, quick),
+            "embed" => cmd_bench_embed(out, quick),
+            _ => cmd_bench_fem(triangles, export.as_deref()),
+        },
         Cmd::Render {
             meshes,
             out,
             view,
             size,
-        } => {
-            if !(16..=8192).contains(&size) {
-                return Err(Error::config("render: --size must be between 16 and 8192"));
-            }
-            let loaded = meshes
-                .iter()
-                .map(|p| facesim::mesh::read_mesh(p))
-                .collect::<Result<Vec<_>>>()?;
-            let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
-            let img = render::render(&refs, view, size);
-            render::write_png(&img, size, &out)?;
-            Ok(())
-        }
+        } => cmd_render(&meshes, &out, view, size),
         Cmd::Study {
             out_dir,
             quick,
             cases,
-        } => {
-            let cases = if cases.is_empty() {
-                facesim_lab::study::default_cases(quick)
-            } else {
-                cases
-            };
-            let s = facesim_lab::study::run(&out_dir, quick, &cases, &Progress::auto())?;
-            println!(
-                "study written to {} in {:.1} s ({} face rows); see summary.md",
-                out_dir.display(),
-                s.wall_s,
-                s.face.len()
-            );
-            Ok(())
-        }
-        Cmd::Compare { a, b, json } => {
-            let ma = facesim::mesh::read_mesh(&a)?;
-            let mb = facesim::mesh::read_mesh(&b)?;
-            let c = facesim::compare::compare(&ma, &mb);
-            if json {
-                println!(
-                    "{}",
-                    serde_json::to_string_pretty(&c).map_err(|e| Error::output(&a, e))?
-                );
-            } else {
-                println!(
-                    "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",
-                    c.mean, c.rms, c.max, c.pct_within_1mm, c.pct_within_2mm
-                );
-                if let (Some(m), Some(x)) = (c.vertex_mean, c.vertex_max) {
-                    println!("per vertex: mean {m:.4} mm, max {x:.4} mm");
-                }
-            }
-            Ok(())
+        } => cmd_study(&out_dir, quick, cases),
+        Cmd::Compare { a, b, json } => cmd_compare(&a, &b, json),
+    }
+}
+
+fn cmd_run(case_dir: &Path, out: Option<&Path>) -> Result<()> {
+    let o = facesim::pipeline::run(case_dir, out, &Progress::auto())?;
+    let r = &o.report;
+    println!(
+        "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
+        r.name,
+        o.skin.vertices.len(),
+        o.skull.vertices.len(),
+        r.costs.wall_s(facesim::report::Stage::Total),
+        o.out_dir.display()
+    );
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+fn cmd_phantom(dir: &Path, spacing: f64, slice: f64, noise: f64, scan_step: f64) -> Result<()> {
+    if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
+        return Err(Error::config(
+            "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
+        ));
+    }
+    let opts = facesim::phantom::PhantomOptions {
+        spacing: [spacing, spacing, slice],
+        noise_hu: noise,
+        scan_step_mm: scan_step,
+        ..Default::default()
+    };
+    facesim::phantom::write_case(dir, &opts)?;
+    println!("phantom case written to {}", dir.display());
+    Ok(())
+}
+
+fn cmd_inspect(path: &Path) -> Result<()> {
+    let v = facesim::volume::read_volume(path)?;
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(path, e))?
+    );
+    Ok(())
+}
+
+fn cmd_bench_scaling(out: Option<PathBuf>, quick: bool) -> Result<()> {
+    let out = out.ok_or_else(|| Error::config("bench scaling: --out DIR is required"))?;
+    let s = facesim_lab::scaling::run(&out, quick, &Progress::auto())?;
+    for f in &s.fits {
+        println!(
+            "{:5} {:18} exponent {:5.2}  largest {:.3} s",
+            f.series, f.stage, f.exponent, f.largest_wall_s
+        );
+    }
+    Ok(())
+}
+
+fn cmd_bench_embed(out: Option<PathBuf>, quick: bool) -> Result<()> {
+    let out = out.ok_or_else(|| Error::config("bench embed: --out DIR is required"))?;
+    let b = facesim_lab::bench_embed::run(&out, quick, &Progress::auto())?;
+    for r in &b.rows {
+        let d = r.distance.as_ref();
+        println!(
+            "{:42} {:>10} {:8.2} s  mean {:.3} mm  p90 {:.3} mm  max {:.3} mm",
+            r.method,
+            r.resolution,
+            r.wall_s,
+            d.map_or(f64::NAN, |d| d.mean),
+            d.map_or(f64::NAN, |d| d.p90),
+            d.map_or(f64::NAN, |d| d.max)
+        );
+    }
+    Ok(())
+}
+
+fn cmd_bench_fem(triangles: usize, export: Option<&Path>) -> Result<()> {
+    if !(2..=20_000_000).contains(&triangles) {
+        return Err(Error::config(
+            "bench: --triangles must be between 2 and 20000000",
+        ));
+    }
+    let b = facesim_lab::bench_fem::run(triangles, export)?;
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&b).map_err(Error::config)?
+    );
+    Ok(())
+}
+
+fn cmd_render(meshes: &[PathBuf], out: &Path, view: render::View, size: usize) -> Result<()> {
+    if !(16..=8192).contains(&size) {
+        return Err(Error::config("render: --size must be between 16 and 8192"));
+    }
+    let loaded = meshes
+        .iter()
+        .map(|p| facesim::mesh::read_mesh(p))
+        .collect::<Result<Vec<_>>>()?;
+    let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
+    let img = render::render(&refs, view, size);
+    render::write_png(&img, size, out)?;
+    Ok(())
+}
+
+fn cmd_study(out_dir: &Path, quick: bool, cases: Vec<PathBuf>) -> Result<()> {
+    let cases = if cases.is_empty() {
+        facesim_lab::study::default_cases(quick)
+    } else {
+        cases
+    };
+    let s = facesim_lab::study::run(out_dir, quick, &cases, &Progress::auto())?;
+    println!(
+        "study written to {} in {:.1} s ({} face rows); see summary.md",
+        out_dir.display(),
+        s.wall_s,
+        s.face.len()
+    );
+    Ok(())
+}
+
+fn cmd_compare(a: &Path, b: &Path, json: bool) -> Result<()> {
+    let ma = facesim::mesh::read_mesh(a)?;
+    let mb = facesim::mesh::read_mesh(b)?;
+    let c = facesim::compare::compare(&ma, &mb);
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&c).map_err(|e| Error::output(a, e))?
+        );
+    } else {
+        println!(
+            "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",
+            c.mean, c.rms, c.max, c.pct_within_1mm, c.pct_within_2mm
+        );
+        if let (Some(m), Some(x)) = (c.vertex_mean, c.vertex_max) {
+            println!("per vertex: mean {m:.4} mm, max {x:.4} mm");
         }
     }
+    Ok(())
 }

@@ -66,115 +66,27 @@ impl Block {
             n >= 2 && n.is_multiple_of(2),
             "an even grid puts a node at the right edge's middle"
         );
+        let grid = QuadGrid { n };
         let h = 1.0 / n as f64;
         let nn = (n + 1) * (n + 1);
         let nd = 2 * nn;
-        let (e, nu) = (mat.e, mat.nu);
-        let f = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
-        let d = [
-            [f * (1.0 - nu), f * nu, 0.0],
-            [f * nu, f * (1.0 - nu), 0.0],
-            [0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0],
-        ];
-        let g = 1.0 / 3f64.sqrt();
-        let gauss = [(-g, -g), (g, -g), (g, g), (-g, g)];
-        let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
-        // Element matrices (all elements are the same square).
-        let mut ke = [[0.0; 8]; 8];
-        let mut me = [[0.0; 8]; 8];
-        let jac = h / 2.0; // dx/dξ
-        for &(xi, eta) in &gauss {
-            let nvals: Vec<f64> = corners
-                .iter()
-                .map(|&(a, b)| 0.25 * (1.0 + a * xi) * (1.0 + b * eta))
-                .collect();
-            let dx: Vec<f64> = corners
-                .iter()
-                .map(|&(a, b)| 0.25 * a * (1.0 + b * eta) / jac)
-                .collect();
-            let dy: Vec<f64> = corners
-                .iter()
-                .map(|&(a, b)| 0.25 * b * (1.0 + a * xi) / jac)
-                .collect();
-            let w = jac * jac; // weights are 1 for the 2-point rule
-            // B: strain (εxx, εyy, γxy) from (u1x, u1y, …).
-            let mut b = [[0.0; 8]; 3];
-            for a in 0..4 {
-                b[0][2 * a] = dx[a];
-                b[1][2 * a + 1] = dy[a];
-                b[2][2 * a] = dy[a];
-                b[2][2 * a + 1] = dx[a];
-            }
-            for i in 0..8 {
-                for j in 0..8 {
-                    let mut s = 0.0;
-                    for p in 0..3 {
-                        for q in 0..3 {
-                            s += b[p][i] * d[p][q] * b[q][j];
-                        }
-                    }
-                    ke[i][j] += w * s;
-                    if i % 2 == j % 2 {
-                        me[i][j] += w * mat.rho * nvals[i / 2] * nvals[j / 2];
-                    }
-                }
-            }
-        }
-        let mut k = DMatrix::zeros(nd, nd);
-        let mut m = DMatrix::zeros(nd, nd);
-        let node = |i: usize, j: usize| j * (n + 1) + i;
-        for j in 0..n {
-            for i in 0..n {
-                let nodes = [
-                    node(i, j),
-                    node(i + 1, j),
-                    node(i + 1, j + 1),
-                    node(i, j + 1),
-                ];
-                let dofs: Vec<usize> = nodes.iter().flat_map(|&v| [2 * v, 2 * v + 1]).collect();
-                for a in 0..8 {
-                    for b in 0..8 {
-                        k[(dofs[a], dofs[b])] += ke[a][b];
-                        m[(dofs[a], dofs[b])] += me[a][b];
-                    }
-                }
-            }
-        }
-        let m_lumped = DVector::from_iterator(nd, (0..nd).map(|r| m.row(r).sum()));
-        let needle = 2 * node(n, n / 2);
-        let mut free = Vec::new();
-        for j in 0..=n {
-            for i in 0..=n {
-                let fixed_node = j == 0 || j == n || i == 0;
-                for c in 0..2 {
-                    let dof = 2 * node(i, j) + c;
-                    if !fixed_node && dof != needle {
-                        free.push(dof);
-                    }
-                }
-            }
-        }
-        let body_force = DVector::zeros(nd);
-        let coords = (0..nn)
-            .map(|v| [(v % (n + 1)) as f64 * h, (v / (n + 1)) as f64 * h, 0.0])
-            .collect();
+        let (ke, me) = quad_element(h, mat);
+        let (k, m) = assemble(nd, &ke, &me, grid.element_dofs());
+        let m_lumped = row_sums(&m);
+        let needle = 2 * grid.node(n, n / 2);
         let node_weights = (0..nn).map(|v| m_lumped[2 * v] / mat.rho).collect();
-        let mut outline: Vec<usize> = (0..=n).map(|i| node(i, 0)).collect();
-        outline.extend((1..=n).map(|j| node(n, j)));
-        outline.extend((0..n).rev().map(|i| node(i, n)));
-        outline.extend((1..n).rev().map(|j| node(0, j)));
         Block {
             n,
             k,
             m_consistent: m,
             m_lumped,
-            free,
+            free: grid.free_dofs(needle),
             needle: Some(needle),
-            body_force,
+            body_force: DVector::zeros(nd),
             dim: 2,
-            coords,
+            coords: grid.coords(h),
             node_weights,
-            outline,
+            outline: grid.outline(),
             boundary_triangles: Vec::new(),
         }
     }
@@ -182,170 +94,37 @@ impl Block {
     /// The 3-D rod (MP3 benchmark): 0.25 × 0.5 × 0.25 m (long along y), trilinear hexes on an
     /// nx × ny × nz grid, the y = 0 face fixed, gravity `g` (m/s²) along −z.
     pub fn rod(nx: usize, ny: usize, nz: usize, mat: MaterialSi, g: f64) -> Block {
+        let grid = HexGrid { nx, ny, nz };
         let size = [0.25, 0.5, 0.25];
         let h = [
             size[0] / nx as f64,
             size[1] / ny as f64,
             size[2] / nz as f64,
         ];
-        let d = isotropic_3d(mat.e, mat.nu);
-        let gp = 1.0 / 3f64.sqrt();
-        let corners: Vec<[f64; 3]> = (0..8)
-            .map(|c| {
-                [
-                    if c & 1 != 0 { 1.0 } else { -1.0 },
-                    if c & 2 != 0 { 1.0 } else { -1.0 },
-                    if c & 4 != 0 { 1.0 } else { -1.0 },
-                ]
-            })
-            .collect();
-        let jac = [h[0] / 2.0, h[1] / 2.0, h[2] / 2.0];
-        let w = jac[0] * jac[1] * jac[2];
-        let mut ke = vec![[0.0; 24]; 24];
-        let mut me = vec![[0.0; 24]; 24];
-        for q in &corners {
-            let x = [q[0] * gp, q[1] * gp, q[2] * gp];
-            let nval: Vec<f64> = corners
-                .iter()
-                .map(|c| (0..3).map(|a| 0.5 * (1.0 + c[a] * x[a])).product())
-                .collect();
-            let grad: Vec<[f64; 3]> = corners
-                .iter()
-                .map(|c| {
-                    let f = |a: usize| 0.5 * (1.0 + c[a] * x[a]);
-                    [
-                        0.5 * c[0] * f(1) * f(2) / jac[0],
-                        0.5 * c[1] * f(0) * f(2) / jac[1],
-                        0.5 * c[2] * f(0) * f(1) / jac[2],
-                    ]
-                })
-                .collect();
-            // B: (εxx, εyy, εzz, γxy, γyz, γzx) from (u1x, u1y, u1z, …).
-            let mut b = vec![[0.0; 24]; 6];
-            for a in 0..8 {
-                let ba = strain_rows_3d(grad[a]);
-                for r in 0..6 {
-                    b[r][3 * a..3 * a + 3].copy_from_slice(&ba[r]);
-                }
-            }
-            for i in 0..24 {
-                for j in 0..24 {
-                    let mut sum = 0.0;
-                    for p in 0..6 {
-                        for r in 0..6 {
-                            sum += b[p][i] * d[p][r] * b[r][j];
-                        }
-                    }
-                    ke[i][j] += w * sum;
-                    if i % 3 == j % 3 {
-                        me[i][j] += w * mat.rho * nval[i / 3] * nval[j / 3];
-                    }
-                }
-            }
-        }
-        let node = |i: usize, j: usize, k: usize| (k * (ny + 1) + j) * (nx + 1) + i;
+        let (ke, me) = hex_element(h, mat);
         let nn = (nx + 1) * (ny + 1) * (nz + 1);
         let nd = 3 * nn;
-        let mut kg = DMatrix::zeros(nd, nd);
-        let mut mg = DMatrix::zeros(nd, nd);
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let dofs: Vec<usize> = (0..8)
-                        .map(|c| node(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1)))
-                        .flat_map(|v| [3 * v, 3 * v + 1, 3 * v + 2])
-                        .collect();
-                    for a in 0..24 {
-                        for bb in 0..24 {
-                            kg[(dofs[a], dofs[bb])] += ke[a][bb];
-                            mg[(dofs[a], dofs[bb])] += me[a][bb];
-                        }
-                    }
-                }
-            }
-        }
-        let m_lumped = DVector::from_iterator(nd, (0..nd).map(|r| mg.row(r).sum()));
+        let (kg, mg) = assemble(nd, &ke, &me, grid.element_dofs());
+        let m_lumped = row_sums(&mg);
         // Gravity: the consistent body force ρ g ∫ N = (row sums of M) · g on the z DOFs.
         let body_force = DVector::from_iterator(
             nd,
             (0..nd).map(|r| if r % 3 == 2 { -g * m_lumped[r] } else { 0.0 }),
         );
-        let mut free = Vec::new();
-        for k in 0..=nz {
-            for j in 0..=ny {
-                for i in 0..=nx {
-                    if j > 0 {
-                        let v = node(i, j, k);
-                        free.extend([3 * v, 3 * v + 1, 3 * v + 2]);
-                    }
-                }
-            }
-        }
-        let coords = (0..nn)
-            .map(|v| {
-                let (i, j, k) = (
-                    v % (nx + 1),
-                    (v / (nx + 1)) % (ny + 1),
-                    v / ((nx + 1) * (ny + 1)),
-                );
-                [i as f64 * h[0], j as f64 * h[1], k as f64 * h[2]]
-            })
-            .collect();
         let node_weights = (0..nn).map(|v| m_lumped[3 * v] / mat.rho).collect();
-        // Boundary quads of the grid, two triangles each (orientation is irrelevant to the
-        // ray-integrated volumes; `enclosed_volume` takes the absolute value).
-        let mut boundary_triangles = Vec::new();
-        let mut quad = |q: [usize; 4]| {
-            boundary_triangles.push([q[0], q[1], q[2]]);
-            boundary_triangles.push([q[0], q[2], q[3]]);
-        };
-        for j in 0..ny {
-            for k in 0..nz {
-                for i in [0, nx] {
-                    quad([
-                        node(i, j, k),
-                        node(i, j + 1, k),
-                        node(i, j + 1, k + 1),
-                        node(i, j, k + 1),
-                    ]);
-                }
-            }
-            for i in 0..nx {
-                for k in [0, nz] {
-                    quad([
-                        node(i, j, k),
-                        node(i + 1, j, k),
-                        node(i + 1, j + 1, k),
-                        node(i, j + 1, k),
-                    ]);
-                }
-            }
-        }
-        for i in 0..nx {
-            for k in 0..nz {
-                for j in [0, ny] {
-                    quad([
-                        node(i, j, k),
-                        node(i + 1, j, k),
-                        node(i + 1, j, k + 1),
-                        node(i, j, k + 1),
-                    ]);
-                }
-            }
-        }
         Block {
             n: ny,
             k: kg,
             m_consistent: mg,
             m_lumped,
-            free,
+            free: grid.free_dofs(),
             needle: None,
             body_force,
             dim: 3,
-            coords,
+            coords: grid.coords(h),
             node_weights,
             outline: Vec::new(),
-            boundary_triangles,
+            boundary_triangles: grid.boundary_triangles(),
         }
     }
 
@@ -391,6 +170,321 @@ impl Block {
             Some(_) => (Block::needle_at(t), if t < 2.0 { -0.08 } else { 0.0 }),
             None => (0.0, 0.0),
         }
+    }
+}
+
+/// Adds one Gauss point's contribution to the element matrices: w BᵀDB to `ke` and w ρ NᵢNⱼ to
+/// `me` between equal displacement components (`nval.len()` nodes, N / nodes components each).
+fn add_gauss_point<const N: usize, const S: usize>(
+    ke: &mut [[f64; N]],
+    me: &mut [[f64; N]],
+    b: &[[f64; N]; S],
+    d: &[[f64; S]; S],
+    nval: &[f64],
+    w: f64,
+    rho: f64,
+) {
+    let dim = N / nval.len();
+    for i in 0..N {
+        for j in 0..N {
+            let mut s = 0.0;
+            for p in 0..S {
+                for q in 0..S {
+                    s += b[p][i] * d[p][q] * b[q][j];
+                }
+            }
+            ke[i][j] += w * s;
+            if i % dim == j % dim {
+                me[i][j] += w * rho * nval[i / dim] * nval[j / dim];
+            }
+        }
+    }
+}
+
+/// Scatters the element matrices into dense global K and M, element by element.
+fn assemble<const N: usize>(
+    nd: usize,
+    ke: &[[f64; N]],
+    me: &[[f64; N]],
+    elements: impl Iterator<Item = [usize; N]>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let mut k = DMatrix::zeros(nd, nd);
+    let mut m = DMatrix::zeros(nd, nd);
+    for dofs in elements {
+        for a in 0..N {
+            for b in 0..N {
+                k[(dofs[a], dofs[b])] += ke[a][b];
+                m[(dofs[a], dofs[b])] += me[a][b];
+            }
+        }
+    }
+    (k, m)
+}
+
+/// Row sums of the consistent mass: the lumped (diagonal) mass.
+fn row_sums(m: &DMatrix<f64>) -> DVector<f64> {
+    DVector::from_iterator(m.nrows(), (0..m.nrows()).map(|r| m.row(r).sum()))
+}
+
+/// Stiffness and consistent mass of one square bilinear quad of side h (plane strain; every
+/// element of the block is the same square).
+fn quad_element(h: f64, mat: MaterialSi) -> ([[f64; 8]; 8], [[f64; 8]; 8]) {
+    let (e, nu) = (mat.e, mat.nu);
+    let f = e / ((1.0 + nu) * (1.0 - 2.0 * nu));
+    let d = [
+        [f * (1.0 - nu), f * nu, 0.0],
+        [f * nu, f * (1.0 - nu), 0.0],
+        [0.0, 0.0, f * (1.0 - 2.0 * nu) / 2.0],
+    ];
+    let g = 1.0 / 3f64.sqrt();
+    let gauss = [(-g, -g), (g, -g), (g, g), (-g, g)];
+    let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
+    let mut ke = [[0.0; 8]; 8];
+    let mut me = [[0.0; 8]; 8];
+    let jac = h / 2.0; // dx/dξ
+    for &(xi, eta) in &gauss {
+        let nvals: Vec<f64> = corners
+            .iter()
+            .map(|&(a, b)| 0.25 * (1.0 + a * xi) * (1.0 + b * eta))
+            .collect();
+        let dx: Vec<f64> = corners
+            .iter()
+            .map(|&(a, b)| 0.25 * a * (1.0 + b * eta) / jac)
+            .collect();
+        let dy: Vec<f64> = corners
+            .iter()
+            .map(|&(a, b)| 0.25 * b * (1.0 + a * xi) / jac)
+            .collect();
+        let w = jac * jac; // weights are 1 for the 2-point rule
+        // B: strain (εxx, εyy, γxy) from (u1x, u1y, …).
+        let mut b = [[0.0; 8]; 3];
+        for a in 0..4 {
+            b[0][2 * a] = dx[a];
+            b[1][2 * a + 1] = dy[a];
+            b[2][2 * a] = dy[a];
+            b[2][2 * a + 1] = dx[a];
+        }
+        add_gauss_point(&mut ke, &mut me, &b, &d, &nvals, w, mat.rho);
+    }
+    (ke, me)
+}
+
+/// Stiffness and consistent mass of one trilinear hex with sides h (2×2×2 Gauss points).
+fn hex_element(h: [f64; 3], mat: MaterialSi) -> (Vec<[f64; 24]>, Vec<[f64; 24]>) {
+    let d = isotropic_3d(mat.e, mat.nu);
+    let gp = 1.0 / 3f64.sqrt();
+    let corners: Vec<[f64; 3]> = (0..8)
+        .map(|c| {
+            [
+                if c & 1 != 0 { 1.0 } else { -1.0 },
+                if c & 2 != 0 { 1.0 } else { -1.0 },
+                if c & 4 != 0 { 1.0 } else { -1.0 },
+            ]
+        })
+        .collect();
+    let jac = [h[0] / 2.0, h[1] / 2.0, h[2] / 2.0];
+    let w = jac[0] * jac[1] * jac[2];
+    let mut ke = vec![[0.0; 24]; 24];
+    let mut me = vec![[0.0; 24]; 24];
+    for q in &corners {
+        let x = [q[0] * gp, q[1] * gp, q[2] * gp];
+        let nval: Vec<f64> = corners
+            .iter()
+            .map(|c| (0..3).map(|a| 0.5 * (1.0 + c[a] * x[a])).product())
+            .collect();
+        let grad: Vec<[f64; 3]> = corners
+            .iter()
+            .map(|c| {
+                let f = |a: usize| 0.5 * (1.0 + c[a] * x[a]);
+                [
+                    0.5 * c[0] * f(1) * f(2) / jac[0],
+                    0.5 * c[1] * f(0) * f(2) / jac[1],
+                    0.5 * c[2] * f(0) * f(1) / jac[2],
+                ]
+            })
+            .collect();
+        // B: (εxx, εyy, εzz, γxy, γyz, γzx) from (u1x, u1y, u1z, …).
+        let mut b = [[0.0; 24]; 6];
+        for a in 0..8 {
+            let ba = strain_rows_3d(grad[a]);
+            for r in 0..6 {
+                b[r][3 * a..3 * a + 3].copy_from_slice(&ba[r]);
+            }
+        }
+        add_gauss_point(&mut ke, &mut me, &b, &d, &nval, w, mat.rho);
+    }
+    (ke, me)
+}
+
+/// The block's n×n quad grid; node (i, j) at (i h, j h).
+struct QuadGrid {
+    n: usize,
+}
+
+impl QuadGrid {
+    fn node(&self, i: usize, j: usize) -> usize {
+        j * (self.n + 1) + i
+    }
+
+    /// Each element's 8 DOFs (corners counter-clockwise, x and y), rows of elements bottom up.
+    fn element_dofs(&self) -> impl Iterator<Item = [usize; 8]> + '_ {
+        (0..self.n).flat_map(move |j| {
+            (0..self.n).map(move |i| {
+                let nodes = [
+                    self.node(i, j),
+                    self.node(i + 1, j),
+                    self.node(i + 1, j + 1),
+                    self.node(i, j + 1),
+                ];
+                let mut dofs = [0; 8];
+                for (a, v) in nodes.into_iter().enumerate() {
+                    dofs[2 * a] = 2 * v;
+                    dofs[2 * a + 1] = 2 * v + 1;
+                }
+                dofs
+            })
+        })
+    }
+
+    /// DOFs not on the fixed top, bottom and left edges, without the prescribed needle DOF.
+    fn free_dofs(&self, needle: usize) -> Vec<usize> {
+        let n = self.n;
+        let mut free = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let fixed_node = j == 0 || j == n || i == 0;
+                for c in 0..2 {
+                    let dof = 2 * self.node(i, j) + c;
+                    if !fixed_node && dof != needle {
+                        free.push(dof);
+                    }
+                }
+            }
+        }
+        free
+    }
+
+    fn coords(&self, h: f64) -> Vec<[f64; 3]> {
+        let n = self.n;
+        (0..(n + 1) * (n + 1))
+            .map(|v| [(v % (n + 1)) as f64 * h, (v / (n + 1)) as f64 * h, 0.0])
+            .collect()
+    }
+
+    /// The boundary nodes counter-clockwise from the origin.
+    fn outline(&self) -> Vec<usize> {
+        let n = self.n;
+        let mut outline: Vec<usize> = (0..=n).map(|i| self.node(i, 0)).collect();
+        outline.extend((1..=n).map(|j| self.node(n, j)));
+        outline.extend((0..n).rev().map(|i| self.node(i, n)));
+        outline.extend((1..n).rev().map(|j| self.node(0, j)));
+        outline
+    }
+}
+
+/// The rod's nx × ny × nz hex grid; node (i, j, k) at (i hx, j hy, k hz).
+struct HexGrid {
+    nx: usize,
+    ny: usize,
+    nz: usize,
+}
+
+impl HexGrid {
+    fn node(&self, i: usize, j: usize, k: usize) -> usize {
+        (k * (self.ny + 1) + j) * (self.nx + 1) + i
+    }
+
+    /// Each element's 24 DOFs (corner c at offset (c & 1, c >> 1 & 1, c >> 2 & 1), x y z each).
+    fn element_dofs(&self) -> impl Iterator<Item = [usize; 24]> + '_ {
+        (0..self.nz).flat_map(move |k| {
+            (0..self.ny).flat_map(move |j| {
+                (0..self.nx).map(move |i| {
+                    let mut dofs = [0; 24];
+                    for c in 0..8 {
+                        let v = self.node(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+                        dofs[3 * c..3 * c + 3].copy_from_slice(&[3 * v, 3 * v + 1, 3 * v + 2]);
+                    }
+                    dofs
+                })
+            })
+        })
+    }
+
+    /// Every DOF off the fixed y = 0 face.
+    fn free_dofs(&self) -> Vec<usize> {
+        let mut free = Vec::new();
+        for k in 0..=self.nz {
+            for j in 0..=self.ny {
+                for i in 0..=self.nx {
+                    if j > 0 {
+                        let v = self.node(i, j, k);
+                        free.extend([3 * v, 3 * v + 1, 3 * v + 2]);
+                    }
+                }
+            }
+        }
+        free
+    }
+
+    fn coords(&self, h: [f64; 3]) -> Vec<[f64; 3]> {
+        let (nx, ny, nz) = (self.nx, self.ny, self.nz);
+        (0..(nx + 1) * (ny + 1) * (nz + 1))
+            .map(|v| {
+                let (i, j, k) = (
+                    v % (nx + 1),
+                    (v / (nx + 1)) % (ny + 1),
+                    v / ((nx + 1) * (ny + 1)),
+                );
+                [i as f64 * h[0], j as f64 * h[1], k as f64 * h[2]]
+            })
+            .collect()
+    }
+
+    /// Boundary quads of the grid, two triangles each (orientation is irrelevant to the
+    /// ray-integrated volumes; `enclosed_volume` takes the absolute value).
+    fn boundary_triangles(&self) -> Vec<[usize; 3]> {
+        let (nx, ny, nz) = (self.nx, self.ny, self.nz);
+        let node = |i, j, k| self.node(i, j, k);
+        let mut boundary_triangles = Vec::new();
+        let mut quad = |q: [usize; 4]| {
+            boundary_triangles.push([q[0], q[1], q[2]]);
+            boundary_triangles.push([q[0], q[2], q[3]]);
+        };
+        for j in 0..ny {
+            for k in 0..nz {
+                for i in [0, nx] {
+                    quad([
+                        node(i, j, k),
+                        node(i, j + 1, k),
+                        node(i, j + 1, k + 1),
+                        node(i, j, k + 1),
+                    ]);
+                }
+            }
+            for i in 0..nx {
+                for k in [0, nz] {
+                    quad([
+                        node(i, j, k),
+                        node(i + 1, j, k),
+                        node(i + 1, j + 1, k),
+                        node(i, j + 1, k),
+                    ]);
+                }
+            }
+        }
+        for i in 0..nx {
+            for k in 0..nz {
+                for j in [0, ny] {
+                    quad([
+                        node(i, j, k),
+                        node(i + 1, j, k),
+                        node(i + 1, j, k + 1),
+                        node(i, j, k + 1),
+                    ]);
+                }
+            }
+        }
+        boundary_triangles
     }
 }
 
@@ -490,6 +584,145 @@ pub struct Run {
     pub diverged: Option<String>,
 }
 
+/// The equations of motion restricted to the free DOFs, M ü + C u̇ + K u = load(t), with the
+/// needle's prescribed motion moved into the load.
+struct FreeSystem<'a> {
+    block: &'a Block,
+    kff: DMatrix<f64>,
+    kfp: DVector<f64>,
+    /// Consistent, or lumped (diagonal) for `ExplicitLumped`.
+    mff: DMatrix<f64>,
+    /// The lumped masses of the free DOFs.
+    ml: DVector<f64>,
+    cff: DMatrix<f64>,
+    cfp: DVector<f64>,
+    body: DVector<f64>,
+}
+
+impl<'a> FreeSystem<'a> {
+    fn new(block: &'a Block, lumped: bool, (ra, rb): (f64, f64)) -> FreeSystem<'a> {
+        let nf = block.free.len();
+        let kff = block.sub(&block.k);
+        let kfp = block.coupling(&block.k);
+        let mc = block.sub(&block.m_consistent);
+        let mcp = block.coupling(&block.m_consistent);
+        let ml = DVector::from_iterator(nf, block.free.iter().map(|&i| block.m_lumped[i]));
+        let mff = if lumped {
+            DMatrix::from_diagonal(&ml)
+        } else {
+            mc
+        };
+        let mfp = if lumped { DVector::zeros(nf) } else { mcp };
+        let cff = &mff * ra + &kff * rb;
+        let cfp = &mfp * ra + &kfp * rb;
+        let body = DVector::from_iterator(nf, block.free.iter().map(|&i| block.body_force[i]));
+        FreeSystem {
+            block,
+            kff,
+            kfp,
+            mff,
+            ml,
+            cff,
+            cfp,
+            body,
+        }
+    }
+
+    /// Forces on the free DOFs from the prescribed needle (its acceleration is zero between the
+    /// start and stop instants).
+    fn load(&self, t: f64) -> DVector<f64> {
+        let (g, gd) = self.block.needle_motion(t);
+        &self.body - (&self.kfp * g) - (&self.cfp * gd)
+    }
+
+    /// The full displacement vector: free DOFs from u, the needle at its prescribed place.
+    fn full(&self, u: &DVector<f64>, t: f64) -> Vec<f64> {
+        let block = self.block;
+        let mut x = vec![0.0; block.k.nrows()];
+        for (i, &d) in block.free.iter().enumerate() {
+            x[d] = u[i];
+        }
+        if let Some(nd) = block.needle {
+            x[nd] = Block::needle_at(t);
+        }
+        x
+    }
+
+    fn quasi_static(&self, run: &mut Run, steps: usize) {
+        let kc = SpdFactor::new(&self.kff);
+        for s in 1..=steps {
+            let t = s as f64 * run.h;
+            let (g, _) = self.block.needle_motion(t);
+            let u = kc.solve(&(&self.body - (&self.kfp * g)));
+            run.history.push(self.full(&u, t));
+        }
+    }
+
+    /// Average-acceleration Newmark (β = 1/4, γ = 1/2), starting at rest.
+    fn implicit_newmark(&self, run: &mut Run, steps: usize) {
+        let (kff, cff, mff) = (&self.kff, &self.cff, &self.mff);
+        let h = run.h;
+        let nf = kff.nrows();
+        let (mut u, mut v) = (DVector::<f64>::zeros(nf), DVector::<f64>::zeros(nf));
+        let (beta, gamma) = (0.25, 0.5);
+        let keff =
+            SpdFactor::new(&(kff + cff * (gamma / (beta * h)) + mff * (1.0 / (beta * h * h))));
+        let mc0 = SpdFactor::new(mff);
+        let mut a = mc0.solve(&(self.load(0.0) - cff * &v - kff * &u));
+        for s in 1..=steps {
+            let t = s as f64 * h;
+            let rhs = self.load(t)
+                + mff
+                    * (&u * (1.0 / (beta * h * h))
+                        + &v * (1.0 / (beta * h))
+                        + &a * (1.0 / (2.0 * beta) - 1.0))
+                + cff
+                    * (&u * (gamma / (beta * h))
+                        + &v * (gamma / beta - 1.0)
+                        + &a * (h * (gamma / (2.0 * beta) - 1.0)));
+            let un = keff.solve(&rhs);
+            let an = (&un - &u) * (1.0 / (beta * h * h))
+                - &v * (1.0 / (beta * h))
+                - &a * (1.0 / (2.0 * beta) - 1.0);
+            let vn = &v + &a * (h * (1.0 - gamma)) + &an * (h * gamma);
+            u = un;
+            v = vn;
+            a = an;
+            run.history.push(self.full(&u, t));
+        }
+    }
+
+    /// Central difference: u_{n+1} = u_n + h v_n + h²/2 a_n; damping taken at the predicted
+    /// velocity so that lumped mass stays explicit (a diagonal solve). Starts at rest; stops at
+    /// the first step that diverges.
+    fn central_difference(&self, run: &mut Run, steps: usize, lumped: bool) {
+        let (kff, cff) = (&self.kff, &self.cff);
+        let h = run.h;
+        let nf = kff.nrows();
+        let (mut u, mut v) = (DVector::<f64>::zeros(nf), DVector::<f64>::zeros(nf));
+        let minv: MassSolve = if lumped {
+            let inv = self.ml.map(|x| 1.0 / x);
+            Box::new(move |r: &DVector<f64>| r.component_mul(&inv))
+        } else {
+            let mc0 = SpdFactor::new(&self.mff);
+            Box::new(move |r: &DVector<f64>| mc0.solve(r))
+        };
+        let mut a = minv(&(self.load(0.0) - cff * &v - kff * &u));
+        for s in 1..=steps {
+            let t = s as f64 * h;
+            u = &u + &v * h + &a * (0.5 * h * h);
+            let vp = &v + &a * (0.5 * h);
+            a = minv(&(self.load(t) - cff * &vp - kff * &u));
+            v = vp + &a * (0.5 * h);
+            if u.iter().any(|x| !x.is_finite() || x.abs() > 100.0) {
+                run.diverged = Some(format!("diverged at step {s} (t = {t:.3} s)"));
+                break;
+            }
+            run.history.push(self.full(&u, t));
+        }
+    }
+}
+
 /// Integrate `steps` steps of size h with Rayleigh damping (α, β). Divergence: a non-finite value
 /// or a displacement beyond 100 m (the block is 1 m; the needle moves 0.16 m).
 pub fn integrate(
@@ -499,107 +732,19 @@ pub fn integrate(
     steps: usize,
     rayleigh: (f64, f64),
 ) -> Run {
-    let nf = block.free.len();
-    let (ra, rb) = rayleigh;
-    let kff = block.sub(&block.k);
-    let kfp = block.coupling(&block.k);
-    let mc = block.sub(&block.m_consistent);
-    let mcp = block.coupling(&block.m_consistent);
-    let ml = DVector::from_iterator(nf, block.free.iter().map(|&i| block.m_lumped[i]));
     let lumped = integrator == Integrator::ExplicitLumped;
-    let mff = if lumped {
-        DMatrix::from_diagonal(&ml)
-    } else {
-        mc.clone()
-    };
-    let mfp = if lumped { DVector::zeros(nf) } else { mcp };
-    let cff = &mff * ra + &kff * rb;
-    let cfp = &mfp * ra + &kfp * rb;
-    let (mut u, mut v) = (DVector::<f64>::zeros(nf), DVector::<f64>::zeros(nf));
-    // Forces on the free DOFs from the prescribed needle (its acceleration is zero between the
-    // start and stop instants).
-    let body = DVector::from_iterator(nf, block.free.iter().map(|&i| block.body_force[i]));
-    let load = |t: f64| {
-        let (g, gd) = block.needle_motion(t);
-        &body - (&kfp * g) - (&cfp * gd)
-    };
-    let full = |u: &DVector<f64>, t: f64| {
-        let mut x = vec![0.0; block.k.nrows()];
-        for (i, &d) in block.free.iter().enumerate() {
-            x[d] = u[i];
-        }
-        if let Some(nd) = block.needle {
-            x[nd] = Block::needle_at(t);
-        }
-        x
-    };
+    let system = FreeSystem::new(block, lumped, rayleigh);
     let mut run = Run {
         integrator,
         h,
         history: Vec::with_capacity(steps),
         diverged: None,
     };
-    let chol = |m: DMatrix<f64>| SpdFactor::new(&m);
     match integrator {
-        Integrator::QuasiStatic => {
-            let kc = chol(kff.clone());
-            for s in 1..=steps {
-                let t = s as f64 * h;
-                let (g, _) = block.needle_motion(t);
-                u = kc.solve(&(&body - (&kfp * g)));
-                run.history.push(full(&u, t));
-            }
-        }
-        Integrator::ImplicitNewmark => {
-            let (beta, gamma) = (0.25, 0.5);
-            let keff = chol(&kff + &cff * (gamma / (beta * h)) + &mff * (1.0 / (beta * h * h)));
-            let mc0 = chol(mff.clone());
-            let mut a = mc0.solve(&(load(0.0) - &cff * &v - &kff * &u));
-            for s in 1..=steps {
-                let t = s as f64 * h;
-                let rhs = load(t)
-                    + &mff
-                        * (&u * (1.0 / (beta * h * h))
-                            + &v * (1.0 / (beta * h))
-                            + &a * (1.0 / (2.0 * beta) - 1.0))
-                    + &cff
-                        * (&u * (gamma / (beta * h))
-                            + &v * (gamma / beta - 1.0)
-                            + &a * (h * (gamma / (2.0 * beta) - 1.0)));
-                let un = keff.solve(&rhs);
-                let an = (&un - &u) * (1.0 / (beta * h * h))
-                    - &v * (1.0 / (beta * h))
-                    - &a * (1.0 / (2.0 * beta) - 1.0);
-                let vn = &v + &a * (h * (1.0 - gamma)) + &an * (h * gamma);
-                u = un;
-                v = vn;
-                a = an;
-                run.history.push(full(&u, t));
-            }
-        }
+        Integrator::QuasiStatic => system.quasi_static(&mut run, steps),
+        Integrator::ImplicitNewmark => system.implicit_newmark(&mut run, steps),
         Integrator::ExplicitConsistent | Integrator::ExplicitLumped => {
-            // Central difference: u_{n+1} = u_n + h v_n + h²/2 a_n; damping taken at the
-            // predicted velocity so that lumped mass stays explicit (a diagonal solve).
-            let minv: MassSolve = if lumped {
-                let inv = ml.map(|x| 1.0 / x);
-                Box::new(move |r: &DVector<f64>| r.component_mul(&inv))
-            } else {
-                let mc0 = chol(mff.clone());
-                Box::new(move |r: &DVector<f64>| mc0.solve(r))
-            };
-            let mut a = minv(&(load(0.0) - &cff * &v - &kff * &u));
-            for s in 1..=steps {
-                let t = s as f64 * h;
-                u = &u + &v * h + &a * (0.5 * h * h);
-                let vp = &v + &a * (0.5 * h);
-                a = minv(&(load(t) - &cff * &vp - &kff * &u));
-                v = vp + &a * (0.5 * h);
-                if u.iter().any(|x| !x.is_finite() || x.abs() > 100.0) {
-                    run.diverged = Some(format!("diverged at step {s} (t = {t:.3} s)"));
-                    break;
-                }
-                run.history.push(full(&u, t));
-            }
+            system.central_difference(&mut run, steps, lumped)
         }
     }
     run

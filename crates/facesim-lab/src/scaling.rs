@@ -14,7 +14,7 @@ use facesim::error::{Error, Result};
 use facesim::observe::Observer;
 use facesim::output::write_bytes_atomic;
 use serde::Serialize;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Point {
@@ -81,46 +81,10 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<Scaling> 
     let work_dir = out.join(format!(".facesim-scaling-{}", std::process::id()));
     std::fs::create_dir_all(&work_dir).map_err(|e| Error::output(&work_dir, e))?;
     for &s in spacings {
-        progress.started(&format!("scaling: phantom CT at {s} mm"));
-        let dir = work_dir.join(format!("ct_{s}"));
-        std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
-        let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions {
-            spacing: [s; 3],
-            // Partial-volume supersampling is for accuracy tests; it would dominate here.
-            supersample: 1,
-            noise_hu: 8.0,
-            scan_step_mm: 1.5,
-        });
-        let voxels = vol.len() as f64;
-        let t = std::time::Instant::now();
-        let sum: f64 = vol.data.iter().map(|&x| x as f64).sum();
-        pass.push((voxels, t.elapsed().as_secs_f64()));
-        std::hint::black_box(sum);
-        facesim::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
-        drop(vol);
-        facesim::mesh::ply::write(
-            &facesim::phantom::face_scan(1.5),
-            &dir.join("face.ply"),
-            facesim::mesh::ply::Encoding::BinaryLittleEndian,
-        )?;
-        let text = facesim::phantom::case_toml("ct.nii.gz", true);
-        write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;
-        progress.started(&format!(
-            "scaling: facesim run at {s} mm ({voxels:.0} voxels)"
-        ));
-        let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
-        for (stage, c) in &o.report.costs.0 {
-            points.push(Point {
-                series: "ct".into(),
-                stage: stage.key().into(),
-                size: voxels,
-                wall_s: c.wall_s,
-                cpu_s: c.cpu_s,
-                peak_heap_mb: c.peak_heap_mb,
-            });
-        }
-        rss.push((voxels, facesim::meter::max_rss_mb()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let ct = ct_size(&work_dir, s, progress)?;
+        points.extend(ct.points);
+        rss.push((ct.voxels, ct.max_rss_mb));
+        pass.push((ct.voxels, ct.voxel_pass_s));
     }
     let _ = std::fs::remove_dir_all(&work_dir);
     let tris: &[usize] = if quick {
@@ -129,35 +93,128 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<Scaling> 
         &[2_000, 5_000, 10_000, 20_000, 40_000, 100_000, 200_000]
     };
     for &n in tris {
-        progress.started(&format!("scaling: C1 FEM on {n} triangles"));
-        let m = facesim::meter::Meter::start(crate::memory::Probe::if_installed());
-        let b = crate::bench_fem::run(n, None)?;
-        let c = m.stop();
-        for (stage, wall) in [
-            ("fem elements", b.seconds_elements),
-            ("fem assembly", b.seconds_assembly),
-            ("fem factor", b.seconds_factor),
-            ("fem three solves", b.seconds_three_solves),
-            ("fem total", b.seconds_total),
-        ] {
-            points.push(Point {
-                series: "mesh".into(),
-                stage: stage.into(),
-                size: b.triangles as f64,
-                wall_s: wall,
-                cpu_s: if stage == "fem total" {
-                    c.cpu_s
-                } else {
-                    f64::NAN
-                },
-                peak_heap_mb: if stage == "fem total" {
-                    c.peak_heap_mb
-                } else {
-                    None
-                },
-            });
-        }
+        points.extend(mesh_size(n, progress)?);
     }
+    let fits = fits(&points);
+    let sc = Scaling {
+        machine: crate::study::machine(),
+        points,
+        fits,
+        max_rss_mb: rss,
+        voxel_pass_s: pass,
+    };
+    write(out, &sc)?;
+    progress.done();
+    Ok(sc)
+}
+
+/// One CT size's measurements.
+struct CtSize {
+    voxels: f64,
+    points: Vec<Point>,
+    voxel_pass_s: f64,
+    max_rss_mb: f64,
+}
+
+/// The phantom CT at spacing `s` mm through the whole pipeline, in `work_dir/ct_{s}`.
+fn ct_size(work_dir: &Path, s: f64, progress: &dyn Observer) -> Result<CtSize> {
+    progress.started(&format!("scaling: phantom CT at {s} mm"));
+    let dir = work_dir.join(format!("ct_{s}"));
+    std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
+    let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions {
+        spacing: [s; 3],
+        // Partial-volume supersampling is for accuracy tests; it would dominate here.
+        supersample: 1,
+        noise_hu: 8.0,
+        scan_step_mm: 1.5,
+    });
+    let voxels = vol.len() as f64;
+    let t = std::time::Instant::now();
+    let sum: f64 = vol.data.iter().map(|&x| x as f64).sum();
+    let voxel_pass_s = t.elapsed().as_secs_f64();
+    std::hint::black_box(sum);
+    facesim::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
+    drop(vol);
+    facesim::mesh::ply::write(
+        &facesim::phantom::face_scan(1.5),
+        &dir.join("face.ply"),
+        facesim::mesh::ply::Encoding::BinaryLittleEndian,
+    )?;
+    let text = facesim::phantom::case_toml("ct.nii.gz", true);
+    write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;
+    progress.started(&format!(
+        "scaling: facesim run at {s} mm ({voxels:.0} voxels)"
+    ));
+    let o = run_case(dir.clone())?;
+    let points = stage_points(&o, voxels);
+    let max_rss_mb = facesim::meter::max_rss_mb();
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(CtSize {
+        voxels,
+        points,
+        voxel_pass_s,
+        max_rss_mb,
+    })
+}
+
+/// The one call into the pipeline, kept alone so that it is easy to re-point.
+fn run_case(dir: PathBuf) -> Result<facesim::pipeline::Outcome> {
+    let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
+    Ok(o)
+}
+
+/// A CT-series point per stage in report.json's `stage_costs`.
+fn stage_points(o: &facesim::pipeline::Outcome, voxels: f64) -> Vec<Point> {
+    let mut points = Vec::new();
+    for (stage, c) in &o.report.costs.0 {
+        points.push(Point {
+            series: "ct".into(),
+            stage: stage.key().into(),
+            size: voxels,
+            wall_s: c.wall_s,
+            cpu_s: c.cpu_s,
+            peak_heap_mb: c.peak_heap_mb,
+        });
+    }
+    points
+}
+
+/// The C1 FEM benchmark on about n triangles: a point per phase (CPU and heap for the total).
+fn mesh_size(n: usize, progress: &dyn Observer) -> Result<Vec<Point>> {
+    progress.started(&format!("scaling: C1 FEM on {n} triangles"));
+    let m = facesim::meter::Meter::start(crate::memory::Probe::if_installed());
+    let b = crate::bench_fem::run(n, None)?;
+    let c = m.stop();
+    let mut points = Vec::new();
+    for (stage, wall) in [
+        ("fem elements", b.seconds_elements),
+        ("fem assembly", b.seconds_assembly),
+        ("fem factor", b.seconds_factor),
+        ("fem three solves", b.seconds_three_solves),
+        ("fem total", b.seconds_total),
+    ] {
+        points.push(Point {
+            series: "mesh".into(),
+            stage: stage.into(),
+            size: b.triangles as f64,
+            wall_s: wall,
+            cpu_s: if stage == "fem total" {
+                c.cpu_s
+            } else {
+                f64::NAN
+            },
+            peak_heap_mb: if stage == "fem total" {
+                c.peak_heap_mb
+            } else {
+                None
+            },
+        });
+    }
+    Ok(points)
+}
+
+/// A fit per (series, stage), in order of first appearance.
+fn fits(points: &[Point]) -> Vec<Fit> {
     let mut fits = Vec::new();
     let mut keys: Vec<(String, String)> = points
         .iter()
@@ -182,16 +239,7 @@ pub fn run(out: &Path, quick: bool, progress: &dyn Observer) -> Result<Scaling> 
             largest_wall_s: pts.last().map_or(f64::NAN, |p| p.1),
         });
     }
-    let sc = Scaling {
-        machine: crate::study::machine(),
-        points,
-        fits,
-        max_rss_mb: rss,
-        voxel_pass_s: pass,
-    };
-    write(out, &sc)?;
-    progress.done();
-    Ok(sc)
+    fits
 }
 
 fn write(out: &Path, s: &Scaling) -> Result<()> {

@@ -177,116 +177,186 @@ pub fn pareto(points: &[(f64, f64)]) -> Vec<usize> {
     front
 }
 
-/// Accuracy (mean distance to the reference, log) against run time (log) for one face case,
-/// a point per method and resolution, the Pareto front joined.
-pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) -> Result<()> {
-    let pts: Vec<(f64, f64, &FaceRow)> = rows
-        .iter()
+/// A log-axis tick label with two significant digits (0.001, 0.02, 0.5, 1, 20): a fixed two
+/// decimals printed every tick below 0.01 as "0.00".
+pub(crate) fn log_tick_label(v: f64) -> String {
+    if !(v.is_finite() && v > 0.0) {
+        return format!("{v}");
+    }
+    let decimals = (1 - v.log10().floor() as i32).max(0) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Ticks of a log axis over [lo, hi]: labelled 1-2-5 per decade (every digit within one decade,
+/// powers of ten only beyond four), light lines at every digit. Plotters' own log ticks start at
+/// the first power of ten in the range, which left no label below 1 mm on the accuracy axis.
+pub(crate) fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
+    if !(lo > 0.0 && hi >= lo && hi.is_finite()) {
+        return (Vec::new(), Vec::new());
+    }
+    let span = (hi / lo).log10();
+    let labelled: &[f64] = if span < 1.0 {
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
+    } else if span <= 4.0 {
+        &[1.0, 2.0, 5.0]
+    } else {
+        &[1.0]
+    };
+    let (mut bold, mut light) = (Vec::new(), Vec::new());
+    for e in lo.log10().floor() as i32..=hi.log10().ceil() as i32 {
+        for m in 1..=9 {
+            let v = f64::from(m) * 10f64.powi(e);
+            if !(lo..=hi).contains(&v) {
+                continue;
+            }
+            light.push(v);
+            if labelled.contains(&f64::from(m)) {
+                bold.push(v);
+            }
+        }
+    }
+    (bold, light)
+}
+
+/// One plotted point: run time (s), mean distance (mm) and its row.
+type AccuracyPoint<'a> = (f64, f64, &'a FaceRow);
+
+/// The non-reference rows with a distance, floored at 1e-4 for the log axes.
+fn accuracy_points(rows: &[FaceRow]) -> Vec<AccuracyPoint<'_>> {
+    rows.iter()
         .filter(|r| !r.is_reference)
         .filter_map(|r| {
             r.distance
                 .as_ref()
                 .map(|d| (r.wall_s.max(1e-4), d.mean.max(1e-4), r))
         })
-        .collect();
-    let families: Vec<String> = {
-        let mut f: Vec<String> = pts.iter().map(|p| p.2.method.clone()).collect();
-        f.dedup();
-        let mut seen = Vec::new();
-        for x in f {
-            if !seen.contains(&x) {
-                seen.push(x);
-            }
+        .collect()
+}
+
+/// The methods in order of first appearance (one colour each).
+fn method_families(pts: &[AccuracyPoint]) -> Vec<String> {
+    let mut seen: Vec<String> = Vec::new();
+    for p in pts {
+        if !seen.contains(&p.2.method) {
+            seen.push(p.2.method.clone());
         }
-        seen
-    };
-    let reference = rows.iter().find(|r| r.is_reference);
-    fn draw<DB: DrawingBackend>(
-        root: DrawingArea<DB, Shift>,
-        case: &str,
-        pts: &[(f64, f64, &FaceRow)],
-        families: &[String],
-        reference: Option<&FaceRow>,
-    ) -> DrawResult
-    where
-        DB::ErrorType: 'static,
-    {
-        root.fill(&WHITE)?;
-        let (xmin, xmax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-            (a.min(p.0), b.max(p.0))
-        });
-        let (ymin, ymax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-            (a.min(p.1), b.max(p.1))
-        });
-        let (xmin, xmax, ymin, ymax) = if pts.is_empty() {
-            (0.01, 10.0, 0.01, 10.0)
-        } else {
-            (xmin / 1.6, xmax * 1.6, ymin / 1.6, ymax * 1.6)
-        };
-        let caption = match reference {
-            Some(r) => format!(
-                "{case}: accuracy vs run time (reference: {} at {}, {:.2} s)",
-                r.method, r.resolution, r.wall_s
-            ),
-            None => format!("{case}: accuracy vs run time"),
-        };
-        let mut chart = ChartBuilder::on(&root)
-            .caption(caption, ("sans-serif", 18))
-            .margin(12)
-            .x_label_area_size(45)
-            .y_label_area_size(70)
-            .build_cartesian_2d((xmin..xmax).log_scale(), (ymin..ymax).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("run time (s, springs + model + solve)")
-            .y_desc("mean distance to reference (mm)")
-            .x_label_formatter(&|v| format!("{v:.2}"))
-            .y_label_formatter(&|v| format!("{v:.2}"))
-            .draw()?;
-        let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
-        let front: Vec<(f64, f64)> = pareto(&xy).into_iter().map(|i| xy[i]).collect();
-        chart
-            .draw_series(LineSeries::new(
-                front.clone(),
-                BLACK.mix(0.6).stroke_width(2),
-            ))?
-            .label("Pareto front")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.stroke_width(2)));
-        for (fi, fam) in families.iter().enumerate() {
-            let color = PALETTE[fi % PALETTE.len()];
-            let mine: Vec<&(f64, f64, &FaceRow)> =
-                pts.iter().filter(|p| &p.2.method == fam).collect();
-            chart
-                .draw_series(
-                    mine.iter()
-                        .map(|p| Circle::new((p.0, p.1), 6, color.filled())),
-                )?
-                .label(fam.clone())
-                .legend(move |(x, y)| Circle::new((x + 9, y), 5, color.filled()));
-            for p in &mine {
-                chart.draw_series(std::iter::once(Text::new(
-                    p.2.resolution.clone(),
-                    (p.0 * 1.06, p.1 * 1.04),
-                    ("sans-serif", 11),
-                )))?;
-            }
-        }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 13))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
-        root.present()?;
-        Ok(())
     }
+    seen
+}
+
+/// Axis ranges (x0, x1, y0, y1) around the points with a margin of a factor 1.6.
+fn accuracy_bounds(pts: &[AccuracyPoint]) -> (f64, f64, f64, f64) {
+    if pts.is_empty() {
+        return (0.01, 10.0, 0.01, 10.0);
+    }
+    let (xmin, xmax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+        (a.min(p.0), b.max(p.0))
+    });
+    let (ymin, ymax) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+        (a.min(p.1), b.max(p.1))
+    });
+    (xmin / 1.6, xmax * 1.6, ymin / 1.6, ymax * 1.6)
+}
+
+fn accuracy_caption(case: &str, reference: Option<&FaceRow>) -> String {
+    match reference {
+        Some(r) => format!(
+            "{case}: accuracy vs run time (reference: {} at {}, {:.2} s)",
+            r.method, r.resolution, r.wall_s
+        ),
+        None => format!("{case}: accuracy vs run time"),
+    }
+}
+
+fn draw_accuracy<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    caption: &str,
+    pts: &[AccuracyPoint],
+    families: &[String],
+) -> DrawResult
+where
+    DB::ErrorType: 'static,
+{
+    root.fill(&WHITE)?;
+    let (xmin, xmax, ymin, ymax) = accuracy_bounds(pts);
+    let ((xbold, xlight), (ybold, ylight)) = (log_ticks(xmin, xmax), log_ticks(ymin, ymax));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(caption, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (xmin..xmax)
+                .log_scale()
+                .with_key_points(xbold)
+                .with_light_points(xlight),
+            (ymin..ymax)
+                .log_scale()
+                .with_key_points(ybold)
+                .with_light_points(ylight),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("run time (s, springs + model + solve)")
+        .y_desc("mean distance to reference (mm)")
+        .x_label_formatter(&|v| log_tick_label(*v))
+        .y_label_formatter(&|v| log_tick_label(*v))
+        .draw()?;
+    let xy: Vec<(f64, f64)> = pts.iter().map(|p| (p.0, p.1)).collect();
+    let front: Vec<(f64, f64)> = pareto(&xy).into_iter().map(|i| xy[i]).collect();
+    chart
+        .draw_series(LineSeries::new(
+            front.clone(),
+            BLACK.mix(0.6).stroke_width(2),
+        ))?
+        .label("Pareto front")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.stroke_width(2)));
+    for (fi, fam) in families.iter().enumerate() {
+        let color = PALETTE[fi % PALETTE.len()];
+        let mine: Vec<&AccuracyPoint> = pts.iter().filter(|p| &p.2.method == fam).collect();
+        chart
+            .draw_series(
+                mine.iter()
+                    .map(|p| Circle::new((p.0, p.1), 6, color.filled())),
+            )?
+            .label(fam.clone())
+            .legend(move |(x, y)| Circle::new((x + 9, y), 5, color.filled()));
+        for p in &mine {
+            chart.draw_series(std::iter::once(Text::new(
+                p.2.resolution.clone(),
+                (p.0 * 1.06, p.1 * 1.04),
+                ("sans-serif", 11),
+            )))?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+/// Accuracy (mean distance to the reference, log) against run time (log) for one face case,
+/// a point per method and resolution, the Pareto front joined.
+pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) -> Result<()> {
+    let pts = accuracy_points(rows);
+    let families = method_families(&pts);
+    let caption = accuracy_caption(case, rows.iter().find(|r| r.is_reference));
     both(
         dir,
         stem,
         (1100, 750),
-        &|r| draw(r, case, &pts, &families, reference),
-        &|r| draw(r, case, &pts, &families, reference),
+        &|r| draw_accuracy(r, &caption, &pts, &families),
+        &|r| draw_accuracy(r, &caption, &pts, &families),
     )
 }
 
@@ -367,4 +437,45 @@ pub fn loglog(
         &|r| draw(r, title, xlabel, lines),
         &|r| draw(r, title, xlabel, lines),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_tick_labels_are_readable_below_one() {
+        // The old "{v:.2}" gave "0.00" for the first two and "0.01" for 0.005.
+        let cases = [
+            (0.001, "0.001"),
+            (0.002, "0.002"),
+            (0.005, "0.005"),
+            (0.01, "0.01"),
+            (10f64.powi(-1), "0.1"),
+            (2.0 * 10f64.powi(-1), "0.2"),
+            (0.5, "0.5"),
+            (1.0, "1"),
+            (2.0, "2"),
+            (20.0, "20"),
+            (100.0, "100"),
+        ];
+        for (v, want) in cases {
+            assert_eq!(log_tick_label(v), want, "{v}");
+        }
+    }
+
+    #[test]
+    fn log_ticks_label_a_range_below_one_millimetre() {
+        // The study's phantom chart: 0.2 to 4 mm (plotters labelled only 1 in it).
+        let (bold, light) = log_ticks(0.2, 4.0);
+        let labels: Vec<String> = bold.iter().map(|&v| log_tick_label(v)).collect();
+        assert_eq!(labels, ["0.2", "0.5", "1", "2"]);
+        assert_eq!(light.len(), 12);
+        let (bold, _) = log_ticks(0.003, 0.08);
+        let labels: Vec<String> = bold.iter().map(|&v| log_tick_label(v)).collect();
+        assert_eq!(labels, ["0.005", "0.01", "0.02", "0.05"]);
+        // Within one decade every digit is labelled; over many only the powers of ten.
+        assert_eq!(log_ticks(0.25, 0.95).0.len(), 7);
+        assert_eq!(log_ticks(0.9e-3, 1.1e3).0.len(), 7);
+    }
 }

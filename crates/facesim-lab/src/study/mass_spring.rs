@@ -31,19 +31,9 @@ fn cot(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     facesim::mesh::dot(u, v) / norm(cr).max(1e-300)
 }
 
-#[allow(clippy::too_many_arguments)]
-pub fn relax(
-    skin: &Mesh,
-    springs: &SpringSet,
-    plan: &Plan,
-    rigid: &[bool],
-    alpha: f64,
-    beta: f64,
-    k_c: f64,
-    tolerance: f64,
-    max_iterations: usize,
-) -> Relaxed {
-    let nv = skin.vertices.len();
+/// The surface's springs (a, b, stiffness, rest length), a < b, sorted so that the force sums
+/// do not depend on hash-map order: cotangent-weighted edge springs, then flexion springs.
+fn surface_springs(skin: &Mesh, alpha: f64, beta: f64) -> Vec<(usize, usize, f64, f64)> {
     let x0 = &skin.vertices;
     // Edge springs with cotangent weights.
     let mut w: std::collections::HashMap<(u32, u32), f64> = std::collections::HashMap::new();
@@ -86,34 +76,48 @@ pub fn relax(
         }
     }
     edges.sort_by(|p, q| (p.0, p.1).cmp(&(q.0, q.1)).then(p.2.total_cmp(&q.2)));
-    let (xb, _) = plan.apply(&springs.attachments, 1.0);
-    let weight: Vec<f64> = springs
-        .springs
-        .iter()
-        .map(|s| k_c * springs.k[s.skin] * s.c)
-        .collect();
-    let mass: Vec<f64> = springs.k.iter().map(|&k| k.max(1e-12)).collect();
-    // Gershgorin bound on λ_max(M⁻¹K): row sums of |K| over the mass.
-    let mut row = vec![0.0; nv];
-    for &(a, b, k, _) in &edges {
-        row[a] += 2.0 * k;
-        row[b] += 2.0 * k;
+    edges
+}
+
+/// The mass-spring system: surface springs, skull springs to the moved bone, lumped masses.
+struct Network<'a> {
+    /// Skin vertices.
+    nv: usize,
+    edges: Vec<(usize, usize, f64, f64)>,
+    springs: &'a SpringSet,
+    /// Skull spring stiffness k_c k_i c, per spring.
+    weight: Vec<f64>,
+    /// Bone attachment points after the plan.
+    bone: Vec<[f64; 3]>,
+    mass: Vec<f64>,
+    rigid: &'a [bool],
+}
+
+impl Network<'_> {
+    /// Step 0.9 × 2/√λ_max, with the Gershgorin bound on λ_max(M⁻¹K): row sums of |K| over
+    /// the mass.
+    fn stable_step(&self) -> f64 {
+        let nv = self.nv;
+        let mut row = vec![0.0; nv];
+        for &(a, b, k, _) in &self.edges {
+            row[a] += 2.0 * k;
+            row[b] += 2.0 * k;
+        }
+        for (s, wt) in self.springs.springs.iter().zip(&self.weight) {
+            row[s.skin] += wt;
+        }
+        let lam = (0..nv)
+            .filter(|&i| !self.rigid[i])
+            .map(|i| row[i] / self.mass[i])
+            .fold(0.0, f64::max)
+            .max(1e-300);
+        0.9 * 2.0 / lam.sqrt()
     }
-    for (s, wt) in springs.springs.iter().zip(&weight) {
-        row[s.skin] += wt;
-    }
-    let lam = (0..nv)
-        .filter(|&i| !rigid[i])
-        .map(|i| row[i] / mass[i])
-        .fold(0.0, f64::max)
-        .max(1e-300);
-    let h = 0.9 * 2.0 / lam.sqrt();
-    // Damping near critical for the stiffest mode would be too much for the slowest; ζ below is a
-    // compromise that converges in a few thousand steps on faces.
-    let zeta = 0.02;
-    let force = |x: &[[f64; 3]]| {
-        let mut f = vec![[0.0; 3]; nv];
-        for &(a, b, k, l0) in &edges {
+
+    /// Spring forces at positions x (zero on rigid vertices).
+    fn force(&self, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let mut f = vec![[0.0; 3]; self.nv];
+        for &(a, b, k, l0) in &self.edges {
             let d = sub(x[b], x[a]);
             let l = norm(d).max(1e-12);
             let s = k * (l - l0) / l;
@@ -122,35 +126,74 @@ pub fn relax(
                 f[b][c] -= s * d[c];
             }
         }
-        for (sp, wt) in springs.springs.iter().zip(&weight) {
-            let d = sub(x[sp.skin], xb[sp.bone]);
+        for (sp, wt) in self.springs.springs.iter().zip(&self.weight) {
+            let d = sub(x[sp.skin], self.bone[sp.bone]);
             let l = norm(d).max(1e-12);
             let s = wt * (l - sp.rest) / l;
             for c in 0..3 {
                 f[sp.skin][c] -= s * d[c];
             }
         }
-        for i in 0..nv {
-            if rigid[i] {
+        for i in 0..self.nv {
+            if self.rigid[i] {
                 f[i] = [0.0; 3];
             }
         }
         f
+    }
+}
+
+fn fnorm(f: &[[f64; 3]]) -> f64 {
+    f.iter()
+        .map(|v| v.iter().map(|x| x * x).sum::<f64>())
+        .sum::<f64>()
+        .sqrt()
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn relax(
+    skin: &Mesh,
+    springs: &SpringSet,
+    plan: &Plan,
+    rigid: &[bool],
+    alpha: f64,
+    beta: f64,
+    k_c: f64,
+    tolerance: f64,
+    max_iterations: usize,
+) -> Relaxed {
+    let nv = skin.vertices.len();
+    let x0 = &skin.vertices;
+    // Built in the original order (springs, bone, weights, masses): the study reports peak heap.
+    let edges = surface_springs(skin, alpha, beta);
+    let (bone, _) = plan.apply(&springs.attachments, 1.0);
+    let weight = springs
+        .springs
+        .iter()
+        .map(|s| k_c * springs.k[s.skin] * s.c)
+        .collect();
+    let mass = springs.k.iter().map(|&k| k.max(1e-12)).collect();
+    let net = Network {
+        nv,
+        edges,
+        springs,
+        weight,
+        bone,
+        mass,
+        rigid,
     };
-    let fnorm = |f: &[[f64; 3]]| {
-        f.iter()
-            .map(|v| v.iter().map(|x| x * x).sum::<f64>())
-            .sum::<f64>()
-            .sqrt()
-    };
+    let h = net.stable_step();
+    // Damping near critical for the stiffest mode would be too much for the slowest; ζ below is a
+    // compromise that converges in a few thousand steps on faces.
+    let zeta = 0.02;
     let mut x = x0.clone();
     let mut prev = x0.clone();
-    let f0 = fnorm(&force(&x)).max(1e-300);
+    let f0 = fnorm(&net.force(&x)).max(1e-300);
     let mut residual = 1.0;
     let mut it = 0;
     while it < max_iterations {
         it += 1;
-        let f = force(&x);
+        let f = net.force(&x);
         residual = fnorm(&f) / f0;
         if residual < tolerance || !residual.is_finite() {
             break;
@@ -161,7 +204,8 @@ pub fn relax(
             }
             let xi = x[i];
             for c in 0..3 {
-                x[i][c] = xi[c] + (1.0 - zeta) * (xi[c] - prev[i][c]) + h * h * f[i][c] / mass[i];
+                x[i][c] =
+                    xi[c] + (1.0 - zeta) * (xi[c] - prev[i][c]) + h * h * f[i][c] / net.mass[i];
             }
             prev[i] = xi;
         }
