@@ -160,62 +160,15 @@ pub fn trace(
     want: Option<&[bool]>,
 ) -> SpringSet {
     let labels = &seg.labels;
-    // `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
-    // moves can reach). Their struts end at their neighbours' attachments, so those are traced
-    // too; every other vertex gets no spring and is not counted as a miss.
     let nb = mesh.neighbours();
-    let traced: Vec<bool> = match want {
-        None => vec![true; mesh.vertices.len()],
-        Some(w) => {
-            let mut t = w.to_vec();
-            for (i, &wi) in w.iter().enumerate() {
-                if wi {
-                    for &j in &nb[i] {
-                        t[j as usize] = true;
-                    }
-                }
-            }
-            t
-        }
-    };
-    let wanted = |i: usize| want.is_none_or(|w| w[i]);
+    let traced = traced_vertices(&nb, want, mesh.vertices.len());
     let iso = seg.windows.bone as f32;
     let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let normals = outward_normals(mesh, vol, labels);
     let map = vol.voxel_map();
     let bone_at =
         |p: [f64; 3]| sample_field(bone_field, vol.dims, map.to_voxel(p), f32::MIN) >= iso;
-    // Main springs: march inwards to the first bone.
-    let hits: Vec<Option<[f64; 3]>> = mesh
-        .vertices
-        .par_iter()
-        .zip(&normals)
-        .zip(&traced)
-        .map(|((&xs, &n), &traced)| {
-            if !traced {
-                return None;
-            }
-            let d = scale(n, -1.0);
-            let mut t = 0.0;
-            while t < params.max_length_mm {
-                let t1 = (t + step).min(params.max_length_mm);
-                if bone_at(add(xs, scale(d, t1))) {
-                    let (mut lo, mut hi) = (t, t1);
-                    for _ in 0..30 {
-                        let m = 0.5 * (lo + hi);
-                        if bone_at(add(xs, scale(d, m))) {
-                            hi = m
-                        } else {
-                            lo = m
-                        }
-                    }
-                    return Some(add(xs, scale(d, 0.5 * (lo + hi))));
-                }
-                t = t1;
-            }
-            None
-        })
-        .collect();
+    let hits = bone_hits(mesh, &normals, &traced, bone_at, params.max_length_mm, step);
     let mut attachment_of = vec![None; mesh.vertices.len()];
     let mut attachments = Vec::new();
     let mut misses = Vec::new();
@@ -229,19 +182,7 @@ pub fn trace(
             None => {}
         }
     }
-    let mut pairs: Vec<(usize, usize, Kind)> = Vec::new();
-    for i in (0..mesh.vertices.len()).filter(|&i| wanted(i)) {
-        if let Some(b) = attachment_of[i] {
-            pairs.push((i, b, Kind::Main));
-        }
-        if params.struts {
-            for &j in &nb[i] {
-                if let Some(b) = attachment_of[j as usize] {
-                    pairs.push((i, b, Kind::Strut));
-                }
-            }
-        }
-    }
+    let pairs = spring_pairs(&nb, &attachment_of, want, params.struts);
     let springs: Vec<Spring> = pairs
         .par_iter()
         .map(|&(i, b, kind)| {
@@ -259,6 +200,103 @@ pub fn trace(
             }
         })
         .collect();
+    SpringSet {
+        attachment_of,
+        attachments,
+        springs,
+        k: vertex_areas(mesh),
+        misses,
+    }
+}
+
+/// `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
+/// moves can reach). Their struts end at their neighbours' attachments, so those are traced
+/// too; every other vertex gets no spring and is not counted as a miss.
+fn traced_vertices(nb: &[Vec<u32>], want: Option<&[bool]>, n: usize) -> Vec<bool> {
+    match want {
+        None => vec![true; n],
+        Some(w) => {
+            let mut t = w.to_vec();
+            for (i, &wi) in w.iter().enumerate() {
+                if wi {
+                    for &j in &nb[i] {
+                        t[j as usize] = true;
+                    }
+                }
+            }
+            t
+        }
+    }
+}
+
+/// Main springs: march from each traced vertex along its inward normal to the first bone
+/// (steps of `step` up to `max_length`), refined by bisection; None when no bone is reached.
+fn bone_hits(
+    mesh: &Mesh,
+    normals: &[[f64; 3]],
+    traced: &[bool],
+    bone_at: impl Fn([f64; 3]) -> bool + Sync,
+    max_length: f64,
+    step: f64,
+) -> Vec<Option<[f64; 3]>> {
+    mesh.vertices
+        .par_iter()
+        .zip(normals)
+        .zip(traced)
+        .map(|((&xs, &n), &traced)| {
+            if !traced {
+                return None;
+            }
+            let d = scale(n, -1.0);
+            let mut t = 0.0;
+            while t < max_length {
+                let t1 = (t + step).min(max_length);
+                if bone_at(add(xs, scale(d, t1))) {
+                    let (mut lo, mut hi) = (t, t1);
+                    for _ in 0..30 {
+                        let m = 0.5 * (lo + hi);
+                        if bone_at(add(xs, scale(d, m))) {
+                            hi = m
+                        } else {
+                            lo = m
+                        }
+                    }
+                    return Some(add(xs, scale(d, 0.5 * (lo + hi))));
+                }
+                t = t1;
+            }
+            None
+        })
+        .collect()
+}
+
+/// (skin vertex, attachment, kind) of every spring of the wanted vertices: the main spring to
+/// its own attachment, struts (with `struts`) to its neighbours'.
+fn spring_pairs(
+    nb: &[Vec<u32>],
+    attachment_of: &[Option<usize>],
+    want: Option<&[bool]>,
+    struts: bool,
+) -> Vec<(usize, usize, Kind)> {
+    let wanted = |i: usize| want.is_none_or(|w| w[i]);
+    let mut pairs = Vec::new();
+    for i in (0..attachment_of.len()).filter(|&i| wanted(i)) {
+        if let Some(b) = attachment_of[i] {
+            pairs.push((i, b, Kind::Main));
+        }
+        if struts {
+            for &j in &nb[i] {
+                if let Some(b) = attachment_of[j as usize] {
+                    pairs.push((i, b, Kind::Strut));
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// k_i per vertex (eq. 21): the areas of the triangles around it, mm².
+fn vertex_areas(mesh: &Mesh) -> Vec<f64> {
     let mut k = vec![0.0; mesh.vertices.len()];
     for t in 0..mesh.triangles.len() {
         let a = 0.5 * norm(mesh.face_normal(t));
@@ -266,13 +304,7 @@ pub fn trace(
             k[v as usize] += a;
         }
     }
-    SpringSet {
-        attachment_of,
-        attachments,
-        springs,
-        k,
-        misses,
-    }
+    k
 }
 
 /// The vertices whose springs a solve uses: with `[solve] restrict` on and part of the skin
