@@ -11,6 +11,7 @@
 use crate::case::{Springs as SpringParams, Stiffness};
 use crate::mesh::{Column, Edges, Mesh, add, norm, scale, sub};
 use crate::segment::{self, Segmentation};
+use crate::union_find::UnionFind;
 use crate::volume::{Volume, VoxelMap, sample_field};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -60,8 +61,10 @@ pub struct SpringReport {
     /// Centroid and bounding box (LPS mm) of the skin vertices whose ray found no bone.
     pub miss_centroid: Option<[f64; 3]>,
     pub miss_bounds: Option<([f64; 3], [f64; 3])>,
-    /// The misses as connected patches of the skin mesh, largest first (at most 8): where the
-    /// rays found no bone (a bone defect, the nose tip, ears, the field of view's edge).
+    /// The misses as connected patches of the skin mesh (at most 8): where the rays found no
+    /// bone (a bone defect, the nose tip, ears, the field of view's edge). Ordered by size
+    /// (largest first), then by centroid z (lowest first), then by smallest vertex index, so
+    /// that tied patches (a symmetric head's two ears) keep one order from run to run.
     pub miss_regions: Vec<MissRegion>,
     pub length_mm: [f64; 3],
     pub stiffness: [f64; 3],
@@ -157,62 +160,15 @@ pub fn trace(
     want: Option<&[bool]>,
 ) -> SpringSet {
     let labels = &seg.labels;
-    // `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
-    // moves can reach). Their struts end at their neighbours' attachments, so those are traced
-    // too; every other vertex gets no spring and is not counted as a miss.
     let nb = mesh.neighbours();
-    let traced: Vec<bool> = match want {
-        None => vec![true; mesh.vertices.len()],
-        Some(w) => {
-            let mut t = w.to_vec();
-            for (i, &wi) in w.iter().enumerate() {
-                if wi {
-                    for &j in &nb[i] {
-                        t[j as usize] = true;
-                    }
-                }
-            }
-            t
-        }
-    };
-    let wanted = |i: usize| want.is_none_or(|w| w[i]);
+    let traced = traced_vertices(&nb, want, mesh.vertices.len());
     let iso = seg.windows.bone as f32;
     let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
     let normals = outward_normals(mesh, vol, labels);
     let map = vol.voxel_map();
     let bone_at =
         |p: [f64; 3]| sample_field(bone_field, vol.dims, map.to_voxel(p), f32::MIN) >= iso;
-    // Main springs: march inwards to the first bone.
-    let hits: Vec<Option<[f64; 3]>> = mesh
-        .vertices
-        .par_iter()
-        .zip(&normals)
-        .zip(&traced)
-        .map(|((&xs, &n), &traced)| {
-            if !traced {
-                return None;
-            }
-            let d = scale(n, -1.0);
-            let mut t = 0.0;
-            while t < params.max_length_mm {
-                let t1 = (t + step).min(params.max_length_mm);
-                if bone_at(add(xs, scale(d, t1))) {
-                    let (mut lo, mut hi) = (t, t1);
-                    for _ in 0..30 {
-                        let m = 0.5 * (lo + hi);
-                        if bone_at(add(xs, scale(d, m))) {
-                            hi = m
-                        } else {
-                            lo = m
-                        }
-                    }
-                    return Some(add(xs, scale(d, 0.5 * (lo + hi))));
-                }
-                t = t1;
-            }
-            None
-        })
-        .collect();
+    let hits = bone_hits(mesh, &normals, &traced, bone_at, params.max_length_mm, step);
     let mut attachment_of = vec![None; mesh.vertices.len()];
     let mut attachments = Vec::new();
     let mut misses = Vec::new();
@@ -226,19 +182,7 @@ pub fn trace(
             None => {}
         }
     }
-    let mut pairs: Vec<(usize, usize, Kind)> = Vec::new();
-    for i in (0..mesh.vertices.len()).filter(|&i| wanted(i)) {
-        if let Some(b) = attachment_of[i] {
-            pairs.push((i, b, Kind::Main));
-        }
-        if params.struts {
-            for &j in &nb[i] {
-                if let Some(b) = attachment_of[j as usize] {
-                    pairs.push((i, b, Kind::Strut));
-                }
-            }
-        }
-    }
+    let pairs = spring_pairs(&nb, &attachment_of, want, params.struts);
     let springs: Vec<Spring> = pairs
         .par_iter()
         .map(|&(i, b, kind)| {
@@ -256,6 +200,103 @@ pub fn trace(
             }
         })
         .collect();
+    SpringSet {
+        attachment_of,
+        attachments,
+        springs,
+        k: vertex_areas(mesh),
+        misses,
+    }
+}
+
+/// `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
+/// moves can reach). Their struts end at their neighbours' attachments, so those are traced
+/// too; every other vertex gets no spring and is not counted as a miss.
+fn traced_vertices(nb: &[Vec<u32>], want: Option<&[bool]>, n: usize) -> Vec<bool> {
+    match want {
+        None => vec![true; n],
+        Some(w) => {
+            let mut t = w.to_vec();
+            for (i, &wi) in w.iter().enumerate() {
+                if wi {
+                    for &j in &nb[i] {
+                        t[j as usize] = true;
+                    }
+                }
+            }
+            t
+        }
+    }
+}
+
+/// Main springs: march from each traced vertex along its inward normal to the first bone
+/// (steps of `step` up to `max_length`), refined by bisection; None when no bone is reached.
+fn bone_hits(
+    mesh: &Mesh,
+    normals: &[[f64; 3]],
+    traced: &[bool],
+    bone_at: impl Fn([f64; 3]) -> bool + Sync,
+    max_length: f64,
+    step: f64,
+) -> Vec<Option<[f64; 3]>> {
+    mesh.vertices
+        .par_iter()
+        .zip(normals)
+        .zip(traced)
+        .map(|((&xs, &n), &traced)| {
+            if !traced {
+                return None;
+            }
+            let d = scale(n, -1.0);
+            let mut t = 0.0;
+            while t < max_length {
+                let t1 = (t + step).min(max_length);
+                if bone_at(add(xs, scale(d, t1))) {
+                    let (mut lo, mut hi) = (t, t1);
+                    for _ in 0..30 {
+                        let m = 0.5 * (lo + hi);
+                        if bone_at(add(xs, scale(d, m))) {
+                            hi = m
+                        } else {
+                            lo = m
+                        }
+                    }
+                    return Some(add(xs, scale(d, 0.5 * (lo + hi))));
+                }
+                t = t1;
+            }
+            None
+        })
+        .collect()
+}
+
+/// (skin vertex, attachment, kind) of every spring of the wanted vertices: the main spring to
+/// its own attachment, struts (with `struts`) to its neighbours'.
+fn spring_pairs(
+    nb: &[Vec<u32>],
+    attachment_of: &[Option<usize>],
+    want: Option<&[bool]>,
+    struts: bool,
+) -> Vec<(usize, usize, Kind)> {
+    let wanted = |i: usize| want.is_none_or(|w| w[i]);
+    let mut pairs = Vec::new();
+    for i in (0..attachment_of.len()).filter(|&i| wanted(i)) {
+        if let Some(b) = attachment_of[i] {
+            pairs.push((i, b, Kind::Main));
+        }
+        if struts {
+            for &j in &nb[i] {
+                if let Some(b) = attachment_of[j as usize] {
+                    pairs.push((i, b, Kind::Strut));
+                }
+            }
+        }
+    }
+    pairs
+}
+
+/// k_i per vertex (eq. 21): the areas of the triangles around it, mm².
+fn vertex_areas(mesh: &Mesh) -> Vec<f64> {
     let mut k = vec![0.0; mesh.vertices.len()];
     for t in 0..mesh.triangles.len() {
         let a = 0.5 * norm(mesh.face_normal(t));
@@ -263,13 +304,7 @@ pub fn trace(
             k[v as usize] += a;
         }
     }
-    SpringSet {
-        attachment_of,
-        attachments,
-        springs,
-        k,
-        misses,
-    }
+    k
 }
 
 /// The vertices whose springs a solve uses: with `[solve] restrict` on and part of the skin
@@ -294,93 +329,72 @@ impl SpringSet {
             .iter()
             .filter(|s| s.kind == Kind::Main)
             .collect();
-        let miss_pts: Vec<[f64; 3]> = self.misses.iter().map(|&i| mesh.vertices[i]).collect();
-        let (centroid, bounds) = if miss_pts.is_empty() {
-            (None, None)
-        } else {
-            let n = miss_pts.len() as f64;
-            let c = miss_pts
-                .iter()
-                .fold([0.0; 3], |a, p| add(a, *p))
-                .map(|x| x / n);
-            let mut lo = [f64::INFINITY; 3];
-            let mut hi = [f64::NEG_INFINITY; 3];
-            for p in &miss_pts {
-                for a in 0..3 {
-                    lo[a] = lo[a].min(p[a]);
-                    hi[a] = hi[a].max(p[a]);
-                }
-            }
-            (Some(c), Some((lo, hi)))
+        let (miss_centroid, miss_bounds) = match extent(mesh, &self.misses) {
+            Some((c, b)) => (Some(c), Some(b)),
+            None => (None, None),
         };
-        // Connected patches of missing vertices (mesh edges between two misses).
-        let missing: std::collections::HashSet<usize> = self.misses.iter().copied().collect();
-        let mut parent: std::collections::HashMap<usize, usize> =
-            self.misses.iter().map(|&i| (i, i)).collect();
-        fn find(p: &mut std::collections::HashMap<usize, usize>, mut x: usize) -> usize {
-            while p[&x] != x {
-                let g = p[&p[&x]];
-                p.insert(x, g);
-                x = g;
-            }
-            x
-        }
-        for t in &mesh.triangles {
-            for e in 0..3 {
-                let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
-                if missing.contains(&a) && missing.contains(&b) {
-                    let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-                    if ra != rb {
-                        parent.insert(rb, ra);
-                    }
-                }
-            }
-        }
-        let mut groups: std::collections::HashMap<usize, Vec<usize>> =
-            std::collections::HashMap::new();
-        for &i in &self.misses {
-            let r = find(&mut parent, i);
-            groups.entry(r).or_default().push(i);
-        }
-        let mut miss_regions: Vec<MissRegion> = groups
-            .values()
-            .map(|g| {
-                let n = g.len() as f64;
-                let c = g
-                    .iter()
-                    .fold([0.0; 3], |a, &i| add(a, mesh.vertices[i]))
-                    .map(|x| x / n);
-                let mut lo = [f64::INFINITY; 3];
-                let mut hi = [f64::NEG_INFINITY; 3];
-                for &i in g {
-                    for a in 0..3 {
-                        lo[a] = lo[a].min(mesh.vertices[i][a]);
-                        hi[a] = hi[a].max(mesh.vertices[i][a]);
-                    }
-                }
-                MissRegion {
-                    vertices: g.len(),
-                    centroid: c,
-                    bounds: (lo, hi),
-                }
-            })
-            .collect();
-        miss_regions.sort_by(|a, b| {
-            b.vertices
-                .cmp(&a.vertices)
-                .then(a.centroid[2].total_cmp(&b.centroid[2]))
-        });
-        miss_regions.truncate(8);
+        let miss_regions = self.miss_regions(mesh);
         SpringReport {
             miss_regions,
             main: main.len(),
             struts: self.springs.len() - main.len(),
             misses: self.misses.len(),
-            miss_centroid: centroid,
-            miss_bounds: bounds,
+            miss_centroid,
+            miss_bounds,
             length_mm: stat(main.iter().map(|s| s.rest).collect()),
             stiffness: stat(main.iter().map(|s| s.c).collect()),
         }
+    }
+
+    /// The misses as connected patches (mesh edges between two misses): the 8 largest, in the
+    /// order documented on [`SpringReport::miss_regions`]. Every key is computed from the
+    /// vertices, never from a hash order, so the list is the same from run to run.
+    fn miss_regions(&self, mesh: &Mesh) -> Vec<MissRegion> {
+        let mut missing = vec![false; mesh.vertices.len()];
+        for &i in &self.misses {
+            missing[i] = true;
+        }
+        let mut sets = UnionFind::new(mesh.vertices.len());
+        for t in &mesh.triangles {
+            for e in 0..3 {
+                let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
+                if missing[a] && missing[b] {
+                    sets.union(a, b);
+                }
+            }
+        }
+        // Patches in the order of their first miss, each listing its misses in `misses` order.
+        let mut patch_of = vec![usize::MAX; mesh.vertices.len()];
+        let mut patches: Vec<Vec<usize>> = Vec::new();
+        for &i in &self.misses {
+            let r = sets.find(i);
+            if patch_of[r] == usize::MAX {
+                patch_of[r] = patches.len();
+                patches.push(Vec::new());
+            }
+            patches[patch_of[r]].push(i);
+        }
+        let mut regions: Vec<(MissRegion, usize)> = patches
+            .iter()
+            .filter_map(|g| {
+                let (centroid, bounds) = extent(mesh, g)?;
+                let first = *g.iter().min()?;
+                let region = MissRegion {
+                    vertices: g.len(),
+                    centroid,
+                    bounds,
+                };
+                Some((region, first))
+            })
+            .collect();
+        regions.sort_by(|(a, fa), (b, fb)| {
+            b.vertices
+                .cmp(&a.vertices)
+                .then(a.centroid[2].total_cmp(&b.centroid[2]))
+                .then(fa.cmp(fb))
+        });
+        regions.truncate(8);
+        regions.into_iter().map(|(r, _)| r).collect()
     }
 
     /// springs.ply (CASE.md): skin vertices then attachments; edges (skin, skull) with
@@ -418,6 +432,78 @@ impl SpringSet {
             vertices,
             edges,
             ..Default::default()
+        }
+    }
+}
+
+/// A bounding box (lo, hi).
+type Bounds = ([f64; 3], [f64; 3]);
+
+/// Centroid and bounding box (LPS mm) of the vertices `idx` of `mesh`; None when empty.
+fn extent(mesh: &Mesh, idx: &[usize]) -> Option<([f64; 3], Bounds)> {
+    if idx.is_empty() {
+        return None;
+    }
+    let n = idx.len() as f64;
+    let c = idx
+        .iter()
+        .fold([0.0; 3], |a, &i| add(a, mesh.vertices[i]))
+        .map(|x| x / n);
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for &i in idx {
+        for a in 0..3 {
+            lo[a] = lo[a].min(mesh.vertices[i][a]);
+            hi[a] = hi[a].max(mesh.vertices[i][a]);
+        }
+    }
+    Some((c, (lo, hi)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ten tied patches (three misses each, centroid z = 0), one larger patch and one lower
+    /// one, listed in `misses` back to front: the report must order them by size, then z, then
+    /// smallest vertex, and keep the same eight every time (a hash-ordered grouping did not).
+    #[test]
+    fn miss_regions_order_ties_by_smallest_vertex() {
+        let mut mesh = Mesh::default();
+        let patch = |mesh: &mut Mesh, x: f64, z: f64, n: usize| {
+            let v0 = mesh.vertices.len() as u32;
+            for k in 0..n {
+                mesh.vertices.push([x + k as f64, (k % 2) as f64, z]);
+            }
+            for k in 2..n as u32 {
+                mesh.triangles.push([v0, v0 + k - 1, v0 + k]);
+            }
+        };
+        // Tied patches at decreasing x, so neither x nor list order gives the expected order.
+        for p in 0..10 {
+            patch(&mut mesh, 100.0 - 10.0 * p as f64, 0.0, 3);
+        }
+        patch(&mut mesh, 200.0, 0.0, 4);
+        patch(&mut mesh, 300.0, -5.0, 3);
+        let n = mesh.vertices.len();
+        let set = SpringSet {
+            attachment_of: vec![None; n],
+            attachments: Vec::new(),
+            springs: Vec::new(),
+            k: vec![0.0; n],
+            misses: (0..n).rev().collect(),
+        };
+        for _ in 0..20 {
+            let r = set.report(&mesh);
+            assert_eq!(r.misses, n);
+            let got: Vec<(usize, [f64; 3])> = r
+                .miss_regions
+                .iter()
+                .map(|m| (m.vertices, m.bounds.0))
+                .collect();
+            let mut want = vec![(4, [200.0, 0.0, 0.0]), (3, [300.0, 0.0, -5.0])];
+            want.extend((0..6).map(|p| (3, [100.0 - 10.0 * p as f64, 0.0, 0.0])));
+            assert_eq!(got, want);
         }
     }
 }

@@ -21,6 +21,7 @@ use facesim::error::{Error, NumericalKind, Result};
 use facesim::fem::assembly::System;
 use facesim::osteotomy::Plan;
 use facesim::segment::{self, Segmentation};
+use facesim::union_find::UnionFind;
 use facesim::volume::Volume;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -285,19 +286,9 @@ pub fn predict(
         }
     }
     // Keep the tissue connected to bone: union–find over the couplings.
-    let mut parent: Vec<usize> = (0..n).collect();
-    fn find(p: &mut [usize], mut i: usize) -> usize {
-        while p[i] != i {
-            p[i] = p[p[i]];
-            i = p[i];
-        }
-        i
-    }
+    let mut sets = UnionFind::new(n);
     for &(a, b) in &couple {
-        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-        if ra != rb {
-            parent[ra] = rb;
-        }
+        sets.union(a, b);
     }
     let mut anchored = vec![false; n];
     let mut touched = vec![false; n];
@@ -307,14 +298,14 @@ pub fn predict(
     }
     for i in 0..n {
         if touched[i] && is_bone(i) {
-            let r = find(&mut parent, i);
+            let r = sets.find(i);
             anchored[r] = true;
         }
     }
     let mut index = vec![usize::MAX; n];
     let mut nodes = Vec::new();
     for i in 0..n {
-        if touched[i] && anchored[find(&mut parent, i)] {
+        if touched[i] && anchored[sets.find(i)] {
             index[i] = nodes.len();
             nodes.push(i);
         }

@@ -7,6 +7,7 @@
 
 use super::element::{Element, Material, NDOF};
 use crate::error::{Error, NumericalKind, Result};
+use crate::union_find::UnionFind;
 use faer::Side;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
@@ -243,32 +244,23 @@ impl FemMesh {
         fixed: &[bool],
     ) -> Result<()> {
         let nv = self.uv.len();
-        let mut parent: Vec<usize> = (0..nv).collect();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                p[x] = p[p[x]];
-                x = p[x];
-            }
-            x
-        }
+        let mut sets = UnionFind::new(nv);
         for t in &self.tris {
-            let a = find(&mut parent, t[0] as usize);
             for &v in &t[1..] {
-                let b = find(&mut parent, v as usize);
-                parent[b] = a;
+                sets.union(t[0] as usize, v as usize);
             }
         }
         // Per piece: (has foundation, has stretching, has bending, a value fixed, a vertex fully fixed).
         let mut piece: HashMap<usize, [bool; 5]> = HashMap::new();
         for (t, tri) in self.tris.iter().enumerate() {
             let m = material(t);
-            let e = piece.entry(find(&mut parent, tri[0] as usize)).or_default();
+            let e = piece.entry(sets.find(tri[0] as usize)).or_default();
             e[0] |= m.foundation > 0.0;
             e[1] |= m.alpha.iter().any(|a| *a != 0.0);
             e[2] |= m.beta.iter().any(|b| *b != 0.0);
         }
         for v in 0..nv {
-            if let Some(e) = piece.get_mut(&find(&mut parent, v)) {
+            if let Some(e) = piece.get_mut(&sets.find(v)) {
                 e[3] |= fixed[3 * v];
                 e[4] |= fixed[3 * v] && fixed[3 * v + 1] && fixed[3 * v + 2];
             }

@@ -5,6 +5,7 @@ pub mod obj;
 pub mod ply;
 
 use crate::error::{Error, Result};
+use crate::union_find::UnionFind;
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -257,34 +258,28 @@ impl Mesh {
 
     /// Connected components by shared vertices: component id per triangle, and the count.
     pub fn components(&self) -> (Vec<u32>, usize) {
-        let mut parent: Vec<u32> = (0..self.vertices.len() as u32).collect();
-        fn find(p: &mut [u32], mut x: u32) -> u32 {
-            while p[x as usize] != x {
-                p[x as usize] = p[p[x as usize] as usize];
-                x = p[x as usize];
-            }
-            x
-        }
+        let mut sets = UnionFind::new(self.vertices.len());
         for tri in &self.triangles {
-            let a = find(&mut parent, tri[0]);
             for &v in &tri[1..] {
-                let b = find(&mut parent, v);
-                if a != b {
-                    parent[b as usize] = a;
-                }
+                sets.union(tri[0] as usize, v as usize);
             }
         }
-        let mut ids: HashMap<u32, u32> = HashMap::new();
+        // Components numbered in the order of their first triangle.
+        let mut id = vec![u32::MAX; self.vertices.len()];
+        let mut count = 0;
         let comp: Vec<u32> = self
             .triangles
             .iter()
             .map(|tri| {
-                let r = find(&mut parent, tri[0]);
-                let n = ids.len() as u32;
-                *ids.entry(r).or_insert(n)
+                let r = sets.find(tri[0] as usize);
+                if id[r] == u32::MAX {
+                    id[r] = count;
+                    count += 1;
+                }
+                id[r]
             })
             .collect();
-        (comp, ids.len())
+        (comp, count as usize)
     }
 }
 

@@ -84,6 +84,19 @@ pub fn read(path: &Path) -> Result<Mesh> {
         .get("vertex")
         .ok_or_else(|| Error::input(path, "no vertex element"))?;
     let mut mesh = Mesh::default();
+    read_vertices(path, verts, &mut mesh)?;
+    if let Some(faces) = ply.payload.get("face") {
+        mesh.triangles = read_faces(path, faces, mesh.vertices.len())?;
+    }
+    if let Some(edges) = ply.payload.get("edge") {
+        mesh.edges = Some(read_edges(path, edges, mesh.vertices.len())?);
+    }
+    Ok(mesh)
+}
+
+/// Positions, colours (when the first vertex has red, green and blue) and every other scalar
+/// property of the first vertex as a column.
+fn read_vertices(path: &Path, verts: &[DefaultElement], mesh: &mut Mesh) -> Result<()> {
     let coord = |v: &DefaultElement, k: &str, i: usize| -> Result<f64> {
         v.get(k)
             .and_then(scalar)
@@ -124,80 +137,75 @@ pub fn read(path: &Path) -> Result<Mesh> {
             });
         }
     }
-    if let Some(faces) = ply.payload.get("face") {
-        for (f, face) in faces.iter().enumerate() {
-            let idx = face
-                .get("vertex_indices")
-                .or_else(|| face.get("vertex_index"))
-                .and_then(index_list)
-                .ok_or_else(|| {
-                    Error::input(path, format!("face {f} has no vertex_indices list"))
-                })?;
-            if idx.len() < 3 {
-                return Err(Error::input(
-                    path,
-                    format!("face {f} has {} vertices", idx.len()),
-                ));
-            }
-            if let Some(bad) = idx
-                .iter()
-                .find(|&&i| i < 0 || i as usize >= mesh.vertices.len())
+    Ok(())
+}
+
+/// Faces as triangles (polygons as fans), every index checked against `nv` vertices.
+fn read_faces(path: &Path, faces: &[DefaultElement], nv: usize) -> Result<Vec<[u32; 3]>> {
+    let mut triangles = Vec::new();
+    for (f, face) in faces.iter().enumerate() {
+        let idx = face
+            .get("vertex_indices")
+            .or_else(|| face.get("vertex_index"))
+            .and_then(index_list)
+            .ok_or_else(|| Error::input(path, format!("face {f} has no vertex_indices list")))?;
+        if idx.len() < 3 {
+            return Err(Error::input(
+                path,
+                format!("face {f} has {} vertices", idx.len()),
+            ));
+        }
+        if let Some(bad) = idx.iter().find(|&&i| i < 0 || i as usize >= nv) {
+            return Err(Error::input(
+                path,
+                format!("face {f} uses vertex index {bad}, but there are {nv} vertices"),
+            ));
+        }
+        // Polygons become triangle fans.
+        for k in 1..idx.len() - 1 {
+            triangles.push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
+        }
+    }
+    Ok(triangles)
+}
+
+/// Edges (vertex1, vertex2) checked against `nv` vertices, with their other scalar properties
+/// as columns.
+fn read_edges(path: &Path, edges: &[DefaultElement], nv: usize) -> Result<Edges> {
+    let mut e = Edges::default();
+    for (n, ed) in edges.iter().enumerate() {
+        let a = ed.get("vertex1").and_then(scalar);
+        let b = ed.get("vertex2").and_then(scalar);
+        match (a, b) {
+            (Some(a), Some(b))
+                if a >= 0.0 && b >= 0.0 && (a as usize) < nv && (b as usize) < nv =>
             {
+                e.pairs.push([a as u32, b as u32])
+            }
+            _ => {
                 return Err(Error::input(
                     path,
-                    format!(
-                        "face {f} uses vertex index {bad}, but there are {} vertices",
-                        mesh.vertices.len()
-                    ),
+                    format!("edge {n} has missing or out-of-range vertex1/vertex2"),
                 ));
             }
-            // Polygons become triangle fans.
-            for k in 1..idx.len() - 1 {
-                mesh.triangles
-                    .push([idx[0] as u32, idx[k] as u32, idx[k + 1] as u32]);
-            }
         }
     }
-    if let Some(edges) = ply.payload.get("edge") {
-        let mut e = Edges::default();
-        for (n, ed) in edges.iter().enumerate() {
-            let a = ed.get("vertex1").and_then(scalar);
-            let b = ed.get("vertex2").and_then(scalar);
-            match (a, b) {
-                (Some(a), Some(b))
-                    if a >= 0.0
-                        && b >= 0.0
-                        && (a as usize) < mesh.vertices.len()
-                        && (b as usize) < mesh.vertices.len() =>
-                {
-                    e.pairs.push([a as u32, b as u32])
-                }
-                _ => {
-                    return Err(Error::input(
-                        path,
-                        format!("edge {n} has missing or out-of-range vertex1/vertex2"),
-                    ));
-                }
+    if let Some(first) = edges.first() {
+        for (name, p) in first.iter() {
+            if name == "vertex1" || name == "vertex2" || scalar(p).is_none() {
+                continue;
             }
+            let values = edges
+                .iter()
+                .map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN))
+                .collect();
+            e.columns.push(Column {
+                name: name.clone(),
+                values,
+            });
         }
-        if let Some(first) = edges.first() {
-            for (name, p) in first.iter() {
-                if name == "vertex1" || name == "vertex2" || scalar(p).is_none() {
-                    continue;
-                }
-                let values = edges
-                    .iter()
-                    .map(|v| v.get(name).and_then(scalar).unwrap_or(f64::NAN))
-                    .collect();
-                e.columns.push(Column {
-                    name: name.clone(),
-                    values,
-                });
-            }
-        }
-        mesh.edges = Some(e);
     }
-    Ok(mesh)
+    Ok(e)
 }
 
 fn def(name: &str, t: ScalarType) -> PropertyDef {

@@ -276,11 +276,17 @@ fn crossing(a: &Gaussian, b: &Gaussian) -> f64 {
     0.5 * (lo + hi)
 }
 
-pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segmentation> {
-    let n = vol.len();
-    let dims = vol.dims;
+/// The head: the largest 6-connected component above the head threshold.
+struct Head {
+    runs: Runs,
+    voxels: usize,
+    removed_components: usize,
+    removed_voxels: usize,
+}
+
+fn find_head(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Head> {
     // Masks as runs along x (src/segment/runs.rs): components without per-voxel labels.
-    let above = Runs::find(dims, |a| vol.data[a] as f64 > t.head_threshold);
+    let above = Runs::find(vol.dims, |a| vol.data[a] as f64 > t.head_threshold);
     let (comp, sizes) = above.components(false);
     let Some((head_id, &head_voxels)) = sizes.iter().enumerate().max_by_key(|(_, s)| **s) else {
         return Err(Error::input(
@@ -291,13 +297,17 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
             ),
         ));
     };
-    let head_runs = above.filter(|q| comp[q] == head_id as u32);
-    let removed_voxels = above.voxels() - head_voxels;
-    drop((above, comp));
-    let head = head_runs.paint();
+    Ok(Head {
+        runs: above.filter(|q| comp[q] == head_id as u32),
+        voxels: head_voxels,
+        removed_components: sizes.len() - 1,
+        removed_voxels: above.voxels() - head_voxels,
+    })
+}
 
-    // Outside air: the components of the non-head voxels that touch the volume border; the
-    // others are cavities (sinuses, airway).
+/// Outside air: the components of the non-head voxels that touch the volume border; the
+/// others are cavities (sinuses, airway). Returns the outside air and the cavity voxel count.
+fn outside_air(head_runs: &Runs, dims: [usize; 3]) -> (Runs, usize) {
     let [nx, ny, nz] = dims;
     let air = head_runs.complement();
     let (air_comp, air_sizes) = air.components(false);
@@ -314,86 +324,145 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
     }
     let outside_runs = air.filter(|q| border[air_comp[q] as usize]);
     let cavity_voxels = air.voxels() - outside_runs.voxels();
-    drop((air, air_comp));
+    (outside_runs, cavity_voxels)
+}
 
-    let mut crossings = None;
-    let mut fit_warnings = Vec::new();
-    let (windows, mixture) = match t.method {
-        TissueMethod::Windows => (
-            Windows {
+/// The HU windows of `t.method`, with the fitted mixture, its crossings and the fit's
+/// warnings (method = "fit").
+struct ChosenWindows {
+    windows: Windows,
+    mixture: Option<Vec<Gaussian>>,
+    crossings: Option<[f64; 2]>,
+    warnings: Vec<String>,
+}
+
+fn choose_windows(
+    vol: &Volume,
+    head_runs: &Runs,
+    t: &Tissue,
+    name: &std::path::Path,
+) -> Result<ChosenWindows> {
+    match t.method {
+        TissueMethod::Windows => Ok(ChosenWindows {
+            windows: Windows {
                 head_threshold: t.head_threshold,
                 fat_dark: t.fat_dark,
                 fat_bright: t.fat_bright,
                 soft: t.soft,
                 bone: t.bone,
             },
-            None,
-        ),
-        TissueMethod::Fit => {
-            let g = fit_mixture(&head_histogram(vol, &head_runs, t), t);
-            // Bounds at the midpoints of neighbouring means, not where the weighted Gaussians
-            // cross: at a tissue boundary a voxel that is half one class and half the other has
-            // the mean of the two, so the midpoint is the unbiased partial-volume threshold. The
-            // crossing is Bayes-optimal only for pure voxels; with a narrow, heavy soft-tissue
-            // peak beside a broad bone component it sits near the soft peak and thickens bone
-            // (docs/segmentation.md). The crossings are reported for comparison.
-            let w = Windows {
-                head_threshold: t.head_threshold,
-                fat_dark: (g[0].mean - 3.0 * g[0].sigma).max(t.head_threshold + 1.0),
-                fat_bright: g[0].mean,
-                soft: 0.5 * (g[0].mean + g[1].mean),
-                bone: 0.5 * (g[1].mean + g[2].mean),
-            };
-            crossings = Some([crossing(&g[0], &g[1]), crossing(&g[1], &g[2])]);
-            let bounds = [(t.fat_dark, t.soft), (t.soft, t.bone), (t.bone, 2000.0)];
-            for (c, (lo, hi)) in g.iter().zip(bounds) {
-                if c.mean <= lo + 1e-9 || c.mean >= hi - 1e-9 {
-                    fit_warnings.push(format!(
-                        "tissue fit: the {} component has no peak of its own inside [{lo}, {hi}] HU (its mean sits at the bound); its window is a guess",
-                        c.name
-                    ));
-                }
-            }
-            let b = [w.head_threshold, w.fat_dark, w.fat_bright, w.soft, w.bone];
-            if b.windows(2).any(|p| !(p[0] < p[1])) || b.iter().any(|x| !x.is_finite()) {
-                return Err(Error::input(
-                    name,
-                    format!(
-                        "the tissue fit did not separate fat, soft tissue and bone (bounds {b:?}); use method = \"windows\""
-                    ),
-                ));
-            }
-            (w, Some(g))
-        }
-    };
+            mixture: None,
+            crossings: None,
+            warnings: Vec::new(),
+        }),
+        TissueMethod::Fit => fitted_windows(vol, head_runs, t, name),
+    }
+}
 
-    // Bone pieces (26-connected runs of head voxels at or above the bone bound).
-    let bone_runs = Runs::find(dims, |a| head[a] && vol.data[a] as f64 >= windows.bone);
+fn fitted_windows(
+    vol: &Volume,
+    head_runs: &Runs,
+    t: &Tissue,
+    name: &std::path::Path,
+) -> Result<ChosenWindows> {
+    let g = fit_mixture(&head_histogram(vol, head_runs, t), t);
+    // Bounds at the midpoints of neighbouring means, not where the weighted Gaussians
+    // cross: at a tissue boundary a voxel that is half one class and half the other has
+    // the mean of the two, so the midpoint is the unbiased partial-volume threshold. The
+    // crossing is Bayes-optimal only for pure voxels; with a narrow, heavy soft-tissue
+    // peak beside a broad bone component it sits near the soft peak and thickens bone
+    // (docs/segmentation.md). The crossings are reported for comparison.
+    let w = Windows {
+        head_threshold: t.head_threshold,
+        fat_dark: (g[0].mean - 3.0 * g[0].sigma).max(t.head_threshold + 1.0),
+        fat_bright: g[0].mean,
+        soft: 0.5 * (g[0].mean + g[1].mean),
+        bone: 0.5 * (g[1].mean + g[2].mean),
+    };
+    let crossings = Some([crossing(&g[0], &g[1]), crossing(&g[1], &g[2])]);
+    let mut warnings = Vec::new();
+    let bounds = [(t.fat_dark, t.soft), (t.soft, t.bone), (t.bone, 2000.0)];
+    for (c, (lo, hi)) in g.iter().zip(bounds) {
+        if c.mean <= lo + 1e-9 || c.mean >= hi - 1e-9 {
+            warnings.push(format!(
+                "tissue fit: the {} component has no peak of its own inside [{lo}, {hi}] HU (its mean sits at the bound); its window is a guess",
+                c.name
+            ));
+        }
+    }
+    let b = [w.head_threshold, w.fat_dark, w.fat_bright, w.soft, w.bone];
+    if b.windows(2).any(|p| !(p[0] < p[1])) || b.iter().any(|x| !x.is_finite()) {
+        return Err(Error::input(
+            name,
+            format!(
+                "the tissue fit did not separate fat, soft tissue and bone (bounds {b:?}); use method = \"windows\""
+            ),
+        ));
+    }
+    Ok(ChosenWindows {
+        windows: w,
+        mixture: Some(g),
+        crossings,
+        warnings,
+    })
+}
+
+/// The kept bone: 26-connected runs of head voxels at or above the bone bound, pieces under
+/// `min_bone_component_mm3` dropped.
+struct Bone {
+    runs: Runs,
+    kept: usize,
+    dropped: usize,
+    voxels_dropped: usize,
+}
+
+fn keep_bone(
+    vol: &Volume,
+    head: &[bool],
+    bone_hu: f64,
+    t: &Tissue,
+    name: &std::path::Path,
+) -> Result<Bone> {
+    let bone_runs = Runs::find(vol.dims, |a| head[a] && vol.data[a] as f64 >= bone_hu);
     let (bcomp, bsizes) = bone_runs.components(true);
     let vv = vol.voxel_volume();
     let keep: Vec<bool> = bsizes
         .iter()
         .map(|&s| s as f64 * vv >= t.min_bone_component_mm3)
         .collect();
-    let bone_components_kept = keep.iter().filter(|k| **k).count();
-    if bone_components_kept == 0 {
+    let kept = keep.iter().filter(|k| **k).count();
+    if kept == 0 {
         return Err(Error::input(
             name,
             format!(
                 "no bone found (no piece of at least {} mm³ above {} HU): a CT with bone is needed",
-                t.min_bone_component_mm3, windows.bone
+                t.min_bone_component_mm3, bone_hu
             ),
         ));
     }
-    let bone_voxels_dropped: usize = bsizes
+    let voxels_dropped: usize = bsizes
         .iter()
         .zip(&keep)
         .filter(|(_, k)| !**k)
         .map(|(s, _)| s)
         .sum();
-    let bone = bone_runs.filter(|q| keep[bcomp[q] as usize]);
-    drop((bone_runs, bcomp));
+    Ok(Bone {
+        runs: bone_runs.filter(|q| keep[bcomp[q] as usize]),
+        kept,
+        dropped: keep.len() - kept,
+        voxels_dropped,
+    })
+}
 
+/// Soft-tissue labels per voxel: skin within the skin layer of the outside air (and every
+/// head voxel touching it), else by the HU windows; AIR outside the head.
+fn soft_labels(
+    vol: &Volume,
+    head: &[bool],
+    outside_runs: &Runs,
+    windows: &Windows,
+    t: &Tissue,
+) -> Vec<u8> {
     // The surface lies about half a voxel in front of the nearest outside-air voxel centre.
     let h = (vol.spacing[0] * vol.spacing[1] * vol.spacing[2]).cbrt();
     let skin_d = t.skin_thickness_mm + 0.5 * h;
@@ -402,11 +471,11 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
     let band = skin_d.max(touch) * 1.001;
     let d2 = distance_sq_within(
         &outside_runs.paint(),
-        dims,
+        vol.dims,
         vol.spacing,
         (band * band) as f32,
     );
-    let mut labels: Vec<u8> = (0..n)
+    (0..vol.len())
         .into_par_iter()
         .map(|a| {
             if !head[a] {
@@ -429,11 +498,12 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
                 MUSCLE
             }
         })
-        .collect();
-    drop(d2);
-    // Kept bone overrides the soft-tissue classes.
-    bone.paint_into(&mut labels, BONE);
-    let counts = labels
+        .collect()
+}
+
+/// Voxels per label, in LABEL_NAMES order.
+fn count_labels(labels: &[u8]) -> [usize; 6] {
+    labels
         .par_chunks(1 << 16)
         .map(|c| {
             let mut k = [0usize; 6];
@@ -442,26 +512,40 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
             }
             k
         })
-        .reduce(|| [0; 6], |a, b| std::array::from_fn(|i| a[i] + b[i]));
+        .reduce(|| [0; 6], |a, b| std::array::from_fn(|i| a[i] + b[i]))
+}
+
+pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segmentation> {
+    let head_part = find_head(vol, t, name)?;
+    let head = head_part.runs.paint();
+    let (outside_runs, cavity_voxels) = outside_air(&head_part.runs, vol.dims);
+    let chosen = choose_windows(vol, &head_part.runs, t, name)?;
+    let windows = chosen.windows;
+    let bone = keep_bone(vol, &head, windows.bone, t, name)?;
+    let mut labels = soft_labels(vol, &head, &outside_runs, &windows, t);
+    // Kept bone overrides the soft-tissue classes.
+    bone.runs.paint_into(&mut labels, BONE);
+    let counts = count_labels(&labels);
     if counts[SKIN as usize] == 0 {
         return Err(Error::input(
             name,
             "no skin found: the head touches the volume border everywhere",
         ));
     }
+    let vv = vol.voxel_volume();
     let report = SegmentReport {
         method: format!("{:?}", t.method).to_lowercase(),
         windows: windows.clone(),
-        mixture: mixture.clone(),
-        mixture_crossings: crossings,
-        head_voxels,
-        removed_components: sizes.len() - 1,
-        removed_voxels,
-        bone_components_kept,
-        bone_components_dropped: keep.len() - bone_components_kept,
-        bone_voxels_dropped,
+        mixture: chosen.mixture,
+        mixture_crossings: chosen.crossings,
+        head_voxels: head_part.voxels,
+        removed_components: head_part.removed_components,
+        removed_voxels: head_part.removed_voxels,
+        bone_components_kept: bone.kept,
+        bone_components_dropped: bone.dropped,
+        bone_voxels_dropped: bone.voxels_dropped,
         cavity_voxels,
-        warnings: fit_warnings,
+        warnings: chosen.warnings,
         volumes_mm3: LABEL_NAMES
             .iter()
             .zip(counts)

@@ -6,6 +6,7 @@
 //! components without a u32 field the size of the volume. Runs are found slice by slice in
 //! parallel; the union–find pass over the runs is serial but touches each run a few times.
 
+use crate::union_find::UnionFind;
 use rayon::prelude::*;
 
 /// Runs [x0, x1) of set voxels per row; row r = j + ny·k owns runs[row_start[r]..row_start[r+1]].
@@ -155,15 +156,7 @@ impl Runs {
     /// component's voxel count.
     pub fn components(&self, conn26: bool) -> (Vec<u32>, Vec<usize>) {
         let [_, ny, nz] = self.dims;
-        let mut parent: Vec<u32> = (0..self.runs.len() as u32).collect();
-        fn find(p: &mut [u32], mut x: u32) -> u32 {
-            while p[x as usize] != x {
-                let g = p[p[x as usize] as usize];
-                p[x as usize] = g;
-                x = g;
-            }
-            x
-        }
+        let mut sets = UnionFind::new(self.runs.len());
         // Backward neighbour rows (dj, dk): every adjacency is visited from its later row.
         let back: &[(i64, i64)] = if conn26 {
             &[(-1, 0), (-1, -1), (0, -1), (1, -1)]
@@ -191,11 +184,7 @@ impl Runs {
                     while p < pe && q < qe {
                         let (a, b) = (self.runs[p], self.runs[q]);
                         if a[0] < b[1] + slack && b[0] < a[1] + slack {
-                            let (ra, rb) =
-                                (find(&mut parent, p as u32), find(&mut parent, q as u32));
-                            if ra != rb {
-                                parent[ra.max(rb) as usize] = ra.min(rb);
-                            }
+                            sets.union(p, q);
                         }
                         // Advance whichever run ends first.
                         if a[1] < b[1] {
@@ -207,17 +196,10 @@ impl Runs {
                 }
             }
         }
-        let mut id = vec![u32::MAX; self.runs.len()];
-        let mut sizes = Vec::new();
-        for q in 0..self.runs.len() {
-            let root = find(&mut parent, q as u32) as usize;
-            // Roots are the smallest run of their set, so they are labelled first.
-            if id[root] == u32::MAX {
-                id[root] = sizes.len() as u32;
-                sizes.push(0);
-            }
-            id[q] = id[root];
-            sizes[id[q] as usize] += (self.runs[q][1] - self.runs[q][0]) as usize;
+        let (id, count) = sets.labels();
+        let mut sizes = vec![0; count];
+        for (q, &c) in id.iter().enumerate() {
+            sizes[c as usize] += (self.runs[q][1] - self.runs[q][0]) as usize;
         }
         (id, sizes)
     }

@@ -133,87 +133,145 @@ pub fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
     if area <= 0.0 || target == 0 {
         return None;
     }
-    let step = (2.0 * area / target as f64).sqrt();
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for i in 0..u.len() {
-        for (a, x) in [u[i], v[i]].into_iter().enumerate() {
-            lo[a] = lo[a].min(x);
-            hi[a] = hi[a].max(x);
-        }
-    }
-    let n = [0, 1].map(|a| ((hi[a] - lo[a]) / step).floor() as usize + 1);
-    // Bucket the skin's triangles by the grid cells their (u, v) boxes overlap.
-    let cell = |p: [f64; 2]| {
-        [0, 1].map(|a| (((p[a] - lo[a]) / step).floor().max(0.0) as usize).min(n[a] - 1))
-    };
-    let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); n[0] * n[1]];
-    for (t, tri) in mesh.triangles.iter().enumerate() {
-        let p = tri.map(uv);
-        let a = cell([
-            p[0][0].min(p[1][0]).min(p[2][0]),
-            p[0][1].min(p[1][1]).min(p[2][1]),
-        ]);
-        let b = cell([
-            p[0][0].max(p[1][0]).max(p[2][0]),
-            p[0][1].max(p[1][1]).max(p[2][1]),
-        ]);
-        for j in a[1]..=b[1] {
-            for i in a[0]..=b[0] {
-                buckets[j * n[0] + i].push(t as u32);
-            }
-        }
-    }
-    // Place each grid node on the skin.
-    let nodes: Vec<Option<[f64; 3]>> = (0..n[0] * n[1])
-        .into_par_iter()
-        .map(|k| {
-            let q = [
-                lo[0] + (k % n[0]) as f64 * step,
-                lo[1] + (k / n[0]) as f64 * step,
-            ];
-            let c = cell(q);
-            buckets[c[1] * n[0] + c[0]].iter().find_map(|&t| {
-                let tri = mesh.triangles[t as usize];
-                let [a, b, cc] = tri.map(uv);
-                let det = (b[0] - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (b[1] - a[1]);
-                if det == 0.0 {
-                    return None;
-                }
-                let l1 = ((q[0] - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (q[1] - a[1])) / det;
-                let l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (q[0] - a[0]) * (b[1] - a[1])) / det;
-                let l0 = 1.0 - l1 - l2;
-                let eps = -1e-9;
-                (l0 >= eps && l1 >= eps && l2 >= eps).then(|| {
-                    let [x, y, z] = tri.map(|i| mesh.vertices[i as usize]);
-                    [0, 1, 2].map(|c| l0 * x[c] + l1 * y[c] + l2 * z[c])
-                })
-            })
-        })
-        .collect();
-    let id = |i: usize, j: usize| (j * n[0] + i) as u32;
-    let mut tris = Vec::new();
-    for j in 0..n[1].saturating_sub(1) {
-        for i in 0..n[0] - 1 {
-            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
-            for t in [[a, b, c], [a, c, d]] {
-                if t.iter().all(|&k| nodes[k as usize].is_some()) {
-                    // Same (u, v) orientation as the skin, hence the same 3-D orientation.
-                    tris.push(if total >= 0.0 { t } else { [t[0], t[2], t[1]] });
-                }
-            }
-        }
-    }
+    let grid = UvGrid::new(u, v, (2.0 * area / target as f64).sqrt());
+    let buckets = grid.buckets(mesh, u, v);
+    let nodes = grid.place_nodes(mesh, u, v, &buckets);
+    // Same (u, v) orientation as the skin, hence the same 3-D orientation.
+    let tris = grid.triangles(&nodes, !(total >= 0.0));
     let vertices: Vec<[f64; 3]> = nodes.iter().map(|p| p.unwrap_or([0.0; 3])).collect();
     let mut m = Mesh::new(vertices, tris);
+    let count = grid.n[0] * grid.n[1];
     set_uv(
         &mut m,
-        (0..n[0] * n[1])
-            .map(|k| lo[0] + (k % n[0]) as f64 * step)
-            .collect(),
-        (0..n[0] * n[1])
-            .map(|k| lo[1] + (k / n[0]) as f64 * step)
-            .collect(),
+        (0..count).map(|k| grid.node(k)[0]).collect(),
+        (0..count).map(|k| grid.node(k)[1]).collect(),
     );
+    keep_largest_piece(&mut m);
+    m.compact();
+    (!m.triangles.is_empty()).then_some(m)
+}
+
+/// The regular grid of `resample_uv`: nodes lo + (i, j)·step, n[0] × n[1] of them, numbered
+/// k = j·n[0] + i.
+struct UvGrid {
+    lo: [f64; 2],
+    step: f64,
+    n: [usize; 2],
+}
+
+impl UvGrid {
+    /// The grid over the (u, v) bounding box.
+    fn new(u: &[f64], v: &[f64], step: f64) -> UvGrid {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for i in 0..u.len() {
+            for (a, x) in [u[i], v[i]].into_iter().enumerate() {
+                lo[a] = lo[a].min(x);
+                hi[a] = hi[a].max(x);
+            }
+        }
+        let n = [0, 1].map(|a| ((hi[a] - lo[a]) / step).floor() as usize + 1);
+        UvGrid { lo, step, n }
+    }
+
+    /// The (u, v) of node k.
+    fn node(&self, k: usize) -> [f64; 2] {
+        [
+            self.lo[0] + (k % self.n[0]) as f64 * self.step,
+            self.lo[1] + (k / self.n[0]) as f64 * self.step,
+        ]
+    }
+
+    /// The cell holding `p`, clamped to the grid.
+    fn cell(&self, p: [f64; 2]) -> [usize; 2] {
+        [0, 1].map(|a| {
+            (((p[a] - self.lo[a]) / self.step).floor().max(0.0) as usize).min(self.n[a] - 1)
+        })
+    }
+
+    /// The skin's triangles by the grid cells their (u, v) boxes overlap.
+    fn buckets(&self, mesh: &Mesh, u: &[f64], v: &[f64]) -> Vec<Vec<u32>> {
+        let uv = |i: u32| [u[i as usize], v[i as usize]];
+        let n = self.n;
+        let mut buckets: Vec<Vec<u32>> = vec![Vec::new(); n[0] * n[1]];
+        for (t, tri) in mesh.triangles.iter().enumerate() {
+            let p = tri.map(uv);
+            let a = self.cell([
+                p[0][0].min(p[1][0]).min(p[2][0]),
+                p[0][1].min(p[1][1]).min(p[2][1]),
+            ]);
+            let b = self.cell([
+                p[0][0].max(p[1][0]).max(p[2][0]),
+                p[0][1].max(p[1][1]).max(p[2][1]),
+            ]);
+            for j in a[1]..=b[1] {
+                for i in a[0]..=b[0] {
+                    buckets[j * n[0] + i].push(t as u32);
+                }
+            }
+        }
+        buckets
+    }
+
+    /// Each grid node placed on the skin by barycentric interpolation in the first skin
+    /// triangle of its cell that contains it in (u, v); None outside the skin's domain.
+    fn place_nodes(
+        &self,
+        mesh: &Mesh,
+        u: &[f64],
+        v: &[f64],
+        buckets: &[Vec<u32>],
+    ) -> Vec<Option<[f64; 3]>> {
+        let uv = |i: u32| [u[i as usize], v[i as usize]];
+        let n = self.n;
+        (0..n[0] * n[1])
+            .into_par_iter()
+            .map(|k| {
+                let q = self.node(k);
+                let c = self.cell(q);
+                buckets[c[1] * n[0] + c[0]].iter().find_map(|&t| {
+                    let tri = mesh.triangles[t as usize];
+                    let [a, b, cc] = tri.map(uv);
+                    let det = (b[0] - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (b[1] - a[1]);
+                    if det == 0.0 {
+                        return None;
+                    }
+                    let l1 =
+                        ((q[0] - a[0]) * (cc[1] - a[1]) - (cc[0] - a[0]) * (q[1] - a[1])) / det;
+                    let l2 = ((b[0] - a[0]) * (q[1] - a[1]) - (q[0] - a[0]) * (b[1] - a[1])) / det;
+                    let l0 = 1.0 - l1 - l2;
+                    let eps = -1e-9;
+                    (l0 >= eps && l1 >= eps && l2 >= eps).then(|| {
+                        let [x, y, z] = tri.map(|i| mesh.vertices[i as usize]);
+                        [0, 1, 2].map(|c| l0 * x[c] + l1 * y[c] + l2 * z[c])
+                    })
+                })
+            })
+            .collect()
+    }
+
+    /// Two triangles per cell, each kept when its three nodes are placed; wound (a, b, c), or
+    /// (a, c, b) when `flip`.
+    fn triangles(&self, nodes: &[Option<[f64; 3]>], flip: bool) -> Vec<[u32; 3]> {
+        let n = self.n;
+        let id = |i: usize, j: usize| (j * n[0] + i) as u32;
+        let mut tris = Vec::new();
+        for j in 0..n[1].saturating_sub(1) {
+            for i in 0..n[0] - 1 {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                for t in [[a, b, c], [a, c, d]] {
+                    if t.iter().all(|&k| nodes[k as usize].is_some()) {
+                        tris.push(if flip { [t[0], t[2], t[1]] } else { t });
+                    }
+                }
+            }
+        }
+        tris
+    }
+}
+
+/// Keep only the triangles of the mesh's largest connected piece (of equal pieces the last in
+/// `Mesh::components` order).
+fn keep_largest_piece(m: &mut Mesh) {
     let (comp, count) = m.components();
     if count > 1 {
         let mut size = vec![0usize; count];
@@ -229,8 +287,6 @@ pub fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
             .map(|(t, _)| t)
             .collect();
     }
-    m.compact();
-    (!m.triangles.is_empty()).then_some(m)
 }
 
 /// Remove zero-area slivers (the collapse can leave a vertex on its neighbour's edge) by

@@ -123,60 +123,100 @@ fn corner_radius(lo: [f64; 3], hi: [f64; 3], axis: [f64; 2]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-pub fn scan(
+/// The scan's cylindrical grid: rays at `nphi` angles on `nz` planes z = zmin + r·z_step,
+/// each from radius `rmax` around `axis` inwards.
+struct Grid {
+    axis: [f64; 2],
+    rmax: f64,
+    /// Where a ray's search for the skin starts (just outside the head's bounding box).
+    t_start: f64,
+    nphi: usize,
+    dphi: f64,
+    nz: usize,
+    zmin: f64,
+    z_step: f64,
+    /// March step along a ray (half the smallest voxel spacing).
+    step: f64,
+}
+
+impl Grid {
+    fn new(vol: &Volume, head: &[bool], p: &ScanParams) -> Grid {
+        // Axis through the centroid of the head, the head's z range and horizontal bounding box
+        // (slices in parallel).
+        let [nx, ny, _] = vol.dims;
+        let ext = head
+            .par_chunks((nx * ny).max(1))
+            .enumerate()
+            .map(|(k, sl)| {
+                let mut e = Extent::empty();
+                for (a, &h) in sl.iter().enumerate() {
+                    if h {
+                        e.add(vol.to_world([(a % nx) as f64, (a / nx) as f64, k as f64]));
+                    }
+                }
+                e
+            })
+            .reduce(Extent::empty, Extent::merge);
+        let axis = [
+            ext.sum[0] / ext.count.max(1) as f64,
+            ext.sum[1] / ext.count.max(1) as f64,
+        ];
+        let (zmin, zmax) = (ext.lo[2], ext.hi[2]);
+        let (lo, hi) = vol.bounds();
+        let rmax = corner_radius(lo, hi, axis);
+        // Rays start just outside the head's bounding box (the skin field is below the iso level
+        // everywhere else): a trilinear sample sees voxels within one spacing per axis.
+        let margin = 3.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
+        let rhead = corner_radius(ext.lo, ext.hi, axis) + margin;
+        let nphi = (360.0 / p.angle_step_deg).round().max(8.0) as usize;
+        Grid {
+            axis,
+            rmax,
+            t_start: (rmax - rhead).max(0.0),
+            nphi,
+            dphi: 2.0 * PI / nphi as f64,
+            nz: ((zmax - zmin) / p.z_step).floor() as usize + 1,
+            zmin,
+            z_step: p.z_step,
+            step: 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min),
+        }
+    }
+
+    /// φ of angle index k.
+    fn phi(&self, k: usize) -> f64 {
+        -PI + (k as f64 + 0.5) * self.dphi
+    }
+
+    /// z of plane r.
+    fn z(&self, r: usize) -> f64 {
+        self.zmin + r as f64 * self.z_step
+    }
+}
+
+/// A ray's skin or skull point.
+type Hit = Option<[f64; 3]>;
+
+/// One row per z; each node: (skin point, skull point).
+fn cast_rays(
     vol: &Volume,
     skin_field: &[f32],
     bone_field: &[f32],
-    head: &[bool],
     p: &ScanParams,
-) -> ScanResult {
-    // Axis through the centroid of the head, the head's z range and horizontal bounding box
-    // (slices in parallel).
-    let [nx, ny, _] = vol.dims;
-    let ext = head
-        .par_chunks((nx * ny).max(1))
-        .enumerate()
-        .map(|(k, sl)| {
-            let mut e = Extent::empty();
-            for (a, &h) in sl.iter().enumerate() {
-                if h {
-                    e.add(vol.to_world([(a % nx) as f64, (a / nx) as f64, k as f64]));
-                }
-            }
-            e
-        })
-        .reduce(Extent::empty, Extent::merge);
-    let axis = [
-        ext.sum[0] / ext.count.max(1) as f64,
-        ext.sum[1] / ext.count.max(1) as f64,
-    ];
-    let (zmin, zmax) = (ext.lo[2], ext.hi[2]);
-    let (lo, hi) = vol.bounds();
-    let rmax = corner_radius(lo, hi, axis);
-    // Rays start just outside the head's bounding box (the skin field is below the iso level
-    // everywhere else): a trilinear sample sees voxels within one spacing per axis.
-    let margin = 3.0 * vol.spacing.iter().cloned().fold(0.0, f64::max);
-    let rhead = corner_radius(ext.lo, ext.hi, axis) + margin;
-    let t_start = (rmax - rhead).max(0.0);
-    let nphi = (360.0 / p.angle_step_deg).round().max(8.0) as usize;
-    let dphi = 2.0 * PI / nphi as f64;
-    let nz = ((zmax - zmin) / p.z_step).floor() as usize + 1;
-    let step = 0.5 * vol.spacing.iter().cloned().fold(f64::INFINITY, f64::min);
-
-    // One row per z; each node: (skin point, skull point).
-    type Hit = Option<[f64; 3]>;
-    let rows: Vec<Vec<(Hit, Hit)>> = (0..nz)
+    g: &Grid,
+) -> Vec<Vec<(Hit, Hit)>> {
+    let (axis, rmax, step) = (g.axis, g.rmax, g.step);
+    (0..g.nz)
         .into_par_iter()
         .map(|r| {
-            let z = zmin + r as f64 * p.z_step;
-            (0..nphi)
+            let z = g.z(r);
+            (0..g.nphi)
                 .map(|k| {
-                    let phi = -PI + (k as f64 + 0.5) * dphi;
+                    let phi = g.phi(k);
                     let o = [axis[0] + rmax * phi.sin(), axis[1] - rmax * phi.cos(), z];
                     let d = [-phi.sin(), phi.cos(), 0.0];
-                    let Some(ts) =
-                        first_crossing(skin_field, vol, o, d, 0.0, t_start, rmax, step, p.skin_iso)
-                    else {
+                    let Some(ts) = first_crossing(
+                        skin_field, vol, o, d, 0.0, g.t_start, rmax, step, p.skin_iso,
+                    ) else {
                         return (None, None);
                     };
                     let skin = [o[0] + ts * d[0], o[1] + ts * d[1], o[2]];
@@ -196,8 +236,79 @@ pub fn scan(
                 })
                 .collect()
         })
-        .collect();
+        .collect()
+}
 
+/// The mesh of the nodes `pick` selects, with (u, v) = (R0·φ, z) columns: two triangles per
+/// grid cell, one when a corner is missing.
+fn grid_mesh(
+    rows: &[Vec<(Hit, Hit)>],
+    pick: impl Fn(&(Hit, Hit)) -> Hit,
+    g: &Grid,
+    r0: f64,
+) -> Mesh {
+    let (nphi, nz) = (g.nphi, g.nz);
+    let mut index = vec![u32::MAX; nz * nphi];
+    let mut verts = Vec::new();
+    let mut u = Vec::new();
+    let mut v = Vec::new();
+    for (r, row) in rows.iter().enumerate() {
+        for (k, node) in row.iter().enumerate() {
+            if let Some(x) = pick(node) {
+                index[r * nphi + k] = verts.len() as u32;
+                verts.push(x);
+                u.push(r0 * g.phi(k));
+                v.push(g.z(r));
+            }
+        }
+    }
+    let mut tris = Vec::new();
+    for r in 0..nz.saturating_sub(1) {
+        // No wrap across the seam at the back (k = nphi−1 → 0): u is discontinuous there.
+        for k in 0..nphi - 1 {
+            let a = index[r * nphi + k];
+            let b = index[r * nphi + k + 1];
+            let c = index[(r + 1) * nphi + k];
+            let d = index[(r + 1) * nphi + k + 1];
+            // φ grows towards +x and z upwards: (a, b, c) winds with the normal outwards.
+            match (a != u32::MAX, b != u32::MAX, c != u32::MAX, d != u32::MAX) {
+                (true, true, true, true) => {
+                    tris.push([a, b, c]);
+                    tris.push([b, d, c]);
+                }
+                (true, true, true, false) => tris.push([a, b, c]),
+                (true, true, false, true) => tris.push([a, b, d]),
+                (true, false, true, true) => tris.push([a, d, c]),
+                (false, true, true, true) => tris.push([b, d, c]),
+                _ => {}
+            }
+        }
+    }
+    let mut m = Mesh::new(verts, tris);
+    m.vertex_columns = vec![
+        Column {
+            name: "u".into(),
+            values: u,
+        },
+        Column {
+            name: "v".into(),
+            values: v,
+        },
+    ];
+    m.compact();
+    m
+}
+
+pub fn scan(
+    vol: &Volume,
+    skin_field: &[f32],
+    bone_field: &[f32],
+    head: &[bool],
+    p: &ScanParams,
+) -> ScanResult {
+    let g = Grid::new(vol, head, p);
+    let axis = g.axis;
+    let rows = cast_rays(vol, skin_field, bone_field, p, &g);
     let hits: Vec<f64> = rows
         .iter()
         .flatten()
@@ -210,72 +321,18 @@ pub fn scan(
     } else {
         hits.iter().sum::<f64>() / hits.len() as f64
     };
-    let rays = nz * nphi;
     let skin_misses = rows.iter().flatten().filter(|(s, _)| s.is_none()).count();
     let skull_misses = rows
         .iter()
         .flatten()
         .filter(|(s, b)| s.is_some() && b.is_none())
         .count();
-    let build = |pick: &dyn Fn(&(Hit, Hit)) -> Hit| -> Mesh {
-        let mut index = vec![u32::MAX; rays];
-        let mut verts = Vec::new();
-        let mut u = Vec::new();
-        let mut v = Vec::new();
-        for (r, row) in rows.iter().enumerate() {
-            for (k, node) in row.iter().enumerate() {
-                if let Some(x) = pick(node) {
-                    index[r * nphi + k] = verts.len() as u32;
-                    verts.push(x);
-                    u.push(r0 * (-PI + (k as f64 + 0.5) * dphi));
-                    v.push(zmin + r as f64 * p.z_step);
-                }
-            }
-        }
-        let mut tris = Vec::new();
-        for r in 0..nz.saturating_sub(1) {
-            // No wrap across the seam at the back (k = nphi−1 → 0): u is discontinuous there.
-            for k in 0..nphi - 1 {
-                let a = index[r * nphi + k];
-                let b = index[r * nphi + k + 1];
-                let c = index[(r + 1) * nphi + k];
-                let d = index[(r + 1) * nphi + k + 1];
-                // φ grows towards +x and z upwards: (a, b, c) winds with the normal outwards.
-                match (a != u32::MAX, b != u32::MAX, c != u32::MAX, d != u32::MAX) {
-                    (true, true, true, true) => {
-                        tris.push([a, b, c]);
-                        tris.push([b, d, c]);
-                    }
-                    (true, true, true, false) => tris.push([a, b, c]),
-                    (true, true, false, true) => tris.push([a, b, d]),
-                    (true, false, true, true) => tris.push([a, d, c]),
-                    (false, true, true, true) => tris.push([b, d, c]),
-                    _ => {}
-                }
-            }
-        }
-        let mut m = Mesh::new(verts, tris);
-        m.vertex_columns = vec![
-            Column {
-                name: "u".into(),
-                values: u,
-            },
-            Column {
-                name: "v".into(),
-                values: v,
-            },
-        ];
-        m.compact();
-        m
-    };
-    let skin = build(&|n| n.0);
-    let skull = build(&|n| n.1);
     ScanResult {
-        skin,
-        skull,
+        skin: grid_mesh(&rows, |n| n.0, &g, r0),
+        skull: grid_mesh(&rows, |n| n.1, &g, r0),
         axis,
         r0,
-        rays,
+        rays: g.nz * g.nphi,
         skin_misses,
         skull_misses,
     }

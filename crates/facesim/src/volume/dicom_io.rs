@@ -136,6 +136,48 @@ fn normalize(v: [f64; 3]) -> [f64; 3] {
 }
 
 pub fn read_series(dir: &Path) -> Result<Volume> {
+    let files = dicom_files(dir)?;
+    let mut headers = files
+        .iter()
+        .map(|p| read_header(p))
+        .collect::<Result<Vec<_>>>()?;
+    check_one_series(dir, &headers)?;
+    check_same_frame(&headers)?;
+    let first = &headers[0];
+    let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
+    let [row_dir, col_dir, normal] = slice_axes(iop);
+    let pos = |h: &SliceHeader| h.ipp[0] * normal[0] + h.ipp[1] * normal[1] + h.ipp[2] * normal[2];
+    headers.sort_by(|a, b| pos(a).total_cmp(&pos(b)));
+
+    let nz = headers.len();
+    let slice_spacing = if nz > 1 {
+        slice_spacing(&headers, pos)?
+    } else {
+        1.0
+    };
+    let dims = [cols, rows, nz];
+    let spacing = [pixel_spacing[1], pixel_spacing[0], slice_spacing];
+    let direction = [row_dir, col_dir, normal];
+    let origin = headers[0].ipp;
+    Volume::check_geometry(dir, dims, spacing, origin, direction)?;
+    let per_slice = rows * cols;
+    debug_assert!(per_slice * nz <= MAX_VOXELS);
+
+    let mut data = Vec::with_capacity(per_slice * nz);
+    for h in &headers {
+        read_slice(h, per_slice, &mut data)?;
+    }
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data,
+    })
+}
+
+/// The DICOM files of `dir` (not hidden, with the DICM preamble), sorted by name.
+fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| Error::input(dir, e))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -156,13 +198,13 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
             "no DICOM files (with the DICM preamble) in this directory",
         ));
     }
-    let mut headers = files
-        .iter()
-        .map(|p| read_header(p))
-        .collect::<Result<Vec<_>>>()?;
+    Ok(files)
+}
 
+/// Refuse a directory that mixes series, listing them.
+fn check_one_series(dir: &Path, headers: &[SliceHeader]) -> Result<()> {
     let mut series: BTreeMap<&str, (usize, &str)> = BTreeMap::new();
-    for h in &headers {
+    for h in headers {
         let e = series
             .entry(h.series.as_str())
             .or_insert((0, h.series_desc.as_str()));
@@ -191,9 +233,13 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
             ),
         ));
     }
+    Ok(())
+}
 
+/// Every slice readable natively and with the first slice's size, spacing and orientation.
+fn check_same_frame(headers: &[SliceHeader]) -> Result<()> {
     let first = &headers[0];
-    for h in &headers {
+    for h in headers {
         if !NATIVE_TS.contains(&h.ts.as_str()) {
             return Err(Error::input(
                 &h.path,
@@ -225,7 +271,12 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
             ));
         }
     }
-    let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
+    Ok(())
+}
+
+/// Row direction, column direction and slice normal (their cross product) from
+/// ImageOrientationPatient.
+fn slice_axes(iop: [f64; 6]) -> [[f64; 3]; 3] {
     let row_dir = normalize([iop[0], iop[1], iop[2]]);
     let col_dir = normalize([iop[3], iop[4], iop[5]]);
     let normal = normalize([
@@ -233,99 +284,85 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
         row_dir[2] * col_dir[0] - row_dir[0] * col_dir[2],
         row_dir[0] * col_dir[1] - row_dir[1] * col_dir[0],
     ]);
-    let pos = |h: &SliceHeader| h.ipp[0] * normal[0] + h.ipp[1] * normal[1] + h.ipp[2] * normal[2];
-    headers.sort_by(|a, b| pos(a).total_cmp(&pos(b)));
+    [row_dir, col_dir, normal]
+}
 
+/// The spacing of two or more slices sorted by position `pos`: refuses duplicate positions
+/// and uneven gaps (a missing slice).
+fn slice_spacing(headers: &[SliceHeader], pos: impl Fn(&SliceHeader) -> f64) -> Result<f64> {
     let nz = headers.len();
-    let slice_spacing = if nz > 1 {
-        let gaps: Vec<f64> = headers
-            .windows(2)
-            .map(|w| pos(&w[1]) - pos(&w[0]))
-            .collect();
-        for (w, g) in headers.windows(2).zip(&gaps) {
-            if *g < 1e-3 {
-                return Err(Error::input(
-                    &w[1].path,
-                    format!("duplicate slice position (same as {})", w[0].path.display()),
-                ));
-            }
-        }
-        // A missing slice only ever widens a gap, so the smallest gap is the series' spacing.
-        let step = gaps.iter().cloned().fold(f64::INFINITY, f64::min);
-        for (w, g) in headers.windows(2).zip(&gaps) {
-            if (g - step).abs() > 0.05 * step + 1e-3 {
-                return Err(Error::input(
-                    &w[1].path,
-                    format!(
-                        "gap of {g:.3} mm before this slice, {step:.3} mm elsewhere: missing slice or uneven slice spacing"
-                    ),
-                ));
-            }
-        }
-        (pos(&headers[nz - 1]) - pos(&headers[0])) / (nz - 1) as f64
-    } else {
-        1.0
-    };
-    let dims = [cols, rows, nz];
-    let spacing = [pixel_spacing[1], pixel_spacing[0], slice_spacing];
-    let direction = [row_dir, col_dir, normal];
-    let origin = headers[0].ipp;
-    Volume::check_geometry(dir, dims, spacing, origin, direction)?;
-    let per_slice = rows * cols;
-    debug_assert!(per_slice * nz <= MAX_VOXELS);
-
-    let mut data = Vec::with_capacity(per_slice * nz);
-    for h in &headers {
-        let obj = dicom_object::open_file(&h.path)
-            .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
-        let slope = obj
-            .element_opt(tags::RESCALE_SLOPE)
-            .ok()
-            .flatten()
-            .and_then(|e| e.to_float64().ok())
-            .unwrap_or(1.0);
-        let inter = obj
-            .element_opt(tags::RESCALE_INTERCEPT)
-            .ok()
-            .flatten()
-            .and_then(|e| e.to_float64().ok())
-            .unwrap_or(0.0);
-        if !slope.is_finite() || !inter.is_finite() {
+    let gaps: Vec<f64> = headers
+        .windows(2)
+        .map(|w| pos(&w[1]) - pos(&w[0]))
+        .collect();
+    for (w, g) in headers.windows(2).zip(&gaps) {
+        if *g < 1e-3 {
             return Err(Error::input(
-                &h.path,
-                "non-finite RescaleSlope/RescaleIntercept",
+                &w[1].path,
+                format!("duplicate slice position (same as {})", w[0].path.display()),
             ));
         }
-        let pd = obj
-            .decode_pixel_data()
-            .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
-        if pd.number_of_frames() != 1 || pd.samples_per_pixel() != 1 {
+    }
+    // A missing slice only ever widens a gap, so the smallest gap is the series' spacing.
+    let step = gaps.iter().cloned().fold(f64::INFINITY, f64::min);
+    for (w, g) in headers.windows(2).zip(&gaps) {
+        if (g - step).abs() > 0.05 * step + 1e-3 {
             return Err(Error::input(
-                &h.path,
-                "expected one greyscale frame per file",
-            ));
-        }
-        let raw: Vec<f32> = pd
-            .to_vec_with_options(&ConvertOptions::new().with_modality_lut(ModalityLutOption::None))
-            .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
-        if raw.len() != per_slice {
-            return Err(Error::input(
-                &h.path,
+                &w[1].path,
                 format!(
-                    "pixel data has {} values, Rows×Columns = {per_slice} (truncated?)",
-                    raw.len()
+                    "gap of {g:.3} mm before this slice, {step:.3} mm elsewhere: missing slice or uneven slice spacing"
                 ),
             ));
         }
-        data.extend(raw.iter().map(|&v| (v as f64 * slope + inter) as f32));
     }
-    Ok(Volume {
-        dims,
-        spacing,
-        origin,
-        direction,
-        data,
-    })
+    Ok((pos(&headers[nz - 1]) - pos(&headers[0])) / (nz - 1) as f64)
+}
+
+/// Append the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) to `data`.
+fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<()> {
+    let obj = dicom_object::open_file(&h.path)
+        .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
+    let slope = obj
+        .element_opt(tags::RESCALE_SLOPE)
+        .ok()
+        .flatten()
+        .and_then(|e| e.to_float64().ok())
+        .unwrap_or(1.0);
+    let inter = obj
+        .element_opt(tags::RESCALE_INTERCEPT)
+        .ok()
+        .flatten()
+        .and_then(|e| e.to_float64().ok())
+        .unwrap_or(0.0);
+    if !slope.is_finite() || !inter.is_finite() {
+        return Err(Error::input(
+            &h.path,
+            "non-finite RescaleSlope/RescaleIntercept",
+        ));
+    }
+    let pd = obj
+        .decode_pixel_data()
+        .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
+    if pd.number_of_frames() != 1 || pd.samples_per_pixel() != 1 {
+        return Err(Error::input(
+            &h.path,
+            "expected one greyscale frame per file",
+        ));
+    }
+    let raw: Vec<f32> = pd
+        .to_vec_with_options(&ConvertOptions::new().with_modality_lut(ModalityLutOption::None))
+        .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
+    if raw.len() != per_slice {
+        return Err(Error::input(
+            &h.path,
+            format!(
+                "pixel data has {} values, Rows×Columns = {per_slice} (truncated?)",
+                raw.len()
+            ),
+        ));
+    }
+    data.extend(raw.iter().map(|&v| (v as f64 * slope + inter) as f32));
+    Ok(())
 }
 
 fn ds(values: &[f64]) -> PrimitiveValue {
@@ -351,104 +388,12 @@ pub fn write_series(vol: &Volume, dest: &Path, series_uid_suffix: &str) -> Resul
     let tmp = parent.join(format!(".facesim-tmp-dicom-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
     std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
-    let root = "1.2.826.0.1.3680043.10.1452";
-    let study = format!("{root}.1.{series_uid_suffix}");
-    let series = format!("{root}.2.{series_uid_suffix}");
-    let frame = format!("{root}.3.{series_uid_suffix}");
-    let [nx, ny, nz] = vol.dims;
-    let iop = [
-        vol.direction[0][0],
-        vol.direction[0][1],
-        vol.direction[0][2],
-        vol.direction[1][0],
-        vol.direction[1][1],
-        vol.direction[1][2],
-    ];
+    let ids = SeriesIds::new(vol, series_uid_suffix);
     let ct = uids::CT_IMAGE_STORAGE;
     let result = (|| -> Result<()> {
-        for k in 0..nz {
-            let sop = format!("{root}.4.{series_uid_suffix}.{}", k + 1);
-            let ipp = vol.to_world([0.0, 0.0, k as f64]);
-            let mut obj = InMemDicomObject::new_empty();
-            let mut put = |tag, vr, v: PrimitiveValue| {
-                obj.put(DataElement::new(tag, vr, v));
-            };
-            put(tags::SOP_CLASS_UID, VR::UI, PrimitiveValue::from(ct));
-            put(
-                tags::SOP_INSTANCE_UID,
-                VR::UI,
-                PrimitiveValue::from(sop.as_str()),
-            );
-            put(
-                tags::STUDY_INSTANCE_UID,
-                VR::UI,
-                PrimitiveValue::from(study.as_str()),
-            );
-            put(
-                tags::SERIES_INSTANCE_UID,
-                VR::UI,
-                PrimitiveValue::from(series.as_str()),
-            );
-            put(
-                tags::FRAME_OF_REFERENCE_UID,
-                VR::UI,
-                PrimitiveValue::from(frame.as_str()),
-            );
-            put(tags::MODALITY, VR::CS, PrimitiveValue::from("CT"));
-            put(
-                tags::PATIENT_NAME,
-                VR::PN,
-                PrimitiveValue::from("Phantom^Facesim"),
-            );
-            put(
-                tags::PATIENT_ID,
-                VR::LO,
-                PrimitiveValue::from("FACESIM-PHANTOM"),
-            );
-            put(
-                tags::SERIES_DESCRIPTION,
-                VR::LO,
-                PrimitiveValue::from("facesim phantom"),
-            );
-            put(
-                tags::INSTANCE_NUMBER,
-                VR::IS,
-                PrimitiveValue::from(format!("{}", k + 1).as_str()),
-            );
-            put(tags::IMAGE_POSITION_PATIENT, VR::DS, ds(&ipp));
-            put(tags::IMAGE_ORIENTATION_PATIENT, VR::DS, ds(&iop));
-            put(
-                tags::PIXEL_SPACING,
-                VR::DS,
-                ds(&[vol.spacing[1], vol.spacing[0]]),
-            );
-            put(tags::SLICE_THICKNESS, VR::DS, ds(&[vol.spacing[2]]));
-            put(tags::SAMPLES_PER_PIXEL, VR::US, PrimitiveValue::from(1u16));
-            put(
-                tags::PHOTOMETRIC_INTERPRETATION,
-                VR::CS,
-                dicom_value!(Str, "MONOCHROME2"),
-            );
-            put(tags::ROWS, VR::US, PrimitiveValue::from(ny as u16));
-            put(tags::COLUMNS, VR::US, PrimitiveValue::from(nx as u16));
-            put(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(16u16));
-            put(tags::BITS_STORED, VR::US, PrimitiveValue::from(16u16));
-            put(tags::HIGH_BIT, VR::US, PrimitiveValue::from(15u16));
-            put(
-                tags::PIXEL_REPRESENTATION,
-                VR::US,
-                PrimitiveValue::from(1u16),
-            );
-            put(tags::RESCALE_INTERCEPT, VR::DS, ds(&[0.0]));
-            put(tags::RESCALE_SLOPE, VR::DS, ds(&[1.0]));
-            let start = k * nx * ny;
-            let mut bytes = Vec::with_capacity(nx * ny * 2);
-            for &v in &vol.data[start..start + nx * ny] {
-                let s = v.round().clamp(-32768.0, 32767.0) as i16;
-                bytes.extend_from_slice(&s.to_le_bytes());
-            }
-            put(tags::PIXEL_DATA, VR::OW, PrimitiveValue::from(bytes));
-            let file = obj
+        for k in 0..vol.dims[2] {
+            let sop = format!("{}.4.{series_uid_suffix}.{}", ids.root, k + 1);
+            let file = slice_object(vol, k, &ids, &sop)
                 .with_meta(
                     FileMetaTableBuilder::new()
                         .transfer_syntax(uids::EXPLICIT_VR_LITTLE_ENDIAN)
@@ -466,6 +411,121 @@ pub fn write_series(vol: &Volume, dest: &Path, series_uid_suffix: &str) -> Resul
         return Err(e);
     }
     replace_dir(&tmp, dest)
+}
+
+/// What every slice of a written series shares: its UIDs and ImageOrientationPatient.
+struct SeriesIds {
+    root: &'static str,
+    study: String,
+    series: String,
+    frame: String,
+    iop: [f64; 6],
+}
+
+impl SeriesIds {
+    fn new(vol: &Volume, series_uid_suffix: &str) -> Self {
+        let root = "1.2.826.0.1.3680043.10.1452";
+        SeriesIds {
+            root,
+            study: format!("{root}.1.{series_uid_suffix}"),
+            series: format!("{root}.2.{series_uid_suffix}"),
+            frame: format!("{root}.3.{series_uid_suffix}"),
+            iop: [
+                vol.direction[0][0],
+                vol.direction[0][1],
+                vol.direction[0][2],
+                vol.direction[1][0],
+                vol.direction[1][1],
+                vol.direction[1][2],
+            ],
+        }
+    }
+}
+
+/// Slice `k` of `vol` as a CT image (int16 HU, RescaleSlope 1, RescaleIntercept 0).
+fn slice_object(vol: &Volume, k: usize, ids: &SeriesIds, sop: &str) -> InMemDicomObject {
+    let [nx, ny, _] = vol.dims;
+    let ipp = vol.to_world([0.0, 0.0, k as f64]);
+    let mut obj = InMemDicomObject::new_empty();
+    let mut put = |tag, vr, v: PrimitiveValue| {
+        obj.put(DataElement::new(tag, vr, v));
+    };
+    put(
+        tags::SOP_CLASS_UID,
+        VR::UI,
+        PrimitiveValue::from(uids::CT_IMAGE_STORAGE),
+    );
+    put(tags::SOP_INSTANCE_UID, VR::UI, PrimitiveValue::from(sop));
+    put(
+        tags::STUDY_INSTANCE_UID,
+        VR::UI,
+        PrimitiveValue::from(ids.study.as_str()),
+    );
+    put(
+        tags::SERIES_INSTANCE_UID,
+        VR::UI,
+        PrimitiveValue::from(ids.series.as_str()),
+    );
+    put(
+        tags::FRAME_OF_REFERENCE_UID,
+        VR::UI,
+        PrimitiveValue::from(ids.frame.as_str()),
+    );
+    put(tags::MODALITY, VR::CS, PrimitiveValue::from("CT"));
+    put(
+        tags::PATIENT_NAME,
+        VR::PN,
+        PrimitiveValue::from("Phantom^Facesim"),
+    );
+    put(
+        tags::PATIENT_ID,
+        VR::LO,
+        PrimitiveValue::from("FACESIM-PHANTOM"),
+    );
+    put(
+        tags::SERIES_DESCRIPTION,
+        VR::LO,
+        PrimitiveValue::from("facesim phantom"),
+    );
+    put(
+        tags::INSTANCE_NUMBER,
+        VR::IS,
+        PrimitiveValue::from(format!("{}", k + 1).as_str()),
+    );
+    put(tags::IMAGE_POSITION_PATIENT, VR::DS, ds(&ipp));
+    put(tags::IMAGE_ORIENTATION_PATIENT, VR::DS, ds(&ids.iop));
+    put(
+        tags::PIXEL_SPACING,
+        VR::DS,
+        ds(&[vol.spacing[1], vol.spacing[0]]),
+    );
+    put(tags::SLICE_THICKNESS, VR::DS, ds(&[vol.spacing[2]]));
+    put(tags::SAMPLES_PER_PIXEL, VR::US, PrimitiveValue::from(1u16));
+    put(
+        tags::PHOTOMETRIC_INTERPRETATION,
+        VR::CS,
+        dicom_value!(Str, "MONOCHROME2"),
+    );
+    put(tags::ROWS, VR::US, PrimitiveValue::from(ny as u16));
+    put(tags::COLUMNS, VR::US, PrimitiveValue::from(nx as u16));
+    put(tags::BITS_ALLOCATED, VR::US, PrimitiveValue::from(16u16));
+    put(tags::BITS_STORED, VR::US, PrimitiveValue::from(16u16));
+    put(tags::HIGH_BIT, VR::US, PrimitiveValue::from(15u16));
+    put(
+        tags::PIXEL_REPRESENTATION,
+        VR::US,
+        PrimitiveValue::from(1u16),
+    );
+    put(tags::RESCALE_INTERCEPT, VR::DS, ds(&[0.0]));
+    put(tags::RESCALE_SLOPE, VR::DS, ds(&[1.0]));
+    let start = k * nx * ny;
+    let mut bytes = Vec::with_capacity(nx * ny * 2);
+    for &v in &vol.data[start..start + nx * ny] {
+        let s = v.round().clamp(-32768.0, 32767.0) as i16;
+        bytes.extend_from_slice(&s.to_le_bytes());
+    }
+    put(tags::PIXEL_DATA, VR::OW, PrimitiveValue::from(bytes));
+    obj
 }
 
 /// Move a finished directory into place, replacing an older one only after the new one exists.

@@ -14,80 +14,17 @@ use std::io::Read;
 use std::path::Path;
 
 pub fn read(path: &Path) -> Result<Volume> {
-    let file = std::fs::File::open(path).map_err(|e| Error::input(path, e))?;
-    let mut archive =
-        tar::Archive::new(flate2::read::GzDecoder::new(std::io::BufReader::new(file)));
-    let mut files: HashMap<String, Vec<u8>> = HashMap::new();
-    let entries = archive
-        .entries()
-        .map_err(|e| Error::input(path, format!("not a gzipped tar InVesalius project ({e})")))?;
-    for entry in entries {
-        let mut entry =
-            entry.map_err(|e| Error::input(path, format!("corrupt project archive ({e})")))?;
-        let name = entry
-            .path()
-            .ok()
-            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().to_string()))
-            .unwrap_or_default();
-        // Surfaces and masks are InVesalius' own derived data; only the plist and matrix matter.
-        if name.ends_with(".vtp") || name.starts_with("mask_") || name.is_empty() {
-            continue;
-        }
-        let size = entry.size();
-        if size > (super::MAX_VOXELS as u64) * 8 {
-            return Err(Error::input(
-                path,
-                format!("member {name} is {size} bytes: too large"),
-            ));
-        }
-        // The size is the archive's claim: read at most that much, without reserving it first
-        // (a corrupt header must not make us allocate gigabytes).
-        let mut buf = Vec::new();
-        (&mut entry)
-            .take(size)
-            .read_to_end(&mut buf)
-            .map_err(|e| Error::input(path, format!("corrupt project archive at {name} ({e})")))?;
-        files.insert(name, buf);
-    }
+    let files = read_members(path)?;
     let main = files
         .get("main.plist")
         .ok_or_else(|| Error::input(path, "no main.plist in the project"))?;
-    let plist: plist::Value = plist::from_bytes(main)
-        .map_err(|e| Error::input(path, format!("unreadable main.plist ({e})")))?;
-    let dict = plist
-        .as_dictionary()
-        .ok_or_else(|| Error::input(path, "main.plist is not a dictionary"))?;
-    let matrix = dict
-        .get("matrix")
-        .and_then(|m| m.as_dictionary())
-        .ok_or_else(|| Error::input(path, "main.plist has no matrix entry"))?;
-    let dtype = matrix
-        .get("dtype")
-        .and_then(|v| v.as_string())
-        .unwrap_or("int16");
-    let fname = matrix
-        .get("filename")
-        .and_then(|v| v.as_string())
-        .unwrap_or("matrix.dat");
-    let shape: Vec<usize> = matrix
-        .get("shape")
-        .and_then(|v| v.as_array())
-        .map(|a| {
-            a.iter()
-                .filter_map(|x| x.as_signed_integer())
-                .map(|x| x.max(0) as usize)
-                .collect()
-        })
-        .unwrap_or_default();
-    let spacing: Vec<f64> = dict
-        .get("spacing")
-        .and_then(|v| v.as_array())
-        .map(|a| {
-            a.iter()
-                .filter_map(|x| x.as_real().or(x.as_signed_integer().map(|i| i as f64)))
-                .collect()
-        })
-        .unwrap_or_default();
+    let MainPlist {
+        dtype,
+        fname,
+        shape,
+        spacing,
+    } = read_main_plist(path, main)?;
+    let (dtype, fname) = (dtype.as_str(), fname.as_str());
     if shape.len() != 3 || spacing.len() != 3 {
         return Err(Error::input(
             path,
@@ -127,7 +64,112 @@ pub fn read(path: &Path) -> Result<Volume> {
             ),
         ));
     }
-    let data: Vec<f32> = match dtype {
+    Ok(Volume {
+        dims,
+        spacing,
+        origin,
+        direction,
+        data: decode(raw, dtype),
+    })
+}
+
+/// The project's members by file name, InVesalius' derived surfaces and masks left out.
+fn read_members(path: &Path) -> Result<HashMap<String, Vec<u8>>> {
+    let file = std::fs::File::open(path).map_err(|e| Error::input(path, e))?;
+    let mut archive =
+        tar::Archive::new(flate2::read::GzDecoder::new(std::io::BufReader::new(file)));
+    let mut files: HashMap<String, Vec<u8>> = HashMap::new();
+    let entries = archive
+        .entries()
+        .map_err(|e| Error::input(path, format!("not a gzipped tar InVesalius project ({e})")))?;
+    for entry in entries {
+        let mut entry =
+            entry.map_err(|e| Error::input(path, format!("corrupt project archive ({e})")))?;
+        let name = entry
+            .path()
+            .ok()
+            .and_then(|p| p.file_name().map(|n| n.to_string_lossy().to_string()))
+            .unwrap_or_default();
+        // Surfaces and masks are InVesalius' own derived data; only the plist and matrix matter.
+        if name.ends_with(".vtp") || name.starts_with("mask_") || name.is_empty() {
+            continue;
+        }
+        let size = entry.size();
+        if size > (super::MAX_VOXELS as u64) * 8 {
+            return Err(Error::input(
+                path,
+                format!("member {name} is {size} bytes: too large"),
+            ));
+        }
+        // The size is the archive's claim: read at most that much, without reserving it first
+        // (a corrupt header must not make us allocate gigabytes).
+        let mut buf = Vec::new();
+        (&mut entry)
+            .take(size)
+            .read_to_end(&mut buf)
+            .map_err(|e| Error::input(path, format!("corrupt project archive at {name} ({e})")))?;
+        files.insert(name, buf);
+    }
+    Ok(files)
+}
+
+/// What main.plist says about the voxel matrix (shape and spacing unchecked).
+struct MainPlist {
+    dtype: String,
+    fname: String,
+    shape: Vec<usize>,
+    spacing: Vec<f64>,
+}
+
+fn read_main_plist(path: &Path, main: &[u8]) -> Result<MainPlist> {
+    let plist: plist::Value = plist::from_bytes(main)
+        .map_err(|e| Error::input(path, format!("unreadable main.plist ({e})")))?;
+    let dict = plist
+        .as_dictionary()
+        .ok_or_else(|| Error::input(path, "main.plist is not a dictionary"))?;
+    let matrix = dict
+        .get("matrix")
+        .and_then(|m| m.as_dictionary())
+        .ok_or_else(|| Error::input(path, "main.plist has no matrix entry"))?;
+    let dtype = matrix
+        .get("dtype")
+        .and_then(|v| v.as_string())
+        .unwrap_or("int16");
+    let fname = matrix
+        .get("filename")
+        .and_then(|v| v.as_string())
+        .unwrap_or("matrix.dat");
+    let shape: Vec<usize> = matrix
+        .get("shape")
+        .and_then(|v| v.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_signed_integer())
+                .map(|x| x.max(0) as usize)
+                .collect()
+        })
+        .unwrap_or_default();
+    let spacing: Vec<f64> = dict
+        .get("spacing")
+        .and_then(|v| v.as_array())
+        .map(|a| {
+            a.iter()
+                .filter_map(|x| x.as_real().or(x.as_signed_integer().map(|i| i as f64)))
+                .collect()
+        })
+        .unwrap_or_default();
+    Ok(MainPlist {
+        dtype: dtype.to_string(),
+        fname: fname.to_string(),
+        shape,
+        spacing,
+    })
+}
+
+/// The voxel values of a raw little-endian matrix of `dtype` (one of those `read` accepts;
+/// int8 otherwise).
+fn decode(raw: &[u8], dtype: &str) -> Vec<f32> {
+    match dtype {
         "int16" => raw
             .chunks_exact(2)
             .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
@@ -146,12 +188,5 @@ pub fn read(path: &Path) -> Result<Volume> {
             .collect(),
         "uint8" => raw.iter().map(|&b| b as f32).collect(),
         _ => raw.iter().map(|&b| b as i8 as f32).collect(),
-    };
-    Ok(Volume {
-        dims,
-        spacing,
-        origin,
-        direction,
-        data,
-    })
+    }
 }

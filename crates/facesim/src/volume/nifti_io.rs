@@ -60,14 +60,27 @@ pub fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
     ]
 }
 
-/// Read the header only and check it: dimensions, spacing and type are validated before any
-/// voxel memory is allocated.
 /// dims, spacing, origin, direction of a checked header.
 type Geometry = ([usize; 3], [f64; 3], [f64; 3], [[f64; 3]; 3]);
 
+/// Read the header only and check it: dimensions, spacing and type are validated before any
+/// voxel memory is allocated.
 fn read_checked_header(path: &Path) -> Result<Geometry> {
     let h = NiftiHeader::from_file(path)
         .map_err(|e| Error::input(path, format!("not a readable NIfTI-1 file ({e})")))?;
+    let dims = checked_dims(path, &h)?;
+    check_type_and_pixdim(path, &h)?;
+    let (spacing, origin, direction) = lps_frame(&h);
+    Volume::check_geometry(path, dims, spacing, origin, direction)?;
+    if !h.scl_slope.is_finite() || !h.scl_inter.is_finite() {
+        return Err(Error::input(path, "non-finite scl_slope/scl_inter"));
+    }
+    check_length(path, &h, dims)?;
+    Ok((dims, spacing, origin, direction))
+}
+
+/// The volume's dimensions: a 2-D image is one slice; higher dimensions must all be 1.
+fn checked_dims(path: &Path, h: &NiftiHeader) -> Result<[usize; 3]> {
     let ndim = h.dim[0] as usize;
     if !(2..=7).contains(&ndim) {
         return Err(Error::input(
@@ -88,11 +101,15 @@ fn read_checked_header(path: &Path) -> Result<Geometry> {
             ),
         ));
     }
-    let dims = [
+    Ok([
         h.dim[1] as usize,
         h.dim[2] as usize,
         if ndim >= 3 { h.dim[3] as usize } else { 1 },
-    ];
+    ])
+}
+
+/// A datatype `read` converts, and (without an sform) a positive voxel size.
+fn check_type_and_pixdim(path: &Path, h: &NiftiHeader) -> Result<()> {
     match h.data_type() {
         Ok(
             NiftiType::Uint8
@@ -129,7 +146,12 @@ fn read_checked_header(path: &Path) -> Result<Geometry> {
             }
         }
     }
-    let ras = header_affine(&h);
+    Ok(())
+}
+
+/// Spacing, origin and direction in LPS from the header's RAS affine.
+fn lps_frame(h: &NiftiHeader) -> ([f64; 3], [f64; 3], [[f64; 3]; 3]) {
+    let ras = header_affine(h);
     // RAS → LPS: negate rows x and y.
     let sign = [-1.0, -1.0, 1.0];
     let mut spacing = [0.0; 3];
@@ -149,11 +171,11 @@ fn read_checked_header(path: &Path) -> Result<Geometry> {
         ras[1][3] * sign[1],
         ras[2][3] * sign[2],
     ];
-    Volume::check_geometry(path, dims, spacing, origin, direction)?;
-    if !h.scl_slope.is_finite() || !h.scl_inter.is_finite() {
-        return Err(Error::input(path, "non-finite scl_slope/scl_inter"));
-    }
-    // An uncompressed file shorter than its header promises is truncated: say so up front.
+    (spacing, origin, direction)
+}
+
+/// An uncompressed file shorter than its header promises is truncated: say so up front.
+fn check_length(path: &Path, h: &NiftiHeader, dims: [usize; 3]) -> Result<()> {
     let name = path.to_string_lossy().to_lowercase();
     if name.ends_with(".nii") {
         let need = h.vox_offset.max(352.0) as u64
@@ -166,7 +188,7 @@ fn read_checked_header(path: &Path) -> Result<Geometry> {
             ));
         }
     }
-    Ok((dims, spacing, origin, direction))
+    Ok(())
 }
 
 pub fn read(path: &Path) -> Result<Volume> {
