@@ -3,6 +3,7 @@
 pub mod assembly;
 pub mod element;
 pub mod jet;
+pub mod pcg;
 pub mod precond;
 pub mod preload;
 pub mod quadrature;
