@@ -2,9 +2,9 @@
 //! K shared by x, y and z, Dirichlet conditions, and faer's sparse Cholesky factored once and
 //! solved for several right-hand sides.
 //!
-//! DOF numbering: vertex k owns 3k (value), 3k+1 (∂u), 3k+2 (∂v); edge e owns 3·nv + e (the
-//! cross-boundary derivative along the edge's global normal, eq. 11).
+//! The DOF numbering is fem/dofs.rs's.
 
+use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
 use crate::error::{Error, NumericalKind, Result};
 use faer::Side;
@@ -93,16 +93,21 @@ impl FemMesh {
         })
     }
 
+    /// The mesh's C1 DOF numbering.
+    pub fn dofs(&self) -> Dofs {
+        Dofs::new(self.uv.len(), self.edges.len())
+    }
+
     pub fn ndof(&self) -> usize {
-        3 * self.uv.len() + self.edges.len()
+        self.dofs().ndof()
     }
 
     /// Global DOFs of triangle t in the element's local order.
     pub fn element_dofs(&self, t: usize) -> [usize; NDOF] {
         let tri = self.tris[t];
-        let nv3 = 3 * self.uv.len();
+        let dofs = self.dofs();
         let e = self.tri_edges[t];
-        let v = |k: usize| 3 * tri[k] as usize;
+        let v = |k: usize| dofs.value(tri[k] as usize);
         [
             v(0),
             v(0) + 1,
@@ -113,9 +118,9 @@ impl FemMesh {
             v(2),
             v(2) + 1,
             v(2) + 2,
-            nv3 + e[0] as usize,
-            nv3 + e[1] as usize,
-            nv3 + e[2] as usize,
+            dofs.edge(e[0] as usize),
+            dofs.edge(e[1] as usize),
+            dofs.edge(e[2] as usize),
         ]
     }
 
@@ -161,7 +166,8 @@ impl FemMesh {
     /// from the triangles containing its vertex or edge, so no global sort of the ~78 triplets
     /// per element is needed.
     fn gather_lower(&self, per: &[ElementSystem]) -> Vec<(usize, usize, f64)> {
-        let nv = self.uv.len();
+        let dofs = self.dofs();
+        let nv = dofs.nv;
         // Triangles per vertex, ascending (counting sort).
         let mut start = vec![0usize; nv + 1];
         for t in &self.tris {
@@ -192,15 +198,16 @@ impl FemMesh {
                 }
             }
         }
-        let columns: Vec<Vec<(usize, usize, f64)>> = (0..self.ndof())
+        let columns: Vec<Vec<(usize, usize, f64)>> = (0..dofs.ndof())
             .into_par_iter()
             .with_min_len(256)
             .map(|c| {
-                let tris: &[u32] = if c < 3 * nv {
-                    &vt[start[c / 3]..start[c / 3 + 1]]
-                } else {
-                    let e = &et[c - 3 * nv];
-                    if e[1] == u32::MAX { &e[..1] } else { &e[..] }
+                let tris: &[u32] = match dofs.owner(c) {
+                    Owner::Vertex(v) => &vt[start[v]..start[v + 1]],
+                    Owner::Edge(e) => {
+                        let e = &et[e];
+                        if e[1] == u32::MAX { &e[..1] } else { &e[..] }
+                    }
                 };
                 let mut col: Vec<(usize, f64)> = Vec::with_capacity(tris.len() * NDOF);
                 for &t in tris {
@@ -242,7 +249,8 @@ impl FemMesh {
         material: &(dyn Fn(usize) -> Material + Sync),
         fixed: &[bool],
     ) -> Result<()> {
-        let nv = self.uv.len();
+        let dofs = self.dofs();
+        let nv = dofs.nv;
         let mut parent: Vec<usize> = (0..nv).collect();
         fn find(p: &mut [usize], mut x: usize) -> usize {
             while p[x] != x {
@@ -269,8 +277,8 @@ impl FemMesh {
         }
         for v in 0..nv {
             if let Some(e) = piece.get_mut(&find(&mut parent, v)) {
-                e[3] |= fixed[3 * v];
-                e[4] |= fixed[3 * v] && fixed[3 * v + 1] && fixed[3 * v + 2];
+                e[3] |= fixed[dofs.value(v)];
+                e[4] |= dofs.vertex(v).all(|g| fixed[g]);
             }
         }
         for (root, [found, stretch, bend, value, full]) in piece {
@@ -455,16 +463,16 @@ fn split(k: &[(usize, usize, f64)], free_index: &[usize], nf: usize) -> Result<S
 /// Boundary conditions from rigid vertices (Koch §4.1): a rigid vertex has value and gradient
 /// fixed; an edge's cross-boundary derivative is fixed when both its ends are rigid.
 pub fn rigid_dofs(mesh: &FemMesh, rigid: &[bool]) -> Vec<bool> {
-    let mut fixed = vec![false; mesh.ndof()];
+    let dofs = mesh.dofs();
+    let mut fixed = vec![false; dofs.ndof()];
     for (v, &r) in rigid.iter().enumerate() {
         if r {
-            fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
+            fixed[dofs.vertex(v)].iter_mut().for_each(|f| *f = true);
         }
     }
-    let nv3 = 3 * mesh.uv.len();
     for (e, ed) in mesh.edges.iter().enumerate() {
         if rigid[ed[0] as usize] && rigid[ed[1] as usize] {
-            fixed[nv3 + e] = true;
+            fixed[dofs.edge(e)] = true;
         }
     }
     fixed

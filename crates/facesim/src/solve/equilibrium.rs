@@ -19,6 +19,7 @@
 use super::{Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
+use crate::fem::dofs::Dofs;
 use crate::fem::pcg::pcg;
 use crate::fem::precond::Precond;
 use crate::mesh::{norm, sub};
@@ -72,6 +73,7 @@ struct Tangent {
 
 /// The skin vertices carrying springs (sorted), each with one 3×3 Hessian block.
 struct SpringBlocks {
+    dofs: Dofs,
     vertices: Vec<usize>,
     slot: HashMap<usize, usize>,
 }
@@ -82,17 +84,22 @@ impl SpringBlocks {
         vertices.sort_unstable();
         vertices.dedup();
         let slot = vertices.iter().enumerate().map(|(n, &i)| (i, n)).collect();
-        SpringBlocks { vertices, slot }
+        SpringBlocks {
+            dofs: pr.fem.dofs(),
+            vertices,
+            slot,
+        }
     }
 
     /// Gradient and Hessians of the spring energy at `a`, attachments at `xb`.
     fn tangent(&self, pr: &Problem, a: &[Vec<f64>; 3], xb: &[[f64; 3]]) -> Tangent {
-        let nd = pr.fem.ndof();
+        let dofs = self.dofs;
+        let nd = dofs.ndof();
         let mut grad = [vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]];
         let mut hess = vec![[[0.0; 3]; 3]; self.vertices.len()];
         let mut clamped = vec![[[0.0; 3]; 3]; self.vertices.len()];
         for (s, w) in pr.springs.springs.iter().zip(&pr.weight) {
-            let g = 3 * s.skin;
+            let g = dofs.value(s.skin);
             let xs = [0, 1, 2].map(|c| a[c][g]);
             let d = sub(xs, xb[s.bone]);
             let l = norm(d).max(1e-12);
@@ -133,7 +140,7 @@ impl SpringBlocks {
             );
         }
         for (n, &i) in self.vertices.iter().enumerate() {
-            let g = 3 * i;
+            let g = self.dofs.value(i);
             for r in 0..3 {
                 for c in 0..=r {
                     t.push((r * nd + g, c * nd + g, hess[n][r][c]));
@@ -177,7 +184,7 @@ impl<'a> Newton<'a> {
         let precond = {
             let mut d = vec![0.0; nd];
             for (n, &i) in blocks.vertices.iter().enumerate() {
-                d[3 * i] = (h0[n][0][0] + h0[n][1][1] + h0[n][2][2]) / 3.0;
+                d[blocks.dofs.value(i)] = (h0[n][0][0] + h0[n][1][1] + h0[n][2][2]) / 3.0;
             }
             Precond::new(nd, &pr.k, &d, &pr.fixed).map_err(|e| {
                 Error::numerical(
@@ -215,7 +222,7 @@ impl<'a> Newton<'a> {
         let nd = self.nd;
         let mut y = self.k_rows.apply3(v, nd);
         for (n, &i) in self.blocks.vertices.iter().enumerate() {
-            let g = 3 * i;
+            let g = self.blocks.dofs.value(i);
             for r in 0..3 {
                 for c in 0..3 {
                     y[r * nd + g] += h[n][r][c] * v[c * nd + g];

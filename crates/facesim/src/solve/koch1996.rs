@@ -21,6 +21,7 @@ pub(super) fn solve(pr: &Problem) -> Result<([Vec<f64>; 3], Vec<StepRecord>)> {
     let sys = System::new(nd, pr.k.clone(), &pr.fixed)?;
     let f_init: Vec<Vec<f64>> = a_init.iter().map(|x| multiply(&pr.k, x)).collect();
     let max_move = max_bone_move(springs, pr.plan);
+    let dofs = pr.fem.dofs();
     let mut a = a_init.clone();
     let mut history = Vec::new();
     for step in 1..=p.steps {
@@ -30,11 +31,12 @@ pub(super) fn solve(pr: &Problem) -> Result<([Vec<f64>; 3], Vec<StepRecord>)> {
         // F_init + F_def (eq. 22), F_def lumped at the value DOFs.
         let mut f = f_init.clone();
         for (s, w) in springs.springs.iter().zip(&pr.weight) {
-            let xs = [0, 1, 2].map(|c| a[c][3 * s.skin]);
+            let g = dofs.value(s.skin);
+            let xs = [0, 1, 2].map(|c| a[c][g]);
             let d = sub(xs, xb[s.bone]);
             let l = norm(d).max(1e-12);
             for c in 0..3 {
-                f[c][3 * s.skin] += w * (s.rest - l) * d[c] / l;
+                f[c][g] += w * (s.rest - l) * d[c] / l;
             }
         }
         let sol = sys.solve(&f, a_init);

@@ -157,8 +157,12 @@ impl Problem<'_> {
 
     /// Largest skin displacement from a_init over the vertices.
     fn max_displacement(&self, a: &[Vec<f64>; 3]) -> f64 {
+        let dofs = self.fem.dofs();
         (0..self.skin.vertices.len())
-            .map(|i| norm([0, 1, 2].map(|c| a[c][3 * i] - self.a_init[c][3 * i])))
+            .map(|i| {
+                let g = dofs.value(i);
+                norm([0, 1, 2].map(|c| a[c][g] - self.a_init[c][g]))
+            })
             .fold(0.0, f64::max)
     }
 }
@@ -225,7 +229,10 @@ fn solve_mesh(
         SolveModel::Equilibrium => equilibrium::solve(&pr)?,
     };
     let nv = skin.vertices.len();
-    let positions: Vec<[f64; 3]> = (0..nv).map(|i| [0, 1, 2].map(|c| a[c][3 * i])).collect();
+    let dofs = pr.fem.dofs();
+    let positions: Vec<[f64; 3]> = (0..nv)
+        .map(|i| [0, 1, 2].map(|c| a[c][dofs.value(i)]))
+        .collect();
     checks::check_not_through_skin(skin, &positions, springs, plan)?;
     let unknowns = 3 * (pr.fem.ndof() - pr.fixed.iter().filter(|f| **f).count());
     Ok(Solution {

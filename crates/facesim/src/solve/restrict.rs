@@ -110,15 +110,15 @@ impl Restriction {
         piece: &FemMesh,
         edges: &[Option<usize>],
     ) -> [Vec<f64>; 3] {
-        let (nv_sub, nv) = (piece.uv.len(), fem.uv.len());
+        let (sub, full) = (piece.dofs(), fem.dofs());
         [0, 1, 2].map(|c| {
-            let mut x = vec![0.0; piece.ndof()];
+            let mut x = vec![0.0; sub.ndof()];
             for (i, &g) in self.to_full.iter().enumerate() {
-                x[3 * i..3 * i + 3].copy_from_slice(&a[c][3 * g..3 * g + 3]);
+                x[sub.vertex(i)].copy_from_slice(&a[c][full.vertex(g)]);
             }
             for (e, fe) in edges.iter().enumerate() {
                 if let Some(fe) = fe {
-                    x[3 * nv_sub + e] = a[c][3 * nv + fe];
+                    x[sub.edge(e)] = a[c][full.edge(*fe)];
                 }
             }
             x
@@ -135,13 +135,11 @@ impl Restriction {
         s: &Solution,
         edges: &[Option<usize>],
     ) {
-        let (nv_sub, nv) = (s.fem.uv.len(), fem.uv.len());
+        let (sub, full) = (s.fem.dofs(), fem.dofs());
         for c in 0..3 {
             for (i, &g) in self.to_full.iter().enumerate() {
                 if !self.rigid[i] {
-                    for k in 0..3 {
-                        a[c][3 * g + k] = s.a[c][3 * i + k];
-                    }
+                    a[c][full.vertex(g)].copy_from_slice(&s.a[c][sub.vertex(i)]);
                 }
             }
             for (e, ed) in s.fem.edges.iter().enumerate() {
@@ -149,7 +147,7 @@ impl Restriction {
                     continue;
                 }
                 if let Some(fe) = edges[e] {
-                    a[c][3 * nv + fe] = s.a[c][3 * nv_sub + e];
+                    a[c][full.edge(fe)] = s.a[c][sub.edge(e)];
                 }
             }
         }
