@@ -6,6 +6,8 @@
 
 use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
+/// The symmetric product, re-exported where K's triplets come from.
+pub use super::sparse::multiply;
 use crate::error::{Error, NumericalKind, Result};
 use faer::Side;
 use faer::linalg::solvers::Solve;
@@ -476,18 +478,6 @@ pub fn rigid_dofs(mesh: &FemMesh, rigid: &[bool]) -> Vec<bool> {
         }
     }
     fixed
-}
-
-/// y = K x for K given by its lower-triangle triplets.
-pub fn multiply(k: &[(usize, usize, f64)], x: &[f64]) -> Vec<f64> {
-    let mut y = vec![0.0; x.len()];
-    for &(r, c, v) in k {
-        y[r] += v * x[c];
-        if r != c {
-            y[c] += v * x[r];
-        }
-    }
-    y
 }
 
 #[cfg(test)]

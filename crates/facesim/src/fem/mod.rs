@@ -8,3 +8,4 @@ pub mod pcg;
 pub mod precond;
 pub mod preload;
 pub mod quadrature;
+pub mod sparse;

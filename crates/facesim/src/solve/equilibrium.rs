@@ -22,6 +22,7 @@ use crate::fem::assembly::System;
 use crate::fem::dofs::Dofs;
 use crate::fem::pcg::pcg;
 use crate::fem::precond::Precond;
+use crate::fem::sparse::SymmetricCsr;
 use crate::mesh::{norm, sub};
 use std::collections::HashMap;
 
@@ -158,7 +159,7 @@ struct Newton<'a> {
     blocks: SpringBlocks,
     /// `fixed` for the stacked unknowns.
     fixed3: Vec<bool>,
-    k_rows: Csr,
+    k_rows: SymmetricCsr,
     precond: Precond,
     /// The spring Hessian blocks at a_init (the coupled factor's first pattern).
     h0: Vec<Block>,
@@ -195,7 +196,7 @@ impl<'a> Newton<'a> {
                 )
             })?
         };
-        let k_rows = Csr::symmetric(nd, &pr.k);
+        let k_rows = SymmetricCsr::from_lower(nd, &pr.k);
         let scale = pr
             .springs
             .springs
@@ -412,71 +413,4 @@ fn not_converged(p: &super::Params, step: usize, res_hist: &[f64], r0: Option<f6
                 .join(" ")
         ),
     )
-}
-
-/// A symmetric matrix (given by lower-triangle triplets, duplicates summed) stored by rows, for
-/// the products inside conjugate gradients: one pass applies it to x, y and z together, rows in
-/// parallel.
-struct Csr {
-    start: Vec<usize>,
-    cols: Vec<u32>,
-    vals: Vec<f64>,
-}
-
-impl Csr {
-    fn symmetric(n: usize, lower: &[(usize, usize, f64)]) -> Csr {
-        let mut t: Vec<(u32, u32, f64)> = Vec::with_capacity(2 * lower.len());
-        for &(r, c, v) in lower {
-            t.push((r as u32, c as u32, v));
-            if r != c {
-                t.push((c as u32, r as u32, v));
-            }
-        }
-        t.sort_unstable_by_key(|e| (e.0, e.1));
-        let mut start = vec![0usize; n + 1];
-        let (mut cols, mut vals): (Vec<u32>, Vec<f64>) = (Vec::new(), Vec::new());
-        let mut last: Option<(u32, u32)> = None;
-        for (r, c, v) in t {
-            if last == Some((r, c)) {
-                if let Some(x) = vals.last_mut() {
-                    *x += v;
-                }
-                continue;
-            }
-            last = Some((r, c));
-            cols.push(c);
-            vals.push(v);
-            start[r as usize + 1] = cols.len();
-        }
-        for i in 1..=n {
-            start[i] = start[i].max(start[i - 1]);
-        }
-        Csr { start, cols, vals }
-    }
-
-    /// y = (I₃ ⊗ K) v for v stacked as three blocks of n.
-    fn apply3(&self, v: &[f64], n: usize) -> Vec<f64> {
-        use rayon::prelude::*;
-        let rows: Vec<[f64; 3]> = (0..n)
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|r| {
-                let mut y = [0.0; 3];
-                for j in self.start[r]..self.start[r + 1] {
-                    let (c, w) = (self.cols[j] as usize, self.vals[j]);
-                    y[0] += w * v[c];
-                    y[1] += w * v[n + c];
-                    y[2] += w * v[2 * n + c];
-                }
-                y
-            })
-            .collect();
-        let mut out = vec![0.0; 3 * n];
-        for (r, y) in rows.iter().enumerate() {
-            out[r] = y[0];
-            out[n + r] = y[1];
-            out[2 * n + r] = y[2];
-        }
-        out
-    }
 }

@@ -7,7 +7,8 @@
 
 use super::{Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
-use crate::fem::assembly::{System, multiply};
+use crate::fem::assembly::System;
+use crate::fem::sparse::SymmetricCsr;
 use crate::mesh::{norm, sub};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
@@ -19,7 +20,8 @@ pub(super) fn solve(pr: &Problem) -> Result<([Vec<f64>; 3], Vec<StepRecord>)> {
     pr.fem
         .check_constraints(&|t: usize| pr.material(t), &pr.fixed)?;
     let sys = System::new(nd, pr.k.clone(), &pr.fixed)?;
-    let f_init: Vec<Vec<f64>> = a_init.iter().map(|x| multiply(&pr.k, x)).collect();
+    let k_rows = SymmetricCsr::from_lower(nd, &pr.k);
+    let f_init: Vec<Vec<f64>> = a_init.iter().map(|x| k_rows.apply(x)).collect();
     let max_move = max_bone_move(springs, pr.plan);
     let dofs = pr.fem.dofs();
     let mut a = a_init.clone();
