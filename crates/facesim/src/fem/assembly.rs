@@ -1,17 +1,15 @@
 //! Global C1 surface system (Koch eq. 6, 15–16): DOF numbering, parallel assembly of one scalar
-//! K shared by x, y and z, Dirichlet conditions, and faer's sparse Cholesky factored once and
-//! solved for several right-hand sides.
+//! K shared by x, y and z, Dirichlet conditions, and the system factored once (fem/cholesky.rs)
+//! and solved for several right-hand sides.
 //!
 //! The DOF numbering is fem/dofs.rs's.
 
+use super::cholesky::{Cholesky, Pattern};
 use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
 /// The symmetric product, re-exported where K's triplets come from.
 pub use super::sparse::multiply;
 use crate::error::{Error, NumericalKind, Result};
-use faer::Side;
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -328,9 +326,8 @@ pub struct System {
     coupling: Vec<(usize, usize, f64)>,
     /// K's lower triangle (global triplets), kept for products such as F_init = K a_init.
     pub k: Vec<(usize, usize, f64)>,
-    llt: Llt<usize, f64>,
-    /// Symbolic analysis (ordering, elimination tree), reused when only values change.
-    symbolic: SymbolicLlt<usize>,
+    /// The factor; its symbolic analysis is reused when only values change.
+    llt: Cholesky<f64>,
     pub nnz_lower: usize,
 }
 
@@ -338,17 +335,14 @@ impl System {
     /// Factor K restricted to the DOFs not in `fixed`.
     pub fn new(n: usize, k: Vec<(usize, usize, f64)>, fixed: &[bool]) -> Result<System> {
         let (free_index, free) = free_dofs(&fixed[..n]);
-        // faer's own multithreading of the sparse factorisation and triangular solves costs more
-        // than it gains at these sizes on 2 cores (40k triangles: factor 0.48 s sequential vs
-        // 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s; docs/fem.md), so faer runs
-        // sequentially while rayon parallelises element work.
+        // faer runs sequentially (fem/cholesky.rs says why), its dense kernels too.
         faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
-        let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower).map_err(|e| {
+        let symbolic = Pattern::analyse(mat.symbolic()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
         })?;
-        let llt = Llt::try_new_with_symbolic(symbolic.clone(), mat.as_ref(), Side::Lower).map_err(|e| {
+        let llt = Cholesky::factor(&symbolic, mat.as_ref()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
             ))
@@ -360,24 +354,13 @@ impl System {
             coupling,
             k,
             llt,
-            symbolic,
             nnz_lower,
         })
     }
 
-    /// Nonzeros of the Cholesky factor L (a separate symbolic analysis; for reports).
+    /// Nonzeros of the Cholesky factor L (for reports).
     pub fn factor_nnz(&self) -> Result<usize> {
-        let (mat, _) = split(&self.k, &self.free_index, self.free.len())?;
-        let s = faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
-            mat.symbolic(),
-            Side::Lower,
-            Default::default(),
-            Default::default(),
-        )
-        .map_err(|e| {
-            Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
-        })?;
-        Ok(s.len_val())
+        Ok(self.llt.pattern().factor_nnz())
     }
 
     /// Refactor after K's values changed on the same pattern (new α/β, spring stiffness),
@@ -390,13 +373,12 @@ impl System {
                 "refactor: the sparsity pattern changed",
             ));
         }
-        self.llt = Llt::try_new_with_symbolic(self.symbolic.clone(), mat.as_ref(), Side::Lower)
-            .map_err(|e| {
-                Error::numerical(
-                    NumericalKind::Singular,
-                    format!("the surface stiffness matrix is not positive definite ({e:?})"),
-                )
-            })?;
+        self.llt.refactor(mat.as_ref()).map_err(|e| {
+            Error::numerical(
+                NumericalKind::Singular,
+                format!("the surface stiffness matrix is not positive definite ({e:?})"),
+            )
+        })?;
         self.coupling = coupling;
         self.k = k;
         Ok(())
@@ -415,7 +397,8 @@ impl System {
                 b[(fr, c)] -= v * prescribed[c][gc];
             }
         }
-        let x = self.llt.solve(&b);
+        self.llt.solve_in_place(b.as_mut());
+        let x = b;
         (0..m)
             .map(|c| {
                 let mut a = prescribed[c].clone();

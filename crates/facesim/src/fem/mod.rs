@@ -1,6 +1,7 @@
 //! Stage 5 — the C1 triangular surface finite element model (Koch et al. 1996 §3–4.3).
 
 pub mod assembly;
+pub mod cholesky;
 pub mod dofs;
 pub mod element;
 pub mod jet;
