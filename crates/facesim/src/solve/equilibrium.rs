@@ -303,10 +303,9 @@ impl<'a> Newton<'a> {
                 &self.fixed3,
             )?),
         };
-        if refactor {
-            if sys.refactor(self.blocks.coupled(k, nd, &t.hess)).is_err() {
-                sys.refactor(self.blocks.coupled(k, nd, &t.clamped))?;
-            }
+        // The exact tangent if it is positive definite, else the clamped one.
+        if refactor && sys.refactor(self.blocks.coupled(k, nd, &t.hess)).is_err() {
+            sys.refactor(self.blocks.coupled(k, nd, &t.clamped))?;
         }
         let zero = vec![0.0; 3 * nd];
         let d = sys.solve(&[neg], std::slice::from_ref(&zero)).remove(0);
