@@ -8,6 +8,7 @@
 //! Matrices are kept dense for the products (the benchmark grids are small); every linear solve
 //! goes through a faer sparse Cholesky factored once per integrator run.
 
+use facesim::fem::cholesky::Cholesky;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
 
@@ -516,10 +517,10 @@ pub fn strain_rows_3d([gx, gy, gz]: [f64; 3]) -> [[f64; 3]; 6] {
     ]
 }
 
-/// A symmetric positive definite matrix factored once by faer's sparse Cholesky (the
-/// benchmark matrices are banded: a dense factor would waste O(n³) on zeros).
+/// A symmetric positive definite matrix factored once by the sparse Cholesky (the benchmark
+/// matrices are banded: a dense factor would waste O(n³) on zeros).
 struct SpdFactor {
-    llt: faer::sparse::linalg::solvers::Llt<usize, f64>,
+    llt: Cholesky<f64>,
 }
 
 impl SpdFactor {
@@ -539,16 +540,14 @@ impl SpdFactor {
         }
         let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t)
             .expect("triplets within bounds");
-        let llt = a
-            .sp_cholesky(faer::Side::Lower)
+        let llt = Cholesky::new(a.as_ref())
             .expect("benchmark matrices (K, M, Newmark's K_eff) are positive definite");
         SpdFactor { llt }
     }
 
     fn solve(&self, b: &DVector<f64>) -> DVector<f64> {
-        use faer::linalg::solvers::Solve;
-        let rhs = faer::Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
-        let x = self.llt.solve(&rhs);
+        let mut x = faer::Mat::<f64>::from_fn(b.len(), 1, |i, _| b[i]);
+        self.llt.solve_in_place(x.as_mut());
         DVector::from_fn(b.len(), |i, _| x[(i, 0)])
     }
 }

@@ -3,9 +3,8 @@
 //! R = Rz·Ry·Rx (rotate about x, then y, then z; degrees). Segments apply in order, each to the
 //! points inside its region at their current position.
 
-use crate::case::{Osteotomy, Region};
+use crate::case::Osteotomy;
 use crate::error::{Error, Result};
-use crate::volume::Volume;
 
 pub struct Plan {
     steps: Vec<Osteotomy>,
@@ -38,12 +37,6 @@ fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
         r
     };
     mul(rz, mul(ry, rx))
-}
-
-/// Whether p is inside a region (masks: their non-zero voxels, read by `Case::read_masks`).
-/// The second argument is unused and goes with the next clean-up of the callers.
-pub fn inside(region: &Region, _unused: Option<&Volume>, p: [f64; 3]) -> bool {
-    region.contains(p)
 }
 
 impl Plan {

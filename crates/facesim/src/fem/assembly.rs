@@ -1,16 +1,16 @@
 //! Global C1 surface system (Koch eq. 6, 15–16): DOF numbering, parallel assembly of one scalar
-//! K shared by x, y and z, Dirichlet conditions, and faer's sparse Cholesky factored once and
-//! solved for several right-hand sides.
+//! K shared by x, y and z, Dirichlet conditions, and the system factored once (fem/cholesky.rs)
+//! and solved for several right-hand sides.
 //!
-//! DOF numbering: vertex k owns 3k (value), 3k+1 (∂u), 3k+2 (∂v); edge e owns 3·nv + e (the
-//! cross-boundary derivative along the edge's global normal, eq. 11).
+//! The DOF numbering is fem/dofs.rs's.
 
+use super::cholesky::{Cholesky, Pattern};
+use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
+/// The symmetric product, re-exported where K's triplets come from.
+pub use super::sparse::multiply;
 use crate::error::{Error, NumericalKind, Result};
 use crate::union_find::UnionFind;
-use faer::Side;
-use faer::linalg::solvers::Solve;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
 use faer::sparse::{SparseColMat, Triplet};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -94,16 +94,21 @@ impl FemMesh {
         })
     }
 
+    /// The mesh's C1 DOF numbering.
+    pub fn dofs(&self) -> Dofs {
+        Dofs::new(self.uv.len(), self.edges.len())
+    }
+
     pub fn ndof(&self) -> usize {
-        3 * self.uv.len() + self.edges.len()
+        self.dofs().ndof()
     }
 
     /// Global DOFs of triangle t in the element's local order.
     pub fn element_dofs(&self, t: usize) -> [usize; NDOF] {
         let tri = self.tris[t];
-        let nv3 = 3 * self.uv.len();
+        let dofs = self.dofs();
         let e = self.tri_edges[t];
-        let v = |k: usize| 3 * tri[k] as usize;
+        let v = |k: usize| dofs.value(tri[k] as usize);
         [
             v(0),
             v(0) + 1,
@@ -114,9 +119,9 @@ impl FemMesh {
             v(2),
             v(2) + 1,
             v(2) + 2,
-            nv3 + e[0] as usize,
-            nv3 + e[1] as usize,
-            nv3 + e[2] as usize,
+            dofs.edge(e[0] as usize),
+            dofs.edge(e[1] as usize),
+            dofs.edge(e[2] as usize),
         ]
     }
 
@@ -162,7 +167,8 @@ impl FemMesh {
     /// from the triangles containing its vertex or edge, so no global sort of the ~78 triplets
     /// per element is needed.
     fn gather_lower(&self, per: &[ElementSystem]) -> Vec<(usize, usize, f64)> {
-        let nv = self.uv.len();
+        let dofs = self.dofs();
+        let nv = dofs.nv;
         // Triangles per vertex, ascending (counting sort).
         let mut start = vec![0usize; nv + 1];
         for t in &self.tris {
@@ -193,15 +199,16 @@ impl FemMesh {
                 }
             }
         }
-        let columns: Vec<Vec<(usize, usize, f64)>> = (0..self.ndof())
+        let columns: Vec<Vec<(usize, usize, f64)>> = (0..dofs.ndof())
             .into_par_iter()
             .with_min_len(256)
             .map(|c| {
-                let tris: &[u32] = if c < 3 * nv {
-                    &vt[start[c / 3]..start[c / 3 + 1]]
-                } else {
-                    let e = &et[c - 3 * nv];
-                    if e[1] == u32::MAX { &e[..1] } else { &e[..] }
+                let tris: &[u32] = match dofs.owner(c) {
+                    Owner::Vertex(v) => &vt[start[v]..start[v + 1]],
+                    Owner::Edge(e) => {
+                        let e = &et[e];
+                        if e[1] == u32::MAX { &e[..1] } else { &e[..] }
+                    }
                 };
                 let mut col: Vec<(usize, f64)> = Vec::with_capacity(tris.len() * NDOF);
                 for &t in tris {
@@ -243,7 +250,8 @@ impl FemMesh {
         material: &(dyn Fn(usize) -> Material + Sync),
         fixed: &[bool],
     ) -> Result<()> {
-        let nv = self.uv.len();
+        let dofs = self.dofs();
+        let nv = dofs.nv;
         let mut sets = UnionFind::new(nv);
         for t in &self.tris {
             for &v in &t[1..] {
@@ -261,8 +269,8 @@ impl FemMesh {
         }
         for v in 0..nv {
             if let Some(e) = piece.get_mut(&sets.find(v)) {
-                e[3] |= fixed[3 * v];
-                e[4] |= fixed[3 * v] && fixed[3 * v + 1] && fixed[3 * v + 2];
+                e[3] |= fixed[dofs.value(v)];
+                e[4] |= dofs.vertex(v).all(|g| fixed[g]);
             }
         }
         for (root, [found, stretch, bend, value, full]) in piece {
@@ -310,9 +318,8 @@ pub struct System {
     coupling: Vec<(usize, usize, f64)>,
     /// K's lower triangle (global triplets), kept for products such as F_init = K a_init.
     pub k: Vec<(usize, usize, f64)>,
-    llt: Llt<usize, f64>,
-    /// Symbolic analysis (ordering, elimination tree), reused when only values change.
-    symbolic: SymbolicLlt<usize>,
+    /// The factor; its symbolic analysis is reused when only values change.
+    llt: Cholesky<f64>,
     pub nnz_lower: usize,
 }
 
@@ -320,17 +327,14 @@ impl System {
     /// Factor K restricted to the DOFs not in `fixed`.
     pub fn new(n: usize, k: Vec<(usize, usize, f64)>, fixed: &[bool]) -> Result<System> {
         let (free_index, free) = free_dofs(&fixed[..n]);
-        // faer's own multithreading of the sparse factorisation and triangular solves costs more
-        // than it gains at these sizes on 2 cores (40k triangles: factor 0.48 s sequential vs
-        // 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s; docs/fem.md), so faer runs
-        // sequentially while rayon parallelises element work.
+        // faer runs sequentially (fem/cholesky.rs says why), its dense kernels too.
         faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
-        let symbolic = SymbolicLlt::try_new(mat.symbolic(), Side::Lower).map_err(|e| {
+        let symbolic = Pattern::analyse(mat.symbolic()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
         })?;
-        let llt = Llt::try_new_with_symbolic(symbolic.clone(), mat.as_ref(), Side::Lower).map_err(|e| {
+        let llt = Cholesky::factor(&symbolic, mat.as_ref()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
             ))
@@ -342,24 +346,13 @@ impl System {
             coupling,
             k,
             llt,
-            symbolic,
             nnz_lower,
         })
     }
 
-    /// Nonzeros of the Cholesky factor L (a separate symbolic analysis; for reports).
+    /// Nonzeros of the Cholesky factor L (for reports).
     pub fn factor_nnz(&self) -> Result<usize> {
-        let (mat, _) = split(&self.k, &self.free_index, self.free.len())?;
-        let s = faer::sparse::linalg::cholesky::factorize_symbolic_cholesky(
-            mat.symbolic(),
-            Side::Lower,
-            Default::default(),
-            Default::default(),
-        )
-        .map_err(|e| {
-            Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
-        })?;
-        Ok(s.len_val())
+        Ok(self.llt.pattern().factor_nnz())
     }
 
     /// Refactor after K's values changed on the same pattern (new α/β, spring stiffness),
@@ -372,13 +365,12 @@ impl System {
                 "refactor: the sparsity pattern changed",
             ));
         }
-        self.llt = Llt::try_new_with_symbolic(self.symbolic.clone(), mat.as_ref(), Side::Lower)
-            .map_err(|e| {
-                Error::numerical(
-                    NumericalKind::Singular,
-                    format!("the surface stiffness matrix is not positive definite ({e:?})"),
-                )
-            })?;
+        self.llt.refactor(mat.as_ref()).map_err(|e| {
+            Error::numerical(
+                NumericalKind::Singular,
+                format!("the surface stiffness matrix is not positive definite ({e:?})"),
+            )
+        })?;
         self.coupling = coupling;
         self.k = k;
         Ok(())
@@ -397,7 +389,8 @@ impl System {
                 b[(fr, c)] -= v * prescribed[c][gc];
             }
         }
-        let x = self.llt.solve(&b);
+        self.llt.solve_in_place(b.as_mut());
+        let x = b;
         (0..m)
             .map(|c| {
                 let mut a = prescribed[c].clone();
@@ -447,31 +440,19 @@ fn split(k: &[(usize, usize, f64)], free_index: &[usize], nf: usize) -> Result<S
 /// Boundary conditions from rigid vertices (Koch §4.1): a rigid vertex has value and gradient
 /// fixed; an edge's cross-boundary derivative is fixed when both its ends are rigid.
 pub fn rigid_dofs(mesh: &FemMesh, rigid: &[bool]) -> Vec<bool> {
-    let mut fixed = vec![false; mesh.ndof()];
+    let dofs = mesh.dofs();
+    let mut fixed = vec![false; dofs.ndof()];
     for (v, &r) in rigid.iter().enumerate() {
         if r {
-            fixed[3 * v..3 * v + 3].iter_mut().for_each(|f| *f = true);
+            fixed[dofs.vertex(v)].iter_mut().for_each(|f| *f = true);
         }
     }
-    let nv3 = 3 * mesh.uv.len();
     for (e, ed) in mesh.edges.iter().enumerate() {
         if rigid[ed[0] as usize] && rigid[ed[1] as usize] {
-            fixed[nv3 + e] = true;
+            fixed[dofs.edge(e)] = true;
         }
     }
     fixed
-}
-
-/// y = K x for K given by its lower-triangle triplets.
-pub fn multiply(k: &[(usize, usize, f64)], x: &[f64]) -> Vec<f64> {
-    let mut y = vec![0.0; x.len()];
-    for &(r, c, v) in k {
-        y[r] += v * x[c];
-        if r != c {
-            y[c] += v * x[r];
-        }
-    }
-    y
 }
 
 #[cfg(test)]

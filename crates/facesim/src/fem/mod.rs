@@ -1,8 +1,12 @@
 //! Stage 5 — the C1 triangular surface finite element model (Koch et al. 1996 §3–4.3).
 
 pub mod assembly;
+pub mod cholesky;
+pub mod dofs;
 pub mod element;
 pub mod jet;
+pub mod pcg;
 pub mod precond;
 pub mod preload;
 pub mod quadrature;
+pub mod sparse;

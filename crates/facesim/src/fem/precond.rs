@@ -1,5 +1,6 @@
 //! A scalar stiffness factored once in single precision, applied to several coordinate fields
-//! at once: the preconditioner of the equilibrium solve's conjugate gradients (src/solve.rs).
+//! at once: the preconditioner of the equilibrium solve's conjugate gradients
+//! (src/solve/equilibrium.rs).
 //!
 //! Why single precision: each CG iteration is one forward and one backward substitution with the
 //! factor L, which streams all of L through memory (L of a 15 k-triangle piece holds 4.7 M
@@ -9,49 +10,20 @@
 //! operator and the residual test stay in f64). If the f32 factorisation breaks down (a matrix too
 //! ill-conditioned for 7 digits), the f64 factor is used instead.
 
+use super::cholesky::{Cholesky, Pattern};
 use crate::error::{Error, NumericalKind, Result};
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
-    factorize_symbolic_cholesky,
-};
-use faer::sparse::{SparseColMat, SparseColMatRef, Triplet};
-use faer::{Conj, Par, Side};
+use faer::sparse::{SparseColMat, Triplet};
 
-enum Values {
-    Single(Vec<f32>),
-    Double(Vec<f64>),
+enum Factor {
+    Single(Cholesky<f32>),
+    Double(Cholesky<f64>),
 }
 
 pub struct Precond {
     n: usize,
     /// Free DOFs in increasing order (fixed DOFs get zero).
     free: Vec<usize>,
-    symbolic: SymbolicCholesky<usize>,
-    values: Values,
-}
-
-/// The numeric Cholesky factor of `m` on `symbolic`'s pattern, or None if `m` is not
-/// (numerically) positive definite.
-fn factor<T: faer::traits::ComplexField + Copy>(
-    symbolic: &SymbolicCholesky<usize>,
-    m: SparseColMatRef<'_, usize, T>,
-) -> Option<Vec<T>> {
-    let mut values = vec![T::zero_impl(); symbolic.len_val()];
-    let mut mem =
-        MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default()));
-    symbolic
-        .factorize_numeric_llt(
-            &mut values,
-            m,
-            Side::Lower,
-            Default::default(),
-            Par::Seq,
-            MemStack::new(&mut mem),
-            Default::default(),
-        )
-        .ok()?;
-    Some(values)
+    factor: Factor,
 }
 
 impl Precond {
@@ -76,47 +48,37 @@ impl Precond {
             .collect();
         let m32 = SparseColMat::<usize, f32>::try_new_from_triplets(nf, nf, &single)
             .map_err(|e| bad(format!("{e:?}")))?;
-        let symbolic = factorize_symbolic_cholesky(
-            m32.symbolic(),
-            Side::Lower,
-            SymmetricOrdering::Amd,
-            CholeskySymbolicParams::default(),
-        )
-        .map_err(|e| bad(format!("symbolic Cholesky: {e:?}")))?;
-        let values = match factor(&symbolic, m32.as_ref()) {
-            Some(v) => Values::Single(v),
-            None => {
+        let pattern = Pattern::analyse(m32.symbolic())
+            .map_err(|e| bad(format!("symbolic Cholesky: {e:?}")))?;
+        let factor = match Cholesky::factor(&pattern, m32.as_ref()) {
+            Ok(f) => Factor::Single(f),
+            Err(_) => {
                 let double: Vec<Triplet<usize, usize, f64>> = triplets
                     .iter()
                     .map(|&(r, c, v)| Triplet::new(r, c, v))
                     .collect();
                 let m64 = SparseColMat::<usize, f64>::try_new_from_triplets(nf, nf, &double)
                     .map_err(|e| bad(format!("{e:?}")))?;
-                Values::Double(
-                    factor(&symbolic, m64.as_ref())
-                        .ok_or_else(|| bad("the matrix is not positive definite".into()))?,
+                Factor::Double(
+                    Cholesky::factor(&pattern, m64.as_ref())
+                        .map_err(|_| bad("the matrix is not positive definite".into()))?,
                 )
             }
         };
-        Ok(Precond {
-            n,
-            free,
-            symbolic,
-            values,
-        })
+        Ok(Precond { n, free, factor })
     }
 
     /// z = (K + diag(d))⁻¹ v for `v` holding m fields of n DOFs stacked; zero on the fixed DOFs.
     pub fn apply(&self, v: &[f64]) -> Vec<f64> {
-        match &self.values {
-            Values::Single(x) => self.apply_with(x, v, |a| a as f32, |a| a as f64),
-            Values::Double(x) => self.apply_with(x, v, |a| a, |a| a),
+        match &self.factor {
+            Factor::Single(f) => self.apply_with(f, v, |a| a as f32, |a| a as f64),
+            Factor::Double(f) => self.apply_with(f, v, |a| a, |a| a),
         }
     }
 
     fn apply_with<T: faer::traits::ComplexField + Copy>(
         &self,
-        values: &[T],
+        factor: &Cholesky<T>,
         v: &[f64],
         to: impl Fn(f64) -> T,
         from: impl Fn(T) -> f64,
@@ -129,13 +91,7 @@ impl Precond {
                 b[(i, c)] = to(v[c * n + g]);
             }
         }
-        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<T>(m, Par::Seq));
-        LltRef::new(&self.symbolic, values).solve_in_place_with_conj(
-            Conj::No,
-            b.as_mut(),
-            Par::Seq,
-            MemStack::new(&mut mem),
-        );
+        factor.solve_in_place(b.as_mut());
         let mut out = vec![0.0; v.len()];
         for c in 0..m {
             for (i, &g) in self.free.iter().enumerate() {

@@ -195,14 +195,13 @@ pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<
         .collect::<Result<Vec<_>>>()?;
     Ok((0..nf)
         .map(|f| {
-            let mut a = vec![0.0; mesh.ndof()];
+            let dofs = mesh.dofs();
+            let mut a = vec![0.0; dofs.ndof()];
             for (v, g) in corner.iter().enumerate() {
-                a[3 * v] = fields[f][v];
-                a[3 * v + 1] = g[f][1];
-                a[3 * v + 2] = g[f][2];
+                a[dofs.vertex(v)].copy_from_slice(&[fields[f][v], g[f][1], g[f][2]]);
             }
             for (e, c) in cross.iter().enumerate() {
-                a[3 * nv + e] = c[f];
+                a[dofs.edge(e)] = c[f];
             }
             a
         })

@@ -1,0 +1,102 @@
+//! The one sparse Cholesky wrapper over faer: a symbolic analysis (AMD ordering, elimination
+//! tree) done once per sparsity pattern, numeric factors of any matrix on that pattern (in f64,
+//! or f32 for the preconditioner), each solved for many right-hand sides.
+//!
+//! Sequential on purpose: faer's own multithreading of the sparse factorisation and triangular
+//! solves costs more than it gains at these sizes on 2 cores (40k triangles: factor 0.48 s
+//! sequential vs 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s; docs/fem.md); rayon
+//! parallelises the element work instead.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::LltError;
+use faer::sparse::linalg::cholesky::{
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
+};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::traits::ComplexField;
+use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
+
+pub use faer::sparse::FaerError;
+
+/// The symbolic analysis of a lower-triangle sparsity pattern, shared by the factors on it.
+#[derive(Clone)]
+pub struct Pattern(Arc<SymbolicCholesky<usize>>);
+
+impl Pattern {
+    pub fn analyse(lower: SymbolicSparseColMatRef<'_, usize>) -> Result<Pattern, FaerError> {
+        let s = factorize_symbolic_cholesky(
+            lower,
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )?;
+        Ok(Pattern(Arc::new(s)))
+    }
+
+    /// Nonzeros of the factor L.
+    pub fn factor_nnz(&self) -> usize {
+        self.0.len_val()
+    }
+}
+
+/// The numeric factor L Lᵀ of a symmetric positive definite matrix on a `Pattern`.
+pub struct Cholesky<T> {
+    pattern: Pattern,
+    values: Vec<T>,
+}
+
+impl<T: ComplexField + Copy> Cholesky<T> {
+    /// Factor `m` (its lower triangle) on `pattern`'s analysis; an error if `m` is not
+    /// (numerically) positive definite.
+    pub fn factor(pattern: &Pattern, m: SparseColMatRef<'_, usize, T>) -> Result<Self, LltError> {
+        let symbolic = &pattern.0;
+        let mut values = vec![T::zero_impl(); symbolic.len_val()];
+        let scratch = symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default());
+        let mut mem =
+            MemBuffer::try_new(scratch).map_err(|_| LltError::Generic(FaerError::OutOfMemory))?;
+        symbolic.factorize_numeric_llt(
+            &mut values,
+            m,
+            Side::Lower,
+            Default::default(),
+            Par::Seq,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )?;
+        Ok(Cholesky {
+            pattern: pattern.clone(),
+            values,
+        })
+    }
+
+    /// Analyse `m`'s pattern and factor it.
+    pub fn new(m: SparseColMatRef<'_, usize, T>) -> Result<Self, LltError> {
+        let pattern = Pattern::analyse(m.symbolic()).map_err(LltError::Generic)?;
+        Self::factor(&pattern, m)
+    }
+
+    /// Refactor for new values on the same pattern, reusing the symbolic analysis; on failure
+    /// the previous factor is kept.
+    pub fn refactor(&mut self, m: SparseColMatRef<'_, usize, T>) -> Result<(), LltError> {
+        *self = Self::factor(&self.pattern, m)?;
+        Ok(())
+    }
+
+    pub fn pattern(&self) -> &Pattern {
+        &self.pattern
+    }
+
+    /// Overwrite each column of `b` with the solution of L Lᵀ x = b.
+    pub fn solve_in_place(&self, b: MatMut<'_, T>) {
+        let symbolic = &self.pattern.0;
+        let mut mem = MemBuffer::new(symbolic.solve_in_place_scratch::<T>(b.ncols(), Par::Seq));
+        LltRef::new(symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            b,
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
+    }
+}
