@@ -1,4 +1,4 @@
-//! The `facesim` command line (CASE.md "Commands").
+//! The `facesim` command line (docs/case.md "Commands").
 
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
@@ -71,7 +71,7 @@ enum Cmd {
         /// Triangles in the mesh.
         #[arg(long, default_value_t = 40000)]
         triangles: usize,
-        /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.py).
+        /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.sh).
         #[arg(long)]
         export: Option<PathBuf>,
     },

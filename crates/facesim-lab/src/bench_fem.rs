@@ -34,7 +34,7 @@ pub fn peak_rss_mb() -> Option<f64> {
 }
 
 /// `export`: also write the factored matrix (free–free lower triangle) as Matrix Market, for
-/// timing another sparse Cholesky on the same matrix (benches/cholmod_compare.py).
+/// timing another sparse Cholesky on the same matrix (benches/cholmod_compare.sh).
 pub fn run(target_triangles: usize, export: Option<&std::path::Path>) -> Result<FemBench> {
     let n = ((target_triangles as f64 / 2.0).sqrt().round() as usize).max(2);
     // A jittered planar grid, 1 mm cells, alternating diagonals.

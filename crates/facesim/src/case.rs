@@ -1,4 +1,4 @@
-//! The case directory (CASE.md): case.toml merged over pipeline/defaults.toml, validated.
+//! The case directory (docs/case.md): case.toml merged over pipeline/defaults.toml, validated.
 //!
 //! Unknown keys and wrong types are errors that name case.toml and the key; relative paths are
 //! resolved against the case directory.
@@ -129,7 +129,7 @@ pub struct SurfaceRegion {
     pub beta: f64,
 }
 
-/// Region shapes (CASE.md), used by `movable` and `osteotomy.region`.
+/// Region shapes (docs/case.md), used by `movable` and `osteotomy.region`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Region {

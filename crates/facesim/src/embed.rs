@@ -1,5 +1,5 @@
-//! Stage 6c — the full-resolution skin carried along a coarse solve (issue 6), after Chen et
-//! al., "Embedding geometric textures in a shell space" (../shared/papers/002, §1.2 and §2).
+//! The full-resolution skin carried along a coarse solve (issue 6), after Chen et
+//! al., "Embedding geometric textures in a shell space" (§1.2 and §2).
 //!
 //! The solve runs on a coarse copy of the skin (the *base* mesh M_b). A shell S is built
 //! between M_b and an *offset* mesh M_o, each base vertex moved inwards by `thickness` along its

@@ -1,4 +1,4 @@
-//! report.json as types (CASE.md: parameters, per-stage `timings`, counts, the displacement
+//! report.json as types (docs/case.md: parameters, per-stage `timings`, counts, the displacement
 //! summary, warnings). Every section is a struct; stage costs are kept in pipeline order.
 
 use crate::case::Case;

@@ -1,4 +1,4 @@
-//! Stage 5 — the C1 triangular surface finite element model (Koch et al. 1996 §3–4.3).
+//! The C1 triangular surface finite element model (Koch et al. 1996 §3–4.3).
 
 pub mod assembly;
 pub mod cholesky;

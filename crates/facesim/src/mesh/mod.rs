@@ -1,4 +1,4 @@
-//! Stage 1b — triangle meshes (skin and skull surfaces, face scans): the data type, its checks,
+//! Triangle meshes (skin and skull surfaces, face scans): the data type, its checks,
 //! and OBJ/PLY input/output. Coordinates are LPS millimetres.
 
 pub mod obj;
@@ -95,7 +95,7 @@ impl Mesh {
             .sum()
     }
 
-    /// Area-weighted vertex normals (MODEL.md §3), unit length; zero for isolated vertices.
+    /// Area-weighted vertex normals (docs/pipeline.md §4), unit length; zero for isolated vertices.
     pub fn vertex_normals(&self) -> Vec<[f64; 3]> {
         let mut n = vec![[0.0; 3]; self.vertices.len()];
         for (t, tri) in self.triangles.iter().enumerate() {

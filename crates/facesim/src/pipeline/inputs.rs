@@ -1,4 +1,4 @@
-//! Stage 1, the input edge: the case file, the CT, a face scan and region masks are read here and
+//! The input edge: the case file, the CT, a face scan and region masks are read here and
 //! nowhere else, after checking that every named file exists (a missing scan is reported before
 //! the CT is read).
 

@@ -79,7 +79,7 @@ impl<'a> Recorder<'a> {
     }
 }
 
-/// Stage 2: tissues from the CT (Koch §2.3; docs/pipeline.md §1).
+/// Tissues from the CT (Koch §2.3; docs/pipeline.md §1).
 pub fn tissues(ct: &Volume, case: &Case, rec: &mut Recorder) -> Result<Segmentation> {
     rec.time(Stage::Segment, "segmenting tissues", || {
         crate::segment::segment(ct, &case.tissue, &case.ct.path)

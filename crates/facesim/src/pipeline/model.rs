@@ -1,4 +1,4 @@
-//! Stage 4: the model on the skin — which skin is rigid (`[surface] movable`), the tissue springs
+//! The model on the skin — which skin is rigid (`[surface] movable`), the tissue springs
 //! to the skull (Koch §2.5–2.6; docs/pipeline.md §3), the bone-move plan, and the parameters of
 //! the C1 solve.
 

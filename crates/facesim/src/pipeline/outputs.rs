@@ -1,4 +1,4 @@
-//! The one module that writes a run's files (CASE.md "Outputs"): each to a temporary name and
+//! The one module that writes a run's files (docs/case.md "Outputs"): each to a temporary name and
 //! renamed, independent files in parallel, report.json last.
 
 use super::predict::Prediction;

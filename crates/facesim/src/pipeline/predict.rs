@@ -1,4 +1,4 @@
-//! Stage 5: the predicted face — the C1 solve of the model (docs/pipeline.md §6) and, when the
+//! The predicted face — the C1 solve of the model (docs/pipeline.md §5) and, when the
 //! model ran on a coarse copy of the skin, the full skin carried along by shell embedding.
 
 use super::inputs::CaseFiles;

@@ -1,4 +1,4 @@
-//! Stage 6b — the predicted face (Koch §4.4–4.5, MODEL.md §6).
+//! The predicted face (Koch §4.4–4.5, docs/pipeline.md §5).
 //!
 //! Both models start from the preloaded C1 skin (a_init, F_init = K a_init) with rigid nodes
 //! outside `[surface] movable`, and move the spring attachments by the plan in `steps` load

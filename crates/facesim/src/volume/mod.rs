@@ -1,7 +1,7 @@
-//! Stage 1a — the CT volume: voxels in Hounsfield units with a voxel-to-LPS affine (mm).
+//! The CT volume: voxels in Hounsfield units with a voxel-to-LPS affine (mm).
 //!
 //! Readers for NIfTI, DICOM series and InVesalius projects all produce a [`Volume`]; everything
-//! downstream works in the LPS world frame (CASE.md "Frames and units").
+//! downstream works in the LPS world frame (docs/case.md "Frames and units").
 
 pub mod dicom_io;
 pub mod inv3;
@@ -29,7 +29,7 @@ pub struct Volume {
     pub data: Vec<f32>,
 }
 
-/// `facesim inspect` output (CASE.md).
+/// `facesim inspect` output (docs/case.md).
 #[derive(Serialize, Debug, PartialEq)]
 pub struct Inspect {
     pub dims: [usize; 3],
