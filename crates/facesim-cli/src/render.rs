@@ -164,8 +164,8 @@ impl Canvas {
                 let k = y * size + x;
                 if z > self.depth[k] {
                     self.depth[k] = z;
-                    for ch in 0..3 {
-                        self.img[3 * k + ch] = (col[ch] * shade).clamp(0.0, 255.0) as u8;
+                    for (ch, v) in col.iter().enumerate() {
+                        self.img[3 * k + ch] = (v * shade).clamp(0.0, 255.0) as u8;
                     }
                 }
             }

@@ -111,13 +111,14 @@ fn prism_tetrahedra(tris: &[[u32; 3]], n: usize) -> Vec<[u32; 4]> {
     tets
 }
 
-/// Per tetrahedron the gradients g_a of F = Σ_a q_a g_aᵀ and the rest volume. Fails on a flat
-/// tetrahedron (relative to the shell's thickness).
-fn tet_gradients(
-    tets: &[[u32; 4]],
-    rest: &[[f64; 3]],
-    thickness: f64,
-) -> Result<(Vec<[[f64; 3]; 4]>, Vec<f64>)> {
+/// Per tetrahedron: the gradients g_a of F = Σ_a q_a g_aᵀ and the rest volume.
+struct Gradients {
+    grads: Vec<[[f64; 3]; 4]>,
+    volumes: Vec<f64>,
+}
+
+/// The shell's `Gradients`. Fails on a flat tetrahedron (relative to the shell's thickness).
+fn tet_gradients(tets: &[[u32; 4]], rest: &[[f64; 3]], thickness: f64) -> Result<Gradients> {
     let mut grads = Vec::with_capacity(tets.len());
     let mut volumes = Vec::with_capacity(tets.len());
     for (k, tet) in tets.iter().enumerate() {
@@ -142,18 +143,25 @@ fn tet_gradients(
         grads.push([r[0], r[1], r[2], g3]);
         volumes.push(det.abs() / 6.0);
     }
-    Ok((grads, volumes))
+    Ok(Gradients { grads, volumes })
 }
 
 /// Per base triangle: rest area A, offset distance h and the inverse edges of its rest reference
-/// tetrahedron (paper §2). `rest` holds the base vertices then their offsets. Fails on a
+/// tetrahedron (paper §2).
+struct References {
+    area: Vec<f64>,
+    h: Vec<f64>,
+    ref_inv: Vec<Matrix3<f64>>,
+}
+
+/// The shell's `References`; `rest` holds the base vertices then their offsets. Fails on a
 /// zero-area triangle.
 fn reference_tetrahedra(
     tris: &[[u32; 3]],
     rest: &[[f64; 3]],
     inward: f64,
     thickness: f64,
-) -> Result<(Vec<f64>, Vec<f64>, Vec<Matrix3<f64>>)> {
+) -> Result<References> {
     let n = rest.len() / 2;
     let mut area = Vec::with_capacity(tris.len());
     let mut h = Vec::with_capacity(tris.len());
@@ -181,7 +189,7 @@ fn reference_tetrahedra(
         h.push(d);
         ref_inv.push(inv);
     }
-    Ok((area, h, ref_inv))
+    Ok(References { area, h, ref_inv })
 }
 
 /// The factorised offset fit. Eq. 1 per coordinate: Σ_tets V |Σ_a q_a g_a − m′_row|² → L q = b
@@ -230,8 +238,9 @@ impl Shell {
         let rest = rest_vertices(base, thickness, inward);
         let tris = base.triangles.clone();
         let tets = prism_tetrahedra(&tris, n);
-        let (grads, volumes) = tet_gradients(&tets, &rest, thickness)?;
-        let (area, h, ref_inv) = reference_tetrahedra(&tris, &rest, inward, thickness)?;
+        let Gradients { grads, volumes } = tet_gradients(&tets, &rest, thickness)?;
+        let References { area, h, ref_inv } =
+            reference_tetrahedra(&tris, &rest, inward, thickness)?;
         let system = offset_fit(n, &tets, &grads, &volumes, fixed)?;
         Ok(Shell {
             n,
