@@ -37,7 +37,63 @@ pub fn peak_rss_mb() -> Option<f64> {
 /// timing another sparse Cholesky on the same matrix (benches/cholmod_compare.sh).
 pub fn run(target_triangles: usize, export: Option<&std::path::Path>) -> Result<FemBench> {
     let n = ((target_triangles as f64 / 2.0).sqrt().round() as usize).max(2);
-    // A jittered planar grid, 1 mm cells, alternating diagonals.
+    let (uv, tris) = jittered_grid(n);
+    let t0 = Instant::now();
+    let mesh = FemMesh::new(uv, tris)?;
+    let t_el = t0.elapsed().as_secs_f64();
+    let rigid: Vec<bool> = mesh
+        .uv
+        .iter()
+        .map(|p| p[0] < 0.5 || p[1] < 0.5 || p[0] > n as f64 - 0.5 || p[1] > n as f64 - 0.5)
+        .collect();
+    let fixed = rigid_dofs(&mesh, &rigid);
+    let mat = |_: usize| Material::isotropic(0.01, 0.02);
+    let t1 = Instant::now();
+    let (k, f) = mesh.assemble(&mat, 1.0);
+    let t_as = t1.elapsed().as_secs_f64();
+    let t2 = Instant::now();
+    let sys = System::new(mesh.ndof(), k, &fixed)?;
+    let t_fa = t2.elapsed().as_secs_f64();
+    let zero = vec![0.0; mesh.ndof()];
+    let t3 = Instant::now();
+    let x = sys.solve(
+        &[f.clone(), f.clone(), f],
+        &[zero.clone(), zero.clone(), zero],
+    );
+    let t_so = t3.elapsed().as_secs_f64();
+    if x.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(Error::numerical(
+            NumericalKind::Diverged,
+            "benchmark solve produced non-finite values",
+        ));
+    }
+    if let Some(path) = export {
+        export_matrix(&sys, path)?;
+    }
+    // Factor size, from a separate symbolic analysis (not timed).
+    let lower = sys.nnz_lower;
+    let nnz_l = sys.factor_nnz()?;
+    Ok(FemBench {
+        triangles: mesh.tris.len(),
+        vertices: mesh.uv.len(),
+        dofs: mesh.ndof(),
+        free_dofs: sys.free.len(),
+        nnz_k_lower: lower,
+        nnz_l,
+        fill: nnz_l as f64 / lower as f64,
+        seconds_elements: t_el,
+        seconds_assembly: t_as,
+        seconds_factor: t_fa,
+        seconds_three_solves: t_so,
+        seconds_total: t_el + t_as + t_fa + t_so,
+        peak_rss_mb: peak_rss_mb(),
+        threads: rayon::current_num_threads(),
+    })
+}
+
+/// A jittered planar n × n grid, 1 mm cells, alternating diagonals (a fixed seed, so every run
+/// solves the same mesh); the border vertices stay on the square.
+fn jittered_grid(n: usize) -> (Vec<[f64; 2]>, Vec<[u32; 3]>) {
     let mut seed = 12345u64;
     let mut rnd = || {
         seed = seed
@@ -69,71 +125,26 @@ pub fn run(target_triangles: usize, export: Option<&std::path::Path>) -> Result<
             }
         }
     }
-    let t0 = Instant::now();
-    let mesh = FemMesh::new(uv, tris)?;
-    let t_el = t0.elapsed().as_secs_f64();
-    let rigid: Vec<bool> = mesh
-        .uv
+    (uv, tris)
+}
+
+/// Write the factored matrix (the free–free lower triangle, 1-based) as Matrix Market.
+fn export_matrix(sys: &System, path: &std::path::Path) -> Result<()> {
+    let entries: Vec<(usize, usize, f64)> = sys
+        .k
         .iter()
-        .map(|p| p[0] < 0.5 || p[1] < 0.5 || p[0] > n as f64 - 0.5 || p[1] > n as f64 - 0.5)
+        .filter_map(|&(r, c, v)| {
+            let (fr, fc) = (sys.free_index[r], sys.free_index[c]);
+            (fr != usize::MAX && fc != usize::MAX).then_some((fr, fc, v))
+        })
         .collect();
-    let fixed = rigid_dofs(&mesh, &rigid);
-    let mat = |_: usize| Material::isotropic(0.01, 0.02);
-    let t1 = Instant::now();
-    let (k, f) = mesh.assemble(&mat, 1.0);
-    let t_as = t1.elapsed().as_secs_f64();
-    let t2 = Instant::now();
-    let sys = System::new(mesh.ndof(), k, &fixed)?;
-    let t_fa = t2.elapsed().as_secs_f64();
-    let zero = vec![0.0; mesh.ndof()];
-    let t3 = Instant::now();
-    let x = sys.solve(
-        &[f.clone(), f.clone(), f],
-        &[zero.clone(), zero.clone(), zero],
-    );
-    let t_so = t3.elapsed().as_secs_f64();
-    if x.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(Error::numerical(
-            NumericalKind::Diverged,
-            "benchmark solve produced non-finite values",
-        ));
-    }
-    if let Some(path) = export {
-        let entries: Vec<(usize, usize, f64)> = sys
-            .k
-            .iter()
-            .filter_map(|&(r, c, v)| {
-                let (fr, fc) = (sys.free_index[r], sys.free_index[c]);
-                (fr != usize::MAX && fc != usize::MAX).then_some((fr, fc, v))
-            })
-            .collect();
-        let nf = sys.free.len();
-        facesim::output::write_bytes_atomic(path, |w| {
-            writeln!(w, "%%MatrixMarket matrix coordinate real symmetric")?;
-            writeln!(w, "{nf} {nf} {}", entries.len())?;
-            for (r, c, v) in &entries {
-                writeln!(w, "{} {} {v:e}", r + 1, c + 1)?;
-            }
-            Ok(())
-        })?;
-    }
-    // Factor size, from a separate symbolic analysis (not timed).
-    let (lower, _) = (sys.nnz_lower, ());
-    let nnz_l = sys.factor_nnz()?;
-    Ok(FemBench {
-        triangles: mesh.tris.len(),
-        vertices: mesh.uv.len(),
-        dofs: mesh.ndof(),
-        free_dofs: sys.free.len(),
-        nnz_k_lower: lower,
-        nnz_l,
-        fill: nnz_l as f64 / lower as f64,
-        seconds_elements: t_el,
-        seconds_assembly: t_as,
-        seconds_factor: t_fa,
-        seconds_three_solves: t_so,
-        seconds_total: t_el + t_as + t_fa + t_so,
-        peak_rss_mb: peak_rss_mb(),
-        threads: rayon::current_num_threads(),
+    let nf = sys.free.len();
+    facesim::output::write_bytes_atomic(path, |w| {
+        writeln!(w, "%%MatrixMarket matrix coordinate real symmetric")?;
+        writeln!(w, "{nf} {nf} {}", entries.len())?;
+        for (r, c, v) in &entries {
+            writeln!(w, "{} {} {v:e}", r + 1, c + 1)?;
+        }
+        Ok(())
     })
 }

@@ -79,6 +79,150 @@ fn reference_edges(p: [[f64; 3]; 3], inward: f64, d: f64) -> (Matrix3<f64>, f64)
     )
 }
 
+/// Rest shell vertices: the base vertices, then each one moved `thickness` along its vertex
+/// normal on the side `inward` (the offset mesh).
+fn rest_vertices(base: &Mesh, thickness: f64, inward: f64) -> Vec<[f64; 3]> {
+    let normals = base.vertex_normals();
+    let mut rest = base.vertices.clone();
+    rest.extend(
+        base.vertices
+            .iter()
+            .zip(&normals)
+            .map(|(p, nv)| add(*p, scale(*nv, inward * thickness))),
+    );
+    rest
+}
+
+/// Three tetrahedra per prism (tetrahedra 3t..3t+3 over triangle t); `n` base vertices, so the
+/// offset of vertex v is n + v.
+fn prism_tetrahedra(tris: &[[u32; 3]], n: usize) -> Vec<[u32; 4]> {
+    let mut tets = Vec::with_capacity(3 * tris.len());
+    for t in tris {
+        // Split with the corners in increasing id, so neighbouring prisms cut their shared
+        // quad along the same diagonal (a conforming tetrahedral shell).
+        let mut s = *t;
+        s.sort_unstable();
+        let [a, b, c] = s;
+        let o = |v: u32| v + n as u32;
+        tets.push([a, b, c, o(a)]);
+        tets.push([b, c, o(a), o(b)]);
+        tets.push([c, o(a), o(b), o(c)]);
+    }
+    tets
+}
+
+/// Per tetrahedron: the gradients g_a of F = Σ_a q_a g_aᵀ and the rest volume.
+struct Gradients {
+    grads: Vec<[[f64; 3]; 4]>,
+    volumes: Vec<f64>,
+}
+
+/// The shell's `Gradients`. Fails on a flat tetrahedron (relative to the shell's thickness).
+fn tet_gradients(tets: &[[u32; 4]], rest: &[[f64; 3]], thickness: f64) -> Result<Gradients> {
+    let mut grads = Vec::with_capacity(tets.len());
+    let mut volumes = Vec::with_capacity(tets.len());
+    for (k, tet) in tets.iter().enumerate() {
+        let q = tet.map(|v| rest[v as usize]);
+        let m = columns(sub(q[0], q[3]), sub(q[1], q[3]), sub(q[2], q[3]));
+        let det = m.determinant();
+        let inv = m
+            .try_inverse()
+            .filter(|_| det.abs() > 1e-12 * thickness.powi(3));
+        let Some(inv) = inv else {
+            return Err(Error::numerical(
+                NumericalKind::DegenerateElement,
+                format!(
+                    "shell embedding: prism tetrahedron {k} (triangle {}) is flat; the coarse skin has a zero-area triangle",
+                    k / 3
+                ),
+            ));
+        };
+        // F = Σ_{a<3} (q_a − q_3) r_aᵀ with r_a row a of M⁻¹, so g_a = r_a, g_3 = −Σ r_a.
+        let r = [0, 1, 2].map(|a| [inv[(a, 0)], inv[(a, 1)], inv[(a, 2)]]);
+        let g3 = [0, 1, 2].map(|c| -(r[0][c] + r[1][c] + r[2][c]));
+        grads.push([r[0], r[1], r[2], g3]);
+        volumes.push(det.abs() / 6.0);
+    }
+    Ok(Gradients { grads, volumes })
+}
+
+/// Per base triangle: rest area A, offset distance h and the inverse edges of its rest reference
+/// tetrahedron (paper §2).
+struct References {
+    area: Vec<f64>,
+    h: Vec<f64>,
+    ref_inv: Vec<Matrix3<f64>>,
+}
+
+/// The shell's `References`; `rest` holds the base vertices then their offsets. Fails on a
+/// zero-area triangle.
+fn reference_tetrahedra(
+    tris: &[[u32; 3]],
+    rest: &[[f64; 3]],
+    inward: f64,
+    thickness: f64,
+) -> Result<References> {
+    let n = rest.len() / 2;
+    let mut area = Vec::with_capacity(tris.len());
+    let mut h = Vec::with_capacity(tris.len());
+    let mut ref_inv = Vec::with_capacity(tris.len());
+    for (ti, t) in tris.iter().enumerate() {
+        let p = t.map(|v| rest[v as usize]);
+        let o = t.map(|v| rest[n + v as usize]);
+        let f = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+        let nn = scale(unit(f), inward);
+        let oc = scale(add(add(o[0], o[1]), o[2]), 1.0 / 3.0);
+        // h: distance from the offset triangle's centre to the base triangle's plane. At a
+        // crease of the coarse skin (vertex normals far from the face normal, e.g. at a
+        // nostril or an ear on an extracted skin) it can come out tiny or negative; there
+        // the reference tetrahedron takes the shell's nominal depth instead.
+        let d = dot(sub(oc, p[0]), nn);
+        let d = if d > 0.1 * thickness { d } else { thickness };
+        let (e, a) = reference_edges(p, inward, d);
+        let Some(inv) = e.try_inverse().filter(|_| a > 0.0) else {
+            return Err(Error::numerical(
+                NumericalKind::DegenerateElement,
+                format!("shell embedding: triangle {ti} of the coarse skin has zero area"),
+            ));
+        };
+        area.push(a);
+        h.push(d);
+        ref_inv.push(inv);
+    }
+    Ok(References { area, h, ref_inv })
+}
+
+/// The factorised offset fit. Eq. 1 per coordinate: Σ_tets V |Σ_a q_a g_a − m′_row|² → L q = b
+/// with L_ab = Σ V g_a·g_b (the same matrix for x, y and z). Base vertices are prescribed, and
+/// so are the offsets of the `fixed` base vertices.
+fn offset_fit(
+    n: usize,
+    tets: &[[u32; 4]],
+    grads: &[[[f64; 3]; 4]],
+    volumes: &[f64],
+    fixed: &[bool],
+) -> Result<System> {
+    let mut trip: Vec<(usize, usize, f64)> = Vec::with_capacity(tets.len() * 10);
+    for ((tet, g), v) in tets.iter().zip(grads).zip(volumes) {
+        for a in 0..4 {
+            for b in 0..4 {
+                let (ra, rb) = (tet[a] as usize, tet[b] as usize);
+                if ra >= rb {
+                    trip.push((ra, rb, v * dot(g[a], g[b])));
+                }
+            }
+        }
+    }
+    let mut fixed_all = vec![true; n];
+    fixed_all.extend((0..n).map(|i| fixed.get(i).copied().unwrap_or(false)));
+    System::new(2 * n, trip, &fixed_all).map_err(|e| {
+        Error::numerical(
+            NumericalKind::Singular,
+            format!("shell embedding: offset fit is singular ({e})"),
+        )
+    })
+}
+
 impl Shell {
     /// Build the rest shell over `base` (the coarse pre-operative skin), `thickness` mm deep on
     /// the side `inward` (+1: along the counter-clockwise normals, −1: against them), with
@@ -91,98 +235,13 @@ impl Shell {
                 "shell embedding: thickness {thickness} mm must be > 0 and Poisson ratio {nu} in [0, 0.5]"
             )));
         }
-        let normals = base.vertex_normals();
-        let mut rest = base.vertices.clone();
-        rest.extend(
-            base.vertices
-                .iter()
-                .zip(&normals)
-                .map(|(p, nv)| add(*p, scale(*nv, inward * thickness))),
-        );
+        let rest = rest_vertices(base, thickness, inward);
         let tris = base.triangles.clone();
-        let mut tets = Vec::with_capacity(3 * tris.len());
-        for t in &tris {
-            // Split with the corners in increasing id, so neighbouring prisms cut their shared
-            // quad along the same diagonal (a conforming tetrahedral shell).
-            let mut s = *t;
-            s.sort_unstable();
-            let [a, b, c] = s;
-            let o = |v: u32| v + n as u32;
-            tets.push([a, b, c, o(a)]);
-            tets.push([b, c, o(a), o(b)]);
-            tets.push([c, o(a), o(b), o(c)]);
-        }
-        let mut grads = Vec::with_capacity(tets.len());
-        let mut volumes = Vec::with_capacity(tets.len());
-        for (k, tet) in tets.iter().enumerate() {
-            let q = tet.map(|v| rest[v as usize]);
-            let m = columns(sub(q[0], q[3]), sub(q[1], q[3]), sub(q[2], q[3]));
-            let det = m.determinant();
-            let inv = m
-                .try_inverse()
-                .filter(|_| det.abs() > 1e-12 * thickness.powi(3));
-            let Some(inv) = inv else {
-                return Err(Error::numerical(
-                    NumericalKind::DegenerateElement,
-                    format!(
-                        "shell embedding: prism tetrahedron {k} (triangle {}) is flat; the coarse skin has a zero-area triangle",
-                        k / 3
-                    ),
-                ));
-            };
-            // F = Σ_{a<3} (q_a − q_3) r_aᵀ with r_a row a of M⁻¹, so g_a = r_a, g_3 = −Σ r_a.
-            let r = [0, 1, 2].map(|a| [inv[(a, 0)], inv[(a, 1)], inv[(a, 2)]]);
-            let g3 = [0, 1, 2].map(|c| -(r[0][c] + r[1][c] + r[2][c]));
-            grads.push([r[0], r[1], r[2], g3]);
-            volumes.push(det.abs() / 6.0);
-        }
-        let mut area = Vec::with_capacity(tris.len());
-        let mut h = Vec::with_capacity(tris.len());
-        let mut ref_inv = Vec::with_capacity(tris.len());
-        for (ti, t) in tris.iter().enumerate() {
-            let p = t.map(|v| rest[v as usize]);
-            let o = t.map(|v| rest[n + v as usize]);
-            let f = cross(sub(p[1], p[0]), sub(p[2], p[0]));
-            let nn = scale(unit(f), inward);
-            let oc = scale(add(add(o[0], o[1]), o[2]), 1.0 / 3.0);
-            // h: distance from the offset triangle's centre to the base triangle's plane. At a
-            // crease of the coarse skin (vertex normals far from the face normal, e.g. at a
-            // nostril or an ear on an extracted skin) it can come out tiny or negative; there
-            // the reference tetrahedron takes the shell's nominal depth instead.
-            let d = dot(sub(oc, p[0]), nn);
-            let d = if d > 0.1 * thickness { d } else { thickness };
-            let (e, a) = reference_edges(p, inward, d);
-            let Some(inv) = e.try_inverse().filter(|_| a > 0.0) else {
-                return Err(Error::numerical(
-                    NumericalKind::DegenerateElement,
-                    format!("shell embedding: triangle {ti} of the coarse skin has zero area"),
-                ));
-            };
-            area.push(a);
-            h.push(d);
-            ref_inv.push(inv);
-        }
-        // Eq. 1 per coordinate: Σ_tets V |Σ_a q_a g_a − m′_row|² → L q = b with
-        // L_ab = Σ V g_a·g_b (the same matrix for x, y and z). Base vertices are prescribed.
-        let mut trip: Vec<(usize, usize, f64)> = Vec::with_capacity(tets.len() * 10);
-        for ((tet, g), v) in tets.iter().zip(&grads).zip(&volumes) {
-            for a in 0..4 {
-                for b in 0..4 {
-                    let (ra, rb) = (tet[a] as usize, tet[b] as usize);
-                    if ra >= rb {
-                        trip.push((ra, rb, v * dot(g[a], g[b])));
-                    }
-                }
-            }
-        }
-        let mut fixed_all = vec![true; n];
-        fixed_all.extend((0..n).map(|i| fixed.get(i).copied().unwrap_or(false)));
-        let system = System::new(2 * n, trip, &fixed_all).map_err(|e| {
-            Error::numerical(
-                NumericalKind::Singular,
-                format!("shell embedding: offset fit is singular ({e})"),
-            )
-        })?;
+        let tets = prism_tetrahedra(&tris, n);
+        let Gradients { grads, volumes } = tet_gradients(&tets, &rest, thickness)?;
+        let References { area, h, ref_inv } =
+            reference_tetrahedra(&tris, &rest, inward, thickness)?;
+        let system = offset_fit(n, &tets, &grads, &volumes, fixed)?;
         Ok(Shell {
             n,
             tris,

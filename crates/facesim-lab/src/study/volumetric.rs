@@ -234,11 +234,72 @@ pub fn predict(
     } = opts;
     let mut lat = Lattice::new(vol, seg, spacing);
     lat.keep_facial_tissue(max_depth_mm);
+    let (couple, cubes) = couplings(&lat, kind);
+    let nodes = Nodes::anchored(&lat, &couple);
+    if nodes.points.iter().all(|&i| lat.is_bone(i)) {
+        return Err(Error::numerical(
+            NumericalKind::Singular,
+            "volumetric model: no soft tissue is connected to bone at this lattice spacing",
+        ));
+    }
+    let mut t: Vec<(usize, usize, f64)> = Vec::new();
+    match kind {
+        Kind::Lattice => lattice_springs(&mut t, &lat, &nodes, &couple, stiffness),
+        Kind::Tetrahedra => kuhn_tetrahedra(&mut t, &lat, &nodes, &cubes, stiffness, nu),
+    }
+    regularise(&mut t, &nodes, &couple);
+    let nn = nodes.points.len();
+    let (fixed, prescribed) = bone_motion(&lat, &nodes, plan);
+    let sys = System::new(3 * nn, t, &fixed)
+        .map_err(|e| Error::numerical(NumericalKind::Singular, format!("volumetric model: {e}")))?;
+    let unknowns = sys.free.len();
+    let u = sys.solve(&[vec![0.0; 3 * nn]], &[prescribed]).remove(0);
+    if u.iter().any(|x| !x.is_finite()) {
+        return Err(Error::numerical(
+            NumericalKind::Diverged,
+            "volumetric model: the solve returned non-finite displacements",
+        ));
+    }
+    Ok(Prediction {
+        displacement: points
+            .iter()
+            .map(|&p| interpolate(&lat, &nodes, &u, p))
+            .collect(),
+        nodes: nn,
+        unknowns,
+    })
+}
+
+impl Lattice {
+    fn is_node(&self, i: usize) -> bool {
+        self.label[i] != 0
+    }
+
+    fn is_bone(&self, i: usize) -> bool {
+        self.label[i] == segment::BONE
+    }
+
+    /// Lattice point at integer coordinates `q`; None outside the lattice.
+    fn at_checked(&self, q: [i64; 3]) -> Option<usize> {
+        if (0..3).any(|a| q[a] < 0 || q[a] >= self.dims[a] as i64) {
+            return None;
+        }
+        Some(self.at(q[0] as usize, q[1] as usize, q[2] as usize))
+    }
+
+    /// The 8 corners of the cell whose lowest corner is (x, y, z); bit 0 of the corner number
+    /// steps x, bit 1 y, bit 2 z (the numbering of marching tetrahedra's Kuhn split).
+    fn cube_corners(&self, x: usize, y: usize, z: usize) -> Vec<usize> {
+        (0..8)
+            .map(|c| self.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)))
+            .collect()
+    }
+}
+
+/// Edges of the model (pairs of lattice points coupled by a spring or an element), in lattice
+/// order, and for tetrahedra the lowest corner of every meshed cube.
+fn couplings(lat: &Lattice, kind: Kind) -> (Vec<(usize, usize)>, Vec<usize>) {
     let d = lat.dims;
-    let n = lat.label.len();
-    let is_node = |i: usize| lat.label[i] != 0;
-    let is_bone = |i: usize| lat.label[i] == segment::BONE;
-    // Edges of the model (pairs of lattice points coupled by a spring or an element).
     let mut couple: Vec<(usize, usize)> = Vec::new();
     let mut cubes: Vec<usize> = Vec::new();
     let offsets: Vec<[i64; 3]> = (0..27)
@@ -250,28 +311,26 @@ pub fn predict(
         for y in 0..d[1] {
             for x in 0..d[0] {
                 let i = lat.at(x, y, z);
-                if !is_node(i) {
+                if !lat.is_node(i) {
                     continue;
                 }
                 match kind {
                     Kind::Lattice => {
                         for o in &offsets {
                             let q = [x as i64 + o[0], y as i64 + o[1], z as i64 + o[2]];
-                            if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
-                                continue;
-                            }
-                            let j = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
-                            if j > i && is_node(j) && !(is_bone(i) && is_bone(j)) {
+                            let Some(j) = lat.at_checked(q) else { continue };
+                            // Bone–bone springs would join two Dirichlet nodes: no energy.
+                            if j > i && lat.is_node(j) && !(lat.is_bone(i) && lat.is_bone(j)) {
                                 couple.push((i, j));
                             }
                         }
                     }
                     Kind::Tetrahedra => {
                         if x + 1 < d[0] && y + 1 < d[1] && z + 1 < d[2] {
-                            let corners = (0..8)
-                                .map(|c| lat.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)));
-                            let cs: Vec<usize> = corners.collect();
-                            if cs.iter().all(|&c| is_node(c)) && !cs.iter().all(|&c| is_bone(c)) {
+                            let cs = lat.cube_corners(x, y, z);
+                            if cs.iter().all(|&c| lat.is_node(c))
+                                && !cs.iter().all(|&c| lat.is_bone(c))
+                            {
                                 cubes.push(i);
                                 for a in 0..8 {
                                     for b in a + 1..8 {
@@ -285,116 +344,160 @@ pub fn predict(
             }
         }
     }
-    // Keep the tissue connected to bone: union–find over the couplings.
-    let mut sets = UnionFind::new(n);
-    for &(a, b) in &couple {
-        sets.union(a, b);
-    }
-    let mut anchored = vec![false; n];
-    let mut touched = vec![false; n];
-    for &(a, b) in &couple {
-        touched[a] = true;
-        touched[b] = true;
-    }
-    for i in 0..n {
-        if touched[i] && is_bone(i) {
-            let r = sets.find(i);
-            anchored[r] = true;
+    (couple, cubes)
+}
+
+/// The nodes of the model: the coupled lattice points of the pieces of tissue connected to bone
+/// (anything else floats).
+struct Nodes {
+    /// Node number per lattice point (usize::MAX: not a node).
+    index: Vec<usize>,
+    /// Lattice point per node.
+    points: Vec<usize>,
+    /// Rest position per node.
+    pos: Vec<[f64; 3]>,
+}
+
+impl Nodes {
+    /// Union–find over the couplings; a component is kept when it holds a coupled bone point.
+    fn anchored(lat: &Lattice, couple: &[(usize, usize)]) -> Nodes {
+        let n = lat.label.len();
+        let mut sets = UnionFind::new(n);
+        for &(a, b) in couple {
+            sets.union(a, b);
         }
-    }
-    let mut index = vec![usize::MAX; n];
-    let mut nodes = Vec::new();
-    for i in 0..n {
-        if touched[i] && anchored[sets.find(i)] {
-            index[i] = nodes.len();
-            nodes.push(i);
+        let mut anchored = vec![false; n];
+        let mut touched = vec![false; n];
+        for &(a, b) in couple {
+            touched[a] = true;
+            touched[b] = true;
         }
+        for i in 0..n {
+            if touched[i] && lat.is_bone(i) {
+                let r = sets.find(i);
+                anchored[r] = true;
+            }
+        }
+        let mut index = vec![usize::MAX; n];
+        let mut points = Vec::new();
+        for i in 0..n {
+            if touched[i] && anchored[sets.find(i)] {
+                index[i] = points.len();
+                points.push(i);
+            }
+        }
+        let pos = points.iter().map(|&i| lat.pos(i)).collect();
+        Nodes { index, points, pos }
     }
-    if nodes.iter().all(|&i| is_bone(i)) {
-        return Err(Error::numerical(
-            NumericalKind::Singular,
-            "volumetric model: no soft tissue is connected to bone at this lattice spacing",
-        ));
+
+    /// Node numbers of both ends of a coupling, None when either end is not a node.
+    fn pair(&self, (a, b): (usize, usize)) -> Option<(usize, usize)> {
+        let (ia, ib) = (self.index[a], self.index[b]);
+        (ia != usize::MAX && ib != usize::MAX).then_some((ia, ib))
     }
-    let pos: Vec<[f64; 3]> = nodes.iter().map(|&i| lat.pos(i)).collect();
-    let mut t: Vec<(usize, usize, f64)> = Vec::new();
+}
+
+/// Voxel-lattice mass-spring: one linearised spring per coupling.
+fn lattice_springs(
+    t: &mut Vec<(usize, usize, f64)>,
+    lat: &Lattice,
+    nodes: &Nodes,
+    couple: &[(usize, usize)],
+    stiffness: &Stiffness,
+) {
     let c_of = |i: usize| tissue_c(lat.label[i], stiffness);
-    match kind {
-        Kind::Lattice => {
-            for &(a, b) in &couple {
-                let (ia, ib) = (index[a], index[b]);
-                if ia == usize::MAX || ib == usize::MAX {
-                    continue;
-                }
-                let (ca, cb) = (c_of(a), c_of(b));
-                // Series stiffness of the two half-springs (a bone end is rigid).
-                let c = match (ca > 0.0, cb > 0.0) {
-                    (true, true) => 2.0 * ca * cb / (ca + cb),
-                    (true, false) => ca,
-                    (false, true) => cb,
-                    _ => continue,
-                };
-                let dv = facesim::mesh::sub(pos[ib], pos[ia]);
-                let l = facesim::mesh::norm(dv);
-                spring(&mut t, ia, ib, c * spacing / l, dv.map(|x| x / l));
-            }
+    let pos = &nodes.pos;
+    for &(a, b) in couple {
+        let Some((ia, ib)) = nodes.pair((a, b)) else {
+            continue;
+        };
+        let (ca, cb) = (c_of(a), c_of(b));
+        // Series stiffness of the two half-springs (a bone end is rigid).
+        let c = match (ca > 0.0, cb > 0.0) {
+            (true, true) => 2.0 * ca * cb / (ca + cb),
+            (true, false) => ca,
+            (false, true) => cb,
+            _ => continue,
+        };
+        let dv = facesim::mesh::sub(pos[ib], pos[ia]);
+        let l = facesim::mesh::norm(dv);
+        spring(t, ia, ib, c * lat.s / l, dv.map(|x| x / l));
+    }
+}
+
+/// Linear tetrahedra: the Kuhn split of every meshed cube whose corners are all nodes, E the
+/// mean stiffness of the tetrahedron's soft corners.
+fn kuhn_tetrahedra(
+    t: &mut Vec<(usize, usize, f64)>,
+    lat: &Lattice,
+    nodes: &Nodes,
+    cubes: &[usize],
+    stiffness: &Stiffness,
+    nu: f64,
+) {
+    // Kuhn split of the cube: six tetrahedra around the main diagonal 0–7 (the same
+    // split marching tetrahedra uses).
+    use facesim::surface::marching::TETS as KUHN;
+    let d = lat.dims;
+    let c_of = |i: usize| tissue_c(lat.label[i], stiffness);
+    let (index, pos) = (&nodes.index, &nodes.pos);
+    for &i in cubes {
+        let (x, y, z) = (i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1]));
+        let cs = lat.cube_corners(x, y, z);
+        if cs.iter().any(|&c| index[c] == usize::MAX) {
+            continue;
         }
-        Kind::Tetrahedra => {
-            // Kuhn split of the cube: six tetrahedra around the main diagonal 0–7 (the same
-            // split marching tetrahedra uses).
-            use facesim::surface::marching::TETS as KUHN;
-            for &i in &cubes {
-                let (x, y, z) = (i % d[0], (i / d[0]) % d[1], i / (d[0] * d[1]));
-                let cs: Vec<usize> = (0..8)
-                    .map(|c| lat.at(x + (c & 1), y + ((c >> 1) & 1), z + (c >> 2)))
-                    .collect();
-                if cs.iter().any(|&c| index[c] == usize::MAX) {
-                    continue;
-                }
-                for tet in KUHN {
-                    let g = tet.map(|c| cs[c]);
-                    let soft: Vec<f64> = g.iter().map(|&c| c_of(c)).filter(|&c| c > 0.0).collect();
-                    if soft.is_empty() {
-                        continue;
-                    }
-                    let e = soft.iter().sum::<f64>() / soft.len() as f64;
-                    tetra(&mut t, g.map(|c| index[c]), g.map(|c| pos[index[c]]), e, nu);
-                }
+        for tet in KUHN {
+            let g = tet.map(|c| cs[c]);
+            let soft: Vec<f64> = g.iter().map(|&c| c_of(c)).filter(|&c| c > 0.0).collect();
+            if soft.is_empty() {
+                continue;
             }
+            let e = soft.iter().sum::<f64>() / soft.len() as f64;
+            tetra(t, g.map(|c| index[c]), g.map(|c| pos[index[c]]), e, nu);
         }
     }
-    let nn = nodes.len();
-    // A weak isotropic coupling along every edge of the model (1e-9 of the largest diagonal)
-    // removes the lattice's zero-energy modes at the tissue's edge; unlike a tie to the rest
-    // position it stores no energy under a rigid translation, so it cannot bias one.
+}
+
+/// A weak isotropic coupling along every edge of the model (1e-9 of the largest diagonal)
+/// removes the lattice's zero-energy modes at the tissue's edge; unlike a tie to the rest
+/// position it stores no energy under a rigid translation, so it cannot bias one.
+fn regularise(t: &mut Vec<(usize, usize, f64)>, nodes: &Nodes, couple: &[(usize, usize)]) {
     let mut diag_max = 0.0f64;
-    for &(r, c, v) in &t {
+    for &(r, c, v) in t.iter() {
         if r == c {
             diag_max = diag_max.max(v);
         }
     }
     let eps = 1e-9 * diag_max;
-    for &(a, b) in &couple {
-        let (ia, ib) = (index[a], index[b]);
-        if ia == usize::MAX || ib == usize::MAX {
+    for &pair in couple {
+        let Some((ia, ib)) = nodes.pair(pair) else {
             continue;
-        }
+        };
         for e in [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] {
-            spring(&mut t, ia, ib, eps, e);
+            spring(t, ia, ib, eps, e);
         }
     }
+}
+
+/// Dirichlet conditions: every bone node is fixed at the plan's motion of its rest position
+/// (returns the fixed flags and prescribed displacements per unknown).
+fn bone_motion(lat: &Lattice, nodes: &Nodes, plan: &Plan) -> (Vec<bool>, Vec<f64>) {
+    let nn = nodes.points.len();
+    let pos = &nodes.pos;
     let mut fixed = vec![false; 3 * nn];
     let mut prescribed = vec![0.0; 3 * nn];
     let bone_pts: Vec<[f64; 3]> = nodes
+        .points
         .iter()
-        .zip(&pos)
-        .filter(|(i, _)| is_bone(**i))
+        .zip(pos)
+        .filter(|(i, _)| lat.is_bone(**i))
         .map(|(_, p)| *p)
         .collect();
     let (moved, _) = plan.apply(&bone_pts, 1.0);
     let mut k = 0;
-    for (a, &i) in nodes.iter().enumerate() {
-        if is_bone(i) {
+    for (a, &i) in nodes.points.iter().enumerate() {
+        if lat.is_bone(i) {
             for c in 0..3 {
                 fixed[3 * a + c] = true;
                 prescribed[3 * a + c] = moved[k][c] - pos[a][c];
@@ -402,70 +505,63 @@ pub fn predict(
             k += 1;
         }
     }
-    let sys = System::new(3 * nn, t, &fixed)
-        .map_err(|e| Error::numerical(NumericalKind::Singular, format!("volumetric model: {e}")))?;
-    let unknowns = sys.free.len();
-    let u = sys.solve(&[vec![0.0; 3 * nn]], &[prescribed]).remove(0);
-    if u.iter().any(|x| !x.is_finite()) {
-        return Err(Error::numerical(
-            NumericalKind::Diverged,
-            "volumetric model: the solve returned non-finite displacements",
-        ));
+    (fixed, prescribed)
+}
+
+/// Displacement at `p`: trilinear over the corners of its cell that are nodes (weights
+/// renormalised), else the nearest node nearby (`nearest_node`), else zero.
+fn interpolate(lat: &Lattice, nodes: &Nodes, u: &[f64], p: [f64; 3]) -> [f64; 3] {
+    let index = &nodes.index;
+    let c = [0, 1, 2].map(|a| (p[a] - lat.origin[a]) / lat.s);
+    let base = c.map(|x| x.floor() as i64);
+    let f = [0, 1, 2].map(|a| c[a] - base[a] as f64);
+    let mut acc = [0.0; 3];
+    let mut wsum = 0.0;
+    for corner in 0..8 {
+        let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
+        let q = [0, 1, 2].map(|a| base[a] + o[a] as i64);
+        let Some(gi) = lat.at_checked(q) else {
+            continue;
+        };
+        if index[gi] == usize::MAX {
+            continue;
+        }
+        // The floor keeps wsum > 0 whenever a corner is a node, even one of zero weight.
+        let w: f64 = (0..3)
+            .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
+            .product::<f64>()
+            .max(1e-12);
+        for k in 0..3 {
+            acc[k] += w * u[3 * index[gi] + k];
+        }
+        wsum += w;
     }
-    // Interpolate at the points.
-    let disp_at = |p: [f64; 3]| {
-        let c = [0, 1, 2].map(|a| (p[a] - lat.origin[a]) / spacing);
-        let base = c.map(|x| x.floor() as i64);
-        let f = [0, 1, 2].map(|a| c[a] - base[a] as f64);
-        let mut acc = [0.0; 3];
-        let mut wsum = 0.0;
-        for corner in 0..8 {
-            let o = [corner & 1, (corner >> 1) & 1, corner >> 2];
-            let q = [0, 1, 2].map(|a| base[a] + o[a] as i64);
-            if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
-                continue;
-            }
-            let gi = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
-            if index[gi] == usize::MAX {
-                continue;
-            }
-            let w: f64 = (0..3)
-                .map(|a| if o[a] == 1 { f[a] } else { 1.0 - f[a] })
-                .product::<f64>()
-                .max(1e-12);
-            for k in 0..3 {
-                acc[k] += w * u[3 * index[gi] + k];
-            }
-            wsum += w;
-        }
-        if wsum > 0.0 {
-            return acc.map(|x| x / wsum);
-        }
-        // Nearest node within two cells.
-        let mut best = (f64::INFINITY, [0.0; 3]);
-        for dz in -2..=3i64 {
-            for dy in -2..=3i64 {
-                for dx in -2..=3i64 {
-                    let q = [base[0] + dx, base[1] + dy, base[2] + dz];
-                    if (0..3).any(|a| q[a] < 0 || q[a] >= d[a] as i64) {
-                        continue;
-                    }
-                    let gi = lat.at(q[0] as usize, q[1] as usize, q[2] as usize);
-                    if index[gi] == usize::MAX {
-                        continue;
-                    }
-                    let dist = facesim::mesh::norm(facesim::mesh::sub(lat.pos(gi), p));
-                    if dist < best.0 {
-                        best = (dist, [0, 1, 2].map(|k| u[3 * index[gi] + k]));
-                    }
+    if wsum > 0.0 {
+        return acc.map(|x| x / wsum);
+    }
+    nearest_node(lat, nodes, u, base, p)
+}
+
+/// Displacement of the node nearest to `p` among the lattice points base − 2 … base + 3.
+fn nearest_node(lat: &Lattice, nodes: &Nodes, u: &[f64], base: [i64; 3], p: [f64; 3]) -> [f64; 3] {
+    let index = &nodes.index;
+    let mut best = (f64::INFINITY, [0.0; 3]);
+    for dz in -2..=3i64 {
+        for dy in -2..=3i64 {
+            for dx in -2..=3i64 {
+                let q = [base[0] + dx, base[1] + dy, base[2] + dz];
+                let Some(gi) = lat.at_checked(q) else {
+                    continue;
+                };
+                if index[gi] == usize::MAX {
+                    continue;
+                }
+                let dist = facesim::mesh::norm(facesim::mesh::sub(lat.pos(gi), p));
+                if dist < best.0 {
+                    best = (dist, [0, 1, 2].map(|k| u[3 * index[gi] + k]));
                 }
             }
         }
-        best.1
-    };
-    Ok(Prediction {
-        displacement: points.iter().map(|&p| disp_at(p)).collect(),
-        nodes: nn,
-        unknowns,
-    })
+    }
+    best.1
 }
