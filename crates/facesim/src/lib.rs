@@ -33,6 +33,7 @@ pub mod segment;
 pub mod solve;
 pub mod springs;
 pub mod surface;
+pub mod tet;
 pub mod union_find;
 pub mod volume;
 

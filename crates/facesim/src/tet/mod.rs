@@ -1,0 +1,219 @@
+//! Linear tetrahedral finite elements for the volumetric soft-tissue model (issue 14; first
+//! increment: the element, assembly and the small-strain linear solve with prescribed nodes).
+//!
+//! Small-strain isotropic linear elasticity per element, σ = λ tr(ε) I + 2 μ ε with
+//! λ = E ν / ((1 + ν)(1 − 2ν)) and μ = E / (2 (1 + ν)). For linear shape functions N_a with
+//! constant gradients g_a, the 3×3 block of the element stiffness coupling nodes a and b is
+//! K_ab = V (λ g_a g_bᵀ + μ g_b g_aᵀ + μ (g_a · g_b) I) (the Galerkin form of ∫ ε(v) : σ(u) dV).
+//! Node n's displacement components are DOFs 3n, 3n + 1, 3n + 2. Units: mm, kPa (any consistent
+//! units give the same displacements, which are all a prescribed-displacement problem yields).
+
+use crate::error::{Error, NumericalKind, Result};
+use crate::fem::assembly::System;
+
+/// Young's modulus (kPa) and Poisson ratio of an element.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Elastic {
+    pub youngs_kpa: f64,
+    pub poisson: f64,
+}
+
+impl Elastic {
+    /// Lamé's (λ, μ).
+    pub fn lame(self) -> (f64, f64) {
+        let (e, nu) = (self.youngs_kpa, self.poisson);
+        (
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+            e / (2.0 * (1.0 + nu)),
+        )
+    }
+}
+
+/// Nodes (LPS mm), tetrahedra (four node indices, positive volume: the fourth node on the side
+/// the first three wind counter-clockwise about) and one material per tetrahedron.
+pub struct TetMesh {
+    pub nodes: Vec<[f64; 3]>,
+    pub tets: Vec<[u32; 4]>,
+    pub material: Vec<Elastic>,
+}
+
+/// Volume and shape-function gradients of a tetrahedron; None when it is flat or inverted.
+pub fn gradients(x: [[f64; 3]; 4]) -> Option<(f64, [[f64; 3]; 4])> {
+    let e = [1, 2, 3].map(|k| [0, 1, 2].map(|c| x[k][c] - x[0][c]));
+    // Rows of J⁻¹ (J's columns are the edges from node 0) are ∇N1..∇N3: cofactors / det.
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let c = [cross(e[1], e[2]), cross(e[2], e[0]), cross(e[0], e[1])];
+    let det = (0..3).map(|k| e[0][k] * c[0][k]).sum::<f64>();
+    let scale = (0..3)
+        .map(|k| e[k].iter().map(|v| v * v).sum::<f64>())
+        .fold(0.0, f64::max)
+        .powf(1.5);
+    if !(det > 1e-12 * scale) {
+        return None;
+    }
+    let g1 = c[0].map(|v| v / det);
+    let g2 = c[1].map(|v| v / det);
+    let g3 = c[2].map(|v| v / det);
+    let g0 = [0, 1, 2].map(|k| -(g1[k] + g2[k] + g3[k]));
+    Some((det / 6.0, [g0, g1, g2, g3]))
+}
+
+/// The 12×12 element stiffness (row 3a + i, column 3b + j).
+pub fn element_stiffness(x: [[f64; 3]; 4], m: Elastic) -> Option<[[f64; 12]; 12]> {
+    let (v, g) = gradients(x)?;
+    let (lambda, mu) = m.lame();
+    let mut k = [[0.0; 12]; 12];
+    for a in 0..4 {
+        for b in 0..4 {
+            let dot: f64 = (0..3).map(|c| g[a][c] * g[b][c]).sum();
+            for i in 0..3 {
+                for j in 0..3 {
+                    let id = if i == j { 1.0 } else { 0.0 };
+                    k[3 * a + i][3 * b + j] =
+                        v * (lambda * g[a][i] * g[b][j] + mu * g[a][j] * g[b][i] + mu * dot * id);
+                }
+            }
+        }
+    }
+    Some(k)
+}
+
+impl TetMesh {
+    pub fn ndof(&self) -> usize {
+        3 * self.nodes.len()
+    }
+
+    /// K's lower triangle as triplets (duplicates summed by the factorisation); an inverted or
+    /// flat tetrahedron is a reported failure naming it.
+    pub fn assemble(&self) -> Result<Vec<(usize, usize, f64)>> {
+        let mut k = Vec::with_capacity(self.tets.len() * 78);
+        for (t, (tet, m)) in self.tets.iter().zip(&self.material).enumerate() {
+            let x = tet.map(|n| self.nodes[n as usize]);
+            let ke = element_stiffness(x, *m).ok_or_else(|| {
+                Error::numerical(
+                    NumericalKind::DegenerateElement,
+                    format!("tetrahedron {t} (nodes {tet:?}) is flat or inverted"),
+                )
+            })?;
+            for a in 0..12 {
+                for b in 0..=a {
+                    let (ga, gb) = (
+                        3 * tet[a / 3] as usize + a % 3,
+                        3 * tet[b / 3] as usize + b % 3,
+                    );
+                    let (r, c) = if ga >= gb { (ga, gb) } else { (gb, ga) };
+                    // The four nodes differ, so each unordered global pair comes once.
+                    k.push((r, c, ke[a][b]));
+                }
+            }
+        }
+        Ok(k)
+    }
+
+    /// Small-strain linear elasticity with the nodes of `prescribed` held at their displacement
+    /// and no body force: the displacement of every node.
+    pub fn solve_linear(&self, prescribed: &[Option<[f64; 3]>]) -> Result<Vec<[f64; 3]>> {
+        let n = self.ndof();
+        let fixed: Vec<bool> = prescribed.iter().flat_map(|p| [p.is_some(); 3]).collect();
+        if !fixed.iter().any(|f| *f) {
+            return Err(Error::config(
+                "volumetric model: no node is held (no bone in the region): the tissue would float",
+            ));
+        }
+        let values: Vec<f64> = prescribed
+            .iter()
+            .flat_map(|p| p.unwrap_or([0.0; 3]))
+            .collect();
+        let sys = System::new(n, self.assemble()?, &fixed).map_err(|e| match e {
+            Error::Numerical { kind, .. } => Error::numerical(
+                kind,
+                "the tetrahedral stiffness matrix is singular: a piece of tissue is held by no node",
+            ),
+            other => other,
+        })?;
+        let u = sys.solve(&[vec![0.0; n]], &[values]).remove(0);
+        Ok(u.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const X: [[f64; 3]; 4] = [
+        [0.1, 0.0, 0.2],
+        [2.0, 0.3, 0.0],
+        [0.2, 1.7, 0.1],
+        [0.4, 0.5, 2.2],
+    ];
+    const M: Elastic = Elastic {
+        youngs_kpa: 3.0,
+        poisson: 0.3,
+    };
+
+    fn apply(k: &[[f64; 12]; 12], u: &[f64; 12]) -> [f64; 12] {
+        std::array::from_fn(|r| (0..12).map(|c| k[r][c] * u[c]).sum())
+    }
+
+    #[test]
+    fn gradients_sum_to_zero_and_reproduce_coordinates() {
+        let (v, g) = gradients(X).unwrap();
+        assert!(v > 0.0);
+        // Σ_a x_a ⊗ ∇N_a = I: linear fields are interpolated exactly.
+        for i in 0..3 {
+            for j in 0..3 {
+                let s: f64 = (0..4).map(|a| X[a][i] * g[a][j]).sum();
+                assert!(
+                    (s - if i == j { 1.0 } else { 0.0 }).abs() < 1e-12,
+                    "{i}{j}: {s}"
+                );
+            }
+        }
+        let swapped = [X[1], X[0], X[2], X[3]];
+        assert!(
+            gradients(swapped).is_none(),
+            "an inverted element is refused"
+        );
+    }
+
+    #[test]
+    fn stiffness_is_symmetric_with_six_rigid_modes_and_positive_strain_energy() {
+        let k = element_stiffness(X, M).unwrap();
+        for r in 0..12 {
+            for c in 0..12 {
+                assert!((k[r][c] - k[c][r]).abs() < 1e-12);
+            }
+        }
+        // Translations and infinitesimal rotations u = ω × x carry no strain: K u = 0.
+        let mut modes: Vec<[f64; 12]> = Vec::new();
+        for d in 0..3 {
+            modes.push(std::array::from_fn(|i| if i % 3 == d { 1.0 } else { 0.0 }));
+            let w: [f64; 3] = std::array::from_fn(|c| if c == d { 1.0 } else { 0.0 });
+            modes.push(std::array::from_fn(|i| {
+                let p = X[i / 3];
+                let r = [
+                    w[1] * p[2] - w[2] * p[1],
+                    w[2] * p[0] - w[0] * p[2],
+                    w[0] * p[1] - w[1] * p[0],
+                ];
+                r[i % 3]
+            }));
+        }
+        for m in &modes {
+            assert!(apply(&k, m).iter().all(|f| f.abs() < 1e-12));
+        }
+        // A uniform stretch ε_xx = s has energy ½ V (λ + 2μ) s².
+        let s = 1e-2;
+        let u: [f64; 12] = std::array::from_fn(|i| if i % 3 == 0 { s * X[i / 3][0] } else { 0.0 });
+        let e = 0.5 * (0..12).map(|i| u[i] * apply(&k, &u)[i]).sum::<f64>();
+        let (v, _) = gradients(X).unwrap();
+        let (l, mu) = M.lame();
+        assert!((e - 0.5 * v * (l + 2.0 * mu) * s * s).abs() < 1e-14, "{e}");
+    }
+}
