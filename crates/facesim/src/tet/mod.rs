@@ -119,26 +119,32 @@ impl TetMesh {
     /// Small-strain linear elasticity with the nodes of `prescribed` held at their displacement
     /// and no body force: the displacement of every node.
     pub fn solve_linear(&self, prescribed: &[Option<[f64; 3]>]) -> Result<Vec<[f64; 3]>> {
-        let n = self.ndof();
         let fixed: Vec<bool> = prescribed.iter().flat_map(|p| [p.is_some(); 3]).collect();
+        let values: Vec<f64> = prescribed
+            .iter()
+            .flat_map(|p| p.unwrap_or([0.0; 3]))
+            .collect();
+        let u = self.solve_dofs(&fixed, &values)?;
+        Ok(u.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+    }
+
+    /// The same with single displacement components held (`fixed[3n + c]` at `values[3n + c]`):
+    /// sliding and symmetry conditions hold one component and leave the others free.
+    pub fn solve_dofs(&self, fixed: &[bool], values: &[f64]) -> Result<Vec<f64>> {
+        let n = self.ndof();
         if !fixed.iter().any(|f| *f) {
             return Err(Error::config(
                 "volumetric model: no node is held (no bone in the region): the tissue would float",
             ));
         }
-        let values: Vec<f64> = prescribed
-            .iter()
-            .flat_map(|p| p.unwrap_or([0.0; 3]))
-            .collect();
-        let sys = System::new(n, self.assemble()?, &fixed).map_err(|e| match e {
+        let sys = System::new(n, self.assemble()?, fixed).map_err(|e| match e {
             Error::Numerical { kind, .. } => Error::numerical(
                 kind,
                 "the tetrahedral stiffness matrix is singular: a piece of tissue is held by no node",
             ),
             other => other,
         })?;
-        let u = sys.solve(&[vec![0.0; n]], &[values]).remove(0);
-        Ok(u.chunks(3).map(|c| [c[0], c[1], c[2]]).collect())
+        Ok(sys.solve(&[vec![0.0; n]], &[values.to_vec()]).remove(0))
     }
 }
 
