@@ -41,10 +41,10 @@ fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
 
 impl Plan {
     /// The plan of `osteotomies`, whose mask regions have been read (`Case::read_masks`).
-    pub fn new(osteotomies: &[Osteotomy]) -> Result<Plan> {
-        Ok(Plan {
+    pub fn new(osteotomies: &[Osteotomy]) -> Plan {
+        Plan {
             steps: osteotomies.to_vec(),
-        })
+        }
     }
 
     /// Move points; `scale` ∈ [0, 1] applies a fraction of every move (load increments:

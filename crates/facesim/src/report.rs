@@ -11,9 +11,8 @@ use crate::surface::register::Transform;
 use serde::Serialize;
 use serde::ser::{SerializeMap, Serializer};
 
-/// A pipeline stage, as named in report.json's `timings` and `stage_costs`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
+/// A pipeline stage, named in report.json's `timings` and `stage_costs` by [`Stage::key`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {
     ReadCt,
     Segment,

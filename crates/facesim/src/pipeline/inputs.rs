@@ -51,20 +51,12 @@ pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)>
     } else {
         case_path.to_path_buf()
     };
-    let skin_source = case
-        .skin
-        .as_ref()
-        .map_or(&case.ct.path, |s| &s.path)
-        .clone();
-    let inputs = read_case(case, rec)?;
-    Ok((
-        inputs,
-        CaseFiles {
-            dir,
-            case_file,
-            skin_source,
-        },
-    ))
+    let files = CaseFiles {
+        dir,
+        case_file,
+        ..CaseFiles::in_memory(&case)
+    };
+    Ok((read_case(case, rec)?, files))
 }
 
 /// Read the files a case built in memory names (paths absolute or relative to the working

@@ -183,7 +183,8 @@ fn finish(
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
     let prediction = predict::predict(&scene, case, files, &mut rec)?;
-    outputs::write(out_dir, &scene, &prediction, case, &mut rec)?;
+    let dist = outputs::displacement(&prediction);
+    outputs::write(out_dir, &scene, &prediction, &dist, case, &mut rec)?;
     rec.costs.0.push((
         Stage::Total,
         // Stage meters reset the heap high-water mark, so the whole run's peak is the
@@ -193,7 +194,7 @@ fn finish(
             ..total.stop()
         },
     ));
-    outputs::fill_report(&mut report, &scene, &prediction, case, rec);
+    outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
     outputs::write_report(out_dir, &report)?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;

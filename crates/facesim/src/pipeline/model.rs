@@ -97,7 +97,7 @@ pub fn build(
     if spring_report.misses > 0 {
         rec.warn(miss_warning(&spring_report, case));
     }
-    let plan = Plan::new(&case.osteotomy)?;
+    let plan = Plan::new(&case.osteotomy);
     plan.check_selects(
         &springs.attachments,
         if want.is_some() {

@@ -81,23 +81,24 @@ fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
     })
 }
 
-/// Every output file but report.json, into `dir` (created if needed).
+/// Every output file but report.json, into `dir` (created if needed); `dist` is
+/// [`displacement`] of `p`.
 pub fn write(
     dir: &Path,
     scene: &Scene,
     p: &Prediction,
+    dist: &[f64],
     case: &Case,
     rec: &mut Recorder,
 ) -> Result<()> {
     rec.time(Stage::Write, "writing outputs", || {
-        write_files(dir, scene, p, case)
+        write_files(dir, scene, p, dist, case)
     })
 }
 
-fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result<()> {
+fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &Case) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-    let dist = displacement(p);
-    let coloured = coloured_face(p, &dist);
+    let coloured = coloured_face(p, dist);
     let skull = &scene.face.skull;
     let mut skull_post = skull.clone();
     skull_post.vertices = scene.model.plan.apply(&skull.vertices, 1.0).0;
@@ -138,7 +139,7 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result
                 mesh::ply::Encoding::BinaryLittleEndian,
             )
         }),
-        Box::new(|| displacement_csv(&o.join("displacement.csv"), p, &dist)),
+        Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.ply"))),
         Box::new(|| mesh::write_mesh(skull, &o.join("skull_pre.ply"))),
@@ -154,9 +155,15 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, case: &Case) -> Result
 }
 
 /// Fill the report from the run's stages (costs, counts, sections, warnings).
-pub fn fill_report(report: &mut Report, scene: &Scene, p: &Prediction, case: &Case, rec: Recorder) {
-    let dist = displacement(p);
-    let dmax = max_of(&dist);
+pub fn fill_report(
+    report: &mut Report,
+    scene: &Scene,
+    p: &Prediction,
+    dist: &[f64],
+    case: &Case,
+    rec: Recorder,
+) {
+    let dmax = max_of(dist);
     report.displacement = Displacement {
         max: dmax,
         mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
