@@ -1,1 +1,215 @@
-//! placeholder
+//! The soft tissue of a CT case as a tetrahedral mesh: isosurface stuffing (`stuffing`) of the
+//! region inside the skin iso-surface and outside the bone iso-surface, restricted to a box.
+//!
+//! The iso-surfaces are the pipeline's own (`pipeline::surfaces`): the skin where
+//! `seg.skin_field` crosses `windows.head_threshold`, the bone where `seg.bone_field` crosses
+//! `windows.bone`, both sampled trilinearly as marching tetrahedra interpolate them. One
+//! implicit (negative in soft tissue): f = max(head_threshold − skin, bone − bone_iso), in HU.
+//!
+//! Air cavities (sinuses, airway, mouth air) are not part of the head mask, so `skin_field`
+//! clamps them below the head threshold: they are holes in the mesh, bounded by Skin nodes
+//! (their walls are a skin-type iso-surface, as in the pipeline's skin surface).
+//!
+//! Thin tissue (skin 2–3 mm over bone, the nasal bridge) narrower than about one lattice
+//! spacing may be missed by the lattice: the mesh stays valid (stuffing's angle bounds do not
+//! depend on the surface) but the gap closes there. `voxel_volume_mm3` (the soft tissue of the
+//! box counted from voxel centres) against `quality.volume_mm3` shows how much was lost.
+//!
+//! Tissue per tetrahedron: the segmentation label of the voxel nearest its centroid; when that
+//! voxel is air or bone (partial volume at the boundary), the most common soft label
+//! (skin, fats, muscle) within 1, then 2, then 3 voxels; muscle when none is found (counted in
+//! `tissue_fallbacks`).
+
+use super::quality::Quality;
+use super::stuffing::{self, NodeKind as StuffKind};
+use crate::error::{Error, Result};
+use crate::segment::{BONE, MUSCLE, Segmentation};
+use crate::volume::{Volume, sample_field};
+use rayon::prelude::*;
+
+/// Lattice sizes (mm). `deep_size_mm` is the coarse size of a graded lattice (not built yet:
+/// the lattice is uniform at `skin_size_mm`); `margin_mm` widens the box on every side.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshParams {
+    pub skin_size_mm: f64,
+    pub deep_size_mm: f64,
+    pub margin_mm: f64,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum NodeKind {
+    Interior,
+    /// On the skin iso-surface (including cavity walls).
+    Skin,
+    /// On the bone iso-surface.
+    Bone,
+    /// On the region's cut faces only.
+    Cut,
+}
+
+pub struct SoftTissueMesh {
+    /// LPS mm.
+    pub nodes: Vec<[f64; 3]>,
+    /// Positive volume (`tet::gradients` is Some for each).
+    pub tets: Vec<[u32; 4]>,
+    /// Per tetrahedron, a soft label of `crate::segment` (SKIN, FAT_DARK, FAT_BRIGHT, MUSCLE).
+    pub tissue: Vec<u8>,
+    /// Per node.
+    pub kind: Vec<NodeKind>,
+    pub quality: Quality,
+    /// Soft tissue inside the box counted from voxel centres (mm³), to compare with
+    /// `quality.volume_mm3`: thin tissue the lattice could not resolve is the difference.
+    pub voxel_volume_mm3: f64,
+    /// Tetrahedra with no soft voxel within 3 voxels of their centroid (labelled muscle).
+    pub tissue_fallbacks: usize,
+}
+
+/// HU given to samples outside the CT: air for the skin field, no bone for the bone field.
+const OUTSIDE_HU: f32 = -1024.0;
+
+/// Mesh the soft tissue of `vol` inside `roi` (an LPS box, mm; widened by `p.margin_mm`).
+pub fn soft_tissue(
+    vol: &Volume,
+    seg: &Segmentation,
+    roi: ([f64; 3], [f64; 3]),
+    p: &MeshParams,
+) -> Result<SoftTissueMesh> {
+    if !(p.skin_size_mm.is_finite() && p.skin_size_mm > 0.0) {
+        return Err(Error::config(format!(
+            "tetrahedral mesh: skin size must be positive, got {} mm",
+            p.skin_size_mm
+        )));
+    }
+    if !(p.margin_mm.is_finite() && p.margin_mm >= 0.0) {
+        return Err(Error::config(format!(
+            "tetrahedral mesh: margin must be ≥ 0, got {} mm",
+            p.margin_mm
+        )));
+    }
+    let lo = roi.0.map(|x| x - p.margin_mm);
+    let hi = roi.1.map(|x| x + p.margin_mm);
+    let skin = seg.skin_field(vol);
+    let bone = seg.bone_field(vol);
+    let (skin_iso, bone_iso) = (seg.windows.head_threshold, seg.windows.bone);
+    let map = vol.voxel_map();
+    let dims = vol.dims;
+    let parts = |q: [f64; 3]| {
+        let c = map.to_voxel(q);
+        (
+            skin_iso - sample_field(&skin, dims, c, OUTSIDE_HU) as f64,
+            sample_field(&bone, dims, c, OUTSIDE_HU) as f64 - bone_iso,
+        )
+    };
+    let f = |q: [f64; 3]| {
+        let (s, b) = parts(q);
+        s.max(b)
+    };
+    let m = stuffing::stuff(&f, lo, hi, p.skin_size_mm)?;
+    if m.tets.is_empty() {
+        return Err(Error::config(format!(
+            "tetrahedral mesh: no soft tissue inside the region {lo:?} .. {hi:?} (LPS mm)"
+        )));
+    }
+    let kind: Vec<NodeKind> = m
+        .nodes
+        .par_iter()
+        .zip(&m.kind)
+        .map(|(q, k)| match k {
+            StuffKind::Interior => NodeKind::Interior,
+            StuffKind::Cut => NodeKind::Cut,
+            StuffKind::Surface => {
+                // On f = 0 one of the two terms is zero and the other is not above it.
+                let (s, b) = parts(*q);
+                if b >= s {
+                    NodeKind::Bone
+                } else {
+                    NodeKind::Skin
+                }
+            }
+        })
+        .collect();
+    let labels: Vec<Option<u8>> = m
+        .tets
+        .par_iter()
+        .map(|t| {
+            let c = [0, 1, 2].map(|a| t.iter().map(|n| m.nodes[*n as usize][a]).sum::<f64>() / 4.0);
+            tissue_near(vol, seg, map.to_voxel(c))
+        })
+        .collect();
+    let tissue_fallbacks = labels.iter().filter(|l| l.is_none()).count();
+    let tissue = labels.into_iter().map(|l| l.unwrap_or(MUSCLE)).collect();
+    let quality = Quality::of(&m.nodes, &m.tets);
+    let voxel_volume_mm3 = voxel_volume(vol, &skin, &bone, skin_iso, bone_iso, lo, hi);
+    Ok(SoftTissueMesh {
+        nodes: m.nodes,
+        tets: m.tets,
+        tissue,
+        kind,
+        quality,
+        voxel_volume_mm3,
+        tissue_fallbacks,
+    })
+}
+
+fn is_soft(l: u8) -> bool {
+    l != crate::segment::AIR && l != BONE
+}
+
+/// The soft label at continuous voxel coordinates `c`: the nearest voxel's, else the most
+/// common soft label within 1, 2, 3 voxels (ties to the lower label).
+fn tissue_near(vol: &Volume, seg: &Segmentation, c: [f64; 3]) -> Option<u8> {
+    let centre = [0, 1, 2].map(|a| c[a].round().clamp(0.0, (vol.dims[a] - 1) as f64) as i64);
+    let label = |q: [i64; 3]| -> Option<u8> {
+        if (0..3).any(|a| q[a] < 0 || q[a] >= vol.dims[a] as i64) {
+            return None;
+        }
+        seg.labels
+            .get(vol.idx(q[0] as usize, q[1] as usize, q[2] as usize))
+            .copied()
+    };
+    if let Some(l) = label(centre).filter(|l| is_soft(*l)) {
+        return Some(l);
+    }
+    for r in 1..=3i64 {
+        let mut count = [0usize; 6];
+        for dz in -r..=r {
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    if let Some(l) = label([centre[0] + dx, centre[1] + dy, centre[2] + dz]) {
+                        if is_soft(l) {
+                            count[l as usize] += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let best = (1..5u8).max_by_key(|l| (count[*l as usize], std::cmp::Reverse(*l)))?;
+        if count[best as usize] > 0 {
+            return Some(best);
+        }
+    }
+    None
+}
+
+/// Soft-tissue volume (mm³) of the voxels whose centres lie in the box: inside the skin
+/// iso-surface and outside the bone's.
+fn voxel_volume(
+    vol: &Volume,
+    skin: &[f32],
+    bone: &[f32],
+    skin_iso: f64,
+    bone_iso: f64,
+    lo: [f64; 3],
+    hi: [f64; 3],
+) -> f64 {
+    let count = (0..vol.len())
+        .into_par_iter()
+        .filter(|&i| {
+            let p = vol.to_world(vol.ijk(i).map(|x| x as f64));
+            (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a])
+                && skin[i] as f64 >= skin_iso
+                && (bone[i] as f64) < bone_iso
+        })
+        .count();
+    count as f64 * vol.voxel_volume()
+}
