@@ -27,6 +27,7 @@ pub struct Case {
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
     pub solve: Solve,
+    pub tet: Tet,
     pub output: Output,
 }
 
@@ -245,6 +246,56 @@ pub struct Osteotomy {
 pub enum SolveModel {
     Equilibrium,
     Koch1996,
+    /// The volumetric soft-tissue model (`[tet]`, docs/pipeline.md, MODEL.md §9).
+    Tet,
+}
+
+/// The volumetric model's constitutive law.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TetMaterial {
+    /// Small-strain isotropic linear elasticity.
+    Linear,
+}
+
+/// Young's modulus (kPa) and Poisson ratio of one tissue.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TissueElastic {
+    pub youngs_kpa: f64,
+    pub poisson: f64,
+}
+
+/// `[tet]`: the volumetric model (used when `[solve] model = "tet"`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tet {
+    pub material: TetMaterial,
+    /// Element edge length (mm) at the skin inside the region the plan reaches.
+    pub skin_size_mm: f64,
+    /// Element edge length (mm) deep in the tissue and far from the moved bone.
+    pub deep_size_mm: f64,
+    /// The modelled region: the box around the moved bone grown by this much (mm); its cut
+    /// faces are held fixed.
+    pub margin_mm: f64,
+    pub skin: TissueElastic,
+    pub muscle: TissueElastic,
+    pub fat_dark: TissueElastic,
+    pub fat_bright: TissueElastic,
+}
+
+impl Tet {
+    /// The material of a tissue label of `crate::segment` (soft labels; anything else is
+    /// muscle, the bulk of the face's soft tissue).
+    pub fn elastic(&self, label: u8) -> TissueElastic {
+        use crate::segment::{FAT_BRIGHT, FAT_DARK, SKIN};
+        match label {
+            SKIN => self.skin,
+            FAT_DARK => self.fat_dark,
+            FAT_BRIGHT => self.fat_bright,
+            _ => self.muscle,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -293,6 +344,7 @@ impl Default for Case {
             surface: Surface::default(),
             osteotomy: Vec::new(),
             solve: Solve::default(),
+            tet: Tet::default(),
             output: Output::default(),
         }
     }
@@ -364,6 +416,25 @@ impl Default for Solve {
             coarse_triangles: 0,
             shell_mm: 3.0,
             shell_poisson: 0.45,
+        }
+    }
+}
+
+impl Default for Tet {
+    fn default() -> Tet {
+        let e = |youngs_kpa, poisson| TissueElastic {
+            youngs_kpa,
+            poisson,
+        };
+        Tet {
+            material: TetMaterial::Linear,
+            skin_size_mm: 2.5,
+            deep_size_mm: 8.0,
+            margin_mm: 30.0,
+            skin: e(30.0, 0.45),
+            muscle: e(10.0, 0.45),
+            fat_dark: e(2.0, 0.45),
+            fat_bright: e(3.0, 0.45),
         }
     }
 }
@@ -519,6 +590,34 @@ impl Case {
         }
         if self.solve.steps == 0 {
             return bad("[solve] steps must be at least 1".into());
+        }
+        let t = &self.tet;
+        if !(t.skin_size_mm > 0.0
+            && t.deep_size_mm >= t.skin_size_mm
+            && t.deep_size_mm.is_finite()
+            && t.margin_mm >= 0.0
+            && t.margin_mm.is_finite())
+        {
+            return bad(
+                "[tet] needs 0 < skin_size_mm <= deep_size_mm (finite) and margin_mm >= 0".into(),
+            );
+        }
+        for (name, m) in [
+            ("skin", t.skin),
+            ("muscle", t.muscle),
+            ("fat_dark", t.fat_dark),
+            ("fat_bright", t.fat_bright),
+        ] {
+            if !(m.youngs_kpa > 0.0 && m.youngs_kpa.is_finite()) {
+                return bad(format!(
+                    "[tet.{name}] youngs_kpa must be positive and finite"
+                ));
+            }
+            if !(m.poisson > -1.0 && m.poisson < 0.5) {
+                return bad(format!(
+                    "[tet.{name}] poisson must lie in (-1, 0.5) (0.5 is incompressible: no finite bulk modulus)"
+                ));
+            }
         }
         if let Some(r) = &self.registration {
             if r.scan.len() != r.ct.len() || r.scan.len() < 3 {

@@ -22,6 +22,7 @@ pub enum Stage {
     PlaceScan,
     Coarsen,
     Springs,
+    TetMesh,
     Solve,
     Embed,
     Write,
@@ -39,6 +40,7 @@ impl Stage {
             Stage::PlaceScan => "place_scan",
             Stage::Coarsen => "coarsen",
             Stage::Springs => "springs",
+            Stage::TetMesh => "tet_mesh",
             Stage::Solve => "solve",
             Stage::Embed => "embed",
             Stage::Write => "write",
@@ -188,6 +190,8 @@ pub struct Report {
     pub parameters: Option<Case>,
     pub springs: Option<SpringReport>,
     pub solve: Option<Vec<StepRecord>>,
+    /// The volumetric model (`[solve] model = "tet"`).
+    pub tet: Option<crate::pipeline::volumetric::TetReport>,
     pub displacement: Displacement,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no

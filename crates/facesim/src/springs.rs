@@ -315,6 +315,17 @@ pub fn wanted(rigid: &[bool], restrict: bool) -> Option<Vec<bool>> {
 }
 
 impl SpringSet {
+    /// No springs on a skin of `n` vertices (models that do not use them).
+    pub fn none(n: usize) -> SpringSet {
+        SpringSet {
+            attachment_of: vec![None; n],
+            attachments: Vec::new(),
+            springs: Vec::new(),
+            k: vec![0.0; n],
+            misses: Vec::new(),
+        }
+    }
+
     pub fn report(&self, mesh: &Mesh) -> SpringReport {
         let stat = |v: Vec<f64>| {
             if v.is_empty() {

@@ -314,7 +314,7 @@ impl<'a> Study<'a> {
             model,
             k_c: match model {
                 SolveModel::Koch1996 => self.case.solve.koch_k_c,
-                SolveModel::Equilibrium => self.case.solve.k_c,
+                SolveModel::Equilibrium | SolveModel::Tet => self.case.solve.k_c,
             },
             regions: self.scene.model.params.regions.clone(),
             ..self.scene.model.params
@@ -612,5 +612,6 @@ fn model_name(m: SolveModel) -> &'static str {
     match m {
         SolveModel::Equilibrium => "equilibrium",
         SolveModel::Koch1996 => "koch1996",
+        SolveModel::Tet => "tet",
     }
 }

@@ -19,6 +19,7 @@ pub mod model;
 pub mod outputs;
 pub mod predict;
 pub mod surfaces;
+pub mod volumetric;
 
 use crate::case::Case;
 use crate::error::Result;

@@ -72,6 +72,9 @@ pub fn build(
             skin.vertices.len()
         )));
     }
+    if case.solve.model == SolveModel::Tet {
+        return volumetric_model(face, rigid, case);
+    }
     let want = crate::springs::wanted(&rigid, case.solve.restrict);
     let springs = rec.time(Stage::Springs, "tracing springs", || {
         Ok(crate::springs::trace(
@@ -109,6 +112,21 @@ pub fn build(
     Ok(Model {
         springs,
         spring_report,
+        plan,
+        rigid,
+        params: solve_params(case),
+    })
+}
+
+/// The volumetric model needs no springs: its tissue is meshed in the solve stage
+/// (`pipeline::volumetric`), and the plan must move some of the skull.
+fn volumetric_model(face: &Face, rigid: Vec<bool>, case: &Case) -> Result<Model> {
+    let plan = Plan::new(&case.osteotomy);
+    plan.check_selects(&face.skull.vertices, "skull surface vertices")?;
+    let springs = SpringSet::none(face.skin.vertices.len());
+    Ok(Model {
+        spring_report: springs.report(&face.skin),
+        springs,
         plan,
         rigid,
         params: solve_params(case),

@@ -3,7 +3,7 @@
 
 use super::predict::Prediction;
 use super::{Recorder, Scene};
-use crate::case::Case;
+use crate::case::{Case, SolveModel};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
 use crate::output::write_bytes_atomic;
@@ -132,12 +132,14 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
             _ => Ok(()),
         }),
         Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
-        Box::new(|| {
-            mesh::ply::write(
+        // Springs belong to the C1 models; the volumetric model has its mesh instead.
+        Box::new(|| match case.solve.model {
+            SolveModel::Tet => Ok(()),
+            _ => mesh::ply::write(
                 &scene.model.springs.to_mesh(solved_skin),
                 &o.join("springs.ply"),
                 mesh::ply::Encoding::BinaryLittleEndian,
-            )
+            ),
         }),
         Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
@@ -180,14 +182,20 @@ pub fn fill_report(
         skull_triangles: skull.triangles.len(),
         springs_main: scene.model.spring_report.main,
         springs_strut: scene.model.spring_report.struts,
-        unknowns: p.solution.as_ref().map_or(0, |s| s.unknowns),
+        unknowns: match (&p.solution, &p.volumetric) {
+            (Some(s), _) => s.unknowns,
+            (None, Some(v)) => v.report.free_dofs,
+            (None, None) => 0,
+        },
         solved_vertices: p.solution.as_ref().map_or(0, |s| s.solved_vertices),
         max_rss_mb: crate::meter::max_rss_mb(),
     };
     report.surfaces = scene.face.report.clone();
     report.surfaces.embedding = p.embedding.clone();
     report.registration = scene.face.registration.clone();
-    report.springs = Some(scene.model.spring_report.clone());
+    report.springs =
+        (case.solve.model != SolveModel::Tet).then(|| scene.model.spring_report.clone());
+    report.tet = p.volumetric.as_ref().map(|v| v.report.clone());
     report.solve = p.solution.as_ref().map(|s| s.history.clone());
     report.segmentation = Some(seg.report.clone());
     report.parameters = Some(case.clone());

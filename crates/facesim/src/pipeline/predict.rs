@@ -3,8 +3,9 @@
 
 use super::inputs::CaseFiles;
 use super::model::rigid_mask;
+use super::volumetric::{self, Volumetric};
 use super::{Recorder, Scene};
-use crate::case::Case;
+use crate::case::{Case, SolveModel};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::report::{EmbeddingReport, Stage};
@@ -20,6 +21,8 @@ pub struct Prediction {
     /// The coarse skin that was solved, when it differs from `skin`.
     pub coarse: Option<Mesh>,
     pub embedding: Option<EmbeddingReport>,
+    /// The volumetric model's mesh and solution (`[solve] model = "tet"`).
+    pub volumetric: Option<Volumetric>,
 }
 
 pub fn predict(
@@ -28,6 +31,9 @@ pub fn predict(
     files: &CaseFiles,
     rec: &mut Recorder,
 ) -> Result<Prediction> {
+    if case.solve.model == SolveModel::Tet {
+        return predict_volumetric(scene, case, rec);
+    }
     let (face, model) = (&scene.face, &scene.model);
     let solution = rec.time(Stage::Solve, "solving", || solve(scene, files))?;
     if solution.is_none() {
@@ -47,6 +53,7 @@ pub fn predict(
             solution,
             coarse: None,
             embedding: None,
+            volumetric: None,
         });
     };
     // The coarse model's answer carried to the full skin (paper 002).
@@ -85,6 +92,33 @@ pub fn predict(
         solution,
         coarse: Some(face.skin.clone()),
         embedding: Some(embedding),
+        volumetric: None,
+    })
+}
+
+/// The volumetric model carries the skin at full resolution (a dense scan needs no coarse copy).
+fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<Prediction> {
+    let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
+    let mut face_post = skin.clone();
+    face_post.colors = None;
+    let volumetric = match volumetric::predict(scene, case, &skin, rec)? {
+        Some((v, post)) => {
+            face_post.vertices = post;
+            Some(v)
+        }
+        None => {
+            rec.warn("the plan moves no bone: the predicted face is the pre-operative face");
+            rec.skip(Stage::Solve, "no bone moves: nothing to solve");
+            None
+        }
+    };
+    Ok(Prediction {
+        skin,
+        face_post,
+        solution: None,
+        coarse: None,
+        embedding: None,
+        volumetric,
     })
 }
 

@@ -227,6 +227,11 @@ fn solve_mesh(
     let (a, history) = match p.model {
         SolveModel::Koch1996 => koch1996::solve(&pr)?,
         SolveModel::Equilibrium => equilibrium::solve(&pr)?,
+        SolveModel::Tet => {
+            return Err(Error::config(
+                "the C1 solver was asked to run the volumetric model 'tet' (it runs in pipeline::volumetric)",
+            ));
+        }
     };
     let nv = skin.vertices.len();
     let dofs = pr.fem.dofs();

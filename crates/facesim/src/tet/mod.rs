@@ -8,6 +8,7 @@
 //! Node n's displacement components are DOFs 3n, 3n + 1, 3n + 2. Units: mm, kPa (any consistent
 //! units give the same displacements, which are all a prescribed-displacement problem yields).
 
+pub mod embed;
 pub mod from_ct;
 pub mod quality;
 pub mod stuffing;

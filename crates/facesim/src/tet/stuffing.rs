@@ -283,56 +283,65 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
         .flat_map_iter(|u| {
             let du = lat.coords(u);
             let (sign, lat, values) = (&sign, &lat, &values);
-            NEIGHBOURS.iter().enumerate().filter_map(move |(slot, off)| {
-                let dw = [0, 1, 2].map(|a| du[a] + off[a]);
-                let w = lat.id(dw)?;
-                if sign[w] <= 0 {
-                    return None;
-                }
-                let (a, b) = (du.map(|x| x as f64), dw.map(|x| x as f64));
-                let at = |t: f64| [0, 1, 2].map(|k| a[k] + t * (b[k] - a[k]));
-                // The box: g is linear on each of its planes; the first plane crossed.
-                let mut tg = f64::INFINITY;
-                if values[w].1 > 0.0 {
-                    for k in 0..3 {
-                        for (plane, out) in [(lat.box_lo[k], a[k] - b[k]), (lat.box_hi[k], b[k] - a[k])] {
-                            if out > 0.0 {
-                                let t = (plane - a[k]).abs() / out;
-                                if t < tg && (a[k] - plane) * (b[k] - plane) <= 0.0 {
-                                    tg = t;
+            NEIGHBOURS
+                .iter()
+                .enumerate()
+                .filter_map(move |(slot, off)| {
+                    let dw = [0, 1, 2].map(|a| du[a] + off[a]);
+                    let w = lat.id(dw)?;
+                    if sign[w] <= 0 {
+                        return None;
+                    }
+                    let (a, b) = (du.map(|x| x as f64), dw.map(|x| x as f64));
+                    let at = |t: f64| [0, 1, 2].map(|k| a[k] + t * (b[k] - a[k]));
+                    // The box: g is linear on each of its planes; the first plane crossed.
+                    let mut tg = f64::INFINITY;
+                    if values[w].1 > 0.0 {
+                        for k in 0..3 {
+                            for (plane, out) in
+                                [(lat.box_lo[k], a[k] - b[k]), (lat.box_hi[k], b[k] - a[k])]
+                            {
+                                if out > 0.0 {
+                                    let t = (plane - a[k]).abs() / out;
+                                    if t < tg && (a[k] - plane) * (b[k] - plane) <= 0.0 {
+                                        tg = t;
+                                    }
                                 }
                             }
                         }
                     }
-                }
-                let mut tf = f64::INFINITY;
-                if values[w].0 > 0.0 {
-                    let (mut t0, mut t1) = (0.0, 1.0);
-                    let (mut f0, mut f1) = (values[u].0, values[w].0);
-                    for _ in 0..12 {
-                        let tm = 0.5 * (t0 + t1);
-                        let fm = f(lat.point(at(tm)));
-                        if fm < 0.0 {
-                            (t0, f0) = (tm, fm);
-                        } else {
-                            (t1, f1) = (tm, fm);
+                    let mut tf = f64::INFINITY;
+                    if values[w].0 > 0.0 {
+                        let (mut t0, mut t1) = (0.0, 1.0);
+                        let (mut f0, mut f1) = (values[u].0, values[w].0);
+                        for _ in 0..12 {
+                            let tm = 0.5 * (t0 + t1);
+                            let fm = f(lat.point(at(tm)));
+                            if fm < 0.0 {
+                                (t0, f0) = (tm, fm);
+                            } else {
+                                (t1, f1) = (tm, fm);
+                            }
                         }
+                        // One secant step in the final bracket (f is smooth at this scale).
+                        tf = if f1 > f0 {
+                            t0 + (t1 - t0) * (-f0 / (f1 - f0))
+                        } else {
+                            t1
+                        };
                     }
-                    // One secant step in the final bracket (f is smooth at this scale).
-                    tf = if f1 > f0 { t0 + (t1 - t0) * (-f0 / (f1 - f0)) } else { t1 };
-                }
-                let (t, kind) = if tf <= tg {
-                    (tf, NodeKind::Surface)
-                } else {
-                    (tg, NodeKind::Cut)
-                };
-                Some(Cut {
-                    from: u,
-                    slot,
-                    t: t.clamp(0.0, 1.0),
-                    kind,
+                    let (t, kind) = if tf <= tg {
+                        (tf, NodeKind::Surface)
+                    } else {
+                        (tg, NodeKind::Cut)
+                    };
+                    Some(Cut {
+                        from: u,
+                        slot,
+                        t: t.clamp(0.0, 1.0),
+                        kind,
+                    })
                 })
-            })
         })
         .collect();
 
@@ -341,7 +350,8 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
     let to_of = |c: &Cut| -> usize {
         let d = lat.coords(c.from);
         let off = NEIGHBOURS[c.slot];
-        lat.id([0, 1, 2].map(|a| d[a] + off[a])).unwrap_or(usize::MAX)
+        lat.id([0, 1, 2].map(|a| d[a] + off[a]))
+            .unwrap_or(usize::MAX)
     };
     let ends: Vec<(usize, usize)> = cuts.iter().map(|c| (c.from, to_of(c))).collect();
     for (i, (u, w)) in ends.iter().enumerate() {
@@ -352,7 +362,8 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
     }
     let mut alive = vec![true; cuts.len()];
     let mut warped: Vec<Option<usize>> = vec![None; nv];
-    let mut vertices_with_cuts: Vec<usize> = (0..nv).filter(|v| !per_vertex[*v].is_empty()).collect();
+    let mut vertices_with_cuts: Vec<usize> =
+        (0..nv).filter(|v| !per_vertex[*v].is_empty()).collect();
     vertices_with_cuts.sort_unstable();
     for v in vertices_with_cuts {
         let mut best: Option<(f64, usize)> = None;

@@ -1,0 +1,196 @@
+//! The face carried by the volume mesh: each face vertex (the extracted skin or a given scan)
+//! takes the displacement of the tetrahedron under its nearest point on the mesh's skin
+//! boundary, interpolated with that tetrahedron's linear shape functions — extrapolated a little
+//! when the vertex lies just outside (the face and the mesh's skin are two discretisations of the
+//! same iso-surface, up to half a voxel apart). An affine displacement field (a rigid move, a
+//! uniform strain) is therefore carried exactly, inside or out.
+//! Face vertices farther than `reach` from the skin boundary (outside the modelled region) do
+//! not move: the region's cut faces are held, so the tissue beyond them is at rest.
+
+use crate::compare::SurfaceIndex;
+use crate::mesh::Mesh;
+use rayon::prelude::*;
+
+/// The faces of `tets` used by exactly one tetrahedron, each with that tetrahedron and wound
+/// so its normal points out of it.
+pub fn boundary_faces(tets: &[[u32; 4]]) -> Vec<(usize, [u32; 3])> {
+    // Each face of a positively oriented tet [a, b, c, d], wound outward.
+    const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
+    let mut all: Vec<([u32; 3], usize, [u32; 3])> = tets
+        .iter()
+        .enumerate()
+        .flat_map(|(t, tet)| {
+            FACES.iter().map(move |f| {
+                let face = f.map(|i| tet[i]);
+                let mut key = face;
+                key.sort_unstable();
+                (key, t, face)
+            })
+        })
+        .collect();
+    all.par_sort_unstable_by_key(|e| e.0);
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < all.len() {
+        let mut j = i + 1;
+        while j < all.len() && all[j].0 == all[i].0 {
+            j += 1;
+        }
+        if j - i == 1 {
+            out.push((all[i].1, all[i].2));
+        }
+        i = j;
+    }
+    out
+}
+
+/// Where each face vertex sits: its tetrahedron and barycentric weights, or None (at rest).
+pub struct SkinEmbedding {
+    pub tet: Vec<Option<u32>>,
+    pub weights: Vec<[f64; 4]>,
+    /// Distance (mm) from each face vertex to the mesh's skin boundary.
+    pub distance: Vec<f64>,
+}
+
+/// Barycentric coordinates of `p` in the tetrahedron `x` (Σ λ = 1; negative outside).
+pub fn barycentric(x: [[f64; 3]; 4], p: [f64; 3]) -> Option<[f64; 4]> {
+    let (_, g) = super::gradients(x)?;
+    // λ_a = N_a(p) = ∇N_a · (p − x_3) for a < 3, since N_a(x_3) = 0.
+    let d = [0, 1, 2].map(|c| p[c] - x[3][c]);
+    let l = [0, 1, 2].map(|a| (0..3).map(|c| g[a][c] * d[c]).sum::<f64>());
+    Some([l[0], l[1], l[2], 1.0 - l[0] - l[1] - l[2]])
+}
+
+impl SkinEmbedding {
+    /// Embed `points` on the boundary faces of the mesh that `on_skin` accepts (faces whose
+    /// three nodes lie on the skin).
+    pub fn new(
+        nodes: &[[f64; 3]],
+        tets: &[[u32; 4]],
+        on_skin: impl Fn([u32; 3]) -> bool,
+        points: &[[f64; 3]],
+        reach: f64,
+    ) -> SkinEmbedding {
+        let faces: Vec<(usize, [u32; 3])> = boundary_faces(tets)
+            .into_iter()
+            .filter(|(_, f)| on_skin(*f))
+            .collect();
+        let none = || SkinEmbedding {
+            tet: vec![None; points.len()],
+            weights: vec![[0.0; 4]; points.len()],
+            distance: vec![f64::INFINITY; points.len()],
+        };
+        if faces.is_empty() {
+            return none();
+        }
+        let skin = Mesh::new(nodes.to_vec(), faces.iter().map(|f| f.1).collect());
+        let index = SurfaceIndex::new(&skin);
+        let found: Vec<(Option<u32>, [f64; 4], f64)> = points
+            .par_iter()
+            .map(|&p| {
+                let (d, _, f) = index.closest_triangle(p);
+                let t = faces[f].0;
+                match barycentric(tets[t].map(|n| nodes[n as usize]), p) {
+                    Some(w) if d <= reach => (Some(t as u32), w, d),
+                    _ => (None, [0.0; 4], d),
+                }
+            })
+            .collect();
+        SkinEmbedding {
+            tet: found.iter().map(|f| f.0).collect(),
+            weights: found.iter().map(|f| f.1).collect(),
+            distance: found.iter().map(|f| f.2).collect(),
+        }
+    }
+
+    /// The displacement at each face vertex for node displacements `u`.
+    pub fn carry(&self, tets: &[[u32; 4]], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.tet
+            .iter()
+            .zip(&self.weights)
+            .map(|(t, w)| match t {
+                None => [0.0; 3],
+                Some(t) => {
+                    let tet = tets[*t as usize];
+                    [0, 1, 2].map(|c| (0..4).map(|a| w[a] * u[tet[a] as usize][c]).sum())
+                }
+            })
+            .collect()
+    }
+
+    /// Face vertices outside the reach of the mesh (they stay at rest).
+    pub fn unreached(&self) -> usize {
+        self.tet.iter().filter(|t| t.is_none()).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two tetrahedra sharing the face (1, 2, 3).
+    fn pair() -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+        let nodes = vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [1.0, 1.0, 1.0],
+        ];
+        (nodes, vec![[0, 1, 2, 3], [1, 4, 2, 3]])
+    }
+
+    #[test]
+    fn boundary_faces_are_the_unshared_ones_wound_outwards() {
+        let (nodes, tets) = pair();
+        assert!(
+            tets.iter()
+                .all(|t| super::super::gradients(t.map(|n| nodes[n as usize])).is_some())
+        );
+        let b = boundary_faces(&tets);
+        assert_eq!(b.len(), 6);
+        for (t, f) in &b {
+            let mut s = *f;
+            s.sort_unstable();
+            assert_ne!(s, [1, 2, 3], "the shared face is interior");
+            // Outward: the tet's fourth node lies behind the face.
+            let other = tets[*t].iter().find(|n| !f.contains(n)).unwrap();
+            let [a, b, c] = f.map(|n| nodes[n as usize]);
+            let nrm = crate::mesh::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a));
+            let d = crate::mesh::dot(nrm, crate::mesh::sub(nodes[*other as usize], a));
+            assert!(d < 0.0);
+        }
+    }
+
+    #[test]
+    fn affine_fields_are_carried_exactly_inside_and_outside() {
+        let (nodes, tets) = pair();
+        let affine = |p: [f64; 3]| {
+            [
+                0.3 + 0.1 * p[0] - 0.2 * p[1] + 0.05 * p[2],
+                -0.7 + 0.02 * p[0] + 0.3 * p[2],
+                1.1 - 0.4 * p[1],
+            ]
+        };
+        let u: Vec<[f64; 3]> = nodes.iter().map(|p| affine(*p)).collect();
+        // Points near the boundary, inside and a little outside.
+        let points = [
+            [0.2, 0.2, -0.1],
+            [0.6, 0.6, 0.6],
+            [1.05, 1.0, 1.1],
+            [0.1, 0.1, 0.1],
+        ];
+        let e = SkinEmbedding::new(&nodes, &tets, |_| true, &points, 1.0);
+        assert_eq!(e.unreached(), 0);
+        for (p, v) in points.iter().zip(e.carry(&tets, &u)) {
+            let want = affine(*p);
+            for c in 0..3 {
+                assert!((v[c] - want[c]).abs() < 1e-12, "{p:?}: {v:?} vs {want:?}");
+            }
+        }
+        // Beyond reach: at rest.
+        let far = SkinEmbedding::new(&nodes, &tets, |_| true, &[[5.0, 5.0, 5.0]], 1.0);
+        assert_eq!(far.unreached(), 1);
+        assert_eq!(far.carry(&tets, &u), vec![[0.0; 3]]);
+    }
+}
