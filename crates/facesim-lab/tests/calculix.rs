@@ -2,7 +2,11 @@
 //! linear tetrahedra on a sheared two-material cube agree to 1e-6 relative (ν = 0.45/0.3 and
 //! ν = 0.49); a tets.vtu read back and handed to CalculiX (cells, materials, the displacements
 //! of its fixed and moved nodes) reproduces the file's free-node displacements (the CASE.md
-//! property). These tests fail, not skip, when `ccx` is missing: run scripts/test-setup.sh.
+//! property); CalculiX's own NLGEOM neo-Hooke matches the closed-form uniaxial stretch and its
+//! C3D10 reproduces a quadratic solution, so both are ready as references. These tests fail, not skip, when `ccx` is missing: run scripts/test-setup.sh.
+
+// Numerics index arrays by axis and node, as in the crates.
+#![allow(clippy::needless_range_loop)]
 
 use facesim::tet::vtu::{self, Cells, TetsVtu};
 use facesim::tet::{Elastic, TetMesh};
