@@ -16,6 +16,8 @@ pub mod stuffing;
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 
+pub mod vtu;
+
 /// Young's modulus (kPa) and Poisson ratio of an element.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Elastic {

@@ -1,0 +1,482 @@
+//! facesim's volumetric model against an independent engine, CalculiX (docs/crosscheck.md):
+//! linear tetrahedra on a sheared two-material cube agree to 1e-6 relative (ν = 0.45/0.3 and
+//! ν = 0.49); a tets.vtu read back and handed to CalculiX (cells, materials, the displacements
+//! of its fixed and moved nodes) reproduces the file's free-node displacements (the CASE.md
+//! property); CalculiX's own NLGEOM neo-Hooke matches the closed-form uniaxial stretch and its
+//! C3D10 reproduces a quadratic solution, so both are ready as references. These tests fail, not skip, when `ccx` is missing: run scripts/test-setup.sh.
+
+// Numerics index arrays by axis and node, as in the crates.
+#![allow(clippy::needless_range_loop)]
+
+use facesim::tet::vtu::{self, Cells, TetsVtu};
+use facesim::tet::{Elastic, TetMesh};
+use facesim_lab::calculix::{self, Dof, Material, Problem, Step};
+
+#[path = "../../facesim/tests/common/tet_grid.rs"]
+mod tet_grid;
+
+const FAT: Elastic = Elastic {
+    youngs_kpa: 3.0,
+    poisson: 0.45,
+};
+const MUSCLE: Elastic = Elastic {
+    youngs_kpa: 15.0,
+    poisson: 0.3,
+};
+
+/// max |a − b| / max |b| over the nodes where `keep` holds.
+fn relative(a: &[[f64; 3]], b: &[[f64; 3]], keep: &dyn Fn(usize) -> bool) -> f64 {
+    let (mut diff, mut size) = (0.0_f64, 0.0_f64);
+    for i in (0..a.len()).filter(|&i| keep(i)) {
+        for c in 0..3 {
+            diff = diff.max((a[i][c] - b[i][c]).abs());
+            size = size.max(b[i][c].abs());
+        }
+    }
+    diff / size
+}
+
+/// The cube's bottom (z = 0) held still and its top moved by a displacement that is not a
+/// linear field (a translation, a shear and a twist-like bilinear term); the sides are free.
+fn bottom_fixed_top_moved(m: &TetMesh) -> Vec<Option<[f64; 3]>> {
+    let top = m.nodes.iter().map(|p| p[2]).fold(0.0, f64::max);
+    m.nodes
+        .iter()
+        .map(|p| {
+            if p[2].abs() < 1e-9 {
+                Some([0.0; 3])
+            } else if (p[2] - top).abs() < 1e-9 {
+                Some([
+                    0.6 + 0.02 * p[1],
+                    -0.3 + 0.03 * p[0],
+                    -0.8 + 0.002 * p[0] * p[1],
+                ])
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+fn problem<'a>(
+    m: &'a TetMesh,
+    material: &'a [Material],
+    held: &'a [Dof],
+    step: Step,
+) -> Problem<'a> {
+    Problem {
+        nodes: &m.nodes,
+        cells: Cells::Linear(&m.tets),
+        material,
+        held,
+        loads: &[],
+        step,
+    }
+}
+
+#[test]
+fn linear_tetrahedra_agree_with_calculix() {
+    for (soft, stiff) in [
+        (FAT, MUSCLE),
+        (
+            Elastic {
+                poisson: 0.49,
+                ..FAT
+            },
+            Elastic {
+                poisson: 0.49,
+                ..MUSCLE
+            },
+        ),
+    ] {
+        // 8³ cubes of 2.5 mm: 729 nodes, 3072 tetrahedra, fat and muscle in a checkerboard.
+        let m = tet_grid::cube(8, 2.5, soft, stiff);
+        let prescribed = bottom_fixed_top_moved(&m);
+        let ours = m.solve_linear(&prescribed).unwrap();
+        let held = calculix::held_nodes(&prescribed);
+        let material = calculix::materials(&m);
+        let p = problem(&m, &material, &held, Step::LINEAR);
+        let printed = calculix::solve(&p).unwrap().displacement;
+        let precise = calculix::solve_precise(&p).unwrap().displacement;
+        let all = |_| true;
+        let (e_printed, e_precise) = (
+            relative(&printed, &ours, &all),
+            relative(&precise, &ours, &all),
+        );
+        println!(
+            "ν = {}/{}: CalculiX C3D4 vs facesim, max |Δu| / max |u|: {e_printed:.2e} as printed (7 digits), {e_precise:.2e} refined",
+            soft.poisson, stiff.poisson
+        );
+        assert!(e_printed < 1e-6, "{e_printed:e}");
+        assert!(e_precise < 1e-9, "{e_precise:e}");
+
+        // The comparison can fail: the two tissues swapped is a different answer.
+        let swapped: Vec<Material> = m
+            .material
+            .iter()
+            .map(|e| Material::linear(if *e == soft { stiff } else { soft }))
+            .collect();
+        let other = calculix::solve(&problem(&m, &swapped, &held, Step::LINEAR))
+            .unwrap()
+            .displacement;
+        let e_swapped = relative(&other, &ours, &all);
+        assert!(e_swapped > 1e-2, "{e_swapped:e}");
+    }
+}
+
+#[test]
+fn tets_vtu_free_nodes_are_reproduced_by_calculix() {
+    let m = tet_grid::cube(8, 2.5, FAT, MUSCLE);
+    let top = m.nodes.iter().map(|p| p[2]).fold(0.0, f64::max);
+    // Bottom fixed to the skull (1); top moved with a bone segment (2): 4° about z through
+    // (10, 10, top) and a 2 mm advancement; the rest free (0).
+    let (s, c) = 4.0_f64.to_radians().sin_cos();
+    let constraint: Vec<u8> = m
+        .nodes
+        .iter()
+        .map(|p| {
+            if p[2].abs() < 1e-9 {
+                vtu::FIXED
+            } else if (p[2] - top).abs() < 1e-9 {
+                vtu::MOVED
+            } else {
+                vtu::FREE
+            }
+        })
+        .collect();
+    let prescribed: Vec<Option<[f64; 3]>> = m
+        .nodes
+        .iter()
+        .zip(&constraint)
+        .map(|(p, &k)| match k {
+            vtu::FIXED => Some([0.0; 3]),
+            vtu::MOVED => {
+                let (x, y) = (p[0] - 10.0, p[1] - 10.0);
+                Some([c * x - s * y - x, s * x + c * y - y + 2.0, 0.0])
+            }
+            _ => None,
+        })
+        .collect();
+    let displacement = m.solve_linear(&prescribed).unwrap();
+    let tissue: Vec<u8> = m
+        .material
+        .iter()
+        .map(|e| if *e == FAT { 3 } else { 4 })
+        .collect();
+    let youngs: Vec<f64> = m.material.iter().map(|e| e.youngs_kpa).collect();
+    let poisson: Vec<f64> = m.material.iter().map(|e| e.poisson).collect();
+    let written = TetsVtu {
+        nodes: &m.nodes,
+        cells: Cells::Linear(&m.tets),
+        displacement: &displacement,
+        constraint: &constraint,
+        youngs_kpa: &youngs,
+        poisson: &poisson,
+        tissue: &tissue,
+    };
+    // Kept under target/tmp so the file can be opened in ParaView or meshio after a run.
+    let dir = tempfile::Builder::new()
+        .prefix("facesim-tets-vtu")
+        .tempdir_in(env!("CARGO_TARGET_TMPDIR"))
+        .unwrap()
+        .keep();
+    let path = dir.join("tets.vtu");
+    vtu::write(&path, &written).unwrap();
+
+    // Everything below uses only the file.
+    let f = vtu::read(&path).unwrap();
+    assert_eq!(f.nodes, m.nodes);
+    assert_eq!(f.displacement, displacement, "bit-exact round trip");
+    let material: Vec<Material> = f
+        .youngs_kpa
+        .iter()
+        .zip(&f.poisson)
+        .map(|(&youngs_kpa, &poisson)| Material::Linear {
+            youngs_kpa,
+            poisson,
+        })
+        .collect();
+    let d = &f.displacement;
+    let held: Vec<Dof> = (0..f.nodes.len())
+        .filter(|&n| f.constraint[n] == vtu::FIXED || f.constraint[n] == vtu::MOVED)
+        .flat_map(|n| {
+            (0..3).map(move |axis| Dof {
+                node: n as u32,
+                axis,
+                value: d[n][axis],
+            })
+        })
+        .collect();
+    let u = calculix::solve_precise(&Problem {
+        nodes: &f.nodes,
+        cells: f.cells.view(),
+        material: &material,
+        held: &held,
+        loads: &[],
+        step: Step::LINEAR,
+    })
+    .unwrap()
+    .displacement;
+    let free = |n: usize| f.constraint[n] == vtu::FREE;
+    let e = relative(&u, &f.displacement, &free);
+    let interior = (0..f.nodes.len()).filter(|&n| free(n)).count();
+    println!("tets.vtu: {interior} free nodes re-solved by CalculiX, max |Δu| / max |u| = {e:.2e}");
+    assert!(interior > 400);
+    assert!(e < 1e-6, "{e:e}");
+}
+
+#[test]
+fn a_malformed_tets_vtu_is_a_one_line_error_naming_the_file() {
+    let m = tet_grid::cube(2, 1.0, FAT, MUSCLE);
+    let n = m.nodes.len();
+    let c = m.tets.len();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("tets.vtu");
+    vtu::write(
+        &path,
+        &TetsVtu {
+            nodes: &m.nodes,
+            cells: Cells::Linear(&m.tets),
+            displacement: &vec![[0.0; 3]; n],
+            constraint: &vec![0; n],
+            youngs_kpa: &vec![3.0; c],
+            poisson: &vec![0.45; c],
+            tissue: &vec![3; c],
+        },
+    )
+    .unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    // Cut short mid-way (an interrupted copy), and a cell naming a node that is not there.
+    for broken in [
+        text[..text.len() / 2].to_string(),
+        text.replacen(
+            "<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n0 ",
+            "<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n99999 ",
+            1,
+        ),
+    ] {
+        assert_ne!(broken, text);
+        std::fs::write(&path, &broken).unwrap();
+        let e = vtu::read(&path).unwrap_err().to_string();
+        assert!(
+            e.starts_with(&path.display().to_string()) && !e.contains('\n'),
+            "{e}"
+        );
+        println!("{e}");
+    }
+}
+
+/// The grid nodes of [0, side]³ in n steps (not sheared, so the faces are coordinate planes)
+/// and its Kuhn tetrahedra.
+fn box_grid(n: usize, side: f64) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+    let id = |i: usize, j: usize, k: usize| ((k * (n + 1) + j) * (n + 1) + i) as u32;
+    let h = side / n as f64;
+    let mut nodes = Vec::new();
+    for k in 0..=n {
+        for j in 0..=n {
+            for i in 0..=n {
+                nodes.push([i as f64 * h, j as f64 * h, k as f64 * h]);
+            }
+        }
+    }
+    let mut tets = Vec::new();
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                tets.extend(tet_grid::kuhn_cell([i, j, k], &id, &nodes));
+            }
+        }
+    }
+    (nodes, tets)
+}
+
+/// Cauchy stresses (σ_xx, σ_yy = σ_zz) of U = C10 (Ī1 − 3) + (J − 1)² / D1 under
+/// F = diag(λ, t, t): σ = (2 C10 / J) dev(B̄) + (2 / D1)(J − 1) I with B̄ = J^(−2/3) F Fᵀ.
+fn neo_hooke_stress(c10: f64, d1: f64, l: f64, t: f64) -> (f64, f64) {
+    let j = l * t * t;
+    let a = 2.0 * c10 / j * j.powf(-2.0 / 3.0);
+    let p = 2.0 / d1 * (j - 1.0);
+    (
+        a * 2.0 / 3.0 * (l * l - t * t) + p,
+        a / 3.0 * (t * t - l * l) + p,
+    )
+}
+
+#[test]
+fn calculix_nlgeom_neo_hooke_matches_the_closed_form_uniaxial_stretch() {
+    // A 10 mm cube stretched by 30 % along x on three symmetry planes, the other faces free:
+    // the deformation is homogeneous, F = diag(λ, t, t), with t from σ_yy(t) = 0.
+    let (side, stretch) = (10.0, 1.3);
+    let (nodes, tets) = box_grid(2, side);
+    let m = Material::neo_hooke(MUSCLE);
+    let Material::NeoHooke { c10, d1 } = m else {
+        unreachable!()
+    };
+    let on = |v: f64, at: f64| (v - at).abs() < 1e-9;
+    let mut held = Vec::new();
+    for (n, p) in nodes.iter().enumerate() {
+        for axis in 0..3 {
+            if on(p[axis], 0.0) {
+                held.push(Dof {
+                    node: n as u32,
+                    axis,
+                    value: 0.0,
+                });
+            }
+        }
+        if on(p[0], side) {
+            held.push(Dof {
+                node: n as u32,
+                axis: 0,
+                value: (stretch - 1.0) * side,
+            });
+        }
+    }
+    let sol = calculix::solve(&Problem {
+        nodes: &nodes,
+        cells: Cells::Linear(&tets),
+        material: &vec![m; tets.len()],
+        held: &held,
+        loads: &[],
+        step: Step {
+            nlgeom: true,
+            increments: 10,
+        },
+    })
+    .unwrap();
+
+    // The closed form: bisection on σ_yy(t) = 0 (σ_yy rises with t through the root).
+    let (mut lo, mut hi) = (0.5, 1.0);
+    assert!(neo_hooke_stress(c10, d1, stretch, lo).1 < 0.0);
+    assert!(neo_hooke_stress(c10, d1, stretch, hi).1 > 0.0);
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if neo_hooke_stress(c10, d1, stretch, mid).1 < 0.0 {
+            lo = mid
+        } else {
+            hi = mid
+        }
+    }
+    let t = 0.5 * (lo + hi);
+    let (sxx, _) = neo_hooke_stress(c10, d1, stretch, t);
+    // Every node on the homogeneous field, and the end force σ_xx times the deformed area.
+    let mut worst: f64 = 0.0;
+    for (p, u) in nodes.iter().zip(&sol.displacement) {
+        let exact = [(stretch - 1.0) * p[0], (t - 1.0) * p[1], (t - 1.0) * p[2]];
+        for c in 0..3 {
+            worst = worst.max((u[c] - exact[c]).abs() / ((stretch - 1.0) * side));
+        }
+    }
+    let force: f64 = nodes
+        .iter()
+        .zip(&sol.force)
+        .filter(|(p, _)| on(p[0], side))
+        .map(|(_, f)| f[0])
+        .sum();
+    let exact_force = sxx * (t * side).powi(2);
+    let e_force = (force - exact_force).abs() / exact_force;
+    // Small strain would give t = 1 − ν (λ − 1) = 0.91; the finite-strain answer differs.
+    println!(
+        "neo-Hooke uniaxial λ = {stretch}: t = {t:.6} (closed form), nodal error {worst:.1e} of the stretch, end force {force:.6e} vs {exact_force:.6e} ({e_force:.1e})"
+    );
+    assert!((t - 0.91).abs() > 5e-3, "t = {t}");
+    assert!(worst < 1e-6, "{worst:e}");
+    assert!(e_force < 1e-5, "{e_force:e}");
+}
+
+#[test]
+fn calculix_c3d10_reproduces_a_quadratic_solution_exactly() {
+    // u = a (x² − y², −2xy, 0) + a linear field is harmonic and divergence-free, so it solves
+    // homogeneous isotropic elasticity without body force (μ Δu + (λ + μ) ∇ div u = 0):
+    // quadratic tetrahedra with exact boundary values reproduce it at every node.
+    let mut m = tet_grid::cube(4, 1.5, MUSCLE, MUSCLE);
+    let exact = |p: [f64; 3]| {
+        let a = 0.01;
+        [
+            a * (p[0] * p[0] - p[1] * p[1]) + 0.02 * p[2],
+            -2.0 * a * p[0] * p[1] - 0.01 * p[0],
+            0.03 * p[1],
+        ]
+    };
+    // Boundary nodes: on a face of the (sheared) cube, i.e. not strictly inside it.
+    let span = 6.0;
+    let boundary = |p: [f64; 3]| {
+        let z = p[2];
+        let y = p[1] - 0.05 * z;
+        let x = p[0] - 0.1 * y;
+        [x, y, z]
+            .iter()
+            .any(|v| v.abs() < 1e-9 || (v - span).abs() < 1e-9)
+    };
+    // Interior nodes jittered by up to 0.2 h: on the uniform grid even linear tetrahedra are
+    // nodally exact for this field (superconvergence), which would leave the control blind.
+    for (n, p) in m.nodes.iter_mut().enumerate() {
+        if !boundary(*p) {
+            for c in 0..3 {
+                p[c] += 0.3 * (1.7 * n as f64 + 2.3 * c as f64).sin();
+            }
+        }
+    }
+    assert!(
+        m.tets
+            .iter()
+            .all(|t| facesim::tet::gradients(t.map(|v| m.nodes[v as usize])).is_some())
+    );
+    // Mid-edge nodes, one per edge, in VTK / C3D10 order.
+    let mut nodes = m.nodes.clone();
+    let mut mid = std::collections::HashMap::new();
+    let quad: Vec<[u32; 10]> = m
+        .tets
+        .iter()
+        .map(|t| {
+            let mut q = [0; 10];
+            q[..4].copy_from_slice(t);
+            for (k, (a, b)) in [(0, 1), (1, 2), (2, 0), (0, 3), (1, 3), (2, 3)]
+                .into_iter()
+                .enumerate()
+            {
+                let key = (t[a].min(t[b]), t[a].max(t[b]));
+                q[4 + k] = *mid.entry(key).or_insert_with(|| {
+                    let (p, r) = (nodes[t[a] as usize], nodes[t[b] as usize]);
+                    nodes.push(std::array::from_fn(|c| 0.5 * (p[c] + r[c])));
+                    (nodes.len() - 1) as u32
+                });
+            }
+            q
+        })
+        .collect();
+    let held_of = |nodes: &[[f64; 3]]| -> Vec<Dof> {
+        (0..nodes.len())
+            .filter(|&n| boundary(nodes[n]))
+            .flat_map(|n| {
+                let u = exact(nodes[n]);
+                (0..3).map(move |axis| Dof {
+                    node: n as u32,
+                    axis,
+                    value: u[axis],
+                })
+            })
+            .collect()
+    };
+    let solve = |nodes: &[[f64; 3]], cells: Cells| {
+        let held = held_of(nodes);
+        assert!(held.len() < 3 * nodes.len(), "interior nodes exist");
+        let u = calculix::solve_precise(&Problem {
+            nodes,
+            cells,
+            material: &vec![Material::linear(MUSCLE); cells.len()],
+            held: &held,
+            loads: &[],
+            step: Step::LINEAR,
+        })
+        .unwrap()
+        .displacement;
+        let e: Vec<[f64; 3]> = nodes.iter().map(|p| exact(*p)).collect();
+        relative(&u, &e, &|_| true)
+    };
+    let quadratic = solve(&nodes, Cells::Quadratic(&quad));
+    let linear = solve(&m.nodes, Cells::Linear(&m.tets));
+    println!("quadratic field: C3D10 error {quadratic:.1e}, C3D4 {linear:.1e} (relative)");
+    assert!(quadratic < 1e-9, "{quadratic:e}");
+    assert!(linear > 1e-4, "the linear element cannot: {linear:e}");
+}

@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Install what the tests need on a fresh Debian machine (README's test command runs this first).
+# Idempotent and quiet when everything is already there. One function per need, so later needs
+# (a browser, npm packages, a Python venv) are one more function and one more line at the bottom.
+set -euo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+root="$(cd "$here/.." && pwd)"
+
+# Run as root on a fresh machine; elsewhere through sudo.
+as_root() {
+  if [ "$(id -u)" = 0 ]; then "$@"; else sudo "$@"; fi
+}
+
+# Install Debian packages that are missing; `apt-get update` only when the install fails for
+# lack of package lists (a fresh machine has none).
+apt_install() {
+  local missing=()
+  local p
+  for p in "$@"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+  done
+  [ "${#missing[@]}" = 0 ] && return 0
+  export DEBIAN_FRONTEND=noninteractive
+  if ! as_root apt-get install -y -qq "${missing[@]}" >/dev/null 2>&1; then
+    as_root apt-get update -qq >/dev/null
+    as_root apt-get install -y -qq "${missing[@]}" >/dev/null
+  fi
+  echo "test-setup: installed ${missing[*]}"
+}
+
+# CalculiX, the independent engine the volumetric model is checked against (docs/crosscheck.md).
+need_calculix() {
+  command -v ccx >/dev/null 2>&1 || apt_install calculix-ccx
+}
+
+# The real sample CT (GPL-2 data, fetched, never committed).
+need_real_ct() {
+  "$root/data-samples/fetch-real.sh"
+}
+
+need_calculix
+need_real_ct
