@@ -11,6 +11,12 @@
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 
+pub mod holds;
+pub mod nonlinear;
+pub mod quadratic;
+
+pub use holds::{Constrained, Hold, Loads};
+
 /// Young's modulus (kPa) and Poisson ratio of an element.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Elastic {
@@ -116,6 +122,21 @@ impl TetMesh {
         Ok(k)
     }
 
+    /// Small-strain linear elasticity with per-node holds (fixed, sliding, on a rail or free) and
+    /// loads (nodal forces, pressure on boundary faces): the displacement of every node. For
+    /// many hold values or loads on one factor, use [`Constrained`] with [`TetMesh::assemble`].
+    pub fn solve(&self, holds: &[Hold], loads: &Loads) -> Result<Vec<[f64; 3]>> {
+        let f = loads.vector_linear(&self.nodes)?;
+        let c = Constrained::new(&self.assemble()?, holds, self.nodes.len())?;
+        Ok(c.solve(&[(holds, &f)])?.remove(0))
+    }
+
+    /// The tetrahedra that are flat or inverted once the nodes have moved by `u` (a large move
+    /// in the linear model; the pipeline warns and names the nonlinear option), ascending.
+    pub fn inverted_after(&self, u: &[[f64; 3]]) -> Vec<usize> {
+        inverted_after(&self.nodes, &self.tets, u)
+    }
+
     /// Small-strain linear elasticity with the nodes of `prescribed` held at their displacement
     /// and no body force: the displacement of every node.
     pub fn solve_linear(&self, prescribed: &[Option<[f64; 3]>]) -> Result<Vec<[f64; 3]>> {
@@ -146,6 +167,22 @@ impl TetMesh {
         })?;
         Ok(sys.solve(&[vec![0.0; n]], &[values.to_vec()]).remove(0))
     }
+}
+
+/// The tetrahedra (corner indices into `nodes`) flat or inverted at `nodes + u`.
+pub fn inverted_after(nodes: &[[f64; 3]], tets: &[[u32; 4]], u: &[[f64; 3]]) -> Vec<usize> {
+    let at = |n: u32| -> [f64; 3] {
+        let (p, d) = (
+            nodes[n as usize],
+            u.get(n as usize).copied().unwrap_or([f64::NAN; 3]),
+        );
+        [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+    };
+    tets.iter()
+        .enumerate()
+        .filter(|(_, t)| gradients(t.map(at)).is_none())
+        .map(|(i, _)| i)
+        .collect()
 }
 
 #[cfg(test)]
