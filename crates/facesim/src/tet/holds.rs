@@ -24,7 +24,7 @@ pub enum Hold {
     Free,
     /// The node's total displacement.
     Fixed([f64; 3]),
-    /// n · u = value along the unit-normalised `normal`; tangential components free.
+    /// n̂ · u = value with n̂ = normal / |normal|; tangential components free.
     Slide {
         normal: [f64; 3],
         value: f64,
@@ -117,6 +117,63 @@ impl Hold {
             _ => Err(Error::config(format!(
                 "volumetric model: node {node}'s hold {self:?} is not finite"
             ))),
+        }
+    }
+}
+
+impl Hold {
+    /// The hold of a node on up to three sliding planes (unit-normalised normal n̂ₖ, n̂ₖ · u =
+    /// valueₖ): none → Free, one → Slide, two → Rail along n̂₁ × n̂₂ through the least-norm
+    /// point of both, three → Fixed at their intersection. Parallel planes are refused.
+    pub fn from_planes(planes: &[([f64; 3], f64)], node: usize) -> Result<Hold> {
+        let unit_planes = planes
+            .iter()
+            .map(|(n, v)| {
+                let l = dot(*n, *n).sqrt();
+                unit(*n, node, "sliding normal").map(|u| (u, v / l))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let parallel = || {
+            Error::config(format!(
+                "volumetric model: node {node} slides on parallel or too many planes"
+            ))
+        };
+        match unit_planes.as_slice() {
+            [] => Ok(Hold::Free),
+            [(n, v)] => Ok(Hold::Slide {
+                normal: *n,
+                value: *v,
+            }),
+            [(n1, v1), (n2, v2)] => {
+                let d = cross(*n1, *n2);
+                let c = dot(*n1, *n2);
+                let det = 1.0 - c * c;
+                if !(det > 1e-12) {
+                    return Err(parallel());
+                }
+                // offset = a n₁ + b n₂ with [1 c; c 1] [a b]ᵀ = [v₁ v₂]ᵀ.
+                let (a, b) = ((v1 - c * v2) / det, (v2 - c * v1) / det);
+                Ok(Hold::Rail {
+                    direction: d,
+                    offset: std::array::from_fn(|k| a * n1[k] + b * n2[k]),
+                })
+            }
+            [(n1, v1), (n2, v2), (n3, v3)] => {
+                let m = nalgebra::Matrix3::from_rows(&[
+                    nalgebra::RowVector3::from(*n1),
+                    nalgebra::RowVector3::from(*n2),
+                    nalgebra::RowVector3::from(*n3),
+                ]);
+                if !(m.determinant().abs() > 1e-6) {
+                    return Err(parallel());
+                }
+                let x = m
+                    .lu()
+                    .solve(&nalgebra::Vector3::new(*v1, *v2, *v3))
+                    .ok_or_else(parallel)?;
+                Ok(Hold::Fixed([x[0], x[1], x[2]]))
+            }
+            _ => Err(parallel()),
         }
     }
 }

@@ -1,5 +1,15 @@
-//! Linear tetrahedral finite elements for the volumetric soft-tissue model (issue 14; first
-//! increment: the element, assembly and the small-strain linear solve with prescribed nodes).
+//! Tetrahedral finite elements for the volumetric soft-tissue model (issue 14).
+//!
+//! - this module: the linear tetrahedron, small-strain isotropic elasticity with a material per
+//!   element, assembly, [`TetMesh::solve`] (holds and loads), [`TetMesh::inverted_after`] (the
+//!   elements a large linear move inverts), and the older `solve_linear` / `solve_dofs`;
+//! - [`holds`]: per-node conditions ([`Hold`]: free, fixed, sliding n · u = value, on a rail),
+//!   imposed by rotating a node's DOFs into its frame; [`Constrained`] factors once and solves
+//!   many hold values and loads; [`Loads`]: nodal forces and pressure on boundary faces;
+//! - [`quadratic`]: 10-node tetrahedra (C3D10 numbering) that do not lock as ν → 0.5
+//!   (`Tet10Mesh::from_linear`, the same `solve`);
+//! - [`nonlinear`]: compressible neo-Hookean tissue (CalculiX's NEO HOOKE) by Newton's method
+//!   with load steps, exact for rigid bone moves of any size.
 //!
 //! Small-strain isotropic linear elasticity per element, σ = λ tr(ε) I + 2 μ ε with
 //! λ = E ν / ((1 + ν)(1 − 2ν)) and μ = E / (2 (1 + ν)). For linear shape functions N_a with

@@ -174,14 +174,19 @@ fn element_state(
     Some((v * w, force, tangent))
 }
 
-/// The mesh's stored energy, internal forces (3 per node) and, when asked, tangent (lower
-/// triangle triplets) at displacement `u`; an element with J ≤ 0 (or flat) is a reported
-/// `DegenerateElement` failure naming it.
-pub fn internal_state(
-    mesh: &TetMesh,
-    u: &[[f64; 3]],
-    with_tangent: bool,
-) -> Result<(f64, Vec<f64>, Vec<(usize, usize, f64)>)> {
+/// The mesh's state at a displacement.
+pub struct Internal {
+    /// Stored energy ∫ W dV.
+    pub energy: f64,
+    /// Internal forces, 3 per node.
+    pub forces: Vec<f64>,
+    /// The tangent's lower triangle as triplets (empty unless asked for).
+    pub tangent: Vec<(usize, usize, f64)>,
+}
+
+/// The mesh's stored energy, internal forces and, when asked, tangent at displacement `u`; an
+/// element with J ≤ 0 (or flat) is a reported `DegenerateElement` failure naming it.
+pub fn internal_state(mesh: &TetMesh, u: &[[f64; 3]], with_tangent: bool) -> Result<Internal> {
     let per: Vec<Option<ElementState>> = mesh
         .tets
         .par_iter()
@@ -222,7 +227,11 @@ pub fn internal_state(
             }
         }
     }
-    Ok((energy, f, k))
+    Ok(Internal {
+        energy,
+        forces: f,
+        tangent: k,
+    })
 }
 
 /// Newton's method settings.
@@ -369,7 +378,7 @@ impl Solver<'_> {
     }
 
     fn energy(&self, u: &[[f64; 3]], s: f64) -> Option<f64> {
-        let (w, _, _) = internal_state(self.mesh, u, false).ok()?;
+        let w = internal_state(self.mesh, u, false).ok()?.energy;
         let work: f64 = u
             .iter()
             .flatten()
@@ -388,8 +397,11 @@ impl Solver<'_> {
             residuals: residuals.to_vec(),
         };
         for it in 0..=self.opts.max_iterations {
-            let (energy, f_int, k) =
-                internal_state(self.mesh, &x, true).map_err(|e| fail(e.to_string(), &residuals))?;
+            let Internal {
+                energy,
+                forces: f_int,
+                tangent: k,
+            } = internal_state(self.mesh, &x, true).map_err(|e| fail(e.to_string(), &residuals))?;
             let r: Vec<f64> = f_int
                 .iter()
                 .zip(&self.f_ext)

@@ -66,3 +66,36 @@ pub fn grid_triangles(n: usize) -> Vec<[u32; 3]> {
     }
     t
 }
+
+/// The six Kuhn tetrahedra of the grid cell whose lowest corner has indices `c` (the paths from
+/// that corner to the opposite one along the three axes in each order), each with positive
+/// volume; `id` numbers grid nodes. Neighbouring cells share their face diagonals: conforming.
+pub fn kuhn_cell(
+    c: [usize; 3],
+    id: &dyn Fn(usize, usize, usize) -> u32,
+    nodes: &[[f64; 3]],
+) -> Vec<[u32; 4]> {
+    const PATHS: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+    ];
+    PATHS
+        .iter()
+        .map(|p| {
+            let mut at = c;
+            let mut t = [id(c[0], c[1], c[2]); 4];
+            for (s, axis) in p.iter().enumerate() {
+                at[*axis] += 1;
+                t[s + 1] = id(at[0], at[1], at[2]);
+            }
+            if facesim::tet::gradients(t.map(|v| nodes[v as usize])).is_none() {
+                t.swap(2, 3);
+            }
+            t
+        })
+        .collect()
+}
