@@ -300,20 +300,28 @@ pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Re
         .iter()
         .map(|m| m.youngs_kpa)
         .fold(0.0, f64::max);
-    let vol: f64 = mesh
+    let volumes: Vec<f64> = mesh
         .tets
         .iter()
-        .filter_map(|t| {
-            gradients(t.map(|n| mesh.nodes[n as usize])).map(|(v, _)| v.powf(4.0 / 3.0))
-        })
-        .sum();
-    let f0 = 1e-4 * e_max * vol.sqrt();
+        .filter_map(|t| gradients(t.map(|n| mesh.nodes[n as usize])).map(|(v, _)| v))
+        .collect();
+    let f0 = 1e-4
+        * e_max
+        * volumes
+            .iter()
+            .map(|v| v.powf(4.0 / 3.0))
+            .sum::<f64>()
+            .sqrt();
+    // Energies are sums of W V with W = O(E) round-off each (Ī₁ − 3 cancels): below this, an
+    // energy difference is noise.
+    let energy_noise = 1e-13 * e_max * volumes.iter().sum::<f64>();
     let mut solver = Solver {
         mesh,
         frames: fr,
         fixed,
         f_ext,
         f0,
+        energy_noise,
         opts: *opts,
         sys: None,
     };
@@ -362,6 +370,7 @@ struct Solver<'a> {
     fixed: Vec<bool>,
     f_ext: Vec<f64>,
     f0: f64,
+    energy_noise: f64,
     opts: Newton,
     sys: Option<System>,
 }
@@ -470,10 +479,9 @@ impl Solver<'_> {
                     // While held values still move, any admissible (uninverted) state is
                     // accepted; after that the energy must decrease (Armijo, with a round-off
                     // allowance).
+                    let before = energy - s * self.work(&x);
                     let armijo = e
-                        <= energy - s * self.work(&x)
-                            + 1e-4 * alpha * slope
-                            + 1e-12 * energy.abs().max(self.f0);
+                        <= before + 1e-4 * alpha * slope + self.energy_noise + 1e-13 * before.abs();
                     if !held || armijo {
                         accepted = Some(trial);
                         break;
