@@ -1,5 +1,18 @@
-//! Linear tetrahedral finite elements for the volumetric soft-tissue model (issue 14; first
-//! increment: the element, assembly and the small-strain linear solve with prescribed nodes).
+//! Tetrahedral finite elements for the volumetric soft-tissue model (issue 14).
+//!
+//! - this module: the linear tetrahedron, small-strain isotropic elasticity with a material per
+//!   element, assembly, [`TetMesh::solve`] (holds and loads), [`TetMesh::inverted_after`] (the
+//!   elements a large linear move inverts), and the older `solve_linear` / `solve_dofs`;
+//! - [`holds`]: per-node conditions ([`Hold`]: free, fixed, sliding n · u = value, on a rail),
+//!   imposed by rotating a node's DOFs into its frame; [`Constrained`] factors once and solves
+//!   many hold values and loads; [`Loads`]: nodal forces and pressure on boundary faces;
+//! - [`quadratic`]: 10-node tetrahedra (C3D10 numbering) that do not lock as ν → 0.5
+//!   (`Tet10Mesh::from_linear`, the same `solve`);
+//! - [`stuffing`], [`from_ct`], [`quality`]: the mesh of the soft tissue from the CT
+//!   (isosurface stuffing) and its quality figures; [`embed`]: the face carried by the mesh;
+//!   [`vtu`]: tets.vtu;
+//! - [`nonlinear`]: compressible neo-Hookean tissue (CalculiX's NEO HOOKE) by Newton's method
+//!   with load steps, exact for rigid bone moves of any size.
 //!
 //! Small-strain isotropic linear elasticity per element, σ = λ tr(ε) I + 2 μ ε with
 //! λ = E ν / ((1 + ν)(1 − 2ν)) and μ = E / (2 (1 + ν)). For linear shape functions N_a with
@@ -10,13 +23,17 @@
 
 pub mod embed;
 pub mod from_ct;
+pub mod holds;
+pub mod nonlinear;
+pub mod quadratic;
 pub mod quality;
 pub mod stuffing;
+pub mod vtu;
+
+pub use holds::{Constrained, Hold, Loads};
 
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
-
-pub mod vtu;
 
 /// Young's modulus (kPa) and Poisson ratio of an element.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -123,6 +140,21 @@ impl TetMesh {
         Ok(k)
     }
 
+    /// Small-strain linear elasticity with per-node holds (fixed, sliding, on a rail or free) and
+    /// loads (nodal forces, pressure on boundary faces): the displacement of every node. For
+    /// many hold values or loads on one factor, use [`Constrained`] with [`TetMesh::assemble`].
+    pub fn solve(&self, holds: &[Hold], loads: &Loads) -> Result<Vec<[f64; 3]>> {
+        let f = loads.vector_linear(&self.nodes)?;
+        let c = Constrained::new(&self.assemble()?, holds, self.nodes.len())?;
+        Ok(c.solve(&[(holds, &f)])?.remove(0))
+    }
+
+    /// The tetrahedra that are flat or inverted once the nodes have moved by `u` (a large move
+    /// in the linear model; the pipeline warns and names the nonlinear option), ascending.
+    pub fn inverted_after(&self, u: &[[f64; 3]]) -> Vec<usize> {
+        inverted_after(&self.nodes, &self.tets, u)
+    }
+
     /// Small-strain linear elasticity with the nodes of `prescribed` held at their displacement
     /// and no body force: the displacement of every node.
     pub fn solve_linear(&self, prescribed: &[Option<[f64; 3]>]) -> Result<Vec<[f64; 3]>> {
@@ -153,6 +185,22 @@ impl TetMesh {
         })?;
         Ok(sys.solve(&[vec![0.0; n]], &[values.to_vec()]).remove(0))
     }
+}
+
+/// The tetrahedra (corner indices into `nodes`) flat or inverted at `nodes + u`.
+pub fn inverted_after(nodes: &[[f64; 3]], tets: &[[u32; 4]], u: &[[f64; 3]]) -> Vec<usize> {
+    let at = |n: u32| -> [f64; 3] {
+        let (p, d) = (
+            nodes[n as usize],
+            u.get(n as usize).copied().unwrap_or([f64::NAN; 3]),
+        );
+        [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+    };
+    tets.iter()
+        .enumerate()
+        .filter(|(_, t)| gradients(t.map(at)).is_none())
+        .map(|(i, _)| i)
+        .collect()
 }
 
 #[cfg(test)]
