@@ -256,6 +256,19 @@ pub enum SolveModel {
 pub enum TetMaterial {
     /// Small-strain isotropic linear elasticity.
     Linear,
+    /// Compressible neo-Hookean (CalculiX's NEO HOOKE form), geometrically nonlinear: exact
+    /// for rigid moves of any size.
+    NeoHookean,
+}
+
+/// The volumetric model's element.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TetElement {
+    /// 4-node tetrahedra (locks as ν → 0.5).
+    Linear,
+    /// 10-node tetrahedra (CalculiX C3D10), which do not lock; linear material only.
+    Quadratic,
 }
 
 /// Young's modulus (kPa) and Poisson ratio of one tissue.
@@ -271,6 +284,9 @@ pub struct TissueElastic {
 #[serde(deny_unknown_fields)]
 pub struct Tet {
     pub material: TetMaterial,
+    pub element: TetElement,
+    /// Newton load steps of the nonlinear material.
+    pub load_steps: usize,
     /// Element edge length (mm) at the skin inside the region the plan reaches.
     pub skin_size_mm: f64,
     /// Element edge length (mm) deep in the tissue and far from the moved bone.
@@ -428,6 +444,8 @@ impl Default for Tet {
         };
         Tet {
             material: TetMaterial::Linear,
+            element: TetElement::Linear,
+            load_steps: 4,
             skin_size_mm: 2.5,
             deep_size_mm: 8.0,
             margin_mm: 30.0,
@@ -601,6 +619,15 @@ impl Case {
             return bad(
                 "[tet] needs 0 < skin_size_mm <= deep_size_mm (finite) and margin_mm >= 0".into(),
             );
+        }
+        if t.material == TetMaterial::NeoHookean && t.element == TetElement::Quadratic {
+            return bad(
+                "[tet] material \"neo-hookean\" runs on element \"linear\" (no nonlinear 10-node tetrahedron yet)"
+                    .into(),
+            );
+        }
+        if t.load_steps == 0 {
+            return bad("[tet] load_steps must be at least 1".into());
         }
         for (name, m) in [
             ("skin", t.skin),

@@ -43,6 +43,8 @@ pub enum NumericalKind {
     Diverged,
     /// An element is flat or inverted.
     DegenerateElement,
+    /// The model is too large for this machine's memory (its factor would not fit).
+    TooLarge,
 }
 
 pub type Result<T> = std::result::Result<T, Error>;

@@ -308,6 +308,10 @@ fn sum_duplicates(mut t: Vec<(usize, usize, f64)>) -> Vec<(usize, usize, f64)> {
     out
 }
 
+/// The largest Cholesky factor a solve may allocate: a model that needs more is refused with
+/// its size (before the allocation fails and aborts the process).
+pub const MAX_FACTOR_BYTES: usize = 12 << 30;
+
 /// K y = b on the free DOFs, with the fixed ones prescribed; factored once.
 pub struct System {
     pub n: usize,
@@ -334,6 +338,20 @@ impl System {
         let symbolic = Pattern::analyse(mat.symbolic()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
         })?;
+        let bytes = symbolic
+            .factor_nnz()
+            .saturating_mul(std::mem::size_of::<f64>());
+        if bytes > MAX_FACTOR_BYTES {
+            return Err(Error::numerical(
+                NumericalKind::TooLarge,
+                format!(
+                    "the system of {} unknowns would need a {:.1} GB Cholesky factor (limit {} GB): use a coarser model",
+                    free.len(),
+                    bytes as f64 / 1e9,
+                    MAX_FACTOR_BYTES >> 30
+                ),
+            ));
+        }
         let llt = Cholesky::factor(&symbolic, mat.as_ref()).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"

@@ -141,6 +141,10 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
                 mesh::ply::Encoding::BinaryLittleEndian,
             ),
         }),
+        Box::new(|| match &p.volumetric {
+            Some(v) => v.write_vtu(&o.join("tets.vtu")),
+            None => Ok(()),
+        }),
         Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.ply"))),

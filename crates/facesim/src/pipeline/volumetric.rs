@@ -5,38 +5,80 @@
 //! given scan, at full resolution).
 
 use super::{Recorder, Scene};
-use crate::case::{Case, TetMaterial};
+use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::report::Stage;
-use crate::tet::embed::SkinEmbedding;
+use crate::tet::embed::{SkinEmbedding, boundary_faces};
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
+use crate::tet::nonlinear::{self, Newton};
+use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
-use crate::tet::{Elastic, TetMesh};
+use crate::tet::vtu::{FIXED, FREE, MOVED};
+use crate::tet::{Elastic, Hold, Loads, TetMesh};
 use serde::Serialize;
-
-/// tets.vtu's `constraint` codes (CASE.md).
-pub const FREE: u8 = 0;
-pub const FIXED: u8 = 1;
-pub const MOVED: u8 = 2;
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
 pub struct Volumetric {
     pub mesh: SoftTissueMesh,
-    /// Per node: FREE, FIXED or MOVED.
+    /// The 10-node mesh that was solved (`[tet] element = "quadratic"`).
+    pub quadratic: Option<Tet10Mesh>,
+    /// Per solved node (the corners, then the midpoints when quadratic): FREE, FIXED or MOVED.
     pub constraint: Vec<u8>,
     /// Per tetrahedron.
     pub material: Vec<Elastic>,
-    /// Per node (mm).
+    /// Per solved node (mm).
     pub displacement: Vec<[f64; 3]>,
     pub report: TetReport,
+}
+
+impl Volumetric {
+    /// The solved nodes (corners, then midpoints when quadratic).
+    pub fn nodes(&self) -> &[[f64; 3]] {
+        self.quadratic
+            .as_ref()
+            .map_or(&self.mesh.nodes, |q| &q.nodes)
+    }
+
+    /// Write tets.vtu (CASE.md): the solved mesh, displacement, constraint codes, cell materials
+    /// and tissue labels.
+    pub fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
+        use crate::tet::vtu::{Cells, TetsVtu};
+        let youngs: Vec<f64> = self.material.iter().map(|m| m.youngs_kpa).collect();
+        let poisson: Vec<f64> = self.material.iter().map(|m| m.poisson).collect();
+        let cells = match &self.quadratic {
+            Some(q) => Cells::Quadratic(&q.tets),
+            None => Cells::Linear(&self.mesh.tets),
+        };
+        crate::tet::vtu::write(
+            path,
+            &TetsVtu {
+                nodes: self.nodes(),
+                cells,
+                displacement: &self.displacement,
+                constraint: &self.constraint,
+                youngs_kpa: &youngs,
+                poisson: &poisson,
+                tissue: &self.mesh.tissue,
+            },
+        )
+    }
+}
+
+/// One converged Newton load step of the nonlinear material.
+#[derive(Clone, Debug, Serialize)]
+pub struct NewtonStep {
+    pub load: f64,
+    pub iterations: usize,
+    pub residual: f64,
 }
 
 /// report.json's `tet` section.
 #[derive(Clone, Debug, Serialize)]
 pub struct TetReport {
     pub material: TetMaterial,
+    pub element: TetElement,
     /// The modelled region (LPS mm): the box around the moved bone grown by `[tet] margin_mm`.
     pub region: ([f64; 3], [f64; 3]),
     pub nodes: usize,
@@ -48,6 +90,11 @@ pub struct TetReport {
     pub moved_nodes: usize,
     pub fixed_nodes: usize,
     pub quality: Quality,
+    /// Linear material: elements the solved displacement turns inside out (the move is too
+    /// large for small-strain elasticity; the nonlinear material handles it).
+    pub inverted_elements: usize,
+    /// Nonlinear material: the load steps.
+    pub newton: Option<Vec<NewtonStep>>,
     /// Face vertices farther from the mesh's skin than the reach (they stay at rest).
     pub face_vertices_unreached: usize,
     /// Distance from each carried face vertex to the mesh's skin boundary (mm).
@@ -76,25 +123,60 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
     (lo[0] <= hi[0]).then_some((lo, hi))
 }
 
-/// The role of each node and the displacement held on it: bone nodes inside a segment move
-/// with it (any rotation, exactly), other bone and the cut faces stay, skin outside
-/// `[surface] movable` stays, the rest is free.
-fn holds(mesh: &SoftTissueMesh, scene: &Scene, case: &Case) -> (Vec<u8>, Vec<Option<[f64; 3]>>) {
-    let (moved_to, moved) = scene.model.plan.apply(&mesh.nodes, 1.0);
-    let rigid = super::model::rigid_mask(case, &mesh.nodes);
-    mesh.kind
-        .iter()
+/// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
+/// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
+/// bone and the cut faces stay, skin outside `[surface] movable` stays, the rest is free.
+fn holds(
+    nodes: &[[f64; 3]],
+    kind: &[NodeKind],
+    scene: &Scene,
+    case: &Case,
+) -> (Vec<u8>, Vec<Hold>) {
+    let (moved_to, moved) = scene.model.plan.apply(nodes, 1.0);
+    let rigid = super::model::rigid_mask(case, nodes);
+    kind.iter()
         .enumerate()
         .map(|(n, k)| match k {
             NodeKind::Bone if moved[n] => (
                 MOVED,
-                Some([0, 1, 2].map(|c| moved_to[n][c] - mesh.nodes[n][c])),
+                Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
             ),
-            NodeKind::Bone | NodeKind::Cut => (FIXED, Some([0.0; 3])),
-            NodeKind::Skin if rigid[n] => (FIXED, Some([0.0; 3])),
-            NodeKind::Skin | NodeKind::Interior => (FREE, None),
+            NodeKind::Bone | NodeKind::Cut => (FIXED, Hold::Fixed([0.0; 3])),
+            NodeKind::Skin if rigid[n] => (FIXED, Hold::Fixed([0.0; 3])),
+            NodeKind::Skin | NodeKind::Interior => (FREE, Hold::Free),
         })
         .unzip()
+}
+
+/// The role of each midpoint of a 10-node mesh: a midpoint on a boundary face whose corners
+/// are all held (bone, cut) takes the role of that surface; every other midpoint is interior or
+/// skin, free.
+fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]) -> Vec<NodeKind> {
+    let mut mid = vec![NodeKind::Interior; q.edges.len()];
+    let held = |k: NodeKind| matches!(k, NodeKind::Bone | NodeKind::Cut);
+    for (_, f) in boundary_faces(tets) {
+        let ks = f.map(|n| kind[n as usize]);
+        let role = if ks.iter().all(|k| *k == NodeKind::Bone) {
+            NodeKind::Bone
+        } else if ks.iter().all(|k| held(*k)) {
+            NodeKind::Cut
+        } else {
+            continue;
+        };
+        for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
+            if let Some(m) = q.midpoint(a, b) {
+                let e = m as usize - q.corners;
+                if mid[e] != NodeKind::Bone {
+                    mid[e] = role;
+                }
+            }
+        }
+    }
+    mid
+}
+
+fn counted(a: &[u8], c: u8) -> usize {
+    a.iter().filter(|k| **k == c).count()
 }
 
 /// Mesh, solve and carry the face; None when the plan moves no bone.
@@ -127,28 +209,78 @@ pub fn predict(
             }
         })
         .collect();
-    let (constraint, prescribed) = holds(&mesh, scene, case);
+    let linear = TetMesh {
+        nodes: mesh.nodes.clone(),
+        tets: mesh.tets.clone(),
+        material: material.clone(),
+    };
+    let quadratic =
+        (t.element == TetElement::Quadratic).then(|| Tet10Mesh::from_linear(&linear, Rule::Full));
+    let (nodes, kind) = match &quadratic {
+        Some(q) => {
+            let mut kind = mesh.kind.clone();
+            kind.extend(midpoint_kinds(q, &mesh.tets, &mesh.kind));
+            (&q.nodes, kind)
+        }
+        None => (&mesh.nodes, mesh.kind.clone()),
+    };
+    let (constraint, hold) = holds(nodes, &kind, scene, case);
     if !constraint.contains(&MOVED) {
         return Err(Error::config(format!(
             "case.toml: the plan moves bone, but no node of the tissue mesh lies on moved bone (region {:?}–{:?} mm): the moved bone touches no soft tissue",
             roi.0, roi.1
         )));
     }
-    let displacement = rec.time(Stage::Solve, "solving the volumetric model", || {
-        let tm = TetMesh {
-            nodes: mesh.nodes.clone(),
-            tets: mesh.tets.clone(),
-            material: material.clone(),
-        };
-        tm.solve_linear(&prescribed)
-    })?;
+    let (displacement, newton) =
+        rec.time(Stage::Solve, "solving the volumetric model", || {
+            match (&quadratic, t.material) {
+                (Some(q), _) => Ok((q.solve(&hold, &Loads::none())?, None)),
+                (None, TetMaterial::Linear) => Ok((linear.solve(&hold, &Loads::none())?, None)),
+                (None, TetMaterial::NeoHookean) => {
+                    let opts = Newton {
+                        load_steps: t.load_steps,
+                        ..Newton::default()
+                    };
+                    let s = nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?;
+                    let steps = s
+                        .steps
+                        .iter()
+                        .map(|s| NewtonStep {
+                            load: s.load,
+                            iterations: s.iterations,
+                            residual: s.residuals.last().copied().unwrap_or(0.0),
+                        })
+                        .collect();
+                    Ok((s.displacements, Some(steps)))
+                }
+            }
+        })?;
+    let inverted = match &quadratic {
+        Some(q) => q.inverted_after(&displacement).len(),
+        None => linear.inverted_after(&displacement).len(),
+    };
+    if inverted > 0 {
+        rec.warn(format!(
+            "the predicted move turns {inverted} tetrahedra inside out: too large for small-strain elasticity; use [tet] material = \"neo-hookean\""
+        ));
+    }
     let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
         let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
         let reach = (1.5 * t.skin_size_mm).max(3.0);
         let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach);
-        Ok((e.carry(&mesh.tets, &displacement), e))
+        let mut carried = match &quadratic {
+            Some(q) => e.carry_quadratic(&q.tets, &displacement),
+            None => e.carry(&mesh.tets, &displacement),
+        };
+        // Beyond the region's cut faces the tissue is held: face vertices there stay (the
+        // extrapolation from the last tetrahedron would move them).
+        for (d, p) in carried.iter_mut().zip(&skin.vertices) {
+            if (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
+                *d = [0.0; 3];
+            }
+        }
+        Ok((carried, e))
     })?;
-    let count = |c: u8| constraint.iter().filter(|k| **k == c).count();
     let reached: Vec<f64> = embedding
         .distance
         .iter()
@@ -158,15 +290,18 @@ pub fn predict(
         .collect();
     let report = TetReport {
         material: t.material,
+        element: t.element,
         region: roi,
-        nodes: mesh.nodes.len(),
+        nodes: nodes.len(),
         tets: mesh.tets.len(),
-        dofs: 3 * mesh.nodes.len(),
-        free_dofs: 3 * count(FREE),
-        skin_nodes: mesh.kind.iter().filter(|k| **k == NodeKind::Skin).count(),
-        moved_nodes: count(MOVED),
-        fixed_nodes: count(FIXED),
+        dofs: 3 * nodes.len(),
+        free_dofs: 3 * counted(&constraint, FREE),
+        skin_nodes: kind.iter().filter(|k| **k == NodeKind::Skin).count(),
+        moved_nodes: counted(&constraint, MOVED),
+        fixed_nodes: counted(&constraint, FIXED),
         quality: mesh.quality.clone(),
+        inverted_elements: inverted,
+        newton,
         face_vertices_unreached: embedding.unreached(),
         face_to_mesh_mm: stats(&reached),
     };
@@ -179,6 +314,7 @@ pub fn predict(
     Ok(Some((
         Volumetric {
             mesh,
+            quadratic,
             constraint,
             material,
             displacement,

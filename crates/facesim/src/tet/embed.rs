@@ -118,6 +118,30 @@ impl SkinEmbedding {
             .collect()
     }
 
+    /// The same for 10-node tetrahedra (`tets10[t]` extends linear tetrahedron t with its edge
+    /// midpoints in `quadratic::EDGES` order): N_a = λ_a (2λ_a − 1) at the corners and
+    /// 4 λ_a λ_b at the midpoints, so quadratic fields are carried exactly too.
+    pub fn carry_quadratic(&self, tets10: &[[u32; 10]], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.tet
+            .iter()
+            .zip(&self.weights)
+            .map(|(t, l)| match t {
+                None => [0.0; 3],
+                Some(t) => {
+                    let tet = tets10[*t as usize];
+                    let mut n = [0.0; 10];
+                    for a in 0..4 {
+                        n[a] = l[a] * (2.0 * l[a] - 1.0);
+                    }
+                    for (e, [a, b]) in super::quadratic::EDGES.iter().enumerate() {
+                        n[4 + e] = 4.0 * l[*a] * l[*b];
+                    }
+                    [0, 1, 2].map(|c| (0..10).map(|k| n[k] * u[tet[k] as usize][c]).sum())
+                }
+            })
+            .collect()
+    }
+
     /// Face vertices outside the reach of the mesh (they stay at rest).
     pub fn unreached(&self) -> usize {
         self.tet.iter().filter(|t| t.is_none()).count()

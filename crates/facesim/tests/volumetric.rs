@@ -1,0 +1,178 @@
+//! The volumetric model through the pipeline (`[solve] model = "tet"`, issue 14) on the phantom:
+//! every output written, and the invariants of linear elasticity with the bone as the only load —
+//! no move, no change; all bone translated, the face translates exactly; the face exactly linear
+//! in the move.
+
+mod common;
+
+use common::phantom_dir;
+use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
+use facesim::observe::Quiet;
+use facesim::pipeline::{self, Outcome};
+
+fn case(region: Region, translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
+    let mut c = Case {
+        name: Some("volumetric".into()),
+        ct: PathSection {
+            path: phantom_dir().join("ct.nii.gz"),
+        },
+        skin: Some(PathSection {
+            path: phantom_dir().join("face.ply"),
+        }),
+        osteotomy: vec![Osteotomy {
+            name: "mandible".into(),
+            region,
+            translate,
+            rotate_deg,
+            pivot: [0.0, -40.0, -60.0],
+        }],
+        ..Case::default()
+    };
+    c.solve.model = SolveModel::Tet;
+    // Coarse elements keep the tests quick; the invariants hold on any mesh.
+    c.tet.skin_size_mm = 6.0;
+    c.tet.deep_size_mm = 12.0;
+    c.tet.margin_mm = 15.0;
+    c
+}
+
+const MANDIBLE: Region = Region::Box {
+    min: [-70.0, -75.0, -125.0],
+    max: [70.0, -1.5, -26.5],
+};
+
+/// Every bone voxel of the phantom, with a region around it that holds the whole head (no cut
+/// faces) and coarse elements (the invariants hold on any mesh).
+fn whole_skull(translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
+    let mut c = case(
+        Region::Box {
+            min: [-500.0; 3],
+            max: [500.0; 3],
+        },
+        translate,
+        rotate_deg,
+    );
+    c.tet.skin_size_mm = 10.0;
+    c.tet.deep_size_mm = 20.0;
+    c.tet.margin_mm = 200.0;
+    c
+}
+
+fn run(c: Case, name: &str) -> Outcome {
+    pipeline::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+}
+
+fn moves(o: &Outcome) -> Vec<[f64; 3]> {
+    o.skin
+        .vertices
+        .iter()
+        .zip(&o.face_post.vertices)
+        .map(|(a, b)| facesim::mesh::sub(*b, *a))
+        .collect()
+}
+
+#[test]
+fn mandibular_advance_writes_every_output_and_moves_the_lower_face() {
+    let o = run(
+        case(MANDIBLE, [0.0, -6.0, 0.0], [0.0; 3]),
+        "facesim-tet-run",
+    );
+    for f in [
+        "face_pre.ply",
+        "face_post.obj",
+        "face_post.ply",
+        "face_displacement.ply",
+        "displacement.csv",
+        "skull_post.ply",
+        "report.json",
+        "tets.vtu",
+    ] {
+        assert!(o.out_dir.join(f).is_file(), "{f} missing");
+    }
+    assert!(
+        !o.out_dir.join("springs.ply").exists(),
+        "no springs in the volumetric model"
+    );
+    assert_eq!(o.face_post.vertices.len(), o.skin.vertices.len());
+    let t = o
+        .report
+        .tet
+        .as_ref()
+        .expect("report.json has the tet section");
+    assert!(
+        t.moved_nodes > 0 && t.fixed_nodes > 0 && t.skin_nodes > 0,
+        "{t:?}"
+    );
+    assert!(t.quality.min_dihedral_deg > 5.0, "{:?}", t.quality);
+    // The chin (below the mouth, in front) comes forward by a good part of the 6 mm; the
+    // forehead, far above the region the plan reaches, does not move at all.
+    let d = moves(&o);
+    let chin: Vec<f64> = o
+        .skin
+        .vertices
+        .iter()
+        .zip(&d)
+        .filter(|(p, _)| p[2] < -70.0 && p[1] < -60.0)
+        .map(|(_, v)| -v[1])
+        .collect();
+    assert!(!chin.is_empty());
+    let chin_mean = chin.iter().sum::<f64>() / chin.len() as f64;
+    assert!(
+        chin_mean > 2.0 && chin_mean < 6.5,
+        "chin moves {chin_mean} mm"
+    );
+    let forehead_max = o
+        .skin
+        .vertices
+        .iter()
+        .zip(&d)
+        .filter(|(p, _)| p[2] > t.region.1[2] + 5.0)
+        .map(|(_, v)| facesim::mesh::norm(*v))
+        .fold(0.0, f64::max);
+    assert_eq!(forehead_max, 0.0);
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(o.out_dir.join("report.json")).unwrap()).unwrap();
+    assert!(json["timings"]["tet_mesh"].as_f64().is_some());
+    assert_eq!(json["tet"]["nodes"].as_u64().unwrap() as usize, t.nodes);
+}
+
+#[test]
+fn all_bone_translated_translates_the_face_exactly() {
+    let t = [1.5, -2.0, 0.7];
+    let o = run(whole_skull(t, [0.0; 3]), "facesim-tet-translate");
+    let r = o.report.tet.as_ref().unwrap();
+    assert_eq!(r.fixed_nodes, 0, "the region holds the whole head: {r:?}");
+    assert_eq!(r.face_vertices_unreached, 0);
+    for (i, v) in moves(&o).iter().enumerate() {
+        for c in 0..3 {
+            assert!((v[c] - t[c]).abs() < 1e-9, "vertex {i}: {v:?}");
+        }
+    }
+}
+
+#[test]
+fn the_face_is_exactly_linear_in_the_move_and_still_without_it() {
+    let one = moves(&run(
+        case(MANDIBLE, [0.4, -3.0, 1.0], [0.0; 3]),
+        "facesim-tet-lin1",
+    ));
+    let two = moves(&run(
+        case(MANDIBLE, [0.8, -6.0, 2.0], [0.0; 3]),
+        "facesim-tet-lin2",
+    ));
+    let scale = one
+        .iter()
+        .map(|v| facesim::mesh::norm(*v))
+        .fold(0.0, f64::max);
+    assert!(scale > 1.0);
+    for (a, b) in one.iter().zip(&two) {
+        for c in 0..3 {
+            assert!((2.0 * a[c] - b[c]).abs() < 1e-9 * scale, "{a:?} {b:?}");
+        }
+    }
+    let none = moves(&run(
+        case(MANDIBLE, [0.0; 3], [0.0; 3]),
+        "facesim-tet-still",
+    ));
+    assert!(none.iter().all(|v| *v == [0.0; 3]));
+}
