@@ -261,13 +261,14 @@ pub fn predict(
     };
     if inverted > 0 {
         rec.warn(format!(
-            "the predicted move turns {inverted} tetrahedra inside out: too large for small-strain elasticity; use [tet] material = \"neo-hookean\""
+            "the predicted move turns {inverted} of {} tetrahedra inside out (where moved and held bone meet, or a move too large for small strain): [tet] material = \"neo-hookean\" keeps them valid",
+            mesh.tets.len()
         ));
     }
     let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
         let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
         let reach = (1.5 * t.skin_size_mm).max(3.0);
-        let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach);
+        let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach, roi);
         let mut carried = match &quadratic {
             Some(q) => e.carry_quadratic(&q.tets, &displacement),
             None => e.carry(&mesh.tets, &displacement),

@@ -63,13 +63,15 @@ pub fn barycentric(x: [[f64; 3]; 4], p: [f64; 3]) -> Option<[f64; 4]> {
 
 impl SkinEmbedding {
     /// Embed `points` on the boundary faces of the mesh that `on_skin` accepts (faces whose
-    /// three nodes lie on the skin).
+    /// three nodes lie on the skin); points outside the box `near` (the mesh's region grown by
+    /// the reach) are not searched for: they stay.
     pub fn new(
         nodes: &[[f64; 3]],
         tets: &[[u32; 4]],
         on_skin: impl Fn([u32; 3]) -> bool,
         points: &[[f64; 3]],
         reach: f64,
+        near: ([f64; 3], [f64; 3]),
     ) -> SkinEmbedding {
         let faces: Vec<(usize, [u32; 3])> = boundary_faces(tets)
             .into_iter()
@@ -88,6 +90,9 @@ impl SkinEmbedding {
         let found: Vec<(Option<u32>, [f64; 4], f64)> = points
             .par_iter()
             .map(|&p| {
+                if (0..3).any(|c| p[c] < near.0[c] - reach || p[c] > near.1[c] + reach) {
+                    return (None, [0.0; 4], f64::INFINITY);
+                }
                 let (d, _, f) = index.closest_triangle(p);
                 let t = faces[f].0;
                 match barycentric(tets[t].map(|n| nodes[n as usize]), p) {
@@ -204,7 +209,7 @@ mod tests {
             [1.05, 1.0, 1.1],
             [0.1, 0.1, 0.1],
         ];
-        let e = SkinEmbedding::new(&nodes, &tets, |_| true, &points, 1.0);
+        let e = SkinEmbedding::new(&nodes, &tets, |_| true, &points, 1.0, ([0.0; 3], [1.0; 3]));
         assert_eq!(e.unreached(), 0);
         for (p, v) in points.iter().zip(e.carry(&tets, &u)) {
             let want = affine(*p);
@@ -213,7 +218,14 @@ mod tests {
             }
         }
         // Beyond reach: at rest.
-        let far = SkinEmbedding::new(&nodes, &tets, |_| true, &[[5.0, 5.0, 5.0]], 1.0);
+        let far = SkinEmbedding::new(
+            &nodes,
+            &tets,
+            |_| true,
+            &[[5.0, 5.0, 5.0]],
+            1.0,
+            ([-9.0; 3], [9.0; 3]),
+        );
         assert_eq!(far.unreached(), 1);
         assert_eq!(far.carry(&tets, &u), vec![[0.0; 3]]);
     }
