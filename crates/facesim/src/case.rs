@@ -287,6 +287,11 @@ pub struct Tet {
     pub element: TetElement,
     /// Newton load steps of the nonlinear material.
     pub load_steps: usize,
+    /// Mucosa (tissue surface facing a cavity, e.g. the inner lip across the vestibule) within
+    /// `mucosa_gap_mm` of the skull: true slides along the bone (its normal displacement follows
+    /// the bone, tangential free), false is attached (moves with the bone).
+    pub sliding: bool,
+    pub mucosa_gap_mm: f64,
     /// Element edge length (mm) at the skin inside the region the plan reaches.
     pub skin_size_mm: f64,
     /// Element edge length (mm) deep in the tissue and far from the moved bone.
@@ -446,6 +451,8 @@ impl Default for Tet {
             material: TetMaterial::Linear,
             element: TetElement::Linear,
             load_steps: 4,
+            sliding: true,
+            mucosa_gap_mm: 3.0,
             skin_size_mm: 2.5,
             deep_size_mm: 8.0,
             margin_mm: 30.0,
@@ -625,6 +632,9 @@ impl Case {
                 "[tet] material \"neo-hookean\" runs on element \"linear\" (no nonlinear 10-node tetrahedron yet)"
                     .into(),
             );
+        }
+        if !(t.mucosa_gap_mm >= 0.0 && t.mucosa_gap_mm.is_finite()) {
+            return bad("[tet] mucosa_gap_mm must be finite and >= 0".into());
         }
         if t.load_steps == 0 {
             return bad("[tet] load_steps must be at least 1".into());

@@ -15,7 +15,7 @@ use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
 use crate::tet::nonlinear::{self, Newton};
 use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
-use crate::tet::vtu::{FIXED, FREE, MOVED};
+use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
 use crate::tet::{Elastic, Hold, Loads, TetMesh};
 use serde::Serialize;
 
@@ -87,6 +87,10 @@ pub struct TetReport {
     pub free_dofs: usize,
     /// Nodes per role: skin (free), bone moved with a segment, bone or cut faces held.
     pub skin_nodes: usize,
+    /// Skin-kind nodes facing a cavity within `[tet] mucosa_gap_mm` of the skull, and those
+    /// of them that slide (`[tet] sliding`; otherwise they move with the bone).
+    pub mucosa_nodes: usize,
+    pub sliding_nodes: usize,
     pub moved_nodes: usize,
     pub fixed_nodes: usize,
     pub quality: Quality,
@@ -125,10 +129,12 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
 
 /// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
 /// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
-/// bone and the cut faces stay, skin outside `[surface] movable` stays, the rest is free.
+/// bone and the cut faces stay, skin outside `[surface] movable` stays, mucosa slides along or
+/// moves with the bone it faces (`mucosa`), the rest is free.
 fn holds(
     nodes: &[[f64; 3]],
     kind: &[NodeKind],
+    mucosa: &[Option<Mucosa>],
     scene: &Scene,
     case: &Case,
 ) -> (Vec<u8>, Vec<Hold>) {
@@ -136,16 +142,89 @@ fn holds(
     let rigid = super::model::rigid_mask(case, nodes);
     kind.iter()
         .enumerate()
-        .map(|(n, k)| match k {
-            NodeKind::Bone if moved[n] => (
+        .map(|(n, k)| match (k, mucosa.get(n).copied().flatten()) {
+            (NodeKind::Bone, _) if moved[n] => (
                 MOVED,
                 Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
             ),
-            NodeKind::Bone | NodeKind::Cut => (FIXED, Hold::Fixed([0.0; 3])),
-            NodeKind::Skin if rigid[n] => (FIXED, Hold::Fixed([0.0; 3])),
-            NodeKind::Skin | NodeKind::Interior => (FREE, Hold::Free),
+            (NodeKind::Bone | NodeKind::Cut, _) => (FIXED, Hold::Fixed([0.0; 3])),
+            (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3])),
+            (NodeKind::Skin, Some(m)) if case.tet.sliding => (
+                SLIDING,
+                Hold::Slide {
+                    normal: m.normal,
+                    value: (0..3).map(|c| m.normal[c] * m.bone_move[c]).sum(),
+                },
+            ),
+            (NodeKind::Skin, Some(m)) => (
+                if m.bone_move == [0.0; 3] { FIXED } else { MOVED },
+                Hold::Fixed(m.bone_move),
+            ),
+            (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free),
         })
         .unzip()
+}
+
+/// A mucosa node: the bone surface's unit normal at the nearest skull point (after the move)
+/// and that point's displacement.
+#[derive(Clone, Copy, Debug)]
+struct Mucosa {
+    normal: [f64; 3],
+    bone_move: [f64; 3],
+}
+
+/// Skin-kind nodes that face a cavity (no outside air within a voxel of them) and lie within
+/// `[tet] mucosa_gap_mm` of the skull surface: the inner lips and cheeks across the vestibule,
+/// the nasal floor.
+fn mucosa(nodes: &[[f64; 3]], kind: &[NodeKind], scene: &Scene, case: &Case) -> Vec<Option<Mucosa>> {
+    use rayon::prelude::*;
+    let skull = &scene.face.skull;
+    let index = crate::compare::SurfaceIndex::new(skull);
+    let (vol, outside) = (&scene.vol, &scene.seg.outside);
+    let faces_cavity = |p: [f64; 3]| {
+        let c = vol.to_voxel(p).map(|v| v.round() as i64);
+        !(-1..=1).any(|dk| {
+            (-1..=1).any(|dj| {
+                (-1..=1).any(|di| {
+                    let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
+                    i >= 0 && j >= 0 && k >= 0 && outside.contains(i as usize, j as usize, k as usize)
+                })
+            })
+        })
+    };
+    let plan = &scene.model.plan;
+    nodes
+        .par_iter()
+        .zip(kind)
+        .map(|(p, k)| {
+            if *k != NodeKind::Skin || !faces_cavity(*p) {
+                return None;
+            }
+            let (d, q, t) = index.closest_triangle(*p);
+            if !(d <= case.tet.mucosa_gap_mm) {
+                return None;
+            }
+            let tri = skull.triangles[t].map(|v| skull.vertices[v as usize]);
+            let n = crate::mesh::cross(crate::mesh::sub(tri[1], tri[0]), crate::mesh::sub(tri[2], tri[0]));
+            let len = crate::mesh::norm(n);
+            if !(len > 0.0) {
+                return None;
+            }
+            let n = n.map(|v| v / len);
+            // The normal carried by the bone's move: the image of q + εn minus that of q.
+            let eps = 1e-3;
+            let (moved, which) = plan.apply(&[q, [0, 1, 2].map(|c| q[c] + eps * n[c])], 1.0);
+            let bone_move = [0, 1, 2].map(|c| moved[0][c] - q[c]);
+            let normal = if which[0] == which[1] {
+                let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
+                let l = crate::mesh::norm(m);
+                m.map(|v| v / l)
+            } else {
+                n
+            };
+            Some(Mucosa { normal, bone_move })
+        })
+        .collect()
 }
 
 /// The role of each midpoint of a 10-node mesh: a midpoint on a boundary face whose corners
@@ -224,7 +303,8 @@ pub fn predict(
         }
         None => (&mesh.nodes, mesh.kind.clone()),
     };
-    let (constraint, hold) = holds(nodes, &kind, scene, case);
+    let mucosa = mucosa(&mesh.nodes, &mesh.kind, scene, case);
+    let (constraint, hold) = holds(nodes, &kind, &mucosa, scene, case);
     if !constraint.contains(&MOVED) {
         return Err(Error::config(format!(
             "case.toml: the plan moves bone, but no node of the tissue mesh lies on moved bone (region {:?}–{:?} mm): the moved bone touches no soft tissue",
@@ -298,6 +378,8 @@ pub fn predict(
         dofs: 3 * nodes.len(),
         free_dofs: 3 * counted(&constraint, FREE),
         skin_nodes: kind.iter().filter(|k| **k == NodeKind::Skin).count(),
+        mucosa_nodes: mucosa.iter().filter(|m| m.is_some()).count(),
+        sliding_nodes: counted(&constraint, SLIDING),
         moved_nodes: counted(&constraint, MOVED),
         fixed_nodes: counted(&constraint, FIXED),
         quality: mesh.quality.clone(),

@@ -75,6 +75,9 @@ pub struct Segmentation {
     pub labels: Vec<u8>,
     /// Head component mask.
     pub head: Vec<bool>,
+    /// The air outside the head (connected to the volume border); the other non-head voxels
+    /// are cavities (sinuses, airway, the oral vestibule).
+    pub outside: Runs,
     pub windows: Windows,
     pub report: SegmentReport,
 }
@@ -555,6 +558,7 @@ pub fn segment(vol: &Volume, t: &Tissue, name: &std::path::Path) -> Result<Segme
     Ok(Segmentation {
         labels,
         head,
+        outside: outside_runs,
         windows,
         report,
     })

@@ -126,6 +126,17 @@ impl Runs {
         &self.runs[self.row_start[r]..self.row_start[r + 1]]
     }
 
+    /// Whether voxel (i, j, k) is in the mask (false outside the grid).
+    pub fn contains(&self, i: usize, j: usize, k: usize) -> bool {
+        let [nx, ny, nz] = self.dims;
+        if i >= nx || j >= ny || k >= nz {
+            return false;
+        }
+        let runs = self.runs_in_row(j + ny * k);
+        let at = runs.partition_point(|r| r[1] as usize <= i);
+        at < runs.len() && runs[at][0] as usize <= i
+    }
+
     /// The mask as one bool per voxel.
     pub fn paint(&self) -> Vec<bool> {
         let mut m = vec![false; self.dims.iter().product()];
