@@ -53,10 +53,7 @@ fn check_conforming(tets: &[[u32; 4]], closed: bool) -> Vec<[u32; 3]> {
             }
         }
         let bad = edges.values().filter(|c| **c != 2).count();
-        assert_eq!(
-            bad, 0,
-            "{bad} boundary edges not shared by exactly two faces"
-        );
+        assert_eq!(bad, 0, "{bad} boundary edges not shared by exactly two faces");
     }
     boundary
 }
@@ -64,8 +61,7 @@ fn check_conforming(tets: &[[u32; 4]], closed: bool) -> Vec<[u32; 3]> {
 fn assert_bounds(q: &Quality) {
     assert_eq!(q.inverted, 0);
     assert!(
-        q.min_dihedral_deg >= MIN_DIHEDRAL_BOUND_DEG
-            && q.max_dihedral_deg <= MAX_DIHEDRAL_BOUND_DEG,
+        q.min_dihedral_deg >= MIN_DIHEDRAL_BOUND_DEG && q.max_dihedral_deg <= MAX_DIHEDRAL_BOUND_DEG,
         "dihedral angles {:.2}°..{:.2}° outside the proven [{MIN_DIHEDRAL_BOUND_DEG}, {MAX_DIHEDRAL_BOUND_DEG}]",
         q.min_dihedral_deg,
         q.max_dihedral_deg
@@ -206,10 +202,7 @@ fn a_box_cuts_the_shell_on_lattice_planes_with_cut_nodes() {
         );
         errors.push(e);
     }
-    assert!(
-        errors[0] < 1e-2 && errors[1] < errors[0] / 2f64.powf(1.7),
-        "{errors:?}"
-    );
+    assert!(errors[0] < 1e-2 && errors[1] < errors[0] / 2f64.powf(1.7), "{errors:?}");
     // Everything inside the box: the box alone is meshed exactly (its volume to rounding).
     let all = |_: [f64; 3]| -1.0;
     let b = stuffing::stuff(&all, [-3.0, -2.0, -1.0], [3.0, 2.0, 4.0], 1.0).unwrap();
@@ -233,10 +226,7 @@ fn stuffing_many_offsets_never_leaves_the_angle_bounds() {
         let q = Quality::of(&m.nodes, &m.tets);
         assert_bounds(&q);
         check_conforming(&m.tets, true);
-        worst = (
-            worst.0.min(q.min_dihedral_deg),
-            worst.1.max(q.max_dihedral_deg),
-        );
+        worst = (worst.0.min(q.min_dihedral_deg), worst.1.max(q.max_dihedral_deg));
     }
     println!("24 spheres: dihedral {:.2}°..{:.2}°", worst.0, worst.1);
 }
