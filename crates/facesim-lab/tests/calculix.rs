@@ -70,6 +70,7 @@ fn problem<'a>(
         material,
         held,
         loads: &[],
+        pressure: &[],
         step,
     }
 }
@@ -213,6 +214,7 @@ fn tets_vtu_free_nodes_are_reproduced_by_calculix() {
         material: &material,
         held: &held,
         loads: &[],
+        pressure: &[],
         step: Step::LINEAR,
     })
     .unwrap()
@@ -338,6 +340,7 @@ fn calculix_nlgeom_neo_hooke_matches_the_closed_form_uniaxial_stretch() {
         material: &vec![m; tets.len()],
         held: &held,
         loads: &[],
+        pressure: &[],
         step: Step {
             nlgeom: true,
             increments: 10,
@@ -467,6 +470,7 @@ fn calculix_c3d10_reproduces_a_quadratic_solution_exactly() {
             material: &vec![Material::linear(MUSCLE); cells.len()],
             held: &held,
             loads: &[],
+            pressure: &[],
             step: Step::LINEAR,
         })
         .unwrap()
@@ -712,4 +716,150 @@ fn neo_hookean_tetrahedra_agree_with_calculix_nlgeom_far_below_the_discretisatio
         (1.6..2.4).contains(&(lin_ours / lin_half)),
         "{lin_ours:e} {lin_half:e}"
     );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Quadratic (10-node) tetrahedra against CalculiX's C3D10.
+
+/// The side of the cube of the quadratic and pressure tests (6 cells of 2 mm).
+const SPAN: f64 = 12.0;
+
+/// A point's coordinates in the sheared cube's own frame (the shear of `tet_grid::cube`
+/// undone), where its faces are the planes 0 and SPAN.
+fn unsheared(p: V3) -> V3 {
+    let y = p[1] - 0.05 * p[2];
+    [p[0] - 0.1 * y, y, p[2]]
+}
+
+/// The mesh of the quadratic test, its 10-node version and the held displacements (None: free).
+fn jittered_quadratic_cube(
+    rule: facesim::tet::quadratic::Rule,
+) -> (TetMesh, facesim::tet::quadratic::Tet10Mesh, Vec<Option<V3>>) {
+    use facesim::tet::quadratic::Tet10Mesh;
+    // A sheared 6³ cube of 2 mm cells, fat and muscle in a checkerboard, interior corners
+    // jittered by up to 0.2 h (no element keeps the grid's symmetry), mid-edge nodes added.
+    let (n, h) = (6, 2.0);
+    let span = n as f64 * h;
+    let mut m = tet_grid::cube(n, h, FAT, MUSCLE);
+    let on_face = |p: V3| {
+        unsheared(p)
+            .iter()
+            .any(|v| v.abs() < 1e-9 || (v - SPAN).abs() < 1e-9)
+    };
+    for (k, p) in m.nodes.iter_mut().enumerate() {
+        if !on_face(*p) {
+            for c in 0..3 {
+                p[c] += 0.2 * h * (1.7 * k as f64 + 2.3 * c as f64).sin();
+            }
+        }
+    }
+    let q = Tet10Mesh::from_linear(&m, rule);
+    // Bottom held, top moved obliquely (translation, shear and a bilinear term at the corners);
+    // a held mid-edge node takes the mean of its edge's corners (the quadratic field along a
+    // held edge is then the linear interpolation of the corner values).
+    let corner_holds = bottom_fixed_top_moved(&m);
+    let mut prescribed: Vec<Option<V3>> = corner_holds.clone();
+    for [a, b] in &q.edges {
+        let (pa, pb) = (corner_holds[*a as usize], corner_holds[*b as usize]);
+        let both_bottom =
+            m.nodes[*a as usize][2].abs() < 1e-9 && m.nodes[*b as usize][2].abs() < 1e-9;
+        let both_top = (m.nodes[*a as usize][2] - span).abs() < 1e-9
+            && (m.nodes[*b as usize][2] - span).abs() < 1e-9;
+        prescribed.push(match (pa, pb) {
+            (Some(ua), Some(ub)) if both_bottom || both_top => {
+                Some(std::array::from_fn(|c| 0.5 * (ua[c] + ub[c])))
+            }
+            _ => None,
+        });
+    }
+    assert_eq!(prescribed.len(), q.nodes.len());
+    assert!((span - SPAN).abs() < 1e-12);
+    (m, q, prescribed)
+}
+
+#[test]
+fn quadratic_tetrahedra_agree_with_calculix_c3d10() {
+    use facesim::tet::quadratic::{Rule, Tet10Mesh};
+    use facesim::tet::{Hold, Loads};
+    let (m, q, prescribed) = jittered_quadratic_cube(Rule::Full);
+    // Nodal forces (mN) on the free nodes of the side x = span, corners and mid-edge nodes alike.
+    let loaded: Vec<(usize, V3)> = (0..q.nodes.len())
+        .filter(|&k| prescribed[k].is_none() && (unsheared(q.nodes[k])[0] - SPAN).abs() < 1e-9)
+        .map(|k| (k, [0.3, -0.2 + 0.01 * k as f64 % 0.1, 0.25]))
+        .collect();
+    assert!(
+        loaded.iter().any(|(k, _)| *k < q.corners) && loaded.iter().any(|(k, _)| *k >= q.corners)
+    );
+    let holds: Vec<Hold> = prescribed
+        .iter()
+        .map(|p| p.map_or(Hold::Free, Hold::Fixed))
+        .collect();
+    let ours = q
+        .solve(
+            &holds,
+            &Loads {
+                nodal: loaded.clone(),
+                pressure: vec![],
+            },
+        )
+        .unwrap();
+
+    let held = calculix::held_nodes(&prescribed);
+    let loads: Vec<Dof> = loaded
+        .iter()
+        .flat_map(|(k, f)| {
+            (0..3).map(move |axis| Dof {
+                node: *k as u32,
+                axis,
+                value: f[axis],
+            })
+        })
+        .collect();
+    let material = calculix::materials(&m);
+    let p = Problem {
+        nodes: &q.nodes,
+        cells: Cells::Quadratic(&q.tets),
+        material: &material,
+        held: &held,
+        loads: &loads,
+        pressure: &[],
+        step: Step::LINEAR,
+    };
+    let printed = calculix::solve(&p).unwrap().displacement;
+    let precise = calculix::solve_precise(&p).unwrap().displacement;
+    let all = |_| true;
+    let (e_printed, e_precise) = (
+        relative(&printed, &ours, &all),
+        relative(&precise, &ours, &all),
+    );
+    // The held move alone: refinement is then limited by round-off only. With loads, the
+    // residual f − K u₁ at a loaded node is the difference of the load and CalculiX's nodal
+    // force printed to 7 digits (≈ 5e-7 of the load), which bounds the refined agreement.
+    let ours_holds = q.solve(&holds, &Loads::none()).unwrap();
+    let unloaded = calculix::solve_precise(&Problem { loads: &[], ..p })
+        .unwrap()
+        .displacement;
+    let e_holds = relative(&unloaded, &ours_holds, &all);
+    // Controls: the loads left out, and facesim's mean-dilatation rule, are other answers.
+    let e_unloaded = relative(&unloaded, &ours, &all);
+    let mean_dilatation = Tet10Mesh::from_linear(&m, Rule::MeanDilatation)
+        .solve(
+            &holds,
+            &Loads {
+                nodal: loaded.clone(),
+                pressure: vec![],
+            },
+        )
+        .unwrap();
+    let e_md = relative(&precise, &mean_dilatation, &all);
+    println!(
+        "C3D10 vs facesim Tet10Mesh (Rule::Full), {} nodes, {} tetrahedra, held move + {} loaded nodes: max |Δu| / max |u| = {e_printed:.2e} as printed, {e_precise:.2e} refined; held move alone {e_holds:.2e} refined; controls: without the loads {e_unloaded:.1e}, facesim's mean-dilatation rule {e_md:.1e}",
+        q.nodes.len(),
+        q.tets.len(),
+        loaded.len()
+    );
+    assert!(e_printed < 1e-6, "{e_printed:e}");
+    assert!(e_precise < 1e-7, "{e_precise:e}");
+    assert!(e_holds < 1e-9, "{e_holds:e}");
+    assert!(e_unloaded > 1e-3 && e_md > 1e-4, "{e_unloaded:e} {e_md:e}");
 }
