@@ -472,6 +472,54 @@ mod tests {
     }
 
     #[test]
+    fn pressure_faces_are_named_by_their_corners_in_any_order() {
+        let cell = [10, 11, 12, 13];
+        assert_eq!(face_number(&cell, [12, 11, 10]), Some(1));
+        assert_eq!(face_number(&cell, [13, 10, 11]), Some(2));
+        assert_eq!(face_number(&cell, [11, 13, 12]), Some(3));
+        assert_eq!(face_number(&cell, [12, 13, 10]), Some(4));
+        assert_eq!(face_number(&cell, [10, 11, 14]), None);
+        let nodes = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let bad = Pressure {
+            cell: 0,
+            corners: [0, 1, 2],
+            value: f64::NAN,
+        };
+        let p = Problem {
+            nodes: &nodes,
+            cells: Cells::Linear(&[[0, 1, 2, 3]]),
+            material: &[Material::NeoHooke { c10: 1.0, d1: 0.1 }],
+            held: &[],
+            loads: &[],
+            pressure: &[Pressure { value: 0.5, ..bad }],
+            step: Step::LINEAR,
+        };
+        assert!(deck(&p).unwrap().contains("*DLOAD\n1, P1, 5e-1\n"));
+        for wrong in [
+            bad,
+            Pressure { cell: 1, ..bad },
+            Pressure {
+                corners: [0, 1, 1],
+                value: 1.0,
+                ..bad
+            },
+        ] {
+            let e = deck(&Problem {
+                pressure: &[wrong],
+                ..p
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("bad pressure"), "{e}");
+        }
+    }
+
+    #[test]
     fn a_dat_file_is_parsed_by_node_number() {
         let dat = " displacements (vx,vy,vz) for set NALL and time  0.5000000E+00\n\n         2  1.000000E+00  0.000000E+00  0.000000E+00\n         1  9.000000E+00  0.000000E+00  0.000000E+00\n\n displacements (vx,vy,vz) for set NALL and time  0.1000000E+01\n\n         2  2.000000E+00  0.000000E+00 -1.500000E-03\n         1  0.000000E+00  3.000000E+00  0.000000E+00\n\n forces (fx,fy,fz) for set NALL and time  0.1000000E+01\n\n         1  1.000000E+00  0.000000E+00  0.000000E+00\n         2  0.000000E+00  0.000000E+00  0.000000E+00\n";
         let s = parse_dat(dat, 2).unwrap();
