@@ -7,7 +7,8 @@
 //! C3D4 is the linear tetrahedron (one integration point, the same stiffness as facesim's
 //! element), C3D10 the quadratic one (corners, then mid-edge nodes of edges 1-2, 2-3, 3-1, 1-4,
 //! 2-4, 3-4: VTK's order); `*BOUNDARY` lines are `node, first dof, last dof, value`; `*CLOAD`
-//! lines `node, dof, value`; `*ELASTIC` takes E, ν; `*HYPERELASTIC, NEO HOOKE` takes C10, D1
+//! lines `node, dof, value`; `*DLOAD` lines `element, Pk, pressure` for face k of a tetrahedron
+//! (1: corners 1-2-3, 2: 1-4-2, 3: 2-4-3, 4: 3-4-1), a positive pressure pushing into it; `*ELASTIC` takes E, ν; `*HYPERELASTIC, NEO HOOKE` takes C10, D1
 //! for U = C10 (Ī1 − 3) + (J − 1)² / D1 (manual eq. 485), so μ = 2 C10 and K = 2 / D1; with
 //! NLGEOM the prescribed values are ramped over the step. `*NODE PRINT` writes 7 significant
 //! digits; [`solve_precise`] removes that limit for linear steps by one refinement pass.
@@ -84,7 +85,16 @@ impl Step {
     };
 }
 
-/// A problem for CalculiX: one material per cell, held and loaded components.
+/// A uniform pressure (kPa) on the face of cell `cell` whose corners are `corners` (any order):
+/// positive pushes into the cell, as facesim's `Loads::pressure` on a boundary face.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pressure {
+    pub cell: u32,
+    pub corners: [u32; 3],
+    pub value: f64,
+}
+
+/// A problem for CalculiX: one material per cell, held and loaded components, face pressures.
 #[derive(Clone, Copy, Debug)]
 pub struct Problem<'a> {
     pub nodes: &'a [[f64; 3]],
@@ -92,7 +102,24 @@ pub struct Problem<'a> {
     pub material: &'a [Material],
     pub held: &'a [Dof],
     pub loads: &'a [Dof],
+    pub pressure: &'a [Pressure],
     pub step: Step,
+}
+
+/// CalculiX's number (1–4) of the face of a tetrahedron with corners `cell` (its first four
+/// nodes) that has the corners `face`.
+fn face_number(cell: &[u32], face: [u32; 3]) -> Option<usize> {
+    const FACES: [[usize; 3]; 4] = [[0, 1, 2], [0, 3, 1], [1, 3, 2], [2, 3, 0]];
+    let mut want = face;
+    want.sort_unstable();
+    FACES
+        .iter()
+        .position(|f| {
+            let mut have = f.map(|i| cell[i]);
+            have.sort_unstable();
+            have == want
+        })
+        .map(|k| k + 1)
 }
 
 /// What CalculiX printed at the end of the step, per node: displacement (mm) and the nodal
@@ -148,6 +175,15 @@ pub fn deck(p: &Problem) -> Result<String> {
         return Err(Error::config(format!(
             "CalculiX deck: cell {i} names a node beyond {n}"
         )));
+    }
+    let mut faces = Vec::with_capacity(p.pressure.len());
+    for pr in p.pressure {
+        let k = ((pr.cell as usize) < c)
+            .then(|| face_number(p.cells.cell(pr.cell as usize), pr.corners))
+            .flatten()
+            .filter(|_| pr.value.is_finite())
+            .ok_or_else(|| Error::config(format!("CalculiX deck: bad pressure {pr:?}")))?;
+        faces.push((pr.cell + 1, k, pr.value));
     }
     if p.step.increments == 0 {
         return Err(Error::config("CalculiX deck: a step needs increments >= 1"));
@@ -228,6 +264,12 @@ pub fn deck(p: &Problem) -> Result<String> {
             let _ = writeln!(s, "{}, {}, {}", d.node + 1, d.axis + 1, num(d.value));
         }
     }
+    if !faces.is_empty() {
+        s.push_str("*DLOAD\n");
+        for (cell, k, value) in faces {
+            let _ = writeln!(s, "{cell}, P{k}, {}", num(value));
+        }
+    }
     s.push_str("*NODE PRINT, NSET=NALL\nU, RF\n*END STEP\n");
     Ok(s)
 }
@@ -258,11 +300,19 @@ pub fn solve(p: &Problem) -> Result<Solution> {
 /// A linear step solved to full precision: CalculiX's printed answer u₁ (7 digits), then the
 /// residual r = f − K u₁ (CalculiX's nodal forces with every component held at u₁) and the
 /// correction K δ = r with the held components at zero, all by CalculiX; u₁ + δ. One pass of
-/// iterative refinement: the printing error shrinks from ~5e-7 to ~5e-7 of itself.
+/// iterative refinement: the printing error shrinks from ~5e-7 to ~5e-7 of itself. With nodal
+/// loads, r at a loaded node is the load minus a force printed to 7 digits, which bounds the
+/// gain (to ~5e-7 of the loads' share of u). Pressures are refused: CalculiX does not print
+/// their nodal forces, which r needs.
 pub fn solve_precise(p: &Problem) -> Result<Solution> {
     if p.step.nlgeom {
         return Err(Error::config(
             "CalculiX refinement applies to linear steps only (NLGEOM set)",
+        ));
+    }
+    if !p.pressure.is_empty() {
+        return Err(Error::config(
+            "CalculiX refinement needs nodal loads only (pressure given)",
         ));
     }
     let first = solve(p)?;
@@ -419,6 +469,54 @@ mod tests {
             assert!((back - x).abs() <= 5e-14 * x.abs() + 1e-99, "{x} -> {s}");
         }
         assert_eq!(num(2.5), "2.5e0");
+    }
+
+    #[test]
+    fn pressure_faces_are_named_by_their_corners_in_any_order() {
+        let cell = [10, 11, 12, 13];
+        assert_eq!(face_number(&cell, [12, 11, 10]), Some(1));
+        assert_eq!(face_number(&cell, [13, 10, 11]), Some(2));
+        assert_eq!(face_number(&cell, [11, 13, 12]), Some(3));
+        assert_eq!(face_number(&cell, [12, 13, 10]), Some(4));
+        assert_eq!(face_number(&cell, [10, 11, 14]), None);
+        let nodes = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let bad = Pressure {
+            cell: 0,
+            corners: [0, 1, 2],
+            value: f64::NAN,
+        };
+        let p = Problem {
+            nodes: &nodes,
+            cells: Cells::Linear(&[[0, 1, 2, 3]]),
+            material: &[Material::NeoHooke { c10: 1.0, d1: 0.1 }],
+            held: &[],
+            loads: &[],
+            pressure: &[Pressure { value: 0.5, ..bad }],
+            step: Step::LINEAR,
+        };
+        assert!(deck(&p).unwrap().contains("*DLOAD\n1, P1, 5e-1\n"));
+        for wrong in [
+            bad,
+            Pressure { cell: 1, ..bad },
+            Pressure {
+                corners: [0, 1, 1],
+                value: 1.0,
+                ..bad
+            },
+        ] {
+            let e = deck(&Problem {
+                pressure: &[wrong],
+                ..p
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(e.contains("bad pressure"), "{e}");
+        }
     }
 
     #[test]
