@@ -438,7 +438,8 @@ fn midline_skin(z: f64) -> [f64; 3] {
 /// menton the skin point vertically below bony menton); bone points on the midline contours of
 /// the jaws (A point the deepest point of the maxilla's labial face, B point of the mandible's
 /// between the alveolar crest and pogonion, pogonion its most anterior point, menton the
-/// lowest), the incisal-edge midpoints of the right central incisors, and the condyle centres.
+/// lowest), the incisal-edge midpoints of the right central incisors and of the upper canines
+/// (their cusp tips), and the condyle centres.
 pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
     let r = |z: f64| skin_radius(0.0, z);
     let prn = argmax(r, 0.0, 35.0);
@@ -465,12 +466,12 @@ pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
         }
     }
     let me_soft = [0.0, menton[1], 0.5 * (lo + hi)];
-    // Right central incisors (x < 0): the middle of each first tooth's incisal edge.
-    let tip = |ab: [f64; 2], bounds: &[f64; 8], z: f64| {
-        let t = -0.5 * (bounds[0] + bounds[1]);
+    // The middle of tooth k's incisal edge, on the right (x < 0, side = −1) or left.
+    let tip = |ab: [f64; 2], bounds: &[f64; 8], z: f64, k: usize, side: f64| {
+        let t = side * 0.5 * (bounds[k] + bounds[k + 1]);
         let n = -0.5 * EDGE_THICKNESS;
         let (u, v) = (t.sin(), t.cos());
-        // First-order point at signed distance n from the ellipse along its normal.
+        // The point at distance n along the ellipse's normal.
         let p = [ab[0] * u, Y_ARCH - ab[1] * v];
         let g = [u / ab[0], v / ab[1]];
         let gl = (g[0] * g[0] + g[1] * g[1]).sqrt();
@@ -490,11 +491,19 @@ pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
         ("menton", menton),
         (
             "upper incisor tip",
-            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE),
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 0, -1.0),
         ),
         (
             "lower incisor tip",
-            tip(ARCH_LOWER, lower_bounds(), Z_LOWER_EDGE),
+            tip(ARCH_LOWER, lower_bounds(), Z_LOWER_EDGE, 0, -1.0),
+        ),
+        (
+            "upper canine right",
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, -1.0),
+        ),
+        (
+            "upper canine left",
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, 1.0),
         ),
         ("condyle right", [-CONDYLE[0], CONDYLE[1], CONDYLE[2]]),
         ("condyle left", CONDYLE),
@@ -718,5 +727,15 @@ mod tests {
         // The first bound: s(t) ≈ a t for small t.
         let t1 = upper_bounds()[1];
         assert!((t1 * a / UPPER_WIDTHS[0] - 1.0).abs() < 0.04, "{t1}");
+    }
+
+    #[test]
+    fn arch_depth_is_adult() {
+        // From the incisors' labial point to the line through the second molars' distal ends.
+        for (ab, bounds) in [(ARCH_UPPER, upper_bounds()), (ARCH_LOWER, lower_bounds())] {
+            let depth = ab[1] * (1.0 - bounds[7].cos());
+            println!("arch depth {depth:.1} mm");
+            assert!((40.0..=50.0).contains(&depth), "{depth}");
+        }
     }
 }
