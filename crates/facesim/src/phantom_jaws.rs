@@ -64,9 +64,9 @@ pub const Z_BRAIN: f64 = 9.5;
 pub const Z_MAXILLA_TOP: f64 = 1.5;
 
 /// Arch ellipses: common centre y, upper and lower semi-axes (x, y).
-pub const Y_ARCH: f64 = -27.0;
-pub const ARCH_UPPER: [f64; 2] = [28.0, 45.0];
-pub const ARCH_LOWER: [f64; 2] = [25.5, 42.5];
+pub const Y_ARCH: f64 = -24.0;
+pub const ARCH_UPPER: [f64; 2] = [31.5, 48.0];
+pub const ARCH_LOWER: [f64; 2] = [29.0, 45.5];
 
 /// Occlusion and crowns.
 pub const Z_OCCLUSAL: f64 = -25.0;
@@ -82,7 +82,7 @@ const NOTCH_MM: f64 = 2.0;
 
 /// Maxilla.
 const MAXILLA_T_MAX: f64 = 95.0 * PI / 180.0;
-const MAXILLA_Y_MAX: f64 = -20.0;
+const MAXILLA_Y_MAX: f64 = -13.5;
 const ALVEOLAR_MM: f64 = 10.0;
 const Z_A_POINT: f64 = -4.0;
 const PALATE_Z: [f64; 2] = [-6.0, -2.0];
@@ -93,9 +93,9 @@ pub const Z_MENTON: f64 = -66.0;
 const N_MENTON: f64 = -5.0;
 const Z_POGONION: f64 = -55.0;
 const Z_B_DIP: f64 = -42.0;
-const BAR: [[f64; 2]; 2] = [[25.5, -29.0], [46.0, 2.0]];
+const BAR: [[f64; 2]; 2] = [[29.0, -26.0], [46.0, 4.0]];
 const BAR_Z: [f64; 2] = [-54.0, -36.0];
-const RAMUS: [[f64; 2]; 3] = [[38.0, 47.0], [-12.0, 14.0], [-56.0, -10.0]];
+const RAMUS: [[f64; 2]; 3] = [[38.0, 47.0], [-8.0, 18.0], [-56.0, -10.0]];
 const NECK: [[f64; 2]; 3] = [[40.0, 48.0], [2.0, 12.0], [-10.0, -4.0]];
 /// Condyle centre (the +x one; the other mirrors it) and semi-axes.
 pub const CONDYLE: [f64; 3] = [48.0, 7.0, -3.0];
@@ -258,8 +258,8 @@ pub fn bone_at(p: [f64; 3]) -> Option<(Piece, bool)> {
     if maxilla(x, y, z) {
         return Some((Piece::Maxilla, false));
     }
-    // Both arches of crowns lie within |x| ≤ 30, y ≤ −18.
-    let arches = x.abs() <= 30.0 && y <= -18.0;
+    // Both arches of crowns lie within |x| ≤ 33, y ≤ MAXILLA_Y_MAX.
+    let arches = x.abs() <= 33.0 && y <= MAXILLA_Y_MAX;
     if arches && (Z_UPPER_EDGE..=Z_UPPER_CEJ).contains(&z) {
         let (t, n) = arch(ARCH_UPPER, x, y);
         if in_crown(upper_bounds(), t, n, z, Z_UPPER_EDGE, Z_UPPER_CEJ) {
@@ -280,7 +280,7 @@ fn midline_weight(t: f64, width: f64) -> f64 {
 }
 
 fn maxilla(x: f64, y: f64, z: f64) -> bool {
-    if !(Z_UPPER_CEJ..=Z_MAXILLA_TOP).contains(&z) || y > MAXILLA_Y_MAX || x.abs() > 30.0 {
+    if !(Z_UPPER_CEJ..=Z_MAXILLA_TOP).contains(&z) || y > MAXILLA_Y_MAX || x.abs() > 33.0 {
         return false;
     }
     let (t, n) = arch(ARCH_UPPER, x, y);
@@ -346,8 +346,8 @@ fn mandible(x: f64, y: f64, z: f64) -> bool {
 /// Is p in the vestibule (the air between the lips and the teeth and alveolar bone)?
 pub fn in_vestibule(p: [f64; 3]) -> bool {
     let [x, y, z] = p;
-    // Cheap bounds first: the vestibule lies in front of y = −35, within |x| < 32.
-    if !(Z_SULCUS_LOWER..=Z_SULCUS_UPPER).contains(&z) || y > -35.0 || x.abs() > 32.0 {
+    // Cheap bounds first: the vestibule lies in front of y = −35, within |x| < 35.
+    if !(Z_SULCUS_LOWER..=Z_SULCUS_UPPER).contains(&z) || y > -35.0 || x.abs() > 35.0 {
         return false;
     }
     let (tu, nu) = arch(ARCH_UPPER, x, y);
@@ -519,12 +519,12 @@ pub fn landmark(name: &str) -> Option<[f64; 3]> {
 }
 
 /// Osteotomy regions (boxes `[min, max]`) that select each segment's bone and nothing else.
-/// The mandible needs two: its anterior part below the occlusal plane (in front of y = −16)
-/// and everything behind y = −16 below the skull base (posterior body, rami, condyles); the
-/// maxilla lies between the occlusal plane and the Le Fort I gap in front of y = −16.
-pub const MANDIBLE_FRONT_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, -110.0], [90.0, -16.0, Z_OCCLUSAL]];
-pub const MANDIBLE_BACK_BOX: [[f64; 3]; 2] = [[-90.0, -16.0, -110.0], [90.0, 90.0, 3.0]];
-pub const MAXILLA_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, Z_OCCLUSAL], [90.0, -16.0, 3.0]];
+/// The mandible needs two: its anterior part below the occlusal plane (in front of y = −11)
+/// and everything behind y = −11 below the skull base (posterior body, rami, condyles); the
+/// maxilla lies between the occlusal plane and the Le Fort I gap in front of y = −11.
+pub const MANDIBLE_FRONT_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, -110.0], [90.0, -11.0, Z_OCCLUSAL]];
+pub const MANDIBLE_BACK_BOX: [[f64; 3]; 2] = [[-90.0, -11.0, -110.0], [90.0, 90.0, 3.0]];
+pub const MAXILLA_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, Z_OCCLUSAL], [90.0, -11.0, 3.0]];
 
 /// Exact volumes (mm³) of the bone pieces inside the box [lo, hi], teeth included, by midpoint
 /// quadrature of `piece_at` on a grid of step `h`.
@@ -735,7 +735,8 @@ mod tests {
         for (ab, bounds) in [(ARCH_UPPER, upper_bounds()), (ARCH_LOWER, lower_bounds())] {
             let depth = ab[1] * (1.0 - bounds[7].cos());
             println!("arch depth {depth:.1} mm");
-            assert!((40.0..=50.0).contains(&depth), "{depth}");
+            // Adult arch depths to the second molars span about 38–50 mm.
+            assert!((38.0..=50.0).contains(&depth), "{depth}");
         }
     }
 }
