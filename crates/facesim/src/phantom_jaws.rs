@@ -619,7 +619,7 @@ path = "face.ply"
 [surface]
 alpha = 0.01
 beta = 0.02
-movable = {{ sphere = {{ center = [0.0, -60.0, -35.0], radius = 65.0 }} }}
+movable = {{ sphere = {{ center = [0.0, -30.0, -35.0], radius = 85.0 }} }}
 "#
     );
     for (n, b, m) in segments {
