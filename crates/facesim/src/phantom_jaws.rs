@@ -5,32 +5,32 @@
 //! coordinate systems build it:
 //! - **cylindrical** (ρ = √(x² + y²), φ from −y towards +x, z) for the skin surface
 //!   ρ = R_s(φ, z) and the layers under it (skin 2 mm, fat 4 mm, measured radially);
-//! - **arch** coordinates about two ellipses in the horizontal plane, centre (0, −27): the upper
-//!   labial arch line (semi-axes 28 × 45 mm) and the lower one (25.5 × 42.5 mm, 2.5 mm inside
+//! - **arch** coordinates about two ellipses in the horizontal plane, centre (0, −24): the upper
+//!   labial arch line (semi-axes 31.5 × 48 mm) and the lower one (29 × 45.5 mm, 2.5 mm inside
 //!   the upper: the overjet). A point has the ellipse angle t (0 on the midline, ±90° at the
 //!   widest point) and the first-order signed distance n = (q − 1)/|∇q| from the line
-//!   (q = √((x/a)² + ((y + 27)/b)²), n > 0 outside, towards the lips);
+//!   (q = √((x/a)² + ((y + 24)/b)²), n > 0 outside, towards the lips);
 //! - plain boxes, segments and ellipsoids for the rami and condyles.
 //!
-//! Dimensions (mm; measured on the midline unless said otherwise):
+//! Dimensions (mm; on the midline unless said otherwise; docs/phantom.md has the measured
+//! proportions):
 //!
 //! | part | geometry |
 //! |---|---|
 //! | cranium | the capsule's bone cylinder ρ ∈ [60, 67] for z ≥ 4.5, closed by a skull-base plate z ∈ [4.5, 9.5]; brain (35 HU) above it |
 //! | Le Fort I gap | z ∈ [1.5, 4.5], soft tissue, horizontal: maxilla below, cranium above |
-//! | maxilla | alveolar band n_u ∈ [−10, 0] (labial face dips 1.5 mm at A point, z = −4), z ∈ [−13, 1.5], \|t\| ≤ 95°, y ≤ −20; palate z ∈ [−6, −2] inside the arch |
-//! | upper teeth | crowns z ∈ [−23.5, −13] (incisal edge to CEJ), labial face on the arch line, labio-lingual 7 (incisors), 8 (canine), 9 (premolars), 10 (molars) at the CEJ tapering to 1.5 at the edge; widths along the arch 8.5, 6.5, 7.5, 7, 6.5, 10, 9; 2 mm embrasure notches between crowns; 1500 HU |
-//! | occlusion | horizontal occlusal plane z = −25; 3 mm interocclusal gap (soft) so the jaws are separate bone pieces; overjet 2.5 mm |
-//! | lower teeth | crowns z ∈ [−35.5, −26.5], widths 5.5, 6, 7, 7, 7, 11, 10.5, same thicknesses |
-//! | mandible body | n_l ∈ [−13, front], z from the alveolar crest −35.5 down to the lower border −65.5 + 12 (1 − cos t) + (n + 5)²/20 (rounded); front = 4 exp(−((z + 55)/7)²) − 1.5 exp(−((z + 42)/4)²) near the midline (chin and B point) |
-//! | symphysis | height 30 (crest −35.5 to menton −65.5), thickness 13 + chin |
-//! | posterior body | 13 mm bars from (±25.5, −29) to (±46, 2), z ∈ [−53.5, −35.5] |
-//! | rami | \|x\| ∈ [38, 47], y ∈ [−12, 14], z ∈ [−56, −10]; condylar necks \|x\| ∈ [40, 48], y ∈ [2, 12], z ∈ [−10, −4] |
-//! | condyles | ellipsoids centred (±48, 7, −3), semi-axes 10 × 5 × 4 (top z = 1): 3.5 mm joint gap below the skull base; intercondylar distance 96 |
-//! | vestibule | air 2 mm thick in front of the arch lines (n ∈ (0, 2]), from the upper sulcus z = −3 to the lower sulcus z = −45, \|t\| ≤ 70° (to the first molars); closed at both sulci and at its ends |
-//! | lips | upper lip 12.5 thick at labrale superius (z ≈ −9.5), lower lip 14.6 at labrale inferius (z = −31), in contact at stomion (z = −21), where a 2.5 mm skin crease marks the lip line |
-//! | chin | soft tissue 11.5 at pogonion (horizontal), 7 below menton (vertical) |
-//! | nose | projection ≈ 20 from subnasale; nasolabial angle ≈ 100° |
+//! | maxilla | alveolar band n_u ∈ [−10, 0] (labial face dips 1.5 mm at A point, z = −4), z ∈ [−13, 1.5], \|t\| ≤ 95°, y ≤ −13.5; palate z ∈ [−6, −2] inside the arch |
+//! | upper teeth | crowns z ∈ [−23, −13] (incisal edge to CEJ), labial face on the arch line, labio-lingual 7 (incisors), 8 (canine), 9 (premolars), 10 (molars) at the CEJ tapering to 1.5 at the edge; widths along the arch 8.5, 6.5, 7.5, 7, 6.5, 10, 9 (central incisor to second molar); 2 mm embrasure notches; 1500 HU |
+//! | occlusion | horizontal occlusal plane z = −25; a 4 mm interocclusal gap (soft tissue, as in a CT taken with a bite wafer) keeps the jaws separate bone pieces at 2 mm voxels |
+//! | lower teeth | crowns z ∈ [−36, −27], widths 5.5, 6, 7, 7, 7, 11, 10.5, same thicknesses |
+//! | mandible body | n_l ∈ [−13, front], z from the alveolar crest −36 down to the lower border −66 + 12 (1 − cos t) + (n + 5)²/20; front = [4 exp(−((z + 55)/7)²) − 1.5 exp(−((z + 42)/4)²)] exp(−(t/0.45)²) (chin, B point) |
+//! | symphysis | height 30 (crest −36 to menton −66), thickness 13 + chin |
+//! | posterior body | 13 mm bars from (±29, −26) to (±46, 4), z ∈ [−54, −36] (rounded lower border) |
+//! | rami | \|x\| ∈ [38, 47], y ∈ [−8, 18], z ∈ [−56, −10]; condylar necks \|x\| ∈ [40, 48], y ∈ [2, 12], z ∈ [−10, −4] |
+//! | condyles | ellipsoids centred (±48, 7, −3), semi-axes 10 × 5 × 4 (top z = 1): 3.5 mm joint space below the skull base; intercondylar distance 96 |
+//! | vestibule | air 2 mm thick in front of the arch lines (n ∈ (0, 2]), from the upper sulcus z = −3 to the lower sulcus z = −45, \|t\| ≤ 70°; closed at both sulci and at its ends; between the incisal edges it bridges the overjet |
+//! | lips | in contact at stomion; a 2.5 mm skin crease marks the lip line |
+//! | skin, fat | 2 mm and 4 mm radially under R_s(φ, z) = envelope + nose + lips − crease + chin (see `skin_radius`) |
 //!
 //! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
 //! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
