@@ -53,6 +53,10 @@ enum Cmd {
         /// Vertex spacing of the face scan (mm): 3 → ~5 k vertices, 0.75 → ~80 k.
         #[arg(long, default_value_t = 3.0)]
         scan_step: f64,
+        /// `capsule`: the layered capsule head; `jaws`: a head with mandible, maxilla, teeth,
+        /// lips over a vestibule, chin and nose, and four jaw plans (docs/phantom.md).
+        #[arg(long, value_parser = ["capsule", "jaws"], default_value = "capsule")]
+        anatomy: String,
     },
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
@@ -175,7 +179,8 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             slice,
             noise,
             scan_step,
-        } => cmd_phantom(&dir, spacing, slice, noise, scan_step),
+            anatomy,
+        } => cmd_phantom(&dir, spacing, slice, noise, scan_step, &anatomy),
         Cmd::Inspect { path } => cmd_inspect(&path),
         Cmd::Bench {
             what,
@@ -220,7 +225,14 @@ fn cmd_run(case_dir: &Path, out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-fn cmd_phantom(dir: &Path, spacing: f64, slice: f64, noise: f64, scan_step: f64) -> Result<()> {
+fn cmd_phantom(
+    dir: &Path,
+    spacing: f64,
+    slice: f64,
+    noise: f64,
+    scan_step: f64,
+    anatomy: &str,
+) -> Result<()> {
     if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
         return Err(Error::config(
             "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
@@ -232,7 +244,15 @@ fn cmd_phantom(dir: &Path, spacing: f64, slice: f64, noise: f64, scan_step: f64)
         scan_step_mm: scan_step,
         ..Default::default()
     };
-    facesim::phantom::write_case(dir, &opts)?;
+    if anatomy == "jaws" {
+        let jaws = facesim::phantom_jaws::JawsOptions {
+            phantom: opts,
+            solve_model: None,
+        };
+        facesim::phantom_jaws::write_case(dir, &jaws)?;
+    } else {
+        facesim::phantom::write_case(dir, &opts)?;
+    }
     println!("phantom case written to {}", dir.display());
     Ok(())
 }

@@ -27,6 +27,7 @@ pub mod observe;
 pub mod osteotomy;
 pub mod output;
 pub mod phantom;
+pub mod phantom_jaws;
 pub mod pipeline;
 pub mod report;
 pub mod segment;

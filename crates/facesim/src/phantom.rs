@@ -257,7 +257,7 @@ impl Default for PhantomOptions {
 
 /// Deterministic pseudo-random normal deviate per voxel (splitmix64 + Box–Muller), so the
 /// phantom is byte-identical on every machine and thread count.
-fn noise(idx: u64) -> f64 {
+pub(crate) fn noise(idx: u64) -> f64 {
     let mix = |mut z: u64| {
         z = z.wrapping_add(0x9E3779B97F4A7C15);
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
@@ -273,6 +273,18 @@ fn noise(idx: u64) -> f64 {
 pub fn ct(opts: &PhantomOptions) -> Volume {
     let lo = [-92.0, -112.0, -Z_HALF - R_SKIN - 8.0];
     let hi = [92.0, 92.0, Z_HALF + R_SKIN + 8.0];
+    sample_ct(lo, hi, opts, hu_at)
+}
+
+/// A CT of the box [lo, hi] (voxel centres from `lo`, identity LPS orientation) of an analytic
+/// HU field: each voxel is the mean of `supersample`³ sub-samples (partial volume) plus the
+/// deterministic noise of its index. Shared by the capsule head and `phantom_jaws`.
+pub(crate) fn sample_ct(
+    lo: [f64; 3],
+    hi: [f64; 3],
+    opts: &PhantomOptions,
+    hu: impl Fn([f64; 3]) -> f64 + Sync,
+) -> Volume {
     let dims = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / opts.spacing[a]).ceil() as usize + 1);
     let s = opts.supersample.max(1);
     let [nx, ny, nz] = dims;
@@ -294,8 +306,7 @@ pub fn ct(opts: &PhantomOptions) -> Volume {
                                 let off = |t: usize, ax: usize| {
                                     ((t as f64 + 0.5) / s as f64 - 0.5) * opts.spacing[ax]
                                 };
-                                acc +=
-                                    hu_at([c[0] + off(a, 0), c[1] + off(b, 1), c[2] + off(d, 2)]);
+                                acc += hu([c[0] + off(a, 0), c[1] + off(b, 1), c[2] + off(d, 2)]);
                             }
                         }
                     }
@@ -337,6 +348,13 @@ pub fn face_scan(step_mm: f64) -> Mesh {
             }
         }
     }
+    grid_mesh(verts, nphi, nz)
+}
+
+/// Triangulate a (φ, z) grid of vertices (row-major, `nphi` per row, φ growing towards +x, z
+/// up) with outward normals and diagonals mirrored about the mid-sagittal plane, dropping the
+/// triangles that collapse (at the poles of a cap).
+pub(crate) fn grid_mesh(verts: Vec<[f64; 3]>, nphi: usize, nz: usize) -> Mesh {
     let mut tris = Vec::new();
     for j in 0..nz - 1 {
         for i in 0..nphi - 1 {

@@ -1,0 +1,101 @@
+//! `facesim phantom DIR --anatomy jaws` through the real CLI: the case it writes runs with the
+//! default (C1) model, and each plan moves the face the way its bone moves.
+
+mod cli;
+#[path = "../../facesim/tests/common/mod.rs"]
+mod common;
+
+use cli::facesim;
+use facesim::phantom_jaws as pj;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+/// The jaws case at 2 mm, written once per test binary by the CLI.
+fn jaws_dir() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let d = common::kept_dir("facesim-jaws");
+        let r = facesim(&[
+            "phantom",
+            d.to_str().unwrap(),
+            "--anatomy",
+            "jaws",
+            "--spacing",
+            "2",
+            "--slice",
+            "2",
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        d
+    })
+}
+
+/// Run one plan of the jaws case; the displacements of the face vertices nearest to
+/// `landmarks`.
+fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
+    let dir = jaws_dir();
+    let out = dir.join(format!("out_{file}"));
+    let r = facesim(&[
+        "run",
+        dir.join(file).to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "{file}: {}", r.stderr);
+    let pre = facesim::mesh::read_mesh(&out.join("face_pre.ply")).unwrap();
+    let post = facesim::mesh::read_mesh(&out.join("face_post.ply")).unwrap();
+    assert_eq!(pre.vertices.len(), post.vertices.len());
+    let moved = |landmark: &str| {
+        let p = pj::landmark(landmark).unwrap();
+        let d2 = |q: &[f64; 3]| (0..3).map(|a| (q[a] - p[a]).powi(2)).sum::<f64>();
+        let i = (0..pre.vertices.len())
+            .min_by(|&a, &b| d2(&pre.vertices[a]).total_cmp(&d2(&pre.vertices[b])))
+            .unwrap();
+        assert!(
+            d2(&pre.vertices[i]).sqrt() < 3.0,
+            "no face vertex near {landmark}"
+        );
+        let d = [0, 1, 2].map(|a| post.vertices[i][a] - pre.vertices[i][a]);
+        println!("{file}: {landmark} moves by {d:.2?} mm");
+        d
+    };
+    landmarks.iter().map(|l| moved(l)).collect()
+}
+
+#[test]
+fn jaws_phantom_writes_a_case_the_default_model_runs() {
+    let dir = jaws_dir();
+    for f in [
+        "ct.nii.gz",
+        "face.ply",
+        "case.toml",
+        "case_setback.toml",
+        "case_rotation.toml",
+        "case_maxilla.toml",
+    ] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    // No model line unless asked for: the default model runs.
+    let text = std::fs::read_to_string(dir.join("case.toml")).unwrap();
+    assert!(!text.contains("[solve]"));
+    // Advancement 5 mm: the soft-tissue chin over the moved bone goes forwards (−y), by no
+    // more than the bone.
+    let d = run_plan("case.toml", &["soft tissue pogonion"])[0];
+    assert!(d[1] < -2.5 && d[1] >= -5.0 - 1e-6, "{d:?}");
+}
+
+#[test]
+fn setback_rotation_and_le_fort_move_the_face_their_way() {
+    let d = run_plan("case_setback.toml", &["soft tissue pogonion"])[0];
+    assert!(d[1] > 2.0 && d[1] <= 4.0 + 1e-6, "{d:?}");
+    // Counter-clockwise rotation: the chin goes up and forwards.
+    let d = run_plan("case_rotation.toml", &["soft tissue pogonion"])[0];
+    assert!(d[1] < -1.0 && d[2] > 1.0, "{d:?}");
+    // Le Fort I advancement: the upper lip goes forwards, the chin stays.
+    let d = run_plan(
+        "case_maxilla.toml",
+        &["labrale superius", "soft tissue pogonion"],
+    );
+    assert!(d[0][1] < -2.0 && d[0][1] >= -4.0 - 1e-6, "{d:?}");
+    assert!(d[1][1].abs() < 0.5, "{d:?}");
+}

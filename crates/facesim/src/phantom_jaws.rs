@@ -1,0 +1,742 @@
+//! A synthetic head with jaws: cranium, maxilla, mandible, teeth, lips over a vestibule, chin
+//! and nose, every tissue an analytic function of the point (docs/phantom.md, "Jaws").
+//!
+//! Frame: LPS mm, origin on the head axis (the capsule head's z axis), face towards −y. Three
+//! coordinate systems build it:
+//! - **cylindrical** (ρ = √(x² + y²), φ from −y towards +x, z) for the skin surface
+//!   ρ = R_s(φ, z) and the layers under it (skin 2 mm, fat 4 mm, measured radially);
+//! - **arch** coordinates about two ellipses in the horizontal plane, centre (0, −24): the upper
+//!   labial arch line (semi-axes 31.5 × 48 mm) and the lower one (29 × 45.5 mm, 2.5 mm inside
+//!   the upper: the overjet). A point has the ellipse angle t (0 on the midline, ±90° at the
+//!   widest point) and the first-order signed distance n = (q − 1)/|∇q| from the line
+//!   (q = √((x/a)² + ((y + 24)/b)²), n > 0 outside, towards the lips);
+//! - plain boxes, segments and ellipsoids for the rami and condyles.
+//!
+//! Dimensions (mm; on the midline unless said otherwise; docs/phantom.md has the measured
+//! proportions):
+//!
+//! | part | geometry |
+//! |---|---|
+//! | cranium | the capsule's bone cylinder ρ ∈ [60, 67] for z ≥ 4.5, closed by a skull-base plate z ∈ [4.5, 9.5]; brain (35 HU) above it |
+//! | Le Fort I gap | z ∈ [1.5, 4.5], soft tissue, horizontal: maxilla below, cranium above |
+//! | maxilla | alveolar band n_u ∈ [−10, 0] (labial face dips 1.5 mm at A point, z = −4), z ∈ [−13, 1.5], \|t\| ≤ 95°, y ≤ −13.5; palate z ∈ [−6, −2] inside the arch |
+//! | upper teeth | crowns z ∈ [−23, −13] (incisal edge to CEJ), labial face on the arch line, labio-lingual 7 (incisors), 8 (canine), 9 (premolars), 10 (molars) at the CEJ tapering to 1.5 at the edge; widths along the arch 8.5, 6.5, 7.5, 7, 6.5, 10, 9 (central incisor to second molar); 2 mm embrasure notches; 1500 HU |
+//! | occlusion | horizontal occlusal plane z = −25; a 4 mm interocclusal gap (soft tissue, as in a CT taken with a bite wafer) keeps the jaws separate bone pieces at 2 mm voxels |
+//! | lower teeth | crowns z ∈ [−36, −27], widths 5.5, 6, 7, 7, 7, 11, 10.5, same thicknesses |
+//! | mandible body | n_l ∈ [−13, front], z from the alveolar crest −36 down to the lower border −66 + 12 (1 − cos t) + (n + 5)²/20; front = [4 exp(−((z + 55)/7)²) − 1.5 exp(−((z + 42)/4)²)] exp(−(t/0.45)²) (chin, B point) |
+//! | symphysis | height 30 (crest −36 to menton −66), thickness 13 + chin |
+//! | posterior body | 13 mm bars from (±29, −26) to (±46, 4), z ∈ [−54, −36] (rounded lower border) |
+//! | rami | \|x\| ∈ [38, 47], y ∈ [−8, 18], z ∈ [−56, −10]; condylar necks \|x\| ∈ [40, 48], y ∈ [2, 12], z ∈ [−10, −4] |
+//! | condyles | ellipsoids centred (±48, 7, −3), semi-axes 10 × 5 × 4 (top z = 1): 3.5 mm joint space below the skull base; intercondylar distance 96 |
+//! | vestibule | air 2 mm thick in front of the arch lines (n ∈ (0, 2]), from the upper sulcus z = −3 to the lower sulcus z = −45, \|t\| ≤ 70°; closed at both sulci and at its ends; between the incisal edges it bridges the overjet |
+//! | lips | in contact at stomion; a 2.5 mm skin crease marks the lip line |
+//! | skin, fat | 2 mm and 4 mm radially under R_s(φ, z) = envelope + nose + lips − crease + chin (see `skin_radius`) |
+//!
+//! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
+//! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
+//! z ∈ [−100, 40]: the capsule's cap is left out, and the head leaves the volume through the
+//! neck and the top of the cranium, as a clinical CT does.
+
+use crate::error::{Error, Result};
+use crate::mesh::Mesh;
+use crate::phantom::{PhantomOptions, grid_mesh, sample_ct};
+use crate::volume::Volume;
+use std::f64::consts::PI;
+use std::sync::OnceLock;
+
+pub const HU_AIR: f64 = -1000.0;
+pub const HU_SOFT: f64 = 45.0;
+pub const HU_BRAIN: f64 = 35.0;
+pub const HU_FAT: f64 = -100.0;
+pub const HU_BONE: f64 = 600.0;
+pub const HU_TOOTH: f64 = 1500.0;
+
+/// Skin and subcutaneous fat, radially under R_s.
+pub const SKIN_MM: f64 = 2.0;
+pub const FAT_MM: f64 = 4.0;
+
+/// Cranium (the capsule's cylinder) and the skull base.
+pub const R_BRAIN: f64 = 60.0;
+pub const R_BONE: f64 = 67.0;
+pub const Z_SKULL_BASE: f64 = 4.5;
+pub const Z_BRAIN: f64 = 9.5;
+/// Le Fort I gap: z ∈ [Z_MAXILLA_TOP, Z_SKULL_BASE].
+pub const Z_MAXILLA_TOP: f64 = 1.5;
+
+/// Arch ellipses: common centre y, upper and lower semi-axes (x, y).
+pub const Y_ARCH: f64 = -24.0;
+pub const ARCH_UPPER: [f64; 2] = [31.5, 48.0];
+pub const ARCH_LOWER: [f64; 2] = [29.0, 45.5];
+
+/// Occlusion and crowns.
+pub const Z_OCCLUSAL: f64 = -25.0;
+pub const Z_UPPER_EDGE: f64 = -23.0;
+pub const Z_UPPER_CEJ: f64 = -13.0;
+pub const Z_LOWER_EDGE: f64 = -27.0;
+pub const Z_LOWER_CEJ: f64 = -36.0;
+const UPPER_WIDTHS: [f64; 7] = [8.5, 6.5, 7.5, 7.0, 6.5, 10.0, 9.0];
+const LOWER_WIDTHS: [f64; 7] = [5.5, 6.0, 7.0, 7.0, 7.0, 11.0, 10.5];
+const THICKNESS: [f64; 7] = [7.0, 7.0, 8.0, 9.0, 9.0, 10.0, 10.0];
+const EDGE_THICKNESS: f64 = 1.5;
+const NOTCH_MM: f64 = 2.0;
+
+/// Maxilla.
+const MAXILLA_T_MAX: f64 = 95.0 * PI / 180.0;
+const MAXILLA_Y_MAX: f64 = -13.5;
+const ALVEOLAR_MM: f64 = 10.0;
+const Z_A_POINT: f64 = -4.0;
+const PALATE_Z: [f64; 2] = [-6.0, -2.0];
+
+/// Mandible.
+const BODY_MM: f64 = 13.0;
+pub const Z_MENTON: f64 = -66.0;
+const N_MENTON: f64 = -5.0;
+const Z_POGONION: f64 = -55.0;
+const Z_B_DIP: f64 = -42.0;
+const BAR: [[f64; 2]; 2] = [[29.0, -26.0], [46.0, 4.0]];
+const BAR_Z: [f64; 2] = [-54.0, -36.0];
+const RAMUS: [[f64; 2]; 3] = [[38.0, 47.0], [-8.0, 18.0], [-56.0, -10.0]];
+const NECK: [[f64; 2]; 3] = [[40.0, 48.0], [2.0, 12.0], [-10.0, -4.0]];
+/// Condyle centre (the +x one; the other mirrors it) and semi-axes.
+pub const CONDYLE: [f64; 3] = [48.0, 7.0, -3.0];
+const CONDYLE_AXES: [f64; 3] = [10.0, 5.0, 4.0];
+/// The pivot of a mandibular rotation: on the condylar axis, in the mid-sagittal plane.
+pub const CONDYLAR_PIVOT: [f64; 3] = [0.0, CONDYLE[1], CONDYLE[2]];
+
+/// No skin point is farther from the axis (the nose tip is at 103.5).
+const MAX_SKIN_RADIUS: f64 = 110.0;
+
+/// Vestibule.
+pub const VESTIBULE_MM: f64 = 2.0;
+pub const Z_SULCUS_UPPER: f64 = -3.0;
+pub const Z_SULCUS_LOWER: f64 = -45.0;
+const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
+
+/// Field of view of `ct`.
+pub const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
+pub const FOV_HI: [f64; 3] = [92.0, 90.0, 40.0];
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tissue {
+    Air,
+    Skin,
+    Fat,
+    Soft,
+    Brain,
+    Bone,
+    Tooth,
+}
+
+/// The three bone pieces the osteotomies separate (teeth belong to their jaw).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Piece {
+    Cranium,
+    Maxilla,
+    Mandible,
+}
+
+/// Smooth step from 0 (z ≥ z0) to 1 (z ≤ z1), z1 < z0.
+fn step_down(z: f64, z0: f64, z1: f64) -> f64 {
+    let u = ((z0 - z) / (z0 - z1)).clamp(0.0, 1.0);
+    u * u * (3.0 - 2.0 * u)
+}
+
+fn gauss(d: f64, sigma: f64) -> f64 {
+    (-(d * d) / (2.0 * sigma * sigma)).exp()
+}
+
+/// The head's envelope without face features: an ellipse per height with half-width X(z) and
+/// half-depths Y_front(z), Y_back(z) — the capsule's radius 80 above z = 0, narrowing to the
+/// jaw (X = 66) and the neck (58 wide, 58 deep in front, 65 behind).
+fn envelope(phi: f64, z: f64) -> f64 {
+    let x = 80.0 - 14.0 * step_down(z, 0.0, -30.0) - 8.0 * step_down(z, -50.0, -80.0);
+    let (s, c) = phi.sin_cos();
+    let y = if c > 0.0 {
+        80.0 - 22.0 * step_down(z, -40.0, -85.0)
+    } else {
+        80.0 - 15.0 * step_down(z, -10.0, -50.0)
+    };
+    1.0 / ((s / x).powi(2) + (c / y).powi(2)).sqrt()
+}
+
+/// Midline heights of the features (z, mm) and their amplitudes (radial mm).
+const NOSE: (f64, f64, f64, f64, f64) = (23.5, 13.0, 5.0, 14.0, 0.14); // amp, z, σ below, σ above, σ_φ
+const UPPER_LIP: (f64, f64, f64, f64) = (5.2, -9.5, 11.0, 0.25); // amp, z, half-width (power 8), σ_φ
+const VERMILION: (f64, f64, f64) = (1.6, -11.5, 3.5); // amp, z, σ_z (the upper lip's most anterior part)
+const LOWER_LIP: (f64, f64, f64, f64) = (5.8, -31.0, 9.0, 0.25); // amp, z, half-width (power 4), σ_φ
+const CREASE: (f64, f64, f64, f64) = (2.5, -21.0, 1.5, 0.3); // depth, z, σ_z, σ_φ
+const CHIN: (f64, f64, f64, f64, f64) = (10.8, -56.0, 11.0, 7.5, 0.35); // amp, z, σ below, σ above, σ_φ
+
+/// The skin surface: distance from the z axis at angle φ (from −y towards +x) and height z.
+pub fn skin_radius(phi: f64, z: f64) -> f64 {
+    let (an, zn, sb, sa, sp) = NOSE;
+    let nose = an * gauss(z - zn, if z < zn { sb } else { sa }) * gauss(phi, sp);
+    let (au, zu, wu, spu) = UPPER_LIP;
+    let (av, zv, sv) = VERMILION;
+    let upper = (au * (-((z - zu) / wu).powi(8)).exp() + av * gauss(z - zv, sv)) * gauss(phi, spu);
+    let (al, zl, wl, spl) = LOWER_LIP;
+    let lower = al * (-((z - zl) / wl).powi(4)).exp() * gauss(phi, spl);
+    let (dc, zc, sc, spc) = CREASE;
+    let crease = dc * gauss(z - zc, sc) * gauss(phi, spc);
+    let (ach, zch, sbc, sac, spch) = CHIN;
+    let chin = ach * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi, spch);
+    envelope(phi, z) + nose + upper + lower - crease + chin
+}
+
+/// The skin point at (φ, z).
+pub fn skin_point(phi: f64, z: f64) -> [f64; 3] {
+    let r = skin_radius(phi, z);
+    [r * phi.sin(), -r * phi.cos(), z]
+}
+
+/// Arch coordinates (t, n) of (x, y) about the ellipse with semi-axes `ab` centred (0, Y_ARCH).
+fn arch(ab: [f64; 2], x: f64, y: f64) -> (f64, f64) {
+    let u = x / ab[0];
+    let v = -(y - Y_ARCH) / ab[1];
+    let q = (u * u + v * v).sqrt();
+    if q < 1e-9 {
+        return (0.0, -ab[0].min(ab[1]));
+    }
+    let grad = ((u / ab[0]).powi(2) + (v / ab[1]).powi(2)).sqrt() / q;
+    (u.atan2(v), (q - 1.0) / grad)
+}
+
+/// Ellipse angles where each tooth of an arch starts and ends (8 values from 0), from the arc
+/// length s(t) = ∫₀ᵗ √(a² cos² τ + b² sin² τ) dτ of x = a sin τ, y = Y_ARCH − b cos τ.
+fn tooth_bounds(ab: [f64; 2], widths: &[f64; 7]) -> [f64; 8] {
+    let mut out = [0.0; 8];
+    let (mut t, mut s, dt) = (0.0f64, 0.0f64, 1e-5);
+    let speed = |t: f64| ((ab[0] * t.cos()).powi(2) + (ab[1] * t.sin()).powi(2)).sqrt();
+    let mut target = 0.0;
+    for (k, w) in widths.iter().enumerate() {
+        target += w;
+        while s < target && t < PI {
+            s += 0.5 * (speed(t) + speed(t + dt)) * dt;
+            t += dt;
+        }
+        out[k + 1] = t;
+    }
+    out
+}
+
+fn upper_bounds() -> &'static [f64; 8] {
+    static B: OnceLock<[f64; 8]> = OnceLock::new();
+    B.get_or_init(|| tooth_bounds(ARCH_UPPER, &UPPER_WIDTHS))
+}
+
+fn lower_bounds() -> &'static [f64; 8] {
+    static B: OnceLock<[f64; 8]> = OnceLock::new();
+    B.get_or_init(|| tooth_bounds(ARCH_LOWER, &LOWER_WIDTHS))
+}
+
+/// Is (t, n, z) inside a crown? `edge` and `cej` are the crown's incisal and cervical heights.
+fn in_crown(bounds: &[f64; 8], t: f64, n: f64, z: f64, edge: f64, cej: f64) -> bool {
+    let at = t.abs();
+    let Some(k) = (0..7).find(|&k| at >= bounds[k] && at < bounds[k + 1]) else {
+        return false;
+    };
+    // Position across the tooth (0..1) and the embrasure notch at its incisal corners.
+    let u = (at - bounds[k]) / (bounds[k + 1] - bounds[k]);
+    let notch = NOTCH_MM * (2.0 * u - 1.0).powi(4);
+    let h = cej - edge; // signed: + for the upper crown (edge below), − for the lower
+    let f = (z - edge) / h; // 0 at the edge, 1 at the CEJ
+    if !(f >= notch / h.abs() && f <= 1.0) {
+        return false;
+    }
+    let thick = EDGE_THICKNESS + (THICKNESS[k] - EDGE_THICKNESS) * f;
+    n <= 0.0 && n >= -thick
+}
+
+/// Which bone piece contains p, and whether it is a tooth there.
+pub fn bone_at(p: [f64; 3]) -> Option<(Piece, bool)> {
+    let [x, y, z] = p;
+    if z >= Z_SKULL_BASE {
+        let rho = (x * x + y * y).sqrt();
+        return ((R_BRAIN..R_BONE).contains(&rho) || (rho < R_BRAIN && z < Z_BRAIN))
+            .then_some((Piece::Cranium, false));
+    }
+    if maxilla(x, y, z) {
+        return Some((Piece::Maxilla, false));
+    }
+    // Both arches of crowns lie within |x| ≤ 33, y ≤ MAXILLA_Y_MAX.
+    let arches = x.abs() <= 33.0 && y <= MAXILLA_Y_MAX;
+    if arches && (Z_UPPER_EDGE..=Z_UPPER_CEJ).contains(&z) {
+        let (t, n) = arch(ARCH_UPPER, x, y);
+        if in_crown(upper_bounds(), t, n, z, Z_UPPER_EDGE, Z_UPPER_CEJ) {
+            return Some((Piece::Maxilla, true));
+        }
+    }
+    if arches && (Z_LOWER_CEJ..=Z_LOWER_EDGE).contains(&z) {
+        let (t, n) = arch(ARCH_LOWER, x, y);
+        if in_crown(lower_bounds(), t, n, z, Z_LOWER_EDGE, Z_LOWER_CEJ) {
+            return Some((Piece::Mandible, true));
+        }
+    }
+    mandible(x, y, z).then_some((Piece::Mandible, false))
+}
+
+fn midline_weight(t: f64, width: f64) -> f64 {
+    (-(t / width).powi(2)).exp()
+}
+
+fn maxilla(x: f64, y: f64, z: f64) -> bool {
+    if !(Z_UPPER_CEJ..=Z_MAXILLA_TOP).contains(&z) || y > MAXILLA_Y_MAX || x.abs() > 33.0 {
+        return false;
+    }
+    let (t, n) = arch(ARCH_UPPER, x, y);
+    if t.abs() > MAXILLA_T_MAX {
+        return false;
+    }
+    let front = -1.5 * gauss(z - Z_A_POINT, 4.0 / 2f64.sqrt()) * midline_weight(t, 0.5);
+    let alveolar = n <= front && n >= -ALVEOLAR_MM;
+    let palate = n < -ALVEOLAR_MM + 1.0 && (PALATE_Z[0]..=PALATE_Z[1]).contains(&z);
+    alveolar || palate
+}
+
+/// The labial face of the symphysis and body, n_l(t, z): the chin and the B-point dip.
+fn mandible_front(t: f64, z: f64) -> f64 {
+    let w = midline_weight(t, 0.45);
+    (4.0 * (-((z - Z_POGONION) / 7.0).powi(2)).exp() - 1.5 * (-((z - Z_B_DIP) / 4.0).powi(2)).exp())
+        * w
+}
+
+fn in_box(b: &[[f64; 2]; 3], p: [f64; 3]) -> bool {
+    (0..3).all(|a| p[a] >= b[a][0] && p[a] <= b[a][1])
+}
+
+fn mandible(x: f64, y: f64, z: f64) -> bool {
+    if z > CONDYLE[2] + CONDYLE_AXES[2] || z < Z_MENTON - 1.0 {
+        return false;
+    }
+    // Anterior body (in front of the arch centre).
+    if y <= Y_ARCH && z <= Z_LOWER_CEJ {
+        let (t, n) = arch(ARCH_LOWER, x, y);
+        let bottom = Z_MENTON + 12.0 * (1.0 - t.cos()) + (n - N_MENTON).powi(2) / 20.0;
+        if n >= -BODY_MM && n <= mandible_front(t, z) && z >= bottom {
+            return true;
+        }
+    }
+    // The mirrored posterior parts: work on |x|.
+    let ax = x.abs();
+    let q = [ax, y, z];
+    // Posterior body: a bar from BAR[0] to BAR[1], outer face on the segment, 13 mm medial.
+    if (BAR_Z[0]..=BAR_Z[1]).contains(&z) {
+        let d = [BAR[1][0] - BAR[0][0], BAR[1][1] - BAR[0][1]];
+        let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        let (dx, dy) = (d[0] / len, d[1] / len);
+        let (rx, ry) = (ax - BAR[0][0], y - BAR[0][1]);
+        let s = rx * dx + ry * dy;
+        let m = rx * dy - ry * dx; // + lateral (towards +|x|)
+        let bottom = BAR_Z[0] + (m + 0.5 * BODY_MM).powi(2) / 20.0;
+        if s >= -3.0 && s <= len + 3.0 && m <= 0.0 && m >= -BODY_MM && z >= bottom {
+            return true;
+        }
+    }
+    if in_box(&RAMUS, q) || in_box(&NECK, q) {
+        return true;
+    }
+    let e = [
+        (ax - CONDYLE[0]) / CONDYLE_AXES[0],
+        (y - CONDYLE[1]) / CONDYLE_AXES[1],
+        (z - CONDYLE[2]) / CONDYLE_AXES[2],
+    ];
+    e[0] * e[0] + e[1] * e[1] + e[2] * e[2] <= 1.0
+}
+
+/// Is p in the vestibule (the air between the lips and the teeth and alveolar bone)?
+pub fn in_vestibule(p: [f64; 3]) -> bool {
+    let [x, y, z] = p;
+    // Cheap bounds first: the vestibule lies in front of y = −35, within |x| < 35.
+    if !(Z_SULCUS_LOWER..=Z_SULCUS_UPPER).contains(&z) || y > -35.0 || x.abs() > 35.0 {
+        return false;
+    }
+    let (tu, nu) = arch(ARCH_UPPER, x, y);
+    let (tl, nl) = arch(ARCH_LOWER, x, y);
+    if z > Z_UPPER_EDGE {
+        tu.abs() <= VESTIBULE_T_MAX && nu > 0.0 && nu <= VESTIBULE_MM
+    } else if z >= Z_LOWER_EDGE {
+        // Between the incisal edges the air bridges the overjet step.
+        tu.abs() <= VESTIBULE_T_MAX && nl > 0.0 && nu <= VESTIBULE_MM
+    } else {
+        tl.abs() <= VESTIBULE_T_MAX && nl > 0.0 && nl <= VESTIBULE_MM
+    }
+}
+
+/// Exact tissue at p (LPS mm). Precedence: outside air, skin, vestibule, bone and teeth,
+/// brain, fat, soft tissue.
+pub fn tissue_at(p: [f64; 3]) -> Tissue {
+    let [x, y, z] = p;
+    let rho = (x * x + y * y).sqrt();
+    if rho > MAX_SKIN_RADIUS {
+        return Tissue::Air;
+    }
+    let phi = x.atan2(-y);
+    let r = skin_radius(phi, z);
+    if rho >= r {
+        return Tissue::Air;
+    }
+    if rho >= r - SKIN_MM {
+        return Tissue::Skin;
+    }
+    if in_vestibule(p) {
+        return Tissue::Air;
+    }
+    if let Some((_, tooth)) = bone_at(p) {
+        return if tooth { Tissue::Tooth } else { Tissue::Bone };
+    }
+    if z >= Z_BRAIN && rho < R_BRAIN {
+        return Tissue::Brain;
+    }
+    if rho >= r - SKIN_MM - FAT_MM {
+        return Tissue::Fat;
+    }
+    Tissue::Soft
+}
+
+pub fn hu_at(p: [f64; 3]) -> f64 {
+    match tissue_at(p) {
+        Tissue::Air => HU_AIR,
+        Tissue::Skin | Tissue::Soft => HU_SOFT,
+        Tissue::Fat => HU_FAT,
+        Tissue::Brain => HU_BRAIN,
+        Tissue::Bone => HU_BONE,
+        Tissue::Tooth => HU_TOOTH,
+    }
+}
+
+/// The bone piece at p, if p is bone or tooth (and not in the skin or the vestibule).
+pub fn piece_at(p: [f64; 3]) -> Option<Piece> {
+    match tissue_at(p) {
+        Tissue::Bone | Tissue::Tooth => bone_at(p).map(|(piece, _)| piece),
+        _ => None,
+    }
+}
+
+/// Golden-section search for the maximum of f on [a, b] (f unimodal there).
+fn argmax(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
+    let g = (5f64.sqrt() - 1.0) / 2.0;
+    for _ in 0..200 {
+        let c = b - g * (b - a);
+        let d = a + g * (b - a);
+        if f(c) > f(d) {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    0.5 * (a + b)
+}
+
+fn midline_skin(z: f64) -> [f64; 3] {
+    skin_point(0.0, z)
+}
+
+/// Named landmarks (LPS mm), from the defining functions: soft-tissue points on the midline
+/// skin profile ρ = R_s(0, z) (pronasale its most anterior point above the lips, subnasale and
+/// stomion the deepest points between nose and upper lip and between the lips, labrale
+/// superius / inferius the most anterior points of the lips, soft pogonion of the chin, soft
+/// menton the skin point vertically below bony menton); bone points on the midline contours of
+/// the jaws (A point the deepest point of the maxilla's labial face, B point of the mandible's
+/// between the alveolar crest and pogonion, pogonion its most anterior point, menton the
+/// lowest), the incisal-edge midpoints of the right central incisors and of the upper canines
+/// (their cusp tips), and the condyle centres.
+pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
+    let r = |z: f64| skin_radius(0.0, z);
+    let prn = argmax(r, 0.0, 35.0);
+    let ls = argmax(r, -18.0, -2.0);
+    let sn = argmax(|z| -r(z), ls, prn);
+    let li = argmax(r, -38.0, -24.0);
+    let sto = argmax(|z| -r(z), li, ls);
+    let pg_soft = argmax(r, -65.0, -45.0);
+    let yl = |n: f64| Y_ARCH - ARCH_LOWER[1] - n;
+    let pog = argmax(|z| mandible_front(0.0, z), -62.0, -48.0);
+    let b = argmax(|z| -mandible_front(0.0, z), pog, Z_LOWER_CEJ);
+    let a = Z_A_POINT;
+    let a_n = -1.5;
+    let menton = [0.0, yl(N_MENTON), Z_MENTON];
+    // Soft menton: the skin crossing below menton on its vertical line (bisection on ρ).
+    let rho_me = -menton[1];
+    let (mut lo, mut hi) = (-100.0, Z_MENTON);
+    for _ in 0..100 {
+        let m = 0.5 * (lo + hi);
+        if r(m) > rho_me {
+            hi = m;
+        } else {
+            lo = m;
+        }
+    }
+    let me_soft = [0.0, menton[1], 0.5 * (lo + hi)];
+    // The middle of tooth k's incisal edge, on the right (x < 0, side = −1) or left.
+    let tip = |ab: [f64; 2], bounds: &[f64; 8], z: f64, k: usize, side: f64| {
+        let t = side * 0.5 * (bounds[k] + bounds[k + 1]);
+        let n = -0.5 * EDGE_THICKNESS;
+        let (u, v) = (t.sin(), t.cos());
+        // The point at distance n along the ellipse's normal.
+        let p = [ab[0] * u, Y_ARCH - ab[1] * v];
+        let g = [u / ab[0], v / ab[1]];
+        let gl = (g[0] * g[0] + g[1] * g[1]).sqrt();
+        [p[0] + n * g[0] / gl, p[1] - n * g[1] / gl, z]
+    };
+    vec![
+        ("pronasale", midline_skin(prn)),
+        ("subnasale", midline_skin(sn)),
+        ("labrale superius", midline_skin(ls)),
+        ("stomion", midline_skin(sto)),
+        ("labrale inferius", midline_skin(li)),
+        ("soft tissue pogonion", midline_skin(pg_soft)),
+        ("soft tissue menton", me_soft),
+        ("A point", [0.0, Y_ARCH - ARCH_UPPER[1] - a_n, a]),
+        ("B point", [0.0, yl(mandible_front(0.0, b)), b]),
+        ("pogonion", [0.0, yl(mandible_front(0.0, pog)), pog]),
+        ("menton", menton),
+        (
+            "upper incisor tip",
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 0, -1.0),
+        ),
+        (
+            "lower incisor tip",
+            tip(ARCH_LOWER, lower_bounds(), Z_LOWER_EDGE, 0, -1.0),
+        ),
+        (
+            "upper canine right",
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, -1.0),
+        ),
+        (
+            "upper canine left",
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, 1.0),
+        ),
+        ("condyle right", [-CONDYLE[0], CONDYLE[1], CONDYLE[2]]),
+        ("condyle left", CONDYLE),
+    ]
+}
+
+/// The landmark called `name`.
+pub fn landmark(name: &str) -> Option<[f64; 3]> {
+    landmarks()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, p)| p)
+}
+
+/// Osteotomy regions (boxes `[min, max]`) that select each segment's bone and nothing else.
+/// The mandible needs two: its anterior part below the occlusal plane (in front of y = −11)
+/// and everything behind y = −11 below the skull base (posterior body, rami, condyles); the
+/// maxilla lies between the occlusal plane and the Le Fort I gap in front of y = −11.
+pub const MANDIBLE_FRONT_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, -110.0], [90.0, -11.0, Z_OCCLUSAL]];
+pub const MANDIBLE_BACK_BOX: [[f64; 3]; 2] = [[-90.0, -11.0, -110.0], [90.0, 90.0, 3.0]];
+pub const MAXILLA_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, Z_OCCLUSAL], [90.0, -11.0, 3.0]];
+
+/// Exact volumes (mm³) of the bone pieces inside the box [lo, hi], teeth included, by midpoint
+/// quadrature of `piece_at` on a grid of step `h`.
+pub fn piece_volumes(lo: [f64; 3], hi: [f64; 3], h: f64) -> [f64; 3] {
+    use rayon::prelude::*;
+    let n = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / h).round().max(1.0) as usize);
+    let step = [0, 1, 2].map(|a| (hi[a] - lo[a]) / n[a] as f64);
+    let counts = (0..n[2])
+        .into_par_iter()
+        .map(|k| {
+            let mut c = [0usize; 3];
+            let z = lo[2] + (k as f64 + 0.5) * step[2];
+            for j in 0..n[1] {
+                let y = lo[1] + (j as f64 + 0.5) * step[1];
+                for i in 0..n[0] {
+                    let x = lo[0] + (i as f64 + 0.5) * step[0];
+                    if let Some(piece) = piece_at([x, y, z]) {
+                        c[piece as usize] += 1;
+                    }
+                }
+            }
+            c
+        })
+        .reduce(|| [0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
+    let dv = step[0] * step[1] * step[2];
+    counts.map(|c| c as f64 * dv)
+}
+
+/// The CT of the box [lo, hi].
+pub fn ct_box(opts: &PhantomOptions, lo: [f64; 3], hi: [f64; 3]) -> Volume {
+    sample_ct(lo, hi, opts, hu_at)
+}
+
+/// The phantom CT over the default field of view.
+pub fn ct(opts: &PhantomOptions) -> Volume {
+    ct_box(opts, FOV_LO, FOV_HI)
+}
+
+/// A face scan of the analytic skin: a (φ, z) grid, φ ∈ ±100°, z from below the chin (−85) to
+/// the top of the field of view.
+pub fn face_scan(step_mm: f64) -> Mesh {
+    let phi_max = 100f64.to_radians();
+    let nphi = ((2.0 * phi_max * 80.0) / step_mm).round() as usize + 1;
+    let (z0, z1) = (-85.0, FOV_HI[2]);
+    let nz = ((z1 - z0) / step_mm).round() as usize + 1;
+    let mut verts = Vec::with_capacity(nphi * nz);
+    for j in 0..nz {
+        let z = z0 + (z1 - z0) * j as f64 / (nz - 1) as f64;
+        for i in 0..nphi {
+            let phi = -phi_max + 2.0 * phi_max * i as f64 / (nphi - 1) as f64;
+            verts.push(skin_point(phi, z));
+        }
+    }
+    grid_mesh(verts, nphi, nz)
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct JawsOptions {
+    pub phantom: PhantomOptions,
+    /// `[solve] model = "…"` in every case file; None writes no `[solve]` section (the default
+    /// model).
+    pub solve_model: Option<String>,
+}
+
+/// One osteotomy table of a case file.
+fn osteotomy(name: &str, b: [[f64; 3]; 2], moves: &str) -> String {
+    let v = |p: [f64; 3]| format!("[{:.1}, {:.1}, {:.1}]", p[0], p[1], p[2]);
+    format!(
+        "\n[[osteotomy]]\nname = \"{name}\"\nregion = {{ box = {{ min = {}, max = {} }} }}\n{moves}\n",
+        v(b[0]),
+        v(b[1])
+    )
+}
+
+/// The text of one case file. `segments` are (name, box, move) in the order they apply.
+fn case_text(
+    name: &str,
+    what: &str,
+    segments: &[(&str, [[f64; 3]; 2], String)],
+    model: Option<&str>,
+) -> String {
+    let mut s = format!(
+        r#"# facesim phantom case with jaws: {what} (docs/phantom.md, "Jaws").
+name = "{name}"
+
+[ct]
+path = "ct.nii.gz"
+
+[skin]
+path = "face.ply"
+
+[surface]
+alpha = 0.01
+beta = 0.02
+movable = {{ sphere = {{ center = [0.0, -30.0, -35.0], radius = 85.0 }} }}
+"#
+    );
+    for (n, b, m) in segments {
+        s.push_str(&osteotomy(n, *b, m));
+    }
+    if let Some(m) = model {
+        s.push_str(&format!("\n[solve]\nmodel = \"{m}\"\n"));
+    }
+    s
+}
+
+/// The four plans: (file name, text).
+pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
+    let tr = |d: [f64; 3]| format!("translate = [{:.1}, {:.1}, {:.1}]", d[0], d[1], d[2]);
+    let p = CONDYLAR_PIVOT;
+    let rot = format!(
+        "rotate_deg = [-5.0, 0.0, 0.0]\npivot = [{:.1}, {:.1}, {:.1}]",
+        p[0], p[1], p[2]
+    );
+    // Each segment moves the points inside its box at their current position, so the boxes
+    // apply in the order that moves no point into the next box: forwards (advancement, the
+    // rotation, whose chin goes up and forwards) front first; backwards (setback) back first.
+    vec![
+        (
+            "case.toml",
+            case_text(
+                "phantom-jaws-mandible-advance-5mm",
+                "mandibular advancement 5 mm",
+                &[
+                    ("mandible", MANDIBLE_FRONT_BOX, tr([0.0, -5.0, 0.0])),
+                    ("mandible_rami", MANDIBLE_BACK_BOX, tr([0.0, -5.0, 0.0])),
+                ],
+                model,
+            ),
+        ),
+        (
+            "case_setback.toml",
+            case_text(
+                "phantom-jaws-mandible-setback-4mm",
+                "mandibular setback 4 mm",
+                &[
+                    ("mandible_rami", MANDIBLE_BACK_BOX, tr([0.0, 4.0, 0.0])),
+                    ("mandible", MANDIBLE_FRONT_BOX, tr([0.0, 4.0, 0.0])),
+                ],
+                model,
+            ),
+        ),
+        (
+            "case_rotation.toml",
+            case_text(
+                "phantom-jaws-mandible-ccw-5deg",
+                "counter-clockwise mandibular rotation of 5° about the condylar axis (chin up and forwards)",
+                &[
+                    ("mandible", MANDIBLE_FRONT_BOX, rot.clone()),
+                    ("mandible_rami", MANDIBLE_BACK_BOX, rot),
+                ],
+                model,
+            ),
+        ),
+        (
+            "case_maxilla.toml",
+            case_text(
+                "phantom-jaws-le-fort-i-advance-4mm",
+                "Le Fort I advancement 4 mm",
+                &[("maxilla", MAXILLA_BOX, tr([0.0, -4.0, 0.0]))],
+                model,
+            ),
+        ),
+    ]
+}
+
+/// Write the jaws phantom case into `dir`: ct.nii.gz, face.ply and the four case files.
+pub fn write_case(dir: &std::path::Path, opts: &JawsOptions) -> Result<()> {
+    let step = opts.phantom.scan_step_mm;
+    if !(step >= 0.1) {
+        return Err(Error::config(format!(
+            "phantom face scan step {step} mm must be at least 0.1 mm"
+        )));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    let vol = ct(&opts.phantom);
+    crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
+    crate::mesh::ply::write(
+        &face_scan(step),
+        &dir.join("face.ply"),
+        crate::mesh::ply::Encoding::BinaryLittleEndian,
+    )?;
+    for (name, text) in case_files(opts.solve_model.as_deref()) {
+        crate::output::write_bytes_atomic(&dir.join(name), |w| w.write_all(text.as_bytes()))?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tooth_bounds_follow_the_arc_length() {
+        // Quarter perimeter of the upper ellipse by Ramanujan's formula vs the tooth widths.
+        let [a, b] = ARCH_UPPER;
+        let quarter = PI * (3.0 * (a + b) - ((3.0 * a + b) * (a + 3.0 * b)).sqrt()) / 4.0;
+        let total: f64 = UPPER_WIDTHS.iter().sum();
+        assert!(total < quarter, "{total} {quarter}");
+        // The first bound: s(t) ≈ a t for small t.
+        let t1 = upper_bounds()[1];
+        assert!((t1 * a / UPPER_WIDTHS[0] - 1.0).abs() < 0.04, "{t1}");
+    }
+
+    #[test]
+    fn arch_depth_is_adult() {
+        // From the incisors' labial point to the line through the second molars' distal ends.
+        for (ab, bounds) in [(ARCH_UPPER, upper_bounds()), (ARCH_LOWER, lower_bounds())] {
+            let depth = ab[1] * (1.0 - bounds[7].cos());
+            println!("arch depth {depth:.1} mm");
+            // Adult arch depths to the second molars span about 38–50 mm.
+            assert!((38.0..=50.0).contains(&depth), "{depth}");
+        }
+    }
+}
