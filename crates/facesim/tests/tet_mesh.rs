@@ -53,7 +53,10 @@ fn check_conforming(tets: &[[u32; 4]], closed: bool) -> Vec<[u32; 3]> {
             }
         }
         let bad = edges.values().filter(|c| **c != 2).count();
-        assert_eq!(bad, 0, "{bad} boundary edges not shared by exactly two faces");
+        assert_eq!(
+            bad, 0,
+            "{bad} boundary edges not shared by exactly two faces"
+        );
     }
     boundary
 }
@@ -61,7 +64,8 @@ fn check_conforming(tets: &[[u32; 4]], closed: bool) -> Vec<[u32; 3]> {
 fn assert_bounds(q: &Quality) {
     assert_eq!(q.inverted, 0);
     assert!(
-        q.min_dihedral_deg >= MIN_DIHEDRAL_BOUND_DEG && q.max_dihedral_deg <= MAX_DIHEDRAL_BOUND_DEG,
+        q.min_dihedral_deg >= MIN_DIHEDRAL_BOUND_DEG
+            && q.max_dihedral_deg <= MAX_DIHEDRAL_BOUND_DEG,
         "dihedral angles {:.2}°..{:.2}° outside the proven [{MIN_DIHEDRAL_BOUND_DEG}, {MAX_DIHEDRAL_BOUND_DEG}]",
         q.min_dihedral_deg,
         q.max_dihedral_deg
@@ -202,7 +206,10 @@ fn a_box_cuts_the_shell_on_lattice_planes_with_cut_nodes() {
         );
         errors.push(e);
     }
-    assert!(errors[0] < 1e-2 && errors[1] < errors[0] / 2f64.powf(1.7), "{errors:?}");
+    assert!(
+        errors[0] < 1e-2 && errors[1] < errors[0] / 2f64.powf(1.7),
+        "{errors:?}"
+    );
     // Everything inside the box: the box alone is meshed exactly (its volume to rounding).
     let all = |_: [f64; 3]| -1.0;
     let b = stuffing::stuff(&all, [-3.0, -2.0, -1.0], [3.0, 2.0, 4.0], 1.0).unwrap();
@@ -226,7 +233,10 @@ fn stuffing_many_offsets_never_leaves_the_angle_bounds() {
         let q = Quality::of(&m.nodes, &m.tets);
         assert_bounds(&q);
         check_conforming(&m.tets, true);
-        worst = (worst.0.min(q.min_dihedral_deg), worst.1.max(q.max_dihedral_deg));
+        worst = (
+            worst.0.min(q.min_dihedral_deg),
+            worst.1.max(q.max_dihedral_deg),
+        );
     }
     println!("24 spheres: dihedral {:.2}°..{:.2}°", worst.0, worst.1);
 }
@@ -239,4 +249,276 @@ fn bad_input_is_a_one_line_error() {
     assert!(stuffing::stuff(&f, [0.0; 3], [1e4; 3], 0.01).is_err());
     let nan = |_: [f64; 3]| f64::NAN;
     assert!(stuffing::stuff(&nan, [0.0; 3], [1.0; 3], 0.5).is_err());
+}
+
+// ---- The CT layer -------------------------------------------------------------------------
+
+mod common;
+
+use facesim::case::Case;
+use facesim::segment::{self, FAT_BRIGHT, FAT_DARK, MUSCLE, SKIN, Segmentation};
+use facesim::surface::marching;
+use facesim::tet::from_ct::{self, MeshParams, SoftTissueMesh};
+use facesim::volume::{Volume, sample_field};
+use std::path::Path;
+
+fn segmented(vol: &Volume) -> Segmentation {
+    let case = Case::parse("[ct]\npath = \"ct.nii.gz\"\n", Path::new("case.toml")).unwrap();
+    segment::segment(vol, &case.tissue, Path::new("ct.nii.gz")).unwrap()
+}
+
+fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Distance from p to the segment ab.
+fn segment_distance(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let ab = sub3(b, a);
+    let t = (dot3(sub3(p, a), ab) / dot3(ab, ab).max(1e-300)).clamp(0.0, 1.0);
+    norm(sub3(
+        p,
+        [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]],
+    ))
+}
+
+/// Distance from p to the triangle abc: to its plane when the projection falls inside,
+/// else to the nearest edge.
+fn triangle_distance(p: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
+    let (e0, e1) = (sub3(t[1], t[0]), sub3(t[2], t[0]));
+    let n = [
+        e0[1] * e1[2] - e0[2] * e1[1],
+        e0[2] * e1[0] - e0[0] * e1[2],
+        e0[0] * e1[1] - e0[1] * e1[0],
+    ];
+    let nn = dot3(n, n);
+    if nn > 0.0 {
+        let d = dot3(sub3(p, t[0]), n) / nn;
+        let q = [p[0] - d * n[0], p[1] - d * n[1], p[2] - d * n[2]];
+        // Barycentric signs: q inside when on the inner side of each edge.
+        let inside = (0..3).all(|k| {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let c = sub3(b, a);
+            let w = sub3(q, a);
+            let x = [
+                c[1] * w[2] - c[2] * w[1],
+                c[2] * w[0] - c[0] * w[2],
+                c[0] * w[1] - c[1] * w[0],
+            ];
+            dot3(x, n) >= 0.0
+        });
+        if inside {
+            return d.abs() * nn.sqrt();
+        }
+    }
+    (0..3)
+        .map(|k| segment_distance(p, t[k], t[(k + 1) % 3]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Distance from each query point to a triangle mesh, through a uniform grid of buckets
+/// (a point farther than `reach` from every triangle reports ≥ reach).
+fn distances(mesh: &facesim::mesh::Mesh, queries: &[[f64; 3]], reach: f64) -> Vec<f64> {
+    let cell = reach.max(1.0);
+    let key = |p: [f64; 3]| p.map(|x| (x / cell).floor() as i64);
+    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        let x = t.map(|v| mesh.vertices[v as usize]);
+        let lo = key([0, 1, 2].map(|a| x.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min)));
+        let hi = key([0, 1, 2].map(|a| x.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max)));
+        for i0 in lo[0]..=hi[0] {
+            for i1 in lo[1]..=hi[1] {
+                for i2 in lo[2]..=hi[2] {
+                    grid.entry([i0, i1, i2]).or_default().push(i as u32);
+                }
+            }
+        }
+    }
+    queries
+        .iter()
+        .map(|q| {
+            let k = key(*q);
+            let mut best = reach;
+            for d0 in -1..=1 {
+                for d1 in -1..=1 {
+                    for d2 in -1..=1 {
+                        for t in grid
+                            .get(&[k[0] + d0, k[1] + d1, k[2] + d2])
+                            .into_iter()
+                            .flatten()
+                        {
+                            let x = mesh.triangles[*t as usize].map(|v| mesh.vertices[v as usize]);
+                            best = best.min(triangle_distance(*q, x));
+                        }
+                    }
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+fn assert_ct_mesh(m: &SoftTissueMesh) {
+    assert_bounds(&m.quality);
+    assert!(
+        m.tets
+            .iter()
+            .all(|t| facesim::tet::gradients(t.map(|n| m.nodes[n as usize])).is_some())
+    );
+    assert_eq!(m.tissue.len(), m.tets.len());
+    assert_eq!(m.kind.len(), m.nodes.len());
+    assert!(
+        m.tissue
+            .iter()
+            .all(|l| [SKIN, FAT_DARK, FAT_BRIGHT, MUSCLE].contains(l))
+    );
+    check_conforming(&m.tets, false);
+}
+
+#[test]
+fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
+    let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions::default());
+    let seg = segmented(&vol);
+    let roi = ([-50.0, -100.0, -45.0], [50.0, -30.0, 35.0]);
+    let p = MeshParams {
+        skin_size_mm: 2.0,
+        deep_size_mm: 6.0,
+        margin_mm: 0.0,
+    };
+    let m = from_ct::soft_tissue(&vol, &seg, roi, &p).unwrap();
+    assert_ct_mesh(&m);
+    assert_eq!(m.tissue_fallbacks, 0);
+    let count = |k: from_ct::NodeKind| m.kind.iter().filter(|x| **x == k).count();
+    let (skin_n, bone_n, cut_n) = (
+        count(from_ct::NodeKind::Skin),
+        count(from_ct::NodeKind::Bone),
+        count(from_ct::NodeKind::Cut),
+    );
+    let q = &m.quality;
+    println!(
+        "phantom: {} nodes ({skin_n} skin, {bone_n} bone, {cut_n} cut), {} tets, dihedral {:.2}°..{:.2}°, worst ratio {:.2}, volume {:.0} mm³ (voxels {:.0})",
+        q.nodes,
+        q.tets,
+        q.min_dihedral_deg,
+        q.max_dihedral_deg,
+        q.worst_aspect_ratio,
+        q.volume_mm3,
+        m.voxel_volume_mm3
+    );
+    assert!(skin_n > 500 && bone_n > 500 && cut_n > 100);
+    assert!((q.volume_mm3 / m.voxel_volume_mm3 - 1.0).abs() < 0.03);
+    // Every soft label of the phantom occurs (skin, fat, muscle).
+    for l in [SKIN, MUSCLE] {
+        assert!(m.tissue.contains(&l), "label {l} missing");
+    }
+    assert!(m.tissue.contains(&FAT_DARK) || m.tissue.contains(&FAT_BRIGHT));
+
+    // Skin and bone nodes: the field interpolates to the iso-value there, and they lie within
+    // half a voxel of the pipeline's marching-tetrahedra surfaces.
+    let half_voxel = 0.5 * vol.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    for (field, iso, kind, name) in [
+        (
+            seg.skin_field(&vol),
+            seg.windows.head_threshold,
+            from_ct::NodeKind::Skin,
+            "skin",
+        ),
+        (
+            seg.bone_field(&vol),
+            seg.windows.bone,
+            from_ct::NodeKind::Bone,
+            "bone",
+        ),
+    ] {
+        let pts: Vec<[f64; 3]> = m
+            .nodes
+            .iter()
+            .zip(&m.kind)
+            .filter(|(_, k)| **k == kind)
+            .map(|(p, _)| *p)
+            .collect();
+        let worst_hu = pts
+            .iter()
+            .map(|p| (sample_field(&field, vol.dims, vol.to_voxel(*p), -1024.0) as f64 - iso).abs())
+            .fold(0.0, f64::max);
+        let surface = marching::extract(&vol, &field, iso as f32);
+        let d = distances(&surface, &pts, 4.0);
+        let worst = d.iter().copied().fold(0.0, f64::max);
+        println!(
+            "{name}: {} nodes, |field − iso| ≤ {worst_hu:.3} HU, distance to the marching surface ≤ {worst:.3} mm (half voxel {half_voxel} mm)",
+            pts.len()
+        );
+        assert!(
+            worst_hu < 1.0,
+            "{name}: a node {worst_hu} HU off the iso-value"
+        );
+        assert!(
+            worst <= half_voxel,
+            "{name}: a node {worst} mm off the surface"
+        );
+    }
+
+    // Cut nodes lie on the box's faces: lo exactly, hi rounded up to whole lattice cubes.
+    let h = p.skin_size_mm;
+    let hi = [0, 1, 2].map(|a| roi.0[a] + ((roi.1[a] - roi.0[a]) / h - 1e-9).ceil() * h);
+    for (q, k) in m.nodes.iter().zip(&m.kind) {
+        assert!((0..3).all(|a| q[a] >= roi.0[a] - 1e-9 && q[a] <= hi[a] + 1e-9));
+        if *k == from_ct::NodeKind::Cut {
+            assert!(
+                (0..3).any(|a| (q[a] - roi.0[a]).abs() < 1e-9 || (q[a] - hi[a]).abs() < 1e-9),
+                "cut node {q:?} off the box"
+            );
+        }
+    }
+
+    // A region without soft tissue is a one-line configuration error.
+    let far = ([300.0; 3], [320.0; 3]);
+    match from_ct::soft_tissue(&vol, &seg, far, &p) {
+        Err(facesim::error::Error::Config(msg)) => assert!(msg.contains("no soft tissue"), "{msg}"),
+        other => panic!("expected a configuration error, got {:?}", other.err()),
+    }
+}
+
+#[test]
+fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
+    let vol = facesim::volume::read_volume(&common::real_ct()).unwrap();
+    let seg = segmented(&vol);
+    // About 120 × 110 × 90 mm around the maxilla, nose and lips (data-samples/real/case.toml:
+    // the maxilla box x 80..170, y 25..95, z −5..22; the face at small y).
+    let roi = ([65.0, -5.0, -30.0], [185.0, 105.0, 60.0]);
+    for size in [2.5, 2.0] {
+        let p = MeshParams {
+            skin_size_mm: size,
+            deep_size_mm: 8.0,
+            margin_mm: 0.0,
+        };
+        let t0 = std::time::Instant::now();
+        let m = from_ct::soft_tissue(&vol, &seg, roi, &p).unwrap();
+        let wall = t0.elapsed().as_secs_f64();
+        assert_ct_mesh(&m);
+        let count = |k: from_ct::NodeKind| m.kind.iter().filter(|x| **x == k).count();
+        let q = &m.quality;
+        let labels: Vec<usize> = (1..5u8)
+            .map(|l| m.tissue.iter().filter(|x| **x == l).count())
+            .collect();
+        println!(
+            "real CT, {size} mm: {} nodes ({} skin, {} bone, {} cut), {} tets in {wall:.2} s; dihedral {:.2}°..{:.2}°, worst ratio {:.2}; volume {:.0} mm³ (voxels {:.0}); tets skin/fat dark/fat bright/muscle {labels:?}, {} fallbacks, {} flattened slivers left out",
+            q.nodes,
+            count(from_ct::NodeKind::Skin),
+            count(from_ct::NodeKind::Bone),
+            count(from_ct::NodeKind::Cut),
+            q.tets,
+            q.min_dihedral_deg,
+            q.max_dihedral_deg,
+            q.worst_aspect_ratio,
+            q.volume_mm3,
+            m.voxel_volume_mm3,
+            m.tissue_fallbacks,
+            m.flattened
+        );
+        assert!(count(from_ct::NodeKind::Skin) > 1000 && count(from_ct::NodeKind::Bone) > 1000);
+        assert!((q.volume_mm3 / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
+    }
 }

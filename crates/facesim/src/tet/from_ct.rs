@@ -62,6 +62,8 @@ pub struct SoftTissueMesh {
     pub voxel_volume_mm3: f64,
     /// Tetrahedra with no soft voxel within 3 voxels of their centroid (labelled muscle).
     pub tissue_fallbacks: usize,
+    /// Surface slivers left out by the mesher (`stuffing::Stuffed::flattened`).
+    pub flattened: usize,
 }
 
 /// HU given to samples outside the CT: air for the skin field, no bone for the bone field.
@@ -148,6 +150,7 @@ pub fn soft_tissue(
         quality,
         voxel_volume_mm3,
         tissue_fallbacks,
+        flattened: m.flattened,
     })
 }
 
@@ -175,10 +178,9 @@ fn tissue_near(vol: &Volume, seg: &Segmentation, c: [f64; 3]) -> Option<u8> {
         for dz in -r..=r {
             for dy in -r..=r {
                 for dx in -r..=r {
-                    if let Some(l) = label([centre[0] + dx, centre[1] + dy, centre[2] + dz]) {
-                        if is_soft(l) {
-                            count[l as usize] += 1;
-                        }
+                    let l = label([centre[0] + dx, centre[1] + dy, centre[2] + dz]);
+                    if let Some(l) = l.filter(|l| is_soft(*l)) {
+                        count[l as usize] += 1;
                     }
                 }
             }

@@ -64,7 +64,13 @@ impl Quality {
                 None => (f64::INFINITY, f64::NEG_INFINITY, 1.0, 0.0, 1),
             })
             .reduce(init, |a, b| {
-                (a.0.min(b.0), a.1.max(b.1), a.2.max(b.2), a.3 + b.3, a.4 + b.4)
+                (
+                    a.0.min(b.0),
+                    a.1.max(b.1),
+                    a.2.max(b.2),
+                    a.3 + b.3,
+                    a.4 + b.4,
+                )
             });
         Quality {
             min_dihedral_deg: lo,
@@ -85,13 +91,12 @@ mod tests {
     #[test]
     fn regular_tetrahedron_has_ratio_one_and_arccos_one_third() {
         let s = 2.0;
-        let x = [
-            [s, s, s],
-            [s, -s, -s],
-            [-s, s, -s],
-            [-s, -s, s],
-        ];
-        let x = if gradients(x).is_some() { x } else { [x[1], x[0], x[2], x[3]] };
+        let x = [[s, s, s], [s, -s, -s], [-s, s, -s], [-s, -s, s]];
+        let x = if gradients(x).is_some() {
+            x
+        } else {
+            [x[1], x[0], x[2], x[3]]
+        };
         let (a, r, v) = tet_shape(x).unwrap();
         let want = (1.0f64 / 3.0).acos().to_degrees();
         assert!(a.iter().all(|d| (d - want).abs() < 1e-9), "{a:?}");
@@ -105,12 +110,21 @@ mod tests {
     fn right_corner_tetrahedron_angles() {
         // The corner of a cube: three 90° dihedrals at the corner edges, arccos(1/√3) elsewhere.
         let q = Quality::of(
-            &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            &[
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [0.0, 0.0, 1.0],
+            ],
             &[[0, 1, 2, 3]],
         );
         assert!((q.max_dihedral_deg - 90.0).abs() < 1e-9);
         let want = (1.0f64 / 3f64.sqrt()).acos().to_degrees();
-        assert!((q.min_dihedral_deg - want).abs() < 1e-9, "{}", q.min_dihedral_deg);
+        assert!(
+            (q.min_dihedral_deg - want).abs() < 1e-9,
+            "{}",
+            q.min_dihedral_deg
+        );
         assert!((q.volume_mm3 - 1.0 / 6.0).abs() < 1e-12 && q.inverted == 0);
     }
 }
