@@ -522,3 +522,98 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
         assert!((q.volume_mm3 / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
     }
 }
+
+/// Distance from the cube (lo, hi) to the sphere |p| = r.
+fn cube_to_sphere(lo: [f64; 3], hi: [f64; 3], r: f64) -> f64 {
+    let near = norm([0, 1, 2].map(|a| 0f64.clamp(lo[a], hi[a])));
+    let far = norm([0, 1, 2].map(|a| lo[a].abs().max(hi[a].abs())));
+    if near <= r && r <= far {
+        0.0
+    } else {
+        (near - r).abs().min((far - r).abs())
+    }
+}
+
+#[test]
+fn grading_keeps_the_outer_surface_fine_with_far_fewer_elements() {
+    use facesim::tet::graded;
+    let (r1, r2) = (3.0, 10.0);
+    let f = shell(r1, r2);
+    let h = 0.5;
+    let exact = 4.0 / 3.0 * PI * (r2.powi(3) - r1.powi(3));
+    // Fine (h) at the lower half of the outer sphere ("the movable skin"), the size growing
+    // with the distance from it: coarse deep inside and at the upper half.
+    let size = move |lo: [f64; 3], hi: [f64; 3]| {
+        let below = (lo[2] - 0.0).max(0.0);
+        (cube_to_sphere(lo, hi, r2) + below).max(h)
+    };
+    let uniform = stuffing::stuff(&f, [-11.0; 3], [11.0; 3], h).unwrap();
+    let bg = graded::background([-11.0; 3], [11.0; 3], h, 3, &size).unwrap();
+    let m = graded::stuff_graded(&f, &bg).unwrap();
+    let q = Quality::of(&m.nodes, &m.tets);
+    let qu = Quality::of(&uniform.nodes, &uniform.tets);
+    let boundary = check_conforming(&m.tets, true);
+    for b in &boundary {
+        let r: Vec<f64> = b.iter().map(|v| norm(m.nodes[*v as usize])).collect();
+        assert!(
+            r.iter().all(|x| (x - r1).abs() < 1e-3) || r.iter().all(|x| (x - r2).abs() < 1e-3),
+            "boundary face with radii {r:?}"
+        );
+    }
+    // Lower outer-surface triangles keep the fine size; inner and upper ones are coarser.
+    let longest = |sphere: f64, lower: bool| {
+        boundary
+            .iter()
+            .filter(|b| (norm(m.nodes[b[0] as usize]) - sphere).abs() < 1e-3)
+            .filter(|b| !lower || b.iter().all(|v| m.nodes[*v as usize][2] < -1.0))
+            .map(|b| {
+                (0..3)
+                    .map(|k| {
+                        norm(sub3(
+                            m.nodes[b[k] as usize],
+                            m.nodes[b[(k + 1) % 3] as usize],
+                        ))
+                    })
+                    .fold(0.0, f64::max)
+            })
+            .fold(0.0, f64::max)
+    };
+    let e = (q.volume_mm3 - exact).abs() / exact;
+    println!(
+        "graded shell h = {h}, 3 levels: {} nodes, {} tets (uniform {} / {}), dihedral {:.2}°..{:.2}° (uniform {:.2}°..{:.2}°), worst ratio {:.2}, volume error {e:.3e}; longest boundary edge outer lower {:.2}, outer {:.2}, inner {:.2} mm",
+        q.nodes,
+        q.tets,
+        qu.nodes,
+        qu.tets,
+        q.min_dihedral_deg,
+        q.max_dihedral_deg,
+        qu.min_dihedral_deg,
+        qu.max_dihedral_deg,
+        q.worst_aspect_ratio,
+        longest(r2, true),
+        longest(r2, false),
+        longest(r1, false)
+    );
+    assert_eq!(q.inverted, 0);
+    assert_bounds(&q);
+    assert!(q.tets * 2 < qu.tets, "grading saved too little");
+    assert!(longest(r2, true) < 1.5 * h);
+    assert!(longest(r2, false) > 2.0 * h && longest(r1, false) > 2.0 * h);
+    // The coarse upper half is a coarser inscribed polyhedron: a larger but still small error.
+    assert!(e < 2e-2, "{e}");
+    // With no coarsening asked for, the graded background is the BCC lattice itself.
+    let fine = |_: [f64; 3], _: [f64; 3]| 0.0;
+    let bg0 = graded::background([-11.0; 3], [11.0; 3], 1.0, 2, &fine).unwrap();
+    let m0 = graded::stuff_graded(&f, &bg0).unwrap();
+    let u1 = stuffing::stuff(&f, [-11.0; 3], [11.0; 3], 1.0).unwrap();
+    let (q0, q1) = (
+        Quality::of(&m0.nodes, &m0.tets),
+        Quality::of(&u1.nodes, &u1.tets),
+    );
+    println!(
+        "graded with nothing to coarsen: {} tets, {} mm³; uniform {} tets, {} mm³",
+        q0.tets, q0.volume_mm3, q1.tets, q1.volume_mm3
+    );
+    assert_eq!(q0.tets, q1.tets);
+    assert!((q0.volume_mm3 - q1.volume_mm3).abs() < 1e-9 * q1.volume_mm3);
+}

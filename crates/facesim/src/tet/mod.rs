@@ -9,6 +9,7 @@
 //! units give the same displacements, which are all a prescribed-displacement problem yields).
 
 pub mod from_ct;
+pub mod graded;
 pub mod quality;
 pub mod stuffing;
 

@@ -187,7 +187,7 @@ impl Lattice {
 }
 
 /// Sign and kind of a lattice value pair (f at the point, g of the box).
-fn classify(f: f64, g: f64) -> (i8, NodeKind) {
+pub(super) fn classify(f: f64, g: f64) -> (i8, NodeKind) {
     if g > 0.0 || f > 0.0 {
         (1, NodeKind::Interior)
     } else if f < 0.0 && g < 0.0 {
@@ -215,10 +215,10 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
         a[0] * b[1] - a[1] * b[0],
     ]
 }
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
-fn orient(x: [[f64; 3]; 4]) -> f64 {
+pub(super) fn orient(x: [[f64; 3]; 4]) -> f64 {
     let (a, b, c) = (sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0]));
     let n = cross(a, b);
     n[0] * c[0] + n[1] * c[1] + n[2] * c[2]
@@ -255,7 +255,7 @@ fn bcc_patterns() -> Vec<[[i64; 3]; 4]> {
 /// A node reference while stencils are filled: a lattice vertex, a cut point (by index) or a
 /// prism's centre point.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
-enum Ref {
+pub(super) enum Ref {
     Vertex(usize),
     Cut(usize),
     /// The k-th centre point of the current corner's prisms.
@@ -598,9 +598,9 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
 
 /// Tetrahedra of one corner's stencils, and the prisms among them split around a centre point.
 #[derive(Default)]
-struct Filled {
-    tets: Vec<[Ref; 4]>,
-    centres: Vec<[Ref; 6]>,
+pub(super) struct Filled {
+    pub(super) tets: Vec<[Ref; 4]>,
+    pub(super) centres: Vec<[Ref; 6]>,
 }
 
 /// The diagonal of quadrilateral (a, b, c_b, c_a) on a lattice face (a, b lattice vertices, c_a
@@ -619,7 +619,7 @@ fn diagonal_through_a(
 }
 
 /// Fill one BCC tetrahedron by the signs of its vertices; None when a needed cut is missing.
-fn fill(
+pub(super) fn fill(
     ids: &[usize; 4],
     s: &[i8; 4],
     cut: &dyn Fn(usize, usize) -> Option<Ref>,
