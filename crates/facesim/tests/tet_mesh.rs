@@ -384,7 +384,7 @@ fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
     let roi = ([-50.0, -100.0, -45.0], [50.0, -30.0, 35.0]);
     let p = MeshParams {
         skin_size_mm: 2.0,
-        deep_size_mm: 6.0,
+        deep_size_mm: 4.0,
         margin_mm: 0.0,
     };
     let m = from_ct::soft_tissue(&vol, &seg, roi, &p).unwrap();
@@ -398,17 +398,18 @@ fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
     );
     let q = &m.quality;
     println!(
-        "phantom: {} nodes ({skin_n} skin, {bone_n} bone, {cut_n} cut), {} tets, dihedral {:.2}°..{:.2}°, worst ratio {:.2}, volume {:.0} mm³ (voxels {:.0})",
+        "phantom: {} nodes ({skin_n} skin, {bone_n} bone, {cut_n} cut), {} tets, dihedral {:.2}°..{:.2}°, worst ratio {:.2}, volume {:.0} mm³ + {:.0} enclosed left out (voxels {:.0})",
         q.nodes,
         q.tets,
         q.min_dihedral_deg,
         q.max_dihedral_deg,
         q.worst_aspect_ratio,
         q.volume_mm3,
+        m.dropped_volume_mm3,
         m.voxel_volume_mm3
     );
     assert!(skin_n > 500 && bone_n > 500 && cut_n > 100);
-    assert!((q.volume_mm3 / m.voxel_volume_mm3 - 1.0).abs() < 0.03);
+    assert!(((q.volume_mm3 + m.dropped_volume_mm3) / m.voxel_volume_mm3 - 1.0).abs() < 0.03);
     // Every soft label of the phantom occurs (skin, fat, muscle).
     for l in [SKIN, MUSCLE] {
         assert!(m.tissue.contains(&l), "label {l} missing");
@@ -460,8 +461,9 @@ fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
         );
     }
 
-    // Cut nodes lie on the box's faces: lo exactly, hi rounded up to whole lattice cubes.
-    let h = p.skin_size_mm;
+    // Cut nodes lie on the box's faces: lo exactly, hi rounded up to whole cubes of the
+    // coarsest size (skin size × 2 here).
+    let h = 2.0 * p.skin_size_mm;
     let hi = [0, 1, 2].map(|a| roi.0[a] + ((roi.1[a] - roi.0[a]) / h - 1e-9).ceil() * h);
     for (q, k) in m.nodes.iter().zip(&m.kind) {
         assert!((0..3).all(|a| q[a] >= roi.0[a] - 1e-9 && q[a] <= hi[a] + 1e-9));
@@ -488,10 +490,10 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
     // About 120 × 110 × 90 mm around the maxilla, nose and lips (data-samples/real/case.toml:
     // the maxilla box x 80..170, y 25..95, z −5..22; the face at small y).
     let roi = ([65.0, -5.0, -30.0], [185.0, 105.0, 60.0]);
-    for size in [2.5, 2.0] {
+    for (size, deep) in [(2.5, 2.5), (2.5, 10.0), (2.0, 8.0)] {
         let p = MeshParams {
             skin_size_mm: size,
-            deep_size_mm: 8.0,
+            deep_size_mm: deep,
             margin_mm: 0.0,
         };
         let t0 = std::time::Instant::now();
@@ -504,7 +506,7 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
             .map(|l| m.tissue.iter().filter(|x| **x == l).count())
             .collect();
         println!(
-            "real CT, {size} mm: {} nodes ({} skin, {} bone, {} cut), {} tets in {wall:.2} s; dihedral {:.2}°..{:.2}°, worst ratio {:.2}; volume {:.0} mm³ (voxels {:.0}); tets skin/fat dark/fat bright/muscle {labels:?}, {} fallbacks, {} flattened slivers left out",
+            "real CT, {size}..{deep} mm: {} nodes ({} skin, {} bone, {} cut), {} tets in {wall:.2} s; dihedral {:.2}°..{:.2}°, worst ratio {:.2}; volume {:.0} mm³ + {:.0} enclosed left out (voxels {:.0}); tets skin/fat dark/fat bright/muscle {labels:?}, {} fallbacks, {} flattened slivers left out",
             q.nodes,
             count(from_ct::NodeKind::Skin),
             count(from_ct::NodeKind::Bone),
@@ -514,12 +516,13 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
             q.max_dihedral_deg,
             q.worst_aspect_ratio,
             q.volume_mm3,
+            m.dropped_volume_mm3,
             m.voxel_volume_mm3,
             m.tissue_fallbacks,
             m.flattened
         );
         assert!(count(from_ct::NodeKind::Skin) > 1000 && count(from_ct::NodeKind::Bone) > 1000);
-        assert!((q.volume_mm3 / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
+        assert!(((q.volume_mm3 + m.dropped_volume_mm3) / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
     }
 }
 
@@ -535,17 +538,16 @@ fn cube_to_sphere(lo: [f64; 3], hi: [f64; 3], r: f64) -> f64 {
 }
 
 #[test]
-fn grading_keeps_the_outer_surface_fine_with_far_fewer_elements() {
+fn grading_keeps_the_surfaces_fine_and_coarsens_between_them() {
     use facesim::tet::graded;
-    let (r1, r2) = (3.0, 10.0);
+    let (r1, r2) = (1.0, 10.0);
     let f = shell(r1, r2);
     let h = 0.5;
     let exact = 4.0 / 3.0 * PI * (r2.powi(3) - r1.powi(3));
-    // Fine (h) at the lower half of the outer sphere ("the movable skin"), the size growing
-    // with the distance from it: coarse deep inside and at the upper half.
+    // Fine (h) at both spheres, the size growing with the distance from them: coarse between.
     let size = move |lo: [f64; 3], hi: [f64; 3]| {
-        let below = (lo[2] - 0.0).max(0.0);
-        (cube_to_sphere(lo, hi, r2) + below).max(h)
+        let d = cube_to_sphere(lo, hi, r2).min(cube_to_sphere(lo, hi, r1));
+        (d - h).max(h)
     };
     let uniform = stuffing::stuff(&f, [-11.0; 3], [11.0; 3], h).unwrap();
     let bg = graded::background([-11.0; 3], [11.0; 3], h, 3, &size).unwrap();
@@ -560,27 +562,29 @@ fn grading_keeps_the_outer_surface_fine_with_far_fewer_elements() {
             "boundary face with radii {r:?}"
         );
     }
-    // Lower outer-surface triangles keep the fine size; inner and upper ones are coarser.
-    let longest = |sphere: f64, lower: bool| {
-        boundary
-            .iter()
-            .filter(|b| (norm(m.nodes[b[0] as usize]) - sphere).abs() < 1e-3)
-            .filter(|b| !lower || b.iter().all(|v| m.nodes[*v as usize][2] < -1.0))
-            .map(|b| {
-                (0..3)
-                    .map(|k| {
-                        norm(sub3(
-                            m.nodes[b[k] as usize],
-                            m.nodes[b[(k + 1) % 3] as usize],
-                        ))
-                    })
-                    .fold(0.0, f64::max)
-            })
-            .fold(0.0, f64::max)
+    // Boundary triangles keep the fine size; the tissue half-way between is coarser.
+    let longest_edge = |t: &[u32]| {
+        let mut l: f64 = 0.0;
+        for i in 0..t.len() {
+            for j in i + 1..t.len() {
+                l = l.max(norm(sub3(m.nodes[t[i] as usize], m.nodes[t[j] as usize])));
+            }
+        }
+        l
     };
+    let boundary_edge = boundary.iter().map(|b| longest_edge(b)).fold(0.0, f64::max);
+    let middle_edge = m
+        .tets
+        .iter()
+        .filter(|t| {
+            let c = [0, 1, 2].map(|a| t.iter().map(|v| m.nodes[*v as usize][a]).sum::<f64>() / 4.0);
+            (norm(c) - 0.5 * (r1 + r2)).abs() < 0.5
+        })
+        .map(|t| longest_edge(t))
+        .fold(0.0, f64::max);
     let e = (q.volume_mm3 - exact).abs() / exact;
     println!(
-        "graded shell h = {h}, 3 levels: {} nodes, {} tets (uniform {} / {}), dihedral {:.2}°..{:.2}° (uniform {:.2}°..{:.2}°), worst ratio {:.2}, volume error {e:.3e}; longest boundary edge outer lower {:.2}, outer {:.2}, inner {:.2} mm",
+        "graded shell h = {h}, 3 levels: {} nodes, {} tets (uniform {} / {}), dihedral {:.2}°..{:.2}° (uniform {:.2}°..{:.2}°), worst ratio {:.2}, volume error {e:.3e}; longest edge on the boundary {:.2}, half-way between {:.2} mm",
         q.nodes,
         q.tets,
         qu.nodes,
@@ -590,15 +594,15 @@ fn grading_keeps_the_outer_surface_fine_with_far_fewer_elements() {
         qu.min_dihedral_deg,
         qu.max_dihedral_deg,
         q.worst_aspect_ratio,
-        longest(r2, true),
-        longest(r2, false),
-        longest(r1, false)
+        boundary_edge,
+        middle_edge
     );
     assert_eq!(q.inverted, 0);
     assert_bounds(&q);
-    assert!(q.tets * 2 < qu.tets, "grading saved too little");
-    assert!(longest(r2, true) < 1.5 * h);
-    assert!(longest(r2, false) > 2.0 * h && longest(r1, false) > 2.0 * h);
+    // Both spheres stay at the finest size (the angle bounds need the surfaces in the uniform
+    // lattice), so only the tissue between them coarsens: here 28 % fewer tetrahedra.
+    assert!(q.tets * 4 < qu.tets * 3, "grading saved too little");
+    assert!(boundary_edge < 1.5 * h && middle_edge > 3.0 * h);
     // The coarse upper half is a coarser inscribed polyhedron: a larger but still small error.
     assert!(e < 2e-2, "{e}");
     // With no coarsening asked for, the graded background is the BCC lattice itself.

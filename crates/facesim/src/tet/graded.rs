@@ -15,9 +15,12 @@
 //! decided by the face alone, so both sides agree: the mesh is conforming. In a uniform region
 //! it is the BCC lattice.
 //!
-//! Stuffing on it: warping with α_long on axis-parallel edges and α_short on the others, the
-//! same stencils. The uniform lattice's angle bounds are not proven for the transition
-//! tetrahedra; `Quality` reports what was reached and `tests/tet_mesh.rs` checks it.
+//! Stuffing on it: the same stencils; warping with α_long on axis-parallel edges and α_short
+//! on the others, except at the points of transition tetrahedra (not whole BCC ones), which
+//! never move: warping the flatter cones at a size change inverted elements on the real CT
+//! (a big cube's centre and a small face's centre both pulled towards the face). The uniform
+//! lattice's angle bounds are not proven there; `Quality` reports what was reached and
+//! `tests/tet_mesh.rs` checks it.
 
 use super::stuffing::{
     ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, MAX_DIHEDRAL_BOUND_DEG, MIN_DIHEDRAL_BOUND_DEG,
@@ -40,6 +43,9 @@ pub struct Background {
     pub unit: f64,
     pub points: Vec<[i64; 3]>,
     pub tets: Vec<[u32; 4]>,
+    /// Points of a tetrahedron that is not a whole BCC tetrahedron (at a size change or on the
+    /// grid's border): never warped.
+    pub transition: Vec<bool>,
     pub box_lo: [f64; 3],
     pub box_hi: [f64; 3],
 }
@@ -103,10 +109,8 @@ impl Octree {
                     let inside = (o[0]..o[0] + s).contains(&i)
                         && (o[1]..o[1] + s).contains(&j)
                         && (o[2]..o[2] + s).contains(&k);
-                    if !inside {
-                        if let Some(l) = self.level([i, j, k]) {
-                            m = m.min(l);
-                        }
+                    if let Some(l) = self.level([i, j, k]).filter(|_| !inside) {
+                        m = m.min(l);
                     }
                 }
             }
@@ -176,16 +180,16 @@ pub fn background(
         leaf: vec![levels as u8; n.iter().product::<i64>() as usize],
     };
     let mm = |c: [i64; 3]| [0, 1, 2].map(|a| origin[a] + h * c[a] as f64);
-    // Refine top-down where the size asks for it (never the padding outside the box).
+    // Refine top-down where the size asks for it, the padding too: a size change on the box's
+    // faces would put transition tetrahedra where the surfaces cross the cut.
     for l in (1..=levels).rev() {
         let s = 1i64 << l;
         let split: Vec<[i64; 3]> = tree
             .leaves(l)
             .into_par_iter()
             .filter(|o| {
-                let inside = (0..3).all(|a| o[a] >= s_top && o[a] + s <= n[a] - s_top);
                 let (a, b) = (mm(*o), mm([o[0] + s, o[1] + s, o[2] + s]));
-                inside && size(a, b) < h * s as f64 * (1.0 - 1e-9)
+                size(a, b) < h * s as f64 * (1.0 - 1e-9)
             })
             .collect();
         for o in split {
@@ -213,20 +217,23 @@ pub fn background(
     }
     let box_lo = [2.0 * s_top as f64; 3];
     let box_hi = coarse.map(|c| 2.0 * ((c - 1) * s_top) as f64);
-    let (points, tets) = tetrahedralise(&tree);
+    let (points, tets, transition) = tetrahedralise(&tree);
     Ok(Background {
         origin,
         unit: 0.5 * h,
         points,
         tets,
+        transition,
         box_lo,
         box_hi,
     })
 }
 
 /// The cone tetrahedra of every leaf (see the module notes), in doubled fine coordinates.
-fn tetrahedralise(tree: &Octree) -> (Vec<[i64; 3]>, Vec<[u32; 4]>) {
-    let per_leaf: Vec<Vec<[[i64; 3]; 4]>> = (0..=tree.levels)
+type Tets = Vec<([[i64; 3]; 4], bool)>;
+
+fn tetrahedralise(tree: &Octree) -> (Vec<[i64; 3]>, Vec<[u32; 4]>, Vec<bool>) {
+    let per_leaf: Vec<Tets> = (0..=tree.levels)
         .flat_map(|l| tree.leaves(l).into_iter().map(move |o| (l, o)))
         .collect::<Vec<_>>()
         .into_par_iter()
@@ -236,7 +243,8 @@ fn tetrahedralise(tree: &Octree) -> (Vec<[i64; 3]>, Vec<[u32; 4]>) {
     let mut id = vec![u32::MAX; (dims[0] * dims[1] * dims[2]) as usize];
     let mut points = Vec::new();
     let mut tets = Vec::new();
-    for t in per_leaf.iter().flatten() {
+    let mut transition = Vec::new();
+    for (t, bcc) in per_leaf.iter().flatten() {
         let mut r = [0u32; 4];
         for k in 0..4 {
             let p = t[k];
@@ -244,23 +252,26 @@ fn tetrahedralise(tree: &Octree) -> (Vec<[i64; 3]>, Vec<[u32; 4]>) {
             if id[i] == u32::MAX {
                 id[i] = points.len() as u32;
                 points.push(p);
+                transition.push(false);
             }
             r[k] = id[i];
+            transition[id[i] as usize] |= !bcc;
         }
         tets.push(r);
     }
-    (points, tets)
+    (points, tets, transition)
 }
 
-fn leaf_tets(tree: &Octree, l: u32, o: [i64; 3]) -> Vec<[[i64; 3]; 4]> {
+/// The leaf's tetrahedra, each marked whether it is a whole BCC tetrahedron.
+fn leaf_tets(tree: &Octree, l: u32, o: [i64; 3]) -> Tets {
     let s = 1i64 << l;
     let c: [i64; 3] = o.map(|x| 2 * x + s);
     let mut out = Vec::new();
-    let mut push = |mut t: [[i64; 3]; 4]| {
+    let mut push = |mut t: [[i64; 3]; 4], bcc: bool| {
         if orient(t.map(|p| p.map(|x| x as f64))) < 0.0 {
             t.swap(2, 3);
         }
-        out.push(t);
+        out.push((t, bcc));
     };
     for axis in 0..3 {
         let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
@@ -276,8 +287,10 @@ fn leaf_tets(tree: &Octree, l: u32, o: [i64; 3]) -> Vec<[[i64; 3]; 4]> {
                     if side == 1 {
                         let mut c2 = c;
                         c2[axis] += 2 * s;
-                        for (a, b) in face_edges(tree, f0, axis, l) {
-                            push([c, c2, a, b]);
+                        let edges = face_edges(tree, f0, axis, l);
+                        let whole = edges.len() == 4;
+                        for (a, b) in edges {
+                            push([c, c2, a, b], whole);
                         }
                     }
                 }
@@ -289,14 +302,14 @@ fn leaf_tets(tree: &Octree, l: u32, o: [i64; 3]) -> Vec<[[i64; 3]; 4]> {
                         q[v] += dv * h2;
                         let fc = face_centre(q, axis, h2);
                         for (a, b) in face_edges(tree, q, axis, l - 1) {
-                            push([c, fc, a, b]);
+                            push([c, fc, a, b], false);
                         }
                     }
                 }
                 _ => {
                     let fc = face_centre(f0, axis, s);
                     for (a, b) in face_edges(tree, f0, axis, l) {
-                        push([c, fc, a, b]);
+                        push([c, fc, a, b], false);
                     }
                 }
             }
@@ -442,7 +455,7 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
     }
     let mut alive = vec![true; cuts.len()];
     let mut warped: Vec<Option<u32>> = vec![None; np];
-    for v in 0..np {
+    for v in (0..np).filter(|v| !bg.transition[*v]) {
         let mut best: Option<(f64, u32)> = None;
         for &c in &per_vertex[v] {
             let cut = &cuts[c as usize];
