@@ -245,7 +245,7 @@ fn keep_skin_components(nodes: Vec<[f64; 3]>, tets: Vec<[u32; 4]>, kind: Vec<Nod
         .iter()
         .filter(|t| !keep[t[0] as usize])
         .filter_map(|t| super::gradients(t.map(|v| nodes[v as usize])).map(|(v, _)| v))
-        .sum();
+        .fold(0.0, |a, v| a + v); // (an empty f64 sum is −0)
     let out_tets: Vec<[u32; 4]> = tets
         .into_iter()
         .filter(|t| keep[t[0] as usize])
