@@ -250,3 +250,374 @@ fn bad_input_is_a_one_line_error() {
     let nan = |_: [f64; 3]| f64::NAN;
     assert!(stuffing::stuff(&nan, [0.0; 3], [1.0; 3], 0.5).is_err());
 }
+
+// ---- The CT layer -------------------------------------------------------------------------
+
+mod common;
+
+use facesim::case::Case;
+use facesim::segment::{self, FAT_BRIGHT, FAT_DARK, MUSCLE, SKIN, Segmentation};
+use facesim::surface::marching;
+use facesim::tet::from_ct::{self, MeshParams, SoftTissueMesh};
+use facesim::volume::{Volume, sample_field};
+use std::path::Path;
+
+fn segmented(vol: &Volume) -> Segmentation {
+    let case = Case::parse("[ct]\npath = \"ct.nii.gz\"\n", Path::new("case.toml")).unwrap();
+    segment::segment(vol, &case.tissue, Path::new("ct.nii.gz")).unwrap()
+}
+
+fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Distance from p to the segment ab.
+fn segment_distance(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
+    let ab = sub3(b, a);
+    let t = (dot3(sub3(p, a), ab) / dot3(ab, ab).max(1e-300)).clamp(0.0, 1.0);
+    norm(sub3(
+        p,
+        [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]],
+    ))
+}
+
+/// Distance from p to the triangle abc: to its plane when the projection falls inside,
+/// else to the nearest edge.
+fn triangle_distance(p: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
+    let (e0, e1) = (sub3(t[1], t[0]), sub3(t[2], t[0]));
+    let n = [
+        e0[1] * e1[2] - e0[2] * e1[1],
+        e0[2] * e1[0] - e0[0] * e1[2],
+        e0[0] * e1[1] - e0[1] * e1[0],
+    ];
+    let nn = dot3(n, n);
+    if nn > 0.0 {
+        let d = dot3(sub3(p, t[0]), n) / nn;
+        let q = [p[0] - d * n[0], p[1] - d * n[1], p[2] - d * n[2]];
+        // Barycentric signs: q inside when on the inner side of each edge.
+        let inside = (0..3).all(|k| {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let c = sub3(b, a);
+            let w = sub3(q, a);
+            let x = [
+                c[1] * w[2] - c[2] * w[1],
+                c[2] * w[0] - c[0] * w[2],
+                c[0] * w[1] - c[1] * w[0],
+            ];
+            dot3(x, n) >= 0.0
+        });
+        if inside {
+            return d.abs() * nn.sqrt();
+        }
+    }
+    (0..3)
+        .map(|k| segment_distance(p, t[k], t[(k + 1) % 3]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Distance from each query point to a triangle mesh, through a uniform grid of buckets
+/// (a point farther than `reach` from every triangle reports ≥ reach).
+fn distances(mesh: &facesim::mesh::Mesh, queries: &[[f64; 3]], reach: f64) -> Vec<f64> {
+    let cell = reach.max(1.0);
+    let key = |p: [f64; 3]| p.map(|x| (x / cell).floor() as i64);
+    let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+    for (i, t) in mesh.triangles.iter().enumerate() {
+        let x = t.map(|v| mesh.vertices[v as usize]);
+        let lo = key([0, 1, 2].map(|a| x.iter().map(|p| p[a]).fold(f64::INFINITY, f64::min)));
+        let hi = key([0, 1, 2].map(|a| x.iter().map(|p| p[a]).fold(f64::NEG_INFINITY, f64::max)));
+        for i0 in lo[0]..=hi[0] {
+            for i1 in lo[1]..=hi[1] {
+                for i2 in lo[2]..=hi[2] {
+                    grid.entry([i0, i1, i2]).or_default().push(i as u32);
+                }
+            }
+        }
+    }
+    queries
+        .iter()
+        .map(|q| {
+            let k = key(*q);
+            let mut best = reach;
+            for d0 in -1..=1 {
+                for d1 in -1..=1 {
+                    for d2 in -1..=1 {
+                        for t in grid
+                            .get(&[k[0] + d0, k[1] + d1, k[2] + d2])
+                            .into_iter()
+                            .flatten()
+                        {
+                            let x = mesh.triangles[*t as usize].map(|v| mesh.vertices[v as usize]);
+                            best = best.min(triangle_distance(*q, x));
+                        }
+                    }
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+fn assert_ct_mesh(m: &SoftTissueMesh) {
+    assert_bounds(&m.quality);
+    assert!(
+        m.tets
+            .iter()
+            .all(|t| facesim::tet::gradients(t.map(|n| m.nodes[n as usize])).is_some())
+    );
+    assert_eq!(m.tissue.len(), m.tets.len());
+    assert_eq!(m.kind.len(), m.nodes.len());
+    assert!(
+        m.tissue
+            .iter()
+            .all(|l| [SKIN, FAT_DARK, FAT_BRIGHT, MUSCLE].contains(l))
+    );
+    check_conforming(&m.tets, false);
+}
+
+#[test]
+fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
+    let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions::default());
+    let seg = segmented(&vol);
+    let roi = ([-50.0, -100.0, -45.0], [50.0, -30.0, 35.0]);
+    let p = MeshParams {
+        skin_size_mm: 2.0,
+        deep_size_mm: 4.0,
+        margin_mm: 0.0,
+    };
+    let m = from_ct::soft_tissue(&vol, &seg, roi, &p).unwrap();
+    assert_ct_mesh(&m);
+    assert_eq!(m.tissue_fallbacks, 0);
+    let count = |k: from_ct::NodeKind| m.kind.iter().filter(|x| **x == k).count();
+    let (skin_n, bone_n, cut_n) = (
+        count(from_ct::NodeKind::Skin),
+        count(from_ct::NodeKind::Bone),
+        count(from_ct::NodeKind::Cut),
+    );
+    let q = &m.quality;
+    println!(
+        "phantom: {} nodes ({skin_n} skin, {bone_n} bone, {cut_n} cut), {} tets, dihedral {:.2}°..{:.2}°, worst ratio {:.2}, volume {:.0} mm³ + {:.0} enclosed left out (voxels {:.0})",
+        q.nodes,
+        q.tets,
+        q.min_dihedral_deg,
+        q.max_dihedral_deg,
+        q.worst_aspect_ratio,
+        q.volume_mm3,
+        m.dropped_volume_mm3,
+        m.voxel_volume_mm3
+    );
+    assert!(skin_n > 500 && bone_n > 500 && cut_n > 100);
+    assert!(((q.volume_mm3 + m.dropped_volume_mm3) / m.voxel_volume_mm3 - 1.0).abs() < 0.03);
+    // Every soft label of the phantom occurs (skin, fat, muscle).
+    for l in [SKIN, MUSCLE] {
+        assert!(m.tissue.contains(&l), "label {l} missing");
+    }
+    assert!(m.tissue.contains(&FAT_DARK) || m.tissue.contains(&FAT_BRIGHT));
+
+    // Skin and bone nodes: the field interpolates to the iso-value there, and they lie within
+    // half a voxel of the pipeline's marching-tetrahedra surfaces.
+    let half_voxel = 0.5 * vol.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    for (field, iso, kind, name) in [
+        (
+            seg.skin_field(&vol),
+            seg.windows.head_threshold,
+            from_ct::NodeKind::Skin,
+            "skin",
+        ),
+        (
+            seg.bone_field(&vol),
+            seg.windows.bone,
+            from_ct::NodeKind::Bone,
+            "bone",
+        ),
+    ] {
+        let pts: Vec<[f64; 3]> = m
+            .nodes
+            .iter()
+            .zip(&m.kind)
+            .filter(|(_, k)| **k == kind)
+            .map(|(p, _)| *p)
+            .collect();
+        let worst_hu = pts
+            .iter()
+            .map(|p| (sample_field(&field, vol.dims, vol.to_voxel(*p), -1024.0) as f64 - iso).abs())
+            .fold(0.0, f64::max);
+        let surface = marching::extract(&vol, &field, iso as f32);
+        let d = distances(&surface, &pts, 4.0);
+        let worst = d.iter().copied().fold(0.0, f64::max);
+        println!(
+            "{name}: {} nodes, |field − iso| ≤ {worst_hu:.3} HU, distance to the marching surface ≤ {worst:.3} mm (half voxel {half_voxel} mm)",
+            pts.len()
+        );
+        assert!(
+            worst_hu < 1.0,
+            "{name}: a node {worst_hu} HU off the iso-value"
+        );
+        assert!(
+            worst <= half_voxel,
+            "{name}: a node {worst} mm off the surface"
+        );
+    }
+
+    // Cut nodes lie on the box's faces: lo exactly, hi rounded up to whole cubes of the
+    // coarsest size (skin size × 2 here).
+    let h = 2.0 * p.skin_size_mm;
+    let hi = [0, 1, 2].map(|a| roi.0[a] + ((roi.1[a] - roi.0[a]) / h - 1e-9).ceil() * h);
+    for (q, k) in m.nodes.iter().zip(&m.kind) {
+        assert!((0..3).all(|a| q[a] >= roi.0[a] - 1e-9 && q[a] <= hi[a] + 1e-9));
+        if *k == from_ct::NodeKind::Cut {
+            assert!(
+                (0..3).any(|a| (q[a] - roi.0[a]).abs() < 1e-9 || (q[a] - hi[a]).abs() < 1e-9),
+                "cut node {q:?} off the box"
+            );
+        }
+    }
+
+    // A region without soft tissue is a one-line configuration error.
+    let far = ([300.0; 3], [320.0; 3]);
+    match from_ct::soft_tissue(&vol, &seg, far, &p) {
+        Err(facesim::error::Error::Config(msg)) => assert!(msg.contains("no soft tissue"), "{msg}"),
+        other => panic!("expected a configuration error, got {:?}", other.err()),
+    }
+}
+
+#[test]
+fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
+    let vol = facesim::volume::read_volume(&common::real_ct()).unwrap();
+    let seg = segmented(&vol);
+    // About 120 × 110 × 90 mm around the maxilla, nose and lips (data-samples/real/case.toml:
+    // the maxilla box x 80..170, y 25..95, z −5..22; the face at small y).
+    let roi = ([65.0, -5.0, -30.0], [185.0, 105.0, 60.0]);
+    for (size, deep) in [(2.5, 2.5), (2.5, 10.0), (2.0, 8.0)] {
+        let p = MeshParams {
+            skin_size_mm: size,
+            deep_size_mm: deep,
+            margin_mm: 0.0,
+        };
+        let t0 = std::time::Instant::now();
+        let m = from_ct::soft_tissue(&vol, &seg, roi, &p).unwrap();
+        let wall = t0.elapsed().as_secs_f64();
+        assert_ct_mesh(&m);
+        let count = |k: from_ct::NodeKind| m.kind.iter().filter(|x| **x == k).count();
+        let q = &m.quality;
+        let labels: Vec<usize> = (1..5u8)
+            .map(|l| m.tissue.iter().filter(|x| **x == l).count())
+            .collect();
+        println!(
+            "real CT, {size}..{deep} mm: {} nodes ({} skin, {} bone, {} cut), {} tets in {wall:.2} s; dihedral {:.2}°..{:.2}°, worst ratio {:.2}; volume {:.0} mm³ + {:.0} enclosed left out (voxels {:.0}); tets skin/fat dark/fat bright/muscle {labels:?}, {} fallbacks, {} flattened slivers left out",
+            q.nodes,
+            count(from_ct::NodeKind::Skin),
+            count(from_ct::NodeKind::Bone),
+            count(from_ct::NodeKind::Cut),
+            q.tets,
+            q.min_dihedral_deg,
+            q.max_dihedral_deg,
+            q.worst_aspect_ratio,
+            q.volume_mm3,
+            m.dropped_volume_mm3,
+            m.voxel_volume_mm3,
+            m.tissue_fallbacks,
+            m.flattened
+        );
+        assert!(count(from_ct::NodeKind::Skin) > 1000 && count(from_ct::NodeKind::Bone) > 1000);
+        assert!(((q.volume_mm3 + m.dropped_volume_mm3) / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
+    }
+}
+
+/// Distance from the cube (lo, hi) to the sphere |p| = r.
+fn cube_to_sphere(lo: [f64; 3], hi: [f64; 3], r: f64) -> f64 {
+    let near = norm([0, 1, 2].map(|a| 0f64.clamp(lo[a], hi[a])));
+    let far = norm([0, 1, 2].map(|a| lo[a].abs().max(hi[a].abs())));
+    if near <= r && r <= far {
+        0.0
+    } else {
+        (near - r).abs().min((far - r).abs())
+    }
+}
+
+#[test]
+fn grading_keeps_the_surfaces_fine_and_coarsens_between_them() {
+    use facesim::tet::graded;
+    let (r1, r2) = (1.0, 10.0);
+    let f = shell(r1, r2);
+    let h = 0.5;
+    let exact = 4.0 / 3.0 * PI * (r2.powi(3) - r1.powi(3));
+    // Fine (h) at both spheres, the size growing with the distance from them: coarse between.
+    let size = move |lo: [f64; 3], hi: [f64; 3]| {
+        let d = cube_to_sphere(lo, hi, r2).min(cube_to_sphere(lo, hi, r1));
+        (d - h).max(h)
+    };
+    let uniform = stuffing::stuff(&f, [-11.0; 3], [11.0; 3], h).unwrap();
+    let bg = graded::background([-11.0; 3], [11.0; 3], h, 3, &size).unwrap();
+    let m = graded::stuff_graded(&f, &bg).unwrap();
+    let q = Quality::of(&m.nodes, &m.tets);
+    let qu = Quality::of(&uniform.nodes, &uniform.tets);
+    let boundary = check_conforming(&m.tets, true);
+    for b in &boundary {
+        let r: Vec<f64> = b.iter().map(|v| norm(m.nodes[*v as usize])).collect();
+        assert!(
+            r.iter().all(|x| (x - r1).abs() < 1e-3) || r.iter().all(|x| (x - r2).abs() < 1e-3),
+            "boundary face with radii {r:?}"
+        );
+    }
+    // Boundary triangles keep the fine size; the tissue half-way between is coarser.
+    let longest_edge = |t: &[u32]| {
+        let mut l: f64 = 0.0;
+        for i in 0..t.len() {
+            for j in i + 1..t.len() {
+                l = l.max(norm(sub3(m.nodes[t[i] as usize], m.nodes[t[j] as usize])));
+            }
+        }
+        l
+    };
+    let boundary_edge = boundary.iter().map(|b| longest_edge(b)).fold(0.0, f64::max);
+    let middle_edge = m
+        .tets
+        .iter()
+        .filter(|t| {
+            let c = [0, 1, 2].map(|a| t.iter().map(|v| m.nodes[*v as usize][a]).sum::<f64>() / 4.0);
+            (norm(c) - 0.5 * (r1 + r2)).abs() < 0.5
+        })
+        .map(|t| longest_edge(t))
+        .fold(0.0, f64::max);
+    let e = (q.volume_mm3 - exact).abs() / exact;
+    println!(
+        "graded shell h = {h}, 3 levels: {} nodes, {} tets (uniform {} / {}), dihedral {:.2}°..{:.2}° (uniform {:.2}°..{:.2}°), worst ratio {:.2}, volume error {e:.3e}; longest edge on the boundary {:.2}, half-way between {:.2} mm",
+        q.nodes,
+        q.tets,
+        qu.nodes,
+        qu.tets,
+        q.min_dihedral_deg,
+        q.max_dihedral_deg,
+        qu.min_dihedral_deg,
+        qu.max_dihedral_deg,
+        q.worst_aspect_ratio,
+        boundary_edge,
+        middle_edge
+    );
+    assert_eq!(q.inverted, 0);
+    assert_bounds(&q);
+    // Both spheres stay at the finest size (the angle bounds need the surfaces in the uniform
+    // lattice), so only the tissue between them coarsens: here 28 % fewer tetrahedra.
+    assert!(q.tets * 4 < qu.tets * 3, "grading saved too little");
+    assert!(boundary_edge < 1.5 * h && middle_edge > 3.0 * h);
+    // The coarse upper half is a coarser inscribed polyhedron: a larger but still small error.
+    assert!(e < 2e-2, "{e}");
+    // With no coarsening asked for, the graded background is the BCC lattice itself.
+    let fine = |_: [f64; 3], _: [f64; 3]| 0.0;
+    let bg0 = graded::background([-11.0; 3], [11.0; 3], 1.0, 2, &fine).unwrap();
+    let m0 = graded::stuff_graded(&f, &bg0).unwrap();
+    let u1 = stuffing::stuff(&f, [-11.0; 3], [11.0; 3], 1.0).unwrap();
+    let (q0, q1) = (
+        Quality::of(&m0.nodes, &m0.tets),
+        Quality::of(&u1.nodes, &u1.tets),
+    );
+    println!(
+        "graded with nothing to coarsen: {} tets, {} mm³; uniform {} tets, {} mm³",
+        q0.tets, q0.volume_mm3, q1.tets, q1.volume_mm3
+    );
+    assert_eq!(q0.tets, q1.tets);
+    assert!((q0.volume_mm3 - q1.volume_mm3).abs() < 1e-9 * q1.volume_mm3);
+}

@@ -13,13 +13,18 @@
 //! Thin tissue (skin 2–3 mm over bone, the nasal bridge) narrower than about one lattice
 //! spacing may be missed by the lattice: the mesh stays valid (stuffing's angle bounds do not
 //! depend on the surface) but the gap closes there. `voxel_volume_mm3` (the soft tissue of the
-//! box counted from voxel centres) against `quality.volume_mm3` shows how much was lost.
+//! box counted from voxel centres) against `quality.volume_mm3 + dropped_volume_mm3` shows how
+//! much was lost.
+//!
+//! Pieces of tissue that reach no skin node (the brain, tissue enclosed by bone) are left out:
+//! they cannot move with the face (`dropped_volume_mm3`).
 //!
 //! Tissue per tetrahedron: the segmentation label of the voxel nearest its centroid; when that
 //! voxel is air or bone (partial volume at the boundary), the most common soft label
 //! (skin, fats, muscle) within 1, then 2, then 3 voxels; muscle when none is found (counted in
 //! `tissue_fallbacks`).
 
+use super::graded;
 use super::quality::Quality;
 use super::stuffing::{self, NodeKind as StuffKind};
 use crate::error::{Error, Result};
@@ -27,8 +32,8 @@ use crate::segment::{BONE, MUSCLE, Segmentation};
 use crate::volume::{Volume, sample_field};
 use rayon::prelude::*;
 
-/// Lattice sizes (mm). `deep_size_mm` is the coarse size of a graded lattice (not built yet:
-/// the lattice is uniform at `skin_size_mm`); `margin_mm` widens the box on every side.
+/// Lattice sizes (mm): `skin_size_mm` at the skin, doubling with depth up to `deep_size_mm`
+/// (rounded down to skin size × 2^k, k ≤ 4); `margin_mm` widens the box on every side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeshParams {
     pub skin_size_mm: f64,
@@ -62,6 +67,10 @@ pub struct SoftTissueMesh {
     pub voxel_volume_mm3: f64,
     /// Tetrahedra with no soft voxel within 3 voxels of their centroid (labelled muscle).
     pub tissue_fallbacks: usize,
+    /// Surface slivers left out by the mesher (`stuffing::Stuffed::flattened`).
+    pub flattened: usize,
+    /// Volume (mm³) of tissue pieces that do not reach the skin (enclosed by bone), left out.
+    pub dropped_volume_mm3: f64,
 }
 
 /// HU given to samples outside the CT: air for the skin field, no bone for the bone field.
@@ -104,7 +113,45 @@ pub fn soft_tissue(
         let (s, b) = parts(q);
         s.max(b)
     };
-    let m = stuffing::stuff(&f, lo, hi, p.skin_size_mm)?;
+    // Grading: a cube of size s = h·2^l stays whole unless the skin or the bone iso-surface
+    // crosses the cube grown by s on every side (sampled every h), so the size doubles about
+    // every cube-width of distance from both surfaces, up to the deep size. Both surfaces stay
+    // in the finest uniform lattice (`graded`: size changes away from every surface keep
+    // stuffing's angle bounds); only tissue away from them coarsens.
+    let h = p.skin_size_mm;
+    let levels = if p.deep_size_mm > h {
+        ((p.deep_size_mm / h).log2().floor() as u32).min(4)
+    } else {
+        0
+    };
+    let m = if levels == 0 {
+        stuffing::stuff(&f, lo, hi, h)?
+    } else {
+        let surface_near = |a: [f64; 3], b: [f64; 3]| {
+            let s = b[0] - a[0];
+            let n = (3.0 * s / h).ceil() as usize;
+            let (mut inside, mut outside) = (false, false);
+            for k in 0..=n {
+                for j in 0..=n {
+                    for i in 0..=n {
+                        let ijk = [i, j, k];
+                        let q = [0, 1, 2].map(|ax| a[ax] - s + 3.0 * s * ijk[ax] as f64 / n as f64);
+                        if f(q) < 0.0 {
+                            inside = true;
+                        } else {
+                            outside = true;
+                        }
+                        if inside && outside {
+                            return h;
+                        }
+                    }
+                }
+            }
+            f64::INFINITY
+        };
+        let bg = graded::background(lo, hi, h, levels, &surface_near)?;
+        graded::stuff_graded(&f, &bg)?
+    };
     if m.tets.is_empty() {
         return Err(Error::config(format!(
             "tetrahedral mesh: no soft tissue inside the region {lo:?} .. {hi:?} (LPS mm)"
@@ -128,6 +175,13 @@ pub fn soft_tissue(
             }
         })
         .collect();
+    let (nodes, tets, kind, dropped_volume_mm3) = keep_skin_components(m.nodes, m.tets, kind);
+    let m = stuffing::Stuffed {
+        nodes,
+        tets,
+        kind: Vec::new(),
+        flattened: m.flattened,
+    };
     let labels: Vec<Option<u8>> = m
         .tets
         .par_iter()
@@ -139,6 +193,10 @@ pub fn soft_tissue(
     let tissue_fallbacks = labels.iter().filter(|l| l.is_none()).count();
     let tissue = labels.into_iter().map(|l| l.unwrap_or(MUSCLE)).collect();
     let quality = Quality::of(&m.nodes, &m.tets);
+    // The box as meshed: rounded up to whole cubes of the coarsest size.
+    let coarsest = h * f64::from(1u32 << levels);
+    let hi =
+        [0, 1, 2].map(|a| lo[a] + ((hi[a] - lo[a]) / coarsest - 1e-9).ceil().max(1.0) * coarsest);
     let voxel_volume_mm3 = voxel_volume(vol, &skin, &bone, skin_iso, bone_iso, lo, hi);
     Ok(SoftTissueMesh {
         nodes: m.nodes,
@@ -148,7 +206,52 @@ pub fn soft_tissue(
         quality,
         voxel_volume_mm3,
         tissue_fallbacks,
+        flattened: m.flattened,
+        dropped_volume_mm3,
     })
+}
+
+/// Nodes, tetrahedra, node kinds and the volume left out (mm³).
+type Kept = (Vec<[f64; 3]>, Vec<[u32; 4]>, Vec<NodeKind>, f64);
+
+/// Keep the pieces of tissue (node-connected) that reach the skin: tissue enclosed by bone
+/// (the brain, an orbit's contents behind closed bone) cannot move with the face. Returns the
+/// renumbered nodes, tetrahedra, kinds and the volume dropped (mm³).
+fn keep_skin_components(nodes: Vec<[f64; 3]>, tets: Vec<[u32; 4]>, kind: Vec<NodeKind>) -> Kept {
+    let mut uf = crate::union_find::UnionFind::new(nodes.len());
+    for t in &tets {
+        for k in 1..4 {
+            uf.union(t[0] as usize, t[k] as usize);
+        }
+    }
+    let mut skin_root = vec![false; nodes.len()];
+    for (i, k) in kind.iter().enumerate() {
+        if *k == NodeKind::Skin {
+            let r = uf.find(i);
+            skin_root[r] = true;
+        }
+    }
+    let keep: Vec<bool> = (0..nodes.len()).map(|i| skin_root[uf.find(i)]).collect();
+    let mut new_id = vec![u32::MAX; nodes.len()];
+    let (mut out_nodes, mut out_kind) = (Vec::new(), Vec::new());
+    for i in 0..nodes.len() {
+        if keep[i] {
+            new_id[i] = out_nodes.len() as u32;
+            out_nodes.push(nodes[i]);
+            out_kind.push(kind[i]);
+        }
+    }
+    let dropped_volume: f64 = tets
+        .iter()
+        .filter(|t| !keep[t[0] as usize])
+        .filter_map(|t| super::gradients(t.map(|v| nodes[v as usize])).map(|(v, _)| v))
+        .fold(0.0, |a, v| a + v); // (an empty f64 sum is −0)
+    let out_tets: Vec<[u32; 4]> = tets
+        .into_iter()
+        .filter(|t| keep[t[0] as usize])
+        .map(|t| t.map(|v| new_id[v as usize]))
+        .collect();
+    (out_nodes, out_tets, out_kind, dropped_volume)
 }
 
 fn is_soft(l: u8) -> bool {
@@ -175,10 +278,9 @@ fn tissue_near(vol: &Volume, seg: &Segmentation, c: [f64; 3]) -> Option<u8> {
         for dz in -r..=r {
             for dy in -r..=r {
                 for dx in -r..=r {
-                    if let Some(l) = label([centre[0] + dx, centre[1] + dy, centre[2] + dz]) {
-                        if is_soft(l) {
-                            count[l as usize] += 1;
-                        }
+                    let l = label([centre[0] + dx, centre[1] + dy, centre[2] + dz]);
+                    if let Some(l) = l.filter(|l| is_soft(*l)) {
+                        count[l as usize] += 1;
                     }
                 }
             }

@@ -23,6 +23,7 @@
 
 pub mod embed;
 pub mod from_ct;
+pub mod graded;
 pub mod holds;
 pub mod nonlinear;
 pub mod quadratic;
