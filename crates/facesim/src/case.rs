@@ -453,7 +453,7 @@ impl Default for Tet {
             load_steps: 4,
             sliding: true,
             mucosa_gap_mm: 3.0,
-            skin_size_mm: 2.5,
+            skin_size_mm: 4.0,
             deep_size_mm: 8.0,
             margin_mm: 30.0,
             skin: e(30.0, 0.45),

@@ -4,6 +4,7 @@
 //!
 //! The DOF numbering is fem/dofs.rs's.
 
+use faer::sparse::linalg::LltError;
 use super::cholesky::{Cholesky, Pattern};
 use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
@@ -352,10 +353,18 @@ impl System {
                 ),
             ));
         }
-        let llt = Cholesky::factor(&symbolic, mat.as_ref()).map_err(|e| {
-            Error::numerical(NumericalKind::Singular, format!(
+        let llt = Cholesky::factor(&symbolic, mat.as_ref()).map_err(|e| match e {
+            LltError::Generic(g) => Error::numerical(
+                NumericalKind::TooLarge,
+                format!(
+                    "the system of {} unknowns could not be factored ({g:?}; a {:.1} GB factor): use a coarser model",
+                    free.len(),
+                    bytes as f64 / 1e9
+                ),
+            ),
+            LltError::Numeric(_) => Error::numerical(NumericalKind::Singular, format!(
                 "the surface stiffness matrix is not positive definite ({e:?}): too few rigid nodes, or α = β = 0"
-            ))
+            )),
         })?;
         Ok(System {
             n,

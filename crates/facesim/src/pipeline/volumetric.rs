@@ -254,6 +254,69 @@ fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]) -> Vec<No
     mid
 }
 
+/// Pieces of the mesh (tetrahedra joined through shared faces; a piece hanging on by a node
+/// or an edge is a hinge) with no node held in place would float: a singular system. Their corner
+/// nodes are held still. Returns the pieces and nodes so held.
+fn hold_floating_pieces(
+    tets: &[[u32; 4]],
+    constraint: &mut [u8],
+    hold: &mut [Hold],
+) -> (usize, usize) {
+    let mut faces: Vec<([u32; 3], u32)> = tets
+        .iter()
+        .enumerate()
+        .flat_map(|(t, q)| {
+            [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]].map(|f| {
+                let mut k = f.map(|i| q[i]);
+                k.sort_unstable();
+                (k, t as u32)
+            })
+        })
+        .collect();
+    faces.sort_unstable();
+    let mut uf = crate::union_find::UnionFind::new(tets.len());
+    for w in faces.windows(2) {
+        if w[0].0 == w[1].0 {
+            uf.union(w[0].1 as usize, w[1].1 as usize);
+        }
+    }
+    let (label, count) = uf.labels();
+    let mut anchored = vec![false; count];
+    for (t, q) in tets.iter().enumerate() {
+        if q.iter().any(|n| matches!(constraint[*n as usize], FIXED | MOVED)) {
+            anchored[label[t] as usize] = true;
+        }
+    }
+    // A node no tetrahedron uses (one of a flattened sliver left out of the mesh) carries no
+    // stiffness: hold it.
+    let mut used = vec![false; constraint.len()];
+    tets.iter().flatten().for_each(|n| used[*n as usize] = true);
+    for (n, u) in used.iter().enumerate() {
+        if !u && n < hold.len() {
+            constraint[n] = FIXED;
+            hold[n] = Hold::Fixed([0.0; 3]);
+        }
+    }
+    let mut pieces = vec![false; count];
+    let mut nodes = 0;
+    for (t, q) in tets.iter().enumerate() {
+        let l = label[t] as usize;
+        if anchored[l] {
+            continue;
+        }
+        pieces[l] = true;
+        for n in q {
+            let n = *n as usize;
+            if constraint[n] != FIXED {
+                constraint[n] = FIXED;
+                hold[n] = Hold::Fixed([0.0; 3]);
+                nodes += 1;
+            }
+        }
+    }
+    (pieces.iter().filter(|p| **p).count(), nodes)
+}
+
 fn counted(a: &[u8], c: u8) -> usize {
     a.iter().filter(|k| **k == c).count()
 }
@@ -304,7 +367,13 @@ pub fn predict(
         None => (&mesh.nodes, mesh.kind.clone()),
     };
     let mucosa = mucosa(&mesh.nodes, &mesh.kind, scene, case);
-    let (constraint, hold) = holds(nodes, &kind, &mucosa, scene, case);
+    let (mut constraint, mut hold) = holds(nodes, &kind, &mucosa, scene, case);
+    let (pieces, held_still) = hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold);
+    if pieces > 0 {
+        rec.warn(format!(
+            "{pieces} pieces of the tissue mesh ({held_still} nodes) touch no bone and no region face: held still (thin tissue the mesh separated; a smaller [tet] skin_size_mm resolves it)"
+        ));
+    }
     if !constraint.contains(&MOVED) {
         return Err(Error::config(format!(
             "case.toml: the plan moves bone, but no node of the tissue mesh lies on moved bone (region {:?}–{:?} mm): the moved bone touches no soft tissue",

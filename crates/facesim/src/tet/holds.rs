@@ -268,8 +268,11 @@ impl Constrained {
             .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
         let sys = System::new(3 * nodes, rotate_lower(k, &frames), &fixed).map_err(|e| match e {
-            Error::Numerical { kind, .. } => Error::numerical(
-                kind,
+            Error::Numerical {
+                kind: NumericalKind::Singular,
+                ..
+            } => Error::numerical(
+                NumericalKind::Singular,
                 "the tetrahedral stiffness matrix is singular: a piece of tissue is held by no node, or only slides",
             ),
             other => other,
