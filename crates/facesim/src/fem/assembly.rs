@@ -4,7 +4,6 @@
 //!
 //! The DOF numbering is fem/dofs.rs's.
 
-use faer::sparse::linalg::LltError;
 use super::cholesky::{Cholesky, Pattern};
 use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
@@ -12,6 +11,7 @@ use super::element::{Element, Material, NDOF};
 pub use super::sparse::multiply;
 use crate::error::{Error, NumericalKind, Result};
 use crate::union_find::UnionFind;
+use faer::sparse::linalg::LltError;
 use faer::sparse::{SparseColMat, Triplet};
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -157,7 +157,11 @@ fn holds(
                 },
             ),
             (NodeKind::Skin, Some(m)) => (
-                if m.bone_move == [0.0; 3] { FIXED } else { MOVED },
+                if m.bone_move == [0.0; 3] {
+                    FIXED
+                } else {
+                    MOVED
+                },
                 Hold::Fixed(m.bone_move),
             ),
             (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free),
@@ -176,7 +180,12 @@ struct Mucosa {
 /// Skin-kind nodes that face a cavity (no outside air within a voxel of them) and lie within
 /// `[tet] mucosa_gap_mm` of the skull surface: the inner lips and cheeks across the vestibule,
 /// the nasal floor.
-fn mucosa(nodes: &[[f64; 3]], kind: &[NodeKind], scene: &Scene, case: &Case) -> Vec<Option<Mucosa>> {
+fn mucosa(
+    nodes: &[[f64; 3]],
+    kind: &[NodeKind],
+    scene: &Scene,
+    case: &Case,
+) -> Vec<Option<Mucosa>> {
     use rayon::prelude::*;
     let skull = &scene.face.skull;
     let index = crate::compare::SurfaceIndex::new(skull);
@@ -187,7 +196,10 @@ fn mucosa(nodes: &[[f64; 3]], kind: &[NodeKind], scene: &Scene, case: &Case) -> 
             (-1..=1).any(|dj| {
                 (-1..=1).any(|di| {
                     let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
-                    i >= 0 && j >= 0 && k >= 0 && outside.contains(i as usize, j as usize, k as usize)
+                    i >= 0
+                        && j >= 0
+                        && k >= 0
+                        && outside.contains(i as usize, j as usize, k as usize)
                 })
             })
         })
@@ -205,7 +217,10 @@ fn mucosa(nodes: &[[f64; 3]], kind: &[NodeKind], scene: &Scene, case: &Case) -> 
                 return None;
             }
             let tri = skull.triangles[t].map(|v| skull.vertices[v as usize]);
-            let n = crate::mesh::cross(crate::mesh::sub(tri[1], tri[0]), crate::mesh::sub(tri[2], tri[0]));
+            let n = crate::mesh::cross(
+                crate::mesh::sub(tri[1], tri[0]),
+                crate::mesh::sub(tri[2], tri[0]),
+            );
             let len = crate::mesh::norm(n);
             if !(len > 0.0) {
                 return None;
@@ -283,7 +298,9 @@ fn hold_floating_pieces(
     let (label, count) = uf.labels();
     let mut anchored = vec![false; count];
     for (t, q) in tets.iter().enumerate() {
-        if q.iter().any(|n| matches!(constraint[*n as usize], FIXED | MOVED)) {
+        if q.iter()
+            .any(|n| matches!(constraint[*n as usize], FIXED | MOVED))
+        {
             anchored[label[t] as usize] = true;
         }
     }
