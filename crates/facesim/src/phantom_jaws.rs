@@ -305,7 +305,7 @@ fn in_box(b: &[[f64; 2]; 3], p: [f64; 3]) -> bool {
 }
 
 fn mandible(x: f64, y: f64, z: f64) -> bool {
-    if z > CONDYLE[2] + CONDYLE_AXES[2] || z < Z_MENTON - 1.0 {
+    if !(Z_MENTON - 1.0..=CONDYLE[2] + CONDYLE_AXES[2]).contains(&z) {
         return false;
     }
     // Anterior body (in front of the arch centre).
@@ -328,7 +328,7 @@ fn mandible(x: f64, y: f64, z: f64) -> bool {
         let s = rx * dx + ry * dy;
         let m = rx * dy - ry * dx; // + lateral (towards +|x|)
         let bottom = BAR_Z[0] + (m + 0.5 * BODY_MM).powi(2) / 20.0;
-        if s >= -3.0 && s <= len + 3.0 && m <= 0.0 && m >= -BODY_MM && z >= bottom {
+        if s >= -3.0 && s <= len + 3.0 && (-BODY_MM..=0.0).contains(&m) && z >= bottom {
             return true;
         }
     }
