@@ -391,11 +391,20 @@ pub fn predict(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) touch no bone and no region face: held still (thin tissue the mesh separated; a smaller [tet] skin_size_mm resolves it)"
         ));
     }
-    if !constraint.contains(&MOVED) {
-        return Err(Error::config(format!(
-            "case.toml: the plan moves bone, but no node of the tissue mesh lies on moved bone (region {:?}–{:?} mm): the moved bone touches no soft tissue",
-            roi.0, roi.1
-        )));
+    // Each segment must carry tissue: a segment whose bone touches no node of the mesh moves
+    // nothing, and the plan is surely not what was meant.
+    for o in &case.osteotomy {
+        let carried = mesh
+            .nodes
+            .iter()
+            .zip(&mesh.kind)
+            .any(|(p, k)| *k == NodeKind::Bone && o.region.contains(*p));
+        if !carried {
+            return Err(Error::config(format!(
+                "case.toml: osteotomy '{}': no node of the soft-tissue mesh lies on its bone (modelled region {:.0?} to {:.0?} mm): the segment carries no tissue; check its region",
+                o.name, roi.0, roi.1
+            )));
+        }
     }
     let (displacement, newton) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
