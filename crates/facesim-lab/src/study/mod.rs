@@ -17,6 +17,7 @@ pub mod chart;
 pub mod face;
 pub mod mass_spring;
 pub mod metrics;
+pub mod regions;
 pub mod volumetric;
 
 use crate::dynamics::{Block, Integrator, MP1, MP2, relative_energy_error};
