@@ -915,10 +915,10 @@ impl<'a> Study<'a> {
             }
         }
         for e in &evals {
-            if let Some(m) = e.mean_mm {
-                if m < best.2 {
-                    best = (e.k_c, e.struts, m);
-                }
+            if let Some(m) = e.mean_mm
+                && m < best.2
+            {
+                best = (e.k_c, e.struts, m);
             }
         }
         let cal = Calibration {
