@@ -259,6 +259,9 @@ impl Reference {
             // Each full-scan solve is the reference of its own spring set (not a plotted point).
             is_reference: reference,
             mean_displacement_mm: Some(mean_move),
+            elements: None,
+            regions: Vec::new(),
+            distance_c1: None,
             note: Some(format!("reference mean displacement {mean_move:.3} mm")),
         }
     }

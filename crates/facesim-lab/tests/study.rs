@@ -32,6 +32,9 @@ fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
         "error_over_time_rod_mp3.png",
         "accuracy_vs_time_phantom_mandible_advance_6mm.svg",
         "accuracy_vs_time_phantom_mandible_advance_6mm.png",
+        "accuracy_vs_unknowns_phantom_mandible_advance_6mm.png",
+        "regions_phantom_mandible_advance_6mm.png",
+        "calibration_phantom_mandible_advance_6mm.png",
     ] {
         let p = dir.join(f);
         assert!(
@@ -127,11 +130,13 @@ fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
         }
     }
 
-    // Face rows: one reference at distance 0; every other row has distances or says why not.
+    // Face rows: one reference at distance 0, the product's volumetric model; every other row
+    // has distances or says why not.
     let face = s["face"].as_array().unwrap();
     let refs: Vec<&Value> = face.iter().filter(|r| r["is_reference"] == true).collect();
     assert_eq!(refs.len(), 1);
     assert_eq!(refs[0]["distance"]["max"].as_f64(), Some(0.0));
+    assert_eq!(refs[0]["family"], "volumetric FEM (product)", "{}", refs[0]);
     for r in face {
         assert!(r["distance"].is_object() || r["note"].is_string(), "{r}");
         assert!(r["wall_s"].as_f64().unwrap() > 0.0);
@@ -141,6 +146,7 @@ fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
     let families: std::collections::HashSet<&str> =
         face.iter().map(|r| r["family"].as_str().unwrap()).collect();
     for fam in [
+        "volumetric FEM (product)",
         "C1 surface FEM",
         "surface mass-spring",
         "volumetric mass-spring",
@@ -148,11 +154,37 @@ fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
     ] {
         assert!(families.contains(fam), "{fam} missing");
     }
-    // The equilibrium C1 model converges under refinement: coarser meshes are farther from the
-    // finest one.
+    // The volumetric model converges under refinement: its coarser linear rows have fewer
+    // elements and are farther from the reference the coarser they are; the neo-Hookean row
+    // exists and solved.
+    let mut tets: Vec<(usize, f64)> = face
+        .iter()
+        .filter(|r| r["method"] == "tet linear, 4-node" && r["is_reference"] == false)
+        .map(|r| {
+            (
+                r["elements"].as_u64().unwrap() as usize,
+                r["distance"]["mean"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    tets.sort_by_key(|t| t.0);
+    println!("tet linear (elements, mean distance mm): {tets:?}");
+    assert!(tets.len() >= 2, "{tets:?}");
+    let ref_elements = refs[0]["elements"].as_u64().unwrap() as usize;
+    for w in tets.windows(2) {
+        assert!(w[0].1 > w[1].1, "not converging: {tets:?}");
+    }
+    assert!(tets.iter().all(|t| t.0 < ref_elements));
+    let neo = face
+        .iter()
+        .find(|r| r["method"] == "tet neo-Hookean, 4-node")
+        .expect("a neo-Hookean row");
+    assert!(neo["distance"]["mean"].as_f64().is_some(), "{neo}");
+    // The former reference, the finest C1 equilibrium solve, is still measured: distance 0 to
+    // itself, and coarser C1 meshes monotonically farther from it.
     let mut eq: Vec<(usize, f64)> = face
         .iter()
-        .filter(|r| r["method"] == "C1 equilibrium" && r["is_reference"] == false)
+        .filter(|r| r["method"] == "C1 equilibrium")
         .filter_map(|r| {
             let tri: usize = r["resolution"]
                 .as_str()?
@@ -160,15 +192,68 @@ fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
                 .next()?
                 .parse()
                 .ok()?;
-            Some((tri, r["distance"]["mean"].as_f64()?))
+            Some((tri, r["distance_c1"]["mean"].as_f64()?))
         })
         .collect();
     eq.sort_by_key(|x| x.0);
-    println!("C1 equilibrium (triangles, mean distance mm): {eq:?}");
-    assert!(eq.len() >= 2, "{eq:?}");
+    println!("C1 equilibrium (triangles, mean distance to the finest C1 mm): {eq:?}");
+    assert!(eq.len() >= 3, "{eq:?}");
+    assert!(eq.last().unwrap().1 < 1e-9, "{eq:?}");
     for w in eq.windows(2) {
         assert!(w[0].1 > w[1].1, "not converging: {eq:?}");
     }
+    // Regions: the phantom has no mouth, so its landmarks come from proportions; every region
+    // is present with vertices, and every measured row reports each region.
+    let case = &s["face_cases"][0];
+    assert_eq!(case["regions"]["landmarks"]["rule"], "proportional");
+    for info in case["regions"]["summary"].as_array().unwrap() {
+        assert!(info["absent"].is_null(), "{info}");
+        assert!(info["vertices"].as_u64().unwrap() > 20, "{info}");
+    }
+    for r in face.iter().filter(|r| r["distance"].is_object()) {
+        let g = r["regions"].as_array().unwrap();
+        assert_eq!(g.len(), 5, "{}: {g:?}", r["method"]);
+        for g in g {
+            let d = &g["distance"];
+            assert!(d["mean"].as_f64().unwrap() <= d["max"].as_f64().unwrap() + 1e-12);
+        }
+    }
+    // Calibration: the fitted k_c is no worse than the default; the default's evaluation is the
+    // native C1 row's distance, and the calibrated row's distance is the fitted value (the same
+    // figures reached by the calibration's own arithmetic and by the study's distances).
+    let cal = &case["calibration"];
+    let (m0, m1) = (
+        cal["mean_default_mm"].as_f64().unwrap(),
+        cal["mean_mm"].as_f64().unwrap(),
+    );
+    println!(
+        "calibration: k_c {} → {} (struts {}), mean {m0:.4} → {m1:.4} mm in {} solves",
+        cal["k_c_default"],
+        cal["k_c"],
+        cal["struts"],
+        cal["evaluations"].as_array().unwrap().len()
+    );
+    assert!(m1 <= m0, "calibrated {m1} worse than the default {m0}");
+    let native = face
+        .iter()
+        .filter(|r| r["method"] == "C1 equilibrium")
+        .max_by_key(|r| r["unknowns"].as_u64().unwrap())
+        .unwrap();
+    let row_mean = |r: &Value| r["distance"]["mean"].as_f64().unwrap();
+    assert!(
+        (row_mean(native) - m0).abs() < 1e-6,
+        "{} vs {m0}",
+        row_mean(native)
+    );
+    let calibrated = face
+        .iter()
+        .find(|r| r["method"] == "C1 equilibrium, k_c calibrated here")
+        .unwrap();
+    assert!(
+        (row_mean(calibrated) - m1).abs() < 1e-6,
+        "{} vs {m1}",
+        row_mean(calibrated)
+    );
     // Every family is closer to the reference than predicting no change at all would be (that
     // would be the reference's own mean displacement away), and moves the skin by a comparable
     // amount.

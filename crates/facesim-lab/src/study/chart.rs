@@ -226,14 +226,15 @@ pub(crate) fn log_ticks(lo: f64, hi: f64) -> (Vec<f64>, Vec<f64>) {
 /// One plotted point: run time (s), mean distance (mm) and its row.
 type AccuracyPoint<'a> = (f64, f64, &'a FaceRow);
 
-/// The non-reference rows with a distance, floored at 1e-4 for the log axes.
-fn accuracy_points(rows: &[FaceRow]) -> Vec<AccuracyPoint<'_>> {
+/// The non-reference rows with a distance, x = `x_of` (run time or unknowns), floored at 1e-4
+/// for the log axes.
+fn accuracy_points(rows: &[FaceRow], x_of: fn(&FaceRow) -> f64) -> Vec<AccuracyPoint<'_>> {
     rows.iter()
-        .filter(|r| !r.is_reference)
+        .filter(|r| !r.is_reference && x_of(r) > 0.0)
         .filter_map(|r| {
             r.distance
                 .as_ref()
-                .map(|d| (r.wall_s.max(1e-4), d.mean.max(1e-4), r))
+                .map(|d| (x_of(r).max(1e-4), d.mean.max(1e-4), r))
         })
         .collect()
 }
@@ -263,19 +264,20 @@ fn accuracy_bounds(pts: &[AccuracyPoint]) -> (f64, f64, f64, f64) {
     (xmin / 1.6, xmax * 1.6, ymin / 1.6, ymax * 1.6)
 }
 
-fn accuracy_caption(case: &str, reference: Option<&FaceRow>) -> String {
+fn accuracy_caption(case: &str, against: &str, reference: Option<&FaceRow>) -> String {
     match reference {
         Some(r) => format!(
-            "{case}: accuracy vs run time (reference: {} at {}, {:.2} s)",
+            "{case}: accuracy vs {against} (reference: {} at {}, {:.1} s)",
             r.method, r.resolution, r.wall_s
         ),
-        None => format!("{case}: accuracy vs run time"),
+        None => format!("{case}: accuracy vs {against}"),
     }
 }
 
 fn draw_accuracy<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     caption: &str,
+    x_desc: &str,
     pts: &[AccuracyPoint],
     families: &[String],
 ) -> DrawResult
@@ -302,7 +304,7 @@ where
         )?;
     chart
         .configure_mesh()
-        .x_desc("run time (s, springs + model + solve)")
+        .x_desc(x_desc)
         .y_desc("mean distance to reference (mm)")
         .x_label_formatter(&|v| log_tick_label(*v))
         .y_label_formatter(&|v| log_tick_label(*v))
@@ -348,16 +350,261 @@ where
 /// Accuracy (mean distance to the reference, log) against run time (log) for one face case,
 /// a point per method and resolution, the Pareto front joined.
 pub fn accuracy_vs_time(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) -> Result<()> {
-    let pts = accuracy_points(rows);
+    accuracy_vs(
+        dir,
+        stem,
+        case,
+        rows,
+        ("run time", "run time (s, springs + model + solve)"),
+        |r| r.wall_s,
+    )
+}
+
+/// The same against the unknowns each method solves for (log).
+pub fn accuracy_vs_unknowns(dir: &Path, stem: &str, case: &str, rows: &[FaceRow]) -> Result<()> {
+    accuracy_vs(
+        dir,
+        stem,
+        case,
+        rows,
+        ("unknowns", "unknowns (free degrees of freedom)"),
+        |r| r.unknowns as f64,
+    )
+}
+
+fn accuracy_vs(
+    dir: &Path,
+    stem: &str,
+    case: &str,
+    rows: &[FaceRow],
+    (against, x_desc): (&str, &str),
+    x_of: fn(&FaceRow) -> f64,
+) -> Result<()> {
+    let pts = accuracy_points(rows, x_of);
     let families = method_families(&pts);
-    let caption = accuracy_caption(case, rows.iter().find(|r| r.is_reference));
+    let caption = accuracy_caption(case, against, rows.iter().find(|r| r.is_reference));
     both(
         dir,
         stem,
         (1100, 750),
-        &|r| draw_accuracy(r, &caption, &pts, &families),
-        &|r| draw_accuracy(r, &caption, &pts, &families),
+        &|r| draw_accuracy(r, &caption, x_desc, &pts, &families),
+        &|r| draw_accuracy(r, &caption, x_desc, &pts, &families),
     )
+}
+
+/// Per facial region, the mean distance to the reference of selected rows (grouped bars), with
+/// the clinical tools' range of mean errors (0.6–0.9 mm, shaded) and the 2 mm clinicians
+/// accept (dashed).
+pub fn regions(dir: &Path, stem: &str, case: &str, rows: &[&FaceRow]) -> Result<()> {
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        case: &str,
+        rows: &[&FaceRow],
+    ) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let names: Vec<&str> = super::regions::NAMES
+            .iter()
+            .copied()
+            .filter(|n| {
+                rows.iter()
+                    .any(|r| r.regions.iter().any(|g| g.region == *n))
+            })
+            .collect();
+        let ymax = rows
+            .iter()
+            .flat_map(|r| r.regions.iter().map(|g| g.distance.mean))
+            .fold(2.2f64, f64::max)
+            * 1.15;
+        let n = names.len().max(1);
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!("{case}: mean distance to the volumetric reference per facial region"),
+                ("sans-serif", 18),
+            )
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..n as f64, 0.0..ymax)?;
+        let labels = names.clone();
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(2 * n + 1)
+            .x_label_formatter(&move |x| {
+                let f = x - x.floor();
+                if (f - 0.5).abs() < 0.01 {
+                    labels
+                        .get(x.floor() as usize)
+                        .map_or(String::new(), |s| s.to_string())
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc("mean distance (mm)")
+            .draw()?;
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(0.0, 0.6), (n as f64, 0.9)],
+                RGBColor(44, 160, 44).mix(0.15).filled(),
+            )))?
+            .label("clinical tools' mean error 0.6–0.9 mm")
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 5), (x + 18, y + 5)],
+                    RGBColor(44, 160, 44).mix(0.3).filled(),
+                )
+            });
+        chart
+            .draw_series(DashedLineSeries::new(
+                vec![(0.0, 2.0), (n as f64, 2.0)],
+                8,
+                5,
+                RED.stroke_width(2),
+            ))?
+            .label("2 mm: clinically acceptable")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], RED.stroke_width(2)));
+        let w = 0.8 / rows.len().max(1) as f64;
+        for (i, r) in rows.iter().enumerate() {
+            let color = PALETTE[i % PALETTE.len()];
+            let bars: Vec<Rectangle<(f64, f64)>> = names
+                .iter()
+                .enumerate()
+                .filter_map(|(k, name)| {
+                    let g = r.regions.iter().find(|g| g.region == *name)?;
+                    let x0 = k as f64 + 0.1 + i as f64 * w;
+                    Some(Rectangle::new(
+                        [(x0, 0.0), (x0 + w * 0.9, g.distance.mean)],
+                        color.filled(),
+                    ))
+                })
+                .collect();
+            chart
+                .draw_series(bars)?
+                .label(format!("{} ({})", r.method, r.resolution))
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 18, y + 5)], color.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 12))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    both(dir, stem, (1200, 650), &|r| draw(r, case, rows), &|r| {
+        draw(r, case, rows)
+    })
+}
+
+/// The C1 calibration: mean distance to the reference against k_c (log), struts on and off,
+/// the default and the fitted value marked.
+pub fn calibration(dir: &Path, stem: &str, c: &super::face::Calibration) -> Result<()> {
+    fn draw<DB: DrawingBackend>(
+        root: DrawingArea<DB, Shift>,
+        c: &super::face::Calibration,
+    ) -> DrawResult
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let pts: Vec<(f64, f64, bool)> = c
+            .evaluations
+            .iter()
+            .filter_map(|e| e.mean_mm.map(|m| (e.k_c, m, e.struts)))
+            .collect();
+        let (x0, x1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.0), b.max(p.0))
+        });
+        let (y0, y1) = pts.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+            (a.min(p.1), b.max(p.1))
+        });
+        let (x0, x1, y0, y1) = if pts.is_empty() {
+            (1e-7, 1e-5, 0.1, 10.0)
+        } else {
+            (x0 / 1.5, x1 * 1.5, y0 / 1.3, y1 * 1.3)
+        };
+        let ((xb, xl), (yb, yl)) = (log_ticks(x0, x1), log_ticks(y0, y1));
+        let mut chart = ChartBuilder::on(&root)
+            .caption(
+                format!(
+                    "{}: C1 equilibrium vs the volumetric reference — k_c {:.2e} ({}) → {:.3} mm",
+                    c.case,
+                    c.k_c,
+                    if c.struts { "struts" } else { "no struts" },
+                    c.mean_mm
+                ),
+                ("sans-serif", 17),
+            )
+            .margin(12)
+            .x_label_area_size(45)
+            .y_label_area_size(70)
+            .build_cartesian_2d(
+                (x0..x1)
+                    .log_scale()
+                    .with_key_points(xb)
+                    .with_light_points(xl),
+                (y0..y1)
+                    .log_scale()
+                    .with_key_points(yb)
+                    .with_light_points(yl),
+            )?;
+        chart
+            .configure_mesh()
+            .x_desc("k_c (spring stiffness per unit c per mm²)")
+            .y_desc("mean distance to reference (mm)")
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| log_tick_label(*v))
+            .draw()?;
+        for (i, struts) in [true, false].into_iter().enumerate() {
+            let color = PALETTE[i];
+            let mut line: Vec<(f64, f64)> = pts
+                .iter()
+                .filter(|p| p.2 == struts)
+                .map(|p| (p.0, p.1))
+                .collect();
+            line.sort_by(|a, b| a.0.total_cmp(&b.0));
+            chart
+                .draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))?
+                .label(if struts { "struts on" } else { "struts off" })
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                });
+            chart.draw_series(line.iter().map(|p| Circle::new(*p, 4, color.filled())))?;
+        }
+        chart
+            .draw_series(std::iter::once(Cross::new(
+                (c.k_c_default, c.mean_default_mm),
+                9,
+                BLACK.stroke_width(2),
+            )))?
+            .label("default")
+            .legend(|(x, y)| Cross::new((x + 9, y), 6, BLACK.stroke_width(2)));
+        chart
+            .draw_series(std::iter::once(TriangleMarker::new(
+                (c.k_c, c.mean_mm),
+                9,
+                RED.filled(),
+            )))?
+            .label("calibrated")
+            .legend(|(x, y)| TriangleMarker::new((x + 9, y), 6, RED.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 13))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    }
+    both(dir, stem, (1000, 650), &|r| draw(r, c), &|r| draw(r, c))
 }
 
 /// Log-log lines (size, seconds), one per labelled series.
@@ -397,13 +644,19 @@ pub fn loglog(
             .margin(12)
             .x_label_area_size(45)
             .y_label_area_size(70)
-            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())?;
+            .build_cartesian_2d(
+                (x0..x1).log_scale(),
+                (y0..y1)
+                    .log_scale()
+                    .with_key_points(log_ticks(y0, y1).0)
+                    .with_light_points(log_ticks(y0, y1).1),
+            )?;
         chart
             .configure_mesh()
             .x_desc(xlabel)
             .y_desc("wall time (s)")
             .x_label_formatter(&|v| format!("{v:.0e}"))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| log_tick_label(*v))
             .draw()?;
         for (i, (label, pts)) in lines.iter().enumerate() {
             let color = PALETTE[i % PALETTE.len()];

@@ -17,6 +17,7 @@ pub mod chart;
 pub mod face;
 pub mod mass_spring;
 pub mod metrics;
+pub mod regions;
 pub mod volumetric;
 
 use crate::dynamics::{Block, Integrator, MP1, MP2, relative_energy_error};
@@ -66,6 +67,8 @@ pub struct Study {
     pub stability: Vec<StabilityRow>,
     pub findings: Findings,
     pub face: Vec<FaceRow>,
+    /// Per face case: its regions and C1 calibration (its rows are in `face`).
+    pub face_cases: Vec<face::CaseStudy>,
 }
 
 pub fn machine() -> Machine {
@@ -172,8 +175,16 @@ pub fn run(out: &Path, quick: bool, cases: &[PathBuf], progress: &dyn Observer) 
     let stability = benchmarks::stability(quick);
     let found = findings(&benches);
     let mut face = Vec::new();
+    let mut face_cases = Vec::new();
+    // The first case (the phantom) calibrates C1; its k_c is carried to the others.
+    let mut transfer: Option<face::Calibration> = None;
     for c in cases {
-        face.extend(face::study_case(c, quick, progress)?);
+        let mut cs = face::study_case(c, quick, transfer.as_ref(), progress)?;
+        if transfer.is_none() {
+            transfer = cs.calibration.clone();
+        }
+        face.append(&mut cs.rows);
+        face_cases.push(cs);
     }
     let study = Study {
         quick,
@@ -183,6 +194,7 @@ pub fn run(out: &Path, quick: bool, cases: &[PathBuf], progress: &dyn Observer) 
         stability,
         findings: found,
         face,
+        face_cases,
     };
     progress.started("study: writing tables and charts");
     write(out, &study)?;
@@ -251,17 +263,37 @@ fn write(out: &Path, s: &Study) -> Result<()> {
     write_bytes_atomic(&out.join("face.csv"), |w| {
         writeln!(
             w,
-            "case,method,resolution,unknowns,wall_s,peak_mb,mean_mm,p90_mm,max_mm,within_1mm_pct,within_2mm_pct,mean_displacement_mm,reference,note"
+            "case,method,resolution,unknowns,elements,wall_s,peak_mb,mean_mm,p90_mm,max_mm,within_1mm_pct,within_2mm_pct,mean_displacement_mm,reference,c1_reference_mean_mm,{},note",
+            regions::NAMES
+                .iter()
+                .map(|n| {
+                    let n = n.replace(' ', "_");
+                    format!("{n}_vertices,{n}_mean_mm,{n}_p90_mm")
+                })
+                .collect::<Vec<_>>()
+                .join(",")
         )?;
         for r in &s.face {
             let d = r.distance.as_ref();
+            let per_region = regions::NAMES
+                .iter()
+                .map(|n| match r.regions.iter().find(|g| g.region == *n) {
+                    Some(g) => format!(
+                        "{},{:.4},{:.4}",
+                        g.vertices, g.distance.mean, g.distance.p90
+                    ),
+                    None => ",,".into(),
+                })
+                .collect::<Vec<_>>()
+                .join(",");
             writeln!(
                 w,
-                "\"{}\",\"{}\",\"{}\",{},{:.4},{},{},{},{},{},{},{},{},\"{}\"",
+                "\"{}\",\"{}\",\"{}\",{},{},{:.4},{},{},{},{},{},{},{},{},{},{},\"{}\"",
                 r.case,
                 r.method,
                 r.resolution,
                 r.unknowns,
+                r.elements.map_or(String::new(), |e| e.to_string()),
                 r.wall_s,
                 opt(r.peak_mb, 1),
                 opt(d.map(|d| d.mean), 4),
@@ -271,6 +303,8 @@ fn write(out: &Path, s: &Study) -> Result<()> {
                 opt(d.map(|d| d.pct_within_2mm), 1),
                 opt(r.mean_displacement_mm, 4),
                 r.is_reference,
+                opt(r.distance_c1.as_ref().map(|d| d.mean), 4),
+                per_region,
                 r.note.clone().unwrap_or_default().replace('"', "'")
             )?;
         }
@@ -289,9 +323,46 @@ fn write(out: &Path, s: &Study) -> Result<()> {
         let stem = format!("accuracy_vs_time_{}", slug(c));
         chart::accuracy_vs_time(out, &stem, c, &rows)?;
         charts.push(stem);
+        let stem = format!("accuracy_vs_unknowns_{}", slug(c));
+        chart::accuracy_vs_unknowns(out, &stem, c, &rows)?;
+        charts.push(stem);
+        let picked = region_chart_rows(&rows);
+        if !picked.is_empty() {
+            let stem = format!("regions_{}", slug(c));
+            chart::regions(out, &stem, c, &picked)?;
+            charts.push(stem);
+        }
+    }
+    for cs in &s.face_cases {
+        if let Some(cal) = &cs.calibration {
+            let stem = format!("calibration_{}", slug(&cs.case));
+            chart::calibration(out, &stem, cal)?;
+            charts.push(stem);
+        }
     }
     let md = summary(s, &charts);
     write_bytes_atomic(&out.join("summary.md"), |w| w.write_all(md.as_bytes()))
+}
+
+/// The rows the region chart compares: the coarsest product tet row, both material and
+/// element variants, the finest C1 equilibrium row, the calibrated C1 rows, the finest Punak row
+/// and the coarsest lab lattice tets.
+fn region_chart_rows(rows: &[FaceRow]) -> Vec<&FaceRow> {
+    let with = |r: &&FaceRow| !r.is_reference && !r.regions.is_empty();
+    let mut out: Vec<&FaceRow> = Vec::new();
+    let mut first = |pred: &dyn Fn(&FaceRow) -> bool| {
+        if let Some(r) = rows.iter().filter(with).find(|r| pred(r)) {
+            out.push(r);
+        }
+    };
+    first(&|r| r.method.starts_with("tet neo-Hookean"));
+    first(&|r| r.method.contains("10-node"));
+    first(&|r| r.method == "C1 equilibrium");
+    first(&|r| r.method == "C1 equilibrium, k_c calibrated here");
+    first(&|r| r.method.starts_with("C1 equilibrium, k_c from"));
+    first(&|r| r.method == "mass-spring (Punak)");
+    first(&|r| r.method.starts_with("linear tetrahedral FEM"));
+    out
 }
 
 fn summary(s: &Study, charts: &[String]) -> String {
@@ -364,14 +435,14 @@ fn summary(s: &Study, charts: &[String]) -> String {
             r.problem, r.integrator, r.h_crit, r.at_0_9, r.at_1_1, r.at_benchmark_h
         ));
     }
-    line("\n## Face baselines (distances to the reference on its vertices, mm)\n".into());
-    line("Over the skin the plan can move (`[surface] movable`). Mean |d|: the method's own mean displacement there.\n".into());
-    line("| case | method | resolution | unknowns | time (s) | peak heap (MB) | mean | p90 | max | ≤1 mm % | ≤2 mm % | mean |d| | note |".into());
-    line("|---|---|---|---|---|---|---|---|---|---|---|---|---|".into());
+    line("\n## Face models against the volumetric reference (distances on the face's vertices, mm)\n".into());
+    line("Reference: the product's tetrahedral model (`[solve] model = \"tet\"`) at its finest size in the table. Over the skin the plan can move (`[surface] movable`). Mean |d|: the method's own mean displacement there. C1-ref mean: mean distance to the finest C1 equilibrium solve (the former reference). Clinical tools against post-operative scans: mean 0.6–0.9 mm, p90 1.5–1.9 mm; 2 mm is what clinicians accept.\n".into());
+    line("| case | method | resolution | unknowns | time (s) | peak heap (MB) | mean | p90 | max | ≤1 mm % | ≤2 mm % | mean |d| | C1-ref mean | note |".into());
+    line("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|".into());
     for r in &s.face {
         let d = r.distance.as_ref();
         line(format!(
-            "| {} | {}{} | {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {}{} | {} | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.case,
             r.method,
             if r.is_reference { " (reference)" } else { "" },
@@ -385,7 +456,91 @@ fn summary(s: &Study, charts: &[String]) -> String {
             opt(d.map(|d| d.pct_within_1mm), 1),
             opt(d.map(|d| d.pct_within_2mm), 1),
             opt(r.mean_displacement_mm, 2),
+            opt(r.distance_c1.as_ref().map(|d| d.mean), 3),
             r.note.clone().unwrap_or_default()
+        ));
+    }
+    line("\n## Per facial region (mean / p90 distance to the volumetric reference, mm)\n".into());
+    line("Regions: `crates/facesim-lab/src/study/regions.rs` (docs/study.md §2).\n".into());
+    for cs in &s.face_cases {
+        if let Some(rg) = &cs.regions {
+            let l = &rg.landmarks;
+            let z = |v: Option<f64>| v.map_or("—".into(), |v| format!("{v:.1}"));
+            line(format!(
+                "{}: landmarks by {:?} rule; midsagittal x {:.1}, nose tip {:.1?}, z of subnasale {}, labrale superius {}, stomion {}, labrale inferius {}, labiomental fold {}, pogonion {}; profile ends at z {:.1}.",
+                cs.case,
+                l.rule,
+                l.midsagittal_x,
+                l.pronasale,
+                z(l.subnasale_z),
+                z(l.labrale_superius_z),
+                z(l.stomion_z),
+                z(l.labrale_inferius_z),
+                z(l.labiomental_z),
+                z(l.pogonion_z),
+                l.profile_bottom_z
+            ));
+            for i in &rg.summary {
+                line(format!(
+                    "- {}: {} vertices{}{}",
+                    i.region,
+                    i.vertices,
+                    i.absent
+                        .as_ref()
+                        .map_or(String::new(), |a| format!(" — {a}")),
+                    i.note.as_ref().map_or(String::new(), |a| format!(" — {a}"))
+                ));
+            }
+            line(String::new());
+        }
+    }
+    line(format!(
+        "| case | method | resolution | {} |",
+        regions::NAMES.join(" | ")
+    ));
+    line(format!(
+        "|---|---|---|{}",
+        "---|".repeat(regions::NAMES.len())
+    ));
+    for r in s
+        .face
+        .iter()
+        .filter(|r| !r.regions.is_empty() && !r.is_reference)
+    {
+        let cells: Vec<String> = regions::NAMES
+            .iter()
+            .map(|n| {
+                r.regions
+                    .iter()
+                    .find(|g| g.region == *n)
+                    .map_or("absent".into(), |g| {
+                        format!("{:.2} / {:.2}", g.distance.mean, g.distance.p90)
+                    })
+            })
+            .collect();
+        line(format!(
+            "| {} | {} | {} | {} |",
+            r.case,
+            r.method,
+            r.resolution,
+            cells.join(" | ")
+        ));
+    }
+    line("\n## C1 calibrated against the volumetric reference\n".into());
+    line("`[solve] k_c` (and `[springs] struts`) of the C1 equilibrium model on the case's skin, fitted to minimise the mean distance to the reference over the movable face (sweep, then golden section in log k_c). The product default is not changed by the study.\n".into());
+    line("| case | default k_c | struts | mean (mm) | calibrated k_c | struts | mean (mm) | evaluations |".into());
+    line("|---|---|---|---|---|---|---|---|".into());
+    for c in s.face_cases.iter().filter_map(|c| c.calibration.as_ref()) {
+        line(format!(
+            "| {} | {:.3e} | {} | {:.3} | {:.3e} | {} | {:.3} | {} |",
+            c.case,
+            c.k_c_default,
+            if c.struts_default { "on" } else { "off" },
+            c.mean_default_mm,
+            c.k_c,
+            if c.struts { "on" } else { "off" },
+            c.mean_mm,
+            c.evaluations.len()
         ));
     }
     line("\n## Charts\n".into());
