@@ -246,7 +246,7 @@ pub struct Osteotomy {
 pub enum SolveModel {
     Equilibrium,
     Koch1996,
-    /// The volumetric soft-tissue model (`[tet]`, docs/pipeline.md, MODEL.md §9).
+    /// The volumetric soft-tissue model (`[tet]`, docs/pipeline.md "Volumetric soft tissue").
     Tet,
 }
 

@@ -1,4 +1,4 @@
-//! The volumetric model (`[solve] model = "tet"`, MODEL.md §9; docs/pipeline.md "Volumetric
+//! The volumetric model (`[solve] model = "tet"`; docs/pipeline.md "Volumetric
 //! soft tissue"): the soft tissue between skin and bone is meshed with tetrahedra inside the
 //! region the plan reaches, bone nodes follow their segment rigidly, the region's cut faces are
 //! held, the skin is free; the solved displacement carries the face (the extracted skin or the
@@ -41,7 +41,7 @@ impl Volumetric {
             .map_or(&self.mesh.nodes, |q| &q.nodes)
     }
 
-    /// Write tets.vtu (CASE.md): the solved mesh, displacement, constraint codes, cell materials
+    /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell materials
     /// and tissue labels.
     pub fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
         use crate::tet::vtu::{Cells, TetsVtu};
@@ -270,8 +270,8 @@ fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]) -> Vec<No
 }
 
 /// Pieces of the mesh (tetrahedra joined through shared faces; a piece hanging on by a node
-/// or an edge is a hinge) with no node held in place would float: a singular system. Their corner
-/// nodes are held still. Returns the pieces and nodes so held.
+/// or an edge is a hinge) held by fewer than three nodes would float or turn: a singular
+/// system. Their corner nodes are held still. Returns the pieces and nodes so held.
 fn hold_floating_pieces(
     tets: &[[u32; 4]],
     constraint: &mut [u8],
@@ -296,14 +296,23 @@ fn hold_floating_pieces(
         }
     }
     let (label, count) = uf.labels();
-    let mut anchored = vec![false; count];
+    // A piece is anchored by three or more held nodes (one or two let it turn about them).
+    let mut held_nodes: Vec<Vec<u32>> = vec![Vec::new(); count];
     for (t, q) in tets.iter().enumerate() {
-        if q.iter()
-            .any(|n| matches!(constraint[*n as usize], FIXED | MOVED))
-        {
-            anchored[label[t] as usize] = true;
+        for n in q {
+            if matches!(constraint[*n as usize], FIXED | MOVED) {
+                held_nodes[label[t] as usize].push(*n);
+            }
         }
     }
+    let anchored: Vec<bool> = held_nodes
+        .iter_mut()
+        .map(|h| {
+            h.sort_unstable();
+            h.dedup();
+            h.len() >= 3
+        })
+        .collect();
     // A node no tetrahedron uses (one of a flattened sliver left out of the mesh) carries no
     // stiffness: hold it.
     let mut used = vec![false; constraint.len()];
