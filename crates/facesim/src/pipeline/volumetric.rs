@@ -397,7 +397,7 @@ pub fn predict(
     let (pieces, held_still) = hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold);
     if pieces > 0 {
         rec.warn(format!(
-            "{pieces} pieces of the tissue mesh ({held_still} nodes) touch no bone and no region face: held still (thin tissue the mesh separated; a smaller [tet] skin_size_mm resolves it)"
+            "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
         ));
     }
     // Each segment must carry tissue: a segment whose bone touches no node of the mesh moves
