@@ -97,6 +97,8 @@ pub struct TetReport {
     /// Linear material: elements the solved displacement turns inside out (the move is too
     /// large for small-strain elasticity; the nonlinear material handles it).
     pub inverted_elements: usize,
+    /// Of those, the ones with nodes on both moved and held bone (the osteotomy's gap).
+    pub inverted_between_moved_and_held_bone: usize,
     /// Nonlinear material: the load steps.
     pub newton: Option<Vec<NewtonStep>>,
     /// Face vertices farther from the mesh's skin than the reach (they stay at rest).
@@ -439,13 +441,23 @@ pub fn predict(
                 }
             }
         })?;
-    let inverted = match &quadratic {
-        Some(q) => q.inverted_after(&displacement).len(),
-        None => linear.inverted_after(&displacement).len(),
+    let inverted_tets = match &quadratic {
+        Some(q) => q.inverted_after(&displacement),
+        None => linear.inverted_after(&displacement),
     };
+    // Tetrahedra spanning moved and held bone (the osteotomy's gap, where the plan shears the
+    // tissue between bone pieces) are told apart from those a large move inverts elsewhere.
+    let at_cuts = inverted_tets
+        .iter()
+        .filter(|t| {
+            let c = mesh.tets[**t].map(|n| constraint[n as usize]);
+            c.contains(&MOVED) && c.contains(&FIXED)
+        })
+        .count();
+    let inverted = inverted_tets.len();
     if inverted > 0 {
         rec.warn(format!(
-            "the predicted move turns {inverted} of {} tetrahedra inside out (where moved and held bone meet, or a move too large for small strain): [tet] material = \"neo-hookean\" keeps them valid",
+            "the predicted move turns {inverted} of {} tetrahedra inside out ({at_cuts} of them span moved and held bone, where the osteotomy shears the tissue between bone pieces): [tet] material = \"neo-hookean\" keeps elements valid for large moves",
             mesh.tets.len()
         ));
     }
@@ -488,6 +500,7 @@ pub fn predict(
         fixed_nodes: counted(&constraint, FIXED),
         quality: mesh.quality.clone(),
         inverted_elements: inverted,
+        inverted_between_moved_and_held_bone: at_cuts,
         newton,
         face_vertices_unreached: embedding.unreached(),
         face_to_mesh_mm: stats(&reached),
