@@ -23,10 +23,10 @@
 //! `tests/tet_mesh.rs` checks it.
 
 use super::stuffing::{
-    ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, MAX_DIHEDRAL_BOUND_DEG, MIN_DIHEDRAL_BOUND_DEG,
-    NodeKind, Ref, Stuffed, classify, fill, orient, sub,
+    ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, NodeKind, Places, Ref, Stuffed, classify, compact,
+    fill, orient, sub,
 };
-use crate::error::{Error, NumericalKind, Result};
+use crate::error::{Error, Result};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -540,91 +540,20 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
             out
         })
         .collect();
-    let mut vertex_node = vec![u32::MAX; np];
-    let mut cut_node = vec![u32::MAX; cuts.len()];
-    let mut nodes: Vec<[f64; 3]> = Vec::new();
-    let mut node_kind: Vec<NodeKind> = Vec::new();
-    let mut tets: Vec<[u32; 4]> = Vec::new();
-    let mut flattened = 0;
-    for Filled {
-        tets: local,
-        centres,
-    } in &filled
-    {
-        let mean = |x: [[f64; 3]; 6]| [0, 1, 2].map(|a| x.iter().map(|p| p[a]).sum::<f64>() / 6.0);
-        let first_centre = nodes.len() as u32;
-        for c in centres {
-            nodes.push(mean(c.map(position)));
-            node_kind.push(NodeKind::Interior);
-        }
-        let centre_ref: Vec<[f64; 3]> = centres.iter().map(|c| mean(c.map(reference))).collect();
-        let refpos = |r: Ref| match r {
-            Ref::Centre(k) => centre_ref[k],
-            other => reference(other),
-        };
-        for t in local {
-            let mut r = *t;
-            if orient(r.map(refpos)) < 0.0 {
-                r.swap(2, 3);
-            }
-            if t.iter()
-                .all(|r| matches!(r, Ref::Vertex(v) if sign[*v] == 0))
-            {
-                // All four corners on the surface (see `stuffing::stuff`, step 6).
-                let x = t.map(position);
-                let c = [0, 1, 2].map(|a| 0.25 * (x[0][a] + x[1][a] + x[2][a] + x[3][a]));
-                let d = [0, 1, 2].map(|a| (c[a] - bg.origin[a]) / bg.unit);
-                if !(f(c) < 0.0 && bg.g(d) < 0.0) {
-                    continue;
-                }
-                let within = super::quality::tet_shape(r.map(position)).is_some_and(|(a, _, _)| {
-                    a.iter()
-                        .all(|x| (MIN_DIHEDRAL_BOUND_DEG..=MAX_DIHEDRAL_BOUND_DEG).contains(x))
-                });
-                if !within {
-                    flattened += 1;
-                    continue;
-                }
-            }
-            let mut tet = [0u32; 4];
-            for k in 0..4 {
-                tet[k] = match r[k] {
-                    Ref::Vertex(v) => {
-                        if vertex_node[v] == u32::MAX {
-                            vertex_node[v] = nodes.len() as u32;
-                            nodes.push(vertex_point(v));
-                            node_kind.push(kind[v]);
-                        }
-                        vertex_node[v]
-                    }
-                    Ref::Cut(c) => {
-                        if cut_node[c] == u32::MAX {
-                            cut_node[c] = nodes.len() as u32;
-                            nodes.push(cut_point(&cuts[c]));
-                            node_kind.push(cuts[c].kind);
-                        }
-                        cut_node[c]
-                    }
-                    Ref::Centre(k) => first_centre + k as u32,
-                };
-            }
-            tets.push(tet);
-        }
-    }
-    let bad = tets
-        .par_iter()
-        .filter(|t| super::gradients(t.map(|v| nodes[v as usize])).is_none())
-        .count();
-    if bad > 0 {
-        return Err(Error::numerical(
-            NumericalKind::DegenerateElement,
-            format!("graded stuffing produced {bad} flat or inverted tetrahedra"),
-        ));
-    }
-    Ok(Stuffed {
-        nodes,
-        tets,
-        kind: node_kind,
-        flattened,
-    })
+    compact(
+        &filled,
+        (np, cuts.len()),
+        &|v| sign[v] == 0,
+        &|c| {
+            let d = [0, 1, 2].map(|a| (c[a] - bg.origin[a]) / bg.unit);
+            f(c) < 0.0 && bg.g(d) < 0.0
+        },
+        &Places {
+            position: &position,
+            reference: &reference,
+            vertex: &|v| (vertex_point(v), kind[v]),
+            cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
+        },
+        "graded stuffing",
+    )
 }

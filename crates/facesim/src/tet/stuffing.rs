@@ -494,9 +494,66 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
         })
         .collect();
 
-    // Compact the used references into nodes.
-    let mut vertex_node = vec![u32::MAX; nv];
-    let mut cut_node = vec![u32::MAX; cuts.len()];
+    compact(
+        &filled,
+        (nv, cuts.len()),
+        &|v| sign[v] == 0,
+        &|c| {
+            let d = [0, 1, 2].map(|a| (c[a] - lat.origin[a]) * 2.0 / lat.h);
+            f(c) < 0.0 && lat.g(d) < 0.0
+        },
+        &Places {
+            position: &position,
+            reference: &reference,
+            vertex: &|v| (vertex_point(v), kind[v]),
+            cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
+        },
+        "stuffing",
+    )
+}
+
+/// Where the references of the filled stencils lie: their positions, their reference positions
+/// (unwarped, for orientation) and, for lattice vertices and cut points, the node they become.
+pub(super) struct Places<'a> {
+    pub(super) position: &'a dyn Fn(Ref) -> [f64; 3],
+    pub(super) reference: &'a dyn Fn(Ref) -> [f64; 3],
+    pub(super) vertex: &'a dyn Fn(usize) -> ([f64; 3], NodeKind),
+    pub(super) cut: &'a dyn Fn(usize) -> ([f64; 3], NodeKind),
+}
+
+/// The filled stencils as a mesh (the uniform and the graded stuffing share it): each used
+/// lattice vertex, cut point and prism centre becomes one node; tetrahedra are oriented
+/// positively by their reference positions. A tetrahedron whose four corners were all warped
+/// onto the surface (`on_surface`) is kept when `inside` holds at its centroid, unless the warp
+/// flattened it (two long edges pulled towards each other onto a surface lying between two
+/// lattice layers): such a sliver is left out and counted — that moves the boundary by its
+/// thickness, and any choice conforms (its faces are whole lattice faces).
+/// The node a lattice vertex or cut point becomes: made at its first use.
+fn node_of(
+    slot: &mut u32,
+    place: impl FnOnce() -> ([f64; 3], NodeKind),
+    nodes: &mut Vec<[f64; 3]>,
+    kinds: &mut Vec<NodeKind>,
+) -> u32 {
+    if *slot == u32::MAX {
+        let (p, k) = place();
+        *slot = nodes.len() as u32;
+        nodes.push(p);
+        kinds.push(k);
+    }
+    *slot
+}
+
+pub(super) fn compact(
+    filled: &[Filled],
+    (vertices, cuts): (usize, usize),
+    on_surface: &dyn Fn(usize) -> bool,
+    inside: &dyn Fn([f64; 3]) -> bool,
+    at: &Places,
+    what: &str,
+) -> Result<Stuffed> {
+    let mut vertex_node = vec![u32::MAX; vertices];
+    let mut cut_node = vec![u32::MAX; cuts];
     let mut nodes: Vec<[f64; 3]> = Vec::new();
     let mut node_kind: Vec<NodeKind> = Vec::new();
     let mut tets: Vec<[u32; 4]> = Vec::new();
@@ -504,79 +561,63 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
     for Filled {
         tets: local,
         centres,
-    } in &filled
+    } in filled
     {
         // Centre points: one new interior node each, at the mean of its prism's corners.
         let mean = |x: [[f64; 3]; 6]| [0, 1, 2].map(|a| x.iter().map(|p| p[a]).sum::<f64>() / 6.0);
         let first_centre = nodes.len() as u32;
         for c in centres {
-            nodes.push(mean(c.map(position)));
+            nodes.push(mean(c.map(at.position)));
             node_kind.push(NodeKind::Interior);
         }
-        let centre_ref: Vec<[f64; 3]> = centres.iter().map(|c| mean(c.map(reference))).collect();
+        let centre_ref: Vec<[f64; 3]> = centres.iter().map(|c| mean(c.map(at.reference))).collect();
+        let refpos = |r: Ref| match r {
+            Ref::Centre(k) => centre_ref[k],
+            other => (at.reference)(other),
+        };
         for t in local {
+            let mut r = *t;
+            if orient(r.map(refpos)) < 0.0 {
+                r.swap(2, 3);
+            }
             if t.iter()
-                .all(|r| matches!(r, Ref::Vertex(v) if sign[*v] == 0))
+                .all(|r| matches!(r, Ref::Vertex(v) if on_surface(*v)))
             {
-                // All four corners warped onto the surface: kept when the domain holds its
-                // centroid, unless the warp flattened it (two long edges pulled towards each
-                // other onto a surface lying between two lattice layers). A flattened one is
-                // a sliver of surface: leaving it out moves the boundary by its thickness,
-                // and any choice here conforms (its faces are whole lattice faces).
-                let x = t.map(position);
+                let x = t.map(at.position);
                 let c = [0, 1, 2].map(|a| 0.25 * (x[0][a] + x[1][a] + x[2][a] + x[3][a]));
-                let d = [0, 1, 2].map(|a| (c[a] - lat.origin[a]) * 2.0 / lat.h);
-                if !(f(c) < 0.0 && lat.g(d) < 0.0) {
+                if !inside(c) {
                     continue;
                 }
-                let mut r = *t;
-                if orient(r.map(reference)) < 0.0 {
-                    r.swap(2, 3);
-                }
-                let within = super::quality::tet_shape(r.map(position)).is_some_and(|(a, _, _)| {
-                    a.iter()
-                        .all(|x| (MIN_DIHEDRAL_BOUND_DEG..=MAX_DIHEDRAL_BOUND_DEG).contains(x))
-                });
+                let within =
+                    super::quality::tet_shape(r.map(at.position)).is_some_and(|(a, _, _)| {
+                        a.iter()
+                            .all(|x| (MIN_DIHEDRAL_BOUND_DEG..=MAX_DIHEDRAL_BOUND_DEG).contains(x))
+                    });
                 if !within {
                     flattened += 1;
                     continue;
                 }
             }
-            let mut r = *t;
-            let refpos = |r: Ref| match r {
-                Ref::Centre(k) => centre_ref[k],
-                other => reference(other),
-            };
-            if orient(r.map(refpos)) < 0.0 {
-                r.swap(2, 3);
-            }
             let mut tet = [0u32; 4];
             for k in 0..4 {
                 tet[k] = match r[k] {
-                    Ref::Vertex(v) => {
-                        if vertex_node[v] == u32::MAX {
-                            vertex_node[v] = nodes.len() as u32;
-                            nodes.push(vertex_point(v));
-                            node_kind.push(kind[v]);
-                        }
-                        vertex_node[v]
-                    }
+                    Ref::Vertex(v) => node_of(
+                        &mut vertex_node[v],
+                        || (at.vertex)(v),
+                        &mut nodes,
+                        &mut node_kind,
+                    ),
                     Ref::Cut(c) => {
-                        if cut_node[c] == u32::MAX {
-                            cut_node[c] = nodes.len() as u32;
-                            nodes.push(cut_point(&cuts[c]));
-                            node_kind.push(cuts[c].kind);
-                        }
-                        cut_node[c]
+                        node_of(&mut cut_node[c], || (at.cut)(c), &mut nodes, &mut node_kind)
                     }
-                    Ref::Centre(k) => first_centre + k as u32,
+                    Ref::Centre(c) => first_centre + c as u32,
                 };
             }
             tets.push(tet);
         }
     }
     if nodes.len() > u32::MAX as usize / 2 {
-        return Err(Error::config("stuffing: too many nodes"));
+        return Err(Error::config(format!("{what}: too many nodes")));
     }
     let bad = tets
         .par_iter()
@@ -585,7 +626,7 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
     if bad > 0 {
         return Err(Error::numerical(
             NumericalKind::DegenerateElement,
-            format!("stuffing produced {bad} flat or inverted tetrahedra"),
+            format!("{what} produced {bad} flat or inverted tetrahedra"),
         ));
     }
     Ok(Stuffed {
