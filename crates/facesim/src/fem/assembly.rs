@@ -4,7 +4,7 @@
 //!
 //! The DOF numbering is fem/dofs.rs's.
 
-use super::cholesky::{Cholesky, Pattern};
+use super::cholesky::{Cholesky, Ordering, Pattern};
 use super::dofs::{Dofs, Owner};
 use super::element::{Element, Material, NDOF};
 /// The symmetric product, re-exported where K's triplets come from.
@@ -331,12 +331,22 @@ pub struct System {
 impl System {
     /// Factor K restricted to the DOFs not in `fixed`.
     pub fn new(n: usize, k: Vec<(usize, usize, f64)>, fixed: &[bool]) -> Result<System> {
+        Self::with_ordering(n, k, fixed, Ordering::Amd)
+    }
+
+    /// As `new`, with the factor's fill-reducing ordering chosen.
+    pub fn with_ordering(
+        n: usize,
+        k: Vec<(usize, usize, f64)>,
+        fixed: &[bool],
+        ordering: Ordering,
+    ) -> Result<System> {
         let (free_index, free) = free_dofs(&fixed[..n]);
         // faer runs sequentially (fem/cholesky.rs says why), its dense kernels too.
         faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
-        let symbolic = Pattern::analyse(mat.symbolic()).map_err(|e| {
+        let symbolic = Pattern::analyse_with(mat.symbolic(), ordering).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
         })?;
         let bytes = symbolic

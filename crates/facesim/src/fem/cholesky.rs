@@ -8,6 +8,7 @@
 //! parallelises the element work instead.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::perm::PermRef;
 use faer::sparse::linalg::LltError;
 use faer::sparse::linalg::cholesky::{
     CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
@@ -24,12 +25,38 @@ pub use faer::sparse::FaerError;
 #[derive(Clone)]
 pub struct Pattern(Arc<SymbolicCholesky<usize>>);
 
+/// The fill-reducing ordering of a factorisation (fem/ordering.rs says when each wins).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Ordering {
+    /// Approximate minimum degree (faer): the surface models.
+    Amd,
+    /// Nested dissection (METIS) on the DOF groups: the volumetric meshes; AMD if METIS fails.
+    NestedDissection,
+}
+
 impl Pattern {
     pub fn analyse(lower: SymbolicSparseColMatRef<'_, usize>) -> Result<Pattern, FaerError> {
+        Self::analyse_with(lower, Ordering::Amd)
+    }
+
+    pub fn analyse_with(
+        lower: SymbolicSparseColMatRef<'_, usize>,
+        ordering: Ordering,
+    ) -> Result<Pattern, FaerError> {
+        let nd = match ordering {
+            Ordering::Amd => None,
+            Ordering::NestedDissection => super::ordering::nested_dissection(lower),
+        };
+        let order = match &nd {
+            Some((fwd, inv)) => {
+                SymmetricOrdering::Custom(PermRef::new_checked(fwd, inv, fwd.len()))
+            }
+            None => SymmetricOrdering::Amd,
+        };
         let s = factorize_symbolic_cholesky(
             lower,
             Side::Lower,
-            SymmetricOrdering::Amd,
+            order,
             CholeskySymbolicParams::default(),
         )?;
         Ok(Pattern(Arc::new(s)))

@@ -5,6 +5,7 @@ pub mod cholesky;
 pub mod dofs;
 pub mod element;
 pub mod jet;
+pub mod ordering;
 pub mod pcg;
 pub mod precond;
 pub mod preload;

@@ -17,6 +17,7 @@
 
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
+use crate::fem::cholesky::Ordering;
 
 /// A node's boundary condition (displacements in mm, LPS).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -267,7 +268,7 @@ impl Constrained {
             .iter()
             .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
-        let sys = System::new(3 * nodes, rotate_lower(k, &frames), &fixed).map_err(|e| match e {
+        let sys = System::with_ordering(3 * nodes, rotate_lower(k, &frames), &fixed, Ordering::NestedDissection).map_err(|e| match e {
             Error::Numerical {
                 kind: NumericalKind::Singular,
                 ..

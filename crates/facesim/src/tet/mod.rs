@@ -21,6 +21,7 @@
 //! Node n's displacement components are DOFs 3n, 3n + 1, 3n + 2. Units: mm, kPa (any consistent
 //! units give the same displacements, which are all a prescribed-displacement problem yields).
 
+pub mod blocks;
 pub mod embed;
 pub mod from_ct;
 pub mod graded;
@@ -35,6 +36,7 @@ pub use holds::{Constrained, Hold, Loads};
 
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
+use crate::fem::cholesky::Ordering;
 
 /// Young's modulus (kPa) and Poisson ratio of an element.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,31 +116,20 @@ impl TetMesh {
         3 * self.nodes.len()
     }
 
-    /// K's lower triangle as triplets (duplicates summed by the factorisation); an inverted or
+    /// K's lower triangle as triplets, one per entry; an inverted or
     /// flat tetrahedron is a reported failure naming it.
     pub fn assemble(&self) -> Result<Vec<(usize, usize, f64)>> {
-        let mut k = Vec::with_capacity(self.tets.len() * 78);
-        for (t, (tet, m)) in self.tets.iter().zip(&self.material).enumerate() {
-            let x = tet.map(|n| self.nodes[n as usize]);
-            let ke = element_stiffness(x, *m).ok_or_else(|| {
-                Error::numerical(
-                    NumericalKind::DegenerateElement,
-                    format!("tetrahedron {t} (nodes {tet:?}) is flat or inverted"),
-                )
-            })?;
-            for a in 0..12 {
-                for b in 0..=a {
-                    let (ga, gb) = (
-                        3 * tet[a / 3] as usize + a % 3,
-                        3 * tet[b / 3] as usize + b % 3,
-                    );
-                    let (r, c) = if ga >= gb { (ga, gb) } else { (gb, ga) };
-                    // The four nodes differ, so each unordered global pair comes once.
-                    k.push((r, c, ke[a][b]));
-                }
-            }
-        }
-        Ok(k)
+        blocks::lower_triplets(self.nodes.len(), &self.tets, |t| {
+            let tet = self.tets[t];
+            element_stiffness(tet.map(|n| self.nodes[n as usize]), self.material[t]).ok_or_else(
+                || {
+                    Error::numerical(
+                        NumericalKind::DegenerateElement,
+                        format!("tetrahedron {t} (nodes {tet:?}) is flat or inverted"),
+                    )
+                },
+            )
+        })
     }
 
     /// Small-strain linear elasticity with per-node holds (fixed, sliding, on a rail or free) and
@@ -177,7 +168,7 @@ impl TetMesh {
                 "volumetric model: no node is held (no bone in the region): the tissue would float",
             ));
         }
-        let sys = System::new(n, self.assemble()?, fixed).map_err(|e| match e {
+        let sys = System::with_ordering(n, self.assemble()?, fixed, Ordering::NestedDissection).map_err(|e| match e {
             Error::Numerical { kind, .. } => Error::numerical(
                 kind,
                 "the tetrahedral stiffness matrix is singular: a piece of tissue is held by no node",

@@ -32,6 +32,7 @@ use super::holds::{Frame, Hold, Loads, frames, rotate_lower, to_global, to_local
 use super::{Elastic, TetMesh, gradients};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
+use crate::fem::cholesky::Ordering;
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 
@@ -202,10 +203,9 @@ pub fn internal_state(mesh: &TetMesh, u: &[[f64; 3]], with_tangent: bool) -> Res
         .collect();
     let mut energy = 0.0;
     let mut f = vec![0.0; mesh.ndof()];
-    let mut k = Vec::with_capacity(if with_tangent { 78 * per.len() } else { 0 });
-    for (e, s) in per.into_iter().enumerate() {
+    for (e, s) in per.iter().enumerate() {
         let tet = mesh.tets[e];
-        let (w, fe, ke) = s.ok_or_else(|| {
+        let (w, fe, _) = s.as_ref().ok_or_else(|| {
             Error::numerical(
                 NumericalKind::DegenerateElement,
                 format!(
@@ -214,19 +214,20 @@ pub fn internal_state(mesh: &TetMesh, u: &[[f64; 3]], with_tangent: bool) -> Res
             )
         })?;
         energy += w;
-        let dof = |a: usize| 3 * tet[a / 3] as usize + a % 3;
         for a in 0..12 {
-            f[dof(a)] += fe[a];
-        }
-        if let Some(ke) = ke {
-            for a in 0..12 {
-                for b in 0..=a {
-                    let (ga, gb) = (dof(a), dof(b));
-                    k.push((ga.max(gb), ga.min(gb), ke[a][b]));
-                }
-            }
+            f[3 * tet[a / 3] as usize + a % 3] += fe[a];
         }
     }
+    let k = if with_tangent {
+        super::blocks::lower_triplets(mesh.nodes.len(), &mesh.tets, |e| {
+            per[e]
+                .as_ref()
+                .and_then(|(_, _, ke)| ke.as_deref())
+                .ok_or_else(|| Error::numerical(NumericalKind::Singular, "no element tangent"))
+        })?
+    } else {
+        Vec::new()
+    };
     Ok(Internal {
         energy,
         forces: f,
@@ -526,7 +527,14 @@ impl Solver<'_> {
         let kl = rotate_lower(k, &self.frames);
         match &mut self.sys {
             Some(sys) => sys.refactor(kl)?,
-            None => self.sys = Some(System::new(rl.len(), kl, &self.fixed)?),
+            None => {
+                self.sys = Some(System::with_ordering(
+                    rl.len(),
+                    kl,
+                    &self.fixed,
+                    Ordering::NestedDissection,
+                )?)
+            }
         }
         let sys = self
             .sys

@@ -144,10 +144,10 @@ impl Tet10Mesh {
 
     /// K's lower triangle as triplets; a flat or inverted tetrahedron is a reported failure.
     pub fn assemble(&self) -> Result<Vec<(usize, usize, f64)>> {
-        let mut k = Vec::with_capacity(self.tets.len() * 465);
-        for (t, (tet, m)) in self.tets.iter().zip(&self.material).enumerate() {
+        super::blocks::lower_triplets(self.nodes.len(), &self.tets, |t| {
+            let tet = self.tets[t];
             let x = [0, 1, 2, 3].map(|c| self.nodes[tet[c] as usize]);
-            let ke = element_stiffness(x, *m, self.rule).ok_or_else(|| {
+            element_stiffness(x, self.material[t], self.rule).ok_or_else(|| {
                 Error::numerical(
                     NumericalKind::DegenerateElement,
                     format!(
@@ -155,18 +155,8 @@ impl Tet10Mesh {
                         &tet[..4]
                     ),
                 )
-            })?;
-            for a in 0..30 {
-                for b in 0..=a {
-                    let (ga, gb) = (
-                        3 * tet[a / 3] as usize + a % 3,
-                        3 * tet[b / 3] as usize + b % 3,
-                    );
-                    k.push((ga.max(gb), ga.min(gb), ke[a][b]));
-                }
-            }
-        }
-        Ok(k)
+            })
+        })
     }
 
     /// The consistent nodal forces of `loads`: a uniform pressure on a flat 6-node triangle puts
