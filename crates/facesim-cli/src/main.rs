@@ -38,6 +38,24 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
+    /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
+    /// re-solving (docs/plan-basis.md).
+    Replan {
+        out_dir: PathBuf,
+        plan: PathBuf,
+        /// Output directory (default OUT_DIR/replan).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Many plans (SWEEP.toml: `[[plan]]` entries and/or a `[grid]`, docs/case.md) from the plan
+    /// basis in a run's OUT_DIR: sweep.csv and sweep.svg in --out.
+    Sweep {
+        out_dir: PathBuf,
+        sweep: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
         dir: PathBuf,
@@ -150,6 +168,8 @@ fn main() -> ExitCode {
         Cmd::Render { meshes, .. } => meshes.first().map(|m| m.display().to_string()),
         Cmd::Phantom { dir, .. } => Some(dir.display().to_string()),
         Cmd::Bench { .. } => None,
+        Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
+        Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
     };
     if let Some(s) = subject {
         let _ = SUBJECT.set(s);
@@ -182,6 +202,25 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             anatomy,
         } => cmd_phantom(&dir, spacing, slice, noise, scan_step, &anatomy),
         Cmd::Inspect { path } => cmd_inspect(&path),
+        Cmd::Replan { out_dir, plan, out } => {
+            let r = facesim::plan::replan::replan(&out_dir, &plan, out.as_deref())?;
+            eprintln!(
+                "replanned from {}: {} (max displacement {:.2} mm)",
+                out_dir.display(),
+                r.out_dir.display(),
+                r.report.displacement.max
+            );
+            Ok(())
+        }
+        Cmd::Sweep {
+            out_dir,
+            sweep,
+            out,
+        } => {
+            let rows = facesim::plan::sweep::sweep(&out_dir, &sweep, &out)?;
+            eprintln!("{} plans: {}", rows.len(), out.join("sweep.csv").display());
+            Ok(())
+        }
         Cmd::Bench {
             what,
             out,
