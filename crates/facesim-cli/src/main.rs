@@ -80,9 +80,11 @@ enum Cmd {
     Inspect { path: PathBuf },
     /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
     /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
-    /// `embed` = a dense face scan solved whole against coarse models + shell embedding.
+    /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
+    /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
+    /// run's output directory; --case: the case.toml, default data-samples/real/case.toml).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "replan"])]
         what: String,
         /// Output directory for `scaling` and `embed`.
         #[arg(long)]
@@ -96,6 +98,9 @@ enum Cmd {
         /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.sh).
         #[arg(long)]
         export: Option<PathBuf>,
+        /// `replan`: the case whose run builds the basis.
+        #[arg(long)]
+        case: Option<PathBuf>,
     },
     /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
     Render {
@@ -227,8 +232,10 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             quick,
             triangles,
             export,
+            case,
         } => match what.as_str() {
             "scaling" => cmd_bench_scaling(out, quick),
+            "replan" => cmd_bench_replan(case, out),
             "embed" => cmd_bench_embed(out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
         },
@@ -332,6 +339,24 @@ fn cmd_bench_embed(out: Option<PathBuf>, quick: bool) -> Result<()> {
             d.map_or(f64::NAN, |d| d.max)
         );
     }
+    Ok(())
+}
+
+fn cmd_bench_replan(case: Option<PathBuf>, out: Option<PathBuf>) -> Result<()> {
+    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/real/case.toml"));
+    let out = out.ok_or_else(|| Error::config("bench replan: --out DIR is required"))?;
+    let b = facesim_lab::bench_replan::run(&case, &out, 200)?;
+    println!(
+        "face {} vertices, {} segments: predict {:.3} ms (median of {}), one pass over the basis {:.3} ms, run {:.1} s (plan basis {:.2} s) = {:.0}x predict",
+        b.face_vertices,
+        b.segments,
+        b.predict_ms,
+        b.repeats,
+        b.memory_pass_ms,
+        b.run_s,
+        b.basis_s,
+        b.run_s * 1e3 / b.predict_ms
+    );
     Ok(())
 }
 
