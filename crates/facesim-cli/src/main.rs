@@ -38,6 +38,24 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
+    /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
+    /// re-solving (docs/plan-basis.md).
+    Replan {
+        out_dir: PathBuf,
+        plan: PathBuf,
+        /// Output directory (default OUT_DIR/replan).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Many plans (SWEEP.toml: `[[plan]]` entries and/or a `[grid]`, docs/case.md) from the plan
+    /// basis in a run's OUT_DIR: sweep.csv and sweep.svg in --out.
+    Sweep {
+        out_dir: PathBuf,
+        sweep: PathBuf,
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
         dir: PathBuf,
@@ -62,9 +80,11 @@ enum Cmd {
     Inspect { path: PathBuf },
     /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
     /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
-    /// `embed` = a dense face scan solved whole against coarse models + shell embedding.
+    /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
+    /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
+    /// run's output directory; --case: the case.toml, default data-samples/real/case.toml).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "replan"])]
         what: String,
         /// Output directory for `scaling` and `embed`.
         #[arg(long)]
@@ -78,6 +98,9 @@ enum Cmd {
         /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.sh).
         #[arg(long)]
         export: Option<PathBuf>,
+        /// `replan`: the case whose run builds the basis.
+        #[arg(long)]
+        case: Option<PathBuf>,
     },
     /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
     Render {
@@ -150,6 +173,8 @@ fn main() -> ExitCode {
         Cmd::Render { meshes, .. } => meshes.first().map(|m| m.display().to_string()),
         Cmd::Phantom { dir, .. } => Some(dir.display().to_string()),
         Cmd::Bench { .. } => None,
+        Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
+        Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
     };
     if let Some(s) = subject {
         let _ = SUBJECT.set(s);
@@ -182,14 +207,35 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             anatomy,
         } => cmd_phantom(&dir, spacing, slice, noise, scan_step, &anatomy),
         Cmd::Inspect { path } => cmd_inspect(&path),
+        Cmd::Replan { out_dir, plan, out } => {
+            let r = facesim::plan::replan::replan(&out_dir, &plan, out.as_deref())?;
+            eprintln!(
+                "replanned from {}: {} (max displacement {:.2} mm)",
+                out_dir.display(),
+                r.out_dir.display(),
+                r.report.displacement.max
+            );
+            Ok(())
+        }
+        Cmd::Sweep {
+            out_dir,
+            sweep,
+            out,
+        } => {
+            let rows = facesim::plan::sweep::sweep(&out_dir, &sweep, &out)?;
+            eprintln!("{} plans: {}", rows.len(), out.join("sweep.csv").display());
+            Ok(())
+        }
         Cmd::Bench {
             what,
             out,
             quick,
             triangles,
             export,
+            case,
         } => match what.as_str() {
             "scaling" => cmd_bench_scaling(out, quick),
+            "replan" => cmd_bench_replan(case, out),
             "embed" => cmd_bench_embed(out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
         },
@@ -293,6 +339,24 @@ fn cmd_bench_embed(out: Option<PathBuf>, quick: bool) -> Result<()> {
             d.map_or(f64::NAN, |d| d.max)
         );
     }
+    Ok(())
+}
+
+fn cmd_bench_replan(case: Option<PathBuf>, out: Option<PathBuf>) -> Result<()> {
+    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/real/case.toml"));
+    let out = out.ok_or_else(|| Error::config("bench replan: --out DIR is required"))?;
+    let b = facesim_lab::bench_replan::run(&case, &out, 200)?;
+    println!(
+        "face {} vertices, {} segments: predict {:.3} ms (median of {}), one pass over the basis {:.3} ms, run {:.1} s (plan basis {:.2} s) = {:.0}x predict",
+        b.face_vertices,
+        b.segments,
+        b.predict_ms,
+        b.repeats,
+        b.memory_pass_ms,
+        b.run_s,
+        b.basis_s,
+        b.run_s * 1e3 / b.predict_ms
+    );
     Ok(())
 }
 

@@ -29,6 +29,8 @@ pub mod output;
 pub mod phantom;
 pub mod phantom_jaws;
 pub mod pipeline;
+pub mod plan;
+pub mod regions;
 pub mod report;
 pub mod segment;
 pub mod solve;

@@ -10,7 +10,8 @@ pub struct Plan {
     steps: Vec<Osteotomy>,
 }
 
-fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
+/// R = Rz·Ry·Rx of the angles in degrees (the plan's convention, also used by the plan basis).
+pub fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
     let [a, b, c] = deg.map(f64::to_radians);
     let rx = [
         [1.0, 0.0, 0.0],

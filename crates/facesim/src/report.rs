@@ -25,6 +25,8 @@ pub enum Stage {
     TetMesh,
     Solve,
     Embed,
+    /// The plan basis: 12 solves per segment on the run's factor (docs/plan-basis.md).
+    PlanBasis,
     Write,
     Total,
 }
@@ -43,6 +45,7 @@ impl Stage {
             Stage::TetMesh => "tet_mesh",
             Stage::Solve => "solve",
             Stage::Embed => "embed",
+            Stage::PlanBasis => "plan_basis",
             Stage::Write => "write",
             Stage::Total => "total",
         }
@@ -193,6 +196,12 @@ pub struct Report {
     /// The volumetric model (`[solve] model = "tet"`).
     pub tet: Option<crate::pipeline::volumetric::TetReport>,
     pub displacement: Displacement,
+    /// The plan basis written with the outputs (docs/plan-basis.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plan_basis: Option<crate::plan::basis::BasisReport>,
+    /// Set by `facesim replan`: where the basis came from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub replan: Option<crate::plan::basis::ReplanReport>,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
     /// coarsening or embedding, ...).

@@ -17,7 +17,8 @@ pub mod chart;
 pub mod face;
 pub mod mass_spring;
 pub mod metrics;
-pub mod regions;
+// The facial regions moved to the product crate (the sweep uses them too).
+pub use facesim::regions;
 pub mod volumetric;
 
 use crate::dynamics::{Block, Integrator, MP1, MP2, relative_energy_error};
@@ -461,7 +462,7 @@ fn summary(s: &Study, charts: &[String]) -> String {
         ));
     }
     line("\n## Per facial region (mean / p90 distance to the volumetric reference, mm)\n".into());
-    line("Regions: `crates/facesim-lab/src/study/regions.rs` (docs/study.md §2).\n".into());
+    line("Regions: `crates/facesim/src/regions.rs` (docs/study.md §2).\n".into());
     for cs in &s.face_cases {
         if let Some(rg) = &cs.regions {
             let l = &rg.landmarks;

@@ -46,7 +46,7 @@ fn max_of(d: &[f64]) -> f64 {
 
 /// The predicted face coloured by its displacement (viridis, 0 → max) with a `displacement`
 /// vertex column.
-fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
+pub fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
     let dmax = max_of(dist);
     let mut m = p.face_post.clone();
     m.colors = Some(
@@ -61,7 +61,7 @@ fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
     m
 }
 
-fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
+pub fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
     write_bytes_atomic(dest, |w| {
         writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
         for (i, (a, b)) in p
@@ -146,6 +146,10 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
             None => Ok(()),
         }),
         Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
+        Box::new(|| match &p.basis {
+            Some(b) => crate::plan::file::write(&o.join(crate::plan::file::FILE_NAME), b),
+            None => Ok(()),
+        }),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.obj"))),
         Box::new(|| mesh::write_mesh(&p.skin, &o.join("face_pre.ply"))),
         Box::new(|| mesh::write_mesh(skull, &o.join("skull_pre.ply"))),
@@ -202,6 +206,7 @@ pub fn fill_report(
     report.tet = p.volumetric.as_ref().map(|v| v.report.clone());
     report.solve = p.solution.as_ref().map(|s| s.history.clone());
     report.segmentation = Some(seg.report.clone());
+    report.plan_basis = p.basis.as_ref().map(|b| b.report());
     report.parameters = Some(case.clone());
     let Recorder {
         costs,
@@ -214,6 +219,9 @@ pub fn fill_report(
             "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
             seg.report.removed_components, seg.report.removed_voxels
         ));
+    }
+    if let Some(b) = &p.basis {
+        warnings.extend(b.warnings.iter().cloned());
     }
     report.costs = costs;
     report.warnings = warnings;

@@ -23,6 +23,8 @@ pub struct Prediction {
     pub embedding: Option<EmbeddingReport>,
     /// The volumetric model's mesh and solution (`[solve] model = "tet"`).
     pub volumetric: Option<Volumetric>,
+    /// The plan basis (docs/plan-basis.md), when the model built one.
+    pub basis: Option<crate::plan::PlanBasis>,
 }
 
 pub fn predict(
@@ -54,6 +56,7 @@ pub fn predict(
             coarse: None,
             embedding: None,
             volumetric: None,
+            basis: None,
         });
     };
     // The coarse model's answer carried to the full skin (paper 002).
@@ -93,6 +96,7 @@ pub fn predict(
         coarse: Some(face.skin.clone()),
         embedding: Some(embedding),
         volumetric: None,
+        basis: None,
     })
 }
 
@@ -101,9 +105,11 @@ fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<
     let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
     let mut face_post = skin.clone();
     face_post.colors = None;
+    let mut basis = None;
     let volumetric = match volumetric::predict(scene, case, &skin, rec)? {
-        Some((v, post)) => {
+        Some((mut v, post)) => {
             face_post.vertices = post;
+            basis = v.basis.take();
             Some(v)
         }
         None => {
@@ -119,6 +125,7 @@ fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<
         coarse: None,
         embedding: None,
         volumetric,
+        basis,
     })
 }
 

@@ -9,6 +9,8 @@ use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::plan::holds::{LinearHold, segment_at};
+use crate::plan::{PlanBasis, SegmentBasis};
 use crate::report::Stage;
 use crate::tet::embed::{SkinEmbedding, boundary_faces};
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
@@ -16,7 +18,7 @@ use crate::tet::nonlinear::{self, Newton};
 use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
-use crate::tet::{Elastic, Hold, Loads, TetMesh};
+use crate::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
 use serde::Serialize;
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
@@ -31,6 +33,8 @@ pub struct Volumetric {
     /// Per solved node (mm).
     pub displacement: Vec<[f64; 3]>,
     pub report: TetReport,
+    /// The plan basis of this solve (docs/plan-basis.md).
+    pub basis: Option<PlanBasis>,
 }
 
 impl Volumetric {
@@ -132,32 +136,60 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
 /// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
 /// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
 /// bone and the cut faces stay, skin outside `[surface] movable` stays, mucosa slides along or
-/// moves with the bone it faces (`mucosa`), the rest is free.
+/// moves with the bone it faces (`mucosa`), the rest is free. With `rest_normals` (the linear
+/// models) mucosa slides along the bone's normal at rest, the small-strain form of the condition,
+/// which keeps the factor independent of the plan (the plan basis). Also returns each hold as a
+/// linear function of the segments' matrices (docs/plan-basis.md) and the nodes that lie in more
+/// than one segment (their moves compose).
 fn holds(
     nodes: &[[f64; 3]],
     kind: &[NodeKind],
     mucosa: &[Option<Mucosa>],
     scene: &Scene,
     case: &Case,
-) -> (Vec<u8>, Vec<Hold>) {
+    rest_normals: bool,
+) -> Holds {
     let (moved_to, moved) = scene.model.plan.apply(nodes, 1.0);
     let rigid = super::model::rigid_mask(case, nodes);
-    kind.iter()
-        .enumerate()
-        .map(|(n, k)| match (k, mucosa.get(n).copied().flatten()) {
-            (NodeKind::Bone, _) if moved[n] => (
-                MOVED,
-                Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
-            ),
-            (NodeKind::Bone | NodeKind::Cut, _) => (FIXED, Hold::Fixed([0.0; 3])),
-            (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3])),
-            (NodeKind::Skin, Some(m)) if case.tet.sliding => (
-                SLIDING,
-                Hold::Slide {
-                    normal: m.normal,
-                    value: (0..3).map(|c| m.normal[c] * m.bone_move[c]).sum(),
-                },
-            ),
+    let mut overlaps = Vec::new();
+    let mut out = Holds::default();
+    for (n, k) in kind.iter().enumerate() {
+        let (c, h, l) = match (k, mucosa.get(n).copied().flatten()) {
+            (NodeKind::Bone, _) if moved[n] => {
+                let (s, over) = segment_at(&case.osteotomy, nodes[n]);
+                overlaps.extend(over);
+                (
+                    MOVED,
+                    Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
+                    s.map_or(LinearHold::Still, |segment| LinearHold::Moves {
+                        segment,
+                        at: nodes[n],
+                    }),
+                )
+            }
+            (NodeKind::Bone | NodeKind::Cut, _) => {
+                (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still)
+            }
+            (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still),
+            (NodeKind::Skin, Some(m)) if case.tet.sliding => {
+                let normal = if rest_normals {
+                    m.rest_normal
+                } else {
+                    m.normal
+                };
+                (
+                    SLIDING,
+                    Hold::Slide {
+                        normal,
+                        value: (0..3).map(|c| normal[c] * m.bone_move[c]).sum(),
+                    },
+                    LinearHold::Slides {
+                        normal: m.rest_normal,
+                        segment: m.segment,
+                        at: m.bone_at,
+                    },
+                )
+            }
             (NodeKind::Skin, Some(m)) => (
                 if m.bone_move == [0.0; 3] {
                     FIXED
@@ -165,10 +197,32 @@ fn holds(
                     MOVED
                 },
                 Hold::Fixed(m.bone_move),
+                m.segment
+                    .map_or(LinearHold::Still, |segment| LinearHold::Moves {
+                        segment,
+                        at: m.bone_at,
+                    }),
             ),
-            (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free),
-        })
-        .unzip()
+            (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free, LinearHold::Free),
+        };
+        out.constraint.push(c);
+        out.hold.push(h);
+        out.linear.push(l);
+    }
+    overlaps.sort_unstable();
+    overlaps.dedup();
+    out.overlapping_segments = overlaps;
+    out
+}
+
+/// Per node: the constraint code, the hold, the hold as a function of the plan; and the segments
+/// some node lies in together.
+#[derive(Default)]
+struct Holds {
+    constraint: Vec<u8>,
+    hold: Vec<Hold>,
+    linear: Vec<LinearHold>,
+    overlapping_segments: Vec<usize>,
 }
 
 /// A mucosa node: the bone surface's unit normal at the nearest skull point (after the move)
@@ -177,6 +231,10 @@ fn holds(
 struct Mucosa {
     normal: [f64; 3],
     bone_move: [f64; 3],
+    /// The bone surface's normal at rest, the nearest skull point and its segment (at rest).
+    rest_normal: [f64; 3],
+    bone_at: [f64; 3],
+    segment: Option<usize>,
 }
 
 /// Skin-kind nodes that face a cavity (no outside air within a voxel of them) and lie within
@@ -239,7 +297,13 @@ fn mucosa(
             } else {
                 n
             };
-            Some(Mucosa { normal, bone_move })
+            Some(Mucosa {
+                normal,
+                bone_move,
+                rest_normal: n,
+                bone_at: q,
+                segment: segment_at(&case.osteotomy, q).0,
+            })
         })
         .collect()
 }
@@ -278,6 +342,7 @@ fn hold_floating_pieces(
     tets: &[[u32; 4]],
     constraint: &mut [u8],
     hold: &mut [Hold],
+    linear: &mut [LinearHold],
 ) -> (usize, usize) {
     let mut faces: Vec<([u32; 3], u32)> = tets
         .iter()
@@ -323,6 +388,7 @@ fn hold_floating_pieces(
         if !u && n < hold.len() {
             constraint[n] = FIXED;
             hold[n] = Hold::Fixed([0.0; 3]);
+            linear[n] = LinearHold::Still;
         }
     }
     let mut pieces = vec![false; count];
@@ -338,6 +404,7 @@ fn hold_floating_pieces(
             if constraint[n] != FIXED {
                 constraint[n] = FIXED;
                 hold[n] = Hold::Fixed([0.0; 3]);
+                linear[n] = LinearHold::Still;
                 nodes += 1;
             }
         }
@@ -395,8 +462,16 @@ pub fn predict(
         None => (&mesh.nodes, mesh.kind.clone()),
     };
     let mucosa = mucosa(&mesh.nodes, &mesh.kind, scene, case);
-    let (mut constraint, mut hold) = holds(nodes, &kind, &mucosa, scene, case);
-    let (pieces, held_still) = hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold);
+    // The linear models (any quadratic element, or the linear material) solve K u = f once.
+    let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
+    let Holds {
+        mut constraint,
+        mut hold,
+        linear: mut linear_hold,
+        overlapping_segments,
+    } = holds(nodes, &kind, &mucosa, scene, case, linear_solve);
+    let (pieces, held_still) =
+        hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold, &mut linear_hold);
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
@@ -417,29 +492,34 @@ pub fn predict(
             )));
         }
     }
-    let (displacement, newton) =
+    let stiffness = || match &quadratic {
+        Some(q) => q.assemble(),
+        None => linear.assemble(),
+    };
+    // The linear models keep their factor for the plan basis (no second factorisation).
+    let (displacement, newton, factor) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
-            match (&quadratic, t.material) {
-                (Some(q), _) => Ok((q.solve(&hold, &Loads::none())?, None)),
-                (None, TetMaterial::Linear) => Ok((linear.solve(&hold, &Loads::none())?, None)),
-                (None, TetMaterial::NeoHookean) => {
-                    let opts = Newton {
-                        load_steps: t.load_steps,
-                        ..Newton::default()
-                    };
-                    let s = nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?;
-                    let steps = s
-                        .steps
-                        .iter()
-                        .map(|s| NewtonStep {
-                            load: s.load,
-                            iterations: s.iterations,
-                            residual: s.residuals.last().copied().unwrap_or(0.0),
-                        })
-                        .collect();
-                    Ok((s.displacements, Some(steps)))
-                }
+            if linear_solve {
+                let c = Constrained::new(&stiffness()?, &hold, nodes.len())?;
+                let f = Loads::none().nodal_vector(nodes.len())?;
+                let u = c.solve(&[(&hold, &f)])?.remove(0);
+                return Ok((u, None, Some(c)));
             }
+            let opts = Newton {
+                load_steps: t.load_steps,
+                ..Newton::default()
+            };
+            let s = nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?;
+            let steps = s
+                .steps
+                .iter()
+                .map(|s| NewtonStep {
+                    load: s.load,
+                    iterations: s.iterations,
+                    residual: s.residuals.last().copied().unwrap_or(0.0),
+                })
+                .collect();
+            Ok((s.displacements, Some(steps), None))
         })?;
     let inverted_tets = match &quadratic {
         Some(q) => q.inverted_after(&displacement),
@@ -461,22 +541,44 @@ pub fn predict(
             mesh.tets.len()
         ));
     }
-    let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
-        let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
-        let reach = (1.5 * t.skin_size_mm).max(3.0);
-        let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach, roi);
+    // Node displacements to face displacements; beyond the region's cut faces the tissue is
+    // held: face vertices there stay (the extrapolation from the last tetrahedron would move them).
+    let carry = |e: &SkinEmbedding, u: &[[f64; 3]]| {
         let mut carried = match &quadratic {
-            Some(q) => e.carry_quadratic(&q.tets, &displacement),
-            None => e.carry(&mesh.tets, &displacement),
+            Some(q) => e.carry_quadratic(&q.tets, u),
+            None => e.carry(&mesh.tets, u),
         };
-        // Beyond the region's cut faces the tissue is held: face vertices there stay (the
-        // extrapolation from the last tetrahedron would move them).
         for (d, p) in carried.iter_mut().zip(&skin.vertices) {
             if (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
                 *d = [0.0; 3];
             }
         }
-        Ok((carried, e))
+        carried
+    };
+    let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
+        let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
+        let reach = (1.5 * t.skin_size_mm).max(3.0);
+        let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach, roi);
+        Ok((carry(&e, &displacement), e))
+    })?;
+    let basis = rec.time(Stage::PlanBasis, "building the plan basis", || {
+        let factor = match factor {
+            Some(c) => c,
+            // The nonlinear material: the linear model at rest, factored for the basis alone.
+            None => {
+                let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
+                Constrained::new(&stiffness()?, &rest, nodes.len())?
+            }
+        };
+        let inputs = BasisInputs {
+            factor: &factor,
+            linear_hold: &linear_hold,
+            overlapping_segments: &overlapping_segments,
+            nonlinear: !linear_solve,
+            skin,
+            run_face_displacement: &carried,
+        };
+        plan_basis(&inputs, case, |u| carry(&embedding, u))
     })?;
     let reached: Vec<f64> = embedding
         .distance
@@ -519,7 +621,105 @@ pub fn predict(
             material,
             displacement,
             report,
+            basis: Some(basis),
         },
         face_post,
     )))
+}
+
+/// What the plan basis is built from.
+struct BasisInputs<'a> {
+    factor: &'a Constrained,
+    linear_hold: &'a [LinearHold],
+    overlapping_segments: &'a [usize],
+    /// The run solved the nonlinear material: the basis is its linearisation at rest.
+    nonlinear: bool,
+    skin: &'a Mesh,
+    /// The run's own face displacement, to check the basis against.
+    run_face_displacement: &'a [[f64; 3]],
+}
+
+/// 12 solves per segment on the run's factor (only the held values change: segment s's bone
+/// moved by E_k·[x; 1], the rest held still), each carried to the face like the run's own.
+fn plan_basis(
+    b: &BasisInputs,
+    case: &Case,
+    carry: impl Fn(&[[f64; 3]]) -> Vec<[f64; 3]>,
+) -> Result<PlanBasis> {
+    use crate::plan::basis::{COLUMNS, unit};
+    let ns = case.osteotomy.len();
+    let n = b.linear_hold.len();
+    let zero = vec![0.0; 3 * n];
+    let unit_holds: Vec<Vec<Hold>> = (0..ns * COLUMNS)
+        .map(|sk| {
+            let mut ms = vec![[0.0; COLUMNS]; ns];
+            ms[sk / COLUMNS] = unit(sk % COLUMNS);
+            b.linear_hold.iter().map(|l| l.hold(&ms)).collect()
+        })
+        .collect();
+    let cases: Vec<(&[Hold], &[f64])> = unit_holds
+        .iter()
+        .map(|h| (h.as_slice(), zero.as_slice()))
+        .collect();
+    let mut solved = b.factor.solve(&cases)?.into_iter();
+    let segments = case
+        .osteotomy
+        .iter()
+        .map(|o| SegmentBasis {
+            name: o.name.clone(),
+            region: o.region.clone(),
+            pivot: o.pivot,
+            columns: solved.by_ref().take(COLUMNS).map(|u| carry(&u)).collect(),
+        })
+        .collect();
+    let mut basis = PlanBasis {
+        model: if b.nonlinear {
+            "tet-neo-hookean-linearised"
+        } else {
+            "tet-linear"
+        }
+        .into(),
+        exact: !b.nonlinear,
+        warnings: Vec::new(),
+        segments,
+        face_pre: b.skin.vertices.clone(),
+        triangles: b.skin.triangles.clone(),
+        run_plan: case.osteotomy.clone(),
+        offset: None,
+        facesim_version: env!("CARGO_PKG_VERSION").into(),
+        run_plan_error_mm: 0.0,
+    };
+    if b.nonlinear {
+        basis.warnings.push(
+            "linear preview: the basis is the linear model at rest, the run solved the neo-Hookean material".into(),
+        );
+    }
+    if !b.overlapping_segments.is_empty() {
+        let names: Vec<String> = b
+            .overlapping_segments
+            .iter()
+            .map(|s| format!("'{}'", case.osteotomy[*s].name))
+            .collect();
+        basis.exact = false;
+        basis.warnings.push(format!(
+            "osteotomies {} share bone nodes (their moves compose, which is not linear): the plan basis is not exact",
+            names.join(", ")
+        ));
+    }
+    // The basis must give the run's own face back: the same linear system, summed.
+    let ms = basis.matrices(&case.osteotomy)?;
+    let again = basis.displacement_of(&ms);
+    basis.run_plan_error_mm = again
+        .iter()
+        .zip(b.run_face_displacement)
+        .map(|(a, r)| crate::mesh::norm(crate::mesh::sub(*a, *r)))
+        .fold(0.0, f64::max);
+    if basis.exact && !(basis.run_plan_error_mm <= 1e-6) {
+        basis.exact = false;
+        basis.warnings.push(format!(
+            "the plan basis differs from the run's own face by up to {:.3e} mm (a segment moves bone into another's region): not exact",
+            basis.run_plan_error_mm
+        ));
+    }
+    Ok(basis)
 }

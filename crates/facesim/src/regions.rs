@@ -1,4 +1,4 @@
-//! Facial regions for the study's per-region statistics (issue 5 item 5: nose, upper lip, lower
+//! Facial regions for the study's and the sweep's per-region statistics (issue 5 item 5: nose, upper lip, lower
 //! lip, chin, cheeks), found on the face itself.
 //!
 //! **Head frame.** LPS: anterior is −y, superior +z (facesim reads every CT into LPS). The

@@ -1,0 +1,301 @@
+//! `plan_basis.bin` (docs/plan-basis.md "File format"), little-endian:
+//!
+//! ```text
+//! magic        8 bytes  "FSPLANB\0"
+//! format       u32      FORMAT_VERSION
+//! version len  u32, then the facesim version (UTF-8) that wrote it
+//! header len   u32, then a JSON header (UTF-8): model, exact, warnings, vertices, triangles,
+//!              columns_per_segment, offset, run_plan_error_mm, segments [{name, region, pivot}],
+//!              run_plan (the case's [[osteotomy]] list)
+//! zero padding to a multiple of 8 bytes
+//! face_pre     vertices × 3 f64 (LPS mm)
+//! triangles    triangles × 3 u32, zero padding to a multiple of 8 bytes
+//! offset       vertices × 3 f64, when the header says `offset: true`
+//! columns      per segment, per k = 0..12: vertices × 3 f64 (mm per unit entry of M)
+//! ```
+//!
+//! Reading checks the magic, the format version, the facesim version and every size; any
+//! mismatch is one line naming the file.
+
+use super::basis::{COLUMNS, PlanBasis, SegmentBasis};
+use crate::case::{Osteotomy, Region};
+use crate::error::{Error, Result};
+use crate::output::write_bytes_atomic;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+pub const MAGIC: &[u8; 8] = b"FSPLANB\0";
+pub const FORMAT_VERSION: u32 = 1;
+/// The file's name in a run's output directory.
+pub const FILE_NAME: &str = "plan_basis.bin";
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    model: String,
+    exact: bool,
+    warnings: Vec<String>,
+    vertices: usize,
+    triangles: usize,
+    columns_per_segment: usize,
+    offset: bool,
+    run_plan_error_mm: f64,
+    segments: Vec<SegmentHeader>,
+    run_plan: Vec<Osteotomy>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct SegmentHeader {
+    name: String,
+    region: Region,
+    pivot: [f64; 3],
+}
+
+fn pad8(len: usize) -> usize {
+    (8 - len % 8) % 8
+}
+
+/// Write `basis` to `path` (temporary name, then renamed).
+pub fn write(path: &Path, basis: &PlanBasis) -> Result<()> {
+    let header = Header {
+        model: basis.model.clone(),
+        exact: basis.exact,
+        warnings: basis.warnings.clone(),
+        vertices: basis.face_pre.len(),
+        triangles: basis.triangles.len(),
+        columns_per_segment: COLUMNS,
+        offset: basis.offset.is_some(),
+        run_plan_error_mm: basis.run_plan_error_mm,
+        segments: basis
+            .segments
+            .iter()
+            .map(|s| SegmentHeader {
+                name: s.name.clone(),
+                region: s.region.clone(),
+                pivot: s.pivot,
+            })
+            .collect(),
+        run_plan: basis.run_plan.clone(),
+    };
+    let n = basis.face_pre.len();
+    if basis
+        .segments
+        .iter()
+        .any(|s| s.columns.len() != COLUMNS || s.columns.iter().any(|c| c.len() != n))
+        || basis.offset.as_ref().is_some_and(|o| o.len() != n)
+    {
+        return Err(Error::output(
+            path,
+            "the plan basis's columns do not match its face",
+        ));
+    }
+    let json = serde_json::to_vec(&header).map_err(|e| Error::output(path, e))?;
+    let version = basis.facesim_version.as_bytes();
+    write_bytes_atomic(path, |w| {
+        let mut head = Vec::with_capacity(24 + version.len() + json.len());
+        head.extend_from_slice(MAGIC);
+        head.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        head.extend_from_slice(&(version.len() as u32).to_le_bytes());
+        head.extend_from_slice(version);
+        head.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        head.extend_from_slice(&json);
+        head.resize(head.len() + pad8(head.len()), 0);
+        w.write_all(&head)?;
+        let f64s = |w: &mut dyn std::io::Write, v: &[[f64; 3]]| -> std::io::Result<()> {
+            let mut buf = Vec::with_capacity(24 * v.len());
+            for c in v.iter().flatten() {
+                buf.extend_from_slice(&c.to_le_bytes());
+            }
+            w.write_all(&buf)
+        };
+        f64s(w, &basis.face_pre)?;
+        let mut tri = Vec::with_capacity(12 * basis.triangles.len());
+        for i in basis.triangles.iter().flatten() {
+            tri.extend_from_slice(&i.to_le_bytes());
+        }
+        tri.resize(tri.len() + pad8(tri.len()), 0);
+        w.write_all(&tri)?;
+        if let Some(o) = &basis.offset {
+            f64s(w, o)?;
+        }
+        for s in &basis.segments {
+            for c in &s.columns {
+                f64s(w, c)?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// A cursor over the file's bytes whose every short read is an error naming the file.
+struct Reader<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, len: usize, what: &str) -> Result<&'a [u8]> {
+        let end = self.at.checked_add(len).filter(|e| *e <= self.bytes.len());
+        let Some(end) = end else {
+            return Err(Error::input(
+                self.path,
+                format!(
+                    "truncated plan basis: {what} is cut off at byte {}",
+                    self.bytes.len()
+                ),
+            ));
+        };
+        let b = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(b)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32> {
+        let b = self.take(4, what)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn points(&mut self, n: usize, what: &str) -> Result<Vec<[f64; 3]>> {
+        let len = n
+            .checked_mul(24)
+            .ok_or_else(|| Error::input(self.path, format!("plan basis: {what} too large")))?;
+        let b = self.take(len, what)?;
+        let f = |i: usize| {
+            let mut a = [0u8; 8];
+            a.copy_from_slice(&b[8 * i..8 * i + 8]);
+            f64::from_le_bytes(a)
+        };
+        Ok((0..n)
+            .map(|v| [f(3 * v), f(3 * v + 1), f(3 * v + 2)])
+            .collect())
+    }
+}
+
+/// Read a basis written by this facesim version.
+pub fn read(path: &Path) -> Result<PlanBasis> {
+    let bytes = std::fs::read(path).map_err(|e| {
+        Error::input(
+            path,
+            if e.kind() == std::io::ErrorKind::NotFound {
+                "no plan basis here (a run of this facesim version writes plan_basis.bin with its outputs)".to_string()
+            } else {
+                e.to_string()
+            },
+        )
+    })?;
+    let mut r = Reader {
+        path,
+        bytes: &bytes,
+        at: 0,
+    };
+    if r.take(8, "the magic bytes")? != MAGIC {
+        return Err(Error::input(
+            path,
+            "not a facesim plan basis (wrong magic bytes)",
+        ));
+    }
+    let format = r.u32("the format version")?;
+    if format != FORMAT_VERSION {
+        return Err(Error::input(
+            path,
+            format!(
+                "plan basis format version {format}, this facesim reads version {FORMAT_VERSION}"
+            ),
+        ));
+    }
+    let vlen = r.u32("the facesim version")? as usize;
+    let version = String::from_utf8_lossy(r.take(vlen, "the facesim version")?).to_string();
+    let ours = env!("CARGO_PKG_VERSION");
+    if version != ours {
+        return Err(Error::input(
+            path,
+            format!(
+                "plan basis written by facesim {version}, this is facesim {ours}: run the case again"
+            ),
+        ));
+    }
+    let hlen = r.u32("the header")? as usize;
+    let header: Header = serde_json::from_slice(r.take(hlen, "the header")?)
+        .map_err(|e| Error::input(path, format!("plan basis header: {e}")))?;
+    if header.columns_per_segment != COLUMNS {
+        return Err(Error::input(
+            path,
+            format!(
+                "plan basis has {} columns per segment, not {COLUMNS}",
+                header.columns_per_segment
+            ),
+        ));
+    }
+    let pad = pad8(r.at);
+    r.take(pad, "the padding")?;
+    let n = header.vertices;
+    let face_pre = r.points(n, "face_pre")?;
+    let tb = r.take(
+        header
+            .triangles
+            .checked_mul(12)
+            .ok_or_else(|| Error::input(path, "plan basis: too many triangles"))?,
+        "the triangles",
+    )?;
+    let idx =
+        |i: usize| u32::from_le_bytes([tb[4 * i], tb[4 * i + 1], tb[4 * i + 2], tb[4 * i + 3]]);
+    let triangles: Vec<[u32; 3]> = (0..header.triangles)
+        .map(|t| [idx(3 * t), idx(3 * t + 1), idx(3 * t + 2)])
+        .collect();
+    if triangles.iter().flatten().any(|v| *v as usize >= n) {
+        return Err(Error::input(
+            path,
+            "plan basis: a triangle names a missing vertex",
+        ));
+    }
+    r.take(pad8(tb.len()), "the padding")?;
+    let offset = if header.offset {
+        Some(r.points(n, "the offset")?)
+    } else {
+        None
+    };
+    let mut segments = Vec::with_capacity(header.segments.len());
+    for s in header.segments {
+        let columns = (0..COLUMNS)
+            .map(|k| r.points(n, &format!("segment '{}' column {k}", s.name)))
+            .collect::<Result<Vec<_>>>()?;
+        segments.push(SegmentBasis {
+            name: s.name,
+            region: s.region,
+            pivot: s.pivot,
+            columns,
+        });
+    }
+    if r.at != bytes.len() {
+        return Err(Error::input(
+            path,
+            format!(
+                "plan basis: {} bytes after the last column (corrupt or wrong sizes)",
+                bytes.len() - r.at
+            ),
+        ));
+    }
+    if face_pre
+        .iter()
+        .chain(segments.iter().flat_map(|s| s.columns.iter().flatten()))
+        .flatten()
+        .any(|v| !v.is_finite())
+    {
+        return Err(Error::input(
+            path,
+            "plan basis: non-finite values (corrupt)",
+        ));
+    }
+    Ok(PlanBasis {
+        model: header.model,
+        exact: header.exact,
+        warnings: header.warnings,
+        segments,
+        face_pre,
+        triangles,
+        run_plan: header.run_plan,
+        offset,
+        facesim_version: version,
+        run_plan_error_mm: header.run_plan_error_mm,
+    })
+}

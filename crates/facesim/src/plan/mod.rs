@@ -1,0 +1,22 @@
+//! Re-planning without re-solving (docs/plan-basis.md).
+//!
+//! A segment's rigid move x ↦ R x + t′ (t′ = (I − R)·pivot + translate) displaces its bone by
+//! M·[x; 1] with M = [R − I | t′], linear in M's 12 entries. In a linear model whose moved bone
+//! follows M exactly, the face displacement is Σ_s Σ_k m_{s,k} B_{s,k}: the [`PlanBasis`], 12
+//! face displacement fields per segment, solved once with the run's factor.
+//!
+//! - [`basis`]: the basis, its matrices and the prediction of any plan from it;
+//! - [`holds`]: the volumetric model's boundary conditions as linear functions of the M_s;
+//! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs;
+//! - [`replan`]: `facesim replan` (a run's face outputs for a new plan);
+//! - [`sweep`]: `facesim sweep` (many plans, a table and a chart; per facial region by
+//!   `crate::regions`).
+
+pub mod basis;
+pub mod chart;
+pub mod file;
+pub mod holds;
+pub mod replan;
+pub mod sweep;
+
+pub use basis::{PlanBasis, SegmentBasis, matrix};

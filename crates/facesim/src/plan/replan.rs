@@ -1,0 +1,139 @@
+//! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/case.md): the face outputs of `run` for
+//! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving.
+
+use super::basis::{PlanBasis, ReplanReport};
+use crate::case::{Osteotomy, Region};
+use crate::error::{Error, Result};
+use crate::mesh::{self, Mesh};
+use crate::pipeline::outputs;
+use crate::pipeline::predict::Prediction;
+use crate::report::{Displacement, Report};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanFile {
+    #[serde(default)]
+    osteotomy: Vec<Osteotomy>,
+}
+
+/// The `[[osteotomy]]` list of a PLAN.toml (case.toml's form; nothing else in the file).
+pub fn read_plan(path: &Path) -> Result<Vec<Osteotomy>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
+    let plan: PlanFile = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    Ok(plan.osteotomy)
+}
+
+/// The basis's prediction for `plan`, a bad plan named as `plan_file`'s error.
+pub fn predict_plan(
+    basis: &PlanBasis,
+    plan: &[Osteotomy],
+    plan_file: &Path,
+) -> Result<Vec<[f64; 3]>> {
+    basis.predict(plan).map_err(|e| match e {
+        Error::Config(msg) => Error::input(plan_file, msg),
+        other => other,
+    })
+}
+
+/// What `replan` wrote.
+pub struct Replanned {
+    pub out_dir: PathBuf,
+    pub face_post: Vec<[f64; 3]>,
+    pub report: Report,
+}
+
+/// Read the basis in `run_dir`, predict `plan_file`'s plan and write face_post.obj/.ply,
+/// face_displacement.ply, displacement.csv, skull_post.ply (when the run's skull_pre.ply is
+/// there and no region is a mask) and report.json into `dest` (default `run_dir/replan`).
+/// Everything is read and computed before the first file is written.
+pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<Replanned> {
+    let basis_path = run_dir.join(super::file::FILE_NAME);
+    let basis = super::file::read(&basis_path)?;
+    let plan = read_plan(plan_file)?;
+    let face_post = predict_plan(&basis, &plan, plan_file)?;
+    let out_dir = dest
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| run_dir.join("replan"));
+    let skin = Mesh::new(basis.face_pre.clone(), basis.triangles.clone());
+    let mut post = skin.clone();
+    post.vertices = face_post.clone();
+    let skull_pre = run_dir.join("skull_pre.ply");
+    let no_masks = plan.iter().all(|o| !matches!(o.region, Region::Mask(_)));
+    let skull_post = if no_masks && skull_pre.exists() {
+        let mut s = mesh::read_mesh(&skull_pre)?;
+        s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
+        Some(s)
+    } else {
+        None
+    };
+    let prediction = Prediction {
+        skin,
+        face_post: post,
+        solution: None,
+        coarse: None,
+        embedding: None,
+        volumetric: None,
+        basis: None,
+    };
+    let dist = outputs::displacement(&prediction);
+    let run_report: Option<serde_json::Value> = std::fs::read(run_dir.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+    let field = |k: &str| {
+        run_report
+            .as_ref()
+            .and_then(|r| r.get(k))
+            .and_then(|v| v.as_str())
+            .map(str::to_string)
+            .unwrap_or_default()
+    };
+    let dmax = dist.iter().cloned().fold(0.0, f64::max);
+    let mut warnings = basis.warnings.clone();
+    if skull_post.is_none() {
+        warnings.push(
+            "skull_post.ply not written (no skull_pre.ply in the run's outputs, or a mask region)"
+                .into(),
+        );
+    }
+    let report = Report {
+        name: field("name"),
+        case: field("case"),
+        facesim_version: env!("CARGO_PKG_VERSION").into(),
+        displacement: Displacement {
+            max: dmax,
+            mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
+            colour_scale_mm: [0.0, dmax],
+            colour_map: "viridis",
+        },
+        replan: Some(ReplanReport {
+            from: run_dir.display().to_string(),
+            plan: plan_file.display().to_string(),
+            basis_model: basis.model.clone(),
+            exact: basis.exact,
+            osteotomy: plan.clone(),
+        }),
+        warnings,
+        ..Default::default()
+    };
+    // The writes (each to a temporary name, renamed), report.json last.
+    std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
+    let o = &out_dir;
+    mesh::write_mesh(&prediction.face_post, &o.join("face_post.obj"))?;
+    mesh::write_mesh(&prediction.face_post, &o.join("face_post.ply"))?;
+    mesh::write_mesh(
+        &outputs::coloured_face(&prediction, &dist),
+        &o.join("face_displacement.ply"),
+    )?;
+    outputs::displacement_csv(&o.join("displacement.csv"), &prediction, &dist)?;
+    if let Some(s) = &skull_post {
+        mesh::write_mesh(s, &o.join("skull_post.ply"))?;
+    }
+    outputs::write_report(o, &report)?;
+    Ok(Replanned {
+        out_dir,
+        face_post,
+        report,
+    })
+}

@@ -1,0 +1,316 @@
+//! `facesim sweep OUT_DIR SWEEP.toml --out DIR` (docs/case.md "SWEEP.toml"): many plans from one
+//! plan basis, written as `sweep.csv` (per plan: its moves, the face displacement's max, mean and
+//! 90th percentile, the same per facial region) and a chart `sweep.svg`.
+//!
+//! ```toml
+//! [[plan]]                      # any number of listed plans
+//! label = "advance 5"
+//! [[plan.move]]
+//! segment = "maxilla"           # a segment of the run; segments not named stay
+//! translate = [0, -5, 0]        # mm, LPS
+//! rotate_deg = [0, 0, 0]        # R = Rz·Ry·Rx
+//! # pivot = [x, y, z]           # default: the run's pivot of that segment
+//!
+//! [grid]                        # and/or one grid over one segment's moves
+//! segment = "maxilla"
+//! translate_y = { from = 0, to = -10, steps = 11 }
+//! rotate_x = { from = -5, to = 5, steps = 3 }   # any of translate_x/y/z, rotate_x/y/z
+//! ```
+
+use super::basis::PlanBasis;
+use crate::case::Osteotomy;
+use crate::error::{Error, Result};
+use crate::output::write_bytes_atomic;
+use serde::Deserialize;
+use std::path::Path;
+
+/// The grid's axes in column order.
+pub const AXES: [&str; 6] = [
+    "translate_x",
+    "translate_y",
+    "translate_z",
+    "rotate_x",
+    "rotate_y",
+    "rotate_z",
+];
+
+/// More plans than this is surely a mistake in the file.
+const MAX_PLANS: usize = 100_000;
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SweepFile {
+    #[serde(default)]
+    plan: Vec<ListedPlan>,
+    grid: Option<Grid>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ListedPlan {
+    label: Option<String>,
+    #[serde(default, rename = "move")]
+    moves: Vec<Move>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Move {
+    segment: String,
+    #[serde(default)]
+    translate: [f64; 3],
+    #[serde(default)]
+    rotate_deg: [f64; 3],
+    pivot: Option<[f64; 3]>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Grid {
+    segment: String,
+    pivot: Option<[f64; 3]>,
+    translate_x: Option<Range>,
+    translate_y: Option<Range>,
+    translate_z: Option<Range>,
+    rotate_x: Option<Range>,
+    rotate_y: Option<Range>,
+    rotate_z: Option<Range>,
+}
+
+#[derive(Clone, Copy, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Range {
+    from: f64,
+    to: f64,
+    steps: usize,
+}
+
+impl Range {
+    fn values(&self) -> Vec<f64> {
+        if self.steps <= 1 {
+            return vec![self.from];
+        }
+        (0..self.steps)
+            .map(|i| self.from + (self.to - self.from) * i as f64 / (self.steps - 1) as f64)
+            .collect()
+    }
+}
+
+/// One plan of the sweep.
+#[derive(Clone, Debug)]
+pub struct SweepPlan {
+    pub label: String,
+    pub osteotomy: Vec<Osteotomy>,
+}
+
+fn osteotomy(basis: &PlanBasis, m: &Move, path: &Path) -> Result<Osteotomy> {
+    let s = basis.segment(&m.segment).ok_or_else(|| {
+        Error::input(
+            path,
+            format!(
+                "segment '{}' is not a segment of the run (its segments: {})",
+                m.segment,
+                basis
+                    .segments
+                    .iter()
+                    .map(|s| format!("'{}'", s.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })?;
+    Ok(Osteotomy {
+        name: s.name.clone(),
+        region: s.region.clone(),
+        translate: m.translate,
+        rotate_deg: m.rotate_deg,
+        pivot: m.pivot.unwrap_or(s.pivot),
+    })
+}
+
+/// The plans of SWEEP.toml at `path`, the listed ones first, then the grid's (the last axis
+/// varying fastest).
+pub fn read_sweep(path: &Path, basis: &PlanBasis) -> Result<Vec<SweepPlan>> {
+    let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
+    let file: SweepFile = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    let mut plans = Vec::new();
+    for (i, p) in file.plan.iter().enumerate() {
+        plans.push(SweepPlan {
+            label: p.label.clone().unwrap_or_else(|| format!("plan {}", i + 1)),
+            osteotomy: p
+                .moves
+                .iter()
+                .map(|m| osteotomy(basis, m, path))
+                .collect::<Result<_>>()?,
+        });
+    }
+    if let Some(g) = &file.grid {
+        let axes = [
+            g.translate_x,
+            g.translate_y,
+            g.translate_z,
+            g.rotate_x,
+            g.rotate_y,
+            g.rotate_z,
+        ];
+        let values: Vec<Vec<f64>> = axes
+            .iter()
+            .map(|r| r.map_or(vec![0.0], |r| r.values()))
+            .collect();
+        let count = values.iter().map(Vec::len).product::<usize>();
+        if count > MAX_PLANS
+            || axes
+                .iter()
+                .flatten()
+                .any(|r| !(r.from.is_finite() && r.to.is_finite()))
+        {
+            return Err(Error::input(
+                path,
+                format!(
+                    "[grid]: {count} plans or non-finite bounds (at most {MAX_PLANS} finite plans)"
+                ),
+            ));
+        }
+        for i in 0..count {
+            let mut rest = i;
+            let mut v = [0.0; 6];
+            for a in (0..6).rev() {
+                v[a] = values[a][rest % values[a].len()];
+                rest /= values[a].len();
+            }
+            let m = Move {
+                segment: g.segment.clone(),
+                translate: [v[0], v[1], v[2]],
+                rotate_deg: [v[3], v[4], v[5]],
+                pivot: g.pivot,
+            };
+            plans.push(SweepPlan {
+                label: format!("grid {}", i + 1),
+                osteotomy: vec![osteotomy(basis, &m, path)?],
+            });
+        }
+    }
+    if plans.is_empty() {
+        return Err(Error::input(
+            path,
+            "no [[plan]] and no [grid]: nothing to sweep",
+        ));
+    }
+    Ok(plans)
+}
+
+/// Max, mean and 90th percentile of displacement magnitudes (mm).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stats {
+    pub max: f64,
+    pub mean: f64,
+    pub p90: f64,
+}
+
+fn stats(d: impl Iterator<Item = f64>) -> Option<Stats> {
+    let mut v: Vec<f64> = d.collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(Stats {
+        max: v[v.len() - 1],
+        mean: v.iter().sum::<f64>() / v.len() as f64,
+        p90: v[((v.len() - 1) as f64 * 0.9).round() as usize],
+    })
+}
+
+/// One row of sweep.csv.
+#[derive(Clone, Debug)]
+pub struct SweepRow {
+    pub plan: SweepPlan,
+    pub face: Stats,
+    /// Per `crate::regions::NAMES` (None: the region is absent on this face).
+    pub regions: Vec<Option<Stats>>,
+}
+
+/// Evaluate every plan of `sweep_file` from the basis in `run_dir`; write sweep.csv and
+/// sweep.svg into `out` (created). Nothing is written when the file or a plan is bad.
+pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepRow>> {
+    let basis = super::file::read(&run_dir.join(super::file::FILE_NAME))?;
+    let plans = read_sweep(sweep_file, &basis)?;
+    let regions = crate::regions::regions(&basis.face_pre);
+    let members: Vec<Option<Vec<bool>>> = regions
+        .map(|r| r.members)
+        .unwrap_or_else(|| vec![None; crate::regions::NAMES.len()]);
+    let mut rows = Vec::with_capacity(plans.len());
+    for plan in plans {
+        let d = super::replan::predict_plan(&basis, &plan.osteotomy, sweep_file)?;
+        let mag: Vec<f64> = d
+            .iter()
+            .zip(&basis.face_pre)
+            .map(|(a, b)| crate::mesh::norm(crate::mesh::sub(*a, *b)))
+            .collect();
+        let face = stats(mag.iter().copied()).unwrap_or(Stats {
+            max: 0.0,
+            mean: 0.0,
+            p90: 0.0,
+        });
+        let regions = members
+            .iter()
+            .map(|m| {
+                m.as_ref()
+                    .and_then(|m| stats(mag.iter().zip(m).filter(|(_, i)| **i).map(|(d, _)| *d)))
+            })
+            .collect();
+        rows.push(SweepRow {
+            plan,
+            face,
+            regions,
+        });
+    }
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    write_csv(&out.join("sweep.csv"), &basis, &rows)?;
+    super::chart::write(&out.join("sweep.svg"), &rows)?;
+    Ok(rows)
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+    let slug = |s: &str| s.replace(' ', "_");
+    let mut head = vec!["plan".to_string(), "label".to_string()];
+    for s in &basis.segments {
+        for a in AXES {
+            head.push(csv_field(&format!("{}_{a}", s.name)));
+        }
+    }
+    head.extend(["face_max_mm", "face_mean_mm", "face_p90_mm"].map(String::from));
+    for r in crate::regions::NAMES {
+        for q in ["max", "mean", "p90"] {
+            head.push(format!("{}_{q}_mm", slug(r)));
+        }
+    }
+    write_bytes_atomic(path, |w| {
+        writeln!(w, "{}", head.join(","))?;
+        for (i, row) in rows.iter().enumerate() {
+            let mut cells = vec![(i + 1).to_string(), csv_field(&row.plan.label)];
+            for s in &basis.segments {
+                let o = row.plan.osteotomy.iter().find(|o| o.name == s.name);
+                let (t, r) = o.map_or(([0.0; 3], [0.0; 3]), |o| (o.translate, o.rotate_deg));
+                cells.extend(t.iter().chain(&r).map(|v| v.to_string()));
+            }
+            let f = row.face;
+            cells.extend([f.max, f.mean, f.p90].map(|v| format!("{v:.6}")));
+            for r in &row.regions {
+                match r {
+                    Some(s) => cells.extend([s.max, s.mean, s.p90].map(|v| format!("{v:.6}"))),
+                    None => cells.extend(["", "", ""].map(String::from)),
+                }
+            }
+            writeln!(w, "{}", cells.join(","))?;
+        }
+        Ok(())
+    })
+}
