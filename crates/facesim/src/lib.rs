@@ -30,6 +30,7 @@ pub mod phantom;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod report;
+pub mod report_page;
 pub mod segment;
 pub mod solve;
 pub mod springs;
