@@ -53,7 +53,7 @@ function main() {
   side.appendChild(model);
 
   // ---- three.js scene ----
-  const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+  const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setPixelRatio(1);
   renderer.setClearColor(0xf4f4f4);
   view.appendChild(renderer.domElement);
@@ -224,7 +224,8 @@ function main() {
       const put = (key, i, label, unit) => {
         const l = el("label", { class: "slider" });
         const value = s.runPlan[key][i];
-        const r = el("input", { type: "range", min: unit === "mm" ? -15 : -20, max: unit === "mm" ? 15 : 20, step: 0.1, value: String(value) });
+        const lim = Math.max(unit === "mm" ? 15 : 20, Math.ceil(Math.abs(value)));
+        const r = el("input", { type: "range", min: -lim, max: lim, step: 0.1, value: String(value) });
         r.dataset.segment = s.name;
         const out = el("output", {}, `${value.toFixed(1)} ${unit}`);
         r.addEventListener("input", () => {
@@ -269,6 +270,11 @@ function main() {
         for (let i = 0; i < 3; i++) {
           const { r, out, unit } = sliders.get(`${s.name}/${key}/${i}`);
           const v = (seg[key] || [0, 0, 0])[i];
+          // A plan beyond the slider's range widens it, so the sliders keep the plan exactly.
+          if (Math.abs(v) > Number(r.max)) {
+            r.max = String(Math.ceil(Math.abs(v)));
+            r.min = String(-Math.ceil(Math.abs(v)));
+          }
           r.value = String(v);
           out.textContent = `${Number(v).toFixed(1)} ${unit}`;
         }
@@ -311,6 +317,8 @@ function main() {
     faceVertices() {
       return Array.from(current);
     },
+    /** Draw the scene now (benchmarks time it). */
+    render,
     /** How many segments and face vertices the page holds (for tests and benchmarks). */
     info() {
       return { vertices: n, segments: basis ? basis.segments.map((s) => s.name) : [], basis: basis ? basis.label : null };

@@ -30,7 +30,9 @@ fn drive(html: &Path, plans: &Value, name: &str) -> Value {
     let plans_file = dir.join("plans.json");
     std::fs::write(&plans_file, plans.to_string()).unwrap();
     let out = dir.join("browser.json");
-    let shot = Path::new(env!("CARGO_TARGET_TMPDIR")).join("../test-artefacts").join(name);
+    let shot = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("../test-artefacts")
+        .join(name);
     let run = Command::new("node")
         .current_dir(web_dir())
         .arg("test/page.test.mjs")
@@ -61,6 +63,26 @@ fn drive(html: &Path, plans: &Value, name: &str) -> Value {
         shot.display()
     );
     r
+}
+
+/// The committed bundle is what `npm run build` makes from web/src and the lockfile.
+#[test]
+fn the_committed_bundle_equals_a_fresh_build() {
+    assert!(
+        web_dir().join("node_modules").is_dir(),
+        "web/node_modules missing: run scripts/test-setup.sh"
+    );
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .args(["build.mjs", "--check"])
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    assert!(
+        run.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
 }
 
 fn flat(v: &Value) -> Vec<f64> {
@@ -127,7 +149,11 @@ fn sheet(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
     for j in 0..=n {
         for i in 0..=n {
             let phi = -1.2 + 2.4 * i as f64 / n as f64;
-            v.push([80.0 * phi.sin(), -80.0 * phi.cos(), -60.0 + 120.0 * j as f64 / n as f64]);
+            v.push([
+                80.0 * phi.sin(),
+                -80.0 * phi.cos(),
+                -60.0 + 120.0 * j as f64 / n as f64,
+            ]);
         }
     }
     (v, common::grid_triangles(n))
@@ -204,11 +230,18 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
     // Before any plan: the run's face_post (float32 in the page).
     assert!(max_diff(&flat(&r["vertices_initial"]), &face_post) < 1e-4);
     // After each plan: each vertex moved by its segment's rigid map, as osteotomy.rs moves bone.
-    for (p, got) in plans.as_array().unwrap()[..2].iter().zip(r["vertices"].as_array().unwrap()) {
+    for (p, got) in plans.as_array().unwrap()[..2]
+        .iter()
+        .zip(r["vertices"].as_array().unwrap())
+    {
         let expected: Vec<[f64; 3]> = face
             .iter()
             .map(|x| {
-                let (name, pivot) = if left(x) { ("left", pivots[0]) } else { ("right", pivots[1]) };
+                let (name, pivot) = if left(x) {
+                    ("left", pivots[0])
+                } else {
+                    ("right", pivots[1])
+                };
                 match p.get(name) {
                     None => *x,
                     Some(m) => {
@@ -224,12 +257,20 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
             })
             .collect();
         let d = max_diff(&flat(got), &expected);
-        assert!(d < 1e-3, "plan {p}: the page is {d} mm off the rigid motion");
+        assert!(
+            d < 1e-3,
+            "plan {p}: the page is {d} mm off the rigid motion"
+        );
     }
     // A plan naming an unknown segment is refused, and the face keeps the previous plan.
     let errors = r["set_plan_errors"].as_array().unwrap();
     assert_eq!(errors.len(), 1, "{errors:?}");
-    assert!(errors[0].as_str().unwrap().contains("unknown segment 'maxilla'"));
+    assert!(
+        errors[0]
+            .as_str()
+            .unwrap()
+            .contains("unknown segment 'maxilla'")
+    );
     assert_eq!(r["vertices"][2], r["vertices"][1]);
 }
 
@@ -312,7 +353,9 @@ fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
     assert!(max_diff(&flat(&r["vertices_initial"]), &y.face_post.vertices) < 1e-3);
     let d = max_diff(&flat(&r["vertices"][0]), &x.face_post.vertices);
     let moved = x.report.displacement.max;
-    println!("setPlan vs a full run of the same plan: max |Δ| = {d:.2e} mm (face moved up to {moved:.2} mm)");
+    println!(
+        "setPlan vs a full run of the same plan: max |Δ| = {d:.2e} mm (face moved up to {moved:.2} mm)"
+    );
     assert!(moved > 1.0, "the plan hardly moved the face: {moved} mm");
     assert!(d < 1e-3, "setPlan is {d} mm off the full run");
 }

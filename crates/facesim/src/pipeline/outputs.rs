@@ -267,14 +267,14 @@ pub fn write_page(
     for o in &case.osteotomy {
         figures.push((
             format!("plan: {}", o.name),
-            format!(
-                "translate {:?} mm, rotate {:?}°",
-                o.translate, o.rotate_deg
-            ),
+            format!("translate {:?} mm, rotate {:?}°", o.translate, o.rotate_deg),
         ));
     }
     for (stage, cost) in &report.costs.0 {
-        figures.push((format!("time: {}", stage.key()), format!("{:.2} s", cost.wall_s)));
+        figures.push((
+            format!("time: {}", stage.key()),
+            format!("{:.2} s", cost.wall_s),
+        ));
     }
     let data = crate::report_page::PageData {
         title: report.name.clone(),
