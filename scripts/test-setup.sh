@@ -38,5 +38,25 @@ need_real_ct() {
   "$root/data-samples/fetch-real.sh"
 }
 
+# Headless Chromium for report.html's browser test (Debian's chromium, never a downloaded
+# browser), and node/npm to drive it (docs/report-page.md).
+need_browser() {
+  command -v chromium >/dev/null 2>&1 || apt_install chromium
+  command -v node >/dev/null 2>&1 || apt_install nodejs
+  command -v npm >/dev/null 2>&1 || apt_install npm
+}
+
+# web/'s npm packages (three, esbuild, puppeteer-core) as the lockfile pins them.
+need_npm() {
+  local web="$root/web"
+  if [ ! -d "$web/node_modules" ] || [ "$web/package-lock.json" -nt "$web/node_modules" ]; then
+    (cd "$web" && npm ci --no-audit --no-fund --loglevel=error >/dev/null)
+    touch "$web/node_modules"
+    echo "test-setup: npm ci in web/"
+  fi
+}
+
 need_calculix
 need_real_ct
+need_browser
+need_npm

@@ -32,6 +32,7 @@ pub mod pipeline;
 pub mod plan;
 pub mod regions;
 pub mod report;
+pub mod report_page;
 pub mod segment;
 pub mod solve;
 pub mod springs;

@@ -196,6 +196,7 @@ fn finish(
         },
     ));
     outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
+    outputs::write_page(out_dir, &scene, &prediction, &report, None)?;
     outputs::write_report(out_dir, &report)?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;

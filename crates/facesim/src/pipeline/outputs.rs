@@ -228,6 +228,84 @@ pub fn fill_report(
     report.stages_not_run = skipped;
 }
 
+/// report.html (docs/report-page.md): the face and skull before and after, report.json's key
+/// figures and warnings; re-planning sliders once the run has a plan basis.
+pub fn write_page(
+    dir: &Path,
+    scene: &Scene,
+    p: &Prediction,
+    report: &Report,
+    basis: Option<crate::report_page::PageBasis>,
+) -> Result<()> {
+    let case = &scene.case;
+    let skull = &scene.face.skull;
+    let skull_post = scene.model.plan.apply(&skull.vertices, 1.0).0;
+    // The segment that moves each skull vertex (the last whose region holds it; 255: none).
+    let skull_segment = skull
+        .vertices
+        .iter()
+        .map(|v| {
+            case.osteotomy
+                .iter()
+                .rposition(|o| o.region.contains(*v))
+                .map_or(255, |i| i.min(254) as u8)
+        })
+        .collect();
+    let model = serde_json::to_value(case.solve.model)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default();
+    let c = &report.counts;
+    let d = &report.displacement;
+    let mut figures = vec![
+        ("model".to_string(), model.clone()),
+        ("face displacement max".into(), format!("{:.2} mm", d.max)),
+        ("face displacement mean".into(), format!("{:.2} mm", d.mean)),
+        (
+            "skin vertices / triangles".into(),
+            format!("{} / {}", c.skin_vertices, c.skin_triangles),
+        ),
+        (
+            "skull vertices / triangles".into(),
+            format!("{} / {}", c.skull_vertices, c.skull_triangles),
+        ),
+        ("CT voxels".into(), format!("{:?}", c.dims)),
+        ("unknowns".into(), c.unknowns.to_string()),
+    ];
+    for o in &case.osteotomy {
+        figures.push((
+            format!("plan: {}", o.name),
+            format!("translate {:?} mm, rotate {:?}°", o.translate, o.rotate_deg),
+        ));
+    }
+    for (stage, cost) in &report.costs.0 {
+        figures.push((
+            format!("time: {}", stage.key()),
+            format!("{:.2} s", cost.wall_s),
+        ));
+    }
+    let data = crate::report_page::PageData {
+        title: report.name.clone(),
+        model,
+        face_pre: &p.skin.vertices,
+        face_post: &p.face_post.vertices,
+        face_triangles: &p.skin.triangles,
+        skull_pre: &skull.vertices,
+        skull_post: &skull_post,
+        skull_triangles: &skull.triangles,
+        segments: case.osteotomy.iter().map(|o| o.name.clone()).collect(),
+        skull_segment,
+        colour_scale_mm: d.colour_scale_mm,
+        figures,
+        warnings: report.warnings.clone(),
+        basis,
+        no_basis_reason: "No plan basis was stored with this run, so the page cannot re-plan: \
+                          run `facesim replan` for other plans."
+            .into(),
+    };
+    crate::report_page::write_report_html(dir, &data)
+}
+
 pub fn write_report(dir: &Path, report: &Report) -> Result<()> {
     let text = serde_json::to_string_pretty(report).map_err(|e| Error::output(dir, e))?;
     write_bytes_atomic(&dir.join("report.json"), |w| w.write_all(text.as_bytes()))

@@ -1,0 +1,213 @@
+//! report.html (docs/report-page.md): one self-contained page per run that opens from disk with
+//! no server and no network. The page logic is the three.js bundle built from `web/` and
+//! committed as `assets/report.bundle.js`; it is embedded here, so writing the page needs no npm.
+//! The run's data go in a JSON block: meshes and basis columns as base64 little-endian float32 /
+//! uint32 / uint8 arrays (LPS mm), plus report.json's key figures and warnings.
+
+use crate::error::{Error, Result};
+use crate::output::write_bytes_atomic;
+use std::path::Path;
+
+/// The page logic (three.js included), rebuilt by `npm run build` in `web/`.
+pub const BUNDLE: &str = include_str!("../assets/report.bundle.js");
+
+/// The plan basis as the page uses it: per segment, the 12 displacement columns of the face.
+pub struct PageBasis {
+    /// Shown above the sliders: "exact", or "linear preview" for a linearised model.
+    pub label: String,
+    pub segments: Vec<PageSegment>,
+}
+
+/// One osteotomy segment: its pivot, the run's move (the sliders' start) and its columns.
+pub struct PageSegment {
+    pub name: String,
+    /// LPS mm, from the case.
+    pub pivot: [f64; 3],
+    /// The run's plan for this segment: mm and degrees (about x, then y, then z).
+    pub translate: [f64; 3],
+    pub rotate_deg: [f64; 3],
+    /// 12 columns (k = 4·i + j of M = [R − I | t′], row-major), each one displacement per face
+    /// vertex (mm per unit entry): the face moves by d = Σ_k m_k · columns[k].
+    pub columns: Vec<Vec<[f64; 3]>>,
+}
+
+/// Everything report.html shows.
+pub struct PageData<'a> {
+    pub title: String,
+    /// `[solve] model`.
+    pub model: String,
+    pub face_pre: &'a [[f64; 3]],
+    /// Same count and order as `face_pre`.
+    pub face_post: &'a [[f64; 3]],
+    pub face_triangles: &'a [[u32; 3]],
+    pub skull_pre: &'a [[f64; 3]],
+    pub skull_post: &'a [[f64; 3]],
+    pub skull_triangles: &'a [[u32; 3]],
+    /// The osteotomy segments' names in case order.
+    pub segments: Vec<String>,
+    /// Per skull vertex, the index in `segments` of the segment that moves it (255: none); the
+    /// page moves the skull rigidly with the sliders.
+    pub skull_segment: Vec<u8>,
+    /// The colour scale of the displacement (mm).
+    pub colour_scale_mm: [f64; 2],
+    /// Key figures of report.json, as label → formatted value.
+    pub figures: Vec<(String, String)>,
+    pub warnings: Vec<String>,
+    pub basis: Option<PageBasis>,
+    /// Shown instead of the sliders when there is no basis.
+    pub no_basis_reason: String,
+}
+
+/// Write `dir/report.html` (temporary name, then renamed).
+pub fn write_report_html(dir: &Path, data: &PageData) -> Result<()> {
+    let dest = dir.join("report.html");
+    let html = page_html(data).map_err(|msg| Error::output(&dest, msg))?;
+    write_bytes_atomic(&dest, |w| w.write_all(html.as_bytes()))
+}
+
+/// The whole page as text; an error names what is inconsistent in `data`.
+pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
+    let n = data.face_pre.len();
+    if data.face_post.len() != n {
+        return Err(format!(
+            "face_post has {} vertices, face_pre {n}",
+            data.face_post.len()
+        ));
+    }
+    if data.skull_post.len() != data.skull_pre.len()
+        || data.skull_segment.len() != data.skull_pre.len()
+    {
+        return Err("skull_pre, skull_post and skull_segment differ in length".into());
+    }
+    let basis = match &data.basis {
+        None => serde_json::Value::Null,
+        Some(b) => {
+            let mut segs = Vec::new();
+            for s in &b.segments {
+                if s.columns.len() != 12 || s.columns.iter().any(|c| c.len() != n) {
+                    return Err(format!(
+                        "plan basis segment '{}': expected 12 columns of {n} vertices",
+                        s.name
+                    ));
+                }
+                let flat: Vec<f32> = s
+                    .columns
+                    .iter()
+                    .flat_map(|c| c.iter().flat_map(|p| p.map(|x| x as f32)))
+                    .collect();
+                segs.push(serde_json::json!({
+                    "name": s.name,
+                    "pivot": s.pivot,
+                    "translate": s.translate,
+                    "rotate_deg": s.rotate_deg,
+                    "columns": base64(&f32_bytes(&flat)),
+                }));
+            }
+            serde_json::json!({ "label": b.label, "segments": segs })
+        }
+    };
+    let json = serde_json::json!({
+        "title": data.title,
+        "model": data.model,
+        "face_pre": points(data.face_pre),
+        "face_post": points(data.face_post),
+        "face_triangles": triangles(data.face_triangles),
+        "skull_pre": points(data.skull_pre),
+        "skull_post": points(data.skull_post),
+        "skull_triangles": triangles(data.skull_triangles),
+        "segments": data.segments,
+        "skull_segment": base64(&data.skull_segment),
+        "colour_scale_mm": data.colour_scale_mm,
+        "figures": data.figures,
+        "warnings": data.warnings,
+        "basis": basis,
+        "no_basis_reason": data.no_basis_reason,
+    });
+    // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built
+    // without "</script" (web/build.mjs checks).
+    let json = json.to_string().replace("</", "<\\/");
+    Ok(format!(
+        "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
+         <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
+         <title>facesim — {title}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n\
+         <aside id=\"side\"></aside>\n<main id=\"view\"></main>\n\
+         <script id=\"facesim-data\" type=\"application/json\">{json}</script>\n\
+         <script>{BUNDLE}</script>\n</body>\n</html>\n",
+        title = escape_html(&data.title),
+    ))
+}
+
+const STYLE: &str = "html,body{margin:0;height:100%;font:13px/1.4 system-ui,sans-serif;color:#222}\
+body{display:flex}#side{width:330px;overflow:auto;padding:10px 14px;box-sizing:border-box;\
+border-right:1px solid #ccc;background:#fff}#view{flex:1;position:relative;min-width:0}\
+#view canvas{display:block;width:100%;height:100%}h1{font-size:16px;margin:0 0 4px}\
+h2{font-size:14px;margin:14px 0 4px}h3{font-size:13px;margin:8px 0 2px}fieldset{margin:8px 0;\
+border:1px solid #ccc}fieldset label{display:block}label.slider{display:grid;\
+grid-template-columns:60px 1fr 60px;align-items:center}.scale{margin:8px 0;display:grid;\
+grid-template-columns:1fr 1fr}.scale>span:first-child{grid-column:1/3}.ramp{grid-column:1/3;\
+height:12px;border:1px solid #999}.scale .max{text-align:right}.label,.why{font-weight:bold;\
+color:#a40}table.figures{border-collapse:collapse}table.figures th{text-align:left;\
+font-weight:normal;color:#555;padding-right:8px}ul.warnings{padding-left:18px;color:#a40}";
+
+fn escape_html(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
+fn points(p: &[[f64; 3]]) -> String {
+    let flat: Vec<f32> = p.iter().flat_map(|v| v.map(|x| x as f32)).collect();
+    base64(&f32_bytes(&flat))
+}
+
+fn triangles(t: &[[u32; 3]]) -> String {
+    let bytes: Vec<u8> = t.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
+    base64(&bytes)
+}
+
+fn f32_bytes(v: &[f32]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_le_bytes()).collect()
+}
+
+/// Standard base64 with padding (RFC 4648), what the page's `atob` reads.
+pub fn base64(bytes: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);
+    for c in bytes.chunks(3) {
+        let b = [c[0], *c.get(1).unwrap_or(&0), *c.get(2).unwrap_or(&0)];
+        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+        for k in 0..4 {
+            if k <= c.len() {
+                s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
+            } else {
+                s.push('=');
+            }
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn base64_matches_rfc4648_vectors() {
+        for (i, o) in [
+            ("", ""),
+            ("f", "Zg=="),
+            ("fo", "Zm8="),
+            ("foo", "Zm9v"),
+            ("foob", "Zm9vYg=="),
+            ("fooba", "Zm9vYmE="),
+            ("foobar", "Zm9vYmFy"),
+        ] {
+            assert_eq!(base64(i.as_bytes()), o);
+        }
+    }
+
+    #[test]
+    fn the_bundle_cannot_end_its_script_early() {
+        assert!(!BUNDLE.to_ascii_lowercase().contains("</script"));
+    }
+}

@@ -1,0 +1,361 @@
+//! report.html in a real browser (docs/report-page.md): Debian's chromium, driven by
+//! puppeteer-core from web/ (web/test/page.test.mjs), opens the page from disk. Checked: no
+//! console or page errors, no request leaving the file, a drawn canvas, and `setPlan` → the face
+//! against two independent paths: the rigid motion of the osteotomy module (an analytic basis), and
+//! full runs of the linear volumetric model. Screenshots go to target/test-artefacts/.
+
+mod common;
+
+use facesim::case::{Case, Osteotomy, Region, SolveModel};
+use facesim::observe::Quiet;
+use facesim::osteotomy::Plan;
+use facesim::report_page::{PageBasis, PageData, PageSegment, write_report_html};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn web_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../web")
+}
+
+/// Run the page script on `html` with `plans`; the screenshot is kept as `target/test-artefacts/NAME`.
+fn drive(html: &Path, plans: &Value, name: &str) -> Value {
+    let chromium = std::env::var("FACESIM_CHROMIUM").unwrap_or_else(|_| "/usr/bin/chromium".into());
+    let node_ok = Command::new("node").arg("--version").output().is_ok();
+    assert!(
+        node_ok && Path::new(&chromium).is_file() && web_dir().join("node_modules").is_dir(),
+        "report.html's browser test needs node, {chromium} and web/node_modules: run scripts/test-setup.sh"
+    );
+    let dir = html.parent().unwrap();
+    let plans_file = dir.join("plans.json");
+    std::fs::write(&plans_file, plans.to_string()).unwrap();
+    let out = dir.join("browser.json");
+    let shot = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("../test-artefacts")
+        .join(name);
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .arg("test/page.test.mjs")
+        .args([html, &plans_file, &out, &shot])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "page.test.mjs failed: {}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(shot.is_file(), "no screenshot at {}", shot.display());
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for k in ["console_errors", "page_errors", "outside_requests"] {
+        assert_eq!(r[k], json!([]), "{k} in {}", html.display());
+    }
+    // The canvas shows something: a good share of drawn pixels in many shades.
+    let c = &r["canvas_final"];
+    let (px, drawn, colours) = (
+        c["pixels"].as_f64().unwrap(),
+        c["drawn"].as_f64().unwrap(),
+        c["colours"].as_f64().unwrap(),
+    );
+    assert!(
+        drawn > 0.05 * px && colours > 100.0,
+        "blank canvas: {c} (screenshot {})",
+        shot.display()
+    );
+    r
+}
+
+/// The committed bundle is what `npm run build` makes from web/src and the lockfile.
+#[test]
+fn the_committed_bundle_equals_a_fresh_build() {
+    assert!(
+        web_dir().join("node_modules").is_dir(),
+        "web/node_modules missing: run scripts/test-setup.sh"
+    );
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .args(["build.mjs", "--check"])
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    assert!(
+        run.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
+fn flat(v: &Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn max_diff(page: &[f64], expected: &[[f64; 3]]) -> f64 {
+    assert_eq!(page.len(), 3 * expected.len());
+    expected
+        .iter()
+        .flatten()
+        .zip(page)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max)
+}
+
+/// The page holds no address it could load: no src/href attributes, no url(), and the only
+/// "http" strings are XML namespace names inside three.js.
+fn assert_self_contained(html: &str) {
+    let lower = html.to_ascii_lowercase();
+    for bad in [" src=", " href=", "@import", "<link"] {
+        assert!(!lower.contains(bad), "report.html contains '{bad}'");
+    }
+    // CSS url(…), not an identifier ending in "url" (three.js has getDataURL).
+    for (i, _) in lower.match_indices("url(") {
+        let before = lower[..i].chars().last().unwrap_or(' ');
+        assert!(
+            before.is_ascii_alphanumeric() || before == '_' || before == '$',
+            "report.html contains url( at byte {i}"
+        );
+    }
+    let mut rest = lower.as_str();
+    while let Some(i) = rest.find("http") {
+        let tail = &rest[i..];
+        assert!(
+            tail.starts_with("http://www.w3.org/"),
+            "report.html names an address: {}",
+            &tail[..tail.len().min(60)]
+        );
+        rest = &rest[i + 4..];
+    }
+}
+
+fn osteotomy(name: &str, translate: [f64; 3], rotate_deg: [f64; 3], pivot: [f64; 3]) -> Osteotomy {
+    Osteotomy {
+        name: name.into(),
+        region: Region::Box {
+            min: [-1e9; 3],
+            max: [1e9; 3],
+        },
+        translate,
+        rotate_deg,
+        pivot,
+    }
+}
+
+/// A curved sheet (a piece of a cylinder about z), n × n cells, LPS mm.
+fn sheet(n: usize) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let mut v = Vec::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let phi = -1.2 + 2.4 * i as f64 / n as f64;
+            v.push([
+                80.0 * phi.sin(),
+                -80.0 * phi.cos(),
+                -60.0 + 120.0 * j as f64 / n as f64,
+            ]);
+        }
+    }
+    (v, common::grid_triangles(n))
+}
+
+/// The basis of a face that moves rigidly with its segment: for vertex x the column of
+/// m_k (k = 4·i + j) is e_i · [x; 1]_j, so d = M·[x; 1] = (R − I)·x + t′ exactly.
+fn rigid_columns(face: &[[f64; 3]], mine: impl Fn(&[f64; 3]) -> bool) -> Vec<Vec<[f64; 3]>> {
+    (0..12)
+        .map(|k| {
+            let (i, j) = (k / 4, k % 4);
+            face.iter()
+                .map(|x| {
+                    let mut c = [0.0; 3];
+                    if mine(x) {
+                        c[i] = if j < 3 { x[j] } else { 1.0 };
+                    }
+                    c
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
+    let (face, tris) = sheet(40);
+    let face_post: Vec<[f64; 3]> = face.iter().map(|p| [p[0], p[1] - 2.0, p[2]]).collect();
+    let left = |p: &[f64; 3]| p[0] > 0.0; // LPS +x: the patient's left
+    let pivots = [[20.0, -70.0, -30.0], [-25.0, -60.0, 10.0]];
+    let segment = |name: &str, pivot: [f64; 3], mine: &dyn Fn(&[f64; 3]) -> bool| PageSegment {
+        name: name.into(),
+        pivot,
+        translate: [0.0, -2.0, 0.0],
+        rotate_deg: [0.0; 3],
+        columns: rigid_columns(&face, mine),
+    };
+    let skull_segment = face.iter().map(|p| if left(p) { 0 } else { 1 }).collect();
+    let data = PageData {
+        title: "analytic basis <&>".into(),
+        model: "tet".into(),
+        face_pre: &face,
+        face_post: &face_post,
+        face_triangles: &tris,
+        skull_pre: &face,
+        skull_post: &face_post,
+        skull_triangles: &tris,
+        segments: vec!["left".into(), "right".into()],
+        skull_segment,
+        colour_scale_mm: [0.0, 2.0],
+        figures: vec![("figure".into(), "1 mm".into())],
+        warnings: vec!["a warning </script> that must stay text".into()],
+        basis: Some(PageBasis {
+            label: "exact".into(),
+            segments: vec![
+                segment("left", pivots[0], &left),
+                segment("right", pivots[1], &|p| !left(p)),
+            ],
+        }),
+        no_basis_reason: String::new(),
+    };
+    let dir = common::kept_dir("facesim-page-analytic");
+    write_report_html(&dir, &data).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert_self_contained(&html);
+
+    let plans = json!([
+        {"left": {"translate": [1.0, -2.0, 3.0], "rotate_deg": [10.0, -20.0, 30.0]},
+         "right": {"translate": [0.0, -5.0, 0.0], "rotate_deg": [0.0, 0.0, -15.0]}},
+        {"right": {"translate": [2.0, 0.0, -1.0], "rotate_deg": [-45.0, 5.0, 0.0]}},
+        {"maxilla": {"translate": [0.0, -5.0, 0.0], "rotate_deg": [0.0, 0.0, 0.0]}},
+    ]);
+    let r = drive(&dir.join("report.html"), &plans, "report-analytic.png");
+    // Before any plan: the run's face_post (float32 in the page).
+    assert!(max_diff(&flat(&r["vertices_initial"]), &face_post) < 1e-4);
+    // After each plan: each vertex moved by its segment's rigid map, as osteotomy.rs moves bone.
+    for (p, got) in plans.as_array().unwrap()[..2]
+        .iter()
+        .zip(r["vertices"].as_array().unwrap())
+    {
+        let expected: Vec<[f64; 3]> = face
+            .iter()
+            .map(|x| {
+                let (name, pivot) = if left(x) {
+                    ("left", pivots[0])
+                } else {
+                    ("right", pivots[1])
+                };
+                match p.get(name) {
+                    None => *x,
+                    Some(m) => {
+                        let v3 = |k: &str| {
+                            let a = flat(&m[k]);
+                            [a[0], a[1], a[2]]
+                        };
+                        Plan::new(&[osteotomy(name, v3("translate"), v3("rotate_deg"), pivot)])
+                            .apply(&[*x], 1.0)
+                            .0[0]
+                    }
+                }
+            })
+            .collect();
+        let d = max_diff(&flat(got), &expected);
+        assert!(
+            d < 1e-3,
+            "plan {p}: the page is {d} mm off the rigid motion"
+        );
+    }
+    // A plan naming an unknown segment is refused, and the face keeps the previous plan.
+    let errors = r["set_plan_errors"].as_array().unwrap();
+    assert_eq!(errors.len(), 1, "{errors:?}");
+    assert!(
+        errors[0]
+            .as_str()
+            .unwrap()
+            .contains("unknown segment 'maxilla'")
+    );
+    assert_eq!(r["vertices"][2], r["vertices"][1]);
+}
+
+/// Run the capsule phantom with the linear volumetric model, the mandible moved by `translate`.
+fn tet_run(translate: [f64; 3], out: &Path) -> facesim::pipeline::Outcome {
+    let (mut case, _) = Case::load(&common::phantom_dir().join("case.toml")).unwrap();
+    case.solve.model = SolveModel::Tet;
+    case.tet.sliding = false;
+    case.tet.skin_size_mm = 8.0;
+    case.tet.deep_size_mm = 16.0;
+    case.osteotomy.truncate(1);
+    case.osteotomy[0].translate = translate;
+    case.osteotomy[0].rotate_deg = [0.0; 3];
+    facesim::pipeline::run_case(case, out, &Quiet).unwrap()
+}
+
+#[test]
+fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
+    // The face displacement of the linear model is linear in M = [R − I | t′]; for translations
+    // only the columns of t′ (k = 3, 7, 11) act. Two runs give the columns of t′_y and t′_z; a third,
+    // independent run of another plan is what the page must reproduce.
+    let dir = common::kept_dir("facesim-page-tet");
+    let y = tet_run([0.0, -4.0, 0.0], &dir.join("y"));
+    let z = tet_run([0.0, 0.0, 3.0], &dir.join("z"));
+    let x_plan = [0.0, -3.0, 2.0];
+    let x = tet_run(x_plan, &dir.join("x"));
+    assert_eq!(y.skin.vertices, x.skin.vertices);
+    let column = |o: &facesim::pipeline::Outcome, per: f64| -> Vec<[f64; 3]> {
+        o.face_post
+            .vertices
+            .iter()
+            .zip(&o.skin.vertices)
+            .map(|(a, b)| [0, 1, 2].map(|c| (a[c] - b[c]) / per))
+            .collect()
+    };
+    let zero = vec![[0.0; 3]; y.skin.vertices.len()];
+    let mut columns = vec![zero; 12];
+    columns[7] = column(&y, -4.0);
+    columns[11] = column(&z, 3.0);
+    // The page of run y: written by the pipeline itself, then again with the basis.
+    let html = std::fs::read_to_string(y.out_dir.join("report.html")).unwrap();
+    assert_self_contained(&html);
+    assert!(html.contains("No plan basis"));
+    let skull_post = Plan::new(&[osteotomy("mandible", [0.0, -4.0, 0.0], [0.0; 3], [0.0; 3])])
+        .apply(&y.skull.vertices, 1.0)
+        .0;
+    let page = dir.join("page");
+    write_report_html(
+        &page,
+        &PageData {
+            title: "tet phantom".into(),
+            model: "tet".into(),
+            face_pre: &y.skin.vertices,
+            face_post: &y.face_post.vertices,
+            face_triangles: &y.skin.triangles,
+            skull_pre: &y.skull.vertices,
+            skull_post: &skull_post,
+            skull_triangles: &y.skull.triangles,
+            segments: vec!["mandible".into()],
+            skull_segment: vec![255; y.skull.vertices.len()],
+            colour_scale_mm: [0.0, y.report.displacement.max],
+            figures: vec![],
+            warnings: y.report.warnings.clone(),
+            basis: Some(PageBasis {
+                label: "exact".into(),
+                segments: vec![PageSegment {
+                    name: "mandible".into(),
+                    pivot: [10.0, -50.0, -40.0],
+                    translate: [0.0, -4.0, 0.0],
+                    rotate_deg: [0.0; 3],
+                    columns,
+                }],
+            }),
+            no_basis_reason: String::new(),
+        },
+    )
+    .unwrap();
+    let plans = json!([{"mandible": {"translate": x_plan, "rotate_deg": [0.0, 0.0, 0.0]}}]);
+    let r = drive(&page.join("report.html"), &plans, "report.png");
+    assert!(max_diff(&flat(&r["vertices_initial"]), &y.face_post.vertices) < 1e-3);
+    let d = max_diff(&flat(&r["vertices"][0]), &x.face_post.vertices);
+    let moved = x.report.displacement.max;
+    println!(
+        "setPlan vs a full run of the same plan: max |Δ| = {d:.2e} mm (face moved up to {moved:.2} mm)"
+    );
+    assert!(moved > 1.0, "the plan hardly moved the face: {moved} mm");
+    assert!(d < 1e-3, "setPlan is {d} mm off the full run");
+}
