@@ -157,7 +157,7 @@ fn case_toml(ct: &Path, scan: &Path, target: usize, struts: bool) -> String {
         "name = \"embed-bench\"\n[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n[springs]\nstruts = {struts}\n\
          [surface]\nmovable = {{ sphere = {{ center = [{}, {}, {}], radius = {} }} }}\n\
          [[osteotomy]]\nname = \"mandible\"\nregion = {{ box = {{ min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] }} }}\n\
-         translate = [0.0, -6.0, 0.0]\n[solve]\ncoarse_triangles = {target}\n",
+         translate = [0.0, -6.0, 0.0]\n[solve]\nmodel = \"equilibrium\"\ncoarse_triangles = {target}\n",
         ct.display(),
         scan.display(),
         MOVABLE.0[0],

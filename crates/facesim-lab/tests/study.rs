@@ -296,6 +296,8 @@ fn a_rigid_translation_of_all_bone_translates_the_skin_in_every_baseline() {
         pivot: [0.0; 3],
     }];
     case.surface.movable = None;
+    // The surface baselines need the C1 model's springs.
+    case.solve.model = facesim::case::SolveModel::Equilibrium;
     let scene = prepare_case(&case, &facesim::observe::Quiet).unwrap();
     let tn = (t.iter().map(|x| x * x).sum::<f64>()).sqrt();
     for kind in [volumetric::Kind::Lattice, volumetric::Kind::Tetrahedra] {

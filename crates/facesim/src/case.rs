@@ -429,7 +429,7 @@ impl Default for Surface {
 impl Default for Solve {
     fn default() -> Solve {
         Solve {
-            model: SolveModel::Equilibrium,
+            model: SolveModel::Tet,
             steps: 4,
             k_c: 2.5e-6,
             koch_k_c: 1e-8,
@@ -727,7 +727,7 @@ mod tests {
         .unwrap();
         assert_eq!(c.tissue.method, TissueMethod::Fit);
         assert_eq!(c.tissue.bone, 300.0);
-        assert_eq!(c.solve.model, SolveModel::Equilibrium);
+        assert_eq!(c.solve.model, SolveModel::Tet);
     }
 
     #[test]

@@ -4,7 +4,7 @@
 mod common;
 
 use common::phantom_dir;
-use facesim::case::{Case, Osteotomy, PathSection, Region};
+use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
 use facesim::error::Error;
 use facesim::observe::Quiet;
 use facesim::pipeline::{self, Outcome};
@@ -33,6 +33,9 @@ fn phantom_case() -> Case {
         ..Case::default()
     }
 }
+
+const TET_SKIPS_WITHOUT_MOVE: [&str; 5] = ["coarsen", "tet_mesh", "solve", "embed", "plan_basis"];
+const TET_SKIPS: [&str; 1] = ["coarsen"];
 
 const MOVABLE: ([f64; 3], f64) = ([0.0, -60.0, -45.0], 70.0);
 
@@ -110,23 +113,42 @@ fn a_movable_region_without_skin_is_refused_naming_the_region() {
 
 #[test]
 fn stages_not_run_says_which_optional_stages_a_case_skipped() {
-    // Before the fix the list was always empty.
-    let mut case = phantom_case();
+    // Before the fix the list was always empty. The C1 model: no coarse copy of the scan, and
+    // no embedding without one.
+    let c1 = || {
+        let mut case = phantom_case();
+        case.solve.model = SolveModel::Equilibrium;
+        case
+    };
+    let mut case = c1();
     case.osteotomy.clear();
     let o = run(case).unwrap();
     let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
     assert_eq!(skipped, ["coarsen", "solve", "embed"]);
     assert!(displacement(&o).iter().all(|d| *d == 0.0));
-    let o = run(phantom_case()).unwrap();
+    let o = run(c1()).unwrap();
     let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
     assert_eq!(skipped, ["coarsen", "embed"]);
+    // The volumetric model (the default) carries the scan whole: it never coarsens, and with
+    // no bone move it neither meshes nor solves.
+    let mut case = phantom_case();
+    case.osteotomy.clear();
+    let o = run(case).unwrap();
+    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    assert_eq!(skipped, TET_SKIPS_WITHOUT_MOVE);
+    assert!(displacement(&o).iter().all(|d| *d == 0.0));
+    let o = run(phantom_case()).unwrap();
+    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    assert_eq!(skipped, TET_SKIPS);
 }
 
 #[test]
 fn input_problems_are_input_errors_naming_the_file() {
     // A marching-tetrahedra skin of the phantom folds over in the cylindrical (u, v) map: a
     // property of the surface, reported against the CT it came from (was a "numerical failure").
+    // The (u, v) map is the C1 model's.
     let mut case = phantom_case();
+    case.solve.model = SolveModel::Equilibrium;
     case.skin = None;
     case.extract.method = facesim::case::ExtractMethod::Marching;
     match run(case).err().unwrap() {
@@ -150,7 +172,10 @@ fn input_problems_are_input_errors_naming_the_file() {
 
 #[test]
 fn an_impossible_plan_is_matched_by_kind_not_by_text() {
+    // The C1 model's check: the skin hangs on springs, so bone can pass through it. (In the
+    // volumetric model the tissue follows its bone; such a move is a warning there.)
     let mut case = phantom_case();
+    case.solve.model = SolveModel::Equilibrium;
     case.osteotomy[0].translate = [0.0, -60.0, 0.0];
     let e = run(case).err().unwrap();
     assert!(

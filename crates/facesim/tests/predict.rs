@@ -1,4 +1,5 @@
-//! Springs, bone moves and the predicted face on the phantom (issue 4, first part).
+//! Springs, bone moves and the predicted face of the C1 model on the phantom (issue 4, first
+//! part): the cases name `model = "equilibrium"` unless they choose a model themselves.
 
 mod common;
 
@@ -7,12 +8,17 @@ use std::path::PathBuf;
 
 fn case(extra: &str) -> PathBuf {
     let d = common::kept_dir("facesim-predict");
+    let model = if extra.contains("[solve]") {
+        ""
+    } else {
+        "[solve]\nmodel = \"equilibrium\"\n"
+    };
     let ct = phantom_dir().join("ct.nii.gz");
     let scan = phantom_dir().join("face.ply");
     std::fs::write(
         d.join("case.toml"),
         format!(
-            "name = \"p\"\n[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n{extra}",
+            "name = \"p\"\n[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n{model}{extra}",
             ct.display(),
             scan.display()
         ),
@@ -274,8 +280,12 @@ fn the_restricted_solve_equals_the_whole_mesh_solve() {
     let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
                 [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
                 translate = [0.0, -6.0, 0.0]\n";
-    let on = run(&format!("{plan}[solve]\nrestrict = true\n"));
-    let off = run(&format!("{plan}[solve]\nrestrict = false\n"));
+    let on = run(&format!(
+        "{plan}[solve]\nmodel = \"equilibrium\"\nrestrict = true\n"
+    ));
+    let off = run(&format!(
+        "{plan}[solve]\nmodel = \"equilibrium\"\nrestrict = false\n"
+    ));
     assert_eq!(on.face_post.vertices.len(), off.face_post.vertices.len());
     let worst = on
         .face_post
@@ -308,7 +318,11 @@ fn the_predicted_face_does_not_depend_on_the_load_increments() {
     let plan = format!("{MANDIBLE}translate = [0.0, -6.0, 0.0]\n");
     let faces: Vec<facesim::pipeline::Outcome> = [1, 2, 4]
         .iter()
-        .map(|n| run(&format!("{plan}[solve]\nsteps = {n}\n")))
+        .map(|n| {
+            run(&format!(
+                "{plan}[solve]\nmodel = \"equilibrium\"\nsteps = {n}\n"
+            ))
+        })
         .collect();
     let moved = displacement(&faces[0])
         .iter()
@@ -359,7 +373,9 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     // coarse skin moves the shell rigidly), and outside [surface] movable nothing moves.
     let t = [1.0, -2.0, 0.5];
     let skull = whole_skull(t);
-    let dir = dense_case(&format!("{skull}[solve]\ncoarse_triangles = 4000\n"));
+    let dir = dense_case(&format!(
+        "{skull}[solve]\nmodel = \"equilibrium\"\ncoarse_triangles = 4000\n"
+    ));
     let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet).unwrap();
     let coarse = o.report.surfaces.coarse.as_ref().unwrap();
     let (nc, nf) = (coarse.triangles, coarse.fine_triangles);
@@ -384,7 +400,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     // scan follows the chin forwards.
     let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
                 [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
-                translate = [0.0, -6.0, 0.0]\n[solve]\ncoarse_triangles = 4000\n";
+                translate = [0.0, -6.0, 0.0]\n[solve]\nmodel = \"equilibrium\"\ncoarse_triangles = 4000\n";
     let o = facesim::pipeline::run(&dense_case(plan), None, &facesim::observe::Quiet).unwrap();
     let inside = |p: &[f64; 3]| {
         (p[0]).powi(2) + (p[1] + 60.0).powi(2) + (p[2] + 45.0).powi(2) <= 70.0f64.powi(2)

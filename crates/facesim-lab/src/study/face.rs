@@ -256,7 +256,12 @@ struct Traced<'l> {
 
 impl<'a> Study<'a> {
     fn new(case_path: &Path, quick: bool, progress: &'a dyn Observer) -> Result<Self> {
-        let (case, dir) = Case::load(case_path)?;
+        let (mut case, dir) = Case::load(case_path)?;
+        // The scene carries the C1 model's springs, which the surface rows need (the default
+        // model, "tet", traces none); the volumetric rows mesh their own tissue.
+        if case.solve.model == SolveModel::Tet {
+            case.solve.model = SolveModel::Equilibrium;
+        }
         let name = case
             .name
             .clone()

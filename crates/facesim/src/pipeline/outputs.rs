@@ -228,6 +228,33 @@ pub fn fill_report(
     report.stages_not_run = skipped;
 }
 
+/// The page's re-planning data from the run's plan basis; None (sliders hidden, the page says
+/// why) without a basis or when the basis has a constant term the page does not carry.
+pub fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_page::PageBasis> {
+    let b = p.basis.as_ref()?;
+    if b.offset.is_some() {
+        return None;
+    }
+    let segments = b
+        .segments
+        .iter()
+        .map(|s| {
+            let o = case.osteotomy.iter().find(|o| o.name == s.name)?;
+            Some(crate::report_page::PageSegment {
+                name: s.name.clone(),
+                pivot: s.pivot,
+                translate: o.translate,
+                rotate_deg: o.rotate_deg,
+                columns: s.columns.clone(),
+            })
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(crate::report_page::PageBasis {
+        label: if b.exact { "exact" } else { "linear preview" }.into(),
+        segments,
+    })
+}
+
 /// report.html (docs/report-page.md): the face and skull before and after, report.json's key
 /// figures and warnings; re-planning sliders once the run has a plan basis.
 pub fn write_page(

@@ -114,7 +114,13 @@ fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<
         }
         None => {
             rec.warn("the plan moves no bone: the predicted face is the pre-operative face");
+            rec.skip(Stage::TetMesh, "no bone moves: no tissue to mesh");
             rec.skip(Stage::Solve, "no bone moves: nothing to solve");
+            rec.skip(Stage::Embed, "no bone moves: the face stays");
+            rec.skip(
+                Stage::PlanBasis,
+                "no bone moves: no plan basis to re-plan from",
+            );
             None
         }
     };

@@ -416,6 +416,10 @@ fn counted(a: &[u8], c: u8) -> usize {
     a.iter().filter(|k| **k == c).count()
 }
 
+/// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
+/// within about 15 mm, distraction of the maxilla reaches ~20.
+const LARGE_MOVE_MM: f64 = 25.0;
+
 /// Mesh, solve and carry the face; None when the plan moves no bone.
 pub fn predict(
     scene: &Scene,
@@ -475,6 +479,22 @@ pub fn predict(
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
+        ));
+    }
+    // The tissue follows its bone, so a move no skin could follow (centimetres typed as
+    // millimetres) is no error here as it is in the C1 model's spring check; say it instead.
+    let largest = hold
+        .iter()
+        .zip(&constraint)
+        .filter(|(_, c)| **c == MOVED)
+        .filter_map(|(h, _)| match h {
+            Hold::Fixed(u) => Some((u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt()),
+            _ => None,
+        })
+        .fold(0.0, f64::max);
+    if largest > LARGE_MOVE_MM {
+        rec.warn(format!(
+            "the plan moves bone up to {largest:.0} mm, beyond the {LARGE_MOVE_MM:.0} mm of the largest orthognathic moves: check the osteotomy's translate (mm) and rotate_deg (degrees); the small-strain model is not valid there"
         ));
     }
     // Each segment must carry tissue: a segment whose bone touches no node of the mesh moves
@@ -543,13 +563,16 @@ pub fn predict(
     }
     // Node displacements to face displacements; beyond the region's cut faces the tissue is
     // held: face vertices there stay (the extrapolation from the last tetrahedron would move them).
+    // Face vertices outside [surface] movable are rigid, as in the C1 model: interpolation
+    // between held and free skin nodes would move them by a little.
+    let face_rigid = super::model::rigid_mask(case, &skin.vertices);
     let carry = |e: &SkinEmbedding, u: &[[f64; 3]]| {
         let mut carried = match &quadratic {
             Some(q) => e.carry_quadratic(&q.tets, u),
             None => e.carry(&mesh.tets, u),
         };
-        for (d, p) in carried.iter_mut().zip(&skin.vertices) {
-            if (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
+        for ((d, p), rigid) in carried.iter_mut().zip(&skin.vertices).zip(&face_rigid) {
+            if *rigid || (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
                 *d = [0.0; 3];
             }
         }
