@@ -62,9 +62,10 @@ enum Cmd {
     Inspect { path: PathBuf },
     /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
     /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
-    /// `embed` = a dense face scan solved whole against coarse models + shell embedding.
+    /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
+    /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "dicom"])]
         what: String,
         /// Output directory for `scaling` and `embed`.
         #[arg(long)]
@@ -191,6 +192,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         } => match what.as_str() {
             "scaling" => cmd_bench_scaling(out, quick),
             "embed" => cmd_bench_embed(out, quick),
+            "dicom" => cmd_bench_dicom(out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
         },
         Cmd::Render {
@@ -292,6 +294,27 @@ fn cmd_bench_embed(out: Option<PathBuf>, quick: bool) -> Result<()> {
             d.map_or(f64::NAN, |d| d.p90),
             d.map_or(f64::NAN, |d| d.max)
         );
+    }
+    Ok(())
+}
+
+fn cmd_bench_dicom(out: Option<PathBuf>, quick: bool) -> Result<()> {
+    let out = out.ok_or_else(|| Error::config("bench dicom: --out DIR is required"))?;
+    let ct = Path::new("data-samples/real/Cranium.inv3");
+    let b = facesim_lab::bench_dicom::run(ct, &out, if quick { 1 } else { 5 })?;
+    println!("{} {:?}, best of {} reads", b.ct, b.dims, b.repeats);
+    for r in &b.rows {
+        match &r.error {
+            None => println!(
+                "{:42} {:24} {:8.1} MB {:7.3} s  max |dHU| {}",
+                r.syntax,
+                r.uid,
+                r.bytes as f64 / 1e6,
+                r.read_s,
+                r.max_abs_hu
+            ),
+            Some(e) => println!("{:42} {:24} not measured: {e}", r.syntax, r.uid),
+        }
     }
     Ok(())
 }
