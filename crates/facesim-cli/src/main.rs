@@ -67,10 +67,10 @@ enum Cmd {
     Bench {
         #[arg(value_parser = ["fem", "scaling", "embed", "dicom"])]
         what: String,
-        /// Output directory for `scaling` and `embed`.
+        /// Output directory for `scaling`, `embed` and `dicom`.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// `scaling`, `embed`: small sizes only.
+        /// `scaling`, `embed`: small sizes only; `dicom`: one read per syntax.
         #[arg(long)]
         quick: bool,
         /// Triangles in the mesh.

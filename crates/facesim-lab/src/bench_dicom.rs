@@ -163,7 +163,10 @@ fn time_read(dir: &Path, reference: &Volume, repeats: usize) -> Result<(f64, f64
         let v = read_volume(dir)?;
         best = best.min(t.elapsed().as_secs_f64());
         if v.dims != reference.dims {
-            return Err(Error::input(dir, "dimensions differ from the uncompressed series"));
+            return Err(Error::input(
+                dir,
+                "dimensions differ from the uncompressed series",
+            ));
         }
         max = v
             .data

@@ -19,6 +19,7 @@ use dicom_core::{DataElement, PrimitiveValue, VR, dicom_value};
 use dicom_dictionary_std::{tags, uids};
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject, OpenFileOptions};
 use dicom_pixeldata::{ConvertOptions, ModalityLutOption, PixelDecoder};
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -187,10 +188,12 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     let per_slice = rows * cols;
     debug_assert!(per_slice * nz <= MAX_VOXELS);
 
-    let mut data = Vec::with_capacity(per_slice * nz);
-    for h in &headers {
-        read_slice(h, per_slice, &mut data)?;
-    }
+    // Slices decode in parallel (a compressed series is codec-bound: docs/performance.md); each
+    // in its own guard, so a parser panic on one damaged file names that file.
+    let mut data = vec![0.0f32; per_slice * nz];
+    data.par_chunks_mut(per_slice)
+        .zip(headers.par_iter())
+        .try_for_each(|(slice, h)| crate::error::guard(&h.path, || read_slice(h, slice)))?;
     Ok(Volume {
         dims,
         spacing,
@@ -392,8 +395,9 @@ fn slice_spacing(headers: &[SliceHeader], pos: impl Fn(&SliceHeader) -> f64) -> 
     Ok((pos(&headers[nz - 1]) - pos(&headers[0])) / (nz - 1) as f64)
 }
 
-/// Append the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) to `data`.
-fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<()> {
+/// Write the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) into `out`.
+fn read_slice(h: &SliceHeader, out: &mut [f32]) -> Result<()> {
+    let per_slice = out.len();
     let obj = dicom_object::open_file(&h.path)
         .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
     let slope = obj
@@ -432,7 +436,9 @@ fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<
             ),
         ));
     }
-    data.extend(raw.iter().map(|&v| (v as f64 * slope + inter) as f32));
+    for (o, &v) in out.iter_mut().zip(&raw) {
+        *o = (v as f64 * slope + inter) as f32;
+    }
     Ok(())
 }
 
