@@ -473,8 +473,14 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
     // The CD's root (images below a DICOMDIR) and the series folder both read.
     assert_like_uncompressed(&cd, Stored::Signed16, 0.0);
     assert_like_uncompressed(&series, Stored::Signed16, 0.0);
-    // A DICOMDIR beside the images in one folder is passed over.
+    // A DICOMDIR beside the images in one folder is passed over, and so is a non-image object
+    // of the same series (no Rows, Columns or pixels: a report or presentation state).
     std::fs::copy(cd.join("DICOMDIR"), series.join("DICOMDIR")).unwrap();
+    let mut note = dicom_object::open_file(series.join("IM000001")).unwrap();
+    for tag in [tags::ROWS, tags::COLUMNS, tags::PIXEL_DATA] {
+        note.remove_element(tag);
+    }
+    note.write_to_file(series.join("SR000001")).unwrap();
     assert_like_uncompressed(&series, Stored::Signed16, 0.0);
 
     // A second series on the CD: refused, each series listed with its folder.
