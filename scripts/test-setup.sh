@@ -33,6 +33,13 @@ need_calculix() {
   command -v ccx >/dev/null 2>&1 || apt_install calculix-ccx
 }
 
+# Encoders for the compressed-DICOM fixtures (docs/dicom.md): dcmtk's dcmcjpeg, dcmcrle,
+# dcmcjpls and gdcm's gdcmconv (JPEG 2000).
+need_dicom_tools() {
+  command -v dcmcjpeg >/dev/null 2>&1 || apt_install dcmtk
+  command -v gdcmconv >/dev/null 2>&1 || apt_install libgdcm-tools
+}
+
 # The real sample CT (GPL-2 data, fetched, never committed).
 need_real_ct() {
   "$root/data-samples/fetch-real.sh"
@@ -57,6 +64,7 @@ need_npm() {
 }
 
 need_calculix
+need_dicom_tools
 need_real_ct
 need_browser
 need_npm

@@ -82,14 +82,15 @@ enum Cmd {
     /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
     /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
     /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
-    /// run's output directory; --case: the case.toml, default data-samples/real/case.toml).
+    /// run's output directory; --case: the case.toml, default data-samples/real/case.toml);
+    /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed", "replan"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom"])]
         what: String,
-        /// Output directory for `scaling` and `embed`.
+        /// Output directory for `scaling`, `embed` and `dicom`.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// `scaling`, `embed`: small sizes only.
+        /// `scaling`, `embed`: small sizes only; `dicom`: one read per syntax.
         #[arg(long)]
         quick: bool,
         /// Triangles in the mesh.
@@ -237,6 +238,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             "scaling" => cmd_bench_scaling(out, quick),
             "replan" => cmd_bench_replan(case, out),
             "embed" => cmd_bench_embed(out, quick),
+            "dicom" => cmd_bench_dicom(out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
         },
         Cmd::Render {
@@ -357,6 +359,27 @@ fn cmd_bench_replan(case: Option<PathBuf>, out: Option<PathBuf>) -> Result<()> {
         b.basis_s,
         b.run_s * 1e3 / b.predict_ms
     );
+    Ok(())
+}
+
+fn cmd_bench_dicom(out: Option<PathBuf>, quick: bool) -> Result<()> {
+    let out = out.ok_or_else(|| Error::config("bench dicom: --out DIR is required"))?;
+    let ct = Path::new("data-samples/real/Cranium.inv3");
+    let b = facesim_lab::bench_dicom::run(ct, &out, if quick { 1 } else { 5 })?;
+    println!("{} {:?}, best of {} reads", b.ct, b.dims, b.repeats);
+    for r in &b.rows {
+        match &r.error {
+            None => println!(
+                "{:42} {:24} {:8.1} MB {:7.3} s  max |dHU| {}",
+                r.syntax,
+                r.uid,
+                r.bytes as f64 / 1e6,
+                r.read_s,
+                r.max_abs_hu
+            ),
+            Some(e) => println!("{:42} {:24} not measured: {e}", r.syntax, r.uid),
+        }
+    }
     Ok(())
 }
 

@@ -252,16 +252,17 @@ fn broken_dicom_series_give_one_clear_line() {
         "PixelSpacing",
     );
 
-    let s = series(&d.path().join("jpeg"));
+    // A transfer syntax facesim does not decode (JPEG XL): named by UID and name.
+    let s = series(&d.path().join("jpegxl"));
     edit_slice(&s.join("slice0004.dcm"), |o| {
         let m = o.meta_mut();
-        m.transfer_syntax = format!("{}\0", dicom_dictionary_std::uids::JPEG2000_LOSSLESS);
+        m.transfer_syntax = "1.2.840.10008.1.2.4.110\0".to_string();
         m.update_information_group_length();
     });
     assert_clean_failure(
         &facesim(&["inspect", s.to_str().unwrap()]),
         "slice0004.dcm",
-        "transfer syntax",
+        "transfer syntax 1.2.840.10008.1.2.4.110 (JPEG XL Lossless) is not decoded",
     );
 
     let empty = d.path().join("empty");
@@ -279,4 +280,38 @@ fn inv3_errors_name_the_file() {
     let d = tempfile::tempdir().unwrap();
     let p = patched(d.path(), "broken.inv3", b"\x1f\x8b\x08\x00garbage");
     assert_clean_failure(&facesim(&["inspect", &p]), "broken.inv3", "");
+}
+
+#[test]
+fn corrupt_compressed_dicom_gives_one_clear_line() {
+    // RLE-compressed by dcmtk (scripts/test-setup.sh installs it), then one slice's RLE header
+    // (the 64 bytes after the fragment's item header) overwritten.
+    let d = tempfile::tempdir().unwrap();
+    let raw = series(&d.path().join("raw"));
+    let rle = d.path().join("rle");
+    std::fs::create_dir_all(&rle).unwrap();
+    for i in 1..=4 {
+        let name = format!("slice{i:04}.dcm");
+        let r = std::process::Command::new("dcmcrle")
+            .arg(raw.join(&name))
+            .arg(rle.join(&name))
+            .output()
+            .expect("dcmcrle (run scripts/test-setup.sh)");
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    }
+    assert_eq!(facesim(&["inspect", rle.to_str().unwrap()]).code, 0);
+    let victim = rle.join("slice0002.dcm");
+    let mut bytes = std::fs::read(&victim).unwrap();
+    let at = bytes
+        .windows(4)
+        .rposition(|w| w == [0xFE, 0xFF, 0x00, 0xE0])
+        .unwrap()
+        + 8;
+    bytes[at..at + 64].fill(0xA5);
+    std::fs::write(&victim, &bytes).unwrap();
+    assert_clean_failure(
+        &facesim(&["inspect", rle.to_str().unwrap()]),
+        "slice0002.dcm",
+        "cannot decode pixel data, transfer syntax 1.2.840.10008.1.2.5 (RLE Lossless)",
+    );
 }

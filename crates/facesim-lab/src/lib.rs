@@ -8,6 +8,7 @@
 // Numerics index arrays by axis and node; iterator rewrites would hide the maths.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bench_dicom;
 pub mod bench_embed;
 pub mod bench_fem;
 pub mod bench_replan;

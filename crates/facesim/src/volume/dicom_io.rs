@@ -1,5 +1,12 @@
 //! DICOM series (a directory holding one series) via dicom-object + dicom-pixeldata.
 //!
+//! What a PACS export or patient CD holds besides the images is passed over: files without the
+//! DICM preamble, a DICOMDIR, non-image objects (reports, presentation states). File names do
+//! not matter (no `.dcm` needed). A directory with no image of its own is searched below (a CD's
+//! `DICOM/…` tree); more than one series found is refused with every series listed, never
+//! guessed (two reconstructions of one scan, bone and soft-tissue kernel, have the same size).
+//! Compressed pixel data is decoded by the codecs in `dicom_syntax` (docs/dicom.md).
+//!
 //! Geometry straight from the standard: ImageOrientationPatient gives the row direction (the
 //! direction of increasing column index i) and the column direction (increasing row index j),
 //! both already LPS; the slice normal is their cross product; slices are sorted by
@@ -12,15 +19,14 @@ use dicom_core::{DataElement, PrimitiveValue, VR, dicom_value};
 use dicom_dictionary_std::{tags, uids};
 use dicom_object::{FileMetaTableBuilder, InMemDicomObject, OpenFileOptions};
 use dicom_pixeldata::{ConvertOptions, ModalityLutOption, PixelDecoder};
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-/// Transfer syntaxes whose pixel data we read natively (no codec).
-const NATIVE_TS: [&str; 3] = [
-    uids::IMPLICIT_VR_LITTLE_ENDIAN,
-    uids::EXPLICIT_VR_LITTLE_ENDIAN,
-    "1.2.840.10008.1.2.2", // explicit VR big endian (retired, still seen)
-];
+use super::dicom_syntax;
+
+/// Media Storage Directory Storage: the SOP class of a DICOMDIR.
+const DICOMDIR_SOP_CLASS: &str = "1.2.840.10008.1.3.10";
 
 struct SliceHeader {
     path: PathBuf,
@@ -67,7 +73,9 @@ fn floats(
     Ok(v[..n].to_vec())
 }
 
-fn read_header(path: &Path) -> Result<SliceHeader> {
+/// The header of an image file; `None` for a DICOMDIR or a non-image object (no Rows and no
+/// Columns), which a series directory may hold beside its images.
+fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
     let obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
@@ -77,6 +85,13 @@ fn read_header(path: &Path) -> Result<SliceHeader> {
         .transfer_syntax()
         .trim_end_matches('\0')
         .to_string();
+    let sop_class = obj.meta().media_storage_sop_class_uid();
+    let has = |tag| obj.element_opt(tag).ok().flatten().is_some();
+    if sop_class.trim_end_matches('\0') == DICOMDIR_SOP_CLASS
+        || (!has(tags::ROWS) && !has(tags::COLUMNS))
+    {
+        return Ok(None);
+    }
     let get_str = |tag| {
         obj.element_opt(tag)
             .ok()
@@ -117,7 +132,7 @@ fn read_header(path: &Path) -> Result<SliceHeader> {
             format!("PixelSpacing {sp:?} must be positive"),
         ));
     }
-    Ok(SliceHeader {
+    Ok(Some(SliceHeader {
         path: path.to_path_buf(),
         series,
         series_desc,
@@ -127,7 +142,7 @@ fn read_header(path: &Path) -> Result<SliceHeader> {
         spacing: [sp[0], sp[1]],
         iop: [iop[0], iop[1], iop[2], iop[3], iop[4], iop[5]],
         ipp: [ipp[0], ipp[1], ipp[2]],
-    })
+    }))
 }
 
 fn normalize(v: [f64; 3]) -> [f64; 3] {
@@ -137,10 +152,19 @@ fn normalize(v: [f64; 3]) -> [f64; 3] {
 
 pub fn read_series(dir: &Path) -> Result<Volume> {
     let files = dicom_files(dir)?;
-    let mut headers = files
-        .iter()
-        .map(|p| read_header(p))
-        .collect::<Result<Vec<_>>>()?;
+    let mut headers = Vec::with_capacity(files.len());
+    for p in &files {
+        headers.extend(read_header(p)?);
+    }
+    if headers.is_empty() {
+        return Err(Error::input(
+            dir,
+            format!(
+                "no DICOM images here ({} DICOM files, none an image: DICOMDIR or reports only)",
+                files.len()
+            ),
+        ));
+    }
     check_one_series(dir, &headers)?;
     check_same_frame(&headers)?;
     let first = &headers[0];
@@ -155,6 +179,7 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     } else {
         1.0
     };
+    check_stacked_along_normal(&headers, normal, pixel_spacing)?;
     let dims = [cols, rows, nz];
     let spacing = [pixel_spacing[1], pixel_spacing[0], slice_spacing];
     let direction = [row_dir, col_dir, normal];
@@ -163,10 +188,12 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     let per_slice = rows * cols;
     debug_assert!(per_slice * nz <= MAX_VOXELS);
 
-    let mut data = Vec::with_capacity(per_slice * nz);
-    for h in &headers {
-        read_slice(h, per_slice, &mut data)?;
-    }
+    // Slices decode in parallel (a compressed series is codec-bound: docs/performance.md); each
+    // in its own guard, so a parser panic on one damaged file names that file.
+    let mut data = vec![0.0f32; per_slice * nz];
+    data.par_chunks_mut(per_slice)
+        .zip(headers.par_iter())
+        .try_for_each(|(slice, h)| crate::error::guard(&h.path, || read_slice(h, slice)))?;
     Ok(Volume {
         dims,
         spacing,
@@ -176,58 +203,88 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     })
 }
 
-/// The DICOM files of `dir` (not hidden, with the DICM preamble), sorted by name.
+/// The DICOM files of `dir` (not hidden, with the DICM preamble, whatever their name), sorted
+/// by path. When `dir` itself holds none, its subdirectories are searched (a patient CD: a
+/// DICOMDIR at the top, the images in `DICOM/…`).
 fn dicom_files(dir: &Path) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| Error::input(dir, e))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.is_file()
-                && !p
-                    .file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with('.'))
-        })
-        .collect();
-    files.sort();
-    // Non-DICOM files (README, DICOMDIR without preamble, ...) are passed over; a file with the
-    // DICM magic that does not parse is an error.
-    let files: Vec<PathBuf> = files.into_iter().filter(|p| is_dicom_file(p)).collect();
+    let (files, subdirs) = list_dir(dir)?;
+    // Non-DICOM files (README, ...) are passed over; a file with the DICM magic that does not
+    // parse is an error.
+    let mut files: Vec<PathBuf> = files.into_iter().filter(|p| is_dicom_file(p)).collect();
+    let only_dicomdir = files.iter().all(|p| {
+        p.file_name()
+            .is_some_and(|n| n.eq_ignore_ascii_case("DICOMDIR"))
+    });
+    if only_dicomdir {
+        let mut stack = subdirs;
+        while let Some(d) = stack.pop() {
+            let (f, sub) = list_dir(&d)?;
+            files.extend(f.into_iter().filter(|p| is_dicom_file(p)));
+            stack.extend(sub);
+        }
+        files.sort();
+    }
     if files.is_empty() {
         return Err(Error::input(
             dir,
-            "no DICOM files (with the DICM preamble) in this directory",
+            "no DICOM files (with the DICM preamble) in this directory or below",
         ));
     }
     Ok(files)
 }
 
-/// Refuse a directory that mixes series, listing them.
+/// The files and the subdirectories of `dir`, hidden ones left out, each sorted.
+fn list_dir(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
+    let (mut files, mut dirs) = (Vec::new(), Vec::new());
+    for e in std::fs::read_dir(dir).map_err(|e| Error::input(dir, e))? {
+        let p = e.map_err(|e| Error::input(dir, e))?.path();
+        if p.file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'))
+        {
+            continue;
+        }
+        if p.is_dir() {
+            dirs.push(p);
+        } else if p.is_file() {
+            files.push(p);
+        }
+    }
+    files.sort();
+    dirs.sort();
+    Ok((files, dirs))
+}
+
+/// Refuse a directory that mixes series, listing each with its size, description and (when it
+/// lies below `dir`) its folder, so the user can give `[ct] path` one series' folder.
 fn check_one_series(dir: &Path, headers: &[SliceHeader]) -> Result<()> {
-    let mut series: BTreeMap<&str, (usize, &str)> = BTreeMap::new();
+    let mut series: BTreeMap<&str, (usize, &str, &Path)> = BTreeMap::new();
     for h in headers {
+        let folder = h.path.parent().unwrap_or(dir);
         let e = series
             .entry(h.series.as_str())
-            .or_insert((0, h.series_desc.as_str()));
+            .or_insert((0, h.series_desc.as_str(), folder));
         e.0 += 1;
     }
     if series.len() > 1 {
         let list: Vec<String> = series
             .iter()
-            .map(|(uid, (n, d))| {
-                format!(
-                    "{uid} ({n} files{})",
-                    if d.is_empty() {
-                        String::new()
-                    } else {
-                        format!(", \"{d}\"")
-                    }
-                )
+            .map(|(uid, (n, d, folder))| {
+                let desc = if d.is_empty() {
+                    String::new()
+                } else {
+                    format!(", \"{d}\"")
+                };
+                let place = match folder.strip_prefix(dir) {
+                    Ok(rel) if !rel.as_os_str().is_empty() => format!(" in {}", rel.display()),
+                    _ => String::new(),
+                };
+                format!("{uid} ({n} files{desc}{place})")
             })
             .collect();
         return Err(Error::input(
             dir,
             format!(
-                "holds {} DICOM series, expected one: {}",
+                "holds {} DICOM series, expected one (give [ct] path a folder holding only the CT series to use): {}",
                 series.len(),
                 list.join("; ")
             ),
@@ -240,15 +297,7 @@ fn check_one_series(dir: &Path, headers: &[SliceHeader]) -> Result<()> {
 fn check_same_frame(headers: &[SliceHeader]) -> Result<()> {
     let first = &headers[0];
     for h in headers {
-        if !NATIVE_TS.contains(&h.ts.as_str()) {
-            return Err(Error::input(
-                &h.path,
-                format!(
-                    "unsupported transfer syntax {} (compressed pixel data); decompress the series first, e.g. `gdcmconv --raw`",
-                    h.ts
-                ),
-            ));
-        }
+        dicom_syntax::check_decodable(&h.ts).map_err(|msg| Error::input(&h.path, msg))?;
         if h.rows != first.rows || h.cols != first.cols {
             return Err(Error::input(
                 &h.path,
@@ -268,6 +317,34 @@ fn check_same_frame(headers: &[SliceHeader]) -> Result<()> {
             return Err(Error::input(
                 &h.path,
                 "pixel spacing or orientation differs from the rest of the series",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Refuse slices that do not lie on one line along the slice normal: a gantry-tilted (sheared)
+/// stack, whose voxel grid is not the orthogonal one a `Volume` describes. The allowed drift
+/// across the slice plane is a tenth of a pixel over the whole series.
+fn check_stacked_along_normal(
+    headers: &[SliceHeader],
+    normal: [f64; 3],
+    pixel_spacing: [f64; 2],
+) -> Result<()> {
+    let first = headers[0].ipp;
+    let tol = 0.1 * pixel_spacing[0].min(pixel_spacing[1]);
+    for h in headers {
+        let d = [0, 1, 2].map(|a| h.ipp[a] - first[a]);
+        let along = d[0] * normal[0] + d[1] * normal[1] + d[2] * normal[2];
+        let across = [0, 1, 2].map(|a| d[a] - along * normal[a]);
+        let drift = (across[0].powi(2) + across[1].powi(2) + across[2].powi(2)).sqrt();
+        if drift > tol {
+            return Err(Error::input(
+                &h.path,
+                format!(
+                    "slice positions drift {drift:.2} mm across the slice plane from {} (gantry tilt or a sheared stack); resample the series to an orthogonal grid first",
+                    headers[0].path.display()
+                ),
             ));
         }
     }
@@ -318,8 +395,9 @@ fn slice_spacing(headers: &[SliceHeader], pos: impl Fn(&SliceHeader) -> f64) -> 
     Ok((pos(&headers[nz - 1]) - pos(&headers[0])) / (nz - 1) as f64)
 }
 
-/// Append the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) to `data`.
-fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<()> {
+/// Write the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) into `out`.
+fn read_slice(h: &SliceHeader, out: &mut [f32]) -> Result<()> {
+    let per_slice = out.len();
     let obj = dicom_object::open_file(&h.path)
         .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
     let slope = obj
@@ -340,18 +418,15 @@ fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<
             "non-finite RescaleSlope/RescaleIntercept",
         ));
     }
-    let pd = obj
-        .decode_pixel_data()
-        .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
+    let pd = decode_guarded(h, || obj.decode_pixel_data())?;
     if pd.number_of_frames() != 1 || pd.samples_per_pixel() != 1 {
         return Err(Error::input(
             &h.path,
             "expected one greyscale frame per file",
         ));
     }
-    let raw: Vec<f32> = pd
-        .to_vec_with_options(&ConvertOptions::new().with_modality_lut(ModalityLutOption::None))
-        .map_err(|e| Error::input(&h.path, format!("cannot decode pixel data ({e})")))?;
+    let convert = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
+    let raw: Vec<f32> = decode_guarded(h, || pd.to_vec_with_options(&convert))?;
     if raw.len() != per_slice {
         return Err(Error::input(
             &h.path,
@@ -361,8 +436,33 @@ fn read_slice(h: &SliceHeader, per_slice: usize, data: &mut Vec<f32>) -> Result<
             ),
         ));
     }
-    data.extend(raw.iter().map(|&v| (v as f64 * slope + inter) as f32));
+    for (o, &v) in out.iter_mut().zip(&raw) {
+        *o = (v as f64 * slope + inter) as f32;
+    }
     Ok(())
+}
+
+/// Run a decoding step of slice `h`; its failure, or a panic of the codec on damaged data
+/// (dicom-rs's RLE reader indexes past a bad segment table), becomes one line naming the file
+/// and the transfer syntax.
+fn decode_guarded<T, E: std::fmt::Display>(
+    h: &SliceHeader,
+    f: impl FnOnce() -> std::result::Result<T, E>,
+) -> Result<T> {
+    let undecodable = |e: &dyn std::fmt::Display| {
+        Error::input(
+            &h.path,
+            format!(
+                "cannot decode pixel data, transfer syntax {} ({e})",
+                dicom_syntax::describe(&h.ts)
+            ),
+        )
+    };
+    match crate::error::guard(&h.path, || Ok(f())) {
+        Ok(r) => r.map_err(|e| undecodable(&e)),
+        Err(Error::Input { msg, .. }) => Err(undecodable(&msg)),
+        Err(e) => Err(e),
+    }
 }
 
 fn ds(values: &[f64]) -> PrimitiveValue {

@@ -4,6 +4,7 @@
 //! downstream works in the LPS world frame (docs/case.md "Frames and units").
 
 pub mod dicom_io;
+pub mod dicom_syntax;
 pub mod inv3;
 pub mod nifti_io;
 
