@@ -83,9 +83,10 @@ enum Cmd {
     /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
     /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
     /// run's output directory; --case: the case.toml, default data-samples/real/case.toml);
-    /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md).
+    /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md);
+    /// `linearisation` = the C1 models' plan basis against full solves, per move size (--case).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom", "linearisation"])]
         what: String,
         /// Output directory for `scaling`, `embed` and `dicom`.
         #[arg(long)]
@@ -237,6 +238,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         } => match what.as_str() {
             "scaling" => cmd_bench_scaling(out, quick),
             "replan" => cmd_bench_replan(case, out),
+            "linearisation" => cmd_bench_linearisation(case),
             "embed" => cmd_bench_embed(out, quick),
             "dicom" => cmd_bench_dicom(out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
@@ -379,6 +381,24 @@ fn cmd_bench_dicom(out: Option<PathBuf>, quick: bool) -> Result<()> {
             ),
             Some(e) => println!("{:42} {:24} not measured: {e}", r.syntax, r.uid),
         }
+    }
+    Ok(())
+}
+
+fn cmd_bench_linearisation(case: Option<PathBuf>) -> Result<()> {
+    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/phantom/case.toml"));
+    use facesim::case::SolveModel;
+    let rows = facesim_lab::bench_linearisation::run(
+        &case,
+        &[SolveModel::Equilibrium, SolveModel::Koch1996],
+    )?;
+    println!("| model | move | max displacement (mm) | max error (mm) | mean error (mm) |");
+    println!("|---|---|---|---|---|");
+    for r in rows {
+        println!(
+            "| {} | {} | {:.3} | {:.3e} | {:.3e} |",
+            r.model, r.mv, r.max_displacement_mm, r.max_error_mm, r.mean_error_mm
+        );
     }
     Ok(())
 }

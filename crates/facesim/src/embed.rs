@@ -369,6 +369,38 @@ impl Shell {
         Ok((carried, e))
     }
 
+    /// The derivative of the carried points with respect to the base vertices at `base`, in the
+    /// direction `delta` (one per base vertex): the plan basis's carry of a coarse solve's
+    /// linearised response (docs/plan-basis.md). The offset fit's targets depend on the deformed
+    /// triangles' normals and areas, so the carry is not linear in the base; its derivative is
+    /// taken by central differences with the largest step 1e-3 mm (truncation O(step²),
+    /// rounding ~1e-13 mm per unit).
+    pub fn carry_derivative(
+        &self,
+        e: &Embedding,
+        base: &[[f64; 3]],
+        delta: &[[f64; 3]],
+    ) -> Vec<[f64; 3]> {
+        let largest = delta.iter().map(|d| norm(*d)).fold(0.0, f64::max);
+        if largest == 0.0 {
+            return vec![[0.0; 3]; e.tet.len()];
+        }
+        let h = 1e-3 / largest;
+        let moved = |sign: f64| -> Vec<[f64; 3]> {
+            let b: Vec<[f64; 3]> = base
+                .iter()
+                .zip(delta)
+                .map(|(p, d)| add(*p, scale(*d, sign * h)))
+                .collect();
+            self.carry(e, &self.deform(&b))
+        };
+        let (plus, minus) = (moved(1.0), moved(-1.0));
+        plus.iter()
+            .zip(&minus)
+            .map(|(p, m)| scale(sub(*p, *m), 0.5 / h))
+            .collect()
+    }
+
     /// Rest shell vertices (base then offset), e.g. to write the shell for inspection.
     pub fn rest(&self) -> &[[f64; 3]] {
         &self.rest

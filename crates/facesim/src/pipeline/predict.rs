@@ -6,10 +6,12 @@ use super::model::rigid_mask;
 use super::volumetric::{self, Volumetric};
 use super::{Recorder, Scene};
 use crate::case::{Case, SolveModel};
+use crate::embed::Shell;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::plan::c1::{self, C1Basis};
 use crate::report::{EmbeddingReport, Stage};
-use crate::solve::Solution;
+use crate::solve::{Responses, Solution};
 
 pub struct Prediction {
     /// The skin of face_pre: the full skin (the scan as given, or the extracted skin).
@@ -37,7 +39,15 @@ pub fn predict(
         return predict_volumetric(scene, case, rec);
     }
     let (face, model) = (&scene.face, &scene.model);
-    let solution = rec.time(Stage::Solve, "solving", || solve(scene, files))?;
+    // The plan basis's unit moves of the spring attachments, answered by the solve's own factor.
+    let moves = crate::plan::c1::attachment_moves(&case.osteotomy, &model.springs.attachments);
+    let solved = rec.time(Stage::Solve, "solving", || {
+        solve(scene, files, &moves.columns)
+    })?;
+    let (solution, responses) = match solved {
+        Some((s, r)) => (Some(s), Some(r)),
+        None => (None, None),
+    };
     if solution.is_none() {
         rec.warn("no [[osteotomy]] in the case: the predicted face is the pre-operative face");
         rec.skip(Stage::Solve, "no [[osteotomy]]: nothing moves");
@@ -47,8 +57,34 @@ pub fn predict(
         face_post.vertices = sol.positions.clone();
     }
     face_post.colors = None;
+    let model_name = match case.solve.model {
+        SolveModel::Koch1996 => "koch1996-linearised",
+        _ => "c1-linearised",
+    };
     let Some(fine) = &face.fine else {
         rec.skip(Stage::Embed, "the skin was solved as given");
+        let basis = match responses {
+            Some(r) => {
+                let wall = r.wall_s;
+                let displacement = displacement_of(&face.skin.vertices, &face_post.vertices);
+                let b = rec.time(Stage::PlanBasis, "building the plan basis", || {
+                    c1::basis(
+                        C1Basis {
+                            model: model_name,
+                            skin: &face.skin,
+                            columns: r.columns,
+                            offset: None,
+                            overlapping_segments: &moves.overlapping_segments,
+                            run_face_displacement: &displacement,
+                        },
+                        &case.osteotomy,
+                    )
+                })?;
+                move_cost(rec, wall);
+                Some(b)
+            }
+            None => None,
+        };
         return Ok(Prediction {
             skin: face.skin.clone(),
             face_post,
@@ -56,39 +92,81 @@ pub fn predict(
             coarse: None,
             embedding: None,
             volumetric: None,
-            basis: None,
+            basis,
         });
     };
+    let inward = -crate::springs::outward_sign(&face.skin, &scene.vol, &scene.seg.labels);
+    let rigid_fine = rigid_mask(case, &fine.vertices);
     // The coarse model's answer carried to the full skin (paper 002).
-    let (post, embedding) = rec.time(Stage::Embed, "carrying the full skin along", || {
-        let (carried, e) = crate::embed::Shell::carry_skin(
-            &face.skin,
-            &face_post.vertices,
-            &fine.vertices,
-            (&scene.vol, &scene.seg.labels),
-            &case.solve,
-            &model.rigid,
-        )?;
-        // Fine vertices outside [surface] movable are rigid, exactly as in a full solve.
-        let mut post = fine.clone();
-        for ((p, c), r) in post
-            .vertices
-            .iter_mut()
-            .zip(carried)
-            .zip(rigid_mask(case, &fine.vertices))
-        {
-            if !r {
-                *p = c;
+    let (post, embedding, shell) =
+        rec.time(Stage::Embed, "carrying the full skin along", || {
+            let shell = Shell::new(
+                &face.skin,
+                case.solve.shell_mm,
+                inward,
+                case.solve.shell_poisson,
+                &model.rigid,
+            )?;
+            let e = shell.embed(&fine.vertices);
+            let carried = shell.carry(&e, &shell.deform(&face_post.vertices));
+            // Fine vertices outside [surface] movable are rigid, exactly as in a full solve.
+            let mut post = fine.clone();
+            for ((p, c), r) in post.vertices.iter_mut().zip(carried).zip(&rigid_fine) {
+                if !r {
+                    *p = c;
+                }
             }
+            post.colors = None;
+            let report = EmbeddingReport {
+                shell_mm: case.solve.shell_mm,
+                poisson: case.solve.shell_poisson,
+                fine_to_coarse_mm: crate::compare::stats(&e.distance),
+            };
+            Ok((post, report, (shell, e)))
+        })?;
+    let basis = match responses {
+        Some(r) => {
+            let wall = r.wall_s;
+            let (shell, e) = &shell;
+            let displacement = displacement_of(&fine.vertices, &post.vertices);
+            let b = rec.time(Stage::PlanBasis, "building the plan basis", || {
+                // The carry linearised at rest, rigid fine vertices still (as in the run).
+                let still = |mut d: Vec<[f64; 3]>| {
+                    for (d, r) in d.iter_mut().zip(&rigid_fine) {
+                        if *r {
+                            *d = [0.0; 3];
+                        }
+                    }
+                    d
+                };
+                let columns = r
+                    .columns
+                    .iter()
+                    .map(|c| still(shell.carry_derivative(e, &face.skin.vertices, c)))
+                    .collect();
+                let at_rest = shell.carry(e, &shell.deform(&face.skin.vertices));
+                let offset = still(displacement_of(&fine.vertices, &at_rest));
+                let offset = offset
+                    .iter()
+                    .any(|d| crate::mesh::norm(*d) > 1e-9)
+                    .then_some(offset);
+                c1::basis(
+                    C1Basis {
+                        model: model_name,
+                        skin: fine,
+                        columns,
+                        offset,
+                        overlapping_segments: &moves.overlapping_segments,
+                        run_face_displacement: &displacement,
+                    },
+                    &case.osteotomy,
+                )
+            })?;
+            move_cost(rec, wall);
+            Some(b)
         }
-        post.colors = None;
-        let report = EmbeddingReport {
-            shell_mm: case.solve.shell_mm,
-            poisson: case.solve.shell_poisson,
-            fine_to_coarse_mm: crate::compare::stats(&e.distance),
-        };
-        Ok((post, report))
-    })?;
+        None => None,
+    };
     Ok(Prediction {
         skin: fine.clone(),
         face_post: post,
@@ -96,8 +174,29 @@ pub fn predict(
         coarse: Some(face.skin.clone()),
         embedding: Some(embedding),
         volumetric: None,
-        basis: None,
+        basis,
     })
+}
+
+/// `after − before` per vertex.
+fn displacement_of(before: &[[f64; 3]], after: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    before
+        .iter()
+        .zip(after)
+        .map(|(b, a)| crate::mesh::sub(*a, *b))
+        .collect()
+}
+
+/// The basis's tangent solves ran inside the solve stage (on its factor): their wall time is
+/// moved from `solve` to `plan_basis` in the cost table.
+fn move_cost(rec: &mut Recorder, wall_s: f64) {
+    for (stage, cost) in rec.costs.0.iter_mut() {
+        match stage {
+            Stage::Solve => cost.wall_s -= wall_s,
+            Stage::PlanBasis => cost.wall_s += wall_s,
+            _ => {}
+        }
+    }
 }
 
 /// The volumetric model carries the skin at full resolution (a dense scan needs no coarse copy).
@@ -135,19 +234,25 @@ fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<
     })
 }
 
-/// The C1 solve; None when there is nothing to move: the preloaded skin is an equilibrium by
-/// construction (F_init = K a_init), so the prediction is the pre-operative face.
-fn solve(scene: &Scene, files: &CaseFiles) -> Result<Option<Solution>> {
+/// The C1 solve and its linearised responses to the attachment `moves`; None when there is
+/// nothing to move: the preloaded skin is an equilibrium by construction (F_init = K a_init), so
+/// the prediction is the pre-operative face.
+fn solve(
+    scene: &Scene,
+    files: &CaseFiles,
+    moves: &[Vec<[f64; 3]>],
+) -> Result<Option<(Solution, Responses)>> {
     let (face, model) = (&scene.face, &scene.model);
     if model.plan.is_empty() {
         return Ok(None);
     }
-    crate::solve::solve(
+    crate::solve::solve_linearised(
         &face.skin,
         &model.springs,
         &model.plan,
         &model.rigid,
         &model.params,
+        moves,
     )
     .map(Some)
     // An impossible plan is the case file's fault, a surface the model cannot use is its

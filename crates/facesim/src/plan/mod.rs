@@ -6,6 +6,7 @@
 //! face displacement fields per segment, solved once with the run's factor.
 //!
 //! - [`basis`]: the basis, its matrices and the prediction of any plan from it;
+//! - [`c1`]: the C1 models' basis, their linearisation at the pre-operative state;
 //! - [`holds`]: the volumetric model's boundary conditions as linear functions of the M_s;
 //! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs;
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan);
@@ -13,6 +14,7 @@
 //!   `crate::regions`).
 
 pub mod basis;
+pub mod c1;
 pub mod chart;
 pub mod file;
 pub mod holds;

@@ -5,6 +5,7 @@
 //! F_def (eq. 22) is evaluated lumped at the value DOFs (k_i already carries the area);
 //! K a = F_init + F_def (eq. 23), forces recomputed at each increment.
 
+use super::linearised::{DofResponses, RestSprings};
 use super::{Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
@@ -13,8 +14,12 @@ use crate::mesh::{norm, sub};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
 
-/// The DOFs of x, y, z after the last load increment, and the per-increment records.
-pub(super) fn solve(pr: &Problem) -> Result<([Vec<f64>; 3], Vec<StepRecord>)> {
+/// The DOFs of x, y, z after the last load increment, the per-increment records, and the
+/// linearised recursion's responses to `moves` (linearised.rs), on the same factor of K.
+pub(super) fn solve(
+    pr: &Problem,
+    moves: &[Vec<[f64; 3]>],
+) -> Result<([Vec<f64>; 3], Vec<StepRecord>, DofResponses)> {
     let (springs, p, a_init) = (pr.springs, pr.p, &pr.a_init);
     let nd = pr.fem.ndof();
     pr.fem
@@ -67,7 +72,41 @@ pub(super) fn solve(pr: &Problem) -> Result<([Vec<f64>; 3], Vec<StepRecord>)> {
             max_displacement_mm: d,
         });
     }
-    Ok((a, history))
+    let responses = if moves.is_empty() {
+        DofResponses::none()
+    } else {
+        responses(pr, &sys, moves)
+    };
+    Ok((a, history, responses))
+}
+
+/// The increments linearised at rest: K δa_k = Σ H_s ((k/steps) δx_b − δx_s(δa_{k−1})),
+/// δa_0 = 0, fixed DOFs still; all moves at once per increment, on the run's factor of K.
+fn responses(pr: &Problem, sys: &System, moves: &[Vec<[f64; 3]>]) -> DofResponses {
+    let start = std::time::Instant::now();
+    let rest = RestSprings::new(pr);
+    let nd = pr.fem.ndof();
+    let zero = vec![vec![0.0; nd]; 3 * moves.len()];
+    let mut da: Vec<[Vec<f64>; 3]> =
+        vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; moves.len()];
+    for step in 1..=pr.p.steps {
+        let scale = step as f64 / pr.p.steps as f64;
+        let rhs: Vec<Vec<f64>> = moves
+            .iter()
+            .zip(&da)
+            .flat_map(|(m, d)| rest.force(pr, m, scale, Some(d)))
+            .collect();
+        let mut sol = sys.solve(&rhs, &zero).into_iter();
+        for d in &mut da {
+            for c in d.iter_mut() {
+                *c = sol.next().unwrap_or_default();
+            }
+        }
+    }
+    DofResponses {
+        columns: da,
+        wall_s: start.elapsed().as_secs_f64(),
+    }
 }
 
 /// Largest distance any attachment moves under the whole plan.

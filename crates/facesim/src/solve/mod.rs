@@ -12,6 +12,7 @@
 mod checks;
 mod equilibrium;
 mod koch1996;
+mod linearised;
 mod restrict;
 
 use crate::case::SolveModel;
@@ -97,13 +98,36 @@ pub fn solve(
     rigid: &[bool],
     p: &Params,
 ) -> Result<Solution> {
+    Ok(solve_linearised(skin, springs, plan, rigid, p, &[])?.0)
+}
+
+/// The model's response to small attachment moves, linearised at the pre-operative state
+/// (linearised.rs, docs/plan-basis.md): per requested move, the skin vertices' displacement.
+pub struct Responses {
+    /// Per move, one displacement (mm per unit move) per skin vertex (`skin`'s order).
+    pub columns: Vec<Vec<[f64; 3]>>,
+    /// Wall time of the tangent solves (s), which run on the solve's own factor.
+    pub wall_s: f64,
+}
+
+/// [`solve`], and the linearised responses to `moves` (each one displacement per attachment of
+/// `springs`, LPS mm), solved with the run's own factor (the equilibrium model's
+/// preconditioner, koch1996's K).
+pub fn solve_linearised(
+    skin: &Mesh,
+    springs: &SpringSet,
+    plan: &Plan,
+    rigid: &[bool],
+    p: &Params,
+    moves: &[Vec<[f64; 3]>],
+) -> Result<(Solution, Responses)> {
     checks::check_plan_reach(skin, springs, plan)?;
     let Some(r) = p
         .restrict
         .then(|| restrict::Restriction::new(skin, springs, rigid))
         .flatten()
     else {
-        return solve_mesh(skin, springs, plan, rigid, p, None);
+        return solve_mesh(skin, springs, plan, rigid, p, None, moves);
     };
     // One preload, of the whole face: the piece takes its DOFs from it, so its fixed rim holds
     // exactly the values the whole-face field keeps there (fits at the piece's edge would see a
@@ -112,27 +136,46 @@ pub fn solve(
     let piece = fem_mesh(&r.skin)?;
     let edges = r.edges_to_full(&fem, &piece);
     let a_piece = r.piece_dofs(&fem, &a, &piece, &edges);
-    let s = solve_mesh(
+    let (s, piece_responses) = solve_mesh(
         &r.skin,
         &r.springs,
         plan,
         &r.rigid,
         p,
         Some((piece, a_piece)),
+        moves,
     )?;
     r.merge_free(&fem, &mut a, &s, &edges);
     let mut positions = skin.vertices.clone();
     for (i, &g) in r.to_full.iter().enumerate() {
         positions[g] = s.positions[i];
     }
-    Ok(Solution {
-        fem,
-        a,
-        positions,
-        history: s.history,
-        unknowns: s.unknowns,
-        solved_vertices: s.solved_vertices,
-    })
+    // Vertices off the piece are rigid: they do not move.
+    let columns = piece_responses
+        .columns
+        .into_iter()
+        .map(|c| {
+            let mut full = vec![[0.0; 3]; skin.vertices.len()];
+            for (i, &g) in r.to_full.iter().enumerate() {
+                full[g] = c[i];
+            }
+            full
+        })
+        .collect();
+    Ok((
+        Solution {
+            fem,
+            a,
+            positions,
+            history: s.history,
+            unknowns: s.unknowns,
+            solved_vertices: s.solved_vertices,
+        },
+        Responses {
+            columns,
+            wall_s: piece_responses.wall_s,
+        },
+    ))
 }
 
 /// What both models solve: the C1 skin with its preloaded DOFs, per-element materials, fixed
@@ -191,7 +234,8 @@ fn materials(skin: &Mesh, p: &Params) -> Vec<Material> {
 }
 
 /// One solve on `skin` (the whole face or the restricted piece, whose preloaded DOFs `pre`
-/// then come from the whole face), by the model `p.model`.
+/// then come from the whole face), by the model `p.model`, and the linearised responses to
+/// `moves`.
 fn solve_mesh(
     skin: &Mesh,
     springs: &SpringSet,
@@ -199,7 +243,8 @@ fn solve_mesh(
     rigid: &[bool],
     p: &Params,
     pre: Option<(FemMesh, [Vec<f64>; 3])>,
-) -> Result<Solution> {
+    moves: &[Vec<[f64; 3]>],
+) -> Result<(Solution, Responses)> {
     let (fem, a_init) = match pre {
         Some(x) => x,
         None => preloaded(skin)?,
@@ -224,9 +269,9 @@ fn solve_mesh(
         k,
         weight,
     };
-    let (a, history) = match p.model {
-        SolveModel::Koch1996 => koch1996::solve(&pr)?,
-        SolveModel::Equilibrium => equilibrium::solve(&pr)?,
+    let (a, history, responses) = match p.model {
+        SolveModel::Koch1996 => koch1996::solve(&pr, moves)?,
+        SolveModel::Equilibrium => equilibrium::solve(&pr, moves)?,
         SolveModel::Tet => {
             return Err(Error::config(
                 "the C1 solver was asked to run the volumetric model 'tet' (it runs in pipeline::volumetric)",
@@ -240,12 +285,27 @@ fn solve_mesh(
         .collect();
     checks::check_not_through_skin(skin, &positions, springs, plan)?;
     let unknowns = 3 * (pr.fem.ndof() - pr.fixed.iter().filter(|f| **f).count());
-    Ok(Solution {
-        fem: pr.fem,
-        a,
-        positions,
-        history,
-        unknowns,
-        solved_vertices: nv,
-    })
+    let columns = responses
+        .columns
+        .iter()
+        .map(|da| {
+            (0..nv)
+                .map(|i| [0, 1, 2].map(|c| da[c][dofs.value(i)]))
+                .collect()
+        })
+        .collect();
+    Ok((
+        Solution {
+            fem: pr.fem,
+            a,
+            positions,
+            history,
+            unknowns,
+            solved_vertices: nv,
+        },
+        Responses {
+            columns,
+            wall_s: responses.wall_s,
+        },
+    ))
 }
