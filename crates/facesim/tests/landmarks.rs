@@ -155,3 +155,161 @@ fn phantom_landmarks_are_where_the_analytic_definitions_put_them() {
     );
     assert!((el - want_el).abs() < 0.5, "{el} vs {want_el}");
 }
+
+#[test]
+fn real_ct_soft_landmarks_are_plausible_and_the_mandibular_ones_missing() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");
+    common::real_ct();
+    let (case, _) = Case::load(&dir.join("case.toml")).unwrap();
+    let scene = pipeline::prepare_case(&case, &Quiet).unwrap();
+    let skin = &scene.face.skin;
+    let (frame, lms) =
+        landmarks::locate(skin, Some(&scene.face.skull), &[], Path::new("case.toml")).unwrap();
+    let frame = frame.unwrap();
+    println!("{frame:?}");
+    for l in &lms {
+        println!("{} {:?} {:?}", l.label, l.position, l.missing);
+    }
+    // The face looks towards −y; the midsagittal plane is nearly x = const.
+    assert!(
+        frame.anterior[1] < -0.95 && frame.lateral[0].abs() > 0.95,
+        "{frame:?}"
+    );
+    // Prn: the most anterior skin point within 5 mm of the plane.
+    let prn = position(&lms, "Prn").expect("Prn");
+    let most = skin
+        .vertices
+        .iter()
+        .filter(|p| frame.coords(**p)[0].abs() < 5.0)
+        .map(|p| frame.coords(*p)[2])
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        (frame.coords(prn)[2] - most).abs() < 1.0,
+        "{prn:?} vs {most}"
+    );
+    // Sn below Prn and behind it; Ls below Sn; N' above Prn and behind it.
+    let c = |l: &str| position(&lms, l).map(|p| frame.coords(p));
+    let (sn, ls) = (c("Sn").expect("Sn"), c("Ls").expect("Ls"));
+    let p = frame.coords(prn);
+    assert!(
+        sn[1] < p[1] - 8.0 && sn[1] > p[1] - 30.0 && sn[2] < p[2] - 8.0,
+        "{sn:?}"
+    );
+    // Ls below Sn, within 10 mm of its depth (this patient's upper lip is retrusive: a
+    // maxillary advancement case).
+    assert!(
+        ls[1] < sn[1] - 5.0 && (ls[2] - sn[2]).abs() < 10.0,
+        "{ls:?}"
+    );
+    if let Some(n) = c("N'") {
+        assert!(n[1] > p[1] + 15.0 && n[2] < p[2] - 10.0, "{n:?}");
+    }
+    // No mandible in the scan: its bony landmarks are missing, with a reason.
+    for l in ["B", "Pog", "Me"] {
+        let lm = lms.iter().find(|x| x.label == l).unwrap();
+        assert!(lm.position.is_none() && lm.missing.is_some(), "{lm:?}");
+    }
+    // A lies behind the upper lip, below ANS.
+    if let (Some(a), Some(ans)) = (c("A"), c("ANS")) {
+        assert!(a[2] < ls[2] - 5.0 && ans[1] > a[1], "A {a:?} ANS {ans:?}");
+    }
+}
+
+#[test]
+fn user_landmarks_override_detection_and_must_lie_on_the_face() {
+    let (_, scene) = jaws();
+    let skin = &scene.face.skin;
+    let prn = pj::landmark("pronasale").unwrap();
+    let mine = [prn[0] + 2.0, prn[1] + 0.5, prn[2] - 3.0];
+    let user = vec![
+        ("Prn".to_string(), mine),
+        ("tragus".to_string(), pj::skin_point(1.2, 0.0)),
+    ];
+    let (_, lms) = landmarks::locate(skin, None, &user, Path::new("case.toml")).unwrap();
+    let l = lms.iter().find(|l| l.label == "Prn").unwrap();
+    assert_eq!((l.position, l.source), (Some(mine), Source::User));
+    let t = lms.iter().find(|l| l.label == "tragus").unwrap();
+    assert_eq!(t.kind, Kind::Soft);
+    // 30 mm in front of the nose: bad input naming the case file.
+    let off = vec![("Pog'".to_string(), [0.0, prn[1] - 30.0, -50.0])];
+    let e = landmarks::locate(skin, None, &off, Path::new("my/case.toml")).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("my/case.toml") && msg.contains("Pog'"),
+        "{msg}"
+    );
+    // The markups file form, in RAS: read, converted to LPS, and used.
+    let dir = kept_dir("facesim-landmarks-user");
+    let doc =
+        landmarks::markups::document("mine", &[("Prn".into(), [-mine[0], -mine[1], mine[2]])])
+            .to_string()
+            .replace("\"LPS\"", "\"RAS\"");
+    std::fs::write(dir.join("mine.mrk.json"), doc).unwrap();
+    let case = Case::parse(
+        "landmarks = \"mine.mrk.json\"\n[ct]\npath = \"ct.nii.gz\"\n[[landmark]]\nlabel = \"Ls\"\nposition = [0.0, -86.8, -11.5]\n",
+        Path::new("case.toml"),
+    )
+    .unwrap();
+    let case = Case {
+        landmarks: Some(dir.join("mine.mrk.json")),
+        ..case
+    };
+    let user = case.user_landmarks().unwrap();
+    assert_eq!(user.len(), 2);
+    let got = user.iter().find(|(l, _)| l == "Prn").unwrap().1;
+    assert!(norm(sub(got, mine)) < 1e-9, "{got:?}");
+}
+
+#[test]
+fn markups_files_follow_the_slicer_schema_and_a_zero_move_keeps_every_landmark() {
+    let (_, scene) = jaws();
+    let skin = &scene.face.skin;
+    let skull = &scene.face.skull;
+    let (_, lms) = landmarks::locate(skin, Some(skull), &[], Path::new("case.toml")).unwrap();
+    // A whole-head rigid shift t: the face shifted by t, every bone segment moved by t — every
+    // landmark must move by exactly t (soft as the same material point, bone by the plan).
+    let t = [1.5, -4.0, 2.5];
+    let mut shifted = skin.clone();
+    for v in &mut shifted.vertices {
+        *v = [v[0] + t[0], v[1] + t[1], v[2] + t[2]];
+    }
+    let case = Case::parse(
+        "[ct]\npath = \"ct.nii.gz\"\n[[osteotomy]]\nname = \"all\"\nregion = { sphere = { center = [0.0, 0.0, 0.0], radius = 500.0 } }\ntranslate = [1.5, -4.0, 2.5]\n",
+        Path::new("case.toml"),
+    )
+    .unwrap();
+    let plan = Plan::new(&case.osteotomy);
+    let carried = landmarks::carry(&lms, skin, &shifted, &plan);
+    for c in carried.iter().filter(|c| c.pre.is_some()) {
+        let (a, b) = (c.pre.unwrap(), c.post.unwrap());
+        let d = norm(sub(sub(b, a), t));
+        assert!(d < 1e-9, "{} moved {:?}", c.label, sub(b, a));
+    }
+    let zero = landmarks::carry(&lms, skin, skin, &Plan::new(&[]));
+    for c in zero.iter().filter(|c| c.pre.is_some()) {
+        assert!(c.change_mm.unwrap() < 1e-9, "{c:?}");
+    }
+    // The files.
+    let dir = kept_dir("facesim-landmarks-mrk");
+    landmarks::markups::write_pre_post(&dir, &carried).unwrap();
+    for f in ["landmarks_pre.mrk.json", "landmarks_post.mrk.json"] {
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(f)).unwrap()).unwrap();
+        // Slicer's markups schema: `@schema` and `markups` required; a markup requires `type`.
+        assert!(v["@schema"].as_str().unwrap().contains("markups-schema"));
+        let m = v["markups"].as_array().unwrap();
+        assert_eq!(m.len(), 1);
+        assert_eq!(m[0]["type"], "Fiducial");
+        assert_eq!(m[0]["coordinateSystem"], "LPS");
+        let cps = m[0]["controlPoints"].as_array().unwrap();
+        let present = lms.iter().filter(|l| l.position.is_some()).count();
+        assert_eq!(cps.len(), present);
+        for cp in cps {
+            assert!(cp["label"].is_string() && cp["id"].is_string());
+            assert_eq!(cp["position"].as_array().unwrap().len(), 3);
+            assert_eq!(cp["positionStatus"], "defined");
+        }
+        // Missing landmarks are not written.
+        assert!(cps.iter().all(|cp| cp["label"] != "N'"));
+    }
+}
