@@ -193,3 +193,60 @@ pub fn displacement_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionStats> {
     }
     out
 }
+
+/// `facesim compare A B --regions OUT_DIR`: per region, A's vertices' distances to surface B
+/// (mean absolute, p90, % within 2 mm, …). The regions come from the run in `out_dir`: its
+/// face_pre.ply (head frame) and landmarks_pre.mrk.json; membership is decided on face_pre's
+/// vertices when A has their count (A is then that run's face, e.g. face_post), else on A's.
+pub fn compare_regions(
+    a: &crate::mesh::Mesh,
+    b: &crate::mesh::Mesh,
+    out_dir: &std::path::Path,
+) -> crate::error::Result<Ordered<RegionDistance>> {
+    use crate::error::Error;
+    let pre_path = out_dir.join("face_pre.ply");
+    let pre = crate::mesh::read_mesh(&pre_path)?;
+    let lms = super::markups::read(&out_dir.join("landmarks_pre.mrk.json"))?;
+    let frame = super::frame::head_frame(&pre)
+        .ok_or_else(|| Error::input(&pre_path, "the face has no vertices"))?;
+    let on = if pre.vertices.len() == a.vertices.len() {
+        &pre.vertices
+    } else {
+        &a.vertices
+    };
+    let r = regions(on, &frame, &lms);
+    let mut out = Ordered::default();
+    for (k, name) in NAMES.iter().enumerate() {
+        let stats = r.members[k].as_ref().map(|m| {
+            let pts: Vec<[f64; 3]> = a
+                .vertices
+                .iter()
+                .zip(m)
+                .filter(|(_, b)| **b)
+                .map(|(p, _)| *p)
+                .collect();
+            crate::compare::stats(&crate::compare::point_to_surface(&pts, b))
+        });
+        out.0.push((
+            name.to_string(),
+            RegionDistance {
+                vertices: r.members[k]
+                    .as_ref()
+                    .map_or(0, |m| m.iter().filter(|b| **b).count()),
+                stats,
+                absent: r.absent[k].clone(),
+            },
+        ));
+    }
+    Ok(out)
+}
+
+/// One region of `compare --regions`: A's vertices there and their distances to B (mm).
+#[derive(Clone, Debug, Serialize)]
+pub struct RegionDistance {
+    pub vertices: usize,
+    #[serde(flatten)]
+    pub stats: Option<crate::compare::DistanceStats>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub absent: Option<String>,
+}
