@@ -65,7 +65,7 @@ fn analytic_subnasale() -> [f64; 3] {
     let prn = pj::landmark("pronasale").unwrap();
     let ls = pj::landmark("labrale superius").unwrap();
     let (v1, a1, v2, a2) = (prn[2], -prn[1], ls[2], -ls[1]);
-    let behind = |z: f64| ((r(z) - a1) * (v2 - v1) - (z - v1) * (a2 - a1));
+    let behind = |z: f64| (r(z) - a1) * (v2 - v1) - (z - v1) * (a2 - a1);
     let z = argmax(behind, ls[2], prn[2]);
     pj::skin_point(0.0, z)
 }

@@ -166,9 +166,11 @@ pub const SOFT: [&str; 10] = [
 ];
 pub const BONE: [&str; 6] = ["N", "ANS", "A", "B", "Pog", "Me"];
 
+/// (v, a) of a landmark, or why it is missing.
+type Spot = std::result::Result<[f64; 2], String>;
+
 struct Found {
-    /// (v, a) per label, or why missing.
-    list: Vec<(&'static str, Kind, std::result::Result<[f64; 2], String>)>,
+    list: Vec<(&'static str, Kind, Spot)>,
 }
 
 impl Found {
@@ -178,7 +180,7 @@ impl Found {
             .find(|(l, _, _)| *l == label)
             .and_then(|(_, _, r)| r.as_ref().ok().copied())
     }
-    fn put(&mut self, label: &'static str, kind: Kind, r: std::result::Result<[f64; 2], String>) {
+    fn put(&mut self, label: &'static str, kind: Kind, r: Spot) {
         self.list.push((label, kind, r));
     }
 }
