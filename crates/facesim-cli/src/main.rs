@@ -134,6 +134,10 @@ enum Cmd {
         /// Print the full JSON (default: a short summary).
         #[arg(long)]
         json: bool,
+        /// A run's output directory: also the figures per facial region (from its face_pre.ply
+        /// and landmarks_pre.mrk.json; docs/landmarks.md).
+        #[arg(long, value_name = "OUT_DIR")]
+        regions: Option<PathBuf>,
     },
 }
 
@@ -254,7 +258,12 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             quick,
             cases,
         } => cmd_study(&out_dir, quick, cases),
-        Cmd::Compare { a, b, json } => cmd_compare(&a, &b, json),
+        Cmd::Compare {
+            a,
+            b,
+            json,
+            regions,
+        } => cmd_compare(&a, &b, json, regions.as_deref()),
     }
 }
 
@@ -447,16 +456,35 @@ fn cmd_study(out_dir: &Path, quick: bool, cases: Vec<PathBuf>) -> Result<()> {
     Ok(())
 }
 
-fn cmd_compare(a: &Path, b: &Path, json: bool) -> Result<()> {
+fn cmd_compare(a: &Path, b: &Path, json: bool, regions: Option<&Path>) -> Result<()> {
     let ma = facesim::mesh::read_mesh(a)?;
     let mb = facesim::mesh::read_mesh(b)?;
     let c = facesim::compare::compare(&ma, &mb);
+    let per_region = regions
+        .map(|dir| facesim::landmarks::face_regions::compare_regions(&ma, &mb, dir))
+        .transpose()?;
     if json {
+        let mut v = serde_json::to_value(&c).map_err(|e| Error::output(a, e))?;
+        if let (Some(r), Some(obj)) = (&per_region, v.as_object_mut()) {
+            obj.insert(
+                "regions".into(),
+                serde_json::to_value(r).map_err(|e| Error::output(a, e))?,
+            );
+        }
         println!(
             "{}",
-            serde_json::to_string_pretty(&c).map_err(|e| Error::output(a, e))?
+            serde_json::to_string_pretty(&v).map_err(|e| Error::output(a, e))?
         );
     } else {
+        for (name, r) in per_region.iter().flat_map(|r| r.0.iter()) {
+            match &r.stats {
+                Some(s) => println!(
+                    "{name}: {} vertices, mean {:.3} mm, p90 {:.3} mm, within 2 mm {:.1}%",
+                    r.vertices, s.mean, s.p90, s.pct_within_2mm
+                ),
+                None => println!("{name}: {}", r.absent.as_deref().unwrap_or("absent")),
+            }
+        }
         println!(
             "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",
             c.mean, c.rms, c.max, c.pct_within_1mm, c.pct_within_2mm

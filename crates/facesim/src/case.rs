@@ -29,6 +29,21 @@ pub struct Case {
     pub solve: Solve,
     pub tet: Tet,
     pub output: Output,
+    /// User landmarks (`[[landmark]]` label and LPS position), overriding detection
+    /// (docs/landmarks.md).
+    #[serde(default, rename = "landmark")]
+    pub landmark: Vec<UserLandmark>,
+    /// A 3D Slicer markups file of user landmarks (`landmarks = "file.mrk.json"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmarks: Option<PathBuf>,
+}
+
+/// One `[[landmark]]`: a label (docs/landmarks.md) and its position (LPS mm).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserLandmark {
+    pub label: String,
+    pub position: [f64; 3],
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -367,6 +382,8 @@ impl Default for Case {
             solve: Solve::default(),
             tet: Tet::default(),
             output: Output::default(),
+            landmark: Vec::new(),
+            landmarks: None,
         }
     }
 }
@@ -518,12 +535,34 @@ impl Case {
         if let Some(s) = &mut c.skin {
             resolve(&mut s.path);
         }
+        if let Some(l) = &mut c.landmarks {
+            resolve(l);
+        }
         for r in c.regions_mut() {
             if let Region::Mask(m) = r {
                 resolve(&mut m.path);
             }
         }
         Ok((c, dir))
+    }
+
+    /// The user landmarks: `[[landmark]]` entries, then the markups file's points (a label
+    /// given twice: the later wins). Errors name case.toml or the markups file.
+    pub fn user_landmarks(&self) -> Result<Vec<(String, [f64; 3])>> {
+        let mut out: Vec<(String, [f64; 3])> = Vec::new();
+        let mut add = |label: String, p: [f64; 3]| match out.iter_mut().find(|(l, _)| *l == label) {
+            Some(e) => e.1 = p,
+            None => out.push((label, p)),
+        };
+        for l in &self.landmark {
+            add(l.label.clone(), l.position);
+        }
+        if let Some(path) = &self.landmarks {
+            for (label, p) in crate::landmarks::markups::read(path)? {
+                add(label, p);
+            }
+        }
+        Ok(out)
     }
 
     /// The regions that may be masks: `[surface] movable` and each osteotomy's region.
@@ -562,6 +601,14 @@ impl Case {
     /// Check every value's range; errors name `path` (case.toml) and the key.
     pub fn validate(&self, path: &Path) -> Result<()> {
         let bad = |msg: String| Err(Error::input(path, msg));
+        for l in &self.landmark {
+            if l.label.trim().is_empty() || l.position.iter().any(|x| !x.is_finite()) {
+                return bad(format!(
+                    "[[landmark]] '{}' needs a label and a finite position",
+                    l.label
+                ));
+            }
+        }
         let t = &self.tissue;
         let bounds = [t.head_threshold, t.fat_dark, t.fat_bright, t.soft, t.bone];
         if bounds.iter().any(|b| !b.is_finite()) || bounds.windows(2).any(|w| w[0] >= w[1]) {

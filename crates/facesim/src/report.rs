@@ -27,6 +27,8 @@ pub enum Stage {
     Embed,
     /// The plan basis: 12 solves per segment on the run's factor (docs/plan-basis.md).
     PlanBasis,
+    /// Landmarks, measurements and regions (docs/landmarks.md).
+    Landmarks,
     Write,
     Total,
 }
@@ -46,6 +48,7 @@ impl Stage {
             Stage::Solve => "solve",
             Stage::Embed => "embed",
             Stage::PlanBasis => "plan_basis",
+            Stage::Landmarks => "landmarks",
             Stage::Write => "write",
             Stage::Total => "total",
         }
@@ -202,6 +205,17 @@ pub struct Report {
     /// Set by `facesim replan`: where the basis came from.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub replan: Option<crate::plan::basis::ReplanReport>,
+    /// The head frame the landmarks were found in (docs/landmarks.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub head_frame: Option<crate::landmarks::HeadFrame>,
+    /// Label → pre, post (LPS mm), change_mm; a missing landmark says why.
+    pub landmarks: crate::landmarks::Ordered<crate::landmarks::Carried>,
+    /// Nasolabial and mentolabial angles, lips to the E-line: before, after, change.
+    pub measurements: crate::landmarks::Ordered<crate::landmarks::measure::Measure>,
+    /// Soft over hard tissue anterior movement per landmark pair (e.g. Pog'/Pog).
+    pub soft_hard_ratios: crate::landmarks::Ordered<crate::landmarks::measure::Ratio>,
+    /// Region → vertices, mean, p90, max of the displacement (mm).
+    pub regions: crate::landmarks::Ordered<crate::landmarks::face_regions::RegionStats>,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
     /// coarsening or embedding, ...).

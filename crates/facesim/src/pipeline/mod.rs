@@ -185,7 +185,19 @@ fn finish(
     let case = &scene.case;
     let prediction = predict::predict(&scene, case, files, &mut rec)?;
     let dist = outputs::displacement(&prediction);
+    // Landmarks before any file is written: a user landmark off the face is bad input.
+    let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
+        crate::landmarks::analyse(
+            &prediction.skin,
+            &prediction.face_post,
+            Some(&scene.face.skull),
+            &scene.model.plan,
+            &case.user_landmarks()?,
+            &files.case_file,
+        )
+    })?;
     outputs::write(out_dir, &scene, &prediction, &dist, case, &mut rec)?;
+    crate::landmarks::markups::write_pre_post(out_dir, &analysis.carried)?;
     rec.costs.0.push((
         Stage::Total,
         // Stage meters reset the heap high-water mark, so the whole run's peak is the
@@ -196,6 +208,7 @@ fn finish(
         },
     ));
     outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
+    analysis.fill(&mut report);
     let page_basis = outputs::page_basis(&prediction, case);
     outputs::write_page(out_dir, &scene, &prediction, &report, page_basis)?;
     outputs::write_report(out_dir, &report)?;

@@ -1,0 +1,436 @@
+//! Landmark detection on the midsagittal profiles (docs/landmarks.md "Definitions").
+//!
+//! The soft-tissue profile is the most anterior point of the skin's midsagittal section per
+//! height (0.25 mm steps). Walking down from pronasale (its most anterior point) the profile's
+//! concavities and convexities alternate; walking up, soft nasion and glabella. An extremum
+//! counts when the profile rises and falls by ≥ 0.5 mm on both sides within 15 mm without a gap
+//! of more than 2 mm (where the scan or the section stops there is no extremum, only an end).
+//! The bony profile is the skull's section, kept within 35 mm behind the soft profile at the
+//! same height (the facial bone, not the spine); its landmarks are searched in windows set by
+//! the soft ones. A landmark whose definition the scan does not satisfy is missing, with the
+//! reason.
+
+use super::frame::{HeadFrame, Profile, STEP_MM, profile, section};
+use super::{Kind, Landmark, Source};
+use crate::mesh::Mesh;
+
+const PROMINENCE_MM: f64 = 0.5;
+const REACH_MM: f64 = 15.0;
+const GAP_MM: f64 = 2.0;
+/// Bone farther behind the soft profile than this is not facial bone.
+const BONE_DEPTH_MM: f64 = 35.0;
+
+/// Convex: a local maximum of anteriority (a bump); concave: a local minimum (a fold).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Ext {
+    Convex,
+    Concave,
+}
+
+impl Ext {
+    fn sign(self) -> f64 {
+        match self {
+            Ext::Convex => 1.0,
+            Ext::Concave => -1.0,
+        }
+    }
+    fn word(self) -> &'static str {
+        match self {
+            Ext::Convex => "convexity",
+            Ext::Concave => "concavity",
+        }
+    }
+}
+
+/// Does the profile at i stand out as `e` by PROMINENCE_MM on both sides within REACH_MM?
+fn is_extremum(p: &Profile, i: usize, e: Ext) -> bool {
+    let s = e.sign();
+    let v = s * p.a[i];
+    if !v.is_finite() {
+        return false;
+    }
+    let reach = (REACH_MM / STEP_MM) as usize;
+    let gap = (GAP_MM / STEP_MM) as usize;
+    let side = |idx: &mut dyn Iterator<Item = usize>| {
+        let mut hole = 0;
+        for j in idx {
+            let w = s * p.a[j];
+            if !w.is_finite() {
+                hole += 1;
+                if hole > gap {
+                    return false;
+                }
+                continue;
+            }
+            hole = 0;
+            if w > v {
+                return false;
+            }
+            if v - w >= PROMINENCE_MM {
+                return true;
+            }
+        }
+        false
+    };
+    let lo = i.saturating_sub(reach);
+    let hi = (i + reach).min(p.a.len() - 1);
+    side(&mut (lo..i).rev()) && side(&mut (i + 1..=hi))
+}
+
+/// The first extremum `e` walking from `from` (exclusive) down (`down`) or up; on a flat
+/// extremum, its most extreme sample.
+fn walk(p: &Profile, from: usize, e: Ext, down: bool) -> Option<usize> {
+    let s = e.sign();
+    let n = p.a.len();
+    let mut i = from;
+    loop {
+        if down {
+            if i == 0 {
+                return None;
+            }
+            i -= 1;
+        } else {
+            i += 1;
+            if i >= n {
+                return None;
+            }
+        }
+        if is_extremum(p, i, e) {
+            let mut best = i;
+            loop {
+                let next = if down {
+                    best.checked_sub(1)
+                } else {
+                    (best + 1 < n).then_some(best + 1)
+                };
+                match next {
+                    Some(j) if s * p.a[j] > s * p.a[best] => best = j,
+                    _ => break,
+                }
+            }
+            // A plateau: its middle.
+            let mut far = best;
+            loop {
+                let next = if down {
+                    far.checked_sub(1)
+                } else {
+                    (far + 1 < n).then_some(far + 1)
+                };
+                match next {
+                    Some(j) if (p.a[j] - p.a[best]).abs() < 1e-9 => far = j,
+                    _ => break,
+                }
+            }
+            return Some((best + far) / 2);
+        }
+    }
+}
+
+/// The most extreme `e` sample in heights [v_lo, v_hi] that is an extremum.
+fn extremum_in(p: &Profile, v_lo: f64, v_hi: f64, e: Ext) -> Option<usize> {
+    let s = e.sign();
+    (0..p.a.len())
+        .filter(|i| (v_lo..=v_hi).contains(&p.height(*i)) && is_extremum(p, *i, e))
+        .max_by(|a, b| (s * p.a[*a]).total_cmp(&(s * p.a[*b])))
+}
+
+/// The contiguous run of the profile around i (gaps ≤ GAP_MM bridged): [lo, hi].
+fn run(p: &Profile, i: usize) -> (usize, usize) {
+    let gap = (GAP_MM / STEP_MM) as usize;
+    let mut ends = [i, i];
+    for (k, dir) in [(0usize, -1i64), (1, 1)] {
+        let mut j = i as i64;
+        let mut hole = 0;
+        loop {
+            j += dir;
+            if j < 0 || j as usize >= p.a.len() {
+                break;
+            }
+            if p.a[j as usize].is_finite() {
+                hole = 0;
+                ends[k] = j as usize;
+            } else {
+                hole += 1;
+                if hole > gap {
+                    break;
+                }
+            }
+        }
+    }
+    (ends[0], ends[1])
+}
+
+/// Soft-tissue labels in profile order (top to bottom) and bony ones.
+pub const SOFT: [&str; 10] = [
+    "G'", "N'", "Prn", "Sn", "Ls", "Sto", "Li", "B'", "Pog'", "Me'",
+];
+pub const BONE: [&str; 6] = ["N", "ANS", "A", "B", "Pog", "Me"];
+
+/// (v, a) of a landmark, or why it is missing.
+type Spot = std::result::Result<[f64; 2], String>;
+
+struct Found {
+    list: Vec<(&'static str, Kind, Spot)>,
+}
+
+impl Found {
+    fn get(&self, label: &str) -> Option<[f64; 2]> {
+        self.list
+            .iter()
+            .find(|(l, _, _)| *l == label)
+            .and_then(|(_, _, r)| r.as_ref().ok().copied())
+    }
+    fn put(&mut self, label: &'static str, kind: Kind, r: Spot) {
+        self.list.push((label, kind, r));
+    }
+}
+
+/// Detect the soft-tissue landmarks on `skin` and the bony ones on `skull` (None: no skull).
+pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
+    let mut f = Found { list: Vec::new() };
+    let soft = profile(&section(skin, frame), |_, _| true);
+    let Some(sp) = soft else {
+        let why = "the skin has no midsagittal section".to_string();
+        return SOFT
+            .iter()
+            .map(|l| Landmark::missing(l, Kind::Soft, why.clone()))
+            .chain(
+                BONE.iter()
+                    .map(|l| Landmark::missing(l, Kind::Bone, why.clone())),
+            )
+            .collect();
+    };
+    soft_landmarks(&sp, &mut f);
+    let bone_prof = skull.and_then(|m| {
+        profile(&section(m, frame), |v, a| {
+            let s = sp.at(v);
+            s.is_finite() && a > s - BONE_DEPTH_MM
+        })
+    });
+    match (skull, bone_prof) {
+        (Some(m), Some(bp)) => bone_landmarks(&bp, m, frame, &mut f),
+        _ => {
+            for l in BONE {
+                f.put(
+                    l,
+                    Kind::Bone,
+                    Err("the skull has no midsagittal section within 35 mm of the face".into()),
+                );
+            }
+        }
+    }
+    // Soft menton: the skin below bony menton (on its vertical line in the plane).
+    let me_soft = match f.get("Me") {
+        Some(me) => {
+            let seg = section(skin, frame);
+            seg.iter()
+                .filter_map(|s| {
+                    let (p, q) = (s[0], s[1]);
+                    let (lo, hi) = (p[1].min(q[1]), p[1].max(q[1]));
+                    if !(lo <= me[1] && me[1] <= hi) || hi - lo < 1e-12 {
+                        return None;
+                    }
+                    let t = (me[1] - p[1]) / (q[1] - p[1]);
+                    let v = p[0] + t * (q[0] - p[0]);
+                    (v < me[0]).then_some(v)
+                })
+                .max_by(f64::total_cmp)
+                .map(|v| [v, me[1]])
+                .ok_or_else(|| "no skin below bony menton in the midsagittal plane".to_string())
+        }
+        None => Err("defined below bony menton (Me), which is missing".into()),
+    };
+    f.put("Me'", Kind::Soft, me_soft);
+    // In the documented order, as LPS points.
+    SOFT.iter()
+        .map(|l| (*l, Kind::Soft))
+        .chain(BONE.iter().map(|l| (*l, Kind::Bone)))
+        .map(|(label, kind)| {
+            match f
+                .list
+                .iter()
+                .find(|(l, _, _)| *l == label)
+                .map(|(_, _, r)| r.clone())
+            {
+                Some(Ok([v, a])) => Landmark {
+                    label: label.into(),
+                    kind,
+                    position: Some(frame.point([0.0, v, a])),
+                    source: Source::Detected,
+                    missing: None,
+                },
+                Some(Err(why)) => Landmark::missing(label, kind, why),
+                None => Landmark::missing(label, kind, "not searched".into()),
+            }
+        })
+        .collect()
+}
+
+fn soft_landmarks(p: &Profile, f: &mut Found) {
+    let end_lo = (0..p.a.len()).find(|i| p.a[*i].is_finite()).unwrap_or(0);
+    let end_hi = (0..p.a.len())
+        .rev()
+        .find(|i| p.a[*i].is_finite())
+        .unwrap_or(0);
+    let Some(prn) = (0..p.a.len())
+        .filter(|i| p.a[*i].is_finite())
+        .max_by(|a, b| p.a[*a].total_cmp(&p.a[*b]))
+    else {
+        return;
+    };
+    let va = |i: usize| [p.height(i), p.a[i]];
+    f.put("Prn", Kind::Soft, Ok(va(prn)));
+    let miss = |e: Ext, what: &str, down: bool| {
+        let end = if down { end_lo } else { end_hi };
+        format!(
+            "the midsagittal skin profile has no {} {} {what} (it ends {:.0} mm {} pronasale)",
+            e.word(),
+            if down { "below" } else { "above" },
+            (p.height(end) - p.height(prn)).abs(),
+            if down { "below" } else { "above" },
+        )
+    };
+    // Up: soft nasion (the first concavity above the nose tip), glabella (the convexity above).
+    let n_soft = walk(p, prn, Ext::Concave, false);
+    f.put(
+        "N'",
+        Kind::Soft,
+        n_soft
+            .map(va)
+            .ok_or_else(|| miss(Ext::Concave, "pronasale", false)),
+    );
+    let g = n_soft.and_then(|n| walk(p, n, Ext::Convex, false));
+    f.put(
+        "G'",
+        Kind::Soft,
+        match (n_soft, g) {
+            (_, Some(g)) => Ok(va(g)),
+            (Some(_), None) => Err(miss(Ext::Convex, "soft nasion", false)),
+            (None, None) => Err("defined above soft nasion (N'), which is missing".into()),
+        },
+    );
+    // Down: fold under the nose, Ls, Sto, Li, B', Pog'.
+    let chain = [
+        ("", Ext::Concave, "pronasale"),
+        ("Ls", Ext::Convex, "the fold under the nose"),
+        ("Sto", Ext::Concave, "labrale superius"),
+        ("Li", Ext::Convex, "stomion"),
+        ("B'", Ext::Concave, "labrale inferius"),
+        ("Pog'", Ext::Convex, "soft B point"),
+    ];
+    let mut at = Some(prn);
+    let mut prev_label = "Prn";
+    let mut ls = None;
+    for (label, e, after) in chain {
+        let next = at.and_then(|i| walk(p, i, e, true));
+        if !label.is_empty() {
+            f.put(
+                label,
+                Kind::Soft,
+                match (at, next) {
+                    (_, Some(i)) => Ok(va(i)),
+                    (Some(_), None) => Err(miss(e, after, true)),
+                    (None, None) => Err(format!("defined below {prev_label}, which is missing")),
+                },
+            );
+            prev_label = label;
+        }
+        if label == "Ls" {
+            ls = next;
+        }
+        at = next;
+    }
+    // Subnasale: between Prn and Ls, the profile point farthest behind the chord Prn–Ls (the
+    // corner where the columella meets the lip).
+    let sn = ls.map(|ls| {
+        let [v1, a1] = va(prn);
+        let [v2, a2] = va(ls);
+        let (dv, da) = (v2 - v1, a2 - a1);
+        let len = (dv * dv + da * da).sqrt().max(1e-12);
+        (ls..=prn)
+            .filter(|i| p.a[*i].is_finite())
+            .max_by(|x, y| {
+                let d = |i: usize| {
+                    let [v, a] = va(i);
+                    // Signed distance behind the chord (posterior side positive).
+                    ((a - a1) * dv - (v - v1) * da) / len
+                };
+                d(*x).total_cmp(&d(*y))
+            })
+            .map(va)
+    });
+    f.put(
+        "Sn",
+        Kind::Soft,
+        sn.flatten().ok_or_else(|| {
+            "defined between pronasale and labrale superius (Ls), which is missing".into()
+        }),
+    );
+}
+
+fn bone_landmarks(p: &Profile, skull: &Mesh, frame: &HeadFrame, f: &mut Found) {
+    let va = |i: usize| [p.height(i), p.a[i]];
+    let window_miss = |what: &str, anchor: &str| {
+        format!("the bony midsagittal profile has no {what} near {anchor}")
+    };
+    let anchor_miss = |anchor: &str| format!("searched near {anchor}, which is missing");
+    // Nasion: the deepest concavity within 12 mm of soft nasion's height.
+    let n = match f.get("N'") {
+        Some([v, _]) => extremum_in(p, v - 12.0, v + 12.0, Ext::Concave)
+            .map(va)
+            .ok_or_else(|| window_miss("concavity", "soft nasion")),
+        None => Err(anchor_miss("soft nasion (N')")),
+    };
+    f.put("N", Kind::Bone, n);
+    // A point: the deepest concavity from 5 mm below Ls to 5 mm above Sn; ANS: the most
+    // anterior point of A's run above A, up to 10 mm above Sn.
+    let a = match (f.get("Sn"), f.get("Ls")) {
+        (Some(sn), Some(ls)) => extremum_in(p, ls[0] - 5.0, sn[0] + 5.0, Ext::Concave)
+            .ok_or_else(|| window_miss("concavity", "the upper lip")),
+        _ => Err(anchor_miss("subnasale and labrale superius (Sn, Ls)")),
+    };
+    f.put("A", Kind::Bone, a.clone().map(va));
+    let ans = match (&a, f.get("Sn")) {
+        (Ok(ai), Some(sn)) => {
+            let (_, top) = run(p, *ai);
+            (*ai..=top)
+                .filter(|i| p.a[*i].is_finite() && p.height(*i) <= sn[0] + 10.0)
+                .max_by(|x, y| p.a[*x].total_cmp(&p.a[*y]))
+                .filter(|i| *i > *ai)
+                .map(va)
+                .ok_or_else(|| "no bone above A point".to_string())
+        }
+        _ => Err("defined above A point, which is missing".into()),
+    };
+    f.put("ANS", Kind::Bone, ans);
+    // Pogonion: the most anterior convexity within 12 mm of soft pogonion's height; B: the
+    // deepest concavity between it and 5 mm above Li.
+    let pog = match f.get("Pog'") {
+        Some([v, _]) => extremum_in(p, v - 12.0, v + 12.0, Ext::Convex)
+            .ok_or_else(|| window_miss("convexity", "soft pogonion")),
+        None => Err(anchor_miss("soft pogonion (Pog')")),
+    };
+    f.put("Pog", Kind::Bone, pog.clone().map(va));
+    let b = match (&pog, f.get("Li")) {
+        (Ok(pi), Some(li)) => extremum_in(p, p.height(*pi), li[0] + 5.0, Ext::Concave)
+            .map(va)
+            .ok_or_else(|| window_miss("concavity", "the lower lip")),
+        _ => Err(anchor_miss("pogonion and labrale inferius (Pog, Li)")),
+    };
+    f.put("B", Kind::Bone, b);
+    // Menton: the lowest point of the skull's section within 15 mm behind pogonion and 30 mm
+    // below it.
+    let me = match pog {
+        Ok(pi) => {
+            let [vp, ap] = va(pi);
+            section(skull, frame)
+                .iter()
+                .flat_map(|s| [s[0], s[1]])
+                .filter(|q| q[1] > ap - 15.0 && q[1] < ap + 5.0 && q[0] < vp && q[0] > vp - 30.0)
+                .min_by(|x, y| x[0].total_cmp(&y[0]))
+                .ok_or_else(|| "no bone below pogonion".to_string())
+        }
+        Err(_) => Err("defined below pogonion (Pog), which is missing".into()),
+    };
+    f.put("Me", Kind::Bone, me);
+}

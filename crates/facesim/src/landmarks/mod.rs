@@ -1,0 +1,262 @@
+//! Cephalometric landmarks, measurements and facial regions (docs/landmarks.md).
+//!
+//! - `frame`: the head frame (midsagittal plane by mirror symmetry) and midsagittal profiles;
+//! - `detect`: soft-tissue and bony landmarks on the profiles, or why each is missing;
+//! - `measure`: nasolabial and mentolabial angles, lips to the E-line, soft/hard ratios;
+//! - `markups`: 3D Slicer markups files (.mrk.json) in and out;
+//! - `face_regions`: nose, lips, chin and cheeks from the landmarks, and their statistics.
+//!
+//! [`locate`] finds the landmarks of a pre-operative face (user landmarks override detection);
+//! [`carry`] takes them to the predicted face as the same material points.
+
+pub mod detect;
+pub mod face_regions;
+pub mod frame;
+pub mod markups;
+pub mod measure;
+
+use crate::compare::{SurfaceIndex, barycentric};
+use crate::error::{Error, Result};
+use crate::mesh::{Mesh, norm, sub};
+use crate::osteotomy::Plan;
+use serde::Serialize;
+use serde::ser::{SerializeMap, Serializer};
+use std::path::Path;
+
+pub use detect::{BONE, SOFT};
+pub use frame::{HeadFrame, head_frame};
+
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    Soft,
+    Bone,
+}
+
+#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Source {
+    Detected,
+    User,
+}
+
+/// One landmark on the pre-operative anatomy (LPS mm), or why it is missing.
+#[derive(Clone, Debug, Serialize)]
+pub struct Landmark {
+    pub label: String,
+    pub kind: Kind,
+    pub position: Option<[f64; 3]>,
+    pub source: Source,
+    pub missing: Option<String>,
+}
+
+impl Landmark {
+    pub fn missing(label: &str, kind: Kind, why: String) -> Landmark {
+        Landmark {
+            label: label.into(),
+            kind,
+            position: None,
+            source: Source::Detected,
+            missing: Some(why),
+        }
+    }
+}
+
+/// A user landmark farther than this from the face (soft) is an input error.
+pub const USER_MAX_OFF_FACE_MM: f64 = 10.0;
+
+/// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
+pub fn kind_of(label: &str) -> Kind {
+    if BONE.contains(&label) {
+        Kind::Bone
+    } else {
+        Kind::Soft
+    }
+}
+
+/// The landmarks of a pre-operative face: detected on `skin` and `skull` in the head frame,
+/// then each user landmark (`[[landmark]]`, or a markups file read into them) replaces the
+/// detected one of its label or is added. A soft user landmark more than
+/// [`USER_MAX_OFF_FACE_MM`] from the skin is an error naming `case_file`.
+pub fn locate(
+    skin: &Mesh,
+    skull: Option<&Mesh>,
+    user: &[(String, [f64; 3])],
+    case_file: &Path,
+) -> Result<(Option<HeadFrame>, Vec<Landmark>)> {
+    let frame = head_frame(skin);
+    let mut lms = match &frame {
+        Some(f) => detect::detect(skin, skull, f),
+        None => SOFT
+            .iter()
+            .chain(BONE.iter())
+            .map(|l| Landmark::missing(l, kind_of(l), "the skin is empty".into()))
+            .collect(),
+    };
+    if !user.is_empty() {
+        let index = SurfaceIndex::new(skin);
+        for (label, p) in user {
+            let kind = kind_of(label);
+            if kind == Kind::Soft {
+                let (d, _) = index.closest(*p);
+                if !(d <= USER_MAX_OFF_FACE_MM) {
+                    return Err(Error::input(
+                        case_file,
+                        format!(
+                            "landmark '{label}' at [{:.1}, {:.1}, {:.1}] (LPS mm) is {d:.1} mm from the face; a soft-tissue landmark must lie within {USER_MAX_OFF_FACE_MM} mm of it",
+                            p[0], p[1], p[2]
+                        ),
+                    ));
+                }
+            }
+            let lm = Landmark {
+                label: label.clone(),
+                kind,
+                position: Some(*p),
+                source: Source::User,
+                missing: None,
+            };
+            match lms.iter_mut().find(|l| l.label == *label) {
+                Some(l) => *l = lm,
+                None => lms.push(lm),
+            }
+        }
+    }
+    Ok((frame, lms))
+}
+
+/// A landmark before and after.
+#[derive(Clone, Debug, Serialize)]
+pub struct Carried {
+    pub label: String,
+    pub kind: Kind,
+    pub source: Source,
+    pub pre: Option<[f64; 3]>,
+    pub post: Option<[f64; 3]>,
+    pub change_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub missing: Option<String>,
+}
+
+/// The landmarks on the predicted face: a soft one as the same material point (its closest
+/// point on `face_pre`, in barycentric coordinates of that triangle, applied to `face_post`,
+/// which has face_pre's vertices and triangles in the same order); a bony one moved by the
+/// plan's rigid move of the segment that holds it.
+pub fn carry(lms: &[Landmark], face_pre: &Mesh, face_post: &Mesh, plan: &Plan) -> Vec<Carried> {
+    let index = SurfaceIndex::new(face_pre);
+    lms.iter()
+        .map(|l| {
+            let post = l.position.map(|p| match l.kind {
+                Kind::Bone => plan.apply(&[p], 1.0).0[0],
+                Kind::Soft => {
+                    let (_, q, t) = index.closest_triangle(p);
+                    let tri = face_pre.triangles[t];
+                    let [a, b, c] = tri.map(|i| face_pre.vertices[i as usize]);
+                    let w = barycentric(q, a, b, c);
+                    let [a2, b2, c2] = tri.map(|i| face_post.vertices[i as usize]);
+                    // The landmark's offset from the surface (0 for a detected one) rides along.
+                    let off = sub(p, q);
+                    [0, 1, 2].map(|k| w[0] * a2[k] + w[1] * b2[k] + w[2] * c2[k] + off[k])
+                }
+            });
+            Carried {
+                label: l.label.clone(),
+                kind: l.kind,
+                source: l.source,
+                pre: l.position,
+                post,
+                change_mm: l.position.zip(post).map(|(a, b)| norm(sub(b, a))),
+                missing: l.missing.clone(),
+            }
+        })
+        .collect()
+}
+
+/// A map that keeps its insertion order in JSON (report.json's `landmarks`, `measurements`,
+/// `regions`).
+#[derive(Clone, Debug)]
+pub struct Ordered<T>(pub Vec<(String, T)>);
+
+impl<T> Default for Ordered<T> {
+    fn default() -> Self {
+        Ordered(Vec::new())
+    }
+}
+
+impl<T: Serialize> Serialize for Ordered<T> {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(Some(self.0.len()))?;
+        for (k, v) in &self.0 {
+            m.serialize_entry(k, v)?;
+        }
+        m.end()
+    }
+}
+
+/// Everything the landmark stage reports (report.json `landmarks`, `measurements`,
+/// `soft_hard_ratios`, `regions`, `head_frame`).
+#[derive(Clone, Debug, Default)]
+pub struct Analysis {
+    pub frame: Option<HeadFrame>,
+    pub carried: Vec<Carried>,
+    pub measurements: Ordered<measure::Measure>,
+    pub ratios: Ordered<measure::Ratio>,
+    pub regions: Ordered<face_regions::RegionStats>,
+}
+
+/// Landmarks, measurements and region statistics of one prediction.
+pub fn analyse(
+    face_pre: &Mesh,
+    face_post: &Mesh,
+    skull: Option<&Mesh>,
+    plan: &Plan,
+    user: &[(String, [f64; 3])],
+    case_file: &Path,
+) -> Result<Analysis> {
+    let (frame, lms) = locate(face_pre, skull, user, case_file)?;
+    let carried = carry(&lms, face_pre, face_post, plan);
+    let (measurements, ratios) = match &frame {
+        Some(f) => measure::measure(&carried, f),
+        None => (Ordered::default(), Ordered::default()),
+    };
+    let regions = match &frame {
+        Some(f) => {
+            let pre: Vec<(String, [f64; 3])> = lms
+                .iter()
+                .filter_map(|l| l.position.map(|p| (l.label.clone(), p)))
+                .collect();
+            let r = face_regions::regions(&face_pre.vertices, f, &pre);
+            let dist: Vec<f64> = face_pre
+                .vertices
+                .iter()
+                .zip(&face_post.vertices)
+                .map(|(a, b)| norm(sub(*a, *b)))
+                .collect();
+            face_regions::displacement_stats(&r, &dist)
+        }
+        None => Ordered::default(),
+    };
+    Ok(Analysis {
+        frame,
+        carried,
+        measurements,
+        ratios,
+        regions,
+    })
+}
+
+impl Analysis {
+    /// report.json's `head_frame`, `landmarks`, `measurements`, `soft_hard_ratios`, `regions`.
+    pub fn fill(self, report: &mut crate::report::Report) {
+        report.head_frame = self.frame;
+        report.landmarks = Ordered(
+            self.carried
+                .into_iter()
+                .map(|c| (c.label.clone(), c))
+                .collect(),
+        );
+        report.measurements = self.measurements;
+        report.soft_hard_ratios = self.ratios;
+        report.regions = self.regions;
+    }
+}
