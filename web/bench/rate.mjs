@@ -1,16 +1,20 @@
 // The update rate of report.html (docs/performance.md): setPlan + re-render per second in
 // headless Chromium (Debian's chromium, SwiftShader WebGL).
 //   node bench/rate.mjs REPORT.html [SECONDS]
-// Two figures: setPlan alone (the basis sum, normals, colours, upload and the render call), and
-// setPlan followed by a 1-pixel read-back, which waits until the GPU process has drawn the frame.
+// Each update is setPlan followed by a 1-pixel read-back, which waits until the GPU process has
+// drawn the frame. Figures: at the page's dragging resolution (what a slider drag shows) and at
+// full resolution (facesim.options.dragPixelRatio = 1), each with the skull shown (the face
+// transparent over it) and hidden; setPlan without the read-back; and one full render alone.
 import { openReport } from "../test/browser.mjs";
-import { cpus } from "node:os";
+import { cpus, loadavg } from "node:os";
 
 const [html, seconds = "4"] = process.argv.slice(2);
+const load = loadavg()[0];
 const { browser, page, problems } = await openReport(html);
 try {
   const result = await page.evaluate(async (ms) => {
-    const info = window.facesim.info();
+    const api = window.facesim;
+    const info = api.info();
     const plan = (i) => {
       const p = {};
       info.segments.forEach((name, s) => {
@@ -21,45 +25,55 @@ try {
     };
     const gl = document.querySelector("#view canvas").getContext("webgl2");
     const px = new Uint8Array(4);
+    const readBack = () => gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     const rate = (sync) => {
       let i = 0;
       const t0 = performance.now();
       while (performance.now() - t0 < ms) {
-        window.facesim.setPlan(plan(i++));
-        if (sync) gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+        api.setPlan(plan(i++));
+        if (sync) readBack();
       }
       // Frames still queued in the GPU process count in the time.
-      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
-      return { updates: i, per_s: (1000 * i) / (performance.now() - t0) };
+      readBack();
+      return Number(((1000 * i) / (performance.now() - t0)).toFixed(1));
     };
     const timeOne = (f) => {
       const t0 = performance.now();
       for (let i = 0; i < 5; i++) f(i);
-      return (performance.now() - t0) / 5;
+      return Number(((performance.now() - t0) / 5).toFixed(1));
     };
-    rate(true); // warm-up
-    const drawn = rate(true);
-    // Where the time goes: the basis sum alone (no render), and one render alone.
-    const renderer = window.facesim.render;
-    // The same with the skull hidden (the face alone, opaque).
     const skullBox = [...document.querySelectorAll("#side input[type=checkbox]")][0];
+    const canvasSize = () => [gl.drawingBufferWidth, gl.drawingBufferHeight];
+    // Pages from before facesim.options drew every frame at full resolution.
+    const opts = api.options || { dragPixelRatio: 1 };
+    const dragRatio = opts.dragPixelRatio;
+    const out = { info, drag_pixel_ratio: dragRatio };
+    rate(true); // warm-up
+    out.per_s_drag = rate(true);
+    out.canvas_drag = canvasSize();
     skullBox.click();
-    const drawnFaceOnly = rate(true);
+    out.per_s_drag_face_only = rate(true);
     skullBox.click();
-    return {
-      info,
-      drawn,
-      drawn_face_only: drawnFaceOnly,
-      ms_set_plan_and_draw: 1000 / drawn.per_s,
-      ms_render_only: renderer ? timeOne(() => { renderer(); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); }) : null,
-    };
+    opts.dragPixelRatio = 1;
+    out.per_s_full = rate(true);
+    out.canvas_full = canvasSize();
+    skullBox.click();
+    out.per_s_full_face_only = rate(true);
+    skullBox.click();
+    opts.dragPixelRatio = dragRatio;
+    out.per_s_set_plan_no_readback = rate(false);
+    out.ms_render_only = timeOne(() => {
+      api.render();
+      readBack();
+    });
+    return out;
   }, 1000 * Number(seconds));
-  const canvas = await page.evaluate(() => {
-    const c = document.querySelector("#view canvas");
-    return [c.width, c.height];
-  });
   console.log(
-    JSON.stringify({ ...result, canvas, ...problems, cpu: cpus()[0].model, cores: cpus().length, chromium: await browser.version() }, null, 1),
+    JSON.stringify(
+      { ...result, ...problems, load_average_1min: load, cpu: cpus()[0].model, cores: cpus().length, chromium: await browser.version() },
+      null,
+      1,
+    ),
   );
 } finally {
   await browser.close();
