@@ -6,7 +6,7 @@ import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { planMatrix, predictFace, moveRigid, interleaveColumns } from "./plan.js";
 import { viridis } from "./viridis.js";
-import { surfaceMaterial, setOpacity } from "./shading.js";
+import { surfaceMaterial, setOpacity, viewUp } from "./shading.js";
 import { vertexNormals, leadingVertexNormals } from "./normals.js";
 import { orderSkull, reorder } from "./skull_order.js";
 import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
@@ -240,6 +240,7 @@ function main() {
       camera.aspect = w / h;
       camera.updateProjectionMatrix();
     }
+    viewUp(camera);
     if (cached && options.cache && skullStatic.visible && cache.draw(scene, camera)) return;
     renderer.render(scene, camera);
   }

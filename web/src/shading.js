@@ -14,12 +14,9 @@ uniform vec3 sky;
 uniform vec3 ground;
 uniform vec3 sun;
 uniform vec3 sunDir;
+uniform vec3 up;
 varying vec3 vFront;
 varying vec3 vBack;
-vec3 shade(vec3 albedo, vec3 n, vec3 up) {
-  vec3 irradiance = mix(ground, sky, 0.5 * dot(n, up) + 0.5) + sun * max(dot(n, sunDir), 0.0);
-  return albedo * irradiance;
-}
 void main() {
 #ifdef TINT
   vec3 albedo = color;
@@ -27,10 +24,11 @@ void main() {
   vec3 albedo = base;
 #endif
   vec3 n = normalize(normalMatrix * normal);
-  // three.js' HemisphereLight shines down world +y unless moved; kept as the page had it.
-  vec3 up = normalize((viewMatrix * vec4(0.0, 1.0, 0.0, 0.0)).xyz);
-  vFront = shade(albedo, n, up);
-  vBack = shade(albedo, -n, up);
+  // The back side's normal is −n: the same two dot products, negated.
+  float h = 0.5 * dot(n, up);
+  float s = dot(n, sunDir);
+  vFront = albedo * (mix(ground, sky, 0.5 + h) + sun * max(s, 0.0));
+  vBack = albedo * (mix(ground, sky, 0.5 - h) + sun * max(-s, 0.0));
   gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
 }`;
 
@@ -49,6 +47,17 @@ void main() {
 const hemi = 1.6 / Math.PI;
 const sunI = 1.2 / Math.PI;
 
+// The hemisphere light's "up" in view coordinates, shared by every surface material and set once a
+// frame (viewUp) rather than per vertex. three.js' HemisphereLight shines down world +y unless
+// moved; kept as the page had it.
+const up = { value: new THREE.Vector3(0, 1, 0) };
+
+/** Point the hemisphere light for `camera` (call before drawing). */
+export function viewUp(camera) {
+  camera.updateMatrixWorld();
+  up.value.set(0, 1, 0).transformDirection(camera.matrixWorldInverse);
+}
+
 /** A two-sided surface: `colour` (sRGB hex) or, with `perVertex`, the geometry's "color" attribute
  *  (linear RGB). */
 export function surfaceMaterial({ colour = 0xffffff, perVertex = false } = {}) {
@@ -66,6 +75,7 @@ export function surfaceMaterial({ colour = 0xffffff, perVertex = false } = {}) {
       ground: { value: new THREE.Color(0x666666).multiplyScalar(hemi) },
       sun: { value: new THREE.Color(0xffffff).multiplyScalar(sunI) },
       sunDir: { value: new THREE.Vector3(0.3, 0.5, 1).normalize() },
+      up,
       opacity: { value: 1 },
     },
   });
