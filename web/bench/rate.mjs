@@ -1,16 +1,56 @@
 // The update rate of report.html (docs/performance.md): setPlan + re-render per second in
 // headless Chromium (Debian's chromium, SwiftShader WebGL).
 //   node bench/rate.mjs REPORT.html [SECONDS]
-// Two figures: setPlan alone (the basis sum, normals, colours, upload and the render call), and
-// setPlan followed by a 1-pixel read-back, which waits until the GPU process has drawn the frame.
+// Each update is setPlan followed by a 1-pixel read-back, which waits until the GPU process has
+// drawn the frame. Cases: at the page's dragging resolution (what a slider drag shows) and at full
+// resolution (facesim.options.dragPixelRatio = 1), each with the skull shown (the face transparent
+// over it) and hidden; full resolution without the static-skull cache (options.cache = false);
+// then one full render alone. Per case: updates per second (wall clock) and
+// the CPU time of all Chromium processes per update (utime + stime from /proc), which a loaded
+// machine inflates far less than the wall clock.
 import { openReport } from "../test/browser.mjs";
-import { cpus } from "node:os";
+import { cpus, loadavg } from "node:os";
+import { readdirSync, readFileSync } from "node:fs";
 
 const [html, seconds = "4"] = process.argv.slice(2);
+const ms = 1000 * Number(seconds);
+
+/** CPU milliseconds used so far by process `root` and all its descendants (Linux /proc). */
+function treeCpuMs(root) {
+  const procs = [];
+  for (const d of readdirSync("/proc")) {
+    if (!/^\d+$/.test(d)) continue;
+    try {
+      const stat = readFileSync(`/proc/${d}/stat`, "utf8");
+      const f = stat.slice(stat.lastIndexOf(")") + 2).split(" ");
+      procs.push({ pid: Number(d), ppid: Number(f[1]), ticks: Number(f[11]) + Number(f[12]) });
+    } catch {
+      // the process ended meanwhile
+    }
+  }
+  const inTree = new Set([root]);
+  for (let grown = true; grown; ) {
+    grown = false;
+    for (const p of procs)
+      if (!inTree.has(p.pid) && inTree.has(p.ppid)) {
+        inTree.add(p.pid);
+        grown = true;
+      }
+  }
+  // USER_HZ is 100 on Linux.
+  return 10 * procs.filter((p) => inTree.has(p.pid)).reduce((s, p) => s + p.ticks, 0);
+}
+
+const load = loadavg()[0];
 const { browser, page, problems } = await openReport(html);
+const root = browser.process().pid;
 try {
-  const result = await page.evaluate(async (ms) => {
-    const info = window.facesim.info();
+  await page.evaluate(() => {
+    const api = window.facesim;
+    const info = api.info();
+    const gl = document.querySelector("#view canvas").getContext("webgl2");
+    const px = new Uint8Array(4);
+    const readBack = () => gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     const plan = (i) => {
       const p = {};
       info.segments.forEach((name, s) => {
@@ -19,47 +59,62 @@ try {
       });
       return p;
     };
-    const gl = document.querySelector("#view canvas").getContext("webgl2");
-    const px = new Uint8Array(4);
-    const rate = (sync) => {
-      let i = 0;
-      const t0 = performance.now();
-      while (performance.now() - t0 < ms) {
-        window.facesim.setPlan(plan(i++));
-        if (sync) gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
-      }
-      // Frames still queued in the GPU process count in the time.
-      gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
-      return { updates: i, per_s: (1000 * i) / (performance.now() - t0) };
-    };
-    const timeOne = (f) => {
-      const t0 = performance.now();
-      for (let i = 0; i < 5; i++) f(i);
-      return (performance.now() - t0) / 5;
-    };
-    rate(true); // warm-up
-    const drawn = rate(true);
-    // Where the time goes: the basis sum alone (no render), and one render alone.
-    const renderer = window.facesim.render;
-    // The same with the skull hidden (the face alone, opaque).
+    // Pages from before facesim.options drew every frame at full resolution.
+    const opts = api.options || { dragPixelRatio: 1 };
+    const dragRatio = opts.dragPixelRatio;
     const skullBox = [...document.querySelectorAll("#side input[type=checkbox]")][0];
-    skullBox.click();
-    const drawnFaceOnly = rate(true);
-    skullBox.click();
-    return {
-      info,
-      drawn,
-      drawn_face_only: drawnFaceOnly,
-      ms_set_plan_and_draw: 1000 / drawn.per_s,
-      ms_render_only: renderer ? timeOne(() => { renderer(); gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px); }) : null,
+    window.__bench = {
+      info: () => ({ ...info, drag_pixel_ratio: dragRatio }),
+      setup(full, skull, cache = true) {
+        opts.dragPixelRatio = full ? 1 : dragRatio;
+        if ("cache" in opts) opts.cache = cache;
+        if (skullBox.checked !== skull) skullBox.click();
+      },
+      rate(ms) {
+        let i = 0;
+        const t0 = performance.now();
+        while (performance.now() - t0 < ms) {
+          api.setPlan(plan(i++));
+          readBack();
+        }
+        return { updates: i, wall_ms: performance.now() - t0, canvas: [gl.drawingBufferWidth, gl.drawingBufferHeight] };
+      },
+      render(k) {
+        const t0 = performance.now();
+        for (let i = 0; i < k; i++) {
+          api.render();
+          readBack();
+        }
+        return { updates: k, wall_ms: performance.now() - t0, canvas: [gl.drawingBufferWidth, gl.drawingBufferHeight] };
+      },
     };
-  }, 1000 * Number(seconds));
-  const canvas = await page.evaluate(() => {
-    const c = document.querySelector("#view canvas");
-    return [c.width, c.height];
   });
+  const measure = async (what, ...args) => {
+    const c0 = treeCpuMs(root);
+    const r = await page.evaluate((what, args) => window.__bench[what](...args), what, args);
+    const cpu = treeCpuMs(root) - c0;
+    return { per_s: Number(((1000 * r.updates) / r.wall_ms).toFixed(1)), cpu_ms_per_update: Number((cpu / r.updates).toFixed(1)), canvas: r.canvas };
+  };
+  const out = { info: await page.evaluate(() => window.__bench.info()) };
+  await page.evaluate(() => window.__bench.rate(500)); // warm-up
+  for (const [name, full, skull, cache] of [
+    ["drag", false, true, true],
+    ["drag_face_only", false, false, true],
+    ["full", true, true, true],
+    ["full_no_cache", true, true, false],
+    ["full_face_only", true, false, true],
+  ]) {
+    await page.evaluate((...a) => window.__bench.setup(...a), full, skull, cache);
+    out[name] = await measure("rate", ms);
+  }
+  await page.evaluate(() => window.__bench.setup(false, true));
+  out.render_only_full = await measure("render", 5);
   console.log(
-    JSON.stringify({ ...result, canvas, ...problems, cpu: cpus()[0].model, cores: cpus().length, chromium: await browser.version() }, null, 1),
+    JSON.stringify(
+      { ...out, ...problems, load_average_1min: load, cpu: cpus()[0].model, cores: cpus().length, chromium: await browser.version() },
+      null,
+      1,
+    ),
   );
 } finally {
   await browser.close();

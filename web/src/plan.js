@@ -17,8 +17,8 @@ export function rotation(deg) {
 }
 
 /** The 12 entries of M = [R − I | t′] (row-major) of one segment's move; zeros when absent. */
-export function planMatrix(move, pivot) {
-  const m = new Float64Array(12);
+export function planMatrix(move, pivot, m = new Float64Array(12)) {
+  m.fill(0);
   if (!move) return m;
   const t = move.translate || [0, 0, 0];
   const r = rotation(move.rotate_deg || [0, 0, 0]);
@@ -33,25 +33,41 @@ export function planMatrix(move, pivot) {
   return m;
 }
 
-/** out = face_pre + Σ_segments Σ_k m_k · columns_k; columns are 12 blocks of 3·n floats. */
-export function predictFace(facePre, segments, plan, out) {
-  const len = facePre.length;
-  for (let a = 0; a < len; a++) out[a] = facePre[a];
-  for (const s of segments) {
-    const m = planMatrix(plan[s.name], s.pivot);
-    for (let k = 0; k < 12; k++) {
-      const w = m[k];
-      if (w === 0) continue;
-      const col = s.columns.subarray(k * len, (k + 1) * len);
-      for (let a = 0; a < len; a++) out[a] += w * col[a];
-    }
+/** The basis as the page keeps it: `columns` (12 blocks of `len` floats, column k at k·len) with
+ *  the 12 values of each coordinate side by side (entry 12·a + k), so the sum below reads one
+ *  array front to back instead of twelve. */
+export function interleaveColumns(columns, len) {
+  const out = new Float32Array(12 * len);
+  for (let k = 0; k < 12; k++) {
+    const col = columns.subarray(k * len, (k + 1) * len);
+    for (let a = 0; a < len; a++) out[12 * a + k] = col[a];
   }
   return out;
 }
 
-/** Move points rigidly: point v by the matrix of segment `which[v]` (255 or null: stays). */
-export function moveRigid(points, which, mats, out) {
-  for (let v = 0; v < points.length / 3; v++) {
+const scratch = new Float64Array(12);
+
+/** out = face_pre + Σ_segments Σ_k m_k · column_k; each segment's `columns` interleaved
+ *  (interleaveColumns). `out` may be a Float32Array (the page's vertex buffer). */
+export function predictFace(facePre, segments, plan, out) {
+  const len = facePre.length;
+  out.set(facePre);
+  for (const s of segments) {
+    if (!plan[s.name]) continue;
+    const [m0, m1, m2, m3, m4, m5, m6, m7, m8, m9, m10, m11] = planMatrix(plan[s.name], s.pivot, scratch);
+    const c = s.columns;
+    for (let a = 0, b = 0; a < len; a++, b += 12)
+      out[a] +=
+        m0 * c[b] + m1 * c[b + 1] + m2 * c[b + 2] + m3 * c[b + 3] + m4 * c[b + 4] + m5 * c[b + 5] +
+        m6 * c[b + 6] + m7 * c[b + 7] + m8 * c[b + 8] + m9 * c[b + 9] + m10 * c[b + 10] + m11 * c[b + 11];
+  }
+  return out;
+}
+
+/** Move points [0, count) rigidly: point v by the matrix of segment `which[v]` (255 or null:
+ *  stays). */
+export function moveRigid(points, which, mats, out, count = points.length / 3) {
+  for (let v = 0; v < count; v++) {
     const x = points[3 * v];
     const y = points[3 * v + 1];
     const z = points[3 * v + 2];

@@ -4,8 +4,18 @@
 // (arrays as base64 little-endian float32 / uint32 / uint8). Frame: LPS, millimetres.
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
-import { planMatrix, predictFace, moveRigid } from "./plan.js";
+import { planMatrix, predictFace, moveRigid, interleaveColumns } from "./plan.js";
 import { viridis } from "./viridis.js";
+import { surfaceMaterial, setOpacity, viewUp } from "./shading.js";
+import { vertexNormals, leadingVertexNormals } from "./normals.js";
+import { orderSkull, reorder } from "./skull_order.js";
+import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
+
+// While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
+// of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
+// facesim.options.dragPixelRatio = 1 draws every frame at full resolution (web/bench/rate.mjs).
+const DRAG_PIXEL_RATIO = 0.5;
+const DRAG_SETTLE_MS = 200;
 
 function decode(b64, Type) {
   const bin = atob(b64);
@@ -28,10 +38,6 @@ function main() {
   const facePre = f32(data.face_pre);
   const facePost = f32(data.face_post);
   const faceTris = u32(data.face_triangles);
-  const skullPre = f32(data.skull_pre);
-  const skullPost = f32(data.skull_post);
-  const skullTris = u32(data.skull_triangles);
-  const skullSegment = decode(data.skull_segment, Uint8Array);
   const n = facePre.length / 3;
   const basis = data.basis
     ? {
@@ -40,10 +46,20 @@ function main() {
           name: s.name,
           pivot: s.pivot,
           runPlan: { translate: s.translate, rotate_deg: s.rotate_deg },
-          columns: f32(s.columns),
+          columns: interleaveColumns(f32(s.columns), 3 * n),
         })),
       }
     : null;
+  // The basis segment of each of the case's segments (−1: not in the basis, never moves).
+  const basisOf = data.segments.map((name) => (basis ? basis.segments.findIndex((s) => s.name === name) : -1));
+  const skullSegmentRaw = decode(data.skull_segment, Uint8Array);
+  const skull = orderSkull(skullSegmentRaw, (seg) => seg < basisOf.length && basisOf[seg] >= 0, u32(data.skull_triangles));
+  const skullTris = new Uint32Array(skull.movingTris.length + skull.staticTris.length);
+  skullTris.set(skull.movingTris);
+  skullTris.set(skull.staticTris, skull.movingTris.length);
+  const skullPre = reorder(f32(data.skull_pre), skull.order, 3);
+  const skullPost = reorder(f32(data.skull_post), skull.order, 3);
+  const skullSegment = reorder(skullSegmentRaw, skull.order, 1);
 
   // ---- layout ----
   const side = document.getElementById("side");
@@ -53,12 +69,14 @@ function main() {
   side.appendChild(model);
 
   // ---- three.js scene ----
+  const BACKGROUND = 0xf4f4f4;
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setPixelRatio(1);
-  renderer.setClearColor(0xf4f4f4);
+  renderer.setClearColor(BACKGROUND);
   view.appendChild(renderer.domElement);
   const scene = new THREE.Scene();
   const camera = new THREE.PerspectiveCamera(30, 1, 1, 5000);
+  camera.layers.enable(STATIC_LAYER);
   scene.add(new THREE.HemisphereLight(0xffffff, 0x666666, 1.6));
   const sun = new THREE.DirectionalLight(0xffffff, 1.2);
   camera.add(sun);
@@ -67,24 +85,44 @@ function main() {
 
   const meshOf = (positions, tris, material) => {
     const g = new THREE.BufferGeometry();
-    g.setAttribute("position", new THREE.BufferAttribute(new Float32Array(positions), 3));
+    const pos = new Float32Array(positions);
+    const normals = new Float32Array(pos.length);
+    vertexNormals(pos, tris, normals);
+    g.setAttribute("position", new THREE.BufferAttribute(pos, 3));
+    g.setAttribute("normal", new THREE.BufferAttribute(normals, 3));
     g.setIndex(new THREE.BufferAttribute(tris, 1));
-    g.computeVertexNormals();
     const m = new THREE.Mesh(g, material);
     scene.add(m);
     return m;
   };
   const colours = new Float32Array(3 * n);
-  const faceAfter = meshOf(facePost, faceTris, new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.8, side: THREE.DoubleSide }));
+  const faceMaterial = surfaceMaterial({ perVertex: true });
+  const faceAfter = meshOf(facePost, faceTris, faceMaterial);
   faceAfter.geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
-  const skinMaterial = new THREE.MeshStandardMaterial({ color: 0xd9b38c, roughness: 0.8, side: THREE.DoubleSide });
+  const skinMaterial = surfaceMaterial({ colour: 0xd9b38c });
   const faceBefore = meshOf(facePre, faceTris, skinMaterial);
   const ghost = new THREE.MeshBasicMaterial({ color: 0x333333, wireframe: true, transparent: true, opacity: 0.25 });
   const faceOverlay = new THREE.Mesh(faceBefore.geometry, ghost);
   scene.add(faceOverlay);
-  const boneMaterial = new THREE.MeshStandardMaterial({ color: 0xeeeadd, roughness: 0.6, side: THREE.DoubleSide });
+  const boneMaterial = surfaceMaterial({ colour: 0xeeeadd });
   const skullBefore = meshOf(skullPre, skullTris, boneMaterial);
+  // The skull after: one set of vertex buffers, drawn as the triangles a plan moves or shades
+  // differently and the static rest (cached while a slider is dragged: frame_cache.js).
   const skullAfter = meshOf(skullPost, skullTris, boneMaterial);
+  scene.remove(skullAfter);
+  const skullPart = (tris, layer) => {
+    const g = new THREE.BufferGeometry();
+    g.setAttribute("position", skullAfter.geometry.getAttribute("position"));
+    g.setAttribute("normal", skullAfter.geometry.getAttribute("normal"));
+    g.setIndex(new THREE.BufferAttribute(tris, 1));
+    const m = new THREE.Mesh(g, boneMaterial);
+    m.layers.set(layer);
+    scene.add(m);
+    return m;
+  };
+  const skullMoving = skullPart(skull.movingTris, 0);
+  const skullStatic = skullPart(skull.staticTris, STATIC_LAYER);
+  const cache = new StaticCache(renderer, BACKGROUND);
 
   // Look at the face from the front: LPS −y is anterior, +z superior.
   const box = new THREE.Box3().setFromBufferAttribute(faceBefore.geometry.getAttribute("position"));
@@ -96,50 +134,82 @@ function main() {
   controls.target.copy(centre);
   controls.update();
 
-  // ---- state: the current face, colours, what is shown ----
-  const current = Float64Array.from(facePost);
+  // ---- state: the current face (the after-mesh's vertex buffer), colours, what is shown ----
+  const facePosition = faceAfter.geometry.getAttribute("position");
+  const faceNormal = faceAfter.geometry.getAttribute("normal");
+  const faceColour = faceAfter.geometry.getAttribute("color");
+  const current = facePosition.array;
   const state = { mode: "after", skull: true, colour: true };
-  let scaleMax = data.colour_scale_mm[1];
   const scaleLabel = el("span", { class: "max" });
+  // Viridis sampled finely once (linear in the colour attribute as before: value / 255).
+  const LUT_STEPS = 1024;
+  const lut = new Float32Array(3 * (LUT_STEPS + 1));
+  for (let i = 0; i <= LUT_STEPS; i++) viridis(i / LUT_STEPS).forEach((c, k) => (lut[3 * i + k] = c / 255));
+  const skin = [217 / 255, 179 / 255, 140 / 255];
+  const dist = new Float32Array(n);
 
+  /** Colours, normals and the scale of the face in `current`; marks the buffers for upload. */
   function refreshFace() {
-    const pos = faceAfter.geometry.getAttribute("position");
     let dmax = 0;
-    const dist = new Float64Array(n);
-    for (let v = 0; v < n; v++) {
-      const dx = current[3 * v] - facePre[3 * v];
-      const dy = current[3 * v + 1] - facePre[3 * v + 1];
-      const dz = current[3 * v + 2] - facePre[3 * v + 2];
-      dist[v] = Math.sqrt(dx * dx + dy * dy + dz * dz);
-      if (dist[v] > dmax) dmax = dist[v];
-      pos.array[3 * v] = current[3 * v];
-      pos.array[3 * v + 1] = current[3 * v + 1];
-      pos.array[3 * v + 2] = current[3 * v + 2];
+    for (let v = 0, p = 0; v < n; v++, p += 3) {
+      const dx = current[p] - facePre[p];
+      const dy = current[p + 1] - facePre[p + 1];
+      const dz = current[p + 2] - facePre[p + 2];
+      const d = Math.sqrt(dx * dx + dy * dy + dz * dz);
+      dist[v] = d;
+      if (d > dmax) dmax = d;
     }
-    scaleMax = dmax;
-    for (let v = 0; v < n; v++) {
-      const c = state.colour ? viridis(dmax > 0 ? dist[v] / dmax : 0) : [217, 179, 140];
-      colours[3 * v] = c[0] / 255;
-      colours[3 * v + 1] = c[1] / 255;
-      colours[3 * v + 2] = c[2] / 255;
+    const scale = dmax > 0 ? LUT_STEPS / dmax : 0;
+    for (let v = 0, p = 0; v < n; v++, p += 3) {
+      if (state.colour) {
+        const q = 3 * Math.round(dist[v] * scale);
+        colours[p] = lut[q];
+        colours[p + 1] = lut[q + 1];
+        colours[p + 2] = lut[q + 2];
+      } else {
+        colours[p] = skin[0];
+        colours[p + 1] = skin[1];
+        colours[p + 2] = skin[2];
+      }
     }
-    pos.needsUpdate = true;
-    faceAfter.geometry.getAttribute("color").needsUpdate = true;
-    faceAfter.geometry.computeVertexNormals();
+    vertexNormals(current, faceTris, faceNormal.array);
+    facePosition.needsUpdate = true;
+    faceNormal.needsUpdate = true;
+    faceColour.needsUpdate = true;
     scaleLabel.textContent = `${dmax.toFixed(2)} mm`;
   }
 
+  // The skull after a plan: only the leading range of movable vertices is rewritten and uploaded
+  // (skull_order.js), with the normals of the vertices around them.
+  const skullPosition = skullAfter.geometry.getAttribute("position");
+  const skullNormal = skullAfter.geometry.getAttribute("normal");
+  const mats = basisOf.map(() => new Float64Array(12));
+  const segmentMats = basisOf.map(() => null);
+  // The run's skull_post also moves segments that are not in the basis; a plan leaves them where
+  // they were before. Switching between the two rewrites the whole skull.
+  let skullIsRun = true;
   function refreshSkull(plan) {
-    const pos = skullAfter.geometry.getAttribute("position");
     if (!plan) {
-      pos.array.set(skullPost);
+      skullPosition.array.set(skullPost);
+      vertexNormals(skullPosition.array, skullTris, skullNormal.array);
     } else {
-      const mats = basis.segments.map((s) => planMatrix(plan[s.name], s.pivot));
-      const byName = data.segments.map((name) => basis.segments.findIndex((s) => s.name === name));
-      moveRigid(skullPre, skullSegment, byName.map((i) => (i < 0 ? null : mats[i])), pos.array);
+      basisOf.forEach((i, seg) => {
+        segmentMats[seg] = i < 0 ? null : planMatrix(plan[basis.segments[i].name], basis.segments[i].pivot, mats[seg]);
+      });
+      if (skullIsRun) {
+        moveRigid(skullPre, skullSegment, segmentMats, skullPosition.array);
+        vertexNormals(skullPosition.array, skullTris, skullNormal.array);
+      } else {
+        moveRigid(skullPre, skullSegment, segmentMats, skullPosition.array, skull.moved);
+        leadingVertexNormals(skullPosition.array, skull.movingTris, skull.dirty, skullNormal.array);
+        skullPosition.addUpdateRange(0, 3 * skull.moved);
+        skullNormal.addUpdateRange(0, 3 * skull.dirty);
+      }
     }
-    pos.needsUpdate = true;
-    skullAfter.geometry.computeVertexNormals();
+    if (skullIsRun !== !plan) cache.invalidate();
+    skullIsRun = !plan;
+    skullPosition.needsUpdate = true;
+    skullNormal.needsUpdate = true;
   }
 
   function showState() {
@@ -148,27 +218,58 @@ function main() {
     faceBefore.visible = state.mode === "before";
     faceOverlay.visible = state.mode === "overlay";
     skullBefore.visible = state.skull && !after;
-    skullAfter.visible = state.skull && after;
-    // The skull shows through the face.
-    for (const m of [faceAfter.material, skinMaterial]) {
-      m.transparent = state.skull;
-      m.opacity = state.skull ? 0.55 : 1;
-      m.depthWrite = !state.skull;
-    }
+    skullMoving.visible = skullStatic.visible = state.skull && after;
+    // The skull shows through the face; the skull itself is always opaque.
+    for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? 0.55 : 1);
+    cache.invalidate();
   }
 
-  function render() {
+  // ---- drawing: on demand, at most once an animation frame; coarser while dragging ----
+  const options = { dragPixelRatio: DRAG_PIXEL_RATIO, cache: true };
+  const drawnAt = { w: 0, h: 0, ratio: 0 };
+  /** Draw now, at full resolution or (`dragging`) at options.dragPixelRatio; `cached`: the
+   *  camera stands still (a slider frame), the static skull may come from the cache. */
+  function draw(dragging, cached = false) {
     const w = view.clientWidth;
     const h = view.clientHeight;
-    const c = renderer.domElement;
-    if (c.width !== w || c.height !== h) {
+    const ratio = dragging ? options.dragPixelRatio : 1;
+    if (drawnAt.w !== w || drawnAt.h !== h || drawnAt.ratio !== ratio) {
+      Object.assign(drawnAt, { w, h, ratio });
+      renderer.setPixelRatio(ratio);
       renderer.setSize(w, h, false);
       camera.aspect = w / h;
       camera.updateProjectionMatrix();
     }
+    viewUp(camera);
+    if (cached && options.cache && skullStatic.visible && cache.draw(scene, camera)) return;
     renderer.render(scene, camera);
   }
-  controls.addEventListener("change", render);
+  const render = () => draw(false);
+  let settle = 0;
+  /** A frame drawn while dragging (`slider`: a slider, not the view); the full-resolution one
+   *  follows when the dragging stops. */
+  function dragFrame(slider) {
+    draw(true, slider);
+    clearTimeout(settle);
+    settle = setTimeout(render, DRAG_SETTLE_MS);
+  }
+  let frameWanted = false;
+  let sliderMoved = false;
+  function requestFrame() {
+    if (frameWanted) return;
+    frameWanted = true;
+    requestAnimationFrame(() => {
+      frameWanted = false;
+      // However many slider events came since the last frame, the face is re-planned once.
+      const slider = sliderMoved;
+      if (slider) {
+        sliderMoved = false;
+        applyPlan(sliderPlan());
+      }
+      dragFrame(slider);
+    });
+  }
+  controls.addEventListener("change", requestFrame);
   window.addEventListener("resize", render);
 
   // ---- controls panel ----
@@ -230,8 +331,8 @@ function main() {
         const out = el("output", {}, `${value.toFixed(1)} ${unit}`);
         r.addEventListener("input", () => {
           out.textContent = `${Number(r.value).toFixed(1)} ${unit}`;
-          applyPlan(sliderPlan());
-          render();
+          sliderMoved = true;
+          requestFrame();
         });
         l.append(`${label} `, r, out);
         planBox.appendChild(l);
@@ -246,6 +347,7 @@ function main() {
       for (const s of basis.segments) p[s.name] = s.runPlan;
       setSliders(p);
       plan = null;
+      sliderMoved = false;
       current.set(facePost);
       refreshFace();
       refreshSkull(null);
@@ -304,24 +406,34 @@ function main() {
   // ---- automation API (docs/report-page.md) ----
   window.facesim = {
     /** Re-plan: segment name → {translate: [x,y,z] mm, rotate_deg: [rx,ry,rz]}; a segment left out
-     *  does not move. Applied (and rendered) before it returns. */
+     *  does not move. Applied and drawn before it returns, as a slider move is: at the dragging
+     *  resolution, the full one following when no further plan comes for DRAG_SETTLE_MS. */
     setPlan(p) {
       if (!basis) throw new Error(data.no_basis_reason || "report.html: no plan basis");
       for (const name of Object.keys(p))
         if (!basis.segments.some((s) => s.name === name)) throw new Error(`report.html: the plan names an unknown segment '${name}'`);
       setSliders(p);
+      sliderMoved = false;
       applyPlan(p);
-      render();
+      dragFrame(true);
     },
     /** The predicted face: LPS mm, flat [x0, y0, z0, x1, …], face_post order. */
     faceVertices() {
       return Array.from(current);
     },
-    /** Draw the scene now (benchmarks time it). */
+    /** Draw the scene now at full resolution (benchmarks time it). */
     render,
+    /** dragPixelRatio: the pixel ratio of frames drawn while dragging (1: always full). */
+    options,
     /** How many segments and face vertices the page holds (for tests and benchmarks). */
     info() {
-      return { vertices: n, segments: basis ? basis.segments.map((s) => s.name) : [], basis: basis ? basis.label : null };
+      return {
+        vertices: n,
+        segments: basis ? basis.segments.map((s) => s.name) : [],
+        basis: basis ? basis.label : null,
+        // Whether slider frames draw the static skull from the cache (frame_cache.js).
+        frame_cache: cache.enabled,
+      };
     },
   };
 

@@ -2,7 +2,8 @@
 //   node test/page.test.mjs REPORT.html PLANS.json OUT.json SCREENSHOT.png
 // PLANS.json is a list of plans; OUT.json gets the problems seen (console errors, page errors,
 // requests leaving the file), canvas statistics, faceVertices() before any plan and after each
-// setPlan, and the page's info(). The Rust test judges them.
+// setPlan, the page's info(), and the frame cache check: a slider frame drawn with the static skull
+// from the cache against the same frame drawn whole (pixels that differ). The Rust test judges them.
 import { openReport, canvasStats } from "./browser.mjs";
 import { readFileSync, writeFileSync, mkdirSync } from "node:fs";
 import { dirname } from "node:path";
@@ -24,6 +25,36 @@ try {
     }
     result.vertices.push(await page.evaluate(() => window.facesim.faceVertices()));
   }
+  result.cache_check = await page.evaluate((plans) => {
+    const api = window.facesim;
+    if (!api.info().basis) return null;
+    const gl = document.querySelector("#view canvas").getContext("webgl2");
+    const pixels = () => {
+      const px = new Uint8Array(gl.drawingBufferWidth * gl.drawingBufferHeight * 4);
+      gl.readPixels(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight, gl.RGBA, gl.UNSIGNED_BYTE, px);
+      return px;
+    };
+    const out = { frame_cache: api.info().frame_cache, frames: 0, differing: 0 };
+    for (const p of plans) {
+      try {
+        api.options.cache = true;
+        api.setPlan(p); // (re)fills the cache when the view changed
+        api.setPlan(p); // drawn from it
+        const cached = pixels();
+        api.options.cache = false;
+        api.setPlan(p);
+        const whole = pixels();
+        out.frames++;
+        for (let k = 0; k < whole.length; k++) if (cached[k] !== whole[k]) out.differing++;
+      } catch {
+        // an unknown segment: refused, as checked above
+      }
+    }
+    api.options.cache = true;
+    return out;
+  }, plans);
+  // The full-resolution frame that follows a drag, drawn now rather than after its delay.
+  await page.evaluate(() => window.facesim.render());
   result.canvas_final = await canvasStats(page);
   mkdirSync(dirname(shot), { recursive: true });
   await page.screenshot({ path: shot });

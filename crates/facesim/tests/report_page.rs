@@ -62,6 +62,25 @@ fn drive(html: &Path, plans: &Value, name: &str) -> Value {
         "blank canvas: {c} (screenshot {})",
         shot.display()
     );
+    // Slider frames draw the static skull from a cached picture (web/src/frame_cache.js): in
+    // Chromium the cache is used, and its frames equal frames drawn whole, pixel for pixel.
+    let cache = &r["cache_check"];
+    if !cache.is_null() {
+        assert_eq!(
+            cache["frame_cache"],
+            json!(true),
+            "the frame cache is off: {cache}"
+        );
+        assert!(
+            cache["frames"].as_u64().unwrap() > 0,
+            "no frame compared: {cache}"
+        );
+        assert_eq!(
+            cache["differing"],
+            json!(0),
+            "cached frames differ from whole ones: {cache}"
+        );
+    }
     r
 }
 
