@@ -34,6 +34,7 @@ pub mod regions;
 pub mod report;
 pub mod report_page;
 pub mod segment;
+pub mod slicer;
 pub mod solve;
 pub mod springs;
 pub mod surface;
