@@ -352,8 +352,10 @@ fn parse_vtp(text: &str) -> std::result::Result<(Mesh, Vec<PointArray>), String>
     };
     let points = arrays(section("Points").ok_or("no <Points>")?)?;
     let p = &points.first().ok_or("no point coordinates")?.1;
-    let mut mesh = Mesh::default();
-    mesh.vertices = p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let mut mesh = Mesh {
+        vertices: p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+        ..Mesh::default()
+    };
     if let Some(polys) = section("Polys") {
         let a = arrays(polys)?;
         let find = |n: &str| {
