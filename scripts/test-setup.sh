@@ -63,8 +63,22 @@ need_npm() {
   fi
 }
 
+# A Python venv for the tests' Python tools (target/slicer-venv): ctk-cli, the CommonTK parser
+# of Slicer Execution Model XML, reads FaceSimPredict --xml (docs/slicer.md). Pinned; more
+# packages go in the pip line.
+need_python_venv() {
+  python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || apt_install python3-venv
+  local venv="$root/target/slicer-venv"
+  [ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+  "$venv/bin/python" -c 'import ctk_cli' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "ctk-cli==1.5"
+    echo "test-setup: venv $venv with ctk-cli"
+  }
+}
+
 need_calculix
 need_dicom_tools
 need_real_ct
 need_browser
 need_npm
+need_python_venv

@@ -149,10 +149,66 @@ pub struct SurfaceRegion {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Region {
-    Box { min: [f64; 3], max: [f64; 3] },
-    Sphere { center: [f64; 3], radius: f64 },
-    HalfSpace { point: [f64; 3], normal: [f64; 3] },
+    Box {
+        min: [f64; 3],
+        max: [f64; 3],
+    },
+    Sphere {
+        center: [f64; 3],
+        radius: f64,
+    },
+    HalfSpace {
+        point: [f64; 3],
+        normal: [f64; 3],
+    },
     Mask(Mask),
+    /// Inside a closed surface (`surface = "maxilla.stl"`: STL, PLY, OBJ, VTK; docs/slicer.md).
+    Surface(SurfaceFile),
+}
+
+/// A `surface = "file.stl"` region: its path as written in case.toml and, once read
+/// (`Case::read_masks`, at the input edge), the closed surface. Serialised as the path alone.
+#[derive(Clone, Deserialize, Serialize)]
+#[serde(from = "PathBuf", into = "PathBuf")]
+pub struct SurfaceFile {
+    pub path: PathBuf,
+    pub surface: Option<std::sync::Arc<crate::mesh::inside::ClosedSurface>>,
+}
+
+impl From<PathBuf> for SurfaceFile {
+    fn from(path: PathBuf) -> SurfaceFile {
+        SurfaceFile {
+            path,
+            surface: None,
+        }
+    }
+}
+
+impl From<SurfaceFile> for PathBuf {
+    fn from(s: SurfaceFile) -> PathBuf {
+        s.path
+    }
+}
+
+impl std::fmt::Debug for SurfaceFile {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Surface({:?})", self.path)
+    }
+}
+
+impl SurfaceFile {
+    fn contains(&self, p: [f64; 3]) -> bool {
+        let Some(s) = &self.surface else {
+            // Read before any stage runs, like masks (Case::read_masks).
+            debug_assert!(
+                false,
+                "region surface {} used before it was read",
+                self.path.display()
+            );
+            return false;
+        };
+        s.contains(p)
+    }
 }
 
 /// A `mask = "file.nii.gz"` region: its path as written in case.toml and, once the pipeline has
@@ -216,6 +272,7 @@ impl Region {
                 (0..3).map(|a| (p[a] - point[a]) * normal[a]).sum::<f64>() >= 0.0
             }
             Region::Mask(m) => m.contains(p),
+            Region::Surface(s) => s.contains(p),
         }
     }
 
@@ -231,7 +288,7 @@ impl Region {
             Region::HalfSpace { point, normal } => {
                 finite(point) && finite(normal) && normal.iter().any(|x| *x != 0.0)
             }
-            Region::Mask(_) => true,
+            Region::Mask(_) | Region::Surface(_) => true,
         };
         if ok {
             Ok(())
@@ -504,8 +561,11 @@ impl Case {
     pub fn parse(text: &str, path: &Path) -> Result<Case> {
         let mut base: toml::Table = toml::from_str(DEFAULTS_TOML)
             .map_err(|e| Error::config(format!("pipeline/defaults.toml: {e}")))?;
-        let over: toml::Table =
+        let mut over: toml::Table =
             toml::from_str(text).map_err(|e| Error::input(path, e.message()))?;
+        // Slicer's files in the plan (transform files, markups planes) become plan keys.
+        let dir = path.parent().unwrap_or(Path::new(""));
+        crate::slicer::resolve_plan_files(&mut over, dir, path)?;
         merge(&mut base, over);
         let case: Case = toml::Value::Table(base)
             .try_into()
@@ -539,8 +599,10 @@ impl Case {
             resolve(l);
         }
         for r in c.regions_mut() {
-            if let Region::Mask(m) = r {
-                resolve(&mut m.path);
+            match r {
+                Region::Mask(m) => resolve(&mut m.path),
+                Region::Surface(s) => resolve(&mut s.path),
+                _ => {}
             }
         }
         Ok((c, dir))
@@ -573,11 +635,23 @@ impl Case {
             .chain(self.osteotomy.iter_mut().map(|o| &mut o.region))
     }
 
-    /// Read every mask region's voxels (once per file): the pipeline's input edge, so that no
-    /// stage reads files and `Region::contains` is right for masks.
+    /// Read every mask region's voxels (once per file) and every surface region's closed
+    /// surface: the pipeline's input edge, so that no stage reads files and `Region::contains`
+    /// is right for masks and surfaces.
     pub fn read_masks(&mut self) -> Result<()> {
         let mut read: Vec<(PathBuf, std::sync::Arc<crate::volume::Volume>)> = Vec::new();
         for r in self.regions_mut() {
+            if let Region::Surface(s) = r
+                && s.surface.is_none()
+            {
+                if !s.path.is_file() {
+                    return Err(Error::input(&s.path, "region surface file not found"));
+                }
+                let mesh = crate::mesh::model_file::read_model(&s.path)?;
+                let closed = crate::mesh::inside::ClosedSurface::new(&mesh, &s.path)?;
+                s.surface = Some(std::sync::Arc::new(closed));
+                continue;
+            }
             let Region::Mask(m) = r else { continue };
             if m.voxels.is_some() {
                 continue;
@@ -723,7 +797,7 @@ impl Case {
             if !(r.alpha.is_finite() && r.alpha >= 0.0 && r.beta.is_finite() && r.beta >= 0.0) {
                 return bad("[[surface.region]] alpha and beta must be finite and >= 0".into());
             }
-            if matches!(r.shape, Region::Mask(_)) {
+            if matches!(r.shape, Region::Mask(_) | Region::Surface(_)) {
                 return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
             }
         }

@@ -35,6 +35,7 @@ pub mod regions;
 pub mod report;
 pub mod report_page;
 pub mod segment;
+pub mod slicer;
 pub mod solve;
 pub mod springs;
 pub mod surface;

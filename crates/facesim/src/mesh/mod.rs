@@ -1,8 +1,12 @@
 //! Triangle meshes (skin and skull surfaces, face scans): the data type, its checks,
 //! and OBJ/PLY input/output. Coordinates are LPS millimetres.
 
+pub mod inside;
+pub mod model_file;
 pub mod obj;
 pub mod ply;
+pub mod stl;
+pub mod vtk;
 
 use crate::error::{Error, Result};
 use crate::union_find::UnionFind;

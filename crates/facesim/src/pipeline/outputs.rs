@@ -81,6 +81,31 @@ pub fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()>
     })
 }
 
+/// The predicted face as VTK XML PolyData: point data `displacement_mm` (x_post − x_pre, 3
+/// components, LPS mm) and `displacement_magnitude_mm` (its length).
+pub fn write_face_vtp(p: &Prediction, dist: &[f64], path: &Path) -> Result<()> {
+    let vector = p
+        .skin
+        .vertices
+        .iter()
+        .zip(&p.face_post.vertices)
+        .flat_map(|(a, b)| mesh::sub(*b, *a))
+        .collect();
+    let arrays = [
+        mesh::vtk::PointArray {
+            name: "displacement_mm".into(),
+            components: 3,
+            values: vector,
+        },
+        mesh::vtk::PointArray {
+            name: "displacement_magnitude_mm".into(),
+            components: 1,
+            values: dist.to_vec(),
+        },
+    ];
+    mesh::vtk::write_vtp(&p.face_post, &arrays, path)
+}
+
 /// Every output file but report.json, into `dir` (created if needed); `dist` is
 /// [`displacement`] of `p`.
 pub fn write(
@@ -110,6 +135,15 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
     let jobs: Vec<Job> = vec![
         Box::new(|| mesh::write_mesh(&p.face_post, &o.join("face_post.obj"))),
         Box::new(|| mesh::write_mesh(&p.face_post, &o.join("face_post.ply"))),
+        // For 3D Slicer and other VTK programs: VTK PolyData with the displacement, and STL.
+        Box::new(|| write_face_vtp(p, dist, &o.join("face_post.vtp"))),
+        Box::new(|| {
+            mesh::stl::write(
+                &p.face_post,
+                &o.join("face_post.stl"),
+                "facesim face_post SPACE=LPS",
+            )
+        }),
         // The C1 surface sampled finer than the solved mesh; with a coarse model the carried
         // full skin is the fine output instead.
         Box::new(

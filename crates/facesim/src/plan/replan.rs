@@ -21,7 +21,12 @@ struct PlanFile {
 /// The `[[osteotomy]]` list of a PLAN.toml (case.toml's form; nothing else in the file).
 pub fn read_plan(path: &Path) -> Result<Vec<Osteotomy>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-    let plan: PlanFile = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    let mut table: toml::Table = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    let dir = path.parent().unwrap_or(Path::new(""));
+    crate::slicer::resolve_plan_files(&mut table, dir, path)?;
+    let plan: PlanFile = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
     Ok(plan.osteotomy)
 }
 

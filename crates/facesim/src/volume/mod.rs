@@ -7,6 +7,7 @@ pub mod dicom_io;
 pub mod dicom_syntax;
 pub mod inv3;
 pub mod nifti_io;
+pub mod nrrd;
 
 use crate::error::{Error, Result};
 use serde::Serialize;
@@ -318,10 +319,12 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
             nifti_io::read(path)
         } else if name.ends_with(".inv3") {
             inv3::read(path)
+        } else if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+            nrrd::read(path)
         } else {
             Err(Error::input(
                 path,
-                "unknown volume format (expected .nii, .nii.gz, .inv3 or a DICOM series directory)",
+                "unknown volume format (expected .nii, .nii.gz, .nrrd, .inv3 or a DICOM series directory)",
             ))
         }
     })?;
