@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use std::path::Path;
 use std::sync::Once;
 
-static FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans.ttf");
+use facesim::plan::chart::{DrawResult, FONT, PALETTE};
 
 fn register_font() {
     static ONCE: Once = Once::new();
@@ -19,19 +19,6 @@ fn register_font() {
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
     });
 }
-
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-];
-
-type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
 /// Draw with `draw` into `<stem>.svg` and `<stem>.png` (atomically).
 fn both(

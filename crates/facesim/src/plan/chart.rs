@@ -7,9 +7,10 @@ use crate::output::write_atomic;
 use plotters::prelude::*;
 use std::path::Path;
 
-static FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans.ttf");
+/// The charts' font and colours, shared with the lab's study charts.
+pub static FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans.ttf");
 
-const PALETTE: [RGBColor; 8] = [
+pub const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
@@ -20,7 +21,7 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(127, 127, 127),
 ];
 
-type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
+pub type DrawResult = std::result::Result<(), Box<dyn std::error::Error>>;
 
 /// The lines of the chart: (name, value per plan).
 fn series(rows: &[SweepRow]) -> Vec<(String, Vec<f64>)> {
