@@ -10,6 +10,7 @@ import { surfaceMaterial, setOpacity, viewUp } from "./shading.js";
 import { vertexNormals, leadingVertexNormals } from "./normals.js";
 import { orderSkull, reorder } from "./skull_order.js";
 import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
+import { placeLandmarks, regionStats } from "./landmarks.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -124,6 +125,30 @@ function main() {
   const skullStatic = skullPart(skull.staticTris, STATIC_LAYER);
   const cache = new StaticCache(renderer, BACKGROUND);
 
+  // Landmarks: small spheres drawn over everything (they sit on the skin, often under the face
+  // seen through), soft tissue red, bone blue; moved with every plan.
+  const landmarks = data.landmarks || [];
+  const landmarkPre = new Float64Array(3 * landmarks.length);
+  landmarks.forEach((l, i) => landmarkPre.set(l.pre, 3 * i));
+  const landmarkNow = new Float64Array(3 * landmarks.length);
+  const markers = new THREE.InstancedMesh(
+    new THREE.SphereGeometry(1.3, 12, 8),
+    new THREE.MeshBasicMaterial({ depthTest: false, transparent: true }),
+    Math.max(landmarks.length, 1),
+  );
+  markers.count = landmarks.length;
+  markers.renderOrder = 10;
+  landmarks.forEach((l, i) => markers.setColorAt(i, new THREE.Color(l.anchor ? 0xd62728 : 0x1f4eb4)));
+  scene.add(markers);
+  const markerMatrix = new THREE.Matrix4();
+  function showMarkers(points) {
+    for (let i = 0; i < landmarks.length; i++) {
+      markerMatrix.makeTranslation(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
+      markers.setMatrixAt(i, markerMatrix);
+    }
+    markers.instanceMatrix.needsUpdate = true;
+  }
+
   // Look at the face from the front: LPS −y is anterior, +z superior.
   const box = new THREE.Box3().setFromBufferAttribute(faceBefore.geometry.getAttribute("position"));
   const centre = box.getCenter(new THREE.Vector3());
@@ -139,7 +164,7 @@ function main() {
   const faceNormal = faceAfter.geometry.getAttribute("normal");
   const faceColour = faceAfter.geometry.getAttribute("color");
   const current = facePosition.array;
-  const state = { mode: "after", skull: true, colour: true };
+  const state = { mode: "after", skull: true, colour: true, landmarks: true };
   const scaleLabel = el("span", { class: "max" });
   // Viridis sampled finely once (linear in the colour attribute as before: value / 255).
   const LUT_STEPS = 1024;
@@ -206,10 +231,19 @@ function main() {
         skullNormal.addUpdateRange(0, 3 * skull.dirty);
       }
     }
+    refreshLandmarks(plan);
     if (skullIsRun !== !plan) cache.invalidate();
     skullIsRun = !plan;
     skullPosition.needsUpdate = true;
     skullNormal.needsUpdate = true;
+  }
+
+  // The landmarks after: the run's own (as report.json has them) or carried with a plan: soft
+  // ones on the face shown, bony ones moved as the skull.
+  function refreshLandmarks(plan) {
+    if (plan) placeLandmarks(landmarks, faceTris, current, segmentMats, landmarkNow);
+    else landmarks.forEach((l, i) => landmarkNow.set(l.post, 3 * i));
+    showMarkers(state.mode === "before" ? landmarkPre : landmarkNow);
   }
 
   function showState() {
@@ -219,6 +253,8 @@ function main() {
     faceOverlay.visible = state.mode === "overlay";
     skullBefore.visible = state.skull && !after;
     skullMoving.visible = skullStatic.visible = state.skull && after;
+    markers.visible = state.landmarks && landmarks.length > 0;
+    showMarkers(after ? landmarkNow : landmarkPre);
     // The skull shows through the face; the skull itself is always opaque.
     for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? 0.55 : 1);
     cache.invalidate();
@@ -251,7 +287,10 @@ function main() {
   function dragFrame(slider) {
     draw(true, slider);
     clearTimeout(settle);
-    settle = setTimeout(render, DRAG_SETTLE_MS);
+    settle = setTimeout(() => {
+      refreshTables();
+      render();
+    }, DRAG_SETTLE_MS);
   }
   let frameWanted = false;
   let sliderMoved = false;
@@ -300,7 +339,7 @@ function main() {
     l.append(c, ` ${label}`);
     return l;
   };
-  modes.append(toggle("skull", "skull"), toggle("displacement colours", "colour"));
+  modes.append(toggle("skull", "skull"), toggle("displacement colours", "colour"), toggle("landmarks", "landmarks"));
   side.appendChild(modes);
 
   const bar = el("div", { class: "scale" });
@@ -351,6 +390,7 @@ function main() {
       current.set(facePost);
       refreshFace();
       refreshSkull(null);
+      refreshTables();
       render();
     });
     planBox.appendChild(reset);
@@ -389,6 +429,55 @@ function main() {
     refreshSkull(p);
   }
 
+  // ---- landmarks, regions and measurements ----
+  const regionNames = data.region_names || [];
+  const regionOf = data.region_of ? decode(data.region_of, Uint8Array) : new Uint8Array(0);
+  const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : Number(v).toFixed(d));
+  const table = (head) => {
+    const t = el("table", { class: "figures" });
+    const tr = el("tr");
+    for (const h of head) tr.appendChild(el("th", {}, h));
+    t.appendChild(tr);
+    return t;
+  };
+  const row = (t, cells, title) => {
+    const tr = el("tr", title ? { title } : {});
+    cells.forEach((c, i) => tr.appendChild(el(i === 0 ? "th" : "td", {}, c)));
+    t.appendChild(tr);
+  };
+  const landmarkTable = table(["landmark", "moves (mm)"]);
+  const regionTable = table(["region", "vertices", "mean", "p90", "max (mm)"]);
+  /** The live tables: each landmark's move and each region's displacement for the face shown. */
+  function refreshTables() {
+    while (landmarkTable.rows.length > 1) landmarkTable.deleteRow(1);
+    landmarks.forEach((l, i) => {
+      let d = 0;
+      for (let k = 0; k < 3; k++) d += (landmarkNow[3 * i + k] - landmarkPre[3 * i + k]) ** 2;
+      row(landmarkTable, [l.label, fmt(Math.sqrt(d))]);
+    });
+    for (const [label, why] of data.missing_landmarks || []) row(landmarkTable, [label, "missing"], why);
+    while (regionTable.rows.length > 1) regionTable.deleteRow(1);
+    const stats = regionStats(regionNames, regionOf, dist);
+    for (const name of regionNames) {
+      const r = stats[name];
+      row(regionTable, r ? [name, String(r.vertices), fmt(r.mean), fmt(r.p90), fmt(r.max)] : [name, "absent", "", "", ""]);
+    }
+  }
+  side.appendChild(el("h2", {}, "landmarks (live)"));
+  side.appendChild(landmarkTable);
+  side.appendChild(el("h2", {}, "regions: displacement (live)"));
+  side.appendChild(regionTable);
+  const measures = Object.entries(data.measurements || {});
+  const ratios = Object.entries(data.ratios || {});
+  if (measures.length + ratios.length > 0) {
+    side.appendChild(el("h2", {}, "measurements (the run's plan)"));
+    const mt = table(["", "before", "after", "change"]);
+    for (const [name, m] of measures)
+      row(mt, [`${name} (${m.unit})`, fmt(m.before, 1), fmt(m.after, 1), fmt(m.change, 1)], m.missing || m.definition);
+    for (const [name, r] of ratios) row(mt, [`${name} soft/hard`, fmt(r.soft_mm), fmt(r.hard_mm), fmt(r.ratio)], r.missing || "soft-tissue move / bone move (mm, ratio)");
+    side.appendChild(mt);
+  }
+
   // ---- figures and warnings of report.json ----
   const figs = el("table", { class: "figures" });
   for (const [k, v] of data.figures) {
@@ -421,6 +510,17 @@ function main() {
     faceVertices() {
       return Array.from(current);
     },
+    /** The landmarks on the face shown: label → [x, y, z] (LPS mm), as `facesim replan` carries
+     *  the run's landmarks. */
+    landmarks() {
+      const out = {};
+      landmarks.forEach((l, i) => (out[l.label] = Array.from(landmarkNow.subarray(3 * i, 3 * i + 3))));
+      return out;
+    },
+    /** Per present facial region: {vertices, mean, p90, max} of the displacement shown (mm). */
+    regions() {
+      return regionStats(regionNames, regionOf, dist);
+    },
     /** Draw the scene now at full resolution (benchmarks time it). */
     render,
     /** dragPixelRatio: the pixel ratio of frames drawn while dragging (1: always full). */
@@ -438,7 +538,9 @@ function main() {
   };
 
   refreshFace();
+  refreshLandmarks(null);
   showState();
+  refreshTables();
   render();
   document.body.dataset.ready = "1";
 }

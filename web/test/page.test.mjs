@@ -2,7 +2,7 @@
 //   node test/page.test.mjs REPORT.html PLANS.json OUT.json SCREENSHOT.png
 // PLANS.json is a list of plans; OUT.json gets the problems seen (console errors, page errors,
 // requests leaving the file), canvas statistics, faceVertices() before any plan and after each
-// setPlan, the page's info(), and the frame cache check: a slider frame drawn with the static skull
+// setPlan (with landmarks() and regions()), the page's info(), and the frame cache check: a slider frame drawn with the static skull
 // from the cache against the same frame drawn whole (pixels that differ). The Rust test judges them.
 import { openReport, canvasStats } from "./browser.mjs";
 import { readFileSync, writeFileSync, mkdirSync } from "node:fs";
@@ -17,6 +17,8 @@ try {
   result.vertices_initial = await page.evaluate(() => window.facesim.faceVertices());
   result.vertices = [];
   result.set_plan_errors = [];
+  result.landmarks = [];
+  result.regions = [];
   for (const p of plans) {
     try {
       await page.evaluate((p) => window.facesim.setPlan(p), p);
@@ -24,6 +26,8 @@ try {
       result.set_plan_errors.push(String(e.message || e));
     }
     result.vertices.push(await page.evaluate(() => window.facesim.faceVertices()));
+    result.landmarks.push(await page.evaluate(() => window.facesim.landmarks()));
+    result.regions.push(await page.evaluate(() => window.facesim.regions()));
   }
   result.cache_check = await page.evaluate((plans) => {
     const api = window.facesim;

@@ -91,6 +91,12 @@ fn main() -> facesim::Result<()> {
                 segment("maxilla_right", false),
             ],
         }),
+        landmarks: vec![],
+        missing_landmarks: vec![],
+        region_names: vec![],
+        region_of: vec![],
+        measurements: serde_json::Value::Null,
+        ratios: serde_json::Value::Null,
         no_basis_reason: String::new(),
     };
     write_report_html(&out, &data)?;

@@ -31,6 +31,19 @@ pub struct PageSegment {
     pub columns: Vec<Vec<[f64; 3]>>,
 }
 
+/// A landmark as the page carries it with a plan (docs/landmarks.md): a soft one as a material
+/// point of the face, a bony one with its segment's rigid move.
+pub struct PageLandmark {
+    pub label: String,
+    /// LPS mm on the pre-operative anatomy, and after the run's plan.
+    pub pre: [f64; 3],
+    pub post: [f64; 3],
+    /// Soft tissue: where it sits on face_pre (None: a bony landmark).
+    pub anchor: Option<crate::landmarks::SurfaceAnchor>,
+    /// Bone: the index in `PageData::segments` of the segment that moves it (255: none).
+    pub segment: u8,
+}
+
 /// Everything report.html shows.
 pub struct PageData<'a> {
     pub title: String,
@@ -54,6 +67,16 @@ pub struct PageData<'a> {
     pub figures: Vec<(String, String)>,
     pub warnings: Vec<String>,
     pub basis: Option<PageBasis>,
+    /// The landmarks found on the pre-operative face and skull, carried live with the sliders.
+    pub landmarks: Vec<PageLandmark>,
+    /// Landmarks the scan lacks: label and why.
+    pub missing_landmarks: Vec<(String, String)>,
+    /// Facial region names, and per face vertex the index of its region (255: none).
+    pub region_names: Vec<String>,
+    pub region_of: Vec<u8>,
+    /// report.json's `measurements` and `soft_hard_ratios` (the run's plan), shown as tables.
+    pub measurements: serde_json::Value,
+    pub ratios: serde_json::Value,
     /// Shown instead of the sliders when there is no basis.
     pub no_basis_reason: String,
 }
@@ -78,6 +101,35 @@ pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
         || data.skull_segment.len() != data.skull_pre.len()
     {
         return Err("skull_pre, skull_post and skull_segment differ in length".into());
+    }
+    if !data.region_of.is_empty() && data.region_of.len() != n {
+        return Err(format!(
+            "{} region indices for {n} face vertices",
+            data.region_of.len()
+        ));
+    }
+    let mut landmarks = Vec::new();
+    for l in &data.landmarks {
+        let anchor = match &l.anchor {
+            Some(a) => {
+                if a.triangle as usize >= data.face_triangles.len() {
+                    return Err(format!("landmark '{}' anchored off the face", l.label));
+                }
+                serde_json::json!({
+                    "triangle": a.triangle,
+                    "weights": a.weights,
+                    "offset": a.offset,
+                })
+            }
+            None => serde_json::Value::Null,
+        };
+        landmarks.push(serde_json::json!({
+            "label": l.label,
+            "pre": l.pre,
+            "post": l.post,
+            "anchor": anchor,
+            "segment": l.segment,
+        }));
     }
     let basis = match &data.basis {
         None => serde_json::Value::Null,
@@ -121,6 +173,12 @@ pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
         "figures": data.figures,
         "warnings": data.warnings,
         "basis": basis,
+        "landmarks": landmarks,
+        "missing_landmarks": data.missing_landmarks,
+        "region_names": data.region_names,
+        "region_of": base64(&data.region_of),
+        "measurements": data.measurements,
+        "ratios": data.ratios,
         "no_basis_reason": data.no_basis_reason,
     });
     // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built

@@ -3,6 +3,8 @@
 //! the run's own plan comes back, bad plans and bad basis files are refused naming the file with
 //! nothing written, and a sweep writes one row per plan.
 
+#[path = "common/browser.rs"]
+mod browser;
 mod common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
@@ -81,6 +83,12 @@ fn basis_run() -> &'static Outcome {
     })
 }
 
+/// A full run of plan B, the independent path the re-planned results are checked against.
+fn plan_b_run() -> &'static Outcome {
+    static RUN: OnceLock<Outcome> = OnceLock::new();
+    RUN.get_or_init(|| run_plan(plan_b(), "facesim-replan-b"))
+}
+
 /// A different plan: both segments translated and rotated about their own pivots.
 fn plan_b() -> Vec<Osteotomy> {
     two_segments([
@@ -123,7 +131,7 @@ fn replanning_equals_a_full_run_of_the_new_plan_and_gives_the_runs_own_face_back
     write_plan(&b_file, &plan_b());
     let r = replan::replan(&a.out_dir, &b_file, None).unwrap();
     assert_eq!(r.out_dir, a.out_dir.join("replan"));
-    let full = run_plan(plan_b(), "facesim-replan-b");
+    let full = plan_b_run();
     let err = max_distance(&r.face_post, &full.face_post.vertices);
     let moved = max_distance(&full.face_post.vertices, &full.skin.vertices);
     println!("plan B: replan vs full run {err:.3e} mm (face moves up to {moved:.2} mm)");
@@ -280,4 +288,173 @@ fn a_sweep_writes_one_row_per_plan() {
     }
     let svg = std::fs::read_to_string(out.join("sweep.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("face max"));
+}
+
+/// report.json of a run or replan in `dir`.
+fn report_json(dir: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// The largest difference between the `post` of each landmark both reports have (and the
+/// number compared); every landmark must be present in both or missing in both.
+fn landmark_gap(a: &serde_json::Value, b: &serde_json::Value) -> (f64, usize) {
+    let (a, b) = (a.as_object().unwrap(), b.as_object().unwrap());
+    assert_eq!(a.keys().collect::<Vec<_>>(), b.keys().collect::<Vec<_>>());
+    let mut worst = 0.0f64;
+    let mut n = 0;
+    for (label, la) in a {
+        let pa = la["post"].as_array();
+        let pb = b[label]["post"].as_array();
+        assert_eq!(pa.is_some(), pb.is_some(), "{label}");
+        if let (Some(pa), Some(pb)) = (pa, pb) {
+            for (x, y) in pa.iter().zip(pb) {
+                worst = worst.max((x.as_f64().unwrap() - y.as_f64().unwrap()).abs());
+            }
+            n += 1;
+        }
+    }
+    (worst, n)
+}
+
+/// The largest difference of mean, p90 and max over the regions present in `b` (each present
+/// in `a` with the same vertex count).
+fn region_gap(a: &serde_json::Value, b: &serde_json::Value) -> (f64, usize) {
+    let mut worst = 0.0f64;
+    let mut n = 0;
+    for (name, rb) in b.as_object().unwrap() {
+        if rb["vertices"].as_u64().unwrap_or(0) == 0 {
+            continue;
+        }
+        let ra = &a[name];
+        assert_eq!(ra["vertices"], rb["vertices"], "{name}");
+        for k in ["mean", "p90", "max"] {
+            worst = worst.max((ra[k].as_f64().unwrap() - rb[k].as_f64().unwrap()).abs());
+        }
+        n += 1;
+    }
+    (worst, n)
+}
+
+#[test]
+fn replanning_carries_the_runs_landmarks_and_regions_as_a_full_run_finds_them() {
+    let a = basis_run();
+    let tmp = common::kept_dir("facesim-replan-landmarks");
+    let b_file = tmp.join("b.toml");
+    write_plan(&b_file, &plan_b());
+    let r = replan::replan(&a.out_dir, &b_file, Some(&tmp.join("b"))).unwrap();
+    let got = report_json(&r.out_dir);
+    let full = report_json(&plan_b_run().out_dir);
+    let (gap, n) = landmark_gap(&got["landmarks"], &full["landmarks"]);
+    println!("replan vs full run: {n} landmarks within {gap:.2e} mm");
+    assert!(n >= 8, "too few landmarks compared: {n}");
+    assert!(gap < 1e-6, "landmarks {gap} mm apart");
+    let (gap, regions) = region_gap(&got["regions"], &full["regions"]);
+    assert!(regions >= 3 && gap < 1e-6, "{regions} regions, {gap} mm");
+    for (name, m) in full["measurements"].as_object().unwrap() {
+        if let Some(after) = m["after"].as_f64() {
+            let mine = got["measurements"][name]["after"].as_f64().unwrap();
+            assert!((mine - after).abs() < 1e-6, "{name}: {mine} vs {after}");
+        }
+    }
+    // Slicer markups of the carried landmarks, as run writes them.
+    for f in ["landmarks_pre.mrk.json", "landmarks_post.mrk.json"] {
+        assert!(r.out_dir.join(f).is_file(), "{f}");
+    }
+}
+
+/// Plan B as the page takes it: moves about the run's pivots (the origin), so the translation
+/// absorbs the pivot: R (x − p) + p + t = R x + (t + p − R p).
+fn plan_b_for_page() -> serde_json::Value {
+    let mut plan = serde_json::Map::new();
+    for o in plan_b() {
+        let r = facesim::osteotomy::rotation(o.rotate_deg);
+        let t: Vec<f64> = (0..3)
+            .map(|i| {
+                o.translate[i] + o.pivot[i] - (0..3).map(|k| r[i][k] * o.pivot[k]).sum::<f64>()
+            })
+            .collect();
+        plan.insert(
+            o.name.clone(),
+            serde_json::json!({"translate": t, "rotate_deg": o.rotate_deg}),
+        );
+    }
+    serde_json::Value::Object(plan)
+}
+
+#[test]
+fn the_runs_page_re_plans_face_landmarks_and_regions_as_a_full_run() {
+    let a = basis_run();
+    assert!(basis_run_plan().iter().all(|o| o.pivot == [0.0; 3]));
+    let page = common::kept_dir("facesim-replan-page").join("report.html");
+    std::fs::copy(a.out_dir.join("report.html"), &page).unwrap();
+    let r = browser::drive(
+        &page,
+        &serde_json::json!([plan_b_for_page()]),
+        "report-jaws-plan-b.png",
+    );
+    let full = plan_b_run();
+    let face = browser::max_diff(&browser::flat(&r["vertices"][0]), &full.face_post.vertices);
+    let json = report_json(&full.out_dir);
+    // The page's landmarks() as report.json's: label → {post}.
+    let page_landmarks: serde_json::Map<String, serde_json::Value> = json["landmarks"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, _)| {
+            let post = r["landmarks"][0].get(k).cloned().unwrap_or_default();
+            (k.clone(), serde_json::json!({ "post": post }))
+        })
+        .collect();
+    let (lm, n) = landmark_gap(
+        &serde_json::Value::Object(page_landmarks),
+        &json["landmarks"],
+    );
+    let (rg, regions) = region_gap(&r["regions"][0], &json["regions"]);
+    println!(
+        "page vs full run of plan B: face {face:.2e} mm, {n} landmarks {lm:.2e} mm, {regions} regions {rg:.2e} mm"
+    );
+    assert!(face < 1e-3, "face {face} mm");
+    assert!(n >= 8 && lm < 1e-3, "{n} landmarks, {lm} mm");
+    assert!(regions >= 3 && rg < 1e-3, "{regions} regions, {rg} mm");
+}
+
+#[test]
+fn a_sweep_reports_each_plans_landmarks_and_regions_as_a_full_run() {
+    let a = basis_run();
+    let tmp = common::kept_dir("facesim-sweep-landmarks");
+    let s = tmp.join("sweep.toml");
+    let mut text = String::from("[[plan]]\nlabel = \"B\"\n");
+    for o in plan_b() {
+        text += &format!(
+            "[[plan.move]]\nsegment = \"{}\"\ntranslate = {:?}\nrotate_deg = {:?}\npivot = {:?}\n",
+            o.name, o.translate, o.rotate_deg, o.pivot
+        );
+    }
+    std::fs::write(&s, text).unwrap();
+    let rows = sweep::sweep(&a.out_dir, &s, &tmp.join("out")).unwrap();
+    let json = report_json(&plan_b_run().out_dir);
+    let row = &rows[0];
+    assert!(row.landmarks.len() >= 8, "{:?}", row.landmarks);
+    for (label, d) in &row.landmarks {
+        let want = json["landmarks"][label]["change_mm"].as_f64().unwrap();
+        assert!((d - want).abs() < 1e-6, "{label}: {d} vs {want}");
+    }
+    for (name, stats) in sweep::REGION_NAMES.iter().zip(&row.regions) {
+        let want = &json["regions"][name];
+        match stats {
+            Some(st) => {
+                for (k, v) in [("mean", st.mean), ("p90", st.p90), ("max", st.max)] {
+                    let w = want[k].as_f64().unwrap();
+                    assert!((v - w).abs() < 1e-6, "{name} {k}: {v} vs {w}");
+                }
+            }
+            None => assert_eq!(want["vertices"].as_u64().unwrap_or(0), 0, "{name}"),
+        }
+    }
+    let csv = std::fs::read_to_string(tmp.join("out/sweep.csv")).unwrap();
+    let head = csv.lines().next().unwrap();
+    assert!(
+        head.contains("Prn_move_mm") && head.contains("nasolabial"),
+        "{head}"
+    );
 }

@@ -17,6 +17,22 @@ pub struct Regions {
     pub notes: Vec<Option<String>>,
 }
 
+/// A vertex in no region (in [`Regions::index`]).
+pub const NONE: u8 = 255;
+
+impl Regions {
+    /// Per vertex (of `n`), the index in [`NAMES`] of its region, or [`NONE`].
+    pub fn index(&self, n: usize) -> Vec<u8> {
+        let mut out = vec![NONE; n];
+        for (k, m) in self.members.iter().enumerate() {
+            for (o, _) in out.iter_mut().zip(m.iter().flatten()).filter(|(_, b)| **b) {
+                *o = k as u8;
+            }
+        }
+        out
+    }
+}
+
 /// The regions of the skin vertices `v` from landmarks (label, LPS position).
 pub fn regions(v: &[[f64; 3]], frame: &HeadFrame, lms: &[(String, [f64; 3])]) -> Regions {
     let c: Vec<[f64; 3]> = v.iter().map(|p| frame.coords(*p)).collect();

@@ -8,9 +8,9 @@
 
 use crate::compare::SurfaceIndex;
 use crate::mesh::{Mesh, add, cross, dot, norm, scale, sub};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Copy, Debug, Serialize, PartialEq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct HeadFrame {
     /// A point on the midsagittal plane (the nose tip's level; LPS mm).
     pub origin: [f64; 3],

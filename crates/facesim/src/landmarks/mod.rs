@@ -19,21 +19,21 @@ use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, norm, sub};
 use crate::osteotomy::Plan;
-use serde::Serialize;
 use serde::ser::{SerializeMap, Serializer};
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub use detect::{BONE, SOFT};
 pub use frame::{HeadFrame, head_frame};
 
-#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum Kind {
     Soft,
     Bone,
 }
 
-#[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
 pub enum Source {
     Detected,
@@ -138,26 +138,69 @@ pub struct Carried {
     pub missing: Option<String>,
 }
 
+/// Where a soft-tissue landmark sits on the face: a triangle of `face_pre`, barycentric weights
+/// of its closest point there, and the landmark's offset from that point (0 for a detected
+/// one). The same material point on any face with face_pre's triangles is
+/// Σ wᵢ·vᵢ + offset.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceAnchor {
+    pub triangle: u32,
+    pub weights: [f64; 3],
+    pub offset: [f64; 3],
+}
+
+impl SurfaceAnchor {
+    /// The anchor of `p` on `face` (`index` built on `face`).
+    pub fn new(index: &SurfaceIndex, face: &Mesh, p: [f64; 3]) -> SurfaceAnchor {
+        let (_, q, t) = index.closest_triangle(p);
+        let [a, b, c] = face.triangles[t].map(|i| face.vertices[i as usize]);
+        SurfaceAnchor {
+            triangle: t as u32,
+            weights: barycentric(q, a, b, c),
+            offset: sub(p, q),
+        }
+    }
+
+    /// The anchored point on vertices with face_pre's order.
+    pub fn place(&self, triangles: &[[u32; 3]], vertices: &[[f64; 3]]) -> [f64; 3] {
+        let [a, b, c] = triangles[self.triangle as usize].map(|i| vertices[i as usize]);
+        let w = self.weights;
+        [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * c[k] + self.offset[k])
+    }
+}
+
+/// The surface anchors of the soft landmarks of `lms` on `face_pre` (None: bony or missing).
+pub fn anchors(lms: &[Landmark], face_pre: &Mesh) -> Vec<Option<SurfaceAnchor>> {
+    let index = SurfaceIndex::new(face_pre);
+    lms.iter()
+        .map(|l| match (l.kind, l.position) {
+            (Kind::Soft, Some(p)) => Some(SurfaceAnchor::new(&index, face_pre, p)),
+            _ => None,
+        })
+        .collect()
+}
+
 /// The landmarks on the predicted face: a soft one as the same material point (its closest
 /// point on `face_pre`, in barycentric coordinates of that triangle, applied to `face_post`,
 /// which has face_pre's vertices and triangles in the same order); a bony one moved by the
 /// plan's rigid move of the segment that holds it.
 pub fn carry(lms: &[Landmark], face_pre: &Mesh, face_post: &Mesh, plan: &Plan) -> Vec<Carried> {
-    let index = SurfaceIndex::new(face_pre);
+    carry_anchored(lms, &anchors(lms, face_pre), face_post, plan)
+}
+
+/// [`carry`] with the anchors already found (a sweep carries the same landmarks many times).
+pub fn carry_anchored(
+    lms: &[Landmark],
+    anchors: &[Option<SurfaceAnchor>],
+    face_post: &Mesh,
+    plan: &Plan,
+) -> Vec<Carried> {
     lms.iter()
-        .map(|l| {
-            let post = l.position.map(|p| match l.kind {
-                Kind::Bone => plan.apply(&[p], 1.0).0[0],
-                Kind::Soft => {
-                    let (_, q, t) = index.closest_triangle(p);
-                    let tri = face_pre.triangles[t];
-                    let [a, b, c] = tri.map(|i| face_pre.vertices[i as usize]);
-                    let w = barycentric(q, a, b, c);
-                    let [a2, b2, c2] = tri.map(|i| face_post.vertices[i as usize]);
-                    // The landmark's offset from the surface (0 for a detected one) rides along.
-                    let off = sub(p, q);
-                    [0, 1, 2].map(|k| w[0] * a2[k] + w[1] * b2[k] + w[2] * c2[k] + off[k])
-                }
+        .zip(anchors)
+        .map(|(l, a)| {
+            let post = l.position.map(|p| match (l.kind, a) {
+                (Kind::Soft, Some(a)) => a.place(&face_post.triangles, &face_post.vertices),
+                _ => plan.apply(&[p], 1.0).0[0],
             });
             Carried {
                 label: l.label.clone(),
@@ -170,6 +213,37 @@ pub fn carry(lms: &[Landmark], face_pre: &Mesh, face_post: &Mesh, plan: &Plan) -
             }
         })
         .collect()
+}
+
+/// The landmarks and head frame a run found, read back from its report.json (`head_frame`,
+/// `landmarks`: label → kind, source, pre, missing); None when the report has none.
+pub fn from_report(report: &serde_json::Value) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
+    #[derive(Deserialize)]
+    struct Entry {
+        kind: Kind,
+        source: Source,
+        pre: Option<[f64; 3]>,
+        missing: Option<String>,
+    }
+    let map = report.get("landmarks")?.as_object()?;
+    if map.is_empty() {
+        return None;
+    }
+    let frame = report
+        .get("head_frame")
+        .and_then(|f| serde_json::from_value::<HeadFrame>(f.clone()).ok());
+    let mut lms = Vec::with_capacity(map.len());
+    for (label, v) in map {
+        let e: Entry = serde_json::from_value(v.clone()).ok()?;
+        lms.push(Landmark {
+            label: label.clone(),
+            kind: e.kind,
+            position: e.pre,
+            source: e.source,
+            missing: e.missing,
+        });
+    }
+    Some((frame, lms))
 }
 
 /// A map that keeps its insertion order in JSON (report.json's `landmarks`, `measurements`,
@@ -198,10 +272,15 @@ impl<T: Serialize> Serialize for Ordered<T> {
 #[derive(Clone, Debug, Default)]
 pub struct Analysis {
     pub frame: Option<HeadFrame>,
+    /// The pre-operative landmarks and, for the soft ones, where they sit on face_pre.
+    pub landmarks: Vec<Landmark>,
+    pub anchors: Vec<Option<SurfaceAnchor>>,
     pub carried: Vec<Carried>,
     pub measurements: Ordered<measure::Measure>,
     pub ratios: Ordered<measure::Ratio>,
     pub regions: Ordered<face_regions::RegionStats>,
+    /// Per face vertex, its region's index in `face_regions::NAMES` (`face_regions::NONE`: none).
+    pub region_of: Vec<u8>,
 }
 
 /// Landmarks, measurements and region statistics of one prediction.
@@ -214,49 +293,73 @@ pub fn analyse(
     case_file: &Path,
 ) -> Result<Analysis> {
     let (frame, lms) = locate(face_pre, skull, user, case_file)?;
-    let carried = carry(&lms, face_pre, face_post, plan);
+    Ok(analyse_located(face_pre, face_post, frame, lms, plan))
+}
+
+/// [`analyse`] of landmarks already located (a run's, read back by [`from_report`]).
+pub fn analyse_located(
+    face_pre: &Mesh,
+    face_post: &Mesh,
+    frame: Option<HeadFrame>,
+    lms: Vec<Landmark>,
+    plan: &Plan,
+) -> Analysis {
+    let anchors = anchors(&lms, face_pre);
+    let carried = carry_anchored(&lms, &anchors, face_post, plan);
     let (measurements, ratios) = match &frame {
         Some(f) => measure::measure(&carried, f),
         None => (Ordered::default(), Ordered::default()),
     };
-    let regions = match &frame {
+    let (regions, region_of) = match &frame {
         Some(f) => {
-            let pre: Vec<(String, [f64; 3])> = lms
-                .iter()
-                .filter_map(|l| l.position.map(|p| (l.label.clone(), p)))
-                .collect();
-            let r = face_regions::regions(&face_pre.vertices, f, &pre);
+            let r = face_regions::regions(&face_pre.vertices, f, &positions(&lms));
             let dist: Vec<f64> = face_pre
                 .vertices
                 .iter()
                 .zip(&face_post.vertices)
                 .map(|(a, b)| norm(sub(*a, *b)))
                 .collect();
-            face_regions::displacement_stats(&r, &dist)
+            (
+                face_regions::displacement_stats(&r, &dist),
+                r.index(face_pre.vertices.len()),
+            )
         }
-        None => Ordered::default(),
+        None => (
+            Ordered::default(),
+            vec![face_regions::NONE; face_pre.vertices.len()],
+        ),
     };
-    Ok(Analysis {
+    Analysis {
         frame,
+        landmarks: lms,
+        anchors,
         carried,
         measurements,
         ratios,
         regions,
-    })
+        region_of,
+    }
+}
+
+/// (label, position) of the landmarks that have one.
+pub fn positions(lms: &[Landmark]) -> Vec<(String, [f64; 3])> {
+    lms.iter()
+        .filter_map(|l| l.position.map(|p| (l.label.clone(), p)))
+        .collect()
 }
 
 impl Analysis {
     /// report.json's `head_frame`, `landmarks`, `measurements`, `soft_hard_ratios`, `regions`.
-    pub fn fill(self, report: &mut crate::report::Report) {
+    pub fn fill(&self, report: &mut crate::report::Report) {
         report.head_frame = self.frame;
         report.landmarks = Ordered(
             self.carried
-                .into_iter()
-                .map(|c| (c.label.clone(), c))
+                .iter()
+                .map(|c| (c.label.clone(), c.clone()))
                 .collect(),
         );
-        report.measurements = self.measurements;
-        report.soft_hard_ratios = self.ratios;
-        report.regions = self.regions;
+        report.measurements = self.measurements.clone();
+        report.soft_hard_ratios = self.ratios.clone();
+        report.regions = self.regions.clone();
     }
 }

@@ -210,7 +210,7 @@ fn finish(
     outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
     analysis.fill(&mut report);
     let page_basis = outputs::page_basis(&prediction, case);
-    outputs::write_page(out_dir, &scene, &prediction, &report, page_basis)?;
+    outputs::write_page(out_dir, &scene, &prediction, &report, page_basis, &analysis)?;
     outputs::write_report(out_dir, &report)?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;

@@ -297,6 +297,7 @@ pub fn write_page(
     p: &Prediction,
     report: &Report,
     basis: Option<crate::report_page::PageBasis>,
+    analysis: &crate::landmarks::Analysis,
 ) -> Result<()> {
     let case = &scene.case;
     let skull = &scene.face.skull;
@@ -360,11 +361,51 @@ pub fn write_page(
         figures,
         warnings: report.warnings.clone(),
         basis,
+        landmarks: page_landmarks(analysis, case),
+        missing_landmarks: analysis
+            .landmarks
+            .iter()
+            .filter_map(|l| l.missing.clone().map(|m| (l.label.clone(), m)))
+            .collect(),
+        region_names: crate::landmarks::face_regions::NAMES
+            .iter()
+            .map(|s| s.to_string())
+            .collect(),
+        region_of: analysis.region_of.clone(),
+        measurements: serde_json::to_value(&report.measurements).unwrap_or_default(),
+        ratios: serde_json::to_value(&report.soft_hard_ratios).unwrap_or_default(),
         no_basis_reason: "No plan basis was stored with this run, so the page cannot re-plan: \
                           run `facesim replan` for other plans."
             .into(),
     };
     crate::report_page::write_report_html(dir, &data)
+}
+
+/// The page's landmarks: soft ones with their anchor on face_pre, bony ones with the segment
+/// that moves them (the last whose region holds them, as for the skull's vertices).
+fn page_landmarks(
+    a: &crate::landmarks::Analysis,
+    case: &Case,
+) -> Vec<crate::report_page::PageLandmark> {
+    a.landmarks
+        .iter()
+        .zip(&a.anchors)
+        .zip(&a.carried)
+        .filter_map(|((l, anchor), c)| {
+            let pre = l.position?;
+            Some(crate::report_page::PageLandmark {
+                label: l.label.clone(),
+                pre,
+                post: c.post?,
+                anchor: *anchor,
+                segment: case
+                    .osteotomy
+                    .iter()
+                    .rposition(|o| o.region.contains(pre))
+                    .map_or(255, |i| i.min(254) as u8),
+            })
+        })
+        .collect()
 }
 
 pub fn write_report(dir: &Path, report: &Report) -> Result<()> {

@@ -39,7 +39,7 @@ fn series(rows: &[SweepRow]) -> Vec<(String, Vec<f64>)> {
             rows.iter().map(|r| r.face.mean).collect(),
         ),
     ];
-    for (i, name) in crate::regions::NAMES.iter().enumerate() {
+    for (i, name) in super::sweep::REGION_NAMES.iter().enumerate() {
         if rows
             .iter()
             .all(|r| r.regions.get(i).is_some_and(|x| x.is_some()))

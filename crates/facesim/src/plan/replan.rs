@@ -51,7 +51,9 @@ pub struct Replanned {
 
 /// Read the basis in `run_dir`, predict `plan_file`'s plan and write face_post.obj/.ply,
 /// face_displacement.ply, displacement.csv, skull_post.ply (when the run's skull_pre.ply is
-/// there and no region is a mask) and report.json into `dest` (default `run_dir/replan`).
+/// there and no region is a mask), the run's landmarks carried with the new plan
+/// (landmarks_pre/post.mrk.json; report.json `landmarks`, `measurements`, `regions`) and
+/// report.json into `dest` (default `run_dir/replan`).
 /// Everything is read and computed before the first file is written.
 pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<Replanned> {
     let basis_path = run_dir.join(super::file::FILE_NAME);
@@ -94,6 +96,19 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
             .map(str::to_string)
             .unwrap_or_default()
     };
+    // The run's landmarks (as it found them, not detected again) carried with the new plan.
+    let analysis = run_report
+        .as_ref()
+        .and_then(crate::landmarks::from_report)
+        .map(|(frame, lms)| {
+            crate::landmarks::analyse_located(
+                &prediction.skin,
+                &prediction.face_post,
+                frame,
+                lms,
+                &crate::osteotomy::Plan::new(&plan),
+            )
+        });
     let dmax = dist.iter().cloned().fold(0.0, f64::max);
     let mut warnings = basis.warnings.clone();
     if skull_post.is_none() {
@@ -102,7 +117,7 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
                 .into(),
         );
     }
-    let report = Report {
+    let mut report = Report {
         name: field("name"),
         case: field("case"),
         facesim_version: env!("CARGO_PKG_VERSION").into(),
@@ -122,6 +137,9 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
         warnings,
         ..Default::default()
     };
+    if let Some(a) = &analysis {
+        a.fill(&mut report);
+    }
     // The writes (each to a temporary name, renamed), report.json last.
     std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
     let o = &out_dir;
@@ -134,6 +152,9 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
     outputs::displacement_csv(&o.join("displacement.csv"), &prediction, &dist)?;
     if let Some(s) = &skull_post {
         mesh::write_mesh(s, &o.join("skull_post.ply"))?;
+    }
+    if let Some(a) = &analysis {
+        crate::landmarks::markups::write_pre_post(o, &a.carried)?;
     }
     outputs::write_report(o, &report)?;
     Ok(Replanned {

@@ -1,6 +1,9 @@
 //! `facesim sweep OUT_DIR SWEEP.toml --out DIR` (docs/case.md "SWEEP.toml"): many plans from one
 //! plan basis, written as `sweep.csv` (per plan: its moves, the face displacement's max, mean and
-//! 90th percentile, the same per facial region) and a chart `sweep.svg`.
+//! 90th percentile, the same per facial region, each landmark's move and the measurements) and
+//! a chart `sweep.svg`. Regions and landmarks are the run's (its report.json: the landmarks as
+//! it found them and the regions derived from them, docs/landmarks.md); a run without them
+//! (an older report) falls back to the profile regions of `crate::regions`.
 //!
 //! ```toml
 //! [[plan]]                      # any number of listed plans
@@ -225,8 +228,34 @@ fn stats(d: impl Iterator<Item = f64>) -> Option<Stats> {
 pub struct SweepRow {
     pub plan: SweepPlan,
     pub face: Stats,
-    /// Per `crate::regions::NAMES` (None: the region is absent on this face).
+    /// Per region of [`REGION_NAMES`] (None: the region is absent on this face).
     pub regions: Vec<Option<Stats>>,
+    /// Per landmark of the run that has a position: label and how far the plan moves it (mm).
+    pub landmarks: Vec<(String, f64)>,
+    /// Per measurement of the run (nasolabial angle, …): name, unit and value after the plan.
+    pub measurements: Vec<(String, String, Option<f64>)>,
+}
+
+/// The facial regions of the sweep's columns (the landmark regions' names; the fallback
+/// `crate::regions` uses the same names in the same order).
+pub const REGION_NAMES: [&str; 5] = crate::landmarks::face_regions::NAMES;
+
+/// Per region of [`REGION_NAMES`], its vertices' flags (None: absent), from the run's
+/// landmarks when it has them.
+fn region_members(
+    basis: &PlanBasis,
+    run: Option<&(
+        Option<crate::landmarks::HeadFrame>,
+        Vec<crate::landmarks::Landmark>,
+    )>,
+) -> Vec<Option<Vec<bool>>> {
+    if let Some((Some(frame), lms)) = run {
+        let pre = crate::landmarks::positions(lms);
+        return crate::landmarks::face_regions::regions(&basis.face_pre, frame, &pre).members;
+    }
+    crate::regions::regions(&basis.face_pre)
+        .map(|r| r.members)
+        .unwrap_or_else(|| vec![None; REGION_NAMES.len()])
 }
 
 /// Evaluate every plan of `sweep_file` from the basis in `run_dir`; write sweep.csv and
@@ -234,10 +263,16 @@ pub struct SweepRow {
 pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepRow>> {
     let basis = super::file::read(&run_dir.join(super::file::FILE_NAME))?;
     let plans = read_sweep(sweep_file, &basis)?;
-    let regions = crate::regions::regions(&basis.face_pre);
-    let members: Vec<Option<Vec<bool>>> = regions
-        .map(|r| r.members)
-        .unwrap_or_else(|| vec![None; crate::regions::NAMES.len()]);
+    let run: Option<serde_json::Value> = std::fs::read(run_dir.join("report.json"))
+        .ok()
+        .and_then(|b| serde_json::from_slice(&b).ok());
+    let located = run.as_ref().and_then(crate::landmarks::from_report);
+    let members = region_members(&basis, located.as_ref());
+    let skin = crate::mesh::Mesh::new(basis.face_pre.clone(), basis.triangles.clone());
+    let anchors = located
+        .as_ref()
+        .map(|(_, lms)| crate::landmarks::anchors(lms, &skin))
+        .unwrap_or_default();
     let mut rows = Vec::with_capacity(plans.len());
     for plan in plans {
         let d = super::replan::predict_plan(&basis, &plan.osteotomy, sweep_file)?;
@@ -258,10 +293,36 @@ pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepR
                     .and_then(|m| stats(mag.iter().zip(m).filter(|(_, i)| **i).map(|(d, _)| *d)))
             })
             .collect();
+        let (landmarks, measurements) = match &located {
+            Some((frame, lms)) => {
+                let post = crate::mesh::Mesh::new(d, basis.triangles.clone());
+                let moved = crate::osteotomy::Plan::new(&plan.osteotomy);
+                let carried = crate::landmarks::carry_anchored(lms, &anchors, &post, &moved);
+                let measurements = frame
+                    .as_ref()
+                    .map(|f| {
+                        crate::landmarks::measure::measure(&carried, f)
+                            .0
+                            .0
+                            .into_iter()
+                            .map(|(k, m)| (k, m.unit.to_string(), m.after))
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                let lm = carried
+                    .into_iter()
+                    .filter_map(|c| c.change_mm.map(|d| (c.label, d)))
+                    .collect();
+                (lm, measurements)
+            }
+            None => (Vec::new(), Vec::new()),
+        };
         rows.push(SweepRow {
             plan,
             face,
             regions,
+            landmarks,
+            measurements,
         });
     }
     std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
@@ -287,9 +348,18 @@ fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
         }
     }
     head.extend(["face_max_mm", "face_mean_mm", "face_p90_mm"].map(String::from));
-    for r in crate::regions::NAMES {
+    for r in REGION_NAMES {
         for q in ["max", "mean", "p90"] {
             head.push(format!("{}_{q}_mm", slug(r)));
+        }
+    }
+    // Landmark and measurement columns: those of the first row (every row has the same).
+    if let Some(first) = rows.first() {
+        for (label, _) in &first.landmarks {
+            head.push(csv_field(&format!("{label}_move_mm")));
+        }
+        for (name, unit, _) in &first.measurements {
+            head.push(csv_field(&format!("{name}_{unit}")));
         }
     }
     write_bytes_atomic(path, |w| {
@@ -309,6 +379,12 @@ fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
                     None => cells.extend(["", "", ""].map(String::from)),
                 }
             }
+            cells.extend(row.landmarks.iter().map(|(_, d)| format!("{d:.6}")));
+            cells.extend(
+                row.measurements
+                    .iter()
+                    .map(|(_, _, v)| v.map_or(String::new(), |v| format!("{v:.6}"))),
+            );
             writeln!(w, "{}", cells.join(","))?;
         }
         Ok(())
