@@ -5,6 +5,7 @@
 // drawn the frame. Cases: at the page's dragging resolution (what a slider drag shows) and at full
 // resolution (facesim.options.dragPixelRatio = 1), each with the skull shown (the face transparent
 // over it) and hidden; full resolution without the static-skull cache (options.cache = false);
+// dragging with every face triangle drawn (options.lod = false: no simplified dragging face);
 // then one full render alone. Per case: updates per second (wall clock) and
 // the CPU time of all Chromium processes per update (utime + stime from /proc), which a loaded
 // machine inflates far less than the wall clock.
@@ -65,9 +66,10 @@ try {
     const skullBox = [...document.querySelectorAll("#side input[type=checkbox]")][0];
     window.__bench = {
       info: () => ({ ...info, drag_pixel_ratio: dragRatio }),
-      setup(full, skull, cache = true) {
+      setup(full, skull, cache = true, lod = true) {
         opts.dragPixelRatio = full ? 1 : dragRatio;
         if ("cache" in opts) opts.cache = cache;
+        if ("lod" in opts) opts.lod = lod;
         if (skullBox.checked !== skull) skullBox.click();
       },
       rate(ms) {
@@ -97,14 +99,15 @@ try {
   };
   const out = { info: await page.evaluate(() => window.__bench.info()) };
   await page.evaluate(() => window.__bench.rate(500)); // warm-up
-  for (const [name, full, skull, cache] of [
+  for (const [name, full, skull, cache, lod] of [
     ["drag", false, true, true],
+    ["drag_no_lod", false, true, true, false],
     ["drag_face_only", false, false, true],
     ["full", true, true, true],
     ["full_no_cache", true, true, false],
     ["full_face_only", true, false, true],
   ]) {
-    await page.evaluate((...a) => window.__bench.setup(...a), full, skull, cache);
+    await page.evaluate((...a) => window.__bench.setup(...a), full, skull, cache, lod ?? true);
     out[name] = await measure("rate", ms);
   }
   await page.evaluate(() => window.__bench.setup(false, true));

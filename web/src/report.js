@@ -39,6 +39,10 @@ function main() {
   const facePre = f32(data.face_pre);
   const facePost = f32(data.face_post);
   const faceTris = u32(data.face_triangles);
+  // Drawn: every triangle in vertex-cache order; while dragging, a simplified set over the same
+  // vertices (report_page.rs: LOD_FRACTION of the triangles, < 0.5 mm from the full face).
+  const faceDraw = data.face_draw ? u32(data.face_draw) : faceTris;
+  const faceLod = data.face_lod ? u32(data.face_lod) : faceDraw;
   const n = facePre.length / 3;
   const basis = data.basis
     ? {
@@ -99,6 +103,9 @@ function main() {
   const colours = new Float32Array(3 * n);
   const faceMaterial = surfaceMaterial({ perVertex: true });
   const faceAfter = meshOf(facePost, faceTris, faceMaterial);
+  const faceIndexFull = new THREE.BufferAttribute(faceDraw, 1);
+  const faceIndexLod = new THREE.BufferAttribute(faceLod, 1);
+  faceAfter.geometry.setIndex(faceIndexFull);
   faceAfter.geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
   const skinMaterial = surfaceMaterial({ colour: 0xd9b38c });
   const faceBefore = meshOf(facePre, faceTris, skinMaterial);
@@ -261,7 +268,7 @@ function main() {
   }
 
   // ---- drawing: on demand, at most once an animation frame; coarser while dragging ----
-  const options = { dragPixelRatio: DRAG_PIXEL_RATIO, cache: true };
+  const options = { dragPixelRatio: DRAG_PIXEL_RATIO, cache: true, lod: true };
   const drawnAt = { w: 0, h: 0, ratio: 0 };
   /** Draw now, at full resolution or (`dragging`) at options.dragPixelRatio; `cached`: the
    *  camera stands still (a slider frame), the static skull may come from the cache. */
@@ -276,6 +283,7 @@ function main() {
       camera.aspect = w / h;
       camera.updateProjectionMatrix();
     }
+    faceAfter.geometry.setIndex(dragging && options.lod ? faceIndexLod : faceIndexFull);
     viewUp(camera);
     if (cached && options.cache && skullStatic.visible && cache.draw(scene, camera)) return;
     renderer.render(scene, camera);

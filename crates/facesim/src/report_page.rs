@@ -164,6 +164,8 @@ pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
         "face_pre": points(data.face_pre),
         "face_post": points(data.face_post),
         "face_triangles": triangles(data.face_triangles),
+        "face_draw": index_base64(&draw_order(data.face_triangles, n)),
+        "face_lod": index_base64(&lod(data.face_pre, data.face_triangles)),
         "skull_pre": points(data.skull_pre),
         "skull_post": points(data.skull_post),
         "skull_triangles": triangles(data.skull_triangles),
@@ -221,6 +223,43 @@ fn points(p: &[[f64; 3]]) -> String {
 fn triangles(t: &[[u32; 3]]) -> String {
     let bytes: Vec<u8> = t.iter().flatten().flat_map(|i| i.to_le_bytes()).collect();
     base64(&bytes)
+}
+
+/// How many of the face's triangles the page draws while a slider or the view is dragged.
+const LOD_FRACTION: f64 = 0.25;
+/// The largest surface deviation (mm) the dragging face may have from the full one.
+const LOD_MAX_ERROR_MM: f32 = 0.5;
+
+/// The triangles in an order that reuses transformed vertices (meshoptimizer's vertex cache
+/// optimisation): software WebGL shades a vertex again for each triangle that misses its cache.
+fn draw_order(t: &[[u32; 3]], vertices: usize) -> Vec<u32> {
+    let idx: Vec<u32> = t.iter().flatten().copied().collect();
+    meshopt::optimize_vertex_cache(&idx, vertices)
+}
+
+/// The face drawn while dragging: the same vertices, LOD_FRACTION of the triangles (quadric
+/// simplification on face_pre, borders kept, error below LOD_MAX_ERROR_MM), in draw order. The
+/// settled frame draws every triangle.
+fn lod(v: &[[f64; 3]], t: &[[u32; 3]]) -> Vec<u32> {
+    let pos: Vec<[f32; 3]> = v.iter().map(|p| p.map(|x| x as f32)).collect();
+    let full: Vec<u32> = t.iter().flatten().copied().collect();
+    let Ok(adapter) = meshopt::VertexDataAdapter::new(bytemuck::cast_slice(&pos), 12, 0) else {
+        return draw_order(t, v.len());
+    };
+    let target = 3 * ((t.len() as f64 * LOD_FRACTION) as usize);
+    let out = meshopt::simplify(
+        &full,
+        &adapter,
+        target,
+        LOD_MAX_ERROR_MM,
+        meshopt::SimplifyOptions::LockBorder | meshopt::SimplifyOptions::ErrorAbsolute,
+        None,
+    );
+    meshopt::optimize_vertex_cache(&out, v.len())
+}
+
+fn index_base64(i: &[u32]) -> String {
+    base64(&i.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>())
 }
 
 fn f32_bytes(v: &[f32]) -> Vec<u8> {
