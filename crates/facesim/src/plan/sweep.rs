@@ -132,7 +132,12 @@ fn osteotomy(basis: &PlanBasis, m: &Move, path: &Path) -> Result<Osteotomy> {
 /// varying fastest).
 pub fn read_sweep(path: &Path, basis: &PlanBasis) -> Result<Vec<SweepPlan>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-    let file: SweepFile = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    sweep_from_text(&text, path, basis)
+}
+
+/// The plans of SWEEP.toml text as if read from `path` (errors name `path`).
+pub fn sweep_from_text(text: &str, path: &Path, basis: &PlanBasis) -> Result<Vec<SweepPlan>> {
+    let file: SweepFile = toml::from_str(text).map_err(|e| Error::input(path, e))?;
     let mut plans = Vec::new();
     for (i, p) in file.plan.iter().enumerate() {
         plans.push(SweepPlan {
@@ -234,13 +239,32 @@ pub struct SweepRow {
 pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepRow>> {
     let basis = super::file::read(&run_dir.join(super::file::FILE_NAME))?;
     let plans = read_sweep(sweep_file, &basis)?;
+    let rows = evaluate(&basis, plans, sweep_file)?;
+    write(out, &basis, &rows)?;
+    Ok(rows)
+}
+
+/// Write sweep.csv and sweep.svg for evaluated rows into `out` (created).
+pub fn write(out: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    write_csv(&out.join("sweep.csv"), basis, rows)?;
+    super::chart::write(&out.join("sweep.svg"), rows)
+}
+
+/// Each plan's face displacement statistics, whole face and per region (a bad plan is named as
+/// `sweep_file`'s error). Writes nothing.
+pub fn evaluate(
+    basis: &PlanBasis,
+    plans: Vec<SweepPlan>,
+    sweep_file: &Path,
+) -> Result<Vec<SweepRow>> {
     let regions = crate::regions::regions(&basis.face_pre);
     let members: Vec<Option<Vec<bool>>> = regions
         .map(|r| r.members)
         .unwrap_or_else(|| vec![None; crate::regions::NAMES.len()]);
     let mut rows = Vec::with_capacity(plans.len());
     for plan in plans {
-        let d = super::replan::predict_plan(&basis, &plan.osteotomy, sweep_file)?;
+        let d = super::replan::predict_plan(basis, &plan.osteotomy, sweep_file)?;
         let mag: Vec<f64> = d
             .iter()
             .zip(&basis.face_pre)
@@ -264,9 +288,6 @@ pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepR
             regions,
         });
     }
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    write_csv(&out.join("sweep.csv"), &basis, &rows)?;
-    super::chart::write(&out.join("sweep.svg"), &rows)?;
     Ok(rows)
 }
 
@@ -278,12 +299,14 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+/// sweep.csv's numeric column names after `plan` and `label`: per segment its six moves
+/// (`{segment}_{axis}`), then `face_{max,mean,p90}_mm`, then the same per facial region.
+pub fn value_columns(basis: &PlanBasis) -> Vec<String> {
     let slug = |s: &str| s.replace(' ', "_");
-    let mut head = vec!["plan".to_string(), "label".to_string()];
+    let mut head = Vec::new();
     for s in &basis.segments {
         for a in AXES {
-            head.push(csv_field(&format!("{}_{a}", s.name)));
+            head.push(format!("{}_{a}", s.name));
         }
     }
     head.extend(["face_max_mm", "face_mean_mm", "face_p90_mm"].map(String::from));
@@ -292,22 +315,40 @@ fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
             head.push(format!("{}_{q}_mm", slug(r)));
         }
     }
+    head
+}
+
+/// One row's values in [`value_columns`] order (NaN: the region is absent on this face).
+pub fn row_values(basis: &PlanBasis, row: &SweepRow) -> Vec<f64> {
+    let mut v = Vec::new();
+    for s in &basis.segments {
+        let o = row.plan.osteotomy.iter().find(|o| o.name == s.name);
+        let (t, r) = o.map_or(([0.0; 3], [0.0; 3]), |o| (o.translate, o.rotate_deg));
+        v.extend(t.iter().chain(&r));
+    }
+    let f = row.face;
+    v.extend([f.max, f.mean, f.p90]);
+    for r in &row.regions {
+        v.extend(r.map_or([f64::NAN; 3], |s| [s.max, s.mean, s.p90]));
+    }
+    v
+}
+
+fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+    let mut head = vec!["plan".to_string(), "label".to_string()];
+    head.extend(value_columns(basis).iter().map(|c| csv_field(c)));
     write_bytes_atomic(path, |w| {
         writeln!(w, "{}", head.join(","))?;
         for (i, row) in rows.iter().enumerate() {
             let mut cells = vec![(i + 1).to_string(), csv_field(&row.plan.label)];
-            for s in &basis.segments {
-                let o = row.plan.osteotomy.iter().find(|o| o.name == s.name);
-                let (t, r) = o.map_or(([0.0; 3], [0.0; 3]), |o| (o.translate, o.rotate_deg));
-                cells.extend(t.iter().chain(&r).map(|v| v.to_string()));
-            }
-            let f = row.face;
-            cells.extend([f.max, f.mean, f.p90].map(|v| format!("{v:.6}")));
-            for r in &row.regions {
-                match r {
-                    Some(s) => cells.extend([s.max, s.mean, s.p90].map(|v| format!("{v:.6}"))),
-                    None => cells.extend(["", "", ""].map(String::from)),
-                }
+            // The moves as given; the statistics to 1 nm, an absent region empty.
+            let moves = AXES.len() * basis.segments.len();
+            for (j, v) in row_values(basis, row).into_iter().enumerate() {
+                cells.push(match () {
+                    _ if j < moves => v.to_string(),
+                    _ if v.is_nan() => String::new(),
+                    _ => format!("{v:.6}"),
+                });
             }
             writeln!(w, "{}", cells.join(","))?;
         }
