@@ -74,6 +74,12 @@ need_python_venv() {
     "$venv/bin/pip" install -q "ctk-cli==1.5"
     echo "test-setup: venv $venv with ctk-cli"
   }
+  # The facesim Python package (docs/python.md): maturin builds its wheel, pytest and numpy test
+  # it (crates/facesim-cli/tests/python_package.rs). Pinned.
+  "$venv/bin/python" -c 'import maturin, pytest, numpy' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "maturin==1.16.0" "pytest==9.2.0" "numpy==2.4.6"
+    echo "test-setup: venv $venv with maturin, pytest, numpy"
+  }
 }
 
 need_calculix

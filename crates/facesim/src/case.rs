@@ -585,7 +585,13 @@ impl Case {
             )
         };
         let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
-        let mut c = Case::parse(&text, &file)?;
+        Ok((Case::from_text(&text, &file, &dir)?, dir))
+    }
+
+    /// Parse case text as if read from `file`, resolving relative paths against `dir` (what
+    /// [`Case::load`] does after reading the file; bindings use it for a case given as a table).
+    pub fn from_text(text: &str, file: &Path, dir: &Path) -> Result<Case> {
+        let mut c = Case::parse(text, file)?;
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {
                 *p = dir.join(&*p);
@@ -605,7 +611,7 @@ impl Case {
                 _ => {}
             }
         }
-        Ok((c, dir))
+        Ok(c)
     }
 
     /// The user landmarks: `[[landmark]]` entries, then the markups file's points (a label

@@ -160,6 +160,26 @@ pub fn run_case(case: Case, out_dir: &Path, obs: &dyn Observer) -> Result<Outcom
     finish(inputs, &files, out_dir, total, rec)
 }
 
+/// Run a case parsed from text ([`Case::from_text`]; the Python package's case given as a
+/// dict): `case_file` names it in errors, `dir` is its directory; outputs go into `out_dir`.
+pub fn run_parsed(
+    case: Case,
+    case_file: &Path,
+    dir: &Path,
+    out_dir: &Path,
+    obs: &dyn Observer,
+) -> Result<Outcome> {
+    let total = Meter::start(obs.heap());
+    let mut rec = Recorder::new(obs);
+    let files = inputs::CaseFiles {
+        dir: dir.to_path_buf(),
+        case_file: case_file.to_path_buf(),
+        ..inputs::CaseFiles::in_memory(&case)
+    };
+    let inputs = inputs::read_case(case, &mut rec)?;
+    finish(inputs, &files, out_dir, total, rec)
+}
+
 /// Stages 2–5, the outputs and report.json, for read inputs.
 fn finish(
     inputs: inputs::Inputs,

@@ -21,7 +21,13 @@ struct PlanFile {
 /// The `[[osteotomy]]` list of a PLAN.toml (case.toml's form; nothing else in the file).
 pub fn read_plan(path: &Path) -> Result<Vec<Osteotomy>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-    let mut table: toml::Table = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    plan_from_text(&text, path)
+}
+
+/// The `[[osteotomy]]` list of PLAN.toml text as if read from `path` (relative file names in it
+/// resolve against `path`'s directory; errors name `path`).
+pub fn plan_from_text(text: &str, path: &Path) -> Result<Vec<Osteotomy>> {
+    let mut table: toml::Table = toml::from_str(text).map_err(|e| Error::input(path, e))?;
     let dir = path.parent().unwrap_or(Path::new(""));
     crate::slicer::resolve_plan_files(&mut table, dir, path)?;
     let plan: PlanFile = toml::Value::Table(table)
@@ -59,7 +65,19 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
     let basis_path = run_dir.join(super::file::FILE_NAME);
     let basis = super::file::read(&basis_path)?;
     let plan = read_plan(plan_file)?;
-    let face_post = predict_plan(&basis, &plan, plan_file)?;
+    replan_with(run_dir, &basis, &plan, plan_file, dest)
+}
+
+/// [`replan`] for a plan already read (`plan_file` names it in errors and the report) and the
+/// run's basis already read from `run_dir`.
+pub fn replan_with(
+    run_dir: &Path,
+    basis: &PlanBasis,
+    plan: &[Osteotomy],
+    plan_file: &Path,
+    dest: Option<&Path>,
+) -> Result<Replanned> {
+    let face_post = predict_plan(basis, plan, plan_file)?;
     let out_dir = dest
         .map(Path::to_path_buf)
         .unwrap_or_else(|| run_dir.join("replan"));
@@ -70,7 +88,7 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
     let no_masks = plan.iter().all(|o| !matches!(o.region, Region::Mask(_)));
     let skull_post = if no_masks && skull_pre.exists() {
         let mut s = mesh::read_mesh(&skull_pre)?;
-        s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
+        s.vertices = crate::osteotomy::Plan::new(plan).apply(&s.vertices, 1.0).0;
         Some(s)
     } else {
         None
@@ -106,7 +124,7 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
                 &prediction.face_post,
                 frame,
                 lms,
-                &crate::osteotomy::Plan::new(&plan),
+                &crate::osteotomy::Plan::new(plan),
             )
         });
     let dmax = dist.iter().cloned().fold(0.0, f64::max);
@@ -132,7 +150,7 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
             plan: plan_file.display().to_string(),
             basis_model: basis.model.clone(),
             exact: basis.exact,
-            osteotomy: plan.clone(),
+            osteotomy: plan.to_vec(),
         }),
         warnings,
         ..Default::default()

@@ -135,7 +135,12 @@ fn osteotomy(basis: &PlanBasis, m: &Move, path: &Path) -> Result<Osteotomy> {
 /// varying fastest).
 pub fn read_sweep(path: &Path, basis: &PlanBasis) -> Result<Vec<SweepPlan>> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-    let file: SweepFile = toml::from_str(&text).map_err(|e| Error::input(path, e))?;
+    sweep_from_text(&text, path, basis)
+}
+
+/// The plans of SWEEP.toml text as if read from `path` (errors name `path`).
+pub fn sweep_from_text(text: &str, path: &Path, basis: &PlanBasis) -> Result<Vec<SweepPlan>> {
+    let file: SweepFile = toml::from_str(text).map_err(|e| Error::input(path, e))?;
     let mut plans = Vec::new();
     for (i, p) in file.plan.iter().enumerate() {
         plans.push(SweepPlan {
@@ -242,13 +247,7 @@ pub const REGION_NAMES: [&str; 5] = crate::landmarks::face_regions::NAMES;
 
 /// Per region of [`REGION_NAMES`], its vertices' flags (None: absent), from the run's
 /// landmarks when it has them.
-fn region_members(
-    basis: &PlanBasis,
-    run: Option<&(
-        Option<crate::landmarks::HeadFrame>,
-        Vec<crate::landmarks::Landmark>,
-    )>,
-) -> Vec<Option<Vec<bool>>> {
+fn region_members(basis: &PlanBasis, run: Option<&RunLandmarks>) -> Vec<Option<Vec<bool>>> {
     if let Some((Some(frame), lms)) = run {
         let pre = crate::landmarks::positions(lms);
         return crate::landmarks::face_regions::regions(&basis.face_pre, frame, &pre).members;
@@ -263,19 +262,48 @@ fn region_members(
 pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepRow>> {
     let basis = super::file::read(&run_dir.join(super::file::FILE_NAME))?;
     let plans = read_sweep(sweep_file, &basis)?;
-    let run: Option<serde_json::Value> = std::fs::read(run_dir.join("report.json"))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
-    let located = run.as_ref().and_then(crate::landmarks::from_report);
-    let members = region_members(&basis, located.as_ref());
+    let run = run_landmarks(run_dir);
+    let rows = evaluate(&basis, plans, sweep_file, run.as_ref())?;
+    write(out, &basis, &rows)?;
+    Ok(rows)
+}
+
+/// The landmarks (and head frame) a run found, from its report.json; None for a run without.
+pub type RunLandmarks = (
+    Option<crate::landmarks::HeadFrame>,
+    Vec<crate::landmarks::Landmark>,
+);
+
+/// [`RunLandmarks`] of the run in `run_dir`.
+pub fn run_landmarks(run_dir: &Path) -> Option<RunLandmarks> {
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run_dir.join("report.json")).ok()?).ok()?;
+    crate::landmarks::from_report(&run)
+}
+
+/// Write sweep.csv and sweep.svg for evaluated rows into `out` (created).
+pub fn write(out: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
+    write_csv(&out.join("sweep.csv"), basis, rows)?;
+    super::chart::write(&out.join("sweep.svg"), rows)
+}
+
+/// Each plan's face displacement statistics, whole face and per region, and the run's
+/// landmarks carried with it (a bad plan is named as `sweep_file`'s error). Writes nothing.
+pub fn evaluate(
+    basis: &PlanBasis,
+    plans: Vec<SweepPlan>,
+    sweep_file: &Path,
+    located: Option<&RunLandmarks>,
+) -> Result<Vec<SweepRow>> {
+    let members = region_members(basis, located);
     let skin = crate::mesh::Mesh::new(basis.face_pre.clone(), basis.triangles.clone());
     let anchors = located
-        .as_ref()
         .map(|(_, lms)| crate::landmarks::anchors(lms, &skin))
         .unwrap_or_default();
     let mut rows = Vec::with_capacity(plans.len());
     for plan in plans {
-        let d = super::replan::predict_plan(&basis, &plan.osteotomy, sweep_file)?;
+        let d = super::replan::predict_plan(basis, &plan.osteotomy, sweep_file)?;
         let mag: Vec<f64> = d
             .iter()
             .zip(&basis.face_pre)
@@ -325,9 +353,6 @@ pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepR
             measurements,
         });
     }
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    write_csv(&out.join("sweep.csv"), &basis, &rows)?;
-    super::chart::write(&out.join("sweep.svg"), &rows)?;
     Ok(rows)
 }
 
@@ -339,12 +364,15 @@ fn csv_field(s: &str) -> String {
     }
 }
 
-fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+/// sweep.csv's numeric column names after `plan` and `label`: per segment its six moves
+/// (`{segment}_{axis}`), then `face_{max,mean,p90}_mm`, then the same per facial region, then
+/// per landmark `{label}_move_mm` and per measurement `{name}_{unit}` (those of `rows`).
+pub fn value_columns(basis: &PlanBasis, rows: &[SweepRow]) -> Vec<String> {
     let slug = |s: &str| s.replace(' ', "_");
-    let mut head = vec!["plan".to_string(), "label".to_string()];
+    let mut head = Vec::new();
     for s in &basis.segments {
         for a in AXES {
-            head.push(csv_field(&format!("{}_{a}", s.name)));
+            head.push(format!("{}_{a}", s.name));
         }
     }
     head.extend(["face_max_mm", "face_mean_mm", "face_p90_mm"].map(String::from));
@@ -356,35 +384,53 @@ fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
     // Landmark and measurement columns: those of the first row (every row has the same).
     if let Some(first) = rows.first() {
         for (label, _) in &first.landmarks {
-            head.push(csv_field(&format!("{label}_move_mm")));
+            head.push(format!("{label}_move_mm"));
         }
         for (name, unit, _) in &first.measurements {
-            head.push(csv_field(&format!("{name}_{unit}")));
+            head.push(format!("{name}_{unit}"));
         }
     }
+    head
+}
+
+/// One row's values in [`value_columns`] order (NaN: the region or measurement is absent).
+pub fn row_values(basis: &PlanBasis, row: &SweepRow) -> Vec<f64> {
+    let mut v = Vec::new();
+    for s in &basis.segments {
+        let o = row.plan.osteotomy.iter().find(|o| o.name == s.name);
+        let (t, r) = o.map_or(([0.0; 3], [0.0; 3]), |o| (o.translate, o.rotate_deg));
+        v.extend(t.iter().chain(&r));
+    }
+    let f = row.face;
+    v.extend([f.max, f.mean, f.p90]);
+    for r in &row.regions {
+        v.extend(r.map_or([f64::NAN; 3], |s| [s.max, s.mean, s.p90]));
+    }
+    v.extend(row.landmarks.iter().map(|(_, d)| *d));
+    v.extend(
+        row.measurements
+            .iter()
+            .map(|(_, _, m)| m.unwrap_or(f64::NAN)),
+    );
+    v
+}
+
+fn write_csv(path: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
+    let mut head = vec!["plan".to_string(), "label".to_string()];
+    head.extend(value_columns(basis, rows).iter().map(|c| csv_field(c)));
     write_bytes_atomic(path, |w| {
         writeln!(w, "{}", head.join(","))?;
         for (i, row) in rows.iter().enumerate() {
             let mut cells = vec![(i + 1).to_string(), csv_field(&row.plan.label)];
-            for s in &basis.segments {
-                let o = row.plan.osteotomy.iter().find(|o| o.name == s.name);
-                let (t, r) = o.map_or(([0.0; 3], [0.0; 3]), |o| (o.translate, o.rotate_deg));
-                cells.extend(t.iter().chain(&r).map(|v| v.to_string()));
+            // The moves as given; the statistics to 1 nm, an absent region empty.
+            let moves = AXES.len() * basis.segments.len();
+            for (j, v) in row_values(basis, row).into_iter().enumerate() {
+                cells.push(match () {
+                    _ if j < moves => v.to_string(),
+                    _ if v.is_nan() => String::new(),
+                    _ => format!("{v:.6}"),
+                });
             }
-            let f = row.face;
-            cells.extend([f.max, f.mean, f.p90].map(|v| format!("{v:.6}")));
-            for r in &row.regions {
-                match r {
-                    Some(s) => cells.extend([s.max, s.mean, s.p90].map(|v| format!("{v:.6}"))),
-                    None => cells.extend(["", "", ""].map(String::from)),
-                }
-            }
-            cells.extend(row.landmarks.iter().map(|(_, d)| format!("{d:.6}")));
-            cells.extend(
-                row.measurements
-                    .iter()
-                    .map(|(_, _, v)| v.map_or(String::new(), |v| format!("{v:.6}"))),
-            );
             writeln!(w, "{}", cells.join(","))?;
         }
         Ok(())

@@ -1,0 +1,177 @@
+//! The `facesim.Result` class: a run's (or replan's) face as numpy arrays, in LPS millimetres,
+//! equal to the files the command line writes (face_pre/face_post vertex order).
+
+use facesim::mesh::{norm, sub};
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::Path;
+use std::time::SystemTime;
+
+/// What `facesim.run` and `facesim.replan` return (docs/python.md).
+#[pyclass(frozen, module = "facesim", name = "Result")]
+pub struct Result {
+    /// The output directory the files were written to (str).
+    #[pyo3(get)]
+    out_dir: String,
+    /// face_pre's vertices: float64, shape (n, 3), LPS mm.
+    #[pyo3(get)]
+    vertices_pre: Py<PyAny>,
+    /// face_post's vertices, same order: float64, shape (n, 3), LPS mm.
+    #[pyo3(get)]
+    vertices_post: Py<PyAny>,
+    /// The triangles (shared by face_pre and face_post): int64, shape (m, 3), vertex indices.
+    #[pyo3(get)]
+    triangles: Py<PyAny>,
+    /// |vertices_post − vertices_pre| per vertex (displacement.csv's `dist`): float64, (n,), mm.
+    #[pyo3(get)]
+    displacement: Py<PyAny>,
+    /// Label → {"pre", "post": float64 (3,) LPS mm, "change_mm": float, "kind": str}, the
+    /// landmarks found (report.json `landmarks` says why a missing one is missing). Empty for a
+    /// replan.
+    #[pyo3(get)]
+    landmarks: Py<PyAny>,
+    /// report.json as a dict.
+    #[pyo3(get)]
+    report: Py<PyAny>,
+    /// With `[uncertainty] samples > 0` (face_band.ply written by this run): {"mean", "p05",
+    /// "p95"}, float64 (n,) displacement magnitudes in mm; otherwise None.
+    #[pyo3(get)]
+    band: Py<PyAny>,
+}
+
+#[pymethods]
+impl Result {
+    fn __repr__(&self, py: Python<'_>) -> PyResult<String> {
+        let n = self.vertices_pre.bind(py).len()?;
+        let m = self.triangles.bind(py).len()?;
+        Ok(format!(
+            "facesim.Result(out_dir={:?}, vertices={n}, triangles={m})",
+            self.out_dir
+        ))
+    }
+}
+
+/// Points as a float64 (n, 3) array.
+fn points<'py>(py: Python<'py>, v: &[[f64; 3]]) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f64> = v.iter().flatten().copied().collect();
+    Ok(PyArray1::from_vec(py, flat)
+        .reshape([v.len(), 3])?
+        .into_any())
+}
+
+fn triangles<'py>(py: Python<'py>, t: &[[u32; 3]]) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<i64> = t.iter().flatten().map(|&i| i64::from(i)).collect();
+    Ok(PyArray1::from_vec(py, flat)
+        .reshape([t.len(), 3])?
+        .into_any())
+}
+
+/// displacement.csv's `dist`, computed the same way (pre − post, Euclidean norm).
+fn distances(pre: &[[f64; 3]], post: &[[f64; 3]]) -> Vec<f64> {
+    pre.iter()
+        .zip(post)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .collect()
+}
+
+/// A serde value as the Python object `json.loads` makes of it.
+fn json<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+    let text = serde_json::to_string(v)
+        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
+    py.import("json")?.call_method1("loads", (text,))
+}
+
+/// The landmarks with both positions, from report.json's `landmarks` map.
+fn landmarks<'py>(py: Python<'py>, report: &serde_json::Value) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let point = |v: &serde_json::Value| -> Option<Vec<f64>> {
+        let a = v.as_array()?;
+        let p: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
+        (p.len() == 3).then_some(p)
+    };
+    if let Some(map) = report.get("landmarks").and_then(|l| l.as_object()) {
+        for (label, l) in map {
+            let (Some(pre), Some(post)) = (point(&l["pre"]), point(&l["post"])) else {
+                continue;
+            };
+            let e = PyDict::new(py);
+            e.set_item("pre", PyArray1::from_vec(py, pre))?;
+            e.set_item("post", PyArray1::from_vec(py, post))?;
+            e.set_item("change_mm", l["change_mm"].as_f64())?;
+            e.set_item("kind", l["kind"].as_str())?;
+            d.set_item(label, e)?;
+        }
+    }
+    Ok(d)
+}
+
+/// face_band.ply's `mean`, `p05`, `p95` columns when this run wrote it (modified at or after
+/// `since`: an older file left in a reused output directory is not this run's).
+fn band<'py>(py: Python<'py>, out_dir: &Path, since: SystemTime) -> PyResult<Bound<'py, PyAny>> {
+    let path = out_dir.join("face_band.ply");
+    let fresh = std::fs::metadata(&path)
+        .and_then(|m| m.modified())
+        .is_ok_and(|t| t >= since);
+    if !fresh {
+        return Ok(py.None().into_bound(py));
+    }
+    let mesh = facesim::mesh::read_mesh(&path).map_err(crate::raise)?;
+    let d = PyDict::new(py);
+    for name in ["mean", "p05", "p95"] {
+        let c = mesh
+            .vertex_columns
+            .iter()
+            .find(|c| c.name == name)
+            .ok_or_else(|| {
+                crate::FacesimError::new_err(format!(
+                    "{}: no vertex property '{name}'",
+                    path.display()
+                ))
+            })?;
+        d.set_item(name, PyArray1::from_vec(py, c.values.clone()))?;
+    }
+    Ok(d.into_any())
+}
+
+/// A run's outputs (`since`: when the run started).
+pub fn from_run(
+    py: Python<'_>,
+    o: &facesim::pipeline::Outcome,
+    since: SystemTime,
+) -> PyResult<Result> {
+    let report = serde_json::to_value(&o.report)
+        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
+    Ok(Result {
+        out_dir: o.out_dir.display().to_string(),
+        vertices_pre: points(py, &o.skin.vertices)?.unbind(),
+        vertices_post: points(py, &o.face_post.vertices)?.unbind(),
+        triangles: triangles(py, &o.skin.triangles)?.unbind(),
+        displacement: PyArray1::from_vec(py, distances(&o.skin.vertices, &o.face_post.vertices))
+            .into_any()
+            .unbind(),
+        landmarks: landmarks(py, &report)?.into_any().unbind(),
+        report: json(py, &report)?.unbind(),
+        band: band(py, &o.out_dir, since)?.unbind(),
+    })
+}
+
+/// A replan's outputs: the basis's face_pre and the predicted face.
+pub fn from_replan(
+    py: Python<'_>,
+    basis: &facesim::plan::PlanBasis,
+    r: &facesim::plan::replan::Replanned,
+) -> PyResult<Result> {
+    Ok(Result {
+        out_dir: r.out_dir.display().to_string(),
+        vertices_pre: points(py, &basis.face_pre)?.unbind(),
+        vertices_post: points(py, &r.face_post)?.unbind(),
+        triangles: triangles(py, &basis.triangles)?.unbind(),
+        displacement: PyArray1::from_vec(py, distances(&basis.face_pre, &r.face_post))
+            .into_any()
+            .unbind(),
+        landmarks: PyDict::new(py).into_any().unbind(),
+        report: json(py, &r.report)?.unbind(),
+        band: py.None(),
+    })
+}
