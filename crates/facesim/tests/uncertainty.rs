@@ -49,9 +49,7 @@ fn points(c: &mut Case, samples: usize, nu: f64, muscle_fat: f64, skin_fat: f64,
     u.poisson = Some(Range::uniform(nu, nu));
     u.muscle_fat = Some(Range::log_uniform(muscle_fat, muscle_fat));
     u.skin_fat = Some(Range::log_uniform(skin_fat, skin_fat));
-    u.sliding = Some(Chance {
-        probability: slide,
-    });
+    u.sliding = Some(Chance { probability: slide });
 }
 
 fn run(c: Case, name: &str) -> Outcome {
@@ -94,7 +92,10 @@ fn zero_spread_gives_a_zero_band_at_exactly_the_deterministic_prediction() {
     let d = magnitudes(&plain);
     assert!(d.iter().any(|x| *x > 1.0));
     for i in 0..d.len() {
-        assert_eq!((mean[i], p05[i], p95[i]), (d[i] as f32 as f64, mean[i], mean[i]));
+        assert_eq!(
+            (mean[i], p05[i], p95[i]),
+            (d[i] as f32 as f64, mean[i], mean[i])
+        );
     }
     for (label, b) in u["landmarks"].as_object().unwrap() {
         let change = &j["landmarks"][label]["change_mm"];
@@ -102,12 +103,55 @@ fn zero_spread_gives_a_zero_band_at_exactly_the_deterministic_prediction() {
         assert_eq!(b["p05"], b["p95"], "{label}");
         assert_eq!(b["p05"], b["mean"], "{label}");
     }
-    assert!(u["landmarks"]["Pog'"]["mean"].as_f64().unwrap() > 1.0, "{u}");
+    // This phantom's face yields few landmarks and no regions: the jaws phantom below has them.
+    assert!(!u["landmarks"].as_object().unwrap().is_empty(), "{u}");
+}
+
+/// Landmarks and regions in report.json `uncertainty` equal the run's own `landmarks` and
+/// `regions` at zero spread, on the phantom with jaws (a face with lips and chin; mucosa that
+/// slides on the teeth).
+#[test]
+fn zero_spread_landmark_and_region_bands_are_the_runs_own_figures() {
+    use facesim::phantom::PhantomOptions;
+    use facesim::phantom_jaws::{self, JawsOptions};
+    let dir = common::kept_dir("facesim-unc-jaws");
+    let opts = JawsOptions {
+        phantom: PhantomOptions {
+            spacing: [2.0; 3],
+            ..PhantomOptions::default()
+        },
+        solve_model: Some("tet".into()),
+    };
+    phantom_jaws::write_case(&dir, &opts).unwrap();
+    let (mut c, _) = Case::load(&dir.join("case.toml")).unwrap();
+    c.tet.skin_size_mm = 6.0;
+    c.tet.deep_size_mm = 12.0;
+    points(&mut c, 3, 0.45, 5.0, 15.0, 1.0);
+    let o = run(c, "facesim-unc-jaws-run");
+    let j = json(&o);
+    let u = &j["uncertainty"];
+    assert_eq!(u["solves"], 0, "{u}");
+    let landmarks = u["landmarks"].as_object().unwrap();
+    assert!(
+        landmarks.contains_key("Pog'") && landmarks.contains_key("Li"),
+        "{u}"
+    );
+    for (label, b) in landmarks {
+        assert_eq!(&b["mean"], &j["landmarks"][label]["change_mm"], "{label}");
+        assert_eq!((&b["p05"], &b["p95"]), (&b["mean"], &b["mean"]), "{label}");
+    }
+    assert!(
+        u["landmarks"]["Pog'"]["mean"].as_f64().unwrap() > 1.0,
+        "{u}"
+    );
     let regions = u["regions"].as_object().unwrap();
-    assert!(regions.contains_key("chin"), "{u}");
+    assert!(
+        regions.contains_key("chin") && regions.contains_key("lower lip"),
+        "{u}"
+    );
     for (name, b) in regions {
         assert_eq!(&b["mean"], &j["regions"][name]["mean"], "{name}");
-        assert_eq!(b["p05"], b["p95"], "{name}");
+        assert_eq!((&b["p05"], &b["p95"]), (&b["mean"], &b["mean"]), "{name}");
     }
 }
 
@@ -132,7 +176,10 @@ fn a_point_away_from_the_nominal_equals_a_run_with_those_parameters() {
     points(&mut c, 2, 0.47, 4.0, 10.0, 0.0);
     let o = run(c, "facesim-unc-point");
     let u = &json(&o)["uncertainty"];
-    assert_eq!((u["solves"].as_u64(), u["reused"].as_u64()), (Some(1), Some(1)));
+    assert_eq!(
+        (u["solves"].as_u64(), u["reused"].as_u64()),
+        (Some(1), Some(1))
+    );
     assert_eq!(u["draws"][0]["sliding"], false);
     let d = magnitudes(&direct);
     let nominal = magnitudes(&o);
@@ -141,12 +188,20 @@ fn a_point_away_from_the_nominal_equals_a_run_with_those_parameters() {
     for i in 0..d.len() {
         // f32 in the file: half an ulp of the value.
         let tol = 1e-6 * d[i].max(1e-3);
-        assert!((mean[i] - d[i]).abs() <= tol, "vertex {i}: {} vs {}", mean[i], d[i]);
+        assert!(
+            (mean[i] - d[i]).abs() <= tol,
+            "vertex {i}: {} vs {}",
+            mean[i],
+            d[i]
+        );
         assert_eq!((p05[i], p95[i]), (mean[i], mean[i]));
         differs = differs.max((d[i] - nominal[i]).abs());
     }
     // The parameters matter: otherwise this test could not tell the paths apart.
-    assert!(differs > 0.05, "largest change from the nominal {differs} mm");
+    assert!(
+        differs > 0.05,
+        "largest change from the nominal {differs} mm"
+    );
 }
 
 /// Mean band width over the face, and the widths per vertex, for muscle/fat in
@@ -181,9 +236,8 @@ fn the_band_widens_with_the_spread() {
         }
         for key in ["landmarks", "regions"] {
             for (name, b) in next.2[key].as_object().unwrap() {
-                let w = |v: &serde_json::Value| {
-                    v["p95"].as_f64().unwrap() - v["p05"].as_f64().unwrap()
-                };
+                let w =
+                    |v: &serde_json::Value| v["p95"].as_f64().unwrap() - v["p05"].as_f64().unwrap();
                 let a = &prev.2[key][name];
                 assert!(w(b) >= w(a) - 1e-9, "{key} {name}: {a} then {b}");
             }
@@ -207,7 +261,10 @@ fn the_same_seed_writes_the_same_bytes() {
     let a = with(7, "facesim-unc-seed-a");
     let b = with(7, "facesim-unc-seed-b");
     let c = with(8, "facesim-unc-seed-c");
-    assert!(a.0 == b.0, "face_band.ply differs between two runs of seed 7");
+    assert!(
+        a.0 == b.0,
+        "face_band.ply differs between two runs of seed 7"
+    );
     assert_eq!(a.1, b.1);
     assert_ne!(a.1, c.1);
     assert!(a.0 != c.0);
@@ -217,14 +274,38 @@ fn the_same_seed_writes_the_same_bytes() {
 fn impossible_ranges_and_foreign_parameters_are_refused_naming_the_key() {
     let base = "[ct]\npath = \"ct.nii.gz\"\n[uncertainty]\nsamples = 4\n";
     for (extra, key) in [
-        ("[uncertainty.poisson]\nuniform = [0.45, 0.5]\n", "[uncertainty.poisson]"),
-        ("[uncertainty.poisson]\nuniform = [-1.5, 0.3]\n", "[uncertainty.poisson]"),
-        ("[uncertainty.poisson]\nuniform = [0.49, 0.45]\n", "[uncertainty.poisson]"),
-        ("[uncertainty.muscle_fat]\nlog_uniform = [-2.0, 5.0]\n", "[uncertainty.muscle_fat]"),
-        ("[uncertainty.skin_fat]\nuniform = [0.0, 5.0]\n", "[uncertainty.skin_fat]"),
-        ("[uncertainty.skin_fat]\nuniform = [1.0, 5.0]\nlog_uniform = [1.0, 5.0]\n", "[uncertainty.skin_fat]"),
-        ("[uncertainty.sliding]\nprobability = 1.5\n", "[uncertainty.sliding]"),
-        ("[uncertainty.spring_scale]\nlog_uniform = [0.5, 2.0]\n", "[uncertainty.spring_scale]"),
+        (
+            "[uncertainty.poisson]\nuniform = [0.45, 0.5]\n",
+            "[uncertainty.poisson]",
+        ),
+        (
+            "[uncertainty.poisson]\nuniform = [-1.5, 0.3]\n",
+            "[uncertainty.poisson]",
+        ),
+        (
+            "[uncertainty.poisson]\nuniform = [0.49, 0.45]\n",
+            "[uncertainty.poisson]",
+        ),
+        (
+            "[uncertainty.muscle_fat]\nlog_uniform = [-2.0, 5.0]\n",
+            "[uncertainty.muscle_fat]",
+        ),
+        (
+            "[uncertainty.skin_fat]\nuniform = [0.0, 5.0]\n",
+            "[uncertainty.skin_fat]",
+        ),
+        (
+            "[uncertainty.skin_fat]\nuniform = [1.0, 5.0]\nlog_uniform = [1.0, 5.0]\n",
+            "[uncertainty.skin_fat]",
+        ),
+        (
+            "[uncertainty.sliding]\nprobability = 1.5\n",
+            "[uncertainty.sliding]",
+        ),
+        (
+            "[uncertainty.spring_scale]\nlog_uniform = [0.5, 2.0]\n",
+            "[uncertainty.spring_scale]",
+        ),
         ("[uncertainty.poison]\nuniform = [0.45, 0.49]\n", "poison"),
         (
             "[solve]\nmodel = \"equilibrium\"\n[uncertainty.poisson]\nuniform = [0.45, 0.49]\n",
@@ -244,4 +325,33 @@ fn impossible_ranges_and_foreign_parameters_are_refused_naming_the_key() {
         Path::new("case.toml"),
     )
     .unwrap();
+}
+
+#[test]
+fn a_uniform_scale_of_every_modulus_leaves_the_face() {
+    // Why only ratios of moduli are sampled: with bone moves as the only load, K(cE) = c·K(E)
+    // and the free nodes' displacement −K_ff⁻¹ K_fp u_p does not change.
+    let plain = run(case(), "facesim-unc-scale1");
+    let mut c = case();
+    for m in [
+        &mut c.tet.skin,
+        &mut c.tet.muscle,
+        &mut c.tet.fat_dark,
+        &mut c.tet.fat_bright,
+    ] {
+        m.youngs_kpa *= 7.0;
+    }
+    let scaled = run(c, "facesim-unc-scale7");
+    let scale = magnitudes(&plain).iter().cloned().fold(0.0, f64::max);
+    assert!(scale > 1.0);
+    for (a, b) in plain
+        .face_post
+        .vertices
+        .iter()
+        .zip(&scaled.face_post.vertices)
+    {
+        for k in 0..3 {
+            assert!((a[k] - b[k]).abs() < 1e-9 * scale, "{a:?} {b:?}");
+        }
+    }
 }

@@ -71,7 +71,12 @@ impl Volumetric {
             linear: mut linear_hold,
             ..
         } = holds(nodes, &r.kind, &r.mucosa, scene, case, r.linear_solve);
-        hold_floating_pieces(&self.mesh.tets, &mut constraint, &mut hold, &mut linear_hold);
+        hold_floating_pieces(
+            &self.mesh.tets,
+            &mut constraint,
+            &mut hold,
+            &mut linear_hold,
+        );
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),

@@ -92,7 +92,10 @@ mod tests {
     fn quantiles_match_numpy_type_7() {
         // numpy.percentile([1, 2, 3, 4, 10], [5, 95]) = [1.2, 8.8].
         let b = Band::of(&[10.0, 2.0, 1.0, 4.0, 3.0]);
-        assert!((b.p05 - 1.2).abs() < 1e-12 && (b.p95 - 8.8).abs() < 1e-12, "{b:?}");
+        assert!(
+            (b.p05 - 1.2).abs() < 1e-12 && (b.p95 - 8.8).abs() < 1e-12,
+            "{b:?}"
+        );
         assert_eq!(b.mean, 4.0);
     }
 

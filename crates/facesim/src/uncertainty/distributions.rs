@@ -47,7 +47,12 @@ impl Range {
     }
 
     /// Check the range's form and that every value in it satisfies `ok`; errors name `key`.
-    fn check(&self, key: &str, what: &str, ok: impl Fn(f64) -> bool) -> std::result::Result<(), String> {
+    fn check(
+        &self,
+        key: &str,
+        what: &str,
+        ok: impl Fn(f64) -> bool,
+    ) -> std::result::Result<(), String> {
         let (kind, [a, b]) = match (self.uniform, self.log_uniform) {
             (Some(r), None) => ("uniform", r),
             (None, Some(r)) => ("log_uniform", r),
@@ -137,7 +142,8 @@ pub mod defaults {
     /// Sliding or attached mucosa: no preference.
     pub const SLIDING: Chance = Chance { probability: 0.5 };
     /// A factor of 3 overall (√3 either way), the spread of the fat and muscle moduli ranges.
-    pub const SPRING_SCALE: Range = Range::log_uniform(0.577_350_269_189_625_8, 1.732_050_807_568_877_2);
+    pub const SPRING_SCALE: Range =
+        Range::log_uniform(0.577_350_269_189_625_8, 1.732_050_807_568_877_2);
 }
 
 /// One sampled parameter, in the order of the quasi-random sequence's dimensions.

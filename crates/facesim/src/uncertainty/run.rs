@@ -39,7 +39,12 @@ impl Draw {
         let mut c = nominal.clone();
         let t = &mut c.tet;
         if let Some(nu) = self.poisson {
-            for m in [&mut t.skin, &mut t.muscle, &mut t.fat_dark, &mut t.fat_bright] {
+            for m in [
+                &mut t.skin,
+                &mut t.muscle,
+                &mut t.fat_dark,
+                &mut t.fat_bright,
+            ] {
                 m.poisson = nu;
             }
         }
@@ -142,9 +147,16 @@ pub struct Sampled {
     pub report: UncertaintyReport,
 }
 
-/// A soft landmark as a material point of the face: triangle and barycentric weights.
+/// A landmark on the samples' faces: a soft one as the same material point as report.json
+/// `landmarks` carries it (triangle, barycentric weights, offset from the face; its position
+/// before), a bony one moves with its segment whatever the tissue.
 enum Tracker {
-    Soft([u32; 3], [f64; 3]),
+    Soft {
+        tri: [u32; 3],
+        w: [f64; 3],
+        off: [f64; 3],
+        pre: [f64; 3],
+    },
     Fixed(f64),
 }
 
@@ -164,12 +176,9 @@ pub fn sample(
     rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
         let start = std::time::Instant::now();
         let skin = &prediction.skin;
-        let nominal: Vec<[f64; 3]> = skin
-            .vertices
-            .iter()
-            .zip(&prediction.face_post.vertices)
-            .map(|(a, b)| sub(*b, *a))
-            .collect();
+        // Positions, not displacements, so that the nominal sample gives the run's own figures
+        // bit for bit (report.json's are computed from face_pre and face_post).
+        let nominal = &prediction.face_post.vertices;
         let draws = draws(case);
         let sliding_matters = prediction
             .volumetric
@@ -191,7 +200,12 @@ pub fn sample(
                             let (_, q, t) = index.closest_triangle(pre);
                             let tri = skin.triangles[t];
                             let [a, b, cc] = tri.map(|i| skin.vertices[i as usize]);
-                            Tracker::Soft(tri, barycentric(q, a, b, cc))
+                            Tracker::Soft {
+                                tri,
+                                w: barycentric(q, a, b, cc),
+                                off: sub(pre, q),
+                                pre,
+                            }
                         }
                         Kind::Bone => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
                     },
@@ -215,8 +229,8 @@ pub fn sample(
             obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
             let c = d.apply(case);
             let key = solve_key(&c, sliding_matters);
-            let disp: &[[f64; 3]] = if key == nominal_key || !solver.moves() {
-                &nominal
+            let post: &[[f64; 3]] = if key == nominal_key || !solver.moves() {
+                nominal
             } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
                 &solved[k].1
             } else {
@@ -226,14 +240,20 @@ pub fn sample(
                 solved.push((key, u));
                 &solved[solved.len() - 1].1
             };
-            let mag: Vec<f64> = disp.iter().map(|v| norm(*v)).collect();
+            // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
+            let mag: Vec<f64> = skin
+                .vertices
+                .iter()
+                .zip(post)
+                .map(|(a, b)| norm(sub(*a, *b)))
+                .collect();
             for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
                 out.push(match t {
-                    Tracker::Soft(tri, w) => {
-                        let v = [0, 1, 2].map(|k| {
-                            (0..3).map(|j| w[j] * disp[tri[j] as usize][k]).sum::<f64>()
-                        });
-                        norm(v)
+                    Tracker::Soft { tri, w, off, pre } => {
+                        let [a, b, cc] = tri.map(|i| post[i as usize]);
+                        let p =
+                            [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * cc[k] + off[k]);
+                        norm(sub(p, *pre))
                     }
                     Tracker::Fixed(m) => *m,
                 });
@@ -341,11 +361,19 @@ impl<'a> Solver<'a> {
         self.prediction.volumetric.is_some() || self.prediction.solution.is_some()
     }
 
-    /// The face displacement (per vertex of the run's face) with `case`'s parameters.
+    /// The predicted face's vertices (the run's face's order) with `case`'s parameters.
     fn solve(&self, case: &Case) -> Result<Vec<[f64; 3]>> {
         let p = self.prediction;
         if let Some(v) = &p.volumetric {
-            return v.resolve(self.scene, case, &p.skin);
+            // As the run's face_post: position plus carried displacement.
+            let d = v.resolve(self.scene, case, &p.skin)?;
+            return Ok(p
+                .skin
+                .vertices
+                .iter()
+                .zip(&d)
+                .map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]])
+                .collect());
         }
         let (face, model) = (&self.scene.face, &self.scene.model);
         let params = crate::pipeline::model::solve_params(case);
@@ -369,11 +397,6 @@ impl<'a> Solver<'a> {
                     .collect()
             }
         };
-        Ok(p.skin
-            .vertices
-            .iter()
-            .zip(&post)
-            .map(|(a, b)| sub(*b, *a))
-            .collect())
+        Ok(post)
     }
 }

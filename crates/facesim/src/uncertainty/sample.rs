@@ -141,7 +141,11 @@ mod tests {
         let mut c = 0.0;
         for x in p {
             for y in p {
-                c += x.iter().zip(y).map(|(u, v)| 1.0 - u.max(*v)).product::<f64>();
+                c += x
+                    .iter()
+                    .zip(y)
+                    .map(|(u, v)| 1.0 - u.max(*v))
+                    .product::<f64>();
             }
         }
         (a - b + c / (n * n)).sqrt()
