@@ -208,7 +208,7 @@ fn a_point_away_from_the_nominal_equals_a_run_with_those_parameters() {
 /// [5/s, 5·s] (log-uniform) and ν in [0.47 − w, 0.47 + w], the rest at the nominal.
 fn widths(s: f64, w: f64, name: &str) -> (f64, Vec<f64>, serde_json::Value) {
     let mut c = case();
-    points(&mut c, 8, 0.47, 5.0, 15.0, 1.0);
+    points(&mut c, 5, 0.47, 5.0, 15.0, 1.0);
     c.uncertainty.muscle_fat = Some(Range::log_uniform(5.0 / s, 5.0 * s));
     c.uncertainty.poisson = Some(Range::uniform(0.47 - w, 0.47 + w));
     let o = run(c, name);
