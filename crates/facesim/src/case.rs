@@ -29,6 +29,9 @@ pub struct Case {
     pub solve: Solve,
     pub tet: Tet,
     pub output: Output,
+    /// `[uncertainty]`: sampling the tissue parameters (docs/uncertainty.md).
+    #[serde(default)]
+    pub uncertainty: crate::uncertainty::Uncertainty,
     /// User landmarks (`[[landmark]]` label and LPS position), overriding detection
     /// (docs/landmarks.md).
     #[serde(default, rename = "landmark")]
@@ -439,6 +442,7 @@ impl Default for Case {
             solve: Solve::default(),
             tet: Tet::default(),
             output: Output::default(),
+            uncertainty: Default::default(),
             landmark: Vec::new(),
             landmarks: None,
         }
@@ -783,6 +787,7 @@ impl Case {
                 ));
             }
         }
+        self.uncertainty.validate(self.solve.model, path)?;
         if let Some(r) = &self.registration {
             if r.scan.len() != r.ct.len() || r.scan.len() < 3 {
                 return bad(format!(

@@ -40,6 +40,7 @@ pub mod solve;
 pub mod springs;
 pub mod surface;
 pub mod tet;
+pub mod uncertainty;
 pub mod union_find;
 pub mod volume;
 

@@ -29,6 +29,8 @@ pub enum Stage {
     PlanBasis,
     /// Landmarks, measurements and regions (docs/landmarks.md).
     Landmarks,
+    /// Sampling the tissue parameters (docs/uncertainty.md).
+    Uncertainty,
     Write,
     Total,
 }
@@ -49,6 +51,7 @@ impl Stage {
             Stage::Embed => "embed",
             Stage::PlanBasis => "plan_basis",
             Stage::Landmarks => "landmarks",
+            Stage::Uncertainty => "uncertainty",
             Stage::Write => "write",
             Stage::Total => "total",
         }
@@ -216,6 +219,9 @@ pub struct Report {
     pub soft_hard_ratios: crate::landmarks::Ordered<crate::landmarks::measure::Ratio>,
     /// Region → vertices, mean, p90, max of the displacement (mm).
     pub regions: crate::landmarks::Ordered<crate::landmarks::face_regions::RegionStats>,
+    /// `[uncertainty] samples > 0`: the band per landmark and region (docs/uncertainty.md).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<crate::uncertainty::UncertaintyReport>,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
     /// coarsening or embedding, ...).

@@ -119,6 +119,13 @@ pub fn nested_dissection(
     let mut perm = vec![0i32; ns];
     let mut iperm = vec![0i32; ns];
     let mut options = [0i32; metis_sys::METIS_NOPTIONS as usize];
+    // METIS seeds its random generator per call, but the generator's state is process-global
+    // (GKlib): two calls on different threads (tests, a library caller running cases in
+    // parallel) would perturb each other's orderings and so the rounding of every solve. One call
+    // at a time keeps each ordering a function of its graph alone (docs/uncertainty.md: the same
+    // seed writes the same bytes). A poisoned lock only means another call panicked.
+    static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    let _one_at_a_time = METIS.lock().unwrap_or_else(|p| p.into_inner());
     // SAFETY: METIS reads nvtxs + 1 offsets, the adjacency they span and nvtxs weights, and writes
     // nvtxs entries into perm and iperm; every buffer has those lengths and outlives the call.
     let status = unsafe {

@@ -216,7 +216,12 @@ fn finish(
             &files.case_file,
         )
     })?;
+    // The band before any file is written: a failed sample leaves no outputs half-written.
+    let band = crate::uncertainty::sample(&scene, &prediction, &analysis, case, &mut rec)?;
     outputs::write(out_dir, &scene, &prediction, &dist, case, &mut rec)?;
+    if let Some(b) = &band {
+        crate::uncertainty::write_band(out_dir, &prediction.face_post, b)?;
+    }
     crate::landmarks::markups::write_pre_post(out_dir, &analysis.carried)?;
     rec.costs.0.push((
         Stage::Total,
@@ -229,6 +234,7 @@ fn finish(
     ));
     outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
     analysis.fill(&mut report);
+    report.uncertainty = band.map(|b| b.report);
     let page_basis = outputs::page_basis(&prediction, case);
     outputs::write_page(out_dir, &scene, &prediction, &report, page_basis, &analysis)?;
     outputs::write_report(out_dir, &report)?;

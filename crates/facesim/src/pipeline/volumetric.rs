@@ -35,6 +35,19 @@ pub struct Volumetric {
     pub report: TetReport,
     /// The plan basis of this solve (docs/plan-basis.md).
     pub basis: Option<PlanBasis>,
+    /// What a solve with other tissue parameters reuses ([`Volumetric::resolve`]).
+    pub reuse: Reuse,
+}
+
+/// The parts of a run that do not depend on the tissue parameters: the node roles, the mucosa
+/// and its bone, the face's embedding in the mesh (docs/uncertainty.md).
+pub struct Reuse {
+    kind: Vec<NodeKind>,
+    mucosa: Vec<Option<Mucosa>>,
+    embedding: SkinEmbedding,
+    face_rigid: Vec<bool>,
+    roi: ([f64; 3], [f64; 3]),
+    linear_solve: bool,
 }
 
 impl Volumetric {
@@ -43,6 +56,60 @@ impl Volumetric {
         self.quadratic
             .as_ref()
             .map_or(&self.mesh.nodes, |q| &q.nodes)
+    }
+
+    /// The face displacement (per vertex of `skin`, the run's face) with other tissue
+    /// parameters (`case.tet`'s moduli, Poisson ratios and sliding; the plan and mesh settings
+    /// must be the run's): the stiffness is assembled and factored again, the mesh, node roles,
+    /// mucosa and face embedding are the run's.
+    pub fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
+        let r = &self.reuse;
+        let nodes = self.nodes();
+        let Holds {
+            mut constraint,
+            mut hold,
+            linear: mut linear_hold,
+            ..
+        } = holds(nodes, &r.kind, &r.mucosa, scene, case, r.linear_solve);
+        hold_floating_pieces(
+            &self.mesh.tets,
+            &mut constraint,
+            &mut hold,
+            &mut linear_hold,
+        );
+        let linear = TetMesh {
+            nodes: self.mesh.nodes.clone(),
+            tets: self.mesh.tets.clone(),
+            material: materials(&self.mesh.tissue, case),
+        };
+        let quadratic = self
+            .quadratic
+            .as_ref()
+            .map(|_| Tet10Mesh::from_linear(&linear, Rule::Full));
+        let u = if r.linear_solve {
+            let k = match &quadratic {
+                Some(q) => q.assemble()?,
+                None => linear.assemble()?,
+            };
+            let c = Constrained::new(&k, &hold, nodes.len())?;
+            let f = Loads::none().nodal_vector(nodes.len())?;
+            c.solve(&[(&hold, &f)])?.remove(0)
+        } else {
+            let opts = Newton {
+                load_steps: case.tet.load_steps,
+                ..Newton::default()
+            };
+            nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?.displacements
+        };
+        Ok(carry_face(
+            &r.embedding,
+            quadratic.as_ref(),
+            &self.mesh.tets,
+            &u,
+            skin,
+            &r.face_rigid,
+            r.roi,
+        ))
     }
 
     /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell materials
@@ -416,6 +483,45 @@ fn counted(a: &[u8], c: u8) -> usize {
     a.iter().filter(|k| **k == c).count()
 }
 
+/// Per tetrahedron, the material of its tissue label (`[tet]`).
+fn materials(tissue: &[u8], case: &Case) -> Vec<Elastic> {
+    tissue
+        .iter()
+        .map(|l| {
+            let m = case.tet.elastic(*l);
+            Elastic {
+                youngs_kpa: m.youngs_kpa,
+                poisson: m.poisson,
+            }
+        })
+        .collect()
+}
+
+/// Node displacements `u` to face displacements; beyond the region's cut faces the tissue is
+/// held: face vertices there stay (the extrapolation from the last tetrahedron would move them).
+/// Face vertices outside [surface] movable (`face_rigid`) are rigid, as in the C1 model:
+/// interpolation between held and free skin nodes would move them by a little.
+fn carry_face(
+    e: &SkinEmbedding,
+    quadratic: Option<&Tet10Mesh>,
+    tets: &[[u32; 4]],
+    u: &[[f64; 3]],
+    skin: &Mesh,
+    face_rigid: &[bool],
+    roi: ([f64; 3], [f64; 3]),
+) -> Vec<[f64; 3]> {
+    let mut carried = match quadratic {
+        Some(q) => e.carry_quadratic(&q.tets, u),
+        None => e.carry(tets, u),
+    };
+    for ((d, p), rigid) in carried.iter_mut().zip(&skin.vertices).zip(face_rigid) {
+        if *rigid || (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
+            *d = [0.0; 3];
+        }
+    }
+    carried
+}
+
 /// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
 /// within about 15 mm, distraction of the maxilla reaches ~20.
 const LARGE_MOVE_MM: f64 = 25.0;
@@ -439,17 +545,7 @@ pub fn predict(
     let mesh = rec.time(Stage::TetMesh, "meshing the soft tissue", || {
         crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)
     })?;
-    let material: Vec<Elastic> = mesh
-        .tissue
-        .iter()
-        .map(|l| {
-            let m = t.elastic(*l);
-            Elastic {
-                youngs_kpa: m.youngs_kpa,
-                poisson: m.poisson,
-            }
-        })
-        .collect();
+    let material = materials(&mesh.tissue, case);
     let linear = TetMesh {
         nodes: mesh.nodes.clone(),
         tets: mesh.tets.clone(),
@@ -561,22 +657,9 @@ pub fn predict(
             mesh.tets.len()
         ));
     }
-    // Node displacements to face displacements; beyond the region's cut faces the tissue is
-    // held: face vertices there stay (the extrapolation from the last tetrahedron would move them).
-    // Face vertices outside [surface] movable are rigid, as in the C1 model: interpolation
-    // between held and free skin nodes would move them by a little.
     let face_rigid = super::model::rigid_mask(case, &skin.vertices);
     let carry = |e: &SkinEmbedding, u: &[[f64; 3]]| {
-        let mut carried = match &quadratic {
-            Some(q) => e.carry_quadratic(&q.tets, u),
-            None => e.carry(&mesh.tets, u),
-        };
-        for ((d, p), rigid) in carried.iter_mut().zip(&skin.vertices).zip(&face_rigid) {
-            if *rigid || (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
-                *d = [0.0; 3];
-            }
-        }
-        carried
+        carry_face(e, quadratic.as_ref(), &mesh.tets, u, skin, &face_rigid, roi)
     };
     let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
         let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
@@ -645,6 +728,14 @@ pub fn predict(
             displacement,
             report,
             basis: Some(basis),
+            reuse: Reuse {
+                kind,
+                mucosa,
+                embedding,
+                face_rigid,
+                roi,
+                linear_solve,
+            },
         },
         face_post,
     )))

@@ -1,0 +1,28 @@
+//! Uncertainty of the prediction (docs/uncertainty.md): the tissue parameters are known only as
+//! ranges, so `[uncertainty] samples = N` draws N parameter sets from a seeded quasi-random
+//! sequence, solves each on the run's mesh and face embedding, and reports the mean and 5–95 %
+//! band of the displacement magnitude per face vertex (face_band.ply), landmark and region
+//! (report.json `uncertainty`). The deterministic prediction stays the nominal parameters'.
+//!
+//! - `distributions`: `[uncertainty]` in case.toml, the literature defaults, validation;
+//! - `sample`: the scrambled Halton sequence;
+//! - `band`: mean and percentiles, face_band.ply;
+//! - `run`: drawing, solving and reducing the samples.
+
+pub mod band;
+pub mod distributions;
+pub mod run;
+pub mod sample;
+
+pub use band::Band;
+pub use distributions::Uncertainty;
+pub use run::{Sampled, UncertaintyReport, sample};
+
+/// face_band.ply in `dir`: the nominal predicted face with the band per vertex.
+pub fn write_band(
+    dir: &std::path::Path,
+    face_post: &crate::mesh::Mesh,
+    s: &Sampled,
+) -> crate::error::Result<()> {
+    band::write_ply(face_post, &s.bands, &dir.join("face_band.ply"))
+}

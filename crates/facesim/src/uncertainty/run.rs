@@ -1,0 +1,402 @@
+//! Sampling a run's tissue parameters (docs/uncertainty.md): draw N parameter sets from the
+//! scrambled Halton sequence, solve each on what the run already built, and reduce the face's
+//! displacement magnitudes to the band per vertex, landmark and region.
+
+use super::band::{self, Band};
+use super::distributions::{Distribution, Parameter, model_name};
+use super::sample::ScrambledHalton;
+use crate::case::{Case, SolveModel};
+use crate::compare::{SurfaceIndex, barycentric};
+use crate::error::Result;
+use crate::landmarks::{Analysis, Kind, Ordered, face_regions};
+use crate::mesh::{norm, sub};
+use crate::pipeline::predict::Prediction;
+use crate::pipeline::{Recorder, Scene};
+use crate::report::Stage;
+use serde::Serialize;
+
+/// One sample's parameters (those the model samples; the others are absent).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Draw {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub poisson: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub muscle_fat: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_fat: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sliding: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spring_scale: Option<f64>,
+}
+
+impl Draw {
+    /// The nominal case with this sample's parameters: ν for every soft tissue, muscle and skin
+    /// moduli as ratios to the (dark) fat's, which stays (with the moduli's scale: with bone moves
+    /// as the only load, a uniform scale of every modulus leaves the displacement unchanged, so
+    /// only ratios are sampled); the spring scale multiplies `k_c` and `koch_k_c`.
+    pub fn apply(&self, nominal: &Case) -> Case {
+        let mut c = nominal.clone();
+        let t = &mut c.tet;
+        if let Some(nu) = self.poisson {
+            for m in [
+                &mut t.skin,
+                &mut t.muscle,
+                &mut t.fat_dark,
+                &mut t.fat_bright,
+            ] {
+                m.poisson = nu;
+            }
+        }
+        let fat = t.fat_dark.youngs_kpa;
+        if let Some(r) = self.muscle_fat {
+            t.muscle.youngs_kpa = r * fat;
+        }
+        if let Some(r) = self.skin_fat {
+            t.skin.youngs_kpa = r * fat;
+        }
+        if let Some(s) = self.sliding {
+            t.sliding = s;
+        }
+        if let Some(s) = self.spring_scale {
+            c.solve.k_c *= s;
+            c.solve.koch_k_c *= s;
+        }
+        c
+    }
+}
+
+/// The draws of `samples` points of the sequence.
+pub fn draws(case: &Case) -> Vec<Draw> {
+    let u = &case.uncertainty;
+    let params = u.parameters(case.solve.model);
+    let seq = ScrambledHalton::new(Parameter::ALL.len(), u.seed);
+    (0..u.samples as u64)
+        .map(|i| {
+            let mut d = Draw::default();
+            for (p, dist) in &params {
+                let x = seq.at(i, p.dimension());
+                match (p, dist) {
+                    (Parameter::Sliding, Distribution::Chance(c)) => {
+                        d.sliding = Some(x < c.probability)
+                    }
+                    (Parameter::Poisson, Distribution::Range(r)) => d.poisson = Some(r.at(x)),
+                    (Parameter::MuscleFat, Distribution::Range(r)) => d.muscle_fat = Some(r.at(x)),
+                    (Parameter::SkinFat, Distribution::Range(r)) => d.skin_fat = Some(r.at(x)),
+                    (Parameter::SpringScale, Distribution::Range(r)) => {
+                        d.spring_scale = Some(r.at(x))
+                    }
+                    _ => {}
+                }
+            }
+            d
+        })
+        .collect()
+}
+
+/// What decides a solve's answer among the sampled parameters, as bits: equal keys, equal
+/// displacement. Sliding is left out when the mesh has no mucosa node (it then holds nothing).
+fn solve_key(c: &Case, sliding_matters: bool) -> Vec<u64> {
+    let t = &c.tet;
+    let mut k: Vec<u64> = [t.skin, t.muscle, t.fat_dark, t.fat_bright]
+        .iter()
+        .flat_map(|m| [m.youngs_kpa.to_bits(), m.poisson.to_bits()])
+        .collect();
+    k.push(u64::from(t.sliding && sliding_matters));
+    k.push(c.solve.k_c.to_bits());
+    k.push(c.solve.koch_k_c.to_bits());
+    k
+}
+
+/// report.json `uncertainty` (docs/uncertainty.md).
+#[derive(Clone, Debug, Serialize)]
+pub struct UncertaintyReport {
+    pub samples: usize,
+    pub seed: u64,
+    pub model: &'static str,
+    pub sequence: &'static str,
+    /// Parameter → its distribution as used (given in case.toml or the default).
+    pub parameters: Ordered<Distribution>,
+    /// Per sample, the parameters drawn.
+    pub draws: Vec<Draw>,
+    /// Solves run; the other samples equalled the nominal parameters or an earlier sample.
+    pub solves: usize,
+    pub reused: usize,
+    pub seconds: f64,
+    pub seconds_per_sample: f64,
+    pub seconds_per_solve: Option<f64>,
+    /// Over the face's vertices: the largest p95, and the mean and largest band width p95 − p05.
+    pub face: FaceSummary,
+    /// Landmark label → band of its displacement magnitude (mm); only landmarks found.
+    pub landmarks: Ordered<Band>,
+    /// Region → band of the region's mean displacement magnitude (mm); only regions present.
+    pub regions: Ordered<Band>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct FaceSummary {
+    pub vertices: usize,
+    pub max_p95: f64,
+    pub mean_width: f64,
+    pub max_width: f64,
+}
+
+/// The band per face vertex (face_post's order) and the report.
+pub struct Sampled {
+    pub bands: Vec<Band>,
+    pub report: UncertaintyReport,
+}
+
+/// A landmark on the samples' faces: a soft one as the same material point as report.json
+/// `landmarks` carries it (triangle, barycentric weights, offset from the face; its position
+/// before), a bony one moves with its segment whatever the tissue.
+enum Tracker {
+    Soft {
+        tri: [u32; 3],
+        w: [f64; 3],
+        off: [f64; 3],
+        pre: [f64; 3],
+    },
+    Fixed(f64),
+}
+
+/// Sample the tissue parameters `case.uncertainty.samples` times; None when off.
+pub fn sample(
+    scene: &Scene,
+    prediction: &Prediction,
+    analysis: &Analysis,
+    case: &Case,
+    rec: &mut Recorder,
+) -> Result<Option<Sampled>> {
+    let n = case.uncertainty.samples;
+    if n == 0 {
+        return Ok(None);
+    }
+    let obs = rec.obs;
+    rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+        let start = std::time::Instant::now();
+        let skin = &prediction.skin;
+        // Positions, not displacements, so that the nominal sample gives the run's own figures
+        // bit for bit (report.json's are computed from face_pre and face_post).
+        let nominal = &prediction.face_post.vertices;
+        let draws = draws(case);
+        let sliding_matters = prediction
+            .volumetric
+            .as_ref()
+            .is_some_and(|v| v.report.mucosa_nodes > 0);
+        let nominal_key = solve_key(case, sliding_matters);
+        let solver = Solver::new(scene, prediction, case)?;
+        // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
+        let index = SurfaceIndex::new(skin);
+        let trackers: Vec<(String, Tracker)> = analysis
+            .carried
+            .iter()
+            .filter_map(|c| {
+                let pre = c.pre?;
+                Some((
+                    c.label.clone(),
+                    match c.kind {
+                        Kind::Soft => {
+                            let (_, q, t) = index.closest_triangle(pre);
+                            let tri = skin.triangles[t];
+                            let [a, b, cc] = tri.map(|i| skin.vertices[i as usize]);
+                            Tracker::Soft {
+                                tri,
+                                w: barycentric(q, a, b, cc),
+                                off: sub(pre, q),
+                                pre,
+                            }
+                        }
+                        Kind::Bone => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
+                    },
+                ))
+            })
+            .collect();
+        let regions = analysis.frame.as_ref().map(|f| {
+            let pre: Vec<(String, [f64; 3])> = analysis
+                .carried
+                .iter()
+                .filter_map(|c| c.pre.map(|p| (c.label.clone(), p)))
+                .collect();
+            face_regions::regions(&skin.vertices, f, &pre)
+        });
+        let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
+        let mut solve_s = 0.0;
+        let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
+        let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
+        let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
+        for (i, d) in draws.iter().enumerate() {
+            obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
+            let c = d.apply(case);
+            let key = solve_key(&c, sliding_matters);
+            let post: &[[f64; 3]] = if key == nominal_key || !solver.moves() {
+                nominal
+            } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
+                &solved[k].1
+            } else {
+                let t = std::time::Instant::now();
+                let u = solver.solve(&c)?;
+                solve_s += t.elapsed().as_secs_f64();
+                solved.push((key, u));
+                &solved[solved.len() - 1].1
+            };
+            // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
+            let mag: Vec<f64> = skin
+                .vertices
+                .iter()
+                .zip(post)
+                .map(|(a, b)| norm(sub(*a, *b)))
+                .collect();
+            for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
+                out.push(match t {
+                    Tracker::Soft { tri, w, off, pre } => {
+                        let [a, b, cc] = tri.map(|i| post[i as usize]);
+                        let p =
+                            [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * cc[k] + off[k]);
+                        norm(sub(p, *pre))
+                    }
+                    Tracker::Fixed(m) => *m,
+                });
+            }
+            if let Some(r) = &regions {
+                for (members, out) in r.members.iter().zip(&mut in_regions) {
+                    if let Some(m) = members {
+                        // As report.json `regions` `mean`: the sum over the members / their count.
+                        let v: Vec<f64> = m
+                            .iter()
+                            .zip(&mag)
+                            .filter(|(b, _)| **b)
+                            .map(|(_, x)| *x)
+                            .collect();
+                        out.push(v.iter().sum::<f64>() / v.len() as f64);
+                    }
+                }
+            }
+            magnitudes.push(mag);
+        }
+        let bands = band::per_vertex(&magnitudes, skin.vertices.len());
+        let widths: Vec<f64> = bands.iter().map(Band::width).collect();
+        let seconds = start.elapsed().as_secs_f64();
+        let report = UncertaintyReport {
+            samples: n,
+            seed: case.uncertainty.seed,
+            model: model_name(case.solve.model),
+            sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)",
+            parameters: Ordered(
+                case.uncertainty
+                    .parameters(case.solve.model)
+                    .into_iter()
+                    .map(|(p, d)| (p.key().to_string(), d))
+                    .collect(),
+            ),
+            solves: solved.len(),
+            reused: n - solved.len(),
+            seconds,
+            seconds_per_sample: seconds / n as f64,
+            seconds_per_solve: (!solved.is_empty()).then(|| solve_s / solved.len() as f64),
+            face: FaceSummary {
+                vertices: bands.len(),
+                max_p95: bands.iter().map(|b| b.p95).fold(0.0, f64::max),
+                mean_width: band::mean(&widths),
+                max_width: widths.iter().cloned().fold(0.0, f64::max),
+            },
+            landmarks: Ordered(
+                trackers
+                    .iter()
+                    .zip(&at_landmarks)
+                    .map(|((l, _), v)| (l.clone(), Band::of(v)))
+                    .collect(),
+            ),
+            regions: Ordered(
+                face_regions::NAMES
+                    .iter()
+                    .zip(&in_regions)
+                    .filter(|(_, v)| !v.is_empty())
+                    .map(|(name, v)| (name.to_string(), Band::of(v)))
+                    .collect(),
+            ),
+            draws,
+        };
+        Ok(Some(Sampled { bands, report }))
+    })
+}
+
+/// Solves the run's model again with a sample's parameters, reusing everything upstream.
+struct Solver<'a> {
+    scene: &'a Scene,
+    prediction: &'a Prediction,
+    /// The C1 models with a coarse skin: the shell that carries the full skin, built once.
+    shell: Option<(crate::embed::Shell, crate::embed::Embedding, Vec<bool>)>,
+}
+
+impl<'a> Solver<'a> {
+    fn new(scene: &'a Scene, prediction: &'a Prediction, case: &Case) -> Result<Solver<'a>> {
+        let face = &scene.face;
+        let shell = match (case.solve.model, &face.fine) {
+            (SolveModel::Tet, _) | (_, None) => None,
+            (_, Some(fine)) => {
+                let inward =
+                    -crate::springs::outward_sign(&face.skin, &scene.vol, &scene.seg.labels);
+                let shell = crate::embed::Shell::new(
+                    &face.skin,
+                    case.solve.shell_mm,
+                    inward,
+                    case.solve.shell_poisson,
+                    &scene.model.rigid,
+                )?;
+                let e = shell.embed(&fine.vertices);
+                let rigid = crate::pipeline::model::rigid_mask(case, &fine.vertices);
+                Some((shell, e, rigid))
+            }
+        };
+        Ok(Solver {
+            scene,
+            prediction,
+            shell,
+        })
+    }
+
+    /// Whether the run moved anything (else every sample is the pre-operative face).
+    fn moves(&self) -> bool {
+        self.prediction.volumetric.is_some() || self.prediction.solution.is_some()
+    }
+
+    /// The predicted face's vertices (the run's face's order) with `case`'s parameters.
+    fn solve(&self, case: &Case) -> Result<Vec<[f64; 3]>> {
+        let p = self.prediction;
+        if let Some(v) = &p.volumetric {
+            // As the run's face_post: position plus carried displacement.
+            let d = v.resolve(self.scene, case, &p.skin)?;
+            return Ok(p
+                .skin
+                .vertices
+                .iter()
+                .zip(&d)
+                .map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]])
+                .collect());
+        }
+        let (face, model) = (&self.scene.face, &self.scene.model);
+        let params = crate::pipeline::model::solve_params(case);
+        let sol = crate::solve::solve(
+            &face.skin,
+            &model.springs,
+            &model.plan,
+            &model.rigid,
+            &params,
+        )?;
+        let post = match &self.shell {
+            None => sol.positions,
+            Some((shell, e, rigid)) => {
+                let carried = shell.carry(e, &shell.deform(&sol.positions));
+                p.skin
+                    .vertices
+                    .iter()
+                    .zip(carried)
+                    .zip(rigid)
+                    .map(|((x, c), r)| if *r { *x } else { c })
+                    .collect()
+            }
+        };
+        Ok(post)
+    }
+}
