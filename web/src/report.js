@@ -171,7 +171,8 @@ function main() {
   const faceNormal = faceAfter.geometry.getAttribute("normal");
   const faceColour = faceAfter.geometry.getAttribute("color");
   const current = facePosition.array;
-  const state = { mode: "after", skull: true, colour: true, landmarks: true };
+  const state = { mode: "after", skull: true, colour: true, landmarks: true, colourBy: "displacement" };
+  const scaleTitle = el("span");
   const scaleLabel = el("span", { class: "max" });
   // Viridis sampled finely once (linear in the colour attribute as before: value / 255).
   const LUT_STEPS = 1024;
@@ -179,6 +180,8 @@ function main() {
   for (let i = 0; i <= LUT_STEPS; i++) viridis(i / LUT_STEPS).forEach((c, k) => (lut[3 * i + k] = c / 255));
   const skin = [217 / 255, 179 / 255, 140 / 255];
   const dist = new Float32Array(n);
+  // With [uncertainty] samples: the band's width p95 − p05 per vertex (the run's plan).
+  const bandWidth = data.band_width ? f32(data.band_width) : null;
 
   /** Colours, normals and the scale of the face in `current`; marks the buffers for upload. */
   function refreshFace() {
@@ -191,10 +194,13 @@ function main() {
       dist[v] = d;
       if (d > dmax) dmax = d;
     }
-    const scale = dmax > 0 ? LUT_STEPS / dmax : 0;
+    const shown = state.colourBy === "band" && bandWidth ? bandWidth : dist;
+    let smax = shown === dist ? dmax : 0;
+    if (shown !== dist) for (let v = 0; v < n; v++) smax = Math.max(smax, shown[v]);
+    const scale = smax > 0 ? LUT_STEPS / smax : 0;
     for (let v = 0, p = 0; v < n; v++, p += 3) {
       if (state.colour) {
-        const q = 3 * Math.round(dist[v] * scale);
+        const q = 3 * Math.round(shown[v] * scale);
         colours[p] = lut[q];
         colours[p + 1] = lut[q + 1];
         colours[p + 2] = lut[q + 2];
@@ -208,7 +214,8 @@ function main() {
     facePosition.needsUpdate = true;
     faceNormal.needsUpdate = true;
     faceColour.needsUpdate = true;
-    scaleLabel.textContent = `${dmax.toFixed(2)} mm`;
+    scaleLabel.textContent = `${smax.toFixed(2)} mm`;
+    scaleTitle.textContent = shown === dist ? "displacement |x_post − x_pre|" : "uncertainty band width p95 − p05 (the run's plan)";
   }
 
   // The skull after a plan: only the leading range of movable vertices is rewritten and uploaded
@@ -355,8 +362,20 @@ function main() {
   const stops = [];
   for (let i = 0; i <= 8; i++) stops.push(`rgb(${viridis(i / 8).join(",")}) ${(i / 8) * 100}%`);
   ramp.style.background = `linear-gradient(to right, ${stops.join(",")})`;
-  bar.append(el("span", {}, "displacement |x_post − x_pre|"), ramp, el("span", { class: "min" }, "0 mm"), scaleLabel);
+  bar.append(scaleTitle, ramp, el("span", { class: "min" }, "0 mm"), scaleLabel);
   side.appendChild(bar);
+  if (bandWidth) {
+    const l = el("label");
+    const c = el("input", { type: "checkbox", id: "band" });
+    c.addEventListener("change", () => {
+      state.colourBy = c.checked ? "band" : "displacement";
+      refreshFace();
+      showState();
+      render();
+    });
+    l.append(c, " colour by the uncertainty band (p95 − p05)");
+    side.appendChild(l);
+  }
 
   // ---- sliders ----
   const planBox = el("fieldset", { id: "plan" });
@@ -484,6 +503,16 @@ function main() {
       row(mt, [`${name} (${m.unit})`, fmt(m.before, 1), fmt(m.after, 1), fmt(m.change, 1)], m.missing || m.definition);
     for (const [name, r] of ratios) row(mt, [`${name} soft/hard`, fmt(r.soft_mm), fmt(r.hard_mm), fmt(r.ratio)], r.missing || "soft-tissue move / bone move (mm, ratio)");
     side.appendChild(mt);
+  }
+
+  const u = data.uncertainty;
+  if (u && u.samples > 0) {
+    side.appendChild(el("h2", {}, `uncertainty: ${u.samples} samples (the run's plan)`));
+    side.appendChild(el("p", {}, "displacement (mm): mean [5 %, 95 %] over tissue parameters drawn from their literature ranges"));
+    const ut = table(["", "mean", "5 %", "95 %"]);
+    for (const [k, b] of Object.entries(u.landmarks || {})) row(ut, [k, fmt(b.mean), fmt(b.p05), fmt(b.p95)]);
+    for (const [k, b] of Object.entries(u.regions || {})) if (b) row(ut, [k, fmt(b.mean), fmt(b.p05), fmt(b.p95)]);
+    side.appendChild(ut);
   }
 
   // ---- figures and warnings of report.json ----

@@ -57,6 +57,16 @@ try {
     api.options.cache = true;
     return out;
   }, plans);
+  // With an uncertainty band: colour by it, and back.
+  result.band_shown = await page.evaluate(() => {
+    const box = document.getElementById("band");
+    if (!box) return null;
+    box.click();
+    window.facesim.render();
+    const title = document.querySelector(".scale span").textContent;
+    box.click();
+    return title;
+  });
   // The full-resolution frame that follows a drag, drawn now rather than after its delay.
   await page.evaluate(() => window.facesim.render());
   result.canvas_final = await canvasStats(page);

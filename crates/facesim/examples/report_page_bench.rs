@@ -97,6 +97,8 @@ fn main() -> facesim::Result<()> {
         region_of: vec![],
         measurements: serde_json::Value::Null,
         ratios: serde_json::Value::Null,
+        band_width: None,
+        uncertainty: serde_json::Value::Null,
         no_basis_reason: String::new(),
     };
     write_report_html(&out, &data)?;

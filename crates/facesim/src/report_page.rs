@@ -77,6 +77,10 @@ pub struct PageData<'a> {
     /// report.json's `measurements` and `soft_hard_ratios` (the run's plan), shown as tables.
     pub measurements: serde_json::Value,
     pub ratios: serde_json::Value,
+    /// With `[uncertainty] samples > 0`: per face vertex the width p95 − p05 of the sampled
+    /// displacement magnitude (mm), and report.json's `uncertainty`.
+    pub band_width: Option<Vec<f64>>,
+    pub uncertainty: serde_json::Value,
     /// Shown instead of the sliders when there is no basis.
     pub no_basis_reason: String,
 }
@@ -107,6 +111,9 @@ pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
             "{} region indices for {n} face vertices",
             data.region_of.len()
         ));
+    }
+    if data.band_width.as_ref().is_some_and(|b| b.len() != n) {
+        return Err(format!("band widths for other than {n} face vertices"));
     }
     let mut landmarks = Vec::new();
     for l in &data.landmarks {
@@ -181,6 +188,11 @@ pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
         "region_of": base64(&data.region_of),
         "measurements": data.measurements,
         "ratios": data.ratios,
+        "band_width": data.band_width.as_ref().map(|b| {
+            let f: Vec<f32> = b.iter().map(|x| *x as f32).collect();
+            base64(&f32_bytes(&f))
+        }),
+        "uncertainty": data.uncertainty,
         "no_basis_reason": data.no_basis_reason,
     });
     // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built

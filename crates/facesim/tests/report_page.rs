@@ -154,6 +154,8 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
         region_of: vec![],
         measurements: serde_json::Value::Null,
         ratios: serde_json::Value::Null,
+        band_width: Some(face.iter().map(|p| p[0].abs() * 0.01).collect()),
+        uncertainty: serde_json::Value::Null,
         no_basis_reason: String::new(),
     };
     let dir = common::kept_dir("facesim-page-analytic");
@@ -168,6 +170,14 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
         {"maxilla": {"translate": [0.0, -5.0, 0.0], "rotate_deg": [0.0, 0.0, 0.0]}},
     ]);
     let r = drive(&dir.join("report.html"), &plans, "report-analytic.png");
+    // The uncertainty band can colour the face (no console error while it does).
+    assert!(
+        r["band_shown"]
+            .as_str()
+            .is_some_and(|t| t.contains("band width")),
+        "{}",
+        r["band_shown"]
+    );
     // Before any plan: the run's face_post (float32 in the page).
     assert!(max_diff(&flat(&r["vertices_initial"]), &face_post) < 1e-4);
     // After each plan: each vertex moved by its segment's rigid map, as osteotomy.rs moves bone.
@@ -291,6 +301,8 @@ fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
             region_of: vec![],
             measurements: serde_json::Value::Null,
             ratios: serde_json::Value::Null,
+            band_width: None,
+            uncertainty: serde_json::Value::Null,
             no_basis_reason: String::new(),
         },
     )

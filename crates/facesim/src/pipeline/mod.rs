@@ -234,9 +234,21 @@ fn finish(
     ));
     outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
     analysis.fill(&mut report);
+    // The page colours the face by the band's width (p95 − p05) on request.
+    let band_width: Option<Vec<f64>> = band
+        .as_ref()
+        .map(|b| b.bands.iter().map(|x| x.p95 - x.p05).collect());
     report.uncertainty = band.map(|b| b.report);
     let page_basis = outputs::page_basis(&prediction, case);
-    outputs::write_page(out_dir, &scene, &prediction, &report, page_basis, &analysis)?;
+    outputs::write_page(
+        out_dir,
+        &scene,
+        &prediction,
+        &report,
+        page_basis,
+        &analysis,
+        band_width.as_deref(),
+    )?;
     outputs::write_report(out_dir, &report)?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;

@@ -298,6 +298,7 @@ pub fn write_page(
     report: &Report,
     basis: Option<crate::report_page::PageBasis>,
     analysis: &crate::landmarks::Analysis,
+    band_width: Option<&[f64]>,
 ) -> Result<()> {
     let case = &scene.case;
     let skull = &scene.face.skull;
@@ -374,6 +375,8 @@ pub fn write_page(
         region_of: analysis.region_of.clone(),
         measurements: serde_json::to_value(&report.measurements).unwrap_or_default(),
         ratios: serde_json::to_value(&report.soft_hard_ratios).unwrap_or_default(),
+        band_width: band_width.map(<[f64]>::to_vec),
+        uncertainty: serde_json::to_value(&report.uncertainty).unwrap_or_default(),
         no_basis_reason: "No plan basis was stored with this run, so the page cannot re-plan: \
                           run `facesim replan` for other plans."
             .into(),
