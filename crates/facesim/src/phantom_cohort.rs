@@ -111,9 +111,7 @@ pub fn write_cohort(
         }
         csv.push('\n');
     }
-    crate::output::write_bytes_atomic(&dir.join("phantoms.csv"), |w| {
-        w.write_all(csv.as_bytes())
-    })?;
+    crate::output::write_bytes_atomic(&dir.join("phantoms.csv"), |w| w.write_all(csv.as_bytes()))?;
     Ok(cases)
 }
 

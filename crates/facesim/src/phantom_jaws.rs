@@ -297,7 +297,8 @@ fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let (dc, zc, sc, spc) = CREASE;
     let crease = dc * gauss(z - zc, sc) * gauss(phi, spc);
     let (ach, zch, sbc, sac, spch) = CHIN;
-    let chin = (ach + sh.chin_mm) * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi_l, spch);
+    let chin =
+        (ach + sh.chin_mm) * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi_l, spch);
     // Prognathism moves the lower face forward: radially by mandible_mm at the midline,
     // fading sideways (σ 0.9 rad, ~52°) where the mandible's move is tangential.
     let forward = sh.mandible_mm * lower_face_weight(z) * gauss(phi_l, 0.9);
@@ -752,7 +753,10 @@ fn standard_landmarks_with(
             "condyle right",
             [-CONDYLE[0] + ma, CONDYLE[1] - md, CONDYLE[2]],
         ),
-        ("condyle left", [CONDYLE[0] + ma, CONDYLE[1] - md, CONDYLE[2]]),
+        (
+            "condyle left",
+            [CONDYLE[0] + ma, CONDYLE[1] - md, CONDYLE[2]],
+        ),
     ]
 }
 
@@ -1026,9 +1030,7 @@ pub fn write_shaped_case(dir: &std::path::Path, opts: &JawsOptions, shape: &Shap
         crate::output::write_bytes_atomic(&dir.join(name), |w| w.write_all(text.as_bytes()))?;
     }
     let text = shape.phantom_toml();
-    crate::output::write_bytes_atomic(&dir.join("phantom.toml"), |w| {
-        w.write_all(text.as_bytes())
-    })
+    crate::output::write_bytes_atomic(&dir.join("phantom.toml"), |w| w.write_all(text.as_bytes()))
 }
 
 impl Shape {

@@ -38,15 +38,30 @@ fn landmarks_move_as_the_parameters_say() {
         let [k, soft, d, c, a] = s.values();
         // Bony landmarks: the maxilla's only scale; the mandible's move by (a, −d) and the
         // chin's projection by c (pogonion, 4 mm proud in the standard head, is at −73.5).
-        close(lm(&s, "A point"), [0.0, -70.5 * k, -4.0 * k], 1e-9, "A point");
+        close(
+            lm(&s, "A point"),
+            [0.0, -70.5 * k, -4.0 * k],
+            1e-9,
+            "A point",
+        );
         let ui = pj::landmark("upper incisor tip").unwrap();
-        close(lm(&s, "upper incisor tip"), ui.map(|v| v * k), 1e-9, "upper incisor");
+        close(
+            lm(&s, "upper incisor tip"),
+            ui.map(|v| v * k),
+            1e-9,
+            "upper incisor",
+        );
         let li = pj::landmark("lower incisor tip").unwrap();
         let li_s = [(li[0] + a) * k, (li[1] - d) * k, li[2] * k];
         close(lm(&s, "lower incisor tip"), li_s, 1e-9, "lower incisor");
         let pog = [a * k, (-73.5 - d - c) * k, -55.0 * k];
         close(lm(&s, "pogonion"), pog, 1e-3, "pogonion");
-        close(lm(&s, "menton"), [a * k, (-64.5 - d) * k, -66.0 * k], 1e-9, "menton");
+        close(
+            lm(&s, "menton"),
+            [a * k, (-64.5 - d) * k, -66.0 * k],
+            1e-9,
+            "menton",
+        );
         let cl = [(48.0 + a) * k, (7.0 - d) * k, -3.0 * k];
         close(lm(&s, "condyle left"), cl, 1e-9, "condyle left");
         // Soft tissue above the lip line: only the thickness change and the scale.
@@ -55,11 +70,20 @@ fn landmarks_move_as_the_parameters_say() {
         // Soft menton: below bony menton, as far below as in the standard head when only the
         // mandible moves (the skin under the chin moves with it).
         let me = lm(&s, "soft tissue menton");
-        close([me[0], me[1], 0.0], [pog[0], (-64.5 - d) * k, 0.0], 1e-9, "soft menton");
+        close(
+            [me[0], me[1], 0.0],
+            [pog[0], (-64.5 - d) * k, 0.0],
+            1e-9,
+            "soft menton",
+        );
     }
     // Prognathism alone moves the soft chin and lower lip forward by the same amount.
     let s = shape([1.0, 0.0, 2.0, 0.0, 0.0]);
-    for name in ["soft tissue pogonion", "labrale inferius", "soft tissue menton"] {
+    for name in [
+        "soft tissue pogonion",
+        "labrale inferius",
+        "soft tissue menton",
+    ] {
         let p = pj::landmark(name).unwrap();
         close(lm(&s, name), [p[0], p[1] - 2.0, p[2]], 2e-3, name);
     }
@@ -118,8 +142,15 @@ fn ct_shows_the_chin_and_nose_where_the_shape_puts_them() {
         let skin = edge(&v, air_skin, -140.0);
         let bone = edge(&v, soft_bone, skin);
         // The skin edge where the analytic skin is, the bone edge at pogonion.
-        assert!((skin - skin_crossing(s, pog[0], pog[2])).abs() < 0.25, "{s:?}");
-        assert!((bone - pog[1]).abs() < 0.25, "{s:?}: bone {bone} vs {}", pog[1]);
+        assert!(
+            (skin - skin_crossing(s, pog[0], pog[2])).abs() < 0.25,
+            "{s:?}"
+        );
+        assert!(
+            (bone - pog[1]).abs() < 0.25,
+            "{s:?}: bone {bone} vs {}",
+            pog[1]
+        );
         bone - skin
     };
     let standard = chin(&Shape::default());
@@ -129,14 +160,21 @@ fn ct_shows_the_chin_and_nose_where_the_shape_puts_them() {
     assert!((t - standard - 3.0).abs() < 0.3, "{t} vs {standard} + 3");
     // Scaling the head by 1.08 scales the thickness.
     let t = chin(&shape([1.08, 0.0, 0.0, 0.0, 0.0]));
-    assert!((t - 1.08 * standard).abs() < 0.3, "{t} vs 1.08 × {standard}");
+    assert!(
+        (t - 1.08 * standard).abs() < 0.3,
+        "{t} vs 1.08 × {standard}"
+    );
     for s in patients() {
         chin(&s);
         // The nose tip: the skin edge on the midline at pronasale's height.
         let prn = lm(&s, "pronasale");
         let v = line_ct(&s, 0.0, prn[2], [-140.0, -60.0]);
         let skin = edge(&v, air_skin, -150.0);
-        assert!((skin - prn[1]).abs() < 0.25, "{s:?}: nose {skin} vs {}", prn[1]);
+        assert!(
+            (skin - prn[1]).abs() < 0.25,
+            "{s:?}: nose {skin} vs {}",
+            prn[1]
+        );
     }
 }
 
@@ -152,8 +190,15 @@ fn face_scan_follows_the_shaped_skin() {
         };
         // No skin point is in front of pronasale; the scan's front vertex is next to it.
         let prn = lm(&s, "pronasale");
-        let front = scan.vertices.iter().map(|v| v[1]).fold(f64::INFINITY, f64::min);
-        assert!(front >= prn[1] - 1e-6 && front - prn[1] < 0.05, "{front} {prn:?}");
+        let front = scan
+            .vertices
+            .iter()
+            .map(|v| v[1])
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            front >= prn[1] - 1e-6 && front - prn[1] < 0.05,
+            "{front} {prn:?}"
+        );
         // The soft chin of this patient is on its scan (within half a grid step) and not on
         // the standard head's.
         let pg = lm(&s, "soft tissue pogonion");
@@ -164,7 +209,10 @@ fn face_scan_follows_the_shaped_skin() {
             .iter()
             .map(|v| (0..3).map(|k| (v[k] - pg[k]).powi(2)).sum::<f64>().sqrt())
             .fold(f64::INFINITY, f64::min);
-        assert!(off > 1.5, "{s:?}: the standard scan is {off} mm from this chin");
+        assert!(
+            off > 1.5,
+            "{s:?}: the standard scan is {off} mm from this chin"
+        );
     }
 }
 
@@ -178,7 +226,8 @@ fn plan_boxes_select_their_segment_at_the_range_extremes() {
     for s in extremes {
         s.validate().unwrap();
         let [front, back, maxilla] = s.boxes();
-        let inside = |b: &[[f64; 3]; 2], p: [f64; 3]| (0..3).all(|k| p[k] >= b[0][k] && p[k] <= b[1][k]);
+        let inside =
+            |b: &[[f64; 3]; 2], p: [f64; 3]| (0..3).all(|k| p[k] >= b[0][k] && p[k] <= b[1][k]);
         let [lo, hi] = s.fov();
         let h = s.scale;
         let n = [0, 1, 2].map(|k| ((hi[k] - lo[k]) / h) as usize);
@@ -190,7 +239,11 @@ fn plan_boxes_select_their_segment_at_the_range_extremes() {
                 let z = lo[2] + (kz as f64 + 0.5) * h;
                 for j in 0..n[1] {
                     for i in 0..n[0] {
-                        let p = [lo[0] + (i as f64 + 0.5) * h, lo[1] + (j as f64 + 0.5) * h, z];
+                        let p = [
+                            lo[0] + (i as f64 + 0.5) * h,
+                            lo[1] + (j as f64 + 0.5) * h,
+                            z,
+                        ];
                         let mandible_box = inside(&front, p) || inside(&back, p);
                         match s.piece_at(p) {
                             Some(Piece::Mandible) => {
@@ -220,6 +273,8 @@ fn plan_boxes_select_their_segment_at_the_range_extremes() {
 fn out_of_range_shapes_are_refused_naming_the_parameter() {
     let e = shape([1.0, 9.0, 0.0, 0.0, 0.0]).validate().unwrap_err();
     assert!(e.to_string().contains("soft_mm"), "{e}");
-    let e = shape([f64::NAN, 0.0, 0.0, 0.0, 0.0]).validate().unwrap_err();
+    let e = shape([f64::NAN, 0.0, 0.0, 0.0, 0.0])
+        .validate()
+        .unwrap_err();
     assert!(e.to_string().contains("scale"), "{e}");
 }
