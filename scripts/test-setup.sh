@@ -77,12 +77,14 @@ need_python_venv() {
 }
 
 # The cohort workflow's tools in the same venv (docs/cohort.md): Snakemake runs workflow/Snakefile,
-# matplotlib draws its charts. Pinned.
+# its Slurm executor plugin reads workflow/profiles/slurm (dry runs in the test), matplotlib
+# draws the charts. Pinned.
 need_cohort_tools() {
   local venv="$root/target/slicer-venv"
-  "$venv/bin/python" -c 'import snakemake, matplotlib' >/dev/null 2>&1 || {
-    "$venv/bin/pip" install -q "snakemake==9.27.1" "matplotlib==3.11.2"
-    echo "test-setup: snakemake and matplotlib in $venv"
+  "$venv/bin/python" -c 'import snakemake, snakemake_executor_plugin_slurm, matplotlib' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "snakemake==9.27.1" "snakemake-executor-plugin-slurm==2.8.0" \
+      "matplotlib==3.11.2"
+    echo "test-setup: snakemake, its Slurm plugin and matplotlib in $venv"
   }
 }
 

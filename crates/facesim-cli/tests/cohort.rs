@@ -196,6 +196,15 @@ fn cohort_workflow_runs_cases_variants_and_a_broken_case() {
     assert_eq!(count("run"), Some(6), "{plan}");
     assert_eq!(count("gather"), Some(1), "{plan}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
+    // The same workflow through the Slurm profile (dry run: no cluster here): its resources
+    // reach the jobs unchanged in the workflow.
+    let profile = root().join("workflow/profiles/slurm");
+    let slurm = run_ok(snake(&["-n"]).arg("--workflow-profile").arg(&profile));
+    assert!(
+        slurm.contains("mem_mb=6000") && slurm.contains("slurm_partition=CHANGE-ME"),
+        "{slurm}"
+    );
+    assert!(!out.exists(), "a dry run wrote {}", out.display());
     // The real run on two cores.
     let t = std::time::Instant::now();
     run_ok(&mut snake(&["--cores", "2"]));

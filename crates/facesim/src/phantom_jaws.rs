@@ -200,12 +200,12 @@ impl Shape {
     }
 
     /// A world point (LPS mm) in the standard head's frame.
-    fn to_standard(&self, p: [f64; 3]) -> [f64; 3] {
+    fn standard_of(&self, p: [f64; 3]) -> [f64; 3] {
         p.map(|c| c / self.scale)
     }
 
     /// A standard-frame point in the world.
-    fn to_world(&self, p: [f64; 3]) -> [f64; 3] {
+    fn world_of(&self, p: [f64; 3]) -> [f64; 3] {
         p.map(|c| c * self.scale)
     }
 
@@ -568,7 +568,7 @@ pub fn piece_at(p: [f64; 3]) -> Option<Piece> {
 /// The shaped head at world points (LPS mm): the standard head's functions of the same names.
 impl Shape {
     pub fn tissue_at(&self, p: [f64; 3]) -> Tissue {
-        tissue(self, self.to_standard(p))
+        tissue(self, self.standard_of(p))
     }
 
     pub fn hu_at(&self, p: [f64; 3]) -> f64 {
@@ -576,7 +576,7 @@ impl Shape {
     }
 
     pub fn piece_at(&self, p: [f64; 3]) -> Option<Piece> {
-        let q = self.to_standard(p);
+        let q = self.standard_of(p);
         match tissue(self, q) {
             Tissue::Bone | Tissue::Tooth => bone(self, q).map(|(piece, _)| piece),
             _ => None,
@@ -584,7 +584,7 @@ impl Shape {
     }
 
     pub fn in_vestibule(&self, p: [f64; 3]) -> bool {
-        vestibule(self, self.to_standard(p))
+        vestibule(self, self.standard_of(p))
     }
 
     /// The skin's distance from the z axis at angle φ and height z (world mm).
@@ -594,12 +594,12 @@ impl Shape {
 
     /// The skin point at (φ, z) (world mm).
     pub fn skin_point(&self, phi: f64, z: f64) -> [f64; 3] {
-        self.to_world(point_at(self, phi, z / self.scale))
+        self.world_of(point_at(self, phi, z / self.scale))
     }
 
     /// The field of view of `ct`: the standard one, scaled.
     pub fn fov(&self) -> [[f64; 3]; 2] {
-        [self.to_world(FOV_LO), self.to_world(FOV_HI)]
+        [self.world_of(FOV_LO), self.world_of(FOV_HI)]
     }
 }
 
@@ -638,7 +638,7 @@ impl Shape {
     pub fn landmarks(&self) -> Vec<(&'static str, [f64; 3])> {
         self.standard_landmarks()
             .into_iter()
-            .map(|(n, p)| (n, self.to_world(p)))
+            .map(|(n, p)| (n, self.world_of(p)))
             .collect()
     }
 
@@ -787,13 +787,13 @@ impl Shape {
         b[0][1][1] = split;
         b[1][0][1] = split;
         b[2][1][1] = split;
-        b.map(|bx| bx.map(|p| self.to_world(p)))
+        b.map(|bx| bx.map(|p| self.world_of(p)))
     }
 
     /// The pivot of a mandibular rotation (world mm): CONDYLAR_PIVOT moved with the mandible.
     pub fn condylar_pivot(&self) -> [f64; 3] {
         let [x, y, z] = CONDYLAR_PIVOT;
-        self.to_world([x + self.asymmetry_mm, y - self.mandible_mm, z])
+        self.world_of([x + self.asymmetry_mm, y - self.mandible_mm, z])
     }
 }
 
@@ -865,7 +865,7 @@ impl Shape {
             let z = z0 + (z1 - z0) * j as f64 / (nz - 1) as f64;
             for i in 0..nphi {
                 let phi = -phi_max + 2.0 * phi_max * i as f64 / (nphi - 1) as f64;
-                verts.push(self.to_world(point_at(self, phi, z)));
+                verts.push(self.world_of(point_at(self, phi, z)));
             }
         }
         grid_mesh(verts, nphi, nz)
@@ -898,7 +898,7 @@ fn case_text(
     model: Option<&str>,
     shape: &Shape,
 ) -> String {
-    let c = shape.to_world([0.0, -30.0, -35.0]);
+    let c = shape.world_of([0.0, -30.0, -35.0]);
     let radius = 85.0 * shape.scale;
     let mut s = format!(
         r#"# facesim phantom case with jaws: {what} (docs/phantom.md, "Jaws").
