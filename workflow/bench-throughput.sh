@@ -29,7 +29,7 @@ report() { # label seconds threads-per-run
 for threads in 1 2; do
   t0=$(now)
   for c in "$work"/cases/case*/; do
-    "$facesim" --threads "$threads" run "$c" --out "$work/single$threads/$(basename "$c")" >/dev/null 2>&1
+    "$facesim" --threads "$threads" run "$c" --set "solve.model=\"$model\"" --out "$work/single$threads/$(basename "$c")" >/dev/null 2>&1
   done
   eval "single$threads=$(awk -v a="$(now)" -v b="$t0" 'BEGIN { print a - b }')"
 done
