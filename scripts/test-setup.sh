@@ -82,9 +82,22 @@ need_python_venv() {
   }
 }
 
+# The cohort workflow's tools in the same venv (docs/cohort.md): Snakemake runs workflow/Snakefile,
+# its Slurm executor plugin reads workflow/profiles/slurm (dry runs in the test), matplotlib
+# draws the charts. Pinned.
+need_cohort_tools() {
+  local venv="$root/target/slicer-venv"
+  "$venv/bin/python" -c 'import snakemake, snakemake_executor_plugin_slurm, matplotlib' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "snakemake==9.27.1" "snakemake-executor-plugin-slurm==2.8.0" \
+      "matplotlib==3.11.2"
+    echo "test-setup: snakemake, its Slurm plugin and matplotlib in $venv"
+  }
+}
+
 need_calculix
 need_dicom_tools
 need_real_ct
 need_browser
 need_npm
 need_python_venv
+need_cohort_tools

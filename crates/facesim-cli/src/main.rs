@@ -37,6 +37,10 @@ enum Cmd {
         case_dir: PathBuf,
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Override a case key without editing case.toml (repeatable; dotted keys, TOML values,
+        /// e.g. `--set tet.sliding=false --set solve.model=equilibrium`).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
     /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
     /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
@@ -75,6 +79,33 @@ enum Cmd {
         /// lips over a vestibule, chin and nose, and four jaw plans (docs/phantom.md).
         #[arg(long, value_parser = ["capsule", "jaws"], default_value = "capsule")]
         anatomy: String,
+        #[command(flatten)]
+        shape: ShapeArgs,
+    },
+    /// Write N distinct jaws phantoms (DIR/case001, …; shapes drawn from --seed) and
+    /// DIR/phantoms.csv: a synthetic cohort for workflow/Snakefile (docs/cohort.md).
+    PhantomCohort {
+        dir: PathBuf,
+        /// Number of cases.
+        #[arg(long)]
+        cases: usize,
+        /// In-plane voxel size (mm).
+        #[arg(long, default_value_t = 2.0)]
+        spacing: f64,
+        /// Slice spacing (mm).
+        #[arg(long, default_value_t = 2.0)]
+        slice: f64,
+        /// Noise standard deviation (HU).
+        #[arg(long, default_value_t = 8.0)]
+        noise: f64,
+        /// Vertex spacing of the face scans (mm).
+        #[arg(long, default_value_t = 3.0)]
+        scan_step: f64,
+        /// `[solve] model` written into every plan (default: none, the default model).
+        #[arg(long)]
+        model: Option<String>,
+        #[command(flatten)]
+        shape: ShapeArgs,
     },
     /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
     Inspect { path: PathBuf },
@@ -141,6 +172,54 @@ enum Cmd {
     },
 }
 
+/// The jaws phantom's cohort parameters (docs/phantom.md, "Cohort parameters"): each given one
+/// is used as is; with --seed the others are drawn from their documented ranges, without it
+/// they keep the standard head's values.
+#[derive(clap::Args)]
+struct ShapeArgs {
+    /// Head size factor (everything scales about the origin; standard 1, drawn 0.92–1.08).
+    #[arg(long)]
+    scale: Option<f64>,
+    /// Soft-tissue thickness change (mm; standard 0, drawn −2..4).
+    #[arg(long)]
+    soft_mm: Option<f64>,
+    /// Mandibular prognathism (mm forward; standard 0, drawn −3..3).
+    #[arg(long)]
+    mandible_mm: Option<f64>,
+    /// Chin prominence change (mm; standard 0, drawn −2..3).
+    #[arg(long)]
+    chin_mm: Option<f64>,
+    /// Mandibular midline shift towards the patient's left (mm; standard 0, drawn −2..2).
+    #[arg(long)]
+    asymmetry_mm: Option<f64>,
+    /// Draw the parameters not given from this seed.
+    #[arg(long)]
+    seed: Option<u64>,
+}
+
+impl ShapeArgs {
+    fn given(&self) -> [Option<f64>; 5] {
+        [
+            self.scale,
+            self.soft_mm,
+            self.mandible_mm,
+            self.chin_mm,
+            self.asymmetry_mm,
+        ]
+    }
+
+    fn any(&self) -> bool {
+        self.seed.is_some() || self.given().iter().any(Option::is_some)
+    }
+
+    fn shape(&self) -> facesim::phantom_jaws::Shape {
+        match self.seed {
+            Some(s) => facesim::phantom_cohort::draw(s, self.given()),
+            None => facesim::phantom_cohort::given_or_default(self.given()),
+        }
+    }
+}
+
 /// What the command works on, for the internal-error message.
 static SUBJECT: std::sync::OnceLock<String> = std::sync::OnceLock::new();
 
@@ -173,6 +252,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let subject = match &cli.cmd {
         Cmd::Run { case_dir, .. } => Some(case_dir.display().to_string()),
+        Cmd::PhantomCohort { dir, .. } => Some(dir.display().to_string()),
         Cmd::Inspect { path } => Some(path.display().to_string()),
         Cmd::Study { out_dir, .. } => Some(format!("the study into {}", out_dir.display())),
         Cmd::Compare { a, b, .. } => Some(format!("{} and {}", a.display(), b.display())),
@@ -203,7 +283,7 @@ fn main() -> ExitCode {
 /// One line per subcommand: the work is in the `cmd_*` functions below.
 fn dispatch(cmd: Cmd) -> Result<()> {
     match cmd {
-        Cmd::Run { case_dir, out } => cmd_run(&case_dir, out.as_deref()),
+        Cmd::Run { case_dir, out, set } => cmd_run(&case_dir, out.as_deref(), &set),
         Cmd::Phantom {
             dir,
             spacing,
@@ -211,7 +291,35 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             noise,
             scan_step,
             anatomy,
-        } => cmd_phantom(&dir, spacing, slice, noise, scan_step, &anatomy),
+            shape,
+        } => {
+            let opts = phantom_options(spacing, slice, noise, scan_step)?;
+            cmd_phantom(&dir, opts, &anatomy, &shape)
+        }
+        Cmd::PhantomCohort {
+            dir,
+            cases,
+            spacing,
+            slice,
+            noise,
+            scan_step,
+            model,
+            shape,
+        } => {
+            let jaws = facesim::phantom_jaws::JawsOptions {
+                phantom: phantom_options(spacing, slice, noise, scan_step)?,
+                solve_model: model,
+            };
+            let seed = shape.seed.unwrap_or(1);
+            let written =
+                facesim::phantom_cohort::write_cohort(&dir, cases, seed, &jaws, shape.given())?;
+            println!(
+                "{} phantom cases written to {} (parameters in phantoms.csv)",
+                written.len(),
+                dir.display()
+            );
+            Ok(())
+        }
         Cmd::Inspect { path } => cmd_inspect(&path),
         Cmd::Replan { out_dir, plan, out } => {
             let r = facesim::plan::replan::replan(&out_dir, &plan, out.as_deref())?;
@@ -267,8 +375,9 @@ fn dispatch(cmd: Cmd) -> Result<()> {
     }
 }
 
-fn cmd_run(case_dir: &Path, out: Option<&Path>) -> Result<()> {
-    let o = facesim::pipeline::run(case_dir, out, &Progress::auto())?;
+fn cmd_run(case_dir: &Path, out: Option<&Path>, set: &[String]) -> Result<()> {
+    let overrides = facesim::case::overrides_table(set)?;
+    let o = facesim::pipeline::run_with(case_dir, out, &overrides, &Progress::auto())?;
     let r = &o.report;
     println!(
         "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",
@@ -284,31 +393,41 @@ fn cmd_run(case_dir: &Path, out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-fn cmd_phantom(
-    dir: &Path,
+fn phantom_options(
     spacing: f64,
     slice: f64,
     noise: f64,
     scan_step: f64,
-    anatomy: &str,
-) -> Result<()> {
+) -> Result<facesim::phantom::PhantomOptions> {
     if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
         return Err(Error::config(
             "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
         ));
     }
-    let opts = facesim::phantom::PhantomOptions {
+    Ok(facesim::phantom::PhantomOptions {
         spacing: [spacing, spacing, slice],
         noise_hu: noise,
         scan_step_mm: scan_step,
         ..Default::default()
-    };
+    })
+}
+
+fn cmd_phantom(
+    dir: &Path,
+    opts: facesim::phantom::PhantomOptions,
+    anatomy: &str,
+    shape: &ShapeArgs,
+) -> Result<()> {
     if anatomy == "jaws" {
         let jaws = facesim::phantom_jaws::JawsOptions {
             phantom: opts,
             solve_model: None,
         };
-        facesim::phantom_jaws::write_case(dir, &jaws)?;
+        facesim::phantom_jaws::write_shaped_case(dir, &jaws, &shape.shape())?;
+    } else if shape.any() {
+        return Err(Error::config(
+            "phantom: the cohort parameters (--scale, --soft-mm, --mandible-mm, --chin-mm, --asymmetry-mm, --seed) need --anatomy jaws",
+        ));
     } else {
         facesim::phantom::write_case(dir, &opts)?;
     }

@@ -560,9 +560,51 @@ fn merge(base: &mut toml::Table, over: toml::Table) {
     }
 }
 
+/// `KEY=VALUE` overrides (the CLI's `run --set tet.sliding=false`, docs/case.md) as a table to
+/// lay over a case file: a dotted key names nested tables; the value is TOML, and a bare word
+/// that is not TOML is a string (`solve.model=tet`).
+pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
+    let mut out = toml::Table::new();
+    for set in sets {
+        let Some((key, value)) = set.split_once('=') else {
+            return Err(Error::config(format!(
+                "--set {set}: expected KEY=VALUE (e.g. tet.sliding=false)"
+            )));
+        };
+        let keys: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+        if keys.iter().any(|k| k.is_empty()) {
+            return Err(Error::config(format!("--set {set}: empty key")));
+        }
+        let value = value.trim();
+        let parsed = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut table = &mut out;
+        for k in &keys[..keys.len() - 1] {
+            let entry = table
+                .entry(k.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            let toml::Value::Table(t) = entry else {
+                return Err(Error::config(format!(
+                    "--set {set}: {k} is already set to a value"
+                )));
+            };
+            table = t;
+        }
+        table.insert(keys[keys.len() - 1].to_string(), parsed);
+    }
+    Ok(out)
+}
+
 impl Case {
     /// Parse case text (as if from `path`) over the defaults.
     pub fn parse(text: &str, path: &Path) -> Result<Case> {
+        Case::parse_with(text, path, &toml::Table::new())
+    }
+
+    /// Parse case text over the defaults, then lay `overrides` (`overrides_table`) on top.
+    pub fn parse_with(text: &str, path: &Path, overrides: &toml::Table) -> Result<Case> {
         let mut base: toml::Table = toml::from_str(DEFAULTS_TOML)
             .map_err(|e| Error::config(format!("pipeline/defaults.toml: {e}")))?;
         let mut over: toml::Table =
@@ -571,6 +613,7 @@ impl Case {
         let dir = path.parent().unwrap_or(Path::new(""));
         crate::slicer::resolve_plan_files(&mut over, dir, path)?;
         merge(&mut base, over);
+        merge(&mut base, overrides.clone());
         let case: Case = toml::Value::Table(base)
             .try_into()
             .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
@@ -580,6 +623,11 @@ impl Case {
 
     /// Load `CASE_DIR/case.toml` (or a .toml file given directly), resolving paths.
     pub fn load(case: &Path) -> Result<(Case, PathBuf)> {
+        Case::load_with(case, &toml::Table::new())
+    }
+
+    /// `load` with `overrides` laid over the case file.
+    pub fn load_with(case: &Path, overrides: &toml::Table) -> Result<(Case, PathBuf)> {
         let (file, dir) = if case.is_dir() {
             (case.join("case.toml"), case.to_path_buf())
         } else {
@@ -589,13 +637,23 @@ impl Case {
             )
         };
         let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
-        Ok((Case::from_text(&text, &file, &dir)?, dir))
+        Ok((Case::from_text_with(&text, &file, &dir, overrides)?, dir))
     }
 
     /// Parse case text as if read from `file`, resolving relative paths against `dir` (what
     /// [`Case::load`] does after reading the file; bindings use it for a case given as a table).
     pub fn from_text(text: &str, file: &Path, dir: &Path) -> Result<Case> {
-        let mut c = Case::parse(text, file)?;
+        Case::from_text_with(text, file, dir, &toml::Table::new())
+    }
+
+    /// [`Case::from_text`] with `overrides` laid over the text.
+    pub fn from_text_with(
+        text: &str,
+        file: &Path,
+        dir: &Path,
+        overrides: &toml::Table,
+    ) -> Result<Case> {
+        let mut c = Case::parse_with(text, file, overrides)?;
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {
                 *p = dir.join(&*p);

@@ -28,6 +28,7 @@ pub mod observe;
 pub mod osteotomy;
 pub mod output;
 pub mod phantom;
+pub mod phantom_cohort;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;

@@ -116,6 +116,105 @@ const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
 pub const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
 pub const FOV_HI: [f64; 3] = [92.0, 90.0, 40.0];
 
+/// One synthetic patient: how a jaws phantom differs from the standard head (docs/phantom.md,
+/// "Cohort parameters"). `Shape::default()` is the standard head. Lengths are mm of the
+/// standard head, before `scale`. The geometry below is written for the standard frame; a
+/// shaped head evaluates it at p / scale with the mandible's parts moved by
+/// (asymmetry_mm, −mandible_mm, 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shape {
+    /// Head size: every point, the field of view and the plans' regions scale about the origin.
+    pub scale: f64,
+    /// Soft-tissue thickness: the skin surface moves out (+) or in (−) by this much everywhere.
+    pub soft_mm: f64,
+    /// Mandibular prognathism: the mandible with its teeth, the lower vestibule and the skin of
+    /// the lower face (below the lip line) sit this much anterior (+, towards −y) or posterior.
+    pub mandible_mm: f64,
+    /// Chin prominence: added to the bony chin's projection (4 mm) and to the skin chin's.
+    pub chin_mm: f64,
+    /// Mandibular midline shift towards the patient's left (+x): the mandible, the lower
+    /// vestibule and the lower face's skin (by an angle asymmetry_mm / 85 mm about the axis).
+    pub asymmetry_mm: f64,
+}
+
+impl Default for Shape {
+    fn default() -> Shape {
+        Shape {
+            scale: 1.0,
+            soft_mm: 0.0,
+            mandible_mm: 0.0,
+            chin_mm: 0.0,
+            asymmetry_mm: 0.0,
+        }
+    }
+}
+
+/// The accepted range of each shape parameter: (name as in phantom.toml and the CLI, min, max).
+/// Inside them the three bone pieces stay separate, every plan's boxes still select exactly
+/// their segment and the skin stays inside the field of view (docs/phantom.md).
+pub const SHAPE_RANGES: [(&str, f64, f64); 5] = [
+    ("scale", 0.8, 1.2),
+    ("soft_mm", -3.0, 5.0),
+    ("mandible_mm", -4.0, 4.0),
+    ("chin_mm", -3.0, 4.0),
+    ("asymmetry_mm", -4.0, 4.0),
+];
+
+/// The radius (mm) at which the lower face's skin features sit: asymmetry_mm / this is their
+/// angular shift, so the skin chin moves about asymmetry_mm sideways with the bony chin.
+const R_LOWER_FACE: f64 = 85.0;
+
+impl Shape {
+    /// The parameters in SHAPE_RANGES order.
+    pub fn values(&self) -> [f64; 5] {
+        [
+            self.scale,
+            self.soft_mm,
+            self.mandible_mm,
+            self.chin_mm,
+            self.asymmetry_mm,
+        ]
+    }
+
+    /// The shape with the parameters in SHAPE_RANGES order.
+    pub fn from_values(v: [f64; 5]) -> Shape {
+        Shape {
+            scale: v[0],
+            soft_mm: v[1],
+            mandible_mm: v[2],
+            chin_mm: v[3],
+            asymmetry_mm: v[4],
+        }
+    }
+
+    /// Refuse a parameter outside its SHAPE_RANGES range, naming it.
+    pub fn validate(&self) -> Result<()> {
+        for ((name, lo, hi), v) in SHAPE_RANGES.iter().zip(self.values()) {
+            if !(v >= *lo && v <= *hi) {
+                return Err(Error::config(format!(
+                    "phantom shape: {name} = {v} is outside [{lo}, {hi}]"
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// A world point (LPS mm) in the standard head's frame.
+    fn standard_of(&self, p: [f64; 3]) -> [f64; 3] {
+        p.map(|c| c / self.scale)
+    }
+
+    /// A standard-frame point in the world.
+    fn world_of(&self, p: [f64; 3]) -> [f64; 3] {
+        p.map(|c| c * self.scale)
+    }
+
+    /// A standard-frame (x, y) in the mandible's own frame (undoing its shift).
+    fn mandible_xy(&self, x: f64, y: f64) -> (f64, f64) {
+        (x - self.asymmetry_mm, y + self.mandible_mm)
+    }
+}
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tissue {
     Air,
@@ -167,25 +266,53 @@ const LOWER_LIP: (f64, f64, f64, f64) = (5.8, -31.0, 9.0, 0.25); // amp, z, half
 const CREASE: (f64, f64, f64, f64) = (2.5, -21.0, 1.5, 0.3); // depth, z, σ_z, σ_φ
 const CHIN: (f64, f64, f64, f64, f64) = (10.8, -56.0, 11.0, 7.5, 0.35); // amp, z, σ below, σ above, σ_φ
 
+/// How much of the mandible's shift the skin at height z follows: 0 above the lip crease
+/// (stomion), 1 from the lower lip down.
+fn lower_face_weight(z: f64) -> f64 {
+    step_down(z, CREASE.1, LOWER_LIP.1)
+}
+
+/// The angle (rad) by which the lower face's skin features turn with the midline shift.
+fn lower_face_turn(sh: &Shape, z: f64) -> f64 {
+    lower_face_weight(z) * sh.asymmetry_mm / R_LOWER_FACE
+}
+
 /// The skin surface: distance from the z axis at angle φ (from −y towards +x) and height z.
 pub fn skin_radius(phi: f64, z: f64) -> f64 {
+    radius(&Shape::default(), phi, z)
+}
+
+/// The skin radius of a shaped head in its standard frame: the standard surface plus the
+/// soft-tissue change everywhere, the lower lip and chin turned by the midline shift, the chin
+/// grown by chin_mm, and the lower face moved forward by mandible_mm (fading out sideways).
+fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let (an, zn, sb, sa, sp) = NOSE;
     let nose = an * gauss(z - zn, if z < zn { sb } else { sa }) * gauss(phi, sp);
     let (au, zu, wu, spu) = UPPER_LIP;
     let (av, zv, sv) = VERMILION;
     let upper = (au * (-((z - zu) / wu).powi(8)).exp() + av * gauss(z - zv, sv)) * gauss(phi, spu);
     let (al, zl, wl, spl) = LOWER_LIP;
-    let lower = al * (-((z - zl) / wl).powi(4)).exp() * gauss(phi, spl);
+    let phi_l = phi - lower_face_turn(sh, z);
+    let lower = al * (-((z - zl) / wl).powi(4)).exp() * gauss(phi_l, spl);
     let (dc, zc, sc, spc) = CREASE;
     let crease = dc * gauss(z - zc, sc) * gauss(phi, spc);
     let (ach, zch, sbc, sac, spch) = CHIN;
-    let chin = ach * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi, spch);
-    envelope(phi, z) + nose + upper + lower - crease + chin
+    let chin =
+        (ach + sh.chin_mm) * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi_l, spch);
+    // Prognathism moves the lower face forward: radially by mandible_mm at the midline,
+    // fading sideways (σ 0.9 rad, ~52°) where the mandible's move is tangential.
+    let forward = sh.mandible_mm * lower_face_weight(z) * gauss(phi_l, 0.9);
+    envelope(phi, z) + sh.soft_mm + nose + upper + lower - crease + chin + forward
 }
 
 /// The skin point at (φ, z).
 pub fn skin_point(phi: f64, z: f64) -> [f64; 3] {
-    let r = skin_radius(phi, z);
+    point_at(&Shape::default(), phi, z)
+}
+
+/// The skin point at (φ, z) of a shaped head, in its standard frame.
+fn point_at(sh: &Shape, phi: f64, z: f64) -> [f64; 3] {
+    let r = radius(sh, phi, z);
     [r * phi.sin(), -r * phi.cos(), z]
 }
 
@@ -249,6 +376,11 @@ fn in_crown(bounds: &[f64; 8], t: f64, n: f64, z: f64, edge: f64, cej: f64) -> b
 
 /// Which bone piece contains p, and whether it is a tooth there.
 pub fn bone_at(p: [f64; 3]) -> Option<(Piece, bool)> {
+    bone(&Shape::default(), p)
+}
+
+/// `bone_at` of a shaped head, in its standard frame.
+fn bone(sh: &Shape, p: [f64; 3]) -> Option<(Piece, bool)> {
     let [x, y, z] = p;
     if z >= Z_SKULL_BASE {
         let rho = (x * x + y * y).sqrt();
@@ -266,13 +398,16 @@ pub fn bone_at(p: [f64; 3]) -> Option<(Piece, bool)> {
             return Some((Piece::Maxilla, true));
         }
     }
+    // The lower teeth and the mandible in their own (shifted) frame.
+    let (x, y) = sh.mandible_xy(x, y);
+    let arches = x.abs() <= 33.0 && y <= MAXILLA_Y_MAX;
     if arches && (Z_LOWER_CEJ..=Z_LOWER_EDGE).contains(&z) {
         let (t, n) = arch(ARCH_LOWER, x, y);
         if in_crown(lower_bounds(), t, n, z, Z_LOWER_EDGE, Z_LOWER_CEJ) {
             return Some((Piece::Mandible, true));
         }
     }
-    mandible(x, y, z).then_some((Piece::Mandible, false))
+    mandible(sh.chin_mm, x, y, z).then_some((Piece::Mandible, false))
 }
 
 fn midline_weight(t: f64, width: f64) -> f64 {
@@ -293,10 +428,12 @@ fn maxilla(x: f64, y: f64, z: f64) -> bool {
     alveolar || palate
 }
 
-/// The labial face of the symphysis and body, n_l(t, z): the chin and the B-point dip.
-fn mandible_front(t: f64, z: f64) -> f64 {
+/// The labial face of the symphysis and body, n_l(t, z): the chin (4 mm + `chin_mm` proud of
+/// the arch line) and the B-point dip.
+fn mandible_front(chin_mm: f64, t: f64, z: f64) -> f64 {
     let w = midline_weight(t, 0.45);
-    (4.0 * (-((z - Z_POGONION) / 7.0).powi(2)).exp() - 1.5 * (-((z - Z_B_DIP) / 4.0).powi(2)).exp())
+    ((4.0 + chin_mm) * (-((z - Z_POGONION) / 7.0).powi(2)).exp()
+        - 1.5 * (-((z - Z_B_DIP) / 4.0).powi(2)).exp())
         * w
 }
 
@@ -304,7 +441,8 @@ fn in_box(b: &[[f64; 2]; 3], p: [f64; 3]) -> bool {
     (0..3).all(|a| p[a] >= b[a][0] && p[a] <= b[a][1])
 }
 
-fn mandible(x: f64, y: f64, z: f64) -> bool {
+/// The mandible in its own frame, with the chin `chin_mm` more prominent.
+fn mandible(chin_mm: f64, x: f64, y: f64, z: f64) -> bool {
     if !(Z_MENTON - 1.0..=CONDYLE[2] + CONDYLE_AXES[2]).contains(&z) {
         return false;
     }
@@ -312,7 +450,7 @@ fn mandible(x: f64, y: f64, z: f64) -> bool {
     if y <= Y_ARCH && z <= Z_LOWER_CEJ {
         let (t, n) = arch(ARCH_LOWER, x, y);
         let bottom = Z_MENTON + 12.0 * (1.0 - t.cos()) + (n - N_MENTON).powi(2) / 20.0;
-        if n >= -BODY_MM && n <= mandible_front(t, z) && z >= bottom {
+        if n >= -BODY_MM && n <= mandible_front(chin_mm, t, z) && z >= bottom {
             return true;
         }
     }
@@ -345,13 +483,22 @@ fn mandible(x: f64, y: f64, z: f64) -> bool {
 
 /// Is p in the vestibule (the air between the lips and the teeth and alveolar bone)?
 pub fn in_vestibule(p: [f64; 3]) -> bool {
+    vestibule(&Shape::default(), p)
+}
+
+/// `in_vestibule` of a shaped head, in its standard frame: the part along the lower arch moves
+/// with the mandible.
+fn vestibule(sh: &Shape, p: [f64; 3]) -> bool {
     let [x, y, z] = p;
-    // Cheap bounds first: the vestibule lies in front of y = −35, within |x| < 35.
-    if !(Z_SULCUS_LOWER..=Z_SULCUS_UPPER).contains(&z) || y > -35.0 || x.abs() > 35.0 {
+    let (xl, yl) = sh.mandible_xy(x, y);
+    // Cheap bounds first: the vestibule lies in front of y = −35, within |x| < 35 (of either
+    // jaw's frame).
+    let near = |x: f64, y: f64| y <= -35.0 && x.abs() <= 35.0;
+    if !(Z_SULCUS_LOWER..=Z_SULCUS_UPPER).contains(&z) || !(near(x, y) || near(xl, yl)) {
         return false;
     }
     let (tu, nu) = arch(ARCH_UPPER, x, y);
-    let (tl, nl) = arch(ARCH_LOWER, x, y);
+    let (tl, nl) = arch(ARCH_LOWER, xl, yl);
     if z > Z_UPPER_EDGE {
         tu.abs() <= VESTIBULE_T_MAX && nu > 0.0 && nu <= VESTIBULE_MM
     } else if z >= Z_LOWER_EDGE {
@@ -365,23 +512,28 @@ pub fn in_vestibule(p: [f64; 3]) -> bool {
 /// Exact tissue at p (LPS mm). Precedence: outside air, skin, vestibule, bone and teeth,
 /// brain, fat, soft tissue.
 pub fn tissue_at(p: [f64; 3]) -> Tissue {
+    tissue(&Shape::default(), p)
+}
+
+/// `tissue_at` of a shaped head, in its standard frame.
+fn tissue(sh: &Shape, p: [f64; 3]) -> Tissue {
     let [x, y, z] = p;
     let rho = (x * x + y * y).sqrt();
-    if rho > MAX_SKIN_RADIUS {
+    if rho > MAX_SKIN_RADIUS + sh.soft_mm.max(0.0) {
         return Tissue::Air;
     }
     let phi = x.atan2(-y);
-    let r = skin_radius(phi, z);
+    let r = radius(sh, phi, z);
     if rho >= r {
         return Tissue::Air;
     }
     if rho >= r - SKIN_MM {
         return Tissue::Skin;
     }
-    if in_vestibule(p) {
+    if vestibule(sh, p) {
         return Tissue::Air;
     }
-    if let Some((_, tooth)) = bone_at(p) {
+    if let Some((_, tooth)) = bone(sh, p) {
         return if tooth { Tissue::Tooth } else { Tissue::Bone };
     }
     if z >= Z_BRAIN && rho < R_BRAIN {
@@ -394,7 +546,11 @@ pub fn tissue_at(p: [f64; 3]) -> Tissue {
 }
 
 pub fn hu_at(p: [f64; 3]) -> f64 {
-    match tissue_at(p) {
+    Shape::default().hu_at(p)
+}
+
+fn hu_of(t: Tissue) -> f64 {
+    match t {
         Tissue::Air => HU_AIR,
         Tissue::Skin | Tissue::Soft => HU_SOFT,
         Tissue::Fat => HU_FAT,
@@ -406,9 +562,44 @@ pub fn hu_at(p: [f64; 3]) -> f64 {
 
 /// The bone piece at p, if p is bone or tooth (and not in the skin or the vestibule).
 pub fn piece_at(p: [f64; 3]) -> Option<Piece> {
-    match tissue_at(p) {
-        Tissue::Bone | Tissue::Tooth => bone_at(p).map(|(piece, _)| piece),
-        _ => None,
+    Shape::default().piece_at(p)
+}
+
+/// The shaped head at world points (LPS mm): the standard head's functions of the same names.
+impl Shape {
+    pub fn tissue_at(&self, p: [f64; 3]) -> Tissue {
+        tissue(self, self.standard_of(p))
+    }
+
+    pub fn hu_at(&self, p: [f64; 3]) -> f64 {
+        hu_of(self.tissue_at(p))
+    }
+
+    pub fn piece_at(&self, p: [f64; 3]) -> Option<Piece> {
+        let q = self.standard_of(p);
+        match tissue(self, q) {
+            Tissue::Bone | Tissue::Tooth => bone(self, q).map(|(piece, _)| piece),
+            _ => None,
+        }
+    }
+
+    pub fn in_vestibule(&self, p: [f64; 3]) -> bool {
+        vestibule(self, self.standard_of(p))
+    }
+
+    /// The skin's distance from the z axis at angle φ and height z (world mm).
+    pub fn skin_radius(&self, phi: f64, z: f64) -> f64 {
+        self.scale * radius(self, phi, z / self.scale)
+    }
+
+    /// The skin point at (φ, z) (world mm).
+    pub fn skin_point(&self, phi: f64, z: f64) -> [f64; 3] {
+        self.world_of(point_at(self, phi, z / self.scale))
+    }
+
+    /// The field of view of `ct`: the standard one, scaled.
+    pub fn fov(&self) -> [[f64; 3]; 2] {
+        [self.world_of(FOV_LO), self.world_of(FOV_HI)]
     }
 }
 
@@ -427,10 +618,6 @@ fn argmax(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     0.5 * (a + b)
 }
 
-fn midline_skin(z: f64) -> [f64; 3] {
-    skin_point(0.0, z)
-}
-
 /// Named landmarks (LPS mm), from the defining functions: soft-tissue points on the midline
 /// skin profile ρ = R_s(0, z) (pronasale its most anterior point above the lips, subnasale and
 /// stomion the deepest points between nose and upper lip and between the lips, labrale
@@ -441,33 +628,85 @@ fn midline_skin(z: f64) -> [f64; 3] {
 /// lowest), the incisal-edge midpoints of the right central incisors and of the upper canines
 /// (their cusp tips), and the condyle centres.
 pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
-    let r = |z: f64| skin_radius(0.0, z);
+    Shape::default().landmarks()
+}
+
+impl Shape {
+    /// `landmarks()` of the shaped head (world mm). The soft-tissue points lie on the skin
+    /// profile that follows the lower face's turn (the midline above the lip crease), the
+    /// mandible's points move with it, and everything scales.
+    pub fn landmarks(&self) -> Vec<(&'static str, [f64; 3])> {
+        self.standard_landmarks()
+            .into_iter()
+            .map(|(n, p)| (n, self.world_of(p)))
+            .collect()
+    }
+
+    /// The landmark called `name` (world mm).
+    pub fn landmark(&self, name: &str) -> Option<[f64; 3]> {
+        self.landmarks()
+            .into_iter()
+            .find(|(n, _)| *n == name)
+            .map(|(_, p)| p)
+    }
+
+    fn standard_landmarks(&self) -> Vec<(&'static str, [f64; 3])> {
+        let sh = self;
+        let turn = |z: f64| lower_face_turn(sh, z);
+        let r = |z: f64| radius(sh, turn(z), z);
+        let midline_skin = |z: f64| point_at(sh, turn(z), z);
+        let (ma, md, chin) = (sh.asymmetry_mm, sh.mandible_mm, sh.chin_mm);
+        standard_landmarks_with(r, midline_skin, ma, md, chin, |p| {
+            let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
+            rho < radius(sh, p[0].atan2(-p[1]), p[2])
+        })
+    }
+}
+
+/// The landmarks' definitions in the standard frame: `r(z)` the skin profile's radius,
+/// `profile(z)` its point, the mandible shifted by (ma, −md, 0) with its chin `chin` mm more
+/// prominent, `inside(p)` whether p is inside the skin.
+fn standard_landmarks_with(
+    r: impl Fn(f64) -> f64,
+    midline_skin: impl Fn(f64) -> [f64; 3],
+    ma: f64,
+    md: f64,
+    chin: f64,
+    inside: impl Fn([f64; 3]) -> bool,
+) -> Vec<(&'static str, [f64; 3])> {
+    let r = &r;
     let prn = argmax(r, 0.0, 35.0);
     let ls = argmax(r, -18.0, -2.0);
     let sn = argmax(|z| -r(z), ls, prn);
     let li = argmax(r, -38.0, -24.0);
     let sto = argmax(|z| -r(z), li, ls);
     let pg_soft = argmax(r, -65.0, -45.0);
-    let yl = |n: f64| Y_ARCH - ARCH_LOWER[1] - n;
-    let pog = argmax(|z| mandible_front(0.0, z), -62.0, -48.0);
-    let b = argmax(|z| -mandible_front(0.0, z), pog, Z_LOWER_CEJ);
+    let yl = |n: f64| Y_ARCH - ARCH_LOWER[1] - n - md;
+    let front = |z: f64| mandible_front(chin, 0.0, z);
+    let pog = argmax(front, -62.0, -48.0);
+    let b = argmax(|z| -front(z), pog, Z_LOWER_CEJ);
     let a = Z_A_POINT;
     let a_n = -1.5;
-    let menton = [0.0, yl(N_MENTON), Z_MENTON];
-    // Soft menton: the skin crossing below menton on its vertical line (bisection on ρ).
-    let rho_me = -menton[1];
-    let (mut lo, mut hi) = (-100.0, Z_MENTON);
+    let menton = [ma, yl(N_MENTON), Z_MENTON];
+    // Soft menton: the skin crossing below menton on its vertical line: step down out of the
+    // skin, then bisect.
+    let at = |z: f64| [menton[0], menton[1], z];
+    let mut lo = Z_MENTON;
+    while inside(at(lo)) && lo > FOV_LO[2] {
+        lo -= 0.5;
+    }
+    let mut hi = Z_MENTON;
     for _ in 0..100 {
         let m = 0.5 * (lo + hi);
-        if r(m) > rho_me {
+        if inside(at(m)) {
             hi = m;
         } else {
             lo = m;
         }
     }
-    let me_soft = [0.0, menton[1], 0.5 * (lo + hi)];
+    let me_soft = at(0.5 * (lo + hi));
     // The middle of tooth k's incisal edge, on the right (x < 0, side = −1) or left.
-    let tip = |ab: [f64; 2], bounds: &[f64; 8], z: f64, k: usize, side: f64| {
+    let tip = |ab: [f64; 2], bounds: &[f64; 8], z: f64, k: usize, side: f64, shift: [f64; 2]| {
         let t = side * 0.5 * (bounds[k] + bounds[k + 1]);
         let n = -0.5 * EDGE_THICKNESS;
         let (u, v) = (t.sin(), t.cos());
@@ -475,8 +714,13 @@ pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
         let p = [ab[0] * u, Y_ARCH - ab[1] * v];
         let g = [u / ab[0], v / ab[1]];
         let gl = (g[0] * g[0] + g[1] * g[1]).sqrt();
-        [p[0] + n * g[0] / gl, p[1] - n * g[1] / gl, z]
+        [
+            p[0] + n * g[0] / gl + shift[0],
+            p[1] - n * g[1] / gl + shift[1],
+            z,
+        ]
     };
+    let (fixed, moved) = ([0.0, 0.0], [ma, -md]);
     vec![
         ("pronasale", midline_skin(prn)),
         ("subnasale", midline_skin(sn)),
@@ -486,27 +730,33 @@ pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
         ("soft tissue pogonion", midline_skin(pg_soft)),
         ("soft tissue menton", me_soft),
         ("A point", [0.0, Y_ARCH - ARCH_UPPER[1] - a_n, a]),
-        ("B point", [0.0, yl(mandible_front(0.0, b)), b]),
-        ("pogonion", [0.0, yl(mandible_front(0.0, pog)), pog]),
+        ("B point", [ma, yl(front(b)), b]),
+        ("pogonion", [ma, yl(front(pog)), pog]),
         ("menton", menton),
         (
             "upper incisor tip",
-            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 0, -1.0),
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 0, -1.0, fixed),
         ),
         (
             "lower incisor tip",
-            tip(ARCH_LOWER, lower_bounds(), Z_LOWER_EDGE, 0, -1.0),
+            tip(ARCH_LOWER, lower_bounds(), Z_LOWER_EDGE, 0, -1.0, moved),
         ),
         (
             "upper canine right",
-            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, -1.0),
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, -1.0, fixed),
         ),
         (
             "upper canine left",
-            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, 1.0),
+            tip(ARCH_UPPER, upper_bounds(), Z_UPPER_EDGE, 2, 1.0, fixed),
         ),
-        ("condyle right", [-CONDYLE[0], CONDYLE[1], CONDYLE[2]]),
-        ("condyle left", CONDYLE),
+        (
+            "condyle right",
+            [-CONDYLE[0] + ma, CONDYLE[1] - md, CONDYLE[2]],
+        ),
+        (
+            "condyle left",
+            [CONDYLE[0] + ma, CONDYLE[1] - md, CONDYLE[2]],
+        ),
     ]
 }
 
@@ -525,6 +775,27 @@ pub fn landmark(name: &str) -> Option<[f64; 3]> {
 pub const MANDIBLE_FRONT_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, -110.0], [90.0, -11.0, Z_OCCLUSAL]];
 pub const MANDIBLE_BACK_BOX: [[f64; 3]; 2] = [[-90.0, -11.0, -110.0], [90.0, 90.0, 3.0]];
 pub const MAXILLA_BOX: [[f64; 3]; 2] = [[-90.0, -120.0, Z_OCCLUSAL], [90.0, -11.0, 3.0]];
+
+impl Shape {
+    /// The plans' boxes of the shaped head (world mm): MANDIBLE_FRONT_BOX, MANDIBLE_BACK_BOX and
+    /// MAXILLA_BOX, their front/back split at y = −11 moved back to midway between the maxilla
+    /// (y ≤ −13.5) and the rami when a prognathic mandible brings the rami (y ≥ −8) forward
+    /// of −10.5, then scaled.
+    pub fn boxes(&self) -> [[[f64; 3]; 2]; 3] {
+        let split = (-11.0f64).min(0.5 * (MAXILLA_Y_MAX + RAMUS[1][0] - self.mandible_mm));
+        let mut b = [MANDIBLE_FRONT_BOX, MANDIBLE_BACK_BOX, MAXILLA_BOX];
+        b[0][1][1] = split;
+        b[1][0][1] = split;
+        b[2][1][1] = split;
+        b.map(|bx| bx.map(|p| self.world_of(p)))
+    }
+
+    /// The pivot of a mandibular rotation (world mm): CONDYLAR_PIVOT moved with the mandible.
+    pub fn condylar_pivot(&self) -> [f64; 3] {
+        let [x, y, z] = CONDYLAR_PIVOT;
+        self.world_of([x + self.asymmetry_mm, y - self.mandible_mm, z])
+    }
+}
 
 /// Exact volumes (mm³) of the bone pieces inside the box [lo, hi], teeth included, by midpoint
 /// quadrature of `piece_at` on a grid of step `h`.
@@ -555,7 +826,7 @@ pub fn piece_volumes(lo: [f64; 3], hi: [f64; 3], h: f64) -> [f64; 3] {
 
 /// The CT of the box [lo, hi].
 pub fn ct_box(opts: &PhantomOptions, lo: [f64; 3], hi: [f64; 3]) -> Volume {
-    sample_ct(lo, hi, opts, hu_at)
+    Shape::default().ct_box(opts, lo, hi)
 }
 
 /// The phantom CT over the default field of view.
@@ -566,19 +837,39 @@ pub fn ct(opts: &PhantomOptions) -> Volume {
 /// A face scan of the analytic skin: a (φ, z) grid, φ ∈ ±100°, z from below the chin (−85) to
 /// the top of the field of view.
 pub fn face_scan(step_mm: f64) -> Mesh {
-    let phi_max = 100f64.to_radians();
-    let nphi = ((2.0 * phi_max * 80.0) / step_mm).round() as usize + 1;
-    let (z0, z1) = (-85.0, FOV_HI[2]);
-    let nz = ((z1 - z0) / step_mm).round() as usize + 1;
-    let mut verts = Vec::with_capacity(nphi * nz);
-    for j in 0..nz {
-        let z = z0 + (z1 - z0) * j as f64 / (nz - 1) as f64;
-        for i in 0..nphi {
-            let phi = -phi_max + 2.0 * phi_max * i as f64 / (nphi - 1) as f64;
-            verts.push(skin_point(phi, z));
-        }
+    Shape::default().face_scan(step_mm)
+}
+
+impl Shape {
+    /// The shaped head's CT of the box [lo, hi] (world mm).
+    pub fn ct_box(&self, opts: &PhantomOptions, lo: [f64; 3], hi: [f64; 3]) -> Volume {
+        sample_ct(lo, hi, opts, |p| self.hu_at(p))
     }
-    grid_mesh(verts, nphi, nz)
+
+    /// The shaped head's CT over its field of view.
+    pub fn ct(&self, opts: &PhantomOptions) -> Volume {
+        let [lo, hi] = self.fov();
+        self.ct_box(opts, lo, hi)
+    }
+
+    /// `face_scan` of the shaped head: the same (φ, z) grid, scaled, `step_mm` apart in the
+    /// world.
+    pub fn face_scan(&self, step_mm: f64) -> Mesh {
+        let step = step_mm / self.scale;
+        let phi_max = 100f64.to_radians();
+        let nphi = ((2.0 * phi_max * 80.0) / step).round() as usize + 1;
+        let (z0, z1) = (-85.0, FOV_HI[2]);
+        let nz = ((z1 - z0) / step).round() as usize + 1;
+        let mut verts = Vec::with_capacity(nphi * nz);
+        for j in 0..nz {
+            let z = z0 + (z1 - z0) * j as f64 / (nz - 1) as f64;
+            for i in 0..nphi {
+                let phi = -phi_max + 2.0 * phi_max * i as f64 / (nphi - 1) as f64;
+                verts.push(self.world_of(point_at(self, phi, z)));
+            }
+        }
+        grid_mesh(verts, nphi, nz)
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -605,7 +896,10 @@ fn case_text(
     what: &str,
     segments: &[(&str, [[f64; 3]; 2], String)],
     model: Option<&str>,
+    shape: &Shape,
 ) -> String {
+    let c = shape.world_of([0.0, -30.0, -35.0]);
+    let radius = 85.0 * shape.scale;
     let mut s = format!(
         r#"# facesim phantom case with jaws: {what} (docs/phantom.md, "Jaws").
 name = "{name}"
@@ -619,8 +913,9 @@ path = "face.ply"
 [surface]
 alpha = 0.01
 beta = 0.02
-movable = {{ sphere = {{ center = [0.0, -30.0, -35.0], radius = 85.0 }} }}
-"#
+movable = {{ sphere = {{ center = [{:.1}, {:.1}, {:.1}], radius = {radius:.1} }} }}
+"#,
+        c[0], c[1], c[2]
     );
     for (n, b, m) in segments {
         s.push_str(&osteotomy(n, *b, m));
@@ -633,8 +928,21 @@ movable = {{ sphere = {{ center = [0.0, -30.0, -35.0], radius = 85.0 }} }}
 
 /// The four plans: (file name, text).
 pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
+    Shape::default().case_files(model)
+}
+
+impl Shape {
+    /// The four plans of the shaped head, on its boxes and pivot (the moves in mm as for the
+    /// standard head): (file name, text).
+    pub fn case_files(&self, model: Option<&str>) -> Vec<(&'static str, String)> {
+        case_files_of(self, model)
+    }
+}
+
+fn case_files_of(shape: &Shape, model: Option<&str>) -> Vec<(&'static str, String)> {
+    let [front, back, maxilla] = shape.boxes();
     let tr = |d: [f64; 3]| format!("translate = [{:.1}, {:.1}, {:.1}]", d[0], d[1], d[2]);
-    let p = CONDYLAR_PIVOT;
+    let p = shape.condylar_pivot();
     let rot = format!(
         "rotate_deg = [-5.0, 0.0, 0.0]\npivot = [{:.1}, {:.1}, {:.1}]",
         p[0], p[1], p[2]
@@ -649,10 +957,11 @@ pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
                 "phantom-jaws-mandible-advance-5mm",
                 "mandibular advancement 5 mm",
                 &[
-                    ("mandible", MANDIBLE_FRONT_BOX, tr([0.0, -5.0, 0.0])),
-                    ("mandible_rami", MANDIBLE_BACK_BOX, tr([0.0, -5.0, 0.0])),
+                    ("mandible", front, tr([0.0, -5.0, 0.0])),
+                    ("mandible_rami", back, tr([0.0, -5.0, 0.0])),
                 ],
                 model,
+                shape,
             ),
         ),
         (
@@ -661,10 +970,11 @@ pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
                 "phantom-jaws-mandible-setback-4mm",
                 "mandibular setback 4 mm",
                 &[
-                    ("mandible_rami", MANDIBLE_BACK_BOX, tr([0.0, 4.0, 0.0])),
-                    ("mandible", MANDIBLE_FRONT_BOX, tr([0.0, 4.0, 0.0])),
+                    ("mandible_rami", back, tr([0.0, 4.0, 0.0])),
+                    ("mandible", front, tr([0.0, 4.0, 0.0])),
                 ],
                 model,
+                shape,
             ),
         ),
         (
@@ -673,10 +983,11 @@ pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
                 "phantom-jaws-mandible-ccw-5deg",
                 "counter-clockwise mandibular rotation of 5° about the condylar axis (chin up and forwards)",
                 &[
-                    ("mandible", MANDIBLE_FRONT_BOX, rot.clone()),
-                    ("mandible_rami", MANDIBLE_BACK_BOX, rot),
+                    ("mandible", front, rot.clone()),
+                    ("mandible_rami", back, rot),
                 ],
                 model,
+                shape,
             ),
         ),
         (
@@ -684,8 +995,9 @@ pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
             case_text(
                 "phantom-jaws-le-fort-i-advance-4mm",
                 "Le Fort I advancement 4 mm",
-                &[("maxilla", MAXILLA_BOX, tr([0.0, -4.0, 0.0]))],
+                &[("maxilla", maxilla, tr([0.0, -4.0, 0.0]))],
                 model,
+                shape,
             ),
         ),
     ]
@@ -693,6 +1005,13 @@ pub fn case_files(model: Option<&str>) -> Vec<(&'static str, String)> {
 
 /// Write the jaws phantom case into `dir`: ct.nii.gz, face.ply and the four case files.
 pub fn write_case(dir: &std::path::Path, opts: &JawsOptions) -> Result<()> {
+    write_shaped_case(dir, opts, &Shape::default())
+}
+
+/// Write the shaped jaws phantom into `dir`: as `write_case`, plus phantom.toml (the shape and
+/// its analytic landmarks, world mm).
+pub fn write_shaped_case(dir: &std::path::Path, opts: &JawsOptions, shape: &Shape) -> Result<()> {
+    shape.validate()?;
     let step = opts.phantom.scan_step_mm;
     if !(step >= 0.1) {
         return Err(Error::config(format!(
@@ -700,17 +1019,39 @@ pub fn write_case(dir: &std::path::Path, opts: &JawsOptions) -> Result<()> {
         )));
     }
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-    let vol = ct(&opts.phantom);
+    let vol = shape.ct(&opts.phantom);
     crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
     crate::mesh::ply::write(
-        &face_scan(step),
+        &shape.face_scan(step),
         &dir.join("face.ply"),
         crate::mesh::ply::Encoding::BinaryLittleEndian,
     )?;
-    for (name, text) in case_files(opts.solve_model.as_deref()) {
+    for (name, text) in shape.case_files(opts.solve_model.as_deref()) {
         crate::output::write_bytes_atomic(&dir.join(name), |w| w.write_all(text.as_bytes()))?;
     }
-    Ok(())
+    let text = shape.phantom_toml();
+    crate::output::write_bytes_atomic(&dir.join("phantom.toml"), |w| w.write_all(text.as_bytes()))
+}
+
+impl Shape {
+    /// phantom.toml: `[shape]` with the parameters and `[landmarks]` with the analytic
+    /// landmarks (world mm, LPS), so a cohort's known geometry travels with each case.
+    pub fn phantom_toml(&self) -> String {
+        let mut s = String::from(
+            "# The jaws phantom's shape and analytic landmarks (LPS mm; docs/phantom.md, \"Cohort parameters\").\n[shape]\n",
+        );
+        for ((name, _, _), v) in SHAPE_RANGES.iter().zip(self.values()) {
+            s.push_str(&format!("{name} = {v:?}\n"));
+        }
+        s.push_str("\n[landmarks]\n");
+        for (name, p) in self.landmarks() {
+            s.push_str(&format!(
+                "\"{name}\" = [{:.4}, {:.4}, {:.4}]\n",
+                p[0], p[1], p[2]
+            ));
+        }
+        s
+    }
 }
 
 #[cfg(test)]

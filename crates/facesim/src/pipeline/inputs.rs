@@ -45,7 +45,16 @@ impl CaseFiles {
 
 /// Load `CASE_DIR/case.toml` (or a .toml file) and read everything it names.
 pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)> {
-    let (case, dir) = Case::load(case_path)?;
+    read_with(case_path, &toml::Table::new(), rec)
+}
+
+/// `read` with `overrides` (`case::overrides_table`) laid over the case file.
+pub fn read_with(
+    case_path: &Path,
+    overrides: &toml::Table,
+    rec: &mut Recorder,
+) -> Result<(Inputs, CaseFiles)> {
+    let (case, dir) = Case::load_with(case_path, overrides)?;
     let case_file = if case_path.is_dir() {
         case_path.join("case.toml")
     } else {

@@ -141,9 +141,19 @@ pub struct Outcome {
 /// `facesim run`: read the case, run every stage, write every output into `out` (default
 /// `CASE_DIR/out`).
 pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<Outcome> {
+    run_with(case_path, out, &toml::Table::new(), obs)
+}
+
+/// `run` with `overrides` (`case::overrides_table`, the CLI's `--set`) laid over the case file.
+pub fn run_with(
+    case_path: &Path,
+    out: Option<&Path>,
+    overrides: &toml::Table,
+    obs: &dyn Observer,
+) -> Result<Outcome> {
     let total = Meter::start(obs.heap());
     let mut rec = Recorder::new(obs);
-    let (inputs, files) = inputs::read(case_path, &mut rec)?;
+    let (inputs, files) = inputs::read_with(case_path, overrides, &mut rec)?;
     let out_dir = out
         .map(Path::to_path_buf)
         .unwrap_or_else(|| files.dir.join("out"));

@@ -1,0 +1,91 @@
+#!/usr/bin/env python3
+"""The cohort table (docs/cohort.md): one row per case, plan, variant and region of the
+result.json files given (run_case.py) and their runs' report.json — region "face" for the whole
+face, then report.json's facial regions. A failed run has one row, region "face", its status
+facesim's one-line error and the figures empty. Standard library only."""
+
+import argparse
+import csv
+import json
+import os
+import sys
+
+BASE = [
+    "case", "plan", "variant", "region", "status", "vertices", "mean_mm", "p90_mm",
+    "max_mm", "seconds", "facesim_seconds", "peak_mem_mb", "model",
+]
+
+
+def p90(values):
+    """The 90th percentile as facesim's report.json regions take it (nearest rank on
+    round(0.9 (n - 1)))."""
+    d = sorted(values)
+    return d[round(0.9 * (len(d) - 1))]
+
+
+def face_distances(out_dir):
+    with open(os.path.join(out_dir, "displacement.csv"), newline="") as f:
+        return [float(r["dist"]) for r in csv.DictReader(f)]
+
+
+def ratio_column(key):
+    """report.json soft_hard_ratios key "Pog'/Pog" → column "ratio_Pog_Pog"."""
+    return "ratio_" + key.replace("'", "").replace("/", "_")
+
+
+def rows_of(result_path):
+    with open(result_path) as f:
+        res = json.load(f)
+    base = {k: res.get(k) for k in ("case", "plan", "variant", "status")}
+    base["seconds"] = f"{res['seconds']:.3f}"
+    base["peak_mem_mb"] = f"{res['peak_mem_mb']:.1f}"
+    if res["status"] != "ok":
+        return [dict(base, region="face")], {}
+    out_dir = os.path.join(os.path.dirname(result_path), res["out_dir"])
+    with open(os.path.join(out_dir, "report.json")) as f:
+        rep = json.load(f)
+    base["facesim_seconds"] = f"{rep['timings']['total']:.3f}"
+    base["model"] = rep["parameters"]["solve"]["model"]
+    extra = {}
+    for key, r in (rep.get("soft_hard_ratios") or {}).items():
+        extra[ratio_column(key)] = "" if r.get("ratio") is None else f"{r['ratio']:.4f}"
+    for key, m in (rep.get("measurements") or {}).items():
+        if isinstance(m, dict) and m.get("change") is not None:
+            extra[f"{key}_change"] = f"{m['change']:.4f}"
+    base.update(extra)
+    dist = face_distances(out_dir)
+    rows = [dict(base, region="face", vertices=len(dist),
+                 mean_mm=f"{sum(dist) / len(dist):.6f}", p90_mm=f"{p90(dist):.6f}",
+                 max_mm=f"{max(dist):.6f}")]
+    for name, s in (rep.get("regions") or {}).items():
+        if not s.get("vertices"):
+            continue
+        rows.append(dict(base, region=name, vertices=s["vertices"],
+                         mean_mm=f"{s['mean']:.6f}", p90_mm=f"{s['p90']:.6f}",
+                         max_mm=f"{s['max']:.6f}"))
+    return rows, extra
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--out", required=True, help="cohort.csv to write")
+    ap.add_argument("results", nargs="+", help="result.json files")
+    a = ap.parse_args()
+    rows, extra_cols = [], []
+    for path in a.results:
+        r, extra = rows_of(path)
+        rows += r
+        extra_cols += [c for c in extra if c not in extra_cols]
+    rows.sort(key=lambda r: (r["case"], r["plan"], r["variant"], r["region"] != "face"))
+    tmp = a.out + ".tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=BASE + extra_cols, restval="")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, a.out)
+    failed = sum(1 for r in rows if r["status"] != "ok")
+    print(f"{a.out}: {len(rows)} rows, {len(a.results)} runs, {failed} failed")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
