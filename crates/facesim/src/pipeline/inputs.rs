@@ -68,9 +68,13 @@ pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
     {
         return Err(Error::input(&skin.path, "face scan not found"));
     }
-    let ct = rec.time(Stage::ReadCt, "reading CT", || {
-        volume::read_volume(&case.ct.path)
+    let series = case.dicom.as_ref().map(|d| d.series.as_str());
+    let (ct, note) = rec.time(Stage::ReadCt, "reading CT", || {
+        volume::read_ct(&case.ct.path, series)
     })?;
+    if let Some(w) = note {
+        rec.warn(w);
+    }
     let scan = match &case.skin {
         // Any model format; not checked here: a skin from another program is cleaned to its
         // outer face once it is in the CT frame (pipeline::face).
