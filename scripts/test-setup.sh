@@ -74,6 +74,12 @@ need_python_venv() {
     "$venv/bin/pip" install -q "ctk-cli==1.5"
     echo "test-setup: venv $venv with ctk-cli"
   }
+  # scikit-image's marching cubes makes the "skin from another program" fixture
+  # (crates/facesim/tests/foreign_skin.rs).
+  "$venv/bin/python" -c 'import skimage' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "scikit-image==0.26.0"
+    echo "test-setup: scikit-image in $venv"
+  }
 }
 
 need_calculix
