@@ -80,6 +80,12 @@ need_python_venv() {
     "$venv/bin/pip" install -q "maturin==1.16.0" "pytest==9.2.0" "numpy==2.4.6"
     echo "test-setup: venv $venv with maturin, pytest, numpy"
   }
+  # scikit-image's marching cubes makes the "skin from another program" fixture
+  # (crates/facesim/tests/foreign_skin.rs).
+  "$venv/bin/python" -c 'import skimage' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "scikit-image==0.26.0"
+    echo "test-setup: scikit-image in $venv"
+  }
 }
 
 # The cohort workflow's tools in the same venv (docs/cohort.md): Snakemake runs workflow/Snakefile,

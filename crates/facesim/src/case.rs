@@ -36,9 +36,21 @@ pub struct Case {
     /// (docs/landmarks.md).
     #[serde(default, rename = "landmark")]
     pub landmark: Vec<UserLandmark>,
+    /// Which series of a DICOM directory holding several is the CT (`[dicom] series`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dicom: Option<Dicom>,
     /// A 3D Slicer markups file of user landmarks (`landmarks = "file.mrk.json"`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub landmarks: Option<PathBuf>,
+}
+
+/// `[dicom]`: `series` is a SeriesInstanceUID, or a SeriesNumber, of the series to read from a
+/// `[ct] path` directory holding several (docs/dicom.md). Without it the largest CT series is
+/// read, with a warning.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dicom {
+    pub series: String,
 }
 
 /// One `[[landmark]]`: a label (docs/landmarks.md) and its position (LPS mm).
@@ -444,6 +456,7 @@ impl Default for Case {
             output: Output::default(),
             uncertainty: Default::default(),
             landmark: Vec::new(),
+            dicom: None,
             landmarks: None,
         }
     }

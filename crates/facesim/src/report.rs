@@ -150,6 +150,10 @@ pub struct SurfaceReport {
     pub coarse: Option<CoarseReport>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub embedding: Option<EmbeddingReport>,
+    /// A given skin that was not a clean face (another program's iso-surface): what keeping
+    /// its outer face dropped (surface::outer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub foreign_skin: Option<crate::surface::outer::OuterReport>,
 }
 
 /// The coarse copy a dense skin was solved on (`[solve] coarse_triangles`).

@@ -496,7 +496,12 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
         obj.write_to_file(other.join(f.file_stem().unwrap()))
             .unwrap();
     }
-    let e = read_volume(&cd).unwrap_err().to_string();
+    // A second series on the CD: without a choice the largest CT series is read (here a tie:
+    // the first by UID), and a note lists each series with its folder.
+    use facesim::volume::dicom_io::read_chosen_series;
+    let (first, note) = read_chosen_series(&cd, None).unwrap();
+    assert_eq!(first.data, read_volume(&series).unwrap().data);
+    let e = note.expect("a note on the series chosen");
     assert!(!e.contains('\n'), "{e}");
     assert!(e.contains("holds 2 DICOM series"), "{e}");
     assert!(
@@ -508,6 +513,21 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
         e.contains("DICOM/ST000001/SE000001") && e.contains("DICOM/ST000001/SE000002"),
         "{e}"
     );
+    // [dicom] series chooses by UID (the other series stores the same HU as 12-bit unsigned).
+    let (second, note) = read_chosen_series(&cd, Some("1.2.826.0.1.3680043.10.1452.2.78")).unwrap();
+    assert!(note.is_none());
+    assert_eq!(second.data, read_volume(&other).unwrap().data);
+    // A key matching no series: one line naming the directory and listing the series.
+    let Err(e) = read_chosen_series(&cd, Some("9.9.9")) else {
+        panic!("a series key matching nothing was accepted");
+    };
+    let e = e.to_string();
+    assert!(!e.contains('\n'), "{e}");
+    assert!(
+        e.contains(&cd.display().to_string()) && e.contains("9.9.9"),
+        "{e}"
+    );
+    assert!(e.contains("1.2.826.0.1.3680043.10.1452.2.78"), "{e}");
 }
 
 #[test]

@@ -8,6 +8,7 @@ use crate::case::{Case, Parameterization};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::report::{CoarseReport, Stage, SurfaceReport};
+use crate::surface::outer::{self, OuterReport};
 use crate::surface::{self, register};
 use crate::volume::Volume;
 use std::path::Path;
@@ -42,9 +43,13 @@ pub fn place(
     let (skin, registration) = match scan {
         None => (extracted, None),
         Some(scan) => {
-            let (m, t) = rec.time(Stage::PlaceScan, "placing the face scan", || {
+            let (m, t, outer) = rec.time(Stage::PlaceScan, "placing the face scan", || {
                 place_scan(scan, ct, case, axis, r0)
             })?;
+            if let Some(o) = outer {
+                rec.warn(o.summary(scan_path(case)));
+                report.foreign_skin = Some(o);
+            }
             let st =
                 crate::compare::stats(&crate::compare::point_to_surface(&m.vertices, &extracted));
             if st.p90 > 3.0 {
@@ -69,15 +74,22 @@ pub fn place(
     })
 }
 
-/// A face scan into the CT frame (`[registration]` landmarks), checked to overlap the CT, with
-/// the (u, v) coordinates of the case's parameterisation.
+fn scan_path(case: &Case) -> &Path {
+    case.skin
+        .as_ref()
+        .map_or(Path::new("face scan"), |s| &s.path)
+}
+
+/// A face scan into the CT frame (`[registration]` landmarks), cut to its outer face when it is
+/// another program's whole iso-surface rather than a clean face (surface::outer), checked to
+/// overlap the CT, with the (u, v) coordinates of the case's parameterisation.
 fn place_scan(
     mut m: Mesh,
     ct: &Volume,
     case: &Case,
     axis: [f64; 2],
     r0: f64,
-) -> Result<(Mesh, Option<register::Transform>)> {
+) -> Result<(Mesh, Option<register::Transform>, Option<OuterReport>)> {
     let mut registration = None;
     if let Some(reg) = &case.registration {
         let t = register::fit(&reg.scan, &reg.ct, reg.scale)?;
@@ -86,6 +98,13 @@ fn place_scan(
         }
         registration = Some(t);
     }
+    let mut outer_report = None;
+    if !outer::is_clean_face(&m) {
+        let (kept, rep) = outer::outer_face(&m, axis, scan_path(case))?;
+        m = kept;
+        outer_report = Some(rep);
+    }
+    m.check(scan_path(case))?;
     let (lo, hi) = ct.bounds();
     let inside = m
         .vertices
@@ -93,12 +112,8 @@ fn place_scan(
         .filter(|v| (0..3).all(|a| v[a] >= lo[a] && v[a] <= hi[a]))
         .count();
     if (inside as f64) < 0.5 * m.vertices.len() as f64 {
-        let path = case
-            .skin
-            .as_ref()
-            .map_or(Path::new("face scan"), |s| &s.path);
         return Err(Error::input(
-            path,
+            scan_path(case),
             format!(
                 "face scan does not overlap the CT: only {inside} of {} vertices lie inside the CT's field of view (missing or wrong [registration]?)",
                 m.vertices.len()
@@ -109,7 +124,7 @@ fn place_scan(
         Parameterization::Cylindrical => surface::cylindrical_uv(&mut m, axis, r0),
         Parameterization::Planar => surface::planar_uv(&mut m),
     }
-    Ok((m, registration))
+    Ok((m, registration, outer_report))
 }
 
 /// A skin with more than twice `[solve] coarse_triangles` triangles is solved on a (u, v)-grid

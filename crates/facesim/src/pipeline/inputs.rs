@@ -77,14 +77,39 @@ pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
     {
         return Err(Error::input(&skin.path, "face scan not found"));
     }
-    let ct = rec.time(Stage::ReadCt, "reading CT", || {
-        volume::read_volume(&case.ct.path)
+    let series = case.dicom.as_ref().map(|d| d.series.as_str());
+    let (ct, note) = rec.time(Stage::ReadCt, "reading CT", || {
+        volume::read_ct(&case.ct.path, series)
     })?;
+    if let Some(w) = note {
+        rec.warn(w);
+    }
     let scan = match &case.skin {
-        Some(s) => Some(rec.time(Stage::ReadScan, "reading face scan", || {
-            mesh::read_mesh(&s.path)
-        })?),
+        // Any model format; not checked here: a skin from another program is cleaned to its
+        // outer face once it is in the CT frame (pipeline::face).
+        Some(s) => Some(rec.time(Stage::ReadScan, "reading face scan", || read_skin(&s.path))?),
         None => None,
     };
     Ok(Inputs { case, ct, scan })
+}
+
+/// A skin file (.ply, .obj, .stl, .vtk, .vtp) in LPS, with every triangle's indices in range.
+fn read_skin(path: &Path) -> Result<Mesh> {
+    let m = mesh::model_file::read_model(path)?;
+    let nv = m.vertices.len();
+    if let Some((t, bad)) = m
+        .triangles
+        .iter()
+        .enumerate()
+        .find_map(|(t, tri)| tri.iter().find(|&&i| i as usize >= nv).map(|&i| (t, i)))
+    {
+        return Err(Error::input(
+            path,
+            format!("triangle {t} uses vertex index {bad}, but there are {nv} vertices"),
+        ));
+    }
+    if m.triangles.is_empty() {
+        return Err(Error::input(path, "empty mesh (no triangles)"));
+    }
+    Ok(m)
 }

@@ -3,6 +3,7 @@
 //! decimation; a given face scan replaces the extracted skin after landmark registration.
 
 pub mod marching;
+pub mod outer;
 pub mod rangescan;
 pub mod register;
 

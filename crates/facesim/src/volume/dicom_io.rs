@@ -32,6 +32,8 @@ struct SliceHeader {
     path: PathBuf,
     series: String,
     series_desc: String,
+    series_number: String,
+    modality: String,
     ts: String,
     rows: usize,
     cols: usize,
@@ -101,6 +103,8 @@ fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
     };
     let series = get_str(tags::SERIES_INSTANCE_UID);
     let series_desc = get_str(tags::SERIES_DESCRIPTION);
+    let series_number = get_str(tags::SERIES_NUMBER);
+    let modality = get_str(tags::MODALITY);
     let us = |tag, name: &str| -> Result<usize> {
         obj.element_opt(tag)
             .ok()
@@ -136,6 +140,8 @@ fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
         path: path.to_path_buf(),
         series,
         series_desc,
+        series_number,
+        modality,
         ts,
         rows,
         cols,
@@ -150,7 +156,16 @@ fn normalize(v: [f64; 3]) -> [f64; 3] {
     v.map(|x| x / n)
 }
 
+/// Read the DICOM series in `dir`; with several there, the largest CT series (see
+/// [`read_chosen_series`]).
 pub fn read_series(dir: &Path) -> Result<Volume> {
+    read_chosen_series(dir, None).map(|(v, _)| v)
+}
+
+/// Read one series of `dir`: the one whose SeriesInstanceUID or SeriesNumber is `series`, else
+/// (when the directory holds several) the CT series with the most images, returning a note
+/// that says which was taken and how to choose another.
+pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, Option<String>)> {
     let files = dicom_files(dir)?;
     let mut headers = Vec::with_capacity(files.len());
     for p in &files {
@@ -165,7 +180,7 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
             ),
         ));
     }
-    check_one_series(dir, &headers)?;
+    let note = choose_series(dir, &mut headers, series)?;
     check_same_frame(&headers)?;
     let first = &headers[0];
     let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
@@ -194,13 +209,16 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
     data.par_chunks_mut(per_slice)
         .zip(headers.par_iter())
         .try_for_each(|(slice, h)| crate::error::guard(&h.path, || read_slice(h, slice)))?;
-    Ok(Volume {
-        dims,
-        spacing,
-        origin,
-        direction,
-        data,
-    })
+    Ok((
+        Volume {
+            dims,
+            spacing,
+            origin,
+            direction,
+            data,
+        },
+        note,
+    ))
 }
 
 /// The DICOM files of `dir` (not hidden, with the DICM preamble, whatever their name), sorted
@@ -254,43 +272,93 @@ fn list_dir(dir: &Path) -> Result<(Vec<PathBuf>, Vec<PathBuf>)> {
     Ok((files, dirs))
 }
 
-/// Refuse a directory that mixes series, listing each with its size, description and (when it
-/// lies below `dir`) its folder, so the user can give `[ct] path` one series' folder.
-fn check_one_series(dir: &Path, headers: &[SliceHeader]) -> Result<()> {
-    let mut series: BTreeMap<&str, (usize, &str, &Path)> = BTreeMap::new();
-    for h in headers {
-        let folder = h.path.parent().unwrap_or(dir);
-        let e = series
-            .entry(h.series.as_str())
-            .or_insert((0, h.series_desc.as_str(), folder));
-        e.0 += 1;
+/// Keep the headers of one series: the one `wanted` names (its SeriesInstanceUID or
+/// SeriesNumber), else, when `dir` holds several, the CT series with the most images (ties:
+/// the first by UID), with a note listing every series with its size, description and (when it
+/// lies below `dir`) its folder. A `wanted` series that is not there is an error listing them.
+fn choose_series(
+    dir: &Path,
+    headers: &mut Vec<SliceHeader>,
+    wanted: Option<&str>,
+) -> Result<Option<String>> {
+    struct Series<'a> {
+        n: usize,
+        desc: &'a str,
+        number: &'a str,
+        ct: bool,
+        folder: &'a Path,
     }
-    if series.len() > 1 {
-        let list: Vec<String> = series
+    let mut series: BTreeMap<&str, Series> = BTreeMap::new();
+    for h in headers.iter() {
+        let e = series.entry(h.series.as_str()).or_insert(Series {
+            n: 0,
+            desc: &h.series_desc,
+            number: &h.series_number,
+            ct: h.modality.eq_ignore_ascii_case("CT"),
+            folder: h.path.parent().unwrap_or(dir),
+        });
+        e.n += 1;
+    }
+    let list = || -> String {
+        series
             .iter()
-            .map(|(uid, (n, d, folder))| {
-                let desc = if d.is_empty() {
+            .map(|(uid, s)| {
+                let desc = if s.desc.is_empty() {
                     String::new()
                 } else {
-                    format!(", \"{d}\"")
+                    format!(", \"{}\"", s.desc)
                 };
-                let place = match folder.strip_prefix(dir) {
+                let number = if s.number.is_empty() {
+                    String::new()
+                } else {
+                    format!(", number {}", s.number)
+                };
+                let place = match s.folder.strip_prefix(dir) {
                     Ok(rel) if !rel.as_os_str().is_empty() => format!(" in {}", rel.display()),
                     _ => String::new(),
                 };
-                format!("{uid} ({n} files{desc}{place})")
+                format!("{uid} ({} files{number}{desc}{place})", s.n)
             })
-            .collect();
-        return Err(Error::input(
-            dir,
-            format!(
-                "holds {} DICOM series, expected one (give [ct] path a folder holding only the CT series to use): {}",
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
+    let (chosen, note) = match wanted {
+        Some(w) => {
+            let w = w.trim();
+            let Some((uid, _)) = series
+                .iter()
+                .find(|(uid, s)| *uid == &w || (!s.number.is_empty() && s.number == w))
+            else {
+                return Err(Error::input(
+                    dir,
+                    format!(
+                        "no DICOM series here has [dicom] series = \"{w}\" as its SeriesInstanceUID or SeriesNumber; the series are: {}",
+                        list()
+                    ),
+                ));
+            };
+            (uid.to_string(), None)
+        }
+        None if series.len() <= 1 => return Ok(None),
+        None => {
+            let best = series
+                .iter()
+                .max_by_key(|(uid, s)| (s.ct, s.n, std::cmp::Reverse(*uid)))
+                .map(|(uid, s)| (uid.to_string(), s.n));
+            let Some((uid, n)) = best else {
+                return Ok(None);
+            };
+            let note = format!(
+                "{} holds {} DICOM series; read the largest CT series {uid} ({n} images); choose another with [dicom] series = \"UID or SeriesNumber\": {}",
+                dir.display(),
                 series.len(),
-                list.join("; ")
-            ),
-        ));
-    }
-    Ok(())
+                list()
+            );
+            (uid, Some(note))
+        }
+    };
+    headers.retain(|h| h.series == chosen);
+    Ok(note)
 }
 
 /// Every slice readable natively and with the first slice's size, spacing and orientation.

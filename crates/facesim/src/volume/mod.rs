@@ -303,7 +303,28 @@ pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     ]
 }
 
-/// Read any supported volume: `.nii`, `.nii.gz`, `.inv3`, or a directory holding one DICOM series.
+/// Read the case's CT: like [`read_volume`], with a DICOM directory's series chosen by
+/// `series` (`[dicom] series`); returns a note for the report when a directory of several
+/// series was read without a choice.
+pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Option<String>)> {
+    if path.is_dir() {
+        let (vol, note) = crate::error::guard(path, || dicom_io::read_chosen_series(path, series))?;
+        vol.check_finite(path)?;
+        return Ok((vol, note));
+    }
+    if let Some(s) = series {
+        return Err(Error::input(
+            path,
+            format!(
+                "[dicom] series = \"{s}\" chooses a series of a DICOM directory, but this is not a directory"
+            ),
+        ));
+    }
+    Ok((read_volume(path)?, None))
+}
+
+/// Read any supported volume: `.nii`, `.nii.gz`, `.inv3`, or a directory holding a DICOM
+/// series (the largest CT series when it holds several).
 pub fn read_volume(path: &Path) -> Result<Volume> {
     if !path.exists() {
         return Err(Error::input(path, "no such file or directory"));
