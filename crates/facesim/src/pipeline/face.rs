@@ -80,6 +80,9 @@ fn scan_path(case: &Case) -> &Path {
         .map_or(Path::new("face scan"), |s| &s.path)
 }
 
+/// The fewest triangles the outer face cut from another program's skin may keep.
+const MIN_CUT_FACE_TRIANGLES: usize = 100;
+
 /// A face scan into the CT frame (`[registration]` landmarks), cut to its outer face when it is
 /// another program's whole iso-surface rather than a clean face (surface::outer), checked to
 /// overlap the CT, with the (u, v) coordinates of the case's parameterisation.
@@ -101,6 +104,17 @@ fn place_scan(
     let mut outer_report = None;
     if !outer::is_clean_face(&m) {
         let (kept, rep) = outer::outer_face(&m, axis, scan_path(case))?;
+        // What is left of a broken file must still be a face, not a few stray triangles.
+        if kept.triangles.len() < MIN_CUT_FACE_TRIANGLES {
+            return Err(Error::input(
+                scan_path(case),
+                format!(
+                    "not usable as a face scan: {}; {} triangles are too few (at least {MIN_CUT_FACE_TRIANGLES})",
+                    rep.summary(scan_path(case)),
+                    kept.triangles.len()
+                ),
+            ));
+        }
         m = kept;
         outer_report = Some(rep);
     }
