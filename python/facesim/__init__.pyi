@@ -43,7 +43,7 @@ class Result:
         """|vertices_post - vertices_pre| per vertex, shape (n,), mm (displacement.csv's dist)."""
     @property
     def landmarks(self) -> Dict[str, Landmark]:
-        """The landmarks found, label -> pre/post; empty for a replan."""
+        """The landmarks found, label -> pre/post; for a replan, the run's landmarks carried with the new plan."""
     @property
     def report(self) -> Dict[str, Any]:
         """report.json as a dict."""

@@ -68,6 +68,37 @@ def read_ply(path: Path):
     return np.stack([v["x"], v["y"], v["z"]], axis=1), f["i"].astype(np.int64)
 
 
+def read_ply_vertex_properties(path: Path):
+    """The vertex element of a binary little-endian PLY as a numpy structured array."""
+    data = path.read_bytes()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    props, n = [], None
+    for line in data[:end].decode().splitlines():
+        w = line.split()
+        if w[0] == "element":
+            if n is not None:
+                break
+            n = int(w[2])
+        elif w[0] == "property" and w[1] != "list":
+            props.append((w[2], PLY_TYPES[w[1]]))
+    return np.frombuffer(data, np.dtype(props), n, end)
+
+
+def test_band_equals_face_band_ply(case_dir, tmp_path):
+    import tomllib
+
+    case = tomllib.loads((case_dir / "case.toml").read_text())
+    case["uncertainty"] = {"samples": 3, "seed": 2}
+    r = facesim.run(case, out=tmp_path / "out", base_dir=case_dir)
+    v = read_ply_vertex_properties(tmp_path / "out" / "face_band.ply")
+    assert set(r.band) == {"mean", "p05", "p95"}
+    for k in ("mean", "p05", "p95"):
+        assert r.band[k].shape == r.displacement.shape
+        assert np.abs(r.band[k] - v[k]).max() <= 1e-5  # float32 in the file
+    assert (r.band["p05"] <= r.band["p95"] + 1e-9).all()
+    assert r.report["uncertainty"]["samples"] == 3
+
+
 def read_displacement_csv(path: Path):
     rows = np.loadtxt(path, delimiter=",", skiprows=1)
     return rows[:, 1:4], rows[:, 4:7], rows[:, 7]
@@ -150,8 +181,13 @@ def test_replan_equals_the_command_line(dict_run, cli_out, tmp_path):
     cli("replan", cli_out, plan_file, "--out", tmp_path / "cli-replan")
     from_dict = facesim.replan(dict_run[0].out_dir, tomllib.loads(PLAN_TOML), out=tmp_path / "py-replan")
     from_file = facesim.replan(dict_run[0].out_dir, plan_file, out=tmp_path / "py-replan-file")
+    cli_post = markups(tmp_path / "cli-replan" / "landmarks_post.mrk.json")
     for r in (from_dict, from_file):
-        assert r.band is None and r.landmarks == {}
+        assert r.band is None
+        # The run's landmarks carried with the new plan, as the command line writes them.
+        assert set(r.landmarks) == set(cli_post) and len(cli_post) > 0
+        for label, p in cli_post.items():
+            assert np.abs(r.landmarks[label]["post"] - p).max() <= TOL_MM
         assert r.report["replan"]["exact"] is True
         assert_equals_files(r, tmp_path / "cli-replan", pre_dir=cli_out)
     assert r.displacement.max() > 1.0

@@ -27,8 +27,8 @@ pub struct Result {
     #[pyo3(get)]
     displacement: Py<PyAny>,
     /// Label → {"pre", "post": float64 (3,) LPS mm, "change_mm": float, "kind": str}, the
-    /// landmarks found (report.json `landmarks` says why a missing one is missing). Empty for a
-    /// replan.
+    /// landmarks found (report.json `landmarks` says why a missing one is missing); for a
+    /// replan, the run's landmarks carried with the new plan.
     #[pyo3(get)]
     landmarks: Py<PyAny>,
     /// report.json as a dict.
@@ -162,6 +162,8 @@ pub fn from_replan(
     basis: &facesim::plan::PlanBasis,
     r: &facesim::plan::replan::Replanned,
 ) -> PyResult<Result> {
+    let report = serde_json::to_value(&r.report)
+        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
     Ok(Result {
         out_dir: r.out_dir.display().to_string(),
         vertices_pre: points(py, &basis.face_pre)?.unbind(),
@@ -170,8 +172,8 @@ pub fn from_replan(
         displacement: PyArray1::from_vec(py, distances(&basis.face_pre, &r.face_post))
             .into_any()
             .unbind(),
-        landmarks: PyDict::new(py).into_any().unbind(),
-        report: json(py, &r.report)?.unbind(),
+        landmarks: landmarks(py, &report)?.into_any().unbind(),
+        report: json(py, &report)?.unbind(),
         band: py.None(),
     })
 }
