@@ -355,3 +355,47 @@ fn a_uniform_scale_of_every_modulus_leaves_the_face() {
         }
     }
 }
+
+/// The C1 model's parameter: a spring scale held at one point (2×) gives the band of a full
+/// `equilibrium` run whose k_c and koch_k_c are doubled (the resampled solve reuses the run's
+/// springs and skin; an independent run builds them again).
+#[test]
+fn a_c1_spring_scale_point_equals_a_run_with_scaled_springs() {
+    let c1 = || {
+        let mut c = case();
+        c.solve.model = SolveModel::Equilibrium;
+        c
+    };
+    let mut direct = c1();
+    direct.solve.k_c *= 2.0;
+    direct.solve.koch_k_c *= 2.0;
+    let direct = run(direct, "facesim-unc-c1-direct");
+    let mut c = c1();
+    c.uncertainty.samples = 2;
+    c.uncertainty.spring_scale = Some(Range::log_uniform(2.0, 2.0));
+    let o = run(c, "facesim-unc-c1-point");
+    let u = &json(&o)["uncertainty"];
+    assert_eq!(u["model"], "equilibrium", "{u}");
+    let d = magnitudes(&direct);
+    let nominal = magnitudes(&o);
+    let [mean, p05, p95] = band_columns(&o.out_dir);
+    let mut worst = 0.0f64;
+    let mut differs = 0.0f64;
+    for i in 0..d.len() {
+        worst = worst.max((mean[i] - d[i]).abs());
+        assert!(
+            p05[i] <= mean[i] + 1e-9 && mean[i] <= p95[i] + 1e-9,
+            "vertex {i}"
+        );
+        differs = differs.max((d[i] - nominal[i]).abs());
+    }
+    println!(
+        "C1 spring scale 2: band mean vs full run {worst:.2e} mm; change from nominal {differs:.3} mm"
+    );
+    // Both solve the same equilibrium to the Newton tolerance; f32 in the file.
+    assert!(worst < 1e-3, "band mean {worst} mm from the full run");
+    assert!(
+        differs > 0.01,
+        "the spring scale changed the face by only {differs} mm"
+    );
+}
