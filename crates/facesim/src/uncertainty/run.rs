@@ -6,9 +6,8 @@ use super::band::{self, Band};
 use super::distributions::{Distribution, Parameter, model_name};
 use super::sample::ScrambledHalton;
 use crate::case::{Case, SolveModel};
-use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::Result;
-use crate::landmarks::{Analysis, Kind, Ordered, face_regions};
+use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
 use crate::mesh::{norm, sub};
 use crate::pipeline::predict::Prediction;
 use crate::pipeline::{Recorder, Scene};
@@ -148,15 +147,10 @@ pub struct Sampled {
 }
 
 /// A landmark on the samples' faces: a soft one as the same material point as report.json
-/// `landmarks` carries it (triangle, barycentric weights, offset from the face; its position
-/// before), a bony one moves with its segment whatever the tissue.
+/// `landmarks` carries it (its anchor on face_pre and its position before), a bony one moves
+/// with its segment whatever the tissue (its move in the run).
 enum Tracker {
-    Soft {
-        tri: [u32; 3],
-        w: [f64; 3],
-        off: [f64; 3],
-        pre: [f64; 3],
-    },
+    Soft(SurfaceAnchor, [f64; 3]),
     Fixed(f64),
 }
 
@@ -187,38 +181,25 @@ pub fn sample(
         let nominal_key = solve_key(case, sliding_matters);
         let solver = Solver::new(scene, prediction, case)?;
         // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
-        let index = SurfaceIndex::new(skin);
         let trackers: Vec<(String, Tracker)> = analysis
             .carried
             .iter()
-            .filter_map(|c| {
+            .zip(&analysis.anchors)
+            .filter_map(|(c, anchor)| {
                 let pre = c.pre?;
-                Some((
-                    c.label.clone(),
-                    match c.kind {
-                        Kind::Soft => {
-                            let (_, q, t) = index.closest_triangle(pre);
-                            let tri = skin.triangles[t];
-                            let [a, b, cc] = tri.map(|i| skin.vertices[i as usize]);
-                            Tracker::Soft {
-                                tri,
-                                w: barycentric(q, a, b, cc),
-                                off: sub(pre, q),
-                                pre,
-                            }
-                        }
-                        Kind::Bone => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
-                    },
-                ))
+                let t = match (c.kind, anchor) {
+                    (Kind::Soft, Some(a)) => Tracker::Soft(*a, pre),
+                    _ => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
+                };
+                Some((c.label.clone(), t))
             })
             .collect();
         let regions = analysis.frame.as_ref().map(|f| {
-            let pre: Vec<(String, [f64; 3])> = analysis
-                .carried
-                .iter()
-                .filter_map(|c| c.pre.map(|p| (c.label.clone(), p)))
-                .collect();
-            face_regions::regions(&skin.vertices, f, &pre)
+            face_regions::regions(
+                &skin.vertices,
+                f,
+                &crate::landmarks::positions(&analysis.landmarks),
+            )
         });
         let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
         let mut solve_s = 0.0;
@@ -249,12 +230,7 @@ pub fn sample(
                 .collect();
             for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
                 out.push(match t {
-                    Tracker::Soft { tri, w, off, pre } => {
-                        let [a, b, cc] = tri.map(|i| post[i as usize]);
-                        let p =
-                            [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * cc[k] + off[k]);
-                        norm(sub(p, *pre))
-                    }
+                    Tracker::Soft(a, pre) => norm(sub(a.place(&skin.triangles, post), *pre)),
                     Tracker::Fixed(m) => *m,
                 });
             }
