@@ -86,6 +86,12 @@ need_python_venv() {
     "$venv/bin/pip" install -q "scikit-image==0.26.0"
     echo "test-setup: scikit-image in $venv"
   }
+  # highdicom converts a single-frame series into a multi-frame Legacy Converted Enhanced CT
+  # object (crates/facesim/tests/dicom_codecs.rs, tests/python/legacy_enhanced.py).
+  "$venv/bin/python" -c 'import highdicom' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "highdicom==0.28.2"
+    echo "test-setup: highdicom in $venv"
+  }
 }
 
 # The cohort workflow's tools in the same venv (docs/cohort.md): Snakemake runs workflow/Snakefile,

@@ -7,21 +7,11 @@
 mod common;
 
 use facesim::mesh::{self, Mesh};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::Command;
 
 fn exe() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_FaceSimPredict"))
-}
-
-fn venv_python() -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/slicer-venv/bin/python");
-    assert!(
-        p.is_file(),
-        "{} missing: run scripts/test-setup.sh (it makes the venv with ctk-cli)",
-        p.display()
-    );
-    p
 }
 
 /// What ctk-cli makes of the module: category, title and per parameter its type, channel,
@@ -40,7 +30,7 @@ params = [dict(typ=p.typ, name=p.name, channel=p.channel, longflag=p.longflag,
 print(json.dumps(dict(category=m.category, title=m.title, description=m.description,
       version=m.version, contributor=m.contributor, params=params, warnings=warnings)))
 "#;
-    let out = Command::new(venv_python())
+    let out = Command::new(common::venv_python())
         .args(["-c", script, exe().to_str().unwrap()])
         .output()
         .unwrap();

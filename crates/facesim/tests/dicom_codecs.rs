@@ -582,3 +582,220 @@ fn jpeg_extended_12_bit_is_one_clear_error() {
         "{e}"
     );
 }
+
+/// `src` (a single-frame series) converted by highdicom (tests/python/legacy_enhanced.py, in the
+/// venv scripts/test-setup.sh makes) into one Legacy Converted Enhanced CT file,
+/// `enhanced.dcm`, in a new directory `name` beside it.
+fn enhanced(src: &Path, name: &str, args: &[&str]) -> PathBuf {
+    let dst = src.with_file_name(name);
+    let _ = std::fs::remove_dir_all(&dst);
+    std::fs::create_dir_all(&dst).unwrap();
+    let out = dst.join("enhanced.dcm");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/legacy_enhanced.py");
+    let r = Command::new(common::venv_python())
+        .arg(script)
+        .arg(src)
+        .arg(&out)
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        r.status.success(),
+        "legacy_enhanced.py {args:?}: {}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    // The fixture is what it claims: one file, every slice a frame, the Legacy Converted
+    // Enhanced CT SOP class, no per-slice geometry at the top level.
+    let obj = dicom_object::OpenFileOptions::new()
+        .read_until(tags::PIXEL_DATA)
+        .open_file(&out)
+        .unwrap();
+    assert_eq!(
+        obj.meta()
+            .media_storage_sop_class_uid()
+            .trim_end_matches('\0'),
+        "1.2.840.10008.5.1.4.1.1.2.2"
+    );
+    let frames: usize = obj
+        .element(tags::NUMBER_OF_FRAMES)
+        .unwrap()
+        .to_int()
+        .unwrap();
+    assert_eq!(frames, SLICES);
+    assert!(
+        obj.element_opt(tags::IMAGE_POSITION_PATIENT)
+            .unwrap()
+            .is_none()
+    );
+    assert_eq!(files(&dst).len(), 1);
+    dst
+}
+
+/// The functional group sequences (tags) in frame `f`'s item of PerFrameFunctionalGroupsSequence.
+fn per_frame_groups(dir: &Path, f: usize) -> Vec<dicom_core::Tag> {
+    let obj = dicom_object::OpenFileOptions::new()
+        .read_until(tags::PIXEL_DATA)
+        .open_file(dir.join("enhanced.dcm"))
+        .unwrap();
+    let items = obj
+        .element(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .unwrap()
+        .items()
+        .unwrap();
+    items[f].iter().map(|e| e.header().tag).collect()
+}
+
+#[test]
+fn multi_frame_enhanced_ct_reads_like_its_single_frame_series() {
+    for stored in [Stored::Signed16, Stored::Unsigned12, Stored::Signed12] {
+        let raw = uncompressed(stored);
+        let mf = enhanced(raw, "enhanced", &[]);
+        assert_like_uncompressed(&mf, stored, 0.0);
+        // Frames stored out of spatial order are placed by their own positions.
+        let interleaved = enhanced(raw, "enhanced-interleaved", &["--interleave"]);
+        assert_like_uncompressed(&interleaved, stored, 0.0);
+        // Compressed as a PACS may send it: RLE written by highdicom; JPEG Lossless SV1 and
+        // JPEG 2000 by dcmtk and gdcm from the multi-frame file (one fragment per frame).
+        let rle = enhanced(raw, "enhanced-rle", &["--syntax", "1.2.840.10008.1.2.5"]);
+        assert_eq!(
+            transfer_syntax(&rle.join("enhanced.dcm")),
+            "1.2.840.10008.1.2.5"
+        );
+        assert_like_uncompressed(&rle, stored, 0.0);
+        let jpeg = encode(
+            &mf,
+            "enhanced-jpeg",
+            "dcmcjpeg",
+            &["+e1"],
+            "1.2.840.10008.1.2.4.70",
+        );
+        assert_like_uncompressed(&jpeg, stored, 0.0);
+        let j2k = encode(
+            &mf,
+            "enhanced-j2k",
+            "gdcmconv",
+            &["--j2k"],
+            "1.2.840.10008.1.2.4.90",
+        );
+        assert_like_uncompressed(&j2k, stored, 0.0);
+    }
+}
+
+#[test]
+fn a_frames_own_rescale_overrides_the_shared_one() {
+    // Slice 3 re-stored as HU − 100 with RescaleIntercept 100: highdicom then writes the pixel
+    // value transformation per frame, and a reader taking the shared (or the first) rescale for
+    // every frame is off by 100 HU on that frame.
+    let raw = uncompressed(Stored::Signed16);
+    let src = raw.with_file_name("rescaled-raw");
+    let _ = std::fs::remove_dir_all(&src);
+    std::fs::create_dir_all(&src).unwrap();
+    for f in files(raw) {
+        std::fs::copy(&f, src.join(f.file_name().unwrap())).unwrap();
+    }
+    let victim = src.join("slice0003.dcm");
+    let mut obj = dicom_object::open_file(&victim).unwrap();
+    let bytes = obj
+        .element(tags::PIXEL_DATA)
+        .unwrap()
+        .to_bytes()
+        .unwrap()
+        .into_owned();
+    let shifted: Vec<u8> = bytes
+        .chunks_exact(2)
+        .flat_map(|b| (i16::from_le_bytes([b[0], b[1]]) - 100).to_le_bytes())
+        .collect();
+    obj.put(DataElement::new(
+        tags::RESCALE_INTERCEPT,
+        VR::DS,
+        PrimitiveValue::from("100"),
+    ));
+    obj.put(DataElement::new(
+        tags::PIXEL_DATA,
+        VR::OW,
+        PrimitiveValue::from(shifted),
+    ));
+    obj.write_to_file(&victim).unwrap();
+    // The single-frame reader already gives the same HU (the reference holds).
+    assert_like_uncompressed(&src, Stored::Signed16, 0.0);
+
+    let mf = enhanced(&src, "rescaled-enhanced", &[]);
+    let transformation = tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE;
+    assert!(
+        (0..SLICES).all(|f| per_frame_groups(&mf, f).contains(&transformation)),
+        "the fixture must carry the rescale per frame"
+    );
+    assert_like_uncompressed(&mf, Stored::Signed16, 0.0);
+}
+
+#[test]
+fn broken_multi_frame_objects_are_one_clear_error() {
+    let mf = enhanced(
+        uncompressed(Stored::Signed16),
+        "enhanced-broken-source",
+        &[],
+    );
+    let source = mf.join("enhanced.dcm");
+    // (what is done to the file with dcmtk's dcmodify, what the one line must say)
+    let cases: [(&str, &[&str], &str); 4] = [
+        (
+            "no-per-frame",
+            &["-e", "(5200,9230)"],
+            "6 frames without PerFrameFunctionalGroupsSequence",
+        ),
+        (
+            "frame-count",
+            &["-m", "(0028,0008)=5"],
+            "NumberOfFrames 5 but PerFrameFunctionalGroupsSequence has 6 items",
+        ),
+        (
+            "same-position",
+            &[
+                "-m",
+                "(5200,9230)[3].(0020,9113)[0].(0020,0032)=0\\0\\0",
+                "-m",
+                "(5200,9230)[1].(0020,9113)[0].(0020,0032)=0\\0\\0",
+            ],
+            "duplicate slice position (same as",
+        ),
+        (
+            "no-spacing",
+            &["-e", "(5200,9229)[0].(0028,9110)"],
+            "frame 1: missing PixelSpacing",
+        ),
+    ];
+    for (name, edit, says) in cases {
+        let dir = mf.with_file_name(format!("enhanced-{name}"));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("enhanced.dcm");
+        std::fs::copy(&source, &file).unwrap();
+        let r = Command::new("dcmodify")
+            .arg("-nb")
+            .args(edit)
+            .arg(&file)
+            .output()
+            .unwrap();
+        assert!(r.status.success(), "dcmodify {edit:?}: {r:?}");
+        let before = std::fs::read(&file).unwrap();
+        let e = read_volume(&dir).unwrap_err().to_string();
+        assert!(
+            !e.contains('\n') && e.contains("enhanced.dcm") && e.contains(says),
+            "{name}: {e}"
+        );
+        assert_eq!(std::fs::read(&file).unwrap(), before, "input modified");
+    }
+
+    // Pixel data cut short: frames past the end cannot be decoded, and the line says which.
+    let dir = mf.with_file_name("enhanced-truncated");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("enhanced.dcm");
+    let bytes = std::fs::read(&source).unwrap();
+    std::fs::write(&file, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let e = read_volume(&dir).unwrap_err().to_string();
+    assert!(
+        !e.contains('\n') && e.contains("enhanced.dcm"),
+        "truncated: {e}"
+    );
+}

@@ -6,18 +6,8 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
-
-fn venv_python() -> PathBuf {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/slicer-venv/bin/python");
-    assert!(
-        p.is_file(),
-        "{} missing: run scripts/test-setup.sh (it makes the venv with scikit-image)",
-        p.display()
-    );
-    p
-}
 
 /// The whole-CT iso-surface at `level` HU, written by scikit-image to `out` (.stl or .obj).
 fn isosurface(ct: &facesim::volume::Volume, level: f64, out: &Path) {
@@ -31,7 +21,7 @@ fn isosurface(ct: &facesim::volume::Volume, level: f64, out: &Path) {
     let meta_path = dir.join("ct.json");
     std::fs::write(&meta_path, meta.to_string()).unwrap();
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/isosurface.py");
-    let st = Command::new(venv_python())
+    let st = Command::new(common::venv_python())
         .arg(script)
         .arg(&raw)
         .arg(&meta_path)

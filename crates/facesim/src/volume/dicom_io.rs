@@ -12,6 +12,13 @@
 //! both already LPS; the slice normal is their cross product; slices are sorted by
 //! ImagePositionPatient · normal. PixelSpacing is (row spacing, column spacing).
 //! Values: stored value × RescaleSlope + RescaleIntercept = HU.
+//!
+//! Multi-frame objects (Enhanced CT, Legacy Converted Enhanced CT) carry the same attributes per
+//! frame in functional groups (PS3.3 C.7.6.16): PlanePositionSequence (ImagePositionPatient),
+//! PlaneOrientationSequence (ImageOrientationPatient), PixelMeasuresSequence (PixelSpacing) and
+//! PixelValueTransformationSequence (the rescale), each taken from the frame's own item of
+//! PerFrameFunctionalGroupsSequence, else from SharedFunctionalGroupsSequence. Each frame is then
+//! one slice like a single-frame file's, so sorting, spacing and tilt checks are the same.
 
 use super::{MAX_VOXELS, Volume};
 use crate::error::{Error, Result};
@@ -28,8 +35,12 @@ use super::dicom_syntax;
 /// Media Storage Directory Storage: the SOP class of a DICOMDIR.
 const DICOMDIR_SOP_CLASS: &str = "1.2.840.10008.1.3.10";
 
+/// One slice: a single-frame file, or one frame of a multi-frame file.
+#[derive(Clone)]
 struct SliceHeader {
     path: PathBuf,
+    /// The frame's index (from 0) in a multi-frame file; `None` for a single-frame file.
+    frame: Option<u32>,
     series: String,
     series_desc: String,
     series_number: String,
@@ -40,6 +51,26 @@ struct SliceHeader {
     spacing: [f64; 2],
     iop: [f64; 6],
     ipp: [f64; 3],
+    /// RescaleSlope and RescaleIntercept.
+    rescale: [f64; 2],
+}
+
+impl SliceHeader {
+    /// An input error about this slice: naming the file, and the frame in a multi-frame file.
+    fn error(&self, msg: impl std::fmt::Display) -> Error {
+        match self.frame {
+            Some(f) => Error::input(&self.path, format!("frame {}: {msg}", f + 1)),
+            None => Error::input(&self.path, msg),
+        }
+    }
+
+    /// The file, and the frame (counted from 1) of a multi-frame file, for messages.
+    fn place(&self) -> String {
+        match self.frame {
+            Some(f) => format!("{} frame {}", self.path.display(), f + 1),
+            None => self.path.display().to_string(),
+        }
+    }
 }
 
 fn is_dicom_file(path: &Path) -> bool {
@@ -75,9 +106,10 @@ fn floats(
     Ok(v[..n].to_vec())
 }
 
-/// The header of an image file; `None` for a DICOMDIR or a non-image object (no Rows and no
-/// Columns), which a series directory may hold beside its images.
-fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
+/// The slices of an image file: one for a single-frame file, one per frame for a multi-frame
+/// (enhanced) one; none for a DICOMDIR or a non-image object (no Rows and no Columns), which a
+/// series directory may hold beside its images.
+fn read_headers(path: &Path) -> Result<Vec<SliceHeader>> {
     let obj = OpenFileOptions::new()
         .read_until(tags::PIXEL_DATA)
         .open_file(path)
@@ -92,7 +124,7 @@ fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
     if sop_class.trim_end_matches('\0') == DICOMDIR_SOP_CLASS
         || (!has(tags::ROWS) && !has(tags::COLUMNS))
     {
-        return Ok(None);
+        return Ok(Vec::new());
     }
     let get_str = |tag| {
         obj.element_opt(tag)
@@ -101,10 +133,6 @@ fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
             .and_then(|e| e.to_str().ok().map(|s| s.trim().to_string()))
             .unwrap_or_default()
     };
-    let series = get_str(tags::SERIES_INSTANCE_UID);
-    let series_desc = get_str(tags::SERIES_DESCRIPTION);
-    let series_number = get_str(tags::SERIES_NUMBER);
-    let modality = get_str(tags::MODALITY);
     let us = |tag, name: &str| -> Result<usize> {
         obj.element_opt(tag)
             .ok()
@@ -113,42 +141,153 @@ fn read_header(path: &Path) -> Result<Option<SliceHeader>> {
             .map(|v| v as usize)
             .ok_or_else(|| Error::input(path, format!("missing {name}")))
     };
-    let rows = us(tags::ROWS, "Rows")?;
-    let cols = us(tags::COLUMNS, "Columns")?;
-    let sp = floats(&obj, tags::PIXEL_SPACING, "PixelSpacing", 2, path)?;
-    let iop = floats(
-        &obj,
+    let template = SliceHeader {
+        path: path.to_path_buf(),
+        frame: None,
+        series: get_str(tags::SERIES_INSTANCE_UID),
+        series_desc: get_str(tags::SERIES_DESCRIPTION),
+        series_number: get_str(tags::SERIES_NUMBER),
+        modality: get_str(tags::MODALITY),
+        ts,
+        rows: us(tags::ROWS, "Rows")?,
+        cols: us(tags::COLUMNS, "Columns")?,
+        spacing: [0.0; 2],
+        iop: [0.0; 6],
+        ipp: [0.0; 3],
+        rescale: [1.0, 0.0],
+    };
+    let frames = obj
+        .element_opt(tags::NUMBER_OF_FRAMES)
+        .ok()
+        .flatten()
+        .map(|e| {
+            e.to_int::<i64>()
+                .ok()
+                .filter(|n| (1..=u32::MAX as i64).contains(n))
+                .ok_or_else(|| Error::input(path, "unreadable NumberOfFrames"))
+        })
+        .transpose()?
+        .unwrap_or(1) as usize;
+    let per_frame = obj
+        .element_opt(tags::PER_FRAME_FUNCTIONAL_GROUPS_SEQUENCE)
+        .ok()
+        .flatten()
+        .map(|e| e.items().unwrap_or(&[]));
+    let shared = obj
+        .element_opt(tags::SHARED_FUNCTIONAL_GROUPS_SEQUENCE)
+        .ok()
+        .flatten()
+        .and_then(|e| e.items())
+        .and_then(|items| items.first());
+    let top: &InMemDicomObject = &obj;
+    let Some(per_frame) = per_frame else {
+        if frames > 1 {
+            return Err(Error::input(
+                path,
+                format!(
+                    "{frames} frames without PerFrameFunctionalGroupsSequence: no position per frame to place them in a volume (an Enhanced CT object has one)"
+                ),
+            ));
+        }
+        return Ok(vec![slice_geometry(template, &[], top)?]);
+    };
+    if per_frame.len() != frames {
+        return Err(Error::input(
+            path,
+            format!(
+                "NumberOfFrames {frames} but PerFrameFunctionalGroupsSequence has {} items",
+                per_frame.len()
+            ),
+        ));
+    }
+    // A frame's attribute: its own functional group, else the shared one, else the top level
+    // (where a converter may have left it).
+    let groups = |own| {
+        let mut g = vec![own];
+        g.extend(shared);
+        g
+    };
+    (0..frames)
+        .map(|f| {
+            let h = SliceHeader {
+                frame: Some(f as u32),
+                ..template.clone()
+            };
+            slice_geometry(h, &groups(&per_frame[f]), top)
+        })
+        .collect()
+}
+
+/// Fill in `h`'s spacing, orientation, position and rescale, each attribute taken from the first
+/// of the functional group items `groups` (a frame's own, then the shared ones; none for a
+/// single-frame file) whose group sequence holds it, else from the data set `top`.
+fn slice_geometry(
+    mut h: SliceHeader,
+    groups: &[&InMemDicomObject],
+    top: &InMemDicomObject,
+) -> Result<SliceHeader> {
+    let holds = |o: &&InMemDicomObject, tag| o.element_opt(tag).ok().flatten().is_some();
+    // The item of functional group sequence `group` (PS3.3 C.7.6.16.2) that holds `tag`.
+    let find = |group, tag| {
+        groups
+            .iter()
+            .find_map(|g| {
+                g.element_opt(group)
+                    .ok()
+                    .flatten()
+                    .and_then(|e| e.items())
+                    .and_then(|items| items.first())
+                    .filter(|i| holds(i, tag))
+            })
+            .or(Some(top).filter(|o| holds(o, tag)))
+    };
+    let floats_in = |group, tag, name: &str, n| -> Result<Vec<f64>> {
+        let o = find(group, tag).ok_or_else(|| h.error(format!("missing {name}")))?;
+        floats(o, tag, name, n, &h.path).map_err(|e| match e {
+            Error::Input { msg, .. } => h.error(msg),
+            e => e,
+        })
+    };
+    let sp = floats_in(
+        tags::PIXEL_MEASURES_SEQUENCE,
+        tags::PIXEL_SPACING,
+        "PixelSpacing",
+        2,
+    )?;
+    let iop = floats_in(
+        tags::PLANE_ORIENTATION_SEQUENCE,
         tags::IMAGE_ORIENTATION_PATIENT,
         "ImageOrientationPatient",
         6,
-        path,
     )?;
-    let ipp = floats(
-        &obj,
+    let ipp = floats_in(
+        tags::PLANE_POSITION_SEQUENCE,
         tags::IMAGE_POSITION_PATIENT,
         "ImagePositionPatient",
         3,
-        path,
     )?;
+    let value = |tag, default: f64| -> Result<f64> {
+        match find(tags::PIXEL_VALUE_TRANSFORMATION_SEQUENCE, tag) {
+            None => Ok(default),
+            Some(o) => o
+                .element(tag)
+                .ok()
+                .and_then(|e| e.to_float64().ok())
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| h.error("non-finite RescaleSlope/RescaleIntercept")),
+        }
+    };
+    h.rescale = [
+        value(tags::RESCALE_SLOPE, 1.0)?,
+        value(tags::RESCALE_INTERCEPT, 0.0)?,
+    ];
     if sp.iter().any(|s| *s <= 0.0) {
-        return Err(Error::input(
-            path,
-            format!("PixelSpacing {sp:?} must be positive"),
-        ));
+        return Err(h.error(format!("PixelSpacing {sp:?} must be positive")));
     }
-    Ok(Some(SliceHeader {
-        path: path.to_path_buf(),
-        series,
-        series_desc,
-        series_number,
-        modality,
-        ts,
-        rows,
-        cols,
-        spacing: [sp[0], sp[1]],
-        iop: [iop[0], iop[1], iop[2], iop[3], iop[4], iop[5]],
-        ipp: [ipp[0], ipp[1], ipp[2]],
-    }))
+    h.spacing = [sp[0], sp[1]];
+    h.iop = [iop[0], iop[1], iop[2], iop[3], iop[4], iop[5]];
+    h.ipp = [ipp[0], ipp[1], ipp[2]];
+    Ok(h)
 }
 
 fn normalize(v: [f64; 3]) -> [f64; 3] {
@@ -169,7 +308,7 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
     let files = dicom_files(dir)?;
     let mut headers = Vec::with_capacity(files.len());
     for p in &files {
-        headers.extend(read_header(p)?);
+        headers.extend(read_headers(p)?);
     }
     if headers.is_empty() {
         return Err(Error::input(
@@ -203,12 +342,17 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
     let per_slice = rows * cols;
     debug_assert!(per_slice * nz <= MAX_VOXELS);
 
-    // Slices decode in parallel (a compressed series is codec-bound: docs/performance.md); each
-    // in its own guard, so a parser panic on one damaged file names that file.
+    // Files decode in parallel, and the frames of a multi-frame file too (a compressed series is
+    // codec-bound: docs/performance.md); each file in its own guard, so a parser panic on one
+    // damaged file names that file.
     let mut data = vec![0.0f32; per_slice * nz];
-    data.par_chunks_mut(per_slice)
-        .zip(headers.par_iter())
-        .try_for_each(|(slice, h)| crate::error::guard(&h.path, || read_slice(h, slice)))?;
+    let mut by_file: BTreeMap<&Path, Vec<(&SliceHeader, &mut [f32])>> = BTreeMap::new();
+    for (h, slice) in headers.iter().zip(data.chunks_mut(per_slice)) {
+        by_file.entry(&h.path).or_default().push((h, slice));
+    }
+    by_file
+        .into_par_iter()
+        .try_for_each(|(path, slices)| crate::error::guard(path, || read_file(path, slices)))?;
     Ok((
         Volume {
             dims,
@@ -317,7 +461,7 @@ fn choose_series(
                     Ok(rel) if !rel.as_os_str().is_empty() => format!(" in {}", rel.display()),
                     _ => String::new(),
                 };
-                format!("{uid} ({} files{number}{desc}{place})", s.n)
+                format!("{uid} ({} images{number}{desc}{place})", s.n)
             })
             .collect::<Vec<_>>()
             .join("; ")
@@ -367,25 +511,19 @@ fn check_same_frame(headers: &[SliceHeader]) -> Result<()> {
     for h in headers {
         dicom_syntax::check_decodable(&h.ts).map_err(|msg| Error::input(&h.path, msg))?;
         if h.rows != first.rows || h.cols != first.cols {
-            return Err(Error::input(
-                &h.path,
-                format!(
-                    "slice size {}x{} differs from {}x{} in {}",
-                    h.cols,
-                    h.rows,
-                    first.cols,
-                    first.rows,
-                    first.path.display()
-                ),
-            ));
+            return Err(h.error(format!(
+                "slice size {}x{} differs from {}x{} in {}",
+                h.cols,
+                h.rows,
+                first.cols,
+                first.rows,
+                first.place()
+            )));
         }
         if (0..2).any(|a| (h.spacing[a] - first.spacing[a]).abs() > 1e-4 * first.spacing[a])
             || (0..6).any(|a| (h.iop[a] - first.iop[a]).abs() > 1e-4)
         {
-            return Err(Error::input(
-                &h.path,
-                "pixel spacing or orientation differs from the rest of the series",
-            ));
+            return Err(h.error("pixel spacing or orientation differs from the rest of the series"));
         }
     }
     Ok(())
@@ -407,13 +545,10 @@ fn check_stacked_along_normal(
         let across = [0, 1, 2].map(|a| d[a] - along * normal[a]);
         let drift = (across[0].powi(2) + across[1].powi(2) + across[2].powi(2)).sqrt();
         if drift > tol {
-            return Err(Error::input(
-                &h.path,
-                format!(
-                    "slice positions drift {drift:.2} mm across the slice plane from {} (gantry tilt or a sheared stack); resample the series to an orthogonal grid first",
-                    headers[0].path.display()
-                ),
-            ));
+            return Err(h.error(format!(
+                "slice positions drift {drift:.2} mm across the slice plane from {} (gantry tilt or a sheared stack); resample the series to an orthogonal grid first",
+                headers[0].place()
+            )));
         }
     }
     Ok(())
@@ -442,72 +577,65 @@ fn slice_spacing(headers: &[SliceHeader], pos: impl Fn(&SliceHeader) -> f64) -> 
         .collect();
     for (w, g) in headers.windows(2).zip(&gaps) {
         if *g < 1e-3 {
-            return Err(Error::input(
-                &w[1].path,
-                format!("duplicate slice position (same as {})", w[0].path.display()),
-            ));
+            return Err(w[1].error(format!(
+                "duplicate slice position (same as {})",
+                w[0].place()
+            )));
         }
     }
     // A missing slice only ever widens a gap, so the smallest gap is the series' spacing.
     let step = gaps.iter().cloned().fold(f64::INFINITY, f64::min);
     for (w, g) in headers.windows(2).zip(&gaps) {
         if (g - step).abs() > 0.05 * step + 1e-3 {
-            return Err(Error::input(
-                &w[1].path,
-                format!(
-                    "gap of {g:.3} mm before this slice, {step:.3} mm elsewhere: missing slice or uneven slice spacing"
-                ),
-            ));
+            return Err(w[1].error(format!(
+                "gap of {g:.3} mm before this slice, {step:.3} mm elsewhere: missing slice or uneven slice spacing"
+            )));
         }
     }
     Ok((pos(&headers[nz - 1]) - pos(&headers[0])) / (nz - 1) as f64)
 }
 
-/// Write the HU of slice `h` (stored value × RescaleSlope + RescaleIntercept) into `out`.
-fn read_slice(h: &SliceHeader, out: &mut [f32]) -> Result<()> {
-    let per_slice = out.len();
-    let obj = dicom_object::open_file(&h.path)
-        .map_err(|e| Error::input(&h.path, format!("unreadable DICOM file ({e})")))?;
-    let slope = obj
-        .element_opt(tags::RESCALE_SLOPE)
-        .ok()
-        .flatten()
-        .and_then(|e| e.to_float64().ok())
-        .unwrap_or(1.0);
-    let inter = obj
-        .element_opt(tags::RESCALE_INTERCEPT)
-        .ok()
-        .flatten()
-        .and_then(|e| e.to_float64().ok())
-        .unwrap_or(0.0);
-    if !slope.is_finite() || !inter.is_finite() {
-        return Err(Error::input(
-            &h.path,
-            "non-finite RescaleSlope/RescaleIntercept",
-        ));
-    }
-    let pd = decode_guarded(h, || obj.decode_pixel_data())?;
-    if pd.number_of_frames() != 1 || pd.samples_per_pixel() != 1 {
-        return Err(Error::input(
-            &h.path,
-            "expected one greyscale frame per file",
-        ));
-    }
-    let convert = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
-    let raw: Vec<f32> = decode_guarded(h, || pd.to_vec_with_options(&convert))?;
-    if raw.len() != per_slice {
-        return Err(Error::input(
-            &h.path,
-            format!(
-                "pixel data has {} values, Rows×Columns = {per_slice} (truncated?)",
-                raw.len()
-            ),
-        ));
-    }
-    for (o, &v) in out.iter_mut().zip(&raw) {
-        *o = (v as f64 * slope + inter) as f32;
-    }
-    Ok(())
+/// Write the HU of the slices of file `path` (stored value × RescaleSlope + RescaleIntercept) into
+/// their places in the volume: the one image of a single-frame file, or the listed frames of a
+/// multi-frame one (decoded frame by frame, in parallel).
+fn read_file(path: &Path, slices: Vec<(&SliceHeader, &mut [f32])>) -> Result<()> {
+    let obj = dicom_object::open_file(path)
+        .map_err(|e| Error::input(path, format!("unreadable DICOM file ({e})")))?;
+    slices.into_par_iter().try_for_each(|(h, out)| {
+        let pd = match h.frame {
+            None => {
+                let pd = decode_guarded(h, || obj.decode_pixel_data())?;
+                if pd.number_of_frames() != 1 {
+                    return Err(h.error(format!(
+                        "{} frames in a file without PerFrameFunctionalGroupsSequence",
+                        pd.number_of_frames()
+                    )));
+                }
+                pd
+            }
+            Some(f) => decode_guarded(h, || obj.decode_pixel_data_frame(f))?,
+        };
+        if pd.samples_per_pixel() != 1 {
+            return Err(h.error(format!(
+                "{} samples per pixel: a CT image is greyscale",
+                pd.samples_per_pixel()
+            )));
+        }
+        let convert = ConvertOptions::new().with_modality_lut(ModalityLutOption::None);
+        let raw: Vec<f32> = decode_guarded(h, || pd.to_vec_with_options(&convert))?;
+        if raw.len() != out.len() {
+            return Err(h.error(format!(
+                "pixel data has {} values, Rows×Columns = {} (truncated?)",
+                raw.len(),
+                out.len()
+            )));
+        }
+        let [slope, inter] = h.rescale;
+        for (o, &v) in out.iter_mut().zip(&raw) {
+            *o = (v as f64 * slope + inter) as f32;
+        }
+        Ok(())
+    })
 }
 
 /// Run a decoding step of slice `h`; its failure, or a panic of the codec on damaged data
@@ -518,13 +646,10 @@ fn decode_guarded<T, E: std::fmt::Display>(
     f: impl FnOnce() -> std::result::Result<T, E>,
 ) -> Result<T> {
     let undecodable = |e: &dyn std::fmt::Display| {
-        Error::input(
-            &h.path,
-            format!(
-                "cannot decode pixel data, transfer syntax {} ({e})",
-                dicom_syntax::describe(&h.ts)
-            ),
-        )
+        h.error(format!(
+            "cannot decode pixel data, transfer syntax {} ({e})",
+            dicom_syntax::describe(&h.ts)
+        ))
     };
     match crate::error::guard(&h.path, || Ok(f())) {
         Ok(r) => r.map_err(|e| undecodable(&e)),

@@ -15,6 +15,18 @@ pub fn kept_dir(prefix: &str) -> PathBuf {
         .keep()
 }
 
+/// The Python of the tests' venv, target/slicer-venv (scripts/test-setup.sh makes it with the
+/// fixture makers and parsers the tests call: ctk-cli, scikit-image, highdicom, ...).
+pub fn venv_python() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/slicer-venv/bin/python");
+    assert!(
+        p.is_file(),
+        "{} missing: run scripts/test-setup.sh (it makes the venv)",
+        p.display()
+    );
+    p
+}
+
 /// A phantom case (1.5 mm voxels), written once per test binary.
 pub fn phantom_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
