@@ -57,10 +57,7 @@ pub fn run(case_toml: &Path, models: &[SolveModel]) -> Result<Vec<Row>> {
     }
     let mut rows = Vec::new();
     for &model in models {
-        let name = match model {
-            SolveModel::Koch1996 => "koch1996",
-            _ => "equilibrium",
-        };
+        let name = model.name();
         let mut c = case.clone();
         c.solve.model = model;
         let mut scene = pipeline::prepare_case(&c, &Quiet)?;

@@ -337,6 +337,17 @@ pub enum SolveModel {
     Tet,
 }
 
+impl SolveModel {
+    /// The name case.toml uses (`[solve] model`).
+    pub fn name(self) -> &'static str {
+        match self {
+            SolveModel::Equilibrium => "equilibrium",
+            SolveModel::Koch1996 => "koch1996",
+            SolveModel::Tet => "tet",
+        }
+    }
+}
+
 /// The volumetric model's constitutive law.
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]

@@ -510,7 +510,7 @@ impl<'a> Study<'a> {
         let plan = &self.scene.model.plan;
         let (sol, wall, peak) =
             timed(|| facesim::solve::solve(&level.skin, &t.springs, plan, &t.rigid, &params));
-        let method = format!("C1 {}", model_name(model));
+        let method = format!("C1 {}", model.name());
         let peak_mb = peak.zip(t.peak_mb).map(|(a, b)| a.max(b));
         let finest = li == 0 && model == SolveModel::Equilibrium;
         let mut row = FaceRow {
@@ -1007,12 +1007,4 @@ fn mean_norm(d: &[[f64; 3]], rigid: &[bool]) -> f64 {
         .map(|(d, _)| facesim::mesh::norm(*d))
         .collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
-}
-
-fn model_name(m: SolveModel) -> &'static str {
-    match m {
-        SolveModel::Equilibrium => "equilibrium",
-        SolveModel::Koch1996 => "koch1996",
-        SolveModel::Tet => "tet",
-    }
 }

@@ -4,7 +4,7 @@
 
 use super::Recorder;
 use super::surfaces::Surfaces;
-use crate::case::{Case, Parameterization};
+use crate::case::{Case, Parameterization, SolveModel};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::report::{CoarseReport, Stage, SurfaceReport};
@@ -40,6 +40,8 @@ pub fn place(
         r0,
         mut report,
     } = surfaces;
+    // The C1 models' resolution for a skin cut from another program: see `coarsen`.
+    let mut c1_target = None;
     let (skin, registration) = match scan {
         None => (extracted, None),
         Some(scan) => {
@@ -59,10 +61,13 @@ pub fn place(
                 ));
             }
             report.scan_to_ct_skin_mm = Some(st);
+            if report.foreign_skin.is_some() && case.solve.model != SolveModel::Tet {
+                c1_target = Some(extracted.triangles.len());
+            }
             (m, t)
         }
     };
-    let (skin, fine) = coarsen(skin, case, &mut report, rec)?;
+    let (skin, fine) = coarsen(skin, case, c1_target, &mut report, rec)?;
     Ok(Face {
         skin,
         skull,
@@ -143,13 +148,30 @@ fn place_scan(
 
 /// A skin with more than twice `[solve] coarse_triangles` triangles is solved on a (u, v)-grid
 /// resampling of it (issue 6); returns (the skin to model, the full skin when coarsened).
+///
+/// `c1_target`: a C1 model on a skin cut from another program's iso-surface, with
+/// `coarse_triangles` unset, is solved at the resolution of the skin facesim makes from the CT
+/// itself (its triangle count). The C1 models are defined on that range-scan grid: Koch's struts
+/// stiffen tangential motion in proportion to the mesh, and on a voxel-fine iso-surface (0.5 mm
+/// edges, ragged rims) the equilibrium Newton solve does not converge (docs/pipeline.md "A skin
+/// from another program").
 fn coarsen(
     skin: Mesh,
     case: &Case,
+    c1_target: Option<usize>,
     report: &mut SurfaceReport,
     rec: &mut Recorder,
 ) -> Result<(Mesh, Option<Mesh>)> {
-    let target = case.solve.coarse_triangles;
+    let target = match (case.solve.coarse_triangles, c1_target) {
+        (0, Some(n)) if skin.triangles.len() > 2 * n => {
+            rec.warn(format!(
+                "the {} model is solved on a {n}-triangle (u, v) resampling of the cut skin (the resolution of the skin facesim scans from the CT) and the whole cut skin is carried along; set [solve] coarse_triangles to choose another",
+                case.solve.model.name()
+            ));
+            n
+        }
+        (n, _) => n,
+    };
     if target == 0 || skin.triangles.len() <= 2 * target {
         rec.skip(
             Stage::Coarsen,

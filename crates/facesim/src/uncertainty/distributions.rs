@@ -253,7 +253,7 @@ impl Uncertainty {
                 return bad(format!(
                     "[uncertainty.{}] does not apply to [solve] model = \"{}\": {why}",
                     p.key(),
-                    model_name(model)
+                    model.name()
                 ));
             }
             let checked = match (p, d) {
@@ -282,14 +282,6 @@ impl Uncertainty {
             checked.or_else(bad)?;
         }
         Ok(())
-    }
-}
-
-pub fn model_name(m: SolveModel) -> &'static str {
-    match m {
-        SolveModel::Equilibrium => "equilibrium",
-        SolveModel::Koch1996 => "koch1996",
-        SolveModel::Tet => "tet",
     }
 }
 

@@ -3,7 +3,7 @@
 //! displacement magnitudes to the band per vertex, landmark and region.
 
 use super::band::{self, Band};
-use super::distributions::{Distribution, Parameter, model_name};
+use super::distributions::{Distribution, Parameter};
 use super::sample::ScrambledHalton;
 use crate::case::{Case, SolveModel};
 use crate::error::Result;
@@ -256,7 +256,7 @@ pub fn sample(
         let report = UncertaintyReport {
             samples: n,
             seed: case.uncertainty.seed,
-            model: model_name(case.solve.model),
+            model: case.solve.model.name(),
             sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)",
             parameters: Ordered(
                 case.uncertainty
