@@ -88,6 +88,12 @@ need_python_venv() {
   }
   # highdicom converts a single-frame series into a multi-frame Legacy Converted Enhanced CT
   # object (crates/facesim/tests/dicom_codecs.rs, tests/python/legacy_enhanced.py).
+  # VTK itself re-saves a model in every encoding its writers have
+  # (crates/facesim/tests/vtk_files.rs, tests/python/vtk_variants.py).
+  "$venv/bin/python" -c 'import vtkmodules.vtkIOXML' >/dev/null 2>&1 || {
+    "$venv/bin/pip" install -q "vtk==9.7.2"
+    echo "test-setup: vtk in $venv"
+  }
   "$venv/bin/python" -c 'import highdicom' >/dev/null 2>&1 || {
     "$venv/bin/pip" install -q "highdicom==0.28.2"
     echo "test-setup: highdicom in $venv"

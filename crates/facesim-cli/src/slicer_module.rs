@@ -267,7 +267,7 @@ fn write_face(o: &facesim::pipeline::Outcome, dest: &Path) -> Result<()> {
         .map(|e| e.to_string_lossy().to_lowercase())
         .unwrap_or_default();
     match ext.as_str() {
-        "vtp" => mesh::vtk::write_vtp(&o.face_post, &arrays, dest),
+        "vtp" => mesh::vtp::write_vtp(&o.face_post, &arrays, dest),
         "vtk" => mesh::vtk::write_legacy(&o.face_post, &arrays, dest),
         "stl" => mesh::stl::write(&o.face_post, dest, "facesim SPACE=LPS"),
         _ => mesh::write_mesh(&o.face_post, dest),

@@ -307,7 +307,7 @@ fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
     assert!(dmax > 1.0, "the plan moved the face ({dmax} mm)");
     // face_post.vtp: the same points as face_post.obj, displacement_mm = post − pre.
     let out = files.join("out");
-    let (m, arrays) = facesim::mesh::vtk::read_vtp(&out.join("face_post.vtp")).unwrap();
+    let (m, arrays) = facesim::mesh::vtp::read_vtp(&out.join("face_post.vtp")).unwrap();
     let obj = facesim::mesh::read_mesh(&out.join("face_post.obj")).unwrap();
     let pre = facesim::mesh::read_mesh(&out.join("face_pre.obj")).unwrap();
     assert_eq!(m.vertices, obj.vertices);

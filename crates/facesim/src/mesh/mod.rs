@@ -7,6 +7,7 @@ pub mod obj;
 pub mod ply;
 pub mod stl;
 pub mod vtk;
+pub mod vtp;
 
 use crate::error::{Error, Result};
 use crate::union_find::UnionFind;

@@ -6,7 +6,7 @@
 //! string in .vtp. A file saying RAS has x and y negated; a file saying nothing is LPS (Slicer's
 //! default since 4.11, and facesim's frame).
 
-use super::{Mesh, obj, ply, stl, vtk};
+use super::{Mesh, obj, ply, stl, vtk, vtp};
 use crate::error::{Error, Result};
 use std::path::Path;
 
@@ -48,17 +48,9 @@ pub fn read_model(path: &Path) -> Result<Mesh> {
             Ok((m, declared_ras(&h)))
         }
         "vtp" => {
-            let (m, _) = vtk::read_vtp(path)?;
-            let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-            // The SPACE string as character codes: "82 65 83" is RAS.
-            let ras = text.find("Name=\"SPACE\"").map(|i| {
-                text[i..]
-                    .split('<')
-                    .next()
-                    .unwrap_or_default()
-                    .contains("82 65 83")
-            });
-            Ok((m, ras))
+            let v = vtp::read(path)?;
+            let ras = v.space().map(|s| s.eq_ignore_ascii_case("RAS"));
+            Ok((v.mesh, ras))
         }
         "ply" => {
             let h = head()?;

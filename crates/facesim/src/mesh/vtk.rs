@@ -1,7 +1,6 @@
-//! VTK polygon meshes: the legacy `.vtk` format (ASCII or BINARY, the 4.2 cell lists 3D Slicer
-//! writes and 5.1's OFFSETS/CONNECTIVITY) and VTK XML PolyData `.vtp` (ASCII), each with
-//! per-point data arrays. 3D Slicer marks the frame in the legacy header line ("SPACE=LPS") and
-//! in a `SPACE` field-data string of `.vtp`; the writers here mark LPS both ways.
+//! Legacy VTK polygon meshes (`.vtk`: ASCII or BINARY, the 4.2 cell lists 3D Slicer writes and
+//! 5.1's OFFSETS/CONNECTIVITY) with per-point data arrays; VTK XML PolyData is `vtp`. 3D Slicer
+//! marks the frame in the legacy header line ("SPACE=LPS"); the writer here marks LPS.
 
 use super::Mesh;
 use crate::error::{Error, Result};
@@ -39,6 +38,12 @@ impl<'a> Cursor<'a> {
         std::str::from_utf8(l)
             .map(|s| s.trim_end_matches('\r'))
             .map_err(|_| "header is not text".to_string())
+    }
+    fn skip_line(&mut self) {
+        while self.i < self.b.len() && self.b[self.i] != b'\n' {
+            self.i += 1;
+        }
+        self.i = (self.i + 1).min(self.b.len());
     }
     fn word(&mut self) -> Option<&'a str> {
         while self.i < self.b.len() && self.b[self.i].is_ascii_whitespace() {
@@ -190,8 +195,15 @@ fn parse_legacy(b: &[u8]) -> std::result::Result<(Mesh, String), String> {
                     }
                 }
             }
+            // The data set's field data (VTK 9 writes it before POINTS): skipped.
+            "FIELD" => skip_field(&mut c, binary)?,
+            // Array metadata (VTK 9 writes it after an array): up to the next empty line.
+            "METADATA" => {
+                c.line()?;
+                while !c.line()?.trim().is_empty() {}
+            }
             // Point and cell data are not needed to build a surface: stop here.
-            "POINT_DATA" | "CELL_DATA" | "FIELD" | "METADATA" => break,
+            "POINT_DATA" | "CELL_DATA" => break,
             other => return Err(format!("unexpected keyword '{other}'")),
         }
     }
@@ -203,6 +215,35 @@ fn parse_legacy(b: &[u8]) -> std::result::Result<(Mesh, String), String> {
         return Err("a cell refers to a point beyond POINTS".into());
     }
     Ok((mesh, header))
+}
+
+/// Pass over a FIELD block (after its keyword): `name n`, then per array `name components
+/// tuples type` and its values (strings one per line).
+fn skip_field(c: &mut Cursor, binary: bool) -> std::result::Result<(), String> {
+    c.word().ok_or("FIELD without a name")?;
+    let arrays = c.usize("FIELD")?;
+    for _ in 0..arrays {
+        let name = c.word().ok_or("FIELD: array name missing")?.to_string();
+        let n = c.usize(&name)? * c.usize(&name)?;
+        let ty = c.word().ok_or("FIELD: array type missing")?;
+        if ty == "string" {
+            // One per line; in a BINARY file each begins with a length byte (not text).
+            for _ in 0..=n {
+                c.skip_line();
+            }
+        } else {
+            c.numbers(n, ty, binary)?;
+        }
+        // VTK 9 follows an array with its METADATA block.
+        let save = c.i;
+        if c.word() == Some("METADATA") {
+            c.line()?;
+            while !c.line()?.trim().is_empty() {}
+        } else {
+            c.i = save;
+        }
+    }
+    Ok(())
 }
 
 /// Legacy ASCII `.vtk` POLYDATA with point data, header line marking LPS.
@@ -235,166 +276,6 @@ pub fn write_legacy(mesh: &Mesh, arrays: &[PointArray], path: &Path) -> Result<(
     })
 }
 
-/// VTK XML PolyData (`.vtp`, ASCII) with point data and a `SPACE` = "LPS" field-data string
-/// (how 3D Slicer records the frame of a .vtp).
-pub fn write_vtp(mesh: &Mesh, arrays: &[PointArray], path: &Path) -> Result<()> {
-    write_bytes_atomic(path, |w| {
-        let (nv, nt) = (mesh.vertices.len(), mesh.triangles.len());
-        writeln!(w, r#"<?xml version="1.0"?>"#)?;
-        writeln!(
-            w,
-            r#"<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">"#
-        )?;
-        writeln!(w, "<PolyData>")?;
-        // "LPS" as VTK writes an ASCII string array: character codes, each string ended by 0.
-        writeln!(
-            w,
-            r#"<FieldData><Array type="String" Name="SPACE" NumberOfTuples="1" format="ascii">76 80 83 0</Array></FieldData>"#
-        )?;
-        writeln!(
-            w,
-            r#"<Piece NumberOfPoints="{nv}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="{nt}">"#
-        )?;
-        writeln!(w, "<PointData>")?;
-        for a in arrays {
-            writeln!(
-                w,
-                r#"<DataArray type="Float64" Name="{}" NumberOfComponents="{}" format="ascii">"#,
-                a.name, a.components
-            )?;
-            for row in a.values.chunks(a.components.max(1)) {
-                let s: Vec<String> = row.iter().map(|x| x.to_string()).collect();
-                writeln!(w, "{}", s.join(" "))?;
-            }
-            writeln!(w, "</DataArray>")?;
-        }
-        writeln!(w, "</PointData>")?;
-        writeln!(
-            w,
-            r#"<Points><DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#
-        )?;
-        for v in &mesh.vertices {
-            writeln!(w, "{} {} {}", v[0], v[1], v[2])?;
-        }
-        writeln!(w, "</DataArray></Points>")?;
-        writeln!(
-            w,
-            r#"<Polys><DataArray type="Int64" Name="connectivity" format="ascii">"#
-        )?;
-        for t in &mesh.triangles {
-            writeln!(w, "{} {} {}", t[0], t[1], t[2])?;
-        }
-        writeln!(w, "</DataArray>")?;
-        writeln!(
-            w,
-            r#"<DataArray type="Int64" Name="offsets" format="ascii">"#
-        )?;
-        for k in 1..=nt {
-            write!(w, "{} ", 3 * k)?;
-        }
-        writeln!(w, "\n</DataArray></Polys>")?;
-        writeln!(w, "</Piece>\n</PolyData>\n</VTKFile>")?;
-        Ok(())
-    })
-}
-
-/// Read an ASCII `.vtp` (points and polys; what [`write_vtp`] and VTK's ASCII mode write) and
-/// its named point-data arrays. Appended or binary-encoded arrays are refused with a hint.
-pub fn read_vtp(path: &Path) -> Result<(Mesh, Vec<PointArray>)> {
-    let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
-    parse_vtp(&text).map_err(|m| Error::input(path, m))
-}
-
-fn attr<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
-    let key = format!(" {name}=\"");
-    let s = tag.find(&key)? + key.len();
-    let e = tag[s..].find('"')? + s;
-    Some(&tag[s..e])
-}
-
-fn parse_vtp(text: &str) -> std::result::Result<(Mesh, Vec<PointArray>), String> {
-    if !text.contains("<VTKFile") || !text.contains("type=\"PolyData\"") {
-        return Err("not a VTK XML PolyData file".into());
-    }
-    let section = |name: &str| -> Option<&str> {
-        let s = text.find(&format!("<{name}>"))?;
-        let e = text[s..].find(&format!("</{name}>"))? + s;
-        Some(&text[s..e])
-    };
-    // Every <DataArray ...>numbers</DataArray> of a section, with its opening tag.
-    let arrays = |sec: &str| -> std::result::Result<Vec<(String, Vec<f64>)>, String> {
-        let mut out = Vec::new();
-        let mut rest = sec;
-        while let Some(s) = rest.find("<DataArray") {
-            let tag_end = rest[s..].find('>').ok_or("unterminated DataArray")? + s;
-            let tag = &rest[s..tag_end];
-            let close = rest[tag_end..]
-                .find("</DataArray>")
-                .ok_or("unterminated DataArray")?
-                + tag_end;
-            if attr(tag, "format") != Some("ascii") {
-                return Err(
-                    "binary or appended data arrays are not supported: save the model as .vtk or as ASCII .vtp"
-                        .into(),
-                );
-            }
-            let nums = rest[tag_end + 1..close]
-                .split_whitespace()
-                .map(|w| {
-                    w.parse::<f64>()
-                        .map_err(|_| format!("'{w}' is not a number"))
-                })
-                .collect::<std::result::Result<Vec<_>, _>>()?;
-            out.push((tag.to_string(), nums));
-            rest = &rest[close..];
-        }
-        Ok(out)
-    };
-    let points = arrays(section("Points").ok_or("no <Points>")?)?;
-    let p = &points.first().ok_or("no point coordinates")?.1;
-    let mut mesh = Mesh {
-        vertices: p.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-        ..Mesh::default()
-    };
-    if let Some(polys) = section("Polys") {
-        let a = arrays(polys)?;
-        let find = |n: &str| {
-            a.iter()
-                .find(|(t, _)| attr(t, "Name") == Some(n))
-                .map(|(_, v)| v.clone())
-        };
-        let con = find("connectivity").ok_or("Polys without connectivity")?;
-        let off = find("offsets").ok_or("Polys without offsets")?;
-        let mut start = 0usize;
-        for o in off {
-            let end = o as usize;
-            let ids = con.get(start..end).ok_or("offsets out of range")?;
-            for k in 1..ids.len().saturating_sub(1) {
-                mesh.triangles
-                    .push([ids[0] as u32, ids[k] as u32, ids[k + 1] as u32]);
-            }
-            start = end;
-        }
-    }
-    let mut data = Vec::new();
-    if let Some(pd) = section("PointData") {
-        for (tag, values) in arrays(pd)? {
-            data.push(PointArray {
-                name: attr(&tag, "Name").unwrap_or_default().to_string(),
-                components: attr(&tag, "NumberOfComponents")
-                    .and_then(|c| c.parse().ok())
-                    .unwrap_or(1),
-                values,
-            });
-        }
-    }
-    let n = mesh.vertices.len();
-    if mesh.triangles.iter().flatten().any(|i| *i as usize >= n) {
-        return Err("a cell refers to a point beyond the points".into());
-    }
-    Ok((mesh, data))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -412,19 +293,13 @@ mod tests {
     }
 
     #[test]
-    fn vtp_and_legacy_round_trip_with_point_data() {
+    fn legacy_round_trip_with_point_data() {
         let dir = tempfile::tempdir().unwrap();
         let a = PointArray {
             name: "displacement_mm".into(),
             components: 3,
             values: (0..12).map(|i| i as f64 * 0.1).collect(),
         };
-        let p = dir.path().join("m.vtp");
-        write_vtp(&tri(), std::slice::from_ref(&a), &p).unwrap();
-        let (m, d) = read_vtp(&p).unwrap();
-        assert_eq!(m.vertices, tri().vertices);
-        assert_eq!(m.triangles, tri().triangles);
-        assert_eq!(d, vec![a.clone()]);
         let p = dir.path().join("m.vtk");
         write_legacy(&tri(), &[a], &p).unwrap();
         let (m, h) = read_legacy(&p).unwrap();

@@ -103,7 +103,7 @@ pub fn write_face_vtp(p: &Prediction, dist: &[f64], path: &Path) -> Result<()> {
             values: dist.to_vec(),
         },
     ];
-    mesh::vtk::write_vtp(&p.face_post, &arrays, path)
+    mesh::vtp::write_vtp(&p.face_post, &arrays, path)
 }
 
 /// Every output file but report.json, into `dir` (created if needed); `dist` is
