@@ -80,26 +80,6 @@ fn the_xml_is_a_valid_execution_model_for_ctk_cli() {
     assert_eq!(m["default"], "tet");
 }
 
-/// A box (LPS mm) as a closed legacy .vtk model, as Slicer hands a model to a CLI.
-fn box_model(min: [f64; 3], max: [f64; 3]) -> Mesh {
-    let v = (0..8)
-        .map(|i| [0, 1, 2].map(|a| if (i >> a) & 1 == 1 { max[a] } else { min[a] }))
-        .collect();
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
-    let t = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    Mesh::new(v, t)
-}
-
 const TFM_6MM_FORWARD: &str = "#Insight Transform File V1.0\n#Transform 0\nTransform: AffineTransform_double_3_3\nParameters: 1 0 0 0 1 0 0 0 1 0 6 0\nFixedParameters: 0 0 0\n";
 
 #[test]
@@ -117,13 +97,13 @@ fn called_as_slicer_calls_it_the_module_predicts_the_face_of_the_same_plan() {
     facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
     let (min, max) = ([-70.05, -75.05, -125.05], [70.05, -1.45, -26.45]);
     let seg = dir.join("mandible.vtk");
-    mesh::vtk::write_legacy(&box_model(min, max), &[], &seg).unwrap();
+    mesh::vtk::write_legacy(&Mesh::cuboid(min, max), &[], &seg).unwrap();
     // Slicer saves the resampling transform: +6 mm in y for a 6 mm anterior (−y) move.
     let tfm = dir.join("mandible.tfm");
     std::fs::write(&tfm, TFM_6MM_FORWARD).unwrap();
     let movable = dir.join("movable.vtk");
     mesh::vtk::write_legacy(
-        &box_model([-80.3, -130.3, -110.3], [80.3, -20.3, 20.3]),
+        &Mesh::cuboid([-80.3, -130.3, -110.3], [80.3, -20.3, 20.3]),
         &[],
         &movable,
     )
@@ -223,7 +203,7 @@ fn a_non_rigid_transform_is_one_line_naming_the_file_and_nothing_is_written() {
     let ct = dir.join("ct.nrrd");
     facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
     let seg = dir.join("seg.vtk");
-    mesh::vtk::write_legacy(&box_model([-10.0; 3], [10.0; 3]), &[], &seg).unwrap();
+    mesh::vtk::write_legacy(&Mesh::cuboid([-10.0; 3], [10.0; 3]), &[], &seg).unwrap();
     let tfm = dir.join("sheared.tfm");
     std::fs::write(
         &tfm,

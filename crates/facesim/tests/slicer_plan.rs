@@ -168,32 +168,20 @@ fn bad_transform_files_and_keys_are_one_line_errors_naming_the_file() {
 /// A box as 12 triangles in binary STL, written in RAS (x and y negated, header SPACE=RAS) as
 /// 3D Slicer does when asked for RAS.
 fn write_box_stl_ras(path: &Path, min: [f64; 3], max: [f64; 3]) {
-    let corner = |i: usize| {
-        let p = [0, 1, 2].map(|a| if (i >> a) & 1 == 1 { max[a] } else { min[a] });
-        [-p[0], -p[1], p[2]]
-    };
-    let quads = [
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [0, 1, 5, 4],
-        [2, 6, 7, 3],
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-    ];
+    let m = facesim::mesh::Mesh::cuboid(min, max);
     let mut b = vec![0u8; 80];
     let h = b"3D Slicer output. SPACE=RAS";
     b[..h.len()].copy_from_slice(h);
-    b.extend(12u32.to_le_bytes());
-    for q in quads {
-        for t in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-            b.extend([0u8; 12]);
-            for v in t {
-                for c in corner(v) {
-                    b.extend((c as f32).to_le_bytes());
-                }
+    b.extend((m.triangles.len() as u32).to_le_bytes());
+    for t in &m.triangles {
+        b.extend([0u8; 12]);
+        for v in t {
+            let p = m.vertices[*v as usize];
+            for c in [-p[0], -p[1], p[2]] {
+                b.extend((c as f32).to_le_bytes());
             }
-            b.extend([0u8; 2]);
         }
+        b.extend([0u8; 2]);
     }
     std::fs::write(path, b).unwrap();
 }

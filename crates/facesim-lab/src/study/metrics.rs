@@ -313,28 +313,9 @@ mod tests {
     }
 
     fn boxmesh(o: [f64; 3], s: [f64; 3]) -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
-        let pts: Vec<[f64; 3]> = (0..8)
-            .map(|c| {
-                [
-                    o[0] + s[0] * (c & 1) as f64,
-                    o[1] + s[1] * ((c >> 1) & 1) as f64,
-                    o[2] + s[2] * ((c >> 2) & 1) as f64,
-                ]
-            })
-            .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let tris = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        (pts, tris)
+        let m = facesim::mesh::Mesh::cuboid(o, [0, 1, 2].map(|a| o[a] + s[a]));
+        let tris = m.triangles.iter().map(|t| t.map(|i| i as usize)).collect();
+        (m.vertices, tris)
     }
 
     #[test]

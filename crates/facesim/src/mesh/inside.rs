@@ -159,28 +159,7 @@ mod tests {
 
     /// An axis-aligned box [0,2]×[0,3]×[0,4] as 12 triangles.
     fn cube() -> Mesh {
-        let v = (0..8)
-            .map(|i| {
-                [
-                    2.0 * (i & 1) as f64,
-                    3.0 * ((i >> 1) & 1) as f64,
-                    4.0 * ((i >> 2) & 1) as f64,
-                ]
-            })
-            .collect();
-        let quads = [
-            [0, 2, 3, 1],
-            [4, 5, 7, 6],
-            [0, 1, 5, 4],
-            [2, 6, 7, 3],
-            [0, 4, 6, 2],
-            [1, 3, 7, 5],
-        ];
-        let t = quads
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect();
-        Mesh::new(v, t)
+        Mesh::cuboid([0.0; 3], [2.0, 3.0, 4.0])
     }
 
     #[test]

@@ -72,6 +72,28 @@ pub fn norm(a: [f64; 3]) -> f64 {
 }
 
 impl Mesh {
+    /// The closed axis-aligned box [min, max] as 12 triangles wound outwards (a region, a test
+    /// body).
+    pub fn cuboid(min: [f64; 3], max: [f64; 3]) -> Self {
+        // Corner i has max[a] where bit a of i is set.
+        let v = (0..8)
+            .map(|i| [0, 1, 2].map(|a| if (i >> a) & 1 == 1 { max[a] } else { min[a] }))
+            .collect();
+        let quads: [[u32; 4]; 6] = [
+            [0, 2, 3, 1],
+            [4, 5, 7, 6],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
+        let t = quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect();
+        Mesh::new(v, t)
+    }
+
     pub fn new(vertices: Vec<[f64; 3]>, triangles: Vec<[u32; 3]>) -> Self {
         Mesh {
             vertices,
