@@ -274,6 +274,42 @@ impl Mask {
     }
 }
 
+/// Read the voxels of every mask region and the closed surface of every surface region in
+/// `regions` that has not been read yet (a mask file once, however many regions name it).
+pub fn read_region_files<'a>(regions: impl Iterator<Item = &'a mut Region>) -> Result<()> {
+    let mut read: Vec<(PathBuf, std::sync::Arc<crate::volume::Volume>)> = Vec::new();
+    for r in regions {
+        if let Region::Surface(s) = r
+            && s.surface.is_none()
+        {
+            if !s.path.is_file() {
+                return Err(Error::input(&s.path, "region surface file not found"));
+            }
+            let mesh = crate::mesh::model_file::read_model(&s.path)?;
+            let closed = crate::mesh::inside::ClosedSurface::new(&mesh, &s.path)?;
+            s.surface = Some(std::sync::Arc::new(closed));
+            continue;
+        }
+        let Region::Mask(m) = r else { continue };
+        if m.voxels.is_some() {
+            continue;
+        }
+        if !m.path.is_file() {
+            return Err(Error::input(&m.path, "region mask file not found"));
+        }
+        let v = match read.iter().find(|(p, _)| *p == m.path) {
+            Some((_, v)) => v.clone(),
+            None => {
+                let v = std::sync::Arc::new(crate::volume::read_volume(&m.path)?);
+                read.push((m.path.clone(), v.clone()));
+                v
+            }
+        };
+        m.voxels = Some(v);
+    }
+    Ok(())
+}
+
 impl Region {
     /// Whether p (LPS mm) is inside; a mask must have been read (`Case::read_masks`).
     pub fn contains(&self, p: [f64; 3]) -> bool {
@@ -731,37 +767,7 @@ impl Case {
     /// surface: the pipeline's input edge, so that no stage reads files and `Region::contains`
     /// is right for masks and surfaces.
     pub fn read_masks(&mut self) -> Result<()> {
-        let mut read: Vec<(PathBuf, std::sync::Arc<crate::volume::Volume>)> = Vec::new();
-        for r in self.regions_mut() {
-            if let Region::Surface(s) = r
-                && s.surface.is_none()
-            {
-                if !s.path.is_file() {
-                    return Err(Error::input(&s.path, "region surface file not found"));
-                }
-                let mesh = crate::mesh::model_file::read_model(&s.path)?;
-                let closed = crate::mesh::inside::ClosedSurface::new(&mesh, &s.path)?;
-                s.surface = Some(std::sync::Arc::new(closed));
-                continue;
-            }
-            let Region::Mask(m) = r else { continue };
-            if m.voxels.is_some() {
-                continue;
-            }
-            if !m.path.is_file() {
-                return Err(Error::input(&m.path, "region mask file not found"));
-            }
-            let v = match read.iter().find(|(p, _)| *p == m.path) {
-                Some((_, v)) => v.clone(),
-                None => {
-                    let v = std::sync::Arc::new(crate::volume::read_volume(&m.path)?);
-                    read.push((m.path.clone(), v.clone()));
-                    v
-                }
-            };
-            m.voxels = Some(v);
-        }
-        Ok(())
+        read_region_files(self.regions_mut())
     }
 
     /// Check every value's range; errors name `path` (case.toml) and the key.

@@ -458,3 +458,62 @@ fn a_sweep_reports_each_plans_landmarks_and_regions_as_a_full_run() {
         "{head}"
     );
 }
+
+/// Plan B with the maxilla cut by a closed surface (a segment as Slicer exports it, .stl) and
+/// the mandible by a mask (.nii.gz), named relative to the plan's folder: re-planned from a
+/// basis run with the same regions, the face and the skull equal a full run of plan B.
+#[test]
+fn replanning_with_surface_and_mask_regions_moves_the_skull_as_a_full_run() {
+    use facesim::case::Region;
+    let dir = common::kept_dir("facesim-replan-files");
+    let maxilla = facesim::mesh::Mesh::cuboid([-90.0, -120.0, -24.0], [90.0, -11.0, 3.0]);
+    facesim::mesh::stl::write(&maxilla, &dir.join("maxilla.stl"), "SPACE=LPS").unwrap();
+    // The mandible's box on a 1 mm grid (its voxels' centres span the box).
+    let (min, max) = ([-90.0, -120.0, -110.0], [90.0, -11.0, -26.0]);
+    let dims = [0, 1, 2].map(|a| (max[a] - min[a]) as usize + 1);
+    let mask = facesim::volume::Volume {
+        dims,
+        spacing: [1.0; 3],
+        origin: min,
+        direction: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        data: vec![1.0; dims[0] * dims[1] * dims[2]],
+    };
+    facesim::volume::nifti_io::write(&mask, &dir.join("mandible.nii.gz")).unwrap();
+    let with_files = |mut plan: Vec<Osteotomy>| {
+        plan[0].region = Region::Surface(dir.join("maxilla.stl").into());
+        plan[1].region = Region::Mask(dir.join("mandible.nii.gz").into());
+        plan
+    };
+    let plan_a = two_segments([
+        ([0.0, -4.0, 0.0], [0.0; 3], [0.0; 3]),
+        ([0.0, -5.0, 0.0], [0.0; 3], [0.0; 3]),
+    ]);
+    let basis = run_plan(with_files(plan_a), "facesim-replan-files-a");
+    let full = run_plan(with_files(plan_b()), "facesim-replan-files-b");
+
+    // PLAN.toml as a user writes it beside the files: relative names.
+    let mut text = String::new();
+    for (o, file) in plan_b()
+        .iter()
+        .zip(["surface = \"maxilla.stl\"", "mask = \"mandible.nii.gz\""])
+    {
+        text += &format!(
+            "[[osteotomy]]\nname = \"{}\"\nregion = {{ {file} }}\ntranslate = {:?}\nrotate_deg = {:?}\npivot = {:?}\n\n",
+            o.name, o.translate, o.rotate_deg, o.pivot
+        );
+    }
+    let plan_file = dir.join("plan_b.toml");
+    std::fs::write(&plan_file, text).unwrap();
+    let r = replan::replan(&basis.out_dir, &plan_file, Some(&dir.join("replanned"))).unwrap();
+    let face = max_distance(&r.face_post, &full.face_post.vertices);
+    let skull = facesim::mesh::read_mesh(&r.out_dir.join("skull_post.ply")).unwrap();
+    let full_skull = facesim::mesh::read_mesh(&full.out_dir.join("skull_post.ply")).unwrap();
+    let bone = max_distance(&skull.vertices, &full_skull.vertices);
+    let pre = facesim::mesh::read_mesh(&basis.out_dir.join("skull_pre.ply")).unwrap();
+    let moved = max_distance(&skull.vertices, &pre.vertices);
+    println!(
+        "surface + mask regions: face {face:.2e} mm, skull {bone:.2e} mm (bone moves {moved:.1} mm)"
+    );
+    assert!(face < 1e-6, "face {face}");
+    assert!(bone < 1e-9 && moved > 3.0, "skull {bone}, moved {moved}");
+}

@@ -98,8 +98,20 @@ pub fn unit(k: usize) -> [f64; COLUMNS] {
     std::array::from_fn(|j| if j == k { 1.0 } else { 0.0 })
 }
 
-/// Regions compare by their case.toml form (a mask by its path).
+/// Regions compare by their case.toml form; a mask or a surface by its file (the same file
+/// named by two paths, e.g. relative to the case and to a plan elsewhere, is the same).
 pub fn same_region(a: &Region, b: &Region) -> bool {
+    let file = |r: &Region| match r {
+        Region::Mask(m) => Some(m.path.clone()),
+        Region::Surface(s) => Some(s.path.clone()),
+        _ => None,
+    };
+    if let (Some(x), Some(y)) = (file(a), file(b))
+        && std::mem::discriminant(a) == std::mem::discriminant(b)
+        && let (Ok(x), Ok(y)) = (x.canonicalize(), y.canonicalize())
+    {
+        return x == y;
+    }
     match (serde_json::to_value(a), serde_json::to_value(b)) {
         (Ok(x), Ok(y)) => x == y,
         _ => false,

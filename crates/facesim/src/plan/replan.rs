@@ -30,9 +30,20 @@ pub fn plan_from_text(text: &str, path: &Path) -> Result<Vec<Osteotomy>> {
     let mut table: toml::Table = toml::from_str(text).map_err(|e| Error::input(path, e))?;
     let dir = path.parent().unwrap_or(Path::new(""));
     crate::slicer::resolve_plan_files(&mut table, dir, path)?;
-    let plan: PlanFile = toml::Value::Table(table)
+    let mut plan: PlanFile = toml::Value::Table(table)
         .try_into()
         .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
+    // Mask and surface files, like case.toml's, are relative to the file that names them.
+    for o in &mut plan.osteotomy {
+        let p = match &mut o.region {
+            Region::Mask(m) => &mut m.path,
+            Region::Surface(s) => &mut s.path,
+            _ => continue,
+        };
+        if p.is_relative() {
+            *p = dir.join(&*p);
+        }
+    }
     Ok(plan.osteotomy)
 }
 
@@ -57,7 +68,7 @@ pub struct Replanned {
 
 /// Read the basis in `run_dir`, predict `plan_file`'s plan and write face_post.obj/.ply,
 /// face_displacement.ply, displacement.csv, skull_post.ply (when the run's skull_pre.ply is
-/// there and no region is a mask), the run's landmarks carried with the new plan
+/// there), the run's landmarks carried with the new plan
 /// (landmarks_pre/post.mrk.json; report.json `landmarks`, `measurements`, `regions`) and
 /// report.json into `dest` (default `run_dir/replan`).
 /// Everything is read and computed before the first file is written.
@@ -85,10 +96,12 @@ pub fn replan_with(
     let mut post = skin.clone();
     post.vertices = face_post.clone();
     let skull_pre = run_dir.join("skull_pre.ply");
-    let no_masks = plan.iter().all(|o| !matches!(o.region, Region::Mask(_)));
-    let skull_post = if no_masks && skull_pre.exists() {
+    let skull_post = if skull_pre.exists() {
+        // The bone each segment moves: mask and surface regions read as the run read them.
+        let mut plan = plan.to_vec();
+        crate::case::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
         let mut s = mesh::read_mesh(&skull_pre)?;
-        s.vertices = crate::osteotomy::Plan::new(plan).apply(&s.vertices, 1.0).0;
+        s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
         Some(s)
     } else {
         None
@@ -130,10 +143,7 @@ pub fn replan_with(
     let dmax = dist.iter().cloned().fold(0.0, f64::max);
     let mut warnings = basis.warnings.clone();
     if skull_post.is_none() {
-        warnings.push(
-            "skull_post.ply not written (no skull_pre.ply in the run's outputs, or a mask region)"
-                .into(),
-        );
+        warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
     }
     let mut report = Report {
         name: field("name"),
