@@ -499,9 +499,9 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
     // A second series on the CD: without a choice the largest CT series is read (here a tie:
     // the first by UID), and a note lists each series with its folder.
     use facesim::volume::dicom_io::read_chosen_series;
-    let (first, note) = read_chosen_series(&cd, None).unwrap();
+    let (first, notes) = read_chosen_series(&cd, None).unwrap();
     assert_eq!(first.data, read_volume(&series).unwrap().data);
-    let e = note.expect("a note on the series chosen");
+    let e = notes.first().expect("a note on the series chosen");
     assert!(!e.contains('\n'), "{e}");
     assert!(e.contains("holds 2 DICOM series"), "{e}");
     assert!(
@@ -514,8 +514,9 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
         "{e}"
     );
     // [dicom] series chooses by UID (the other series stores the same HU as 12-bit unsigned).
-    let (second, note) = read_chosen_series(&cd, Some("1.2.826.0.1.3680043.10.1452.2.78")).unwrap();
-    assert!(note.is_none());
+    let (second, notes) =
+        read_chosen_series(&cd, Some("1.2.826.0.1.3680043.10.1452.2.78")).unwrap();
+    assert!(notes.is_empty());
     assert_eq!(second.data, read_volume(&other).unwrap().data);
     // A key matching no series: one line naming the directory and listing the series.
     let Err(e) = read_chosen_series(&cd, Some("9.9.9")) else {
@@ -530,32 +531,95 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
     assert!(e.contains("1.2.826.0.1.3680043.10.1452.2.78"), "{e}");
 }
 
-#[test]
-fn a_gantry_tilted_series_is_refused() {
+/// The slab as a series acquired with a tilted gantry: slice k's plane shifted by `shift(k)`
+/// pixels along the column direction (its ImagePositionPatient moved with it) and its pixels
+/// those of the slab at the shifted place (whole-pixel shifts: no interpolation in the fixture;
+/// `fill` beyond the slab). Written to a new directory `name` beside the uncompressed series.
+fn tilted_series(name: &str, shift_mm: impl Fn(usize) -> f64, whole_pixels: bool) -> PathBuf {
     let raw = uncompressed(Stored::Signed16);
-    let tilted = raw.with_file_name("tilted");
-    let _ = std::fs::remove_dir_all(&tilted);
-    std::fs::create_dir_all(&tilted).unwrap();
-    let v = slab();
-    // A 10° tilt: each slice shifted along the column direction by tan(10°) × slice spacing.
-    let shift = (10f64).to_radians().tan() * v.spacing[2];
+    let reference = read_volume(raw).unwrap();
+    let dir = raw.with_file_name(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let [ni, nj, _] = reference.dims;
+    let fill = reference.data.iter().cloned().fold(f32::MAX, f32::min);
     for (k, f) in files(raw).iter().enumerate() {
         let mut obj = dicom_object::open_file(f).unwrap();
-        let p = v.to_world([0.0, 0.0, k as f64]);
-        let q = [0, 1, 2].map(|a| format!("{:.4}", p[a] + k as f64 * shift * v.direction[1][a]));
+        let s = shift_mm(k);
+        let p = reference.to_world([0.0, 0.0, k as f64]);
+        let q = [0, 1, 2].map(|a| format!("{:.7}", p[a] + s * reference.direction[1][a]));
         obj.put(DataElement::new(
             tags::IMAGE_POSITION_PATIENT,
             VR::DS,
             PrimitiveValue::Strs(q.into_iter().collect()),
         ));
-        obj.write_to_file(tilted.join(f.file_name().unwrap()))
-            .unwrap();
+        if whole_pixels {
+            let m = (s / reference.spacing[1]).round() as usize;
+            let hu: Vec<u8> = (0..nj)
+                .flat_map(|j| (0..ni).map(move |i| (i, j)))
+                .flat_map(|(i, j)| {
+                    let v = if j + m < nj {
+                        reference.data[(k * nj + j + m) * ni + i]
+                    } else {
+                        fill
+                    };
+                    (v as i16).to_le_bytes()
+                })
+                .collect();
+            obj.put(DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OW,
+                PrimitiveValue::from(hu),
+            ));
+        }
+        obj.write_to_file(dir.join(f.file_name().unwrap())).unwrap();
     }
-    let e = read_volume(&tilted).unwrap_err().to_string();
-    assert!(!e.contains('\n'), "{e}");
+    dir
+}
+
+#[test]
+fn a_gantry_tilted_series_is_resampled_onto_the_orthogonal_grid() {
+    use facesim::volume::dicom_io::read_chosen_series;
+    let reference = read_volume(uncompressed(Stored::Signed16)).unwrap();
+    let (ni, nj) = (reference.dims[0], reference.dims[1]);
+    let fill = reference.data.iter().cloned().fold(f32::MAX, f32::min);
+    // Whole-pixel drift, one pixel per slice (a 32° tilt at these spacings): shifted back, every
+    // voxel the slices cover is the untilted CT's exactly, the rest the series' lowest value.
+    let dy = reference.spacing[1];
+    let dir = tilted_series("tilted-whole", |k| k as f64 * dy, true);
+    let (v, notes) = read_chosen_series(&dir, None).unwrap();
+    assert_eq!(
+        (v.dims, v.spacing, v.origin, v.direction),
+        (
+            reference.dims,
+            reference.spacing,
+            reference.origin,
+            reference.direction
+        )
+    );
+    for k in 0..SLICES {
+        for j in 0..nj {
+            for i in 0..ni {
+                let at = (k * nj + j) * ni + i;
+                let want = if j >= k { reference.data[at] } else { fill };
+                assert_eq!(v.data[at], want, "({i}, {j}, {k})");
+            }
+        }
+    }
+    let tilt = (dy / reference.spacing[2]).atan().to_degrees();
+    let note = notes.iter().find(|n| n.contains("gantry-tilted")).unwrap();
+    assert!(note.contains(&format!("({tilt:.1}°")), "{note}");
+
+    // A 10° tilt (shifts of fractions of a pixel): read, resampled, and said so.
+    let shift = (10f64).to_radians().tan() * reference.spacing[2];
+    let dir = tilted_series("tilted-10", |k| k as f64 * shift, false);
+    let (v, notes) = read_chosen_series(&dir, None).unwrap();
+    assert_eq!(v.dims, reference.dims);
     assert!(
-        e.contains("tilted/slice000") && e.contains("gantry tilt"),
-        "{e}"
+        notes
+            .iter()
+            .any(|n| n.contains("gantry-tilted series (10.0°")),
+        "{notes:?}"
     );
 }
 

@@ -78,10 +78,10 @@ pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
         return Err(Error::input(&skin.path, "face scan not found"));
     }
     let series = case.dicom.as_ref().map(|d| d.series.as_str());
-    let (ct, note) = rec.time(Stage::ReadCt, "reading CT", || {
+    let (ct, notes) = rec.time(Stage::ReadCt, "reading CT", || {
         volume::read_ct(&case.ct.path, series)
     })?;
-    if let Some(w) = note {
+    for w in notes {
         rec.warn(w);
     }
     let scan = match &case.skin {

@@ -30,7 +30,7 @@ use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use super::dicom_syntax;
+use super::{dicom_syntax, tilt};
 
 /// Media Storage Directory Storage: the SOP class of a DICOMDIR.
 const DICOMDIR_SOP_CLASS: &str = "1.2.840.10008.1.3.10";
@@ -302,9 +302,9 @@ pub fn read_series(dir: &Path) -> Result<Volume> {
 }
 
 /// Read one series of `dir`: the one whose SeriesInstanceUID or SeriesNumber is `series`, else
-/// (when the directory holds several) the CT series with the most images, returning a note
-/// that says which was taken and how to choose another.
-pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, Option<String>)> {
+/// (when the directory holds several) the CT series with the most images. Returns notes for the
+/// report: which series was taken and how to choose another; a gantry tilt resampled.
+pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>)> {
     let files = dicom_files(dir)?;
     let mut headers = Vec::with_capacity(files.len());
     for p in &files {
@@ -319,7 +319,9 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
             ),
         ));
     }
-    let note = choose_series(dir, &mut headers, series)?;
+    let mut notes: Vec<String> = choose_series(dir, &mut headers, series)?
+        .into_iter()
+        .collect();
     check_same_frame(&headers)?;
     let first = &headers[0];
     let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
@@ -333,7 +335,18 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
     } else {
         1.0
     };
-    check_stacked_along_normal(&headers, normal, pixel_spacing)?;
+    // Gantry tilt: slices shifted across their plane (more than a tenth of a pixel over the
+    // series) are resampled onto the orthogonal grid through the first slice (`tilt`).
+    let ipps: Vec<[f64; 3]> = headers.iter().map(|h| h.ipp).collect();
+    let drift = tilt::drift_pixels(
+        &ipps,
+        row_dir,
+        col_dir,
+        [pixel_spacing[1], pixel_spacing[0]],
+    );
+    let drift_mm = |d: &[f64; 2]| (d[0] * pixel_spacing[1]).hypot(d[1] * pixel_spacing[0]);
+    let max_drift = drift.iter().map(drift_mm).fold(0.0, f64::max);
+    let tilted = max_drift > 0.1 * pixel_spacing[0].min(pixel_spacing[1]);
     let dims = [cols, rows, nz];
     let spacing = [pixel_spacing[1], pixel_spacing[0], slice_spacing];
     let direction = [row_dir, col_dir, normal];
@@ -353,6 +366,16 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
     by_file
         .into_par_iter()
         .try_for_each(|(path, slices)| crate::error::guard(path, || read_file(path, slices)))?;
+    if tilted {
+        let fill = data.iter().cloned().fold(f32::INFINITY, f32::min);
+        tilt::resample(&mut data, [cols, rows, nz], &drift, fill);
+        let height = pos(&headers[nz - 1]) - pos(&headers[0]);
+        let angle = drift_mm(&drift[nz - 1]).atan2(height).to_degrees();
+        notes.push(format!(
+            "{}: gantry-tilted series ({angle:.1}°: the slices drift up to {max_drift:.1} mm across their plane); each slice was shifted back in its plane onto an orthogonal grid (bilinear; {fill} HU where no slice data falls)",
+            dir.display()
+        ));
+    }
     Ok((
         Volume {
             dims,
@@ -361,7 +384,7 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, O
             direction,
             data,
         },
-        note,
+        notes,
     ))
 }
 
@@ -524,31 +547,6 @@ fn check_same_frame(headers: &[SliceHeader]) -> Result<()> {
             || (0..6).any(|a| (h.iop[a] - first.iop[a]).abs() > 1e-4)
         {
             return Err(h.error("pixel spacing or orientation differs from the rest of the series"));
-        }
-    }
-    Ok(())
-}
-
-/// Refuse slices that do not lie on one line along the slice normal: a gantry-tilted (sheared)
-/// stack, whose voxel grid is not the orthogonal one a `Volume` describes. The allowed drift
-/// across the slice plane is a tenth of a pixel over the whole series.
-fn check_stacked_along_normal(
-    headers: &[SliceHeader],
-    normal: [f64; 3],
-    pixel_spacing: [f64; 2],
-) -> Result<()> {
-    let first = headers[0].ipp;
-    let tol = 0.1 * pixel_spacing[0].min(pixel_spacing[1]);
-    for h in headers {
-        let d = [0, 1, 2].map(|a| h.ipp[a] - first[a]);
-        let along = d[0] * normal[0] + d[1] * normal[1] + d[2] * normal[2];
-        let across = [0, 1, 2].map(|a| d[a] - along * normal[a]);
-        let drift = (across[0].powi(2) + across[1].powi(2) + across[2].powi(2)).sqrt();
-        if drift > tol {
-            return Err(h.error(format!(
-                "slice positions drift {drift:.2} mm across the slice plane from {} (gantry tilt or a sheared stack); resample the series to an orthogonal grid first",
-                headers[0].place()
-            )));
         }
     }
     Ok(())

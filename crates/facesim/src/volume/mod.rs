@@ -8,6 +8,7 @@ pub mod dicom_syntax;
 pub mod inv3;
 pub mod nifti_io;
 pub mod nrrd;
+pub mod tilt;
 
 use crate::error::{Error, Result};
 use serde::Serialize;
@@ -304,13 +305,14 @@ pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
 }
 
 /// Read the case's CT: like [`read_volume`], with a DICOM directory's series chosen by
-/// `series` (`[dicom] series`); returns a note for the report when a directory of several
-/// series was read without a choice.
-pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Option<String>)> {
+/// `series` (`[dicom] series`); returns notes for the report (a directory of several series
+/// read without a choice, a gantry tilt resampled).
+pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>)> {
     if path.is_dir() {
-        let (vol, note) = crate::error::guard(path, || dicom_io::read_chosen_series(path, series))?;
+        let (vol, notes) =
+            crate::error::guard(path, || dicom_io::read_chosen_series(path, series))?;
         vol.check_finite(path)?;
-        return Ok((vol, note));
+        return Ok((vol, notes));
     }
     if let Some(s) = series {
         return Err(Error::input(
@@ -320,7 +322,7 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Option<Stri
             ),
         ));
     }
-    Ok((read_volume(path)?, None))
+    Ok((read_volume(path)?, Vec::new()))
 }
 
 /// Read any supported volume: `.nii`, `.nii.gz`, `.inv3`, or a directory holding a DICOM
