@@ -436,7 +436,11 @@ fn cmd_phantom(
 }
 
 fn cmd_inspect(path: &Path) -> Result<()> {
-    let v = facesim::volume::read_volume(path)?;
+    // As `run` reads a case's CT: its notes (the series chosen, a gantry tilt resampled) too.
+    let (v, notes) = facesim::volume::read_ct(path, None)?;
+    for w in notes {
+        eprintln!("warning: {w}");
+    }
     println!(
         "{}",
         serde_json::to_string_pretty(&v.inspect()).map_err(|e| Error::output(path, e))?
