@@ -235,6 +235,24 @@ fn uncompressed_references_hold_the_ct_values() {
 }
 
 #[test]
+fn implicit_big_endian_and_deflated_encodings_read_exactly() {
+    // What PACS send besides explicit little endian: implicit VR (the DICOM default syntax),
+    // explicit big endian (retired, still in archives) and deflated explicit little endian,
+    // re-encoded by dcmtk's dcmconv.
+    for stored in [Stored::Signed16, Stored::Unsigned12, Stored::Signed12] {
+        let raw = uncompressed(stored);
+        for (name, flag, ts) in [
+            ("implicit", "+ti", "1.2.840.10008.1.2"),
+            ("big-endian", "+tb", "1.2.840.10008.1.2.2"),
+            ("deflated", "+td", "1.2.840.10008.1.2.1.99"),
+        ] {
+            let dir = encode(raw, name, "dcmconv", &[flag], ts);
+            assert_like_uncompressed(&dir, stored, 0.0);
+        }
+    }
+}
+
+#[test]
 fn jpeg_lossless_process_14_and_sv1_decode_exactly() {
     for stored in [Stored::Signed16, Stored::Unsigned12, Stored::Signed12] {
         let raw = uncompressed(stored);
