@@ -280,6 +280,77 @@ fn fuzz_ply() {
     }
 }
 
+/// The tetrahedron as VTK's default XML: appended raw data, zlib-compressed, UInt32 headers.
+fn appended_zlib_vtp() -> Vec<u8> {
+    let m = tetrahedron();
+    let block = |data: Vec<u8>| {
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+        z.write_all(&data).unwrap();
+        let z = z.finish().unwrap();
+        let mut out = Vec::new();
+        for w in [1u32, data.len() as u32, data.len() as u32, z.len() as u32] {
+            out.extend(w.to_le_bytes());
+        }
+        out.extend(z);
+        out
+    };
+    let points: Vec<u8> = m
+        .vertices
+        .iter()
+        .flatten()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    let con: Vec<u8> = m
+        .triangles
+        .iter()
+        .flatten()
+        .flat_map(|i| (*i as i64).to_le_bytes())
+        .collect();
+    let off: Vec<u8> = (1..=4i64).flat_map(|k| (3 * k).to_le_bytes()).collect();
+    let (a, b, c) = (block(points), block(con), block(off));
+    let mut f = format!(
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\">\n<PolyData>\n<Piece NumberOfPoints=\"4\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"4\">\n<Points><DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"appended\" offset=\"0\"/></Points>\n<Polys><DataArray type=\"Int64\" Name=\"connectivity\" format=\"appended\" offset=\"{}\"/><DataArray type=\"Int64\" Name=\"offsets\" format=\"appended\" offset=\"{}\"/></Polys>\n</Piece>\n</PolyData>\n<AppendedData encoding=\"raw\">\n_",
+        a.len(),
+        a.len() + b.len()
+    )
+    .into_bytes();
+    f.extend(a);
+    f.extend(b);
+    f.extend(c);
+    f.extend(b"\n</AppendedData>\n</VTKFile>\n");
+    f
+}
+
+#[test]
+fn fuzz_model_files() {
+    // The formats a region surface or a skin from another program comes in (docs/slicer.md).
+    let d = tempfile::tempdir().unwrap();
+    let m = tetrahedron();
+    let read_model = |p: &Path| -> Result<(), TestCaseError> {
+        let name = p.file_name().unwrap().to_string_lossy().to_string();
+        refusal_ok(&name, &mesh::model_file::read_model(p))
+    };
+    let mut seeds: Vec<(&str, &str, Vec<u8>)> = Vec::new();
+    let p = d.path().join("seed.stl");
+    mesh::stl::write(&m, &p, "SPACE=LPS").unwrap();
+    seeds.push(("stl (binary)", "segment.stl", std::fs::read(&p).unwrap()));
+    let p = d.path().join("seed.vtk");
+    mesh::vtk::write_legacy(&m, &[], &p).unwrap();
+    seeds.push(("legacy vtk", "segment.vtk", std::fs::read(&p).unwrap()));
+    let p = d.path().join("seed.vtp");
+    mesh::vtp::write_vtp(&m, &[], &p).unwrap();
+    seeds.push(("vtp (ascii)", "segment.vtp", std::fs::read(&p).unwrap()));
+    seeds.push(("vtp (appended zlib)", "segment.vtp", appended_zlib_vtp()));
+    for (label, name, seed) in seeds {
+        // Each seed is a valid model, so the damage is what is refused.
+        let p = d.path().join(name);
+        std::fs::write(&p, &seed).unwrap();
+        let back = mesh::model_file::read_model(&p).unwrap_or_else(|e| panic!("{label}: {e}"));
+        assert_eq!(back.triangles.len(), m.triangles.len(), "{label}");
+        fuzz(label, name, seed, |b| b, read_model);
+    }
+}
+
 #[test]
 fn fuzz_case_toml() {
     let seed = std::fs::read(
