@@ -437,8 +437,15 @@ fn parse(bytes: &[u8]) -> Parsed<Vtp> {
         appended,
     };
 
+    // An element's opening tag may carry attributes (`<PointData Vectors="…">`).
     let section = |name: &str| -> Option<&str> {
-        let s = text.find(&format!("<{name}>"))?;
+        let open = format!("<{name}");
+        let s = text.match_indices(&open).map(|(i, _)| i).find(|&i| {
+            matches!(
+                text.as_bytes().get(i + open.len()),
+                Some(b'>' | b' ' | b'\n' | b'\r' | b'\t')
+            )
+        })?;
         let e = text[s..].find(&format!("</{name}>"))? + s;
         Some(&text[s..e])
     };

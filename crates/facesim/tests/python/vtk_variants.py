@@ -26,6 +26,8 @@ def main() -> None:
     reader.Update()
     mesh = reader.GetOutput()
     print(f"read {mesh.GetNumberOfPoints()} points {mesh.GetNumberOfPolys()} polys")
+    # Marked as the active vectors, as Slicer and ParaView do: <PointData Vectors="...">.
+    mesh.GetPointData().SetActiveVectors("displacement_mm")
     space = vtkStringArray()
     space.SetName("SPACE")
     space.InsertNextValue("RAS")
