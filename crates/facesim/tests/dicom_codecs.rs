@@ -733,6 +733,11 @@ fn multi_frame_enhanced_ct_reads_like_its_single_frame_series() {
         let raw = uncompressed(stored);
         let mf = enhanced(raw, "enhanced", &[]);
         assert_like_uncompressed(&mf, stored, 0.0);
+        // `[ct] path` may name the file itself; a single-frame file is refused as one slice.
+        assert_like_uncompressed(&mf.join("enhanced.dcm"), stored, 0.0);
+        let one = files(raw).remove(0);
+        let e = read_volume(&one).unwrap_err().to_string();
+        assert!(e.contains("one slice") && !e.contains('\n'), "{e}");
         // Frames stored out of spatial order are placed by their own positions.
         let interleaved = enhanced(raw, "enhanced-interleaved", &["--interleave"]);
         assert_like_uncompressed(&interleaved, stored, 0.0);

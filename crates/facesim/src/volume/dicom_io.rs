@@ -73,7 +73,8 @@ impl SliceHeader {
     }
 }
 
-fn is_dicom_file(path: &Path) -> bool {
+/// Whether `path` has the DICOM preamble (`DICM` at byte 128), whatever its name.
+pub fn is_dicom_file(path: &Path) -> bool {
     use std::io::Read;
     let mut buf = [0u8; 132];
     std::fs::File::open(path)
@@ -319,9 +320,33 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, V
             ),
         ));
     }
-    let mut notes: Vec<String> = choose_series(dir, &mut headers, series)?
+    let notes: Vec<String> = choose_series(dir, &mut headers, series)?
         .into_iter()
         .collect();
+    assemble(dir, headers, notes)
+}
+
+/// Read one DICOM file that holds a whole volume: a multi-frame (enhanced) CT object, which
+/// `[ct] path` may name directly. A single-frame file is one slice: its directory is the series.
+pub fn read_multiframe_file(path: &Path) -> Result<(Volume, Vec<String>)> {
+    let headers = read_headers(path)?;
+    match headers.len() {
+        0 => Err(Error::input(path, "a DICOM file without an image")),
+        1 => Err(Error::input(
+            path,
+            "a single-frame DICOM image is one slice: give the directory holding its series",
+        )),
+        _ => assemble(path, headers, Vec::new()),
+    }
+}
+
+/// The volume of the slices `headers` (one series; `dir` names its directory or file in
+/// messages), with the notes so far and a gantry tilt's.
+fn assemble(
+    dir: &Path,
+    mut headers: Vec<SliceHeader>,
+    mut notes: Vec<String>,
+) -> Result<(Volume, Vec<String>)> {
     check_same_frame(&headers)?;
     let first = &headers[0];
     let (rows, cols, pixel_spacing, iop) = (first.rows, first.cols, first.spacing, first.iop);
@@ -365,7 +390,7 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, V
     }
     by_file
         .into_par_iter()
-        .try_for_each(|(path, slices)| crate::error::guard(path, || read_file(path, slices)))?;
+        .try_for_each(|(path, slices)| crate::error::guard(path, || decode_file(path, slices)))?;
     if tilted {
         let fill = data.iter().cloned().fold(f32::INFINITY, f32::min);
         tilt::resample(&mut data, [cols, rows, nz], &drift, fill);
@@ -596,7 +621,7 @@ fn slice_spacing(headers: &[SliceHeader], pos: impl Fn(&SliceHeader) -> f64) -> 
 /// Write the HU of the slices of file `path` (stored value × RescaleSlope + RescaleIntercept) into
 /// their places in the volume: the one image of a single-frame file, or the listed frames of a
 /// multi-frame one (decoded frame by frame, in parallel).
-fn read_file(path: &Path, slices: Vec<(&SliceHeader, &mut [f32])>) -> Result<()> {
+fn decode_file(path: &Path, slices: Vec<(&SliceHeader, &mut [f32])>) -> Result<()> {
     let obj = dicom_object::open_file(path)
         .map_err(|e| Error::input(path, format!("unreadable DICOM file ({e})")))?;
     slices.into_par_iter().try_for_each(|(h, out)| {

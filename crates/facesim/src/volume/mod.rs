@@ -314,6 +314,11 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>
         vol.check_finite(path)?;
         return Ok((vol, notes));
     }
+    if series.is_none() && path.is_file() && dicom_io::is_dicom_file(path) {
+        let (vol, notes) = crate::error::guard(path, || dicom_io::read_multiframe_file(path))?;
+        vol.check_finite(path)?;
+        return Ok((vol, notes));
+    }
     if let Some(s) = series {
         return Err(Error::input(
             path,
@@ -344,10 +349,12 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
             inv3::read(path)
         } else if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
             nrrd::read(path)
+        } else if dicom_io::is_dicom_file(path) {
+            dicom_io::read_multiframe_file(path).map(|(v, _)| v)
         } else {
             Err(Error::input(
                 path,
-                "unknown volume format (expected .nii, .nii.gz, .nrrd, .inv3 or a DICOM series directory)",
+                "unknown volume format (expected .nii, .nii.gz, .nrrd, .inv3, a DICOM series directory or a multi-frame DICOM file)",
             ))
         }
     })?;
