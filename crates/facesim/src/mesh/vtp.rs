@@ -158,11 +158,13 @@ impl Layout<'_> {
             if b.len() < self.word {
                 return Err("data array header cut short".into());
             }
-            3 + self.word_at(b)
+            self.word_at(b).checked_add(3).ok_or("absurd block count")?
         } else {
             1
         };
-        Ok(words * self.word)
+        words
+            .checked_mul(self.word)
+            .ok_or_else(|| "absurd block count".into())
     }
 
     /// The data of a binary array, from its header onwards in `b` (raw bytes).
@@ -185,11 +187,13 @@ impl Layout<'_> {
                 .ok_or_else(|| "data array shorter than its byte count".into());
         }
         let (blocks, size, last) = (words[0], words[1], words[2]);
-        let mut out = Vec::with_capacity(blocks * size);
+        // No allocation from the header's sizes: a damaged header must not ask for terabytes.
+        let mut out = Vec::new();
         let mut at = 0usize;
         for (k, &c) in words[3..].iter().enumerate() {
-            let block = rest
-                .get(at..at + c)
+            let block = at
+                .checked_add(c)
+                .and_then(|end| rest.get(at..end))
                 .ok_or("compressed data shorter than its block sizes")?;
             let want = if k + 1 == blocks && last != 0 {
                 last
@@ -222,7 +226,7 @@ impl Layout<'_> {
                 .map_err(|e| format!("bad base64 data ({e})"))
         };
         // Characters of a separately encoded chunk of n bytes.
-        let chars = |n: usize| n.div_ceil(3) * 4;
+        let chars = |n: usize| n.div_ceil(3).saturating_mul(4);
         // The first word: the byte count, or with zlib the block count. (Decoding a prefix of
         // whole 4-character groups gives the first bytes of a longer chunk.)
         let first = b64(text.get(..chars(self.word)).ok_or("data array cut short")?)?;
@@ -230,7 +234,7 @@ impl Layout<'_> {
             // Uncompressed, VTK encodes the byte count and the data as one chunk.
             let n = self.word_at(&first);
             let all = b64(text
-                .get(..chars(self.word + n))
+                .get(..chars(self.word.saturating_add(n)))
                 .ok_or("data array shorter than its byte count")?)?;
             return Ok(all[self.word..self.word + n].to_vec());
         }
@@ -243,9 +247,9 @@ impl Layout<'_> {
             .map(|w| self.word_at(w))
             .collect();
         // The data chunk: as many characters as its encoded length (appended data runs on).
-        let n = words[3..].iter().sum();
+        let n = words[3..].iter().fold(0usize, |a, w| a.saturating_add(*w));
         let body = b64(text
-            .get(hc..hc + chars(n))
+            .get(hc..hc.saturating_add(chars(n)))
             .ok_or("data array shorter than its byte count")?)?;
         self.body(&words, &body)
     }
@@ -576,5 +580,20 @@ mod tests {
         assert_eq!(layout.data(&b).unwrap(), data);
         // Cut inside the second block: one line, no panic.
         assert!(layout.data(&b[..b.len() - 3]).is_err());
+        // Absurd counts and sizes (a damaged header) are refused without allocating them.
+        let mut huge = b.clone();
+        huge[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(layout.data(&huge).is_err());
+        let mut huge = b.clone();
+        huge[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(layout.data(&huge).is_err());
+        let wide = Layout { word: 8, ..layout };
+        let mut b8 = Vec::new();
+        for w in [u64::MAX, 8, 4, u64::MAX, 1] {
+            b8.extend(w.to_le_bytes());
+        }
+        assert!(wide.data(&b8).is_err());
+        b8[..8].copy_from_slice(&2u64.to_le_bytes());
+        assert!(wide.data(&b8).is_err());
     }
 }
