@@ -139,12 +139,18 @@ fn files(dir: &Path) -> Vec<PathBuf> {
     v
 }
 
+/// An empty directory `name` beside `path` (emptied if a previous run left it).
+fn fresh_beside(path: &Path, name: &str) -> PathBuf {
+    let dir = path.with_file_name(name);
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// Run `tool ARGS IN OUT` on every file of `src` into a new directory `name` beside it, and
 /// check that the tool wrote transfer syntax `ts`.
 fn encode(src: &Path, name: &str, tool: &str, args: &[&str], ts: &str) -> PathBuf {
-    let dst = src.with_file_name(name);
-    let _ = std::fs::remove_dir_all(&dst);
-    std::fs::create_dir_all(&dst).unwrap();
+    let dst = fresh_beside(src, name);
     for f in files(src) {
         let out = dst.join(f.file_name().unwrap());
         let r = Command::new(tool)
@@ -473,8 +479,7 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
         &["+e1"],
         "1.2.840.10008.1.2.4.70",
     );
-    let cd = sv1.with_file_name("cd");
-    let _ = std::fs::remove_dir_all(&cd);
+    let cd = fresh_beside(&sv1, "cd");
     let series = cd.join("DICOM/ST000001/SE000001");
     std::fs::create_dir_all(&series).unwrap();
     for (i, f) in files(&sv1).iter().enumerate() {
@@ -556,9 +561,7 @@ fn a_patient_cd_with_dicomdir_and_names_without_extension_reads() {
 fn tilted_series(name: &str, shift_mm: impl Fn(usize) -> f64, whole_pixels: bool) -> PathBuf {
     let raw = uncompressed(Stored::Signed16);
     let reference = read_volume(raw).unwrap();
-    let dir = raw.with_file_name(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_beside(raw, name);
     let [ni, nj, _] = reference.dims;
     let fill = reference.data.iter().cloned().fold(f32::MAX, f32::min);
     for (k, f) in files(raw).iter().enumerate() {
@@ -669,9 +672,7 @@ fn jpeg_extended_12_bit_is_one_clear_error() {
 /// venv scripts/test-setup.sh makes) into one Legacy Converted Enhanced CT file,
 /// `enhanced.dcm`, in a new directory `name` beside it.
 fn enhanced(src: &Path, name: &str, args: &[&str]) -> PathBuf {
-    let dst = src.with_file_name(name);
-    let _ = std::fs::remove_dir_all(&dst);
-    std::fs::create_dir_all(&dst).unwrap();
+    let dst = fresh_beside(src, name);
     let out = dst.join("enhanced.dcm");
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/legacy_enhanced.py");
     let r = Command::new(common::venv_python())
@@ -774,9 +775,7 @@ fn a_frames_own_rescale_overrides_the_shared_one() {
     // value transformation per frame, and a reader taking the shared (or the first) rescale for
     // every frame is off by 100 HU on that frame.
     let raw = uncompressed(Stored::Signed16);
-    let src = raw.with_file_name("rescaled-raw");
-    let _ = std::fs::remove_dir_all(&src);
-    std::fs::create_dir_all(&src).unwrap();
+    let src = fresh_beside(raw, "rescaled-raw");
     for f in files(raw) {
         std::fs::copy(&f, src.join(f.file_name().unwrap())).unwrap();
     }
@@ -852,9 +851,7 @@ fn broken_multi_frame_objects_are_one_clear_error() {
         ),
     ];
     for (name, edit, says) in cases {
-        let dir = mf.with_file_name(format!("enhanced-{name}"));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = fresh_beside(&mf, &format!("enhanced-{name}"));
         let file = dir.join("enhanced.dcm");
         std::fs::copy(&source, &file).unwrap();
         let r = Command::new("dcmodify")
@@ -874,9 +871,7 @@ fn broken_multi_frame_objects_are_one_clear_error() {
     }
 
     // Pixel data cut short: frames past the end cannot be decoded, and the line says which.
-    let dir = mf.with_file_name("enhanced-truncated");
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = fresh_beside(&mf, "enhanced-truncated");
     let file = dir.join("enhanced.dcm");
     let bytes = std::fs::read(&source).unwrap();
     std::fs::write(&file, &bytes[..bytes.len() * 2 / 3]).unwrap();
