@@ -7,8 +7,9 @@ mod common;
 
 use facesim::mesh::Mesh;
 use facesim::mesh::vtk::PointArray;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
+use std::sync::OnceLock;
 
 /// A curved 80 × 80 grid (13 122 triangles, arrays of many zlib blocks) with coordinates that
 /// use all of a double's digits, and a 3-component point array.
@@ -35,26 +36,38 @@ fn surface() -> (Mesh, PointArray) {
     )
 }
 
+/// facesim's `.vtp` of [`surface`] and VTK's re-saves of it (tests/python/vtk_variants.py):
+/// the directory of the variants and the script's log (`read …` and one `wrote NAME` line per
+/// file). Made once per test binary.
+fn variants() -> &'static (PathBuf, String) {
+    static V: OnceLock<(PathBuf, String)> = OnceLock::new();
+    V.get_or_init(|| {
+        let dir = common::kept_dir("facesim-vtk");
+        let (mesh, disp) = surface();
+        let ours = dir.join("ours.vtp");
+        facesim::mesh::vtp::write_vtp(&mesh, &[disp], &ours).unwrap();
+        let out = dir.join("variants");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/vtk_variants.py");
+        let r = Command::new(common::venv_python())
+            .arg(script)
+            .arg(&ours)
+            .arg(&out)
+            .output()
+            .unwrap();
+        let log = String::from_utf8_lossy(&r.stdout).into_owned();
+        assert!(
+            r.status.success(),
+            "{log}{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        (out, log)
+    })
+}
+
 #[test]
 fn every_encoding_vtk_writes_reads_back_exactly() {
-    let dir = common::kept_dir("facesim-vtk");
     let (mesh, disp) = surface();
-    let ours = dir.join("ours.vtp");
-    facesim::mesh::vtp::write_vtp(&mesh, std::slice::from_ref(&disp), &ours).unwrap();
-    let out = dir.join("variants");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/vtk_variants.py");
-    let r = Command::new(common::venv_python())
-        .arg(script)
-        .arg(&ours)
-        .arg(&out)
-        .output()
-        .unwrap();
-    let log = String::from_utf8_lossy(&r.stdout);
-    assert!(
-        r.status.success(),
-        "{log}{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    let (out, log) = variants();
     // VTK read facesim's file whole.
     assert!(
         log.contains(&format!(
@@ -117,18 +130,7 @@ fn every_encoding_vtk_writes_reads_back_exactly() {
 #[test]
 fn damaged_binary_vtp_is_one_clear_line() {
     let dir = common::kept_dir("facesim-vtk-bad");
-    let (mesh, disp) = surface();
-    let ours = dir.join("ours.vtp");
-    facesim::mesh::vtp::write_vtp(&mesh, &[disp], &ours).unwrap();
-    let out = dir.join("variants");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/vtk_variants.py");
-    let st = Command::new(common::venv_python())
-        .arg(script)
-        .arg(&ours)
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(st.status.success());
+    let (out, _) = variants();
     for name in [
         "appended-raw-zlib-UInt64.vtp",
         "appended-raw-none-UInt32.vtp",
