@@ -6,40 +6,19 @@
 
 mod common;
 
-use common::phantom_dir;
-use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
+use facesim::case::{Case, SolveModel};
 use facesim::observe::Quiet;
 use facesim::pipeline::{self, Outcome};
 use facesim::uncertainty::distributions::{Chance, Range};
 use std::path::Path;
 
 fn case() -> Case {
-    let mut c = Case {
-        name: Some("uncertainty".into()),
-        ct: PathSection {
-            path: phantom_dir().join("ct.nii.gz"),
-        },
-        skin: Some(PathSection {
-            path: phantom_dir().join("face.ply"),
-        }),
-        osteotomy: vec![Osteotomy {
-            name: "mandible".into(),
-            region: Region::Box {
-                min: [-70.0, -75.0, -125.0],
-                max: [70.0, -1.5, -26.5],
-            },
-            translate: [0.0, -6.0, 0.0],
-            rotate_deg: [0.0; 3],
-            pivot: [0.0, -40.0, -60.0],
-        }],
-        ..Case::default()
-    };
-    c.solve.model = SolveModel::Tet;
-    // Coarse elements keep the tests quick; what is tested holds on any mesh.
-    c.tet.skin_size_mm = 6.0;
-    c.tet.deep_size_mm = 12.0;
-    c.tet.margin_mm = 15.0;
-    c
+    common::coarse_tet_phantom(
+        "uncertainty",
+        common::PHANTOM_MANDIBLE,
+        [0.0, -6.0, 0.0],
+        [0.0; 3],
+    )
 }
 
 /// Every tet parameter at a point: ν, muscle/fat, skin/fat, sliding probability.

@@ -5,41 +5,15 @@
 
 mod common;
 
-use common::phantom_dir;
-use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
+use facesim::case::{Case, Region};
 use facesim::observe::Quiet;
 use facesim::pipeline::{self, Outcome};
 
 fn case(region: Region, translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
-    let mut c = Case {
-        name: Some("volumetric".into()),
-        ct: PathSection {
-            path: phantom_dir().join("ct.nii.gz"),
-        },
-        skin: Some(PathSection {
-            path: phantom_dir().join("face.ply"),
-        }),
-        osteotomy: vec![Osteotomy {
-            name: "mandible".into(),
-            region,
-            translate,
-            rotate_deg,
-            pivot: [0.0, -40.0, -60.0],
-        }],
-        ..Case::default()
-    };
-    c.solve.model = SolveModel::Tet;
-    // Coarse elements keep the tests quick; the invariants hold on any mesh.
-    c.tet.skin_size_mm = 6.0;
-    c.tet.deep_size_mm = 12.0;
-    c.tet.margin_mm = 15.0;
-    c
+    common::coarse_tet_phantom("volumetric", region, translate, rotate_deg)
 }
 
-const MANDIBLE: Region = Region::Box {
-    min: [-70.0, -75.0, -125.0],
-    max: [70.0, -1.5, -26.5],
-};
+const MANDIBLE: Region = common::PHANTOM_MANDIBLE;
 
 /// Every bone voxel of the phantom, with a region around it that holds the whole head (no cut
 /// faces) and coarse elements (the invariants hold on any mesh).

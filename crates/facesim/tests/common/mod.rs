@@ -37,6 +37,47 @@ pub fn phantom_dir() -> &'static Path {
     })
 }
 
+/// The phantom's mandible below the occlusal plane (LPS mm): the segment its sample case moves.
+pub const PHANTOM_MANDIBLE: facesim::case::Region = facesim::case::Region::Box {
+    min: [-70.0, -75.0, -125.0],
+    max: [70.0, -1.5, -26.5],
+};
+
+/// The phantom of [`phantom_dir`] built in memory with one `mandible` segment (`region` moved by
+/// `translate` and `rotate_deg` about (0, −40, −60) mm) on the volumetric model with coarse
+/// elements (6 mm at the skin, 12 mm deep, 15 mm margin): quick, and what the tests check holds
+/// on any mesh.
+pub fn coarse_tet_phantom(
+    name: &str,
+    region: facesim::case::Region,
+    translate: [f64; 3],
+    rotate_deg: [f64; 3],
+) -> facesim::case::Case {
+    use facesim::case::{Case, Osteotomy, PathSection, SolveModel};
+    let mut c = Case {
+        name: Some(name.into()),
+        ct: PathSection {
+            path: phantom_dir().join("ct.nii.gz"),
+        },
+        skin: Some(PathSection {
+            path: phantom_dir().join("face.ply"),
+        }),
+        osteotomy: vec![Osteotomy {
+            name: "mandible".into(),
+            region,
+            translate,
+            rotate_deg,
+            pivot: [0.0, -40.0, -60.0],
+        }],
+        ..Case::default()
+    };
+    c.solve.model = SolveModel::Tet;
+    c.tet.skin_size_mm = 6.0;
+    c.tet.deep_size_mm = 12.0;
+    c.tet.margin_mm = 15.0;
+    c
+}
+
 /// The real CT, fetched by data-samples/fetch-real.sh (the README's test command runs it first).
 pub fn real_ct() -> PathBuf {
     let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real/Cranium.inv3");
