@@ -91,15 +91,7 @@ fn main() -> facesim::Result<()> {
                 segment("maxilla_right", false),
             ],
         }),
-        landmarks: vec![],
-        missing_landmarks: vec![],
-        region_names: vec![],
-        region_of: vec![],
-        measurements: serde_json::Value::Null,
-        ratios: serde_json::Value::Null,
-        band_width: None,
-        uncertainty: serde_json::Value::Null,
-        no_basis_reason: String::new(),
+        ..Default::default()
     };
     write_report_html(&out, &data)?;
     println!(

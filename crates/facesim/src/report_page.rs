@@ -44,7 +44,8 @@ pub struct PageLandmark {
     pub segment: u8,
 }
 
-/// Everything report.html shows.
+/// Everything report.html shows (the default: nothing, no basis, no landmarks or regions).
+#[derive(Default)]
 pub struct PageData<'a> {
     pub title: String,
     /// `[solve] model`.

@@ -148,15 +148,8 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
                 segment("right", pivots[1], &|p| !left(p)),
             ],
         }),
-        landmarks: vec![],
-        missing_landmarks: vec![],
-        region_names: vec![],
-        region_of: vec![],
-        measurements: serde_json::Value::Null,
-        ratios: serde_json::Value::Null,
         band_width: Some(face.iter().map(|p| p[0].abs() * 0.01).collect()),
-        uncertainty: serde_json::Value::Null,
-        no_basis_reason: String::new(),
+        ..Default::default()
     };
     let dir = common::kept_dir("facesim-page-analytic");
     write_report_html(&dir, &data).unwrap();
@@ -295,15 +288,7 @@ fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
                     columns,
                 }],
             }),
-            landmarks: vec![],
-            missing_landmarks: vec![],
-            region_names: vec![],
-            region_of: vec![],
-            measurements: serde_json::Value::Null,
-            ratios: serde_json::Value::Null,
-            band_width: None,
-            uncertainty: serde_json::Value::Null,
-            no_basis_reason: String::new(),
+            ..Default::default()
         },
     )
     .unwrap();
