@@ -71,6 +71,20 @@ pub fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// Two triangles over four points with fractional coordinates: the file-format tests' mesh.
+#[cfg(test)]
+pub(crate) fn two_triangles() -> Mesh {
+    Mesh::new(
+        vec![
+            [0.0, 0.0, 0.0],
+            [1.5, 0.0, 0.0],
+            [0.0, 2.25, -1.0],
+            [1.0, 1.0, 1.0],
+        ],
+        vec![[0, 1, 2], [1, 3, 2]],
+    )
+}
+
 impl Mesh {
     /// The closed axis-aligned box [min, max] as 12 triangles wound outwards (a region, a test
     /// body).

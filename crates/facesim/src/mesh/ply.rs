@@ -426,15 +426,7 @@ mod tests {
     }
 
     fn sample() -> Mesh {
-        let mut m = Mesh::new(
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.5, 0.0, 0.0],
-                [0.0, 2.25, -1.0],
-                [1.0, 1.0, 1.0],
-            ],
-            vec![[0, 1, 2], [1, 3, 2]],
-        );
+        let mut m = crate::mesh::two_triangles();
         m.colors = Some(vec![[255, 0, 0], [0, 255, 0], [0, 0, 255], [7, 8, 9]]);
         m.vertex_columns.push(Column {
             name: "dist".into(),

@@ -217,6 +217,16 @@ fn parse_legacy(b: &[u8]) -> std::result::Result<(Mesh, String), String> {
     Ok((mesh, header))
 }
 
+/// A 3-component point array for [`crate::mesh::two_triangles`]: the file-format tests' data.
+#[cfg(test)]
+pub(crate) fn test_displacement() -> PointArray {
+    PointArray {
+        name: "displacement_mm".into(),
+        components: 3,
+        values: (0..12).map(|i| i as f64 * 0.1).collect(),
+    }
+}
+
 /// Pass over a FIELD block (after its keyword): `name n`, then per array `name components
 /// tuples type` and its values (strings one per line).
 fn skip_field(c: &mut Cursor, binary: bool) -> std::result::Result<(), String> {
@@ -279,33 +289,17 @@ pub fn write_legacy(mesh: &Mesh, arrays: &[PointArray], path: &Path) -> Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn tri() -> Mesh {
-        Mesh::new(
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.5, 0.0, 0.0],
-                [0.0, 2.25, -1.0],
-                [1.0, 1.0, 1.0],
-            ],
-            vec![[0, 1, 2], [1, 3, 2]],
-        )
-    }
+    use crate::mesh::two_triangles;
 
     #[test]
     fn legacy_round_trip_with_point_data() {
         let dir = tempfile::tempdir().unwrap();
-        let a = PointArray {
-            name: "displacement_mm".into(),
-            components: 3,
-            values: (0..12).map(|i| i as f64 * 0.1).collect(),
-        };
         let p = dir.path().join("m.vtk");
-        write_legacy(&tri(), &[a], &p).unwrap();
+        write_legacy(&two_triangles(), &[test_displacement()], &p).unwrap();
         let (m, h) = read_legacy(&p).unwrap();
         assert!(h.contains("SPACE=LPS"));
-        assert_eq!(m.vertices, tri().vertices);
-        assert_eq!(m.triangles, tri().triangles);
+        assert_eq!(m.vertices, two_triangles().vertices);
+        assert_eq!(m.triangles, two_triangles().triangles);
     }
 
     #[test]

@@ -121,7 +121,8 @@ pub fn read(path: &Path) -> Result<Vtp> {
 
 type Parsed<T> = std::result::Result<T, String>;
 
-fn attr<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
+/// The value of attribute `name` in a VTK XML opening tag (`<DataArray type="Float64" …`).
+pub(crate) fn attr<'a>(tag: &'a str, name: &str) -> Option<&'a str> {
     let key = format!(" {name}=\"");
     let s = tag.find(&key)? + key.len();
     let e = tag[s..].find('"')? + s;
@@ -531,20 +532,8 @@ mod tests {
     #[test]
     fn ascii_round_trip_with_point_data_and_space() {
         let dir = tempfile::tempdir().unwrap();
-        let mesh = Mesh::new(
-            vec![
-                [0.0, 0.0, 0.0],
-                [1.5, 0.0, 0.0],
-                [0.0, 2.25, -1.0],
-                [1.0, 1.0, 1.0],
-            ],
-            vec![[0, 1, 2], [1, 3, 2]],
-        );
-        let a = PointArray {
-            name: "displacement_mm".into(),
-            components: 3,
-            values: (0..12).map(|i| i as f64 * 0.1).collect(),
-        };
+        let mesh = crate::mesh::two_triangles();
+        let a = crate::mesh::vtk::test_displacement();
         let p = dir.path().join("m.vtp");
         write_vtp(&mesh, std::slice::from_ref(&a), &p).unwrap();
         let v = read(&p).unwrap();
