@@ -10,6 +10,7 @@
 //! ParaView writes when told to save ASCII; it is not a general VTK reader.
 
 use crate::error::{Error, Result};
+use crate::mesh::vtp::attr;
 use crate::output::write_bytes_atomic;
 use std::io::Write;
 use std::path::Path;
@@ -265,18 +266,11 @@ struct Array<'t> {
     text: &'t str,
 }
 
-fn attribute(tag: &str, key: &str) -> Option<String> {
-    let pat = format!(" {key}=\"");
-    let start = tag.find(&pat)? + pat.len();
-    let len = tag[start..].find('"')?;
-    Some(tag[start..start + len].to_string())
-}
-
 fn parse(text: &str) -> std::result::Result<TetsVtuOwned, String> {
     let vtk_file = text
         .find("<VTKFile")
         .and_then(|at| Some(&text[at..at + text[at..].find('>')?]));
-    if vtk_file.and_then(|t| attribute(t, "type")).as_deref() != Some("UnstructuredGrid") {
+    if vtk_file.and_then(|t| attr(t, "type")) != Some("UnstructuredGrid") {
         return Err("no VTKFile of type UnstructuredGrid".into());
     }
     if text.matches("<Piece").count() != 1 {
@@ -285,7 +279,7 @@ fn parse(text: &str) -> std::result::Result<TetsVtuOwned, String> {
     let piece_at = text.find("<Piece").ok_or("no Piece")?;
     let piece = &text[piece_at..piece_at + text[piece_at..].find('>').ok_or("unclosed Piece")?];
     let count = |key: &str| -> std::result::Result<usize, String> {
-        attribute(piece, key)
+        attr(piece, key)
             .ok_or_else(|| format!("Piece has no {key}"))?
             .parse()
             .map_err(|_| format!("Piece's {key} is not a count"))
@@ -314,7 +308,7 @@ fn parse(text: &str) -> std::result::Result<TetsVtuOwned, String> {
             .max()
             .map(|(_, s)| s)
             .ok_or("a DataArray outside Points, Cells, PointData and CellData")?;
-        let format = attribute(tag, "format").unwrap_or_default();
+        let format = attr(tag, "format").unwrap_or_default();
         if format != "ascii" {
             return Err(format!(
                 "DataArray format \"{format}\": only ascii is read (save as ASCII)"
@@ -322,8 +316,8 @@ fn parse(text: &str) -> std::result::Result<TetsVtuOwned, String> {
         }
         arrays.push(Array {
             section,
-            name: attribute(tag, "Name").unwrap_or_default(),
-            components: attribute(tag, "NumberOfComponents")
+            name: attr(tag, "Name").unwrap_or_default().to_string(),
+            components: attr(tag, "NumberOfComponents")
                 .map(|c| c.parse().map_err(|_| "bad NumberOfComponents".to_string()))
                 .transpose()?
                 .unwrap_or(1),
