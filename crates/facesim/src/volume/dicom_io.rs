@@ -296,12 +296,6 @@ fn normalize(v: [f64; 3]) -> [f64; 3] {
     v.map(|x| x / n)
 }
 
-/// Read the DICOM series in `dir`; with several there, the largest CT series (see
-/// [`read_chosen_series`]).
-pub fn read_series(dir: &Path) -> Result<Volume> {
-    read_chosen_series(dir, None).map(|(v, _)| v)
-}
-
 /// Read one series of `dir`: the one whose SeriesInstanceUID or SeriesNumber is `series`, else
 /// (when the directory holds several) the CT series with the most images. Returns notes for the
 /// report: which series was taken and how to choose another; a gantry tilt resampled.

@@ -308,18 +308,9 @@ pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
 /// `series` (`[dicom] series`); returns notes for the report (a directory of several series
 /// read without a choice, a gantry tilt resampled).
 pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>)> {
-    if path.is_dir() {
-        let (vol, notes) =
-            crate::error::guard(path, || dicom_io::read_chosen_series(path, series))?;
-        vol.check_finite(path)?;
-        return Ok((vol, notes));
-    }
-    if series.is_none() && path.is_file() && dicom_io::is_dicom_file(path) {
-        let (vol, notes) = crate::error::guard(path, || dicom_io::read_multiframe_file(path))?;
-        vol.check_finite(path)?;
-        return Ok((vol, notes));
-    }
-    if let Some(s) = series {
+    if let Some(s) = series
+        && !path.is_dir()
+    {
         return Err(Error::input(
             path,
             format!(
@@ -327,12 +318,6 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>
             ),
         ));
     }
-    Ok((read_volume(path)?, Vec::new()))
-}
-
-/// Read any supported volume: `.nii`, `.nii.gz`, `.inv3`, or a directory holding a DICOM
-/// series (the largest CT series when it holds several).
-pub fn read_volume(path: &Path) -> Result<Volume> {
     if !path.exists() {
         return Err(Error::input(path, "no such file or directory"));
     }
@@ -340,17 +325,18 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
         .file_name()
         .map(|n| n.to_string_lossy().to_lowercase())
         .unwrap_or_default();
-    let vol = crate::error::guard(path, || {
+    let none = |v: Volume| (v, Vec::new());
+    let (vol, notes) = crate::error::guard(path, || {
         if path.is_dir() {
-            dicom_io::read_series(path)
+            dicom_io::read_chosen_series(path, series)
         } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-            nifti_io::read(path)
+            nifti_io::read(path).map(none)
         } else if name.ends_with(".inv3") {
-            inv3::read(path)
+            inv3::read(path).map(none)
         } else if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-            nrrd::read(path)
+            nrrd::read(path).map(none)
         } else if dicom_io::is_dicom_file(path) {
-            dicom_io::read_multiframe_file(path).map(|(v, _)| v)
+            dicom_io::read_multiframe_file(path)
         } else {
             Err(Error::input(
                 path,
@@ -359,7 +345,13 @@ pub fn read_volume(path: &Path) -> Result<Volume> {
         }
     })?;
     vol.check_finite(path)?;
-    Ok(vol)
+    Ok((vol, notes))
+}
+
+/// Read any supported volume: `.nii`, `.nii.gz`, `.nrrd`, `.inv3`, a directory holding a DICOM
+/// series (the largest CT series when it holds several) or a multi-frame DICOM file.
+pub fn read_volume(path: &Path) -> Result<Volume> {
+    read_ct(path, None).map(|(v, _)| v)
 }
 
 #[cfg(test)]
