@@ -674,19 +674,9 @@ fn jpeg_extended_12_bit_is_one_clear_error() {
 fn enhanced(src: &Path, name: &str, args: &[&str]) -> PathBuf {
     let dst = fresh_beside(src, name);
     let out = dst.join("enhanced.dcm");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/legacy_enhanced.py");
-    let r = Command::new(common::venv_python())
-        .arg(script)
-        .arg(src)
-        .arg(&out)
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        r.status.success(),
-        "legacy_enhanced.py {args:?}: {}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    let mut argv = vec![src.as_os_str(), out.as_os_str()];
+    argv.extend(args.iter().map(std::ffi::OsStr::new));
+    common::run_python_script("legacy_enhanced.py", &argv);
     // The fixture is what it claims: one file, every slice a frame, the Legacy Converted
     // Enhanced CT SOP class, no per-slice geometry at the top level.
     let obj = dicom_object::OpenFileOptions::new()

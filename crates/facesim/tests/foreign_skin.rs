@@ -7,7 +7,6 @@
 mod common;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::OnceLock;
 
 /// The whole-CT iso-surface at `level` HU, written by scikit-image to `out` (.stl or .obj).
@@ -21,16 +20,16 @@ fn isosurface(ct: &facesim::volume::Volume, level: f64, out: &Path) {
     });
     let meta_path = dir.join("ct.json");
     std::fs::write(&meta_path, meta.to_string()).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/isosurface.py");
-    let st = Command::new(common::venv_python())
-        .arg(script)
-        .arg(&raw)
-        .arg(&meta_path)
-        .arg(level.to_string())
-        .arg(out)
-        .status()
-        .unwrap();
-    assert!(st.success(), "isosurface.py failed");
+    let level = level.to_string();
+    common::run_python_script(
+        "isosurface.py",
+        &[
+            raw.as_os_str(),
+            meta_path.as_os_str(),
+            level.as_ref(),
+            out.as_os_str(),
+        ],
+    );
     std::fs::remove_file(raw).unwrap();
 }
 

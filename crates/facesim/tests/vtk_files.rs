@@ -7,8 +7,7 @@ mod common;
 
 use facesim::mesh::Mesh;
 use facesim::mesh::vtk::PointArray;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::PathBuf;
 use std::sync::OnceLock;
 
 /// A curved 80 × 80 grid (13 122 triangles, arrays of many zlib blocks) with coordinates that
@@ -47,19 +46,8 @@ fn variants() -> &'static (PathBuf, String) {
         let ours = dir.join("ours.vtp");
         facesim::mesh::vtp::write_vtp(&mesh, &[disp], &ours).unwrap();
         let out = dir.join("variants");
-        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/vtk_variants.py");
-        let r = Command::new(common::venv_python())
-            .arg(script)
-            .arg(&ours)
-            .arg(&out)
-            .output()
-            .unwrap();
-        let log = String::from_utf8_lossy(&r.stdout).into_owned();
-        assert!(
-            r.status.success(),
-            "{log}{}",
-            String::from_utf8_lossy(&r.stderr)
-        );
+        let log =
+            common::run_python_script("vtk_variants.py", &[ours.as_os_str(), out.as_os_str()]);
         (out, log)
     })
 }

@@ -27,6 +27,26 @@ pub fn venv_python() -> PathBuf {
     p
 }
 
+/// Run the fixture script `crates/facesim/tests/python/NAME` in the venv with `args`; it must
+/// succeed (else the test fails with its output). Returns what it printed.
+pub fn run_python_script(name: &str, args: &[&std::ffi::OsStr]) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../facesim/tests/python")
+        .join(name);
+    let r = std::process::Command::new(venv_python())
+        .arg(&script)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", script.display()));
+    let out = String::from_utf8_lossy(&r.stdout).into_owned();
+    assert!(
+        r.status.success(),
+        "{name} {args:?}: {out}{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    out
+}
+
 /// A phantom case (1.5 mm voxels), written once per test binary.
 pub fn phantom_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
