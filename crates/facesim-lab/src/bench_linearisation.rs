@@ -7,7 +7,7 @@
 use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::error::{Error, Result};
 use facesim::observe::Quiet;
-use facesim::pipeline::{self, Recorder, inputs::CaseFiles, predict};
+use facesim::pipeline::{self, Recorder, inputs::CaseFiles};
 use std::path::Path;
 
 /// One move's row.
@@ -67,7 +67,7 @@ pub fn run(case_toml: &Path, models: &[SolveModel]) -> Result<Vec<Row>> {
             scene.model.plan = facesim::osteotomy::Plan::new(&scene.case.osteotomy);
             let mut rec = Recorder::new(&Quiet);
             let case = scene.case.clone();
-            predict::predict(scene, &case, &files, &mut rec)
+            facesim::model::predict(scene, &case, &files, &mut rec)
         };
         // The basis does not depend on the plan (the linearisation at rest): build it once.
         let basis = with_plan(&mut scene, case.osteotomy.clone())?

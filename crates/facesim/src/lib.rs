@@ -24,6 +24,7 @@ pub mod fem;
 pub mod landmarks;
 pub mod mesh;
 pub mod meter;
+pub mod model;
 pub mod observe;
 pub mod osteotomy;
 pub mod output;

@@ -204,7 +204,7 @@ pub struct Report {
     pub springs: Option<SpringReport>,
     pub solve: Option<Vec<StepRecord>>,
     /// The volumetric model (`[solve] model = "tet"`).
-    pub tet: Option<crate::pipeline::volumetric::TetReport>,
+    pub tet: Option<crate::model::TetReport>,
     pub displacement: Displacement,
     /// The plan basis written with the outputs (docs/plan-basis.md).
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -9,7 +9,7 @@ mod common;
 use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
-use facesim::pipeline::{self, Recorder, Scene, inputs::CaseFiles, predict};
+use facesim::pipeline::{self, Recorder, Scene, inputs::CaseFiles};
 use facesim::plan::{PlanBasis, file, replan};
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -38,7 +38,7 @@ fn solve(scene: &mut Scene, plan: Vec<Osteotomy>) -> (Vec<[f64; 3]>, Option<Plan
     scene.model.plan = facesim::osteotomy::Plan::new(&scene.case.osteotomy);
     let case = scene.case.clone();
     let mut rec = Recorder::new(&Quiet);
-    let p = predict::predict(scene, &case, &CaseFiles::in_memory(&case), &mut rec).unwrap();
+    let p = facesim::model::predict(scene, &case, &CaseFiles::in_memory(&case), &mut rec).unwrap();
     (p.face_post.vertices, p.basis)
 }
 

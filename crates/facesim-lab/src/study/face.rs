@@ -1,5 +1,5 @@
 //! Every model on a face case (issue 5 item 5), measured against the volumetric reference: the
-//! product's tetrahedral model (`[solve] model = "tet"`, `pipeline::volumetric::predict`) at the
+//! product's tetrahedral model (`[solve] model = "tet"`, `facesim::model::volumetric::predict`) at the
 //! finest affordable skin element size, with the case's `[tet]` material and element. Rows: that
 //! model at coarser sizes (its own convergence), neo-Hookean against linear material and
 //! quadratic against linear elements; the C1 model at several skin resolutions under both solve
@@ -344,7 +344,7 @@ impl<'a> Study<'a> {
                 .started(&format!("study {}: {method} at {size} mm", self.name));
             let mut rec = facesim::pipeline::Recorder::new(&facesim::observe::Quiet);
             let (r, wall, peak) = timed(|| {
-                facesim::pipeline::volumetric::predict(&self.scene, &case, ref_mesh, &mut rec)
+                facesim::model::volumetric::predict(&self.scene, &case, ref_mesh, &mut rec)
             });
             let mut row = FaceRow {
                 is_reference: i == 0,
@@ -498,12 +498,11 @@ impl<'a> Study<'a> {
         let level = t.level;
         let what = format!("study {}: C1 {model:?} at {}", self.name, level.label);
         self.progress.started(&what);
+        let method =
+            facesim::solve::Method::of(model).unwrap_or(facesim::solve::Method::Equilibrium);
         let params = facesim::solve::Params {
-            model,
-            k_c: match model {
-                SolveModel::Koch1996 => self.case.solve.koch_k_c,
-                SolveModel::Equilibrium | SolveModel::Tet => self.case.solve.k_c,
-            },
+            model: method,
+            k_c: method.k_c(&self.case.solve),
             regions: self.scene.model.params.regions.clone(),
             ..self.scene.model.params
         };
@@ -788,7 +787,7 @@ impl<'a> Study<'a> {
         let mut sp = self.case.springs.clone();
         sp.struts = struts;
         let params = facesim::solve::Params {
-            model: SolveModel::Equilibrium,
+            model: facesim::solve::Method::Equilibrium,
             k_c,
             regions: self.scene.model.params.regions.clone(),
             ..self.scene.model.params

@@ -4,7 +4,7 @@
 
 use super::Recorder;
 use super::surfaces::Surfaces;
-use crate::case::{Case, Parameterization, SolveModel};
+use crate::case::{Case, Parameterization};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::report::{CoarseReport, Stage, SurfaceReport};
@@ -61,7 +61,8 @@ pub fn place(
                 ));
             }
             report.scan_to_ct_skin_mm = Some(st);
-            if report.foreign_skin.is_some() && case.solve.model != SolveModel::Tet {
+            if report.foreign_skin.is_some() && crate::solve::Method::of(case.solve.model).is_some()
+            {
                 c1_target = Some(extracted.triangles.len());
             }
             (m, t)

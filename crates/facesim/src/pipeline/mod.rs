@@ -17,9 +17,7 @@ pub mod face;
 pub mod inputs;
 pub mod model;
 pub mod outputs;
-pub mod predict;
 pub mod surfaces;
-pub mod volumetric;
 
 use crate::case::Case;
 use crate::error::Result;
@@ -213,7 +211,7 @@ fn finish(
     };
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
-    let prediction = predict::predict(&scene, case, files, &mut rec)?;
+    let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
     let dist = outputs::displacement(&prediction);
     // Landmarks before any file is written: a user landmark off the face is bad input.
     let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
@@ -227,7 +225,22 @@ fn finish(
         )
     })?;
     // The band before any file is written: a failed sample leaves no outputs half-written.
-    let band = crate::uncertainty::sample(&scene, &prediction, &analysis, case, &mut rec)?;
+    let band = if case.uncertainty.samples == 0 {
+        None
+    } else {
+        let nominal = crate::uncertainty::Nominal {
+            skin: &prediction.skin,
+            face_post: &prediction.face_post.vertices,
+            moves: prediction.moves(),
+            sliding_matters: prediction.sliding_matters(),
+        };
+        let resolve = |c: &Case| prediction.resolve(&scene, c);
+        Some(
+            rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+                crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs)
+            })?,
+        )
+    };
     outputs::write(out_dir, &scene, &prediction, &dist, case, &mut rec)?;
     if let Some(b) = &band {
         crate::uncertainty::write_band(out_dir, &prediction.face_post, b)?;

@@ -4,7 +4,7 @@
 
 use super::Recorder;
 use super::face::Face;
-use crate::case::{Case, SolveModel};
+use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::osteotomy::Plan;
 use crate::report::Stage;
@@ -37,17 +37,16 @@ pub fn rigid_mask(case: &Case, vertices: &[[f64; 3]]) -> Vec<bool> {
 
 /// The C1 solve's parameters from the case.
 pub fn solve_params(case: &Case) -> crate::solve::Params {
+    // The volumetric model has no C1 solve; a C1 study of its case solves to equilibrium.
+    let method =
+        crate::solve::Method::of(case.solve.model).unwrap_or(crate::solve::Method::Equilibrium);
     crate::solve::Params {
-        model: case.solve.model,
+        model: method,
         steps: case.solve.steps,
         alpha: case.surface.alpha,
         beta: case.surface.beta,
         regions: case.surface.regions.clone(),
-        k_c: if case.solve.model == SolveModel::Koch1996 {
-            case.solve.koch_k_c
-        } else {
-            case.solve.k_c
-        },
+        k_c: method.k_c(&case.solve),
         tolerance: 1e-6,
         max_iterations: 30,
         restrict: case.solve.restrict,
@@ -72,7 +71,7 @@ pub fn build(
             skin.vertices.len()
         )));
     }
-    if case.solve.model == SolveModel::Tet {
+    if crate::solve::Method::of(case.solve.model).is_none() {
         return volumetric_model(face, rigid, case);
     }
     let want = crate::springs::wanted(&rigid, case.solve.restrict);
@@ -119,7 +118,7 @@ pub fn build(
 }
 
 /// The volumetric model needs no springs: its tissue is meshed in the solve stage
-/// (`pipeline::volumetric`), and the plan must move some of the skull.
+/// (`crate::model::volumetric`), and the plan must move some of the skull.
 fn volumetric_model(face: &Face, rigid: Vec<bool>, case: &Case) -> Result<Model> {
     let plan = Plan::new(&case.osteotomy);
     plan.check_selects(&face.skull.vertices, "skull surface vertices")?;

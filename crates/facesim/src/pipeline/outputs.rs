@@ -1,11 +1,11 @@
 //! The one module that writes a run's files (docs/case.md "Outputs"): each to a temporary name and
 //! renamed, independent files in parallel, report.json last.
 
-use super::predict::Prediction;
 use super::{Recorder, Scene};
-use crate::case::{Case, SolveModel};
+use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
+use crate::model::Prediction;
 use crate::output::write_bytes_atomic;
 use crate::report::{Counts, Displacement, Report, Stage};
 use crate::volume;
@@ -127,7 +127,6 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
     let skull = &scene.face.skull;
     let mut skull_post = skull.clone();
     skull_post.vertices = scene.model.plan.apply(&skull.vertices, 1.0).0;
-    let solved_skin = p.coarse.as_ref().unwrap_or(&p.skin);
     // The files are independent (each written to a temporary name and renamed), so they are
     // written in parallel; the first error is reported.
     type Job<'a> = Box<dyn FnOnce() -> Result<()> + Send + Sync + 'a>;
@@ -144,41 +143,10 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
                 "facesim face_post SPACE=LPS",
             )
         }),
-        // The C1 surface sampled finer than the solved mesh; with a coarse model the carried
-        // full skin is the fine output instead.
-        Box::new(
-            || match (&p.solution, case.output.subdivide > 1 && p.coarse.is_none()) {
-                (Some(sol), true) => {
-                    let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
-                    mesh::write_mesh(&fine, &o.join("face_post_fine.ply"))
-                }
-                _ => Ok(()),
-            },
-        ),
         Box::new(|| mesh::write_mesh(&coloured, &o.join("face_displacement.ply"))),
-        // With a coarse model, the mesh that was solved (pre-operative skin → its answer).
-        Box::new(|| match (&p.solution, &p.coarse) {
-            (Some(sol), Some(coarse)) => {
-                let mut m = coarse.clone();
-                m.vertices = sol.positions.clone();
-                mesh::write_mesh(&m, &o.join("face_post_coarse.ply"))
-            }
-            _ => Ok(()),
-        }),
         Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
-        // Springs belong to the C1 models; the volumetric model has its mesh instead.
-        Box::new(|| match case.solve.model {
-            SolveModel::Tet => Ok(()),
-            _ => mesh::ply::write(
-                &scene.model.springs.to_mesh(solved_skin),
-                &o.join("springs.ply"),
-                mesh::ply::Encoding::BinaryLittleEndian,
-            ),
-        }),
-        Box::new(|| match &p.volumetric {
-            Some(v) => v.write_vtu(&o.join("tets.vtu")),
-            None => Ok(()),
-        }),
+        // The model's own files: springs (C1) or the tetrahedral mesh.
+        Box::new(|| p.write_model_files(o, scene, case)),
         Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
         Box::new(|| match &p.basis {
             Some(b) => crate::plan::file::write(&o.join(crate::plan::file::FILE_NAME), b),
@@ -224,21 +192,12 @@ pub fn fill_report(
         skull_triangles: skull.triangles.len(),
         springs_main: scene.model.spring_report.main,
         springs_strut: scene.model.spring_report.struts,
-        unknowns: match (&p.solution, &p.volumetric) {
-            (Some(s), _) => s.unknowns,
-            (None, Some(v)) => v.report.free_dofs,
-            (None, None) => 0,
-        },
-        solved_vertices: p.solution.as_ref().map_or(0, |s| s.solved_vertices),
         max_rss_mb: crate::meter::max_rss_mb(),
+        ..Counts::default()
     };
     report.surfaces = scene.face.report.clone();
-    report.surfaces.embedding = p.embedding.clone();
     report.registration = scene.face.registration.clone();
-    report.springs =
-        (case.solve.model != SolveModel::Tet).then(|| scene.model.spring_report.clone());
-    report.tet = p.volumetric.as_ref().map(|v| v.report.clone());
-    report.solve = p.solution.as_ref().map(|s| s.history.clone());
+    p.fill_report(report, scene);
     report.segmentation = Some(seg.report.clone());
     report.plan_basis = p.basis.as_ref().map(|b| b.report());
     report.parameters = Some(case.clone());

@@ -7,7 +7,6 @@
 //!
 //! - [`basis`]: the basis, its matrices and the prediction of any plan from it;
 //! - [`c1`]: the C1 models' basis, their linearisation at the pre-operative state;
-//! - [`holds`]: the volumetric model's boundary conditions as linear functions of the M_s;
 //! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs;
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan);
 //! - [`sweep`]: `facesim sweep` (many plans, a table and a chart; per facial region by
@@ -17,7 +16,6 @@ pub mod basis;
 pub mod c1;
 pub mod chart;
 pub mod file;
-pub mod holds;
 pub mod replan;
 pub mod sweep;
 

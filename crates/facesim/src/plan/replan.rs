@@ -5,8 +5,8 @@ use super::basis::{PlanBasis, ReplanReport};
 use crate::case::{Osteotomy, Region};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
+use crate::model::{Prediction, Solved};
 use crate::pipeline::outputs;
-use crate::pipeline::predict::Prediction;
 use crate::report::{Displacement, Report};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -109,11 +109,8 @@ pub fn replan_with(
     let prediction = Prediction {
         skin,
         face_post: post,
-        solution: None,
-        coarse: None,
-        embedding: None,
-        volumetric: None,
         basis: None,
+        solved: Solved::Tet(None),
     };
     let dist = outputs::displacement(&prediction);
     let run_report: Option<serde_json::Value> = std::fs::read(run_dir.join("report.json"))

@@ -15,7 +15,6 @@ mod koch1996;
 mod linearised;
 mod restrict;
 
-use crate::case::SolveModel;
 use crate::error::{Error, Result};
 use crate::fem::assembly::{FemMesh, rigid_dofs};
 use crate::fem::element::Material;
@@ -25,8 +24,39 @@ use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
 use serde::Serialize;
 
+/// How the C1 model is solved (the case's `[solve] model`, `crate::case::SolveModel::c1_method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Newton's method on the equilibrium equations (docs/pipeline.md §5).
+    Equilibrium,
+    /// Koch's load steps, eq. 20–23.
+    Koch1996,
+}
+
+impl Method {
+    /// The C1 method of a case's `[solve] model`; None for the volumetric model, which is no C1
+    /// model (`crate::model` dispatches on this).
+    pub fn of(model: crate::case::SolveModel) -> Option<Method> {
+        use crate::case::SolveModel;
+        match model {
+            SolveModel::Equilibrium => Some(Method::Equilibrium),
+            SolveModel::Koch1996 => Some(Method::Koch1996),
+            SolveModel::Tet => None,
+        }
+    }
+
+    /// The spring force scale k_c (Koch eq. 20) of `[solve]`: Koch's own iteration was
+    /// calibrated with its own constant (docs/pipeline.md).
+    pub fn k_c(self, solve: &crate::case::Solve) -> f64 {
+        match self {
+            Method::Koch1996 => solve.koch_k_c,
+            Method::Equilibrium => solve.k_c,
+        }
+    }
+}
+
 pub struct Params {
-    pub model: SolveModel,
+    pub model: Method,
     pub steps: usize,
     pub alpha: f64,
     pub beta: f64,
@@ -270,13 +300,8 @@ fn solve_mesh(
         weight,
     };
     let (a, history, responses) = match p.model {
-        SolveModel::Koch1996 => koch1996::solve(&pr, moves)?,
-        SolveModel::Equilibrium => equilibrium::solve(&pr, moves)?,
-        SolveModel::Tet => {
-            return Err(Error::config(
-                "the C1 solver was asked to run the volumetric model 'tet' (it runs in pipeline::volumetric)",
-            ));
-        }
+        Method::Koch1996 => koch1996::solve(&pr, moves)?,
+        Method::Equilibrium => equilibrium::solve(&pr, moves)?,
     };
     let nv = skin.vertices.len();
     let dofs = pr.fem.dofs();

@@ -22,11 +22,13 @@
 //! units give the same displacements, which are all a prescribed-displacement problem yields).
 
 pub mod blocks;
+pub mod conditions;
 pub mod embed;
 pub mod from_ct;
 pub mod graded;
 pub mod holds;
 pub mod nonlinear;
+pub mod plan_holds;
 pub mod quadratic;
 pub mod quality;
 pub mod stuffing;

@@ -179,8 +179,8 @@ impl Parameter {
     /// The models the parameter exists in.
     fn applies_to(self, model: SolveModel) -> bool {
         match self {
-            Parameter::SpringScale => model != SolveModel::Tet,
-            _ => model == SolveModel::Tet,
+            Parameter::SpringScale => crate::solve::Method::of(model).is_some(),
+            _ => crate::solve::Method::of(model).is_none(),
         }
     }
 

@@ -16,7 +16,7 @@ pub mod sample;
 
 pub use band::Band;
 pub use distributions::Uncertainty;
-pub use run::{Sampled, UncertaintyReport, sample};
+pub use run::{Nominal, Sampled, UncertaintyReport, sample};
 
 /// face_band.ply in `dir`: the nominal predicted face with the band per vertex.
 pub fn write_band(

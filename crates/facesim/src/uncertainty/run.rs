@@ -5,13 +5,11 @@
 use super::band::{self, Band};
 use super::distributions::{Distribution, Parameter};
 use super::sample::ScrambledHalton;
-use crate::case::{Case, SolveModel};
+use crate::case::Case;
 use crate::error::Result;
 use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
-use crate::mesh::{norm, sub};
-use crate::pipeline::predict::Prediction;
-use crate::pipeline::{Recorder, Scene};
-use crate::report::Stage;
+use crate::mesh::{Mesh, norm, sub};
+use crate::observe::Observer;
 use serde::Serialize;
 
 /// One sample's parameters (those the model samples; the others are absent).
@@ -154,32 +152,37 @@ enum Tracker {
     Fixed(f64),
 }
 
-/// Sample the tissue parameters `case.uncertainty.samples` times; None when off.
+/// The run's prediction as the samples see it.
+pub struct Nominal<'a> {
+    /// The face before (face_pre) and the run's predicted positions, same vertex order.
+    pub skin: &'a Mesh,
+    pub face_post: &'a [[f64; 3]],
+    /// Whether the run moved anything (else every sample is the pre-operative face).
+    pub moves: bool,
+    /// Whether `[tet] sliding` can change the answer (the mesh has mucosa nodes).
+    pub sliding_matters: bool,
+}
+
+/// Sample the tissue parameters `case.uncertainty.samples` times (at least one): `resolve`
+/// gives the face's positions for a case with other tissue parameters (the model's re-solve on
+/// what the run built, `crate::model::Prediction::resolve`).
 pub fn sample(
-    scene: &Scene,
-    prediction: &Prediction,
+    run: &Nominal,
+    resolve: &dyn Fn(&Case) -> Result<Vec<[f64; 3]>>,
     analysis: &Analysis,
     case: &Case,
-    rec: &mut Recorder,
-) -> Result<Option<Sampled>> {
+    obs: &dyn Observer,
+) -> Result<Sampled> {
     let n = case.uncertainty.samples;
-    if n == 0 {
-        return Ok(None);
-    }
-    let obs = rec.obs;
-    rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+    {
         let start = std::time::Instant::now();
-        let skin = &prediction.skin;
+        let skin = run.skin;
         // Positions, not displacements, so that the nominal sample gives the run's own figures
         // bit for bit (report.json's are computed from face_pre and face_post).
-        let nominal = &prediction.face_post.vertices;
+        let nominal = run.face_post;
         let draws = draws(case);
-        let sliding_matters = prediction
-            .volumetric
-            .as_ref()
-            .is_some_and(|v| v.report.mucosa_nodes > 0);
+        let sliding_matters = run.sliding_matters;
         let nominal_key = solve_key(case, sliding_matters);
-        let solver = Solver::new(scene, prediction, case)?;
         // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
         let trackers: Vec<(String, Tracker)> = analysis
             .carried
@@ -210,13 +213,13 @@ pub fn sample(
             obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
             let c = d.apply(case);
             let key = solve_key(&c, sliding_matters);
-            let post: &[[f64; 3]] = if key == nominal_key || !solver.moves() {
+            let post: &[[f64; 3]] = if key == nominal_key || !run.moves {
                 nominal
             } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
                 &solved[k].1
             } else {
                 let t = std::time::Instant::now();
-                let u = solver.solve(&c)?;
+                let u = resolve(&c)?;
                 solve_s += t.elapsed().as_secs_f64();
                 solved.push((key, u));
                 &solved[solved.len() - 1].1
@@ -293,86 +296,6 @@ pub fn sample(
             ),
             draws,
         };
-        Ok(Some(Sampled { bands, report }))
-    })
-}
-
-/// Solves the run's model again with a sample's parameters, reusing everything upstream.
-struct Solver<'a> {
-    scene: &'a Scene,
-    prediction: &'a Prediction,
-    /// The C1 models with a coarse skin: the shell that carries the full skin, built once.
-    shell: Option<(crate::embed::Shell, crate::embed::Embedding, Vec<bool>)>,
-}
-
-impl<'a> Solver<'a> {
-    fn new(scene: &'a Scene, prediction: &'a Prediction, case: &Case) -> Result<Solver<'a>> {
-        let face = &scene.face;
-        let shell = match (case.solve.model, &face.fine) {
-            (SolveModel::Tet, _) | (_, None) => None,
-            (_, Some(fine)) => {
-                let inward =
-                    -crate::springs::outward_sign(&face.skin, &scene.vol, &scene.seg.labels);
-                let shell = crate::embed::Shell::new(
-                    &face.skin,
-                    case.solve.shell_mm,
-                    inward,
-                    case.solve.shell_poisson,
-                    &scene.model.rigid,
-                )?;
-                let e = shell.embed(&fine.vertices);
-                let rigid = crate::pipeline::model::rigid_mask(case, &fine.vertices);
-                Some((shell, e, rigid))
-            }
-        };
-        Ok(Solver {
-            scene,
-            prediction,
-            shell,
-        })
-    }
-
-    /// Whether the run moved anything (else every sample is the pre-operative face).
-    fn moves(&self) -> bool {
-        self.prediction.volumetric.is_some() || self.prediction.solution.is_some()
-    }
-
-    /// The predicted face's vertices (the run's face's order) with `case`'s parameters.
-    fn solve(&self, case: &Case) -> Result<Vec<[f64; 3]>> {
-        let p = self.prediction;
-        if let Some(v) = &p.volumetric {
-            // As the run's face_post: position plus carried displacement.
-            let d = v.resolve(self.scene, case, &p.skin)?;
-            return Ok(p
-                .skin
-                .vertices
-                .iter()
-                .zip(&d)
-                .map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]])
-                .collect());
-        }
-        let (face, model) = (&self.scene.face, &self.scene.model);
-        let params = crate::pipeline::model::solve_params(case);
-        let sol = crate::solve::solve(
-            &face.skin,
-            &model.springs,
-            &model.plan,
-            &model.rigid,
-            &params,
-        )?;
-        let post = match &self.shell {
-            None => sol.positions,
-            Some((shell, e, rigid)) => {
-                let carried = shell.carry(e, &shell.deform(&sol.positions));
-                p.skin
-                    .vertices
-                    .iter()
-                    .zip(carried)
-                    .zip(rigid)
-                    .map(|((x, c), r)| if *r { *x } else { c })
-                    .collect()
-            }
-        };
-        Ok(post)
+        Ok(Sampled { bands, report })
     }
 }

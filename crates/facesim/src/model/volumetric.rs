@@ -4,17 +4,21 @@
 //! held, the skin is free; the solved displacement carries the face (the extracted skin or the
 //! given scan, at full resolution).
 
-use super::{Recorder, Scene};
+use super::{Prediction, Solved};
 use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::plan::holds::{LinearHold, segment_at};
+use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
 use crate::report::Stage;
-use crate::tet::embed::{SkinEmbedding, boundary_faces};
+use crate::tet::conditions::{
+    Bone, Holds, Mucosa, hold_floating_pieces, holds, materials, midpoint_kinds, mucosa,
+};
+use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
 use crate::tet::nonlinear::{self, Newton};
+use crate::tet::plan_holds::LinearHold;
 use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
@@ -70,7 +74,15 @@ impl Volumetric {
             mut hold,
             linear: mut linear_hold,
             ..
-        } = holds(nodes, &r.kind, &r.mucosa, scene, case, r.linear_solve);
+        } = holds(
+            nodes,
+            &r.kind,
+            &r.mucosa,
+            &crate::pipeline::model::rigid_mask(case, nodes),
+            &bone(scene, case),
+            case.tet.sliding,
+            r.linear_solve,
+        );
         hold_floating_pieces(
             &self.mesh.tets,
             &mut constraint,
@@ -80,7 +92,7 @@ impl Volumetric {
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
-            material: materials(&self.mesh.tissue, case),
+            material: materials(&self.mesh.tissue, &case.tet),
         };
         let quadratic = self
             .quadratic
@@ -178,6 +190,15 @@ pub struct TetReport {
     pub face_to_mesh_mm: DistanceStats,
 }
 
+/// The bone of the scene, moved by the case's plan.
+fn bone<'a>(scene: &'a Scene, case: &'a Case) -> Bone<'a> {
+    Bone {
+        skull: &scene.face.skull,
+        plan: &scene.model.plan,
+        osteotomy: &case.osteotomy,
+    }
+}
+
 /// The box (LPS mm) around the skull points the plan moves, grown by `margin` and kept inside
 /// the CT's voxel centres (where the scan ends, the tissue is cut and held like the region's other
 /// cut faces, not left as a free surface); None when the plan moves none.
@@ -200,301 +221,8 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
     (lo[0] <= hi[0]).then_some((lo, hi))
 }
 
-/// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
-/// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
-/// bone and the cut faces stay, skin outside `[surface] movable` stays, mucosa slides along or
-/// moves with the bone it faces (`mucosa`), the rest is free. With `rest_normals` (the linear
-/// models) mucosa slides along the bone's normal at rest, the small-strain form of the condition,
-/// which keeps the factor independent of the plan (the plan basis). Also returns each hold as a
-/// linear function of the segments' matrices (docs/plan-basis.md) and the nodes that lie in more
-/// than one segment (their moves compose).
-fn holds(
-    nodes: &[[f64; 3]],
-    kind: &[NodeKind],
-    mucosa: &[Option<Mucosa>],
-    scene: &Scene,
-    case: &Case,
-    rest_normals: bool,
-) -> Holds {
-    let (moved_to, moved) = scene.model.plan.apply(nodes, 1.0);
-    let rigid = super::model::rigid_mask(case, nodes);
-    let mut overlaps = Vec::new();
-    let mut out = Holds::default();
-    for (n, k) in kind.iter().enumerate() {
-        let (c, h, l) = match (k, mucosa.get(n).copied().flatten()) {
-            (NodeKind::Bone, _) if moved[n] => {
-                let (s, over) = segment_at(&case.osteotomy, nodes[n]);
-                overlaps.extend(over);
-                (
-                    MOVED,
-                    Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
-                    s.map_or(LinearHold::Still, |segment| LinearHold::Moves {
-                        segment,
-                        at: nodes[n],
-                    }),
-                )
-            }
-            (NodeKind::Bone | NodeKind::Cut, _) => {
-                (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still)
-            }
-            (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still),
-            (NodeKind::Skin, Some(m)) if case.tet.sliding => {
-                let normal = if rest_normals {
-                    m.rest_normal
-                } else {
-                    m.normal
-                };
-                (
-                    SLIDING,
-                    Hold::Slide {
-                        normal,
-                        value: (0..3).map(|c| normal[c] * m.bone_move[c]).sum(),
-                    },
-                    LinearHold::Slides {
-                        normal: m.rest_normal,
-                        segment: m.segment,
-                        at: m.bone_at,
-                    },
-                )
-            }
-            (NodeKind::Skin, Some(m)) => (
-                if m.bone_move == [0.0; 3] {
-                    FIXED
-                } else {
-                    MOVED
-                },
-                Hold::Fixed(m.bone_move),
-                m.segment
-                    .map_or(LinearHold::Still, |segment| LinearHold::Moves {
-                        segment,
-                        at: m.bone_at,
-                    }),
-            ),
-            (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free, LinearHold::Free),
-        };
-        out.constraint.push(c);
-        out.hold.push(h);
-        out.linear.push(l);
-    }
-    overlaps.sort_unstable();
-    overlaps.dedup();
-    out.overlapping_segments = overlaps;
-    out
-}
-
-/// Per node: the constraint code, the hold, the hold as a function of the plan; and the segments
-/// some node lies in together.
-#[derive(Default)]
-struct Holds {
-    constraint: Vec<u8>,
-    hold: Vec<Hold>,
-    linear: Vec<LinearHold>,
-    overlapping_segments: Vec<usize>,
-}
-
-/// A mucosa node: the bone surface's unit normal at the nearest skull point (after the move)
-/// and that point's displacement.
-#[derive(Clone, Copy, Debug)]
-struct Mucosa {
-    normal: [f64; 3],
-    bone_move: [f64; 3],
-    /// The bone surface's normal at rest, the nearest skull point and its segment (at rest).
-    rest_normal: [f64; 3],
-    bone_at: [f64; 3],
-    segment: Option<usize>,
-}
-
-/// Skin-kind nodes that face a cavity (no outside air within a voxel of them) and lie within
-/// `[tet] mucosa_gap_mm` of the skull surface: the inner lips and cheeks across the vestibule,
-/// the nasal floor.
-fn mucosa(
-    nodes: &[[f64; 3]],
-    kind: &[NodeKind],
-    scene: &Scene,
-    case: &Case,
-) -> Vec<Option<Mucosa>> {
-    use rayon::prelude::*;
-    let skull = &scene.face.skull;
-    let index = crate::compare::SurfaceIndex::new(skull);
-    let (vol, outside) = (&scene.vol, &scene.seg.outside);
-    let faces_cavity = |p: [f64; 3]| {
-        let c = vol.to_voxel(p).map(|v| v.round() as i64);
-        !(-1..=1).any(|dk| {
-            (-1..=1).any(|dj| {
-                (-1..=1).any(|di| {
-                    let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
-                    i >= 0
-                        && j >= 0
-                        && k >= 0
-                        && outside.contains(i as usize, j as usize, k as usize)
-                })
-            })
-        })
-    };
-    let plan = &scene.model.plan;
-    nodes
-        .par_iter()
-        .zip(kind)
-        .map(|(p, k)| {
-            if *k != NodeKind::Skin || !faces_cavity(*p) {
-                return None;
-            }
-            let (d, q, t) = index.closest_triangle(*p);
-            if !(d <= case.tet.mucosa_gap_mm) {
-                return None;
-            }
-            let tri = skull.triangles[t].map(|v| skull.vertices[v as usize]);
-            let n = crate::mesh::cross(
-                crate::mesh::sub(tri[1], tri[0]),
-                crate::mesh::sub(tri[2], tri[0]),
-            );
-            let len = crate::mesh::norm(n);
-            if !(len > 0.0) {
-                return None;
-            }
-            let n = n.map(|v| v / len);
-            // The normal carried by the bone's move: the image of q + εn minus that of q.
-            let eps = 1e-3;
-            let (moved, which) = plan.apply(&[q, [0, 1, 2].map(|c| q[c] + eps * n[c])], 1.0);
-            let bone_move = [0, 1, 2].map(|c| moved[0][c] - q[c]);
-            let normal = if which[0] == which[1] {
-                let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
-                let l = crate::mesh::norm(m);
-                m.map(|v| v / l)
-            } else {
-                n
-            };
-            Some(Mucosa {
-                normal,
-                bone_move,
-                rest_normal: n,
-                bone_at: q,
-                segment: segment_at(&case.osteotomy, q).0,
-            })
-        })
-        .collect()
-}
-
-/// The role of each midpoint of a 10-node mesh: a midpoint on a boundary face whose corners
-/// are all held (bone, cut) takes the role of that surface; every other midpoint is interior or
-/// skin, free.
-fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]) -> Vec<NodeKind> {
-    let mut mid = vec![NodeKind::Interior; q.edges.len()];
-    let held = |k: NodeKind| matches!(k, NodeKind::Bone | NodeKind::Cut);
-    for (_, f) in boundary_faces(tets) {
-        let ks = f.map(|n| kind[n as usize]);
-        let role = if ks.iter().all(|k| *k == NodeKind::Bone) {
-            NodeKind::Bone
-        } else if ks.iter().all(|k| held(*k)) {
-            NodeKind::Cut
-        } else {
-            continue;
-        };
-        for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
-            if let Some(m) = q.midpoint(a, b) {
-                let e = m as usize - q.corners;
-                if mid[e] != NodeKind::Bone {
-                    mid[e] = role;
-                }
-            }
-        }
-    }
-    mid
-}
-
-/// Pieces of the mesh (tetrahedra joined through shared faces; a piece hanging on by a node
-/// or an edge is a hinge) held by fewer than three nodes would float or turn: a singular
-/// system. Their corner nodes are held still. Returns the pieces and nodes so held.
-fn hold_floating_pieces(
-    tets: &[[u32; 4]],
-    constraint: &mut [u8],
-    hold: &mut [Hold],
-    linear: &mut [LinearHold],
-) -> (usize, usize) {
-    let mut faces: Vec<([u32; 3], u32)> = tets
-        .iter()
-        .enumerate()
-        .flat_map(|(t, q)| {
-            [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]].map(|f| {
-                let mut k = f.map(|i| q[i]);
-                k.sort_unstable();
-                (k, t as u32)
-            })
-        })
-        .collect();
-    faces.sort_unstable();
-    let mut uf = crate::union_find::UnionFind::new(tets.len());
-    for w in faces.windows(2) {
-        if w[0].0 == w[1].0 {
-            uf.union(w[0].1 as usize, w[1].1 as usize);
-        }
-    }
-    let (label, count) = uf.labels();
-    // A piece is anchored by three or more held nodes (one or two let it turn about them).
-    let mut held_nodes: Vec<Vec<u32>> = vec![Vec::new(); count];
-    for (t, q) in tets.iter().enumerate() {
-        for n in q {
-            if matches!(constraint[*n as usize], FIXED | MOVED) {
-                held_nodes[label[t] as usize].push(*n);
-            }
-        }
-    }
-    let anchored: Vec<bool> = held_nodes
-        .iter_mut()
-        .map(|h| {
-            h.sort_unstable();
-            h.dedup();
-            h.len() >= 3
-        })
-        .collect();
-    // A node no tetrahedron uses (one of a flattened sliver left out of the mesh) carries no
-    // stiffness: hold it.
-    let mut used = vec![false; constraint.len()];
-    tets.iter().flatten().for_each(|n| used[*n as usize] = true);
-    for (n, u) in used.iter().enumerate() {
-        if !u && n < hold.len() {
-            constraint[n] = FIXED;
-            hold[n] = Hold::Fixed([0.0; 3]);
-            linear[n] = LinearHold::Still;
-        }
-    }
-    let mut pieces = vec![false; count];
-    let mut nodes = 0;
-    for (t, q) in tets.iter().enumerate() {
-        let l = label[t] as usize;
-        if anchored[l] {
-            continue;
-        }
-        pieces[l] = true;
-        for n in q {
-            let n = *n as usize;
-            if constraint[n] != FIXED {
-                constraint[n] = FIXED;
-                hold[n] = Hold::Fixed([0.0; 3]);
-                linear[n] = LinearHold::Still;
-                nodes += 1;
-            }
-        }
-    }
-    (pieces.iter().filter(|p| **p).count(), nodes)
-}
-
 fn counted(a: &[u8], c: u8) -> usize {
     a.iter().filter(|k| **k == c).count()
-}
-
-/// Per tetrahedron, the material of its tissue label (`[tet]`).
-fn materials(tissue: &[u8], case: &Case) -> Vec<Elastic> {
-    tissue
-        .iter()
-        .map(|l| {
-            let m = case.tet.elastic(*l);
-            Elastic {
-                youngs_kpa: m.youngs_kpa,
-                poisson: m.poisson,
-            }
-        })
-        .collect()
 }
 
 /// Node displacements `u` to face displacements; beyond the region's cut faces the tissue is
@@ -526,6 +254,39 @@ fn carry_face(
 /// within about 15 mm, distraction of the maxilla reaches ~20.
 const LARGE_MOVE_MM: f64 = 25.0;
 
+/// The volumetric model's prediction: it carries the skin at full resolution (a dense scan
+/// needs no coarse copy).
+pub(super) fn predict_face(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<Prediction> {
+    let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
+    let mut face_post = skin.clone();
+    face_post.colors = None;
+    let mut basis = None;
+    let volumetric = match predict(scene, case, &skin, rec)? {
+        Some((mut v, post)) => {
+            face_post.vertices = post;
+            basis = v.basis.take();
+            Some(v)
+        }
+        None => {
+            rec.warn("the plan moves no bone: the predicted face is the pre-operative face");
+            rec.skip(Stage::TetMesh, "no bone moves: no tissue to mesh");
+            rec.skip(Stage::Solve, "no bone moves: nothing to solve");
+            rec.skip(Stage::Embed, "no bone moves: the face stays");
+            rec.skip(
+                Stage::PlanBasis,
+                "no bone moves: no plan basis to re-plan from",
+            );
+            None
+        }
+    };
+    Ok(Prediction {
+        skin,
+        face_post,
+        basis,
+        solved: Solved::Tet(volumetric),
+    })
+}
+
 /// Mesh, solve and carry the face; None when the plan moves no bone.
 pub fn predict(
     scene: &Scene,
@@ -545,7 +306,7 @@ pub fn predict(
     let mesh = rec.time(Stage::TetMesh, "meshing the soft tissue", || {
         crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)
     })?;
-    let material = materials(&mesh.tissue, case);
+    let material = materials(&mesh.tissue, &case.tet);
     let linear = TetMesh {
         nodes: mesh.nodes.clone(),
         tets: mesh.tets.clone(),
@@ -561,7 +322,15 @@ pub fn predict(
         }
         None => (&mesh.nodes, mesh.kind.clone()),
     };
-    let mucosa = mucosa(&mesh.nodes, &mesh.kind, scene, case);
+    let bone = bone(scene, case);
+    let mucosa = mucosa(
+        &mesh.nodes,
+        &mesh.kind,
+        &bone,
+        &scene.vol,
+        &scene.seg.outside,
+        t.mucosa_gap_mm,
+    );
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
     let Holds {
@@ -569,7 +338,15 @@ pub fn predict(
         mut hold,
         linear: mut linear_hold,
         overlapping_segments,
-    } = holds(nodes, &kind, &mucosa, scene, case, linear_solve);
+    } = holds(
+        nodes,
+        &kind,
+        &mucosa,
+        &crate::pipeline::model::rigid_mask(case, nodes),
+        &bone,
+        t.sliding,
+        linear_solve,
+    );
     let (pieces, held_still) =
         hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold, &mut linear_hold);
     if pieces > 0 {
@@ -657,7 +434,7 @@ pub fn predict(
             mesh.tets.len()
         ));
     }
-    let face_rigid = super::model::rigid_mask(case, &skin.vertices);
+    let face_rigid = crate::pipeline::model::rigid_mask(case, &skin.vertices);
     let carry = |e: &SkinEmbedding, u: &[[f64; 3]]| {
         carry_face(e, quadratic.as_ref(), &mesh.tets, u, skin, &face_rigid, roi)
     };

@@ -2,9 +2,9 @@
 //! M_s (docs/plan-basis.md): evaluated at the unit matrices they give the plan basis's right-hand
 //! sides; the held directions (and so the factor) do not depend on the plan.
 
-use super::basis::{COLUMNS, displace, unit};
+use super::Hold;
 use crate::case::Osteotomy;
-use crate::tet::Hold;
+use crate::plan::basis::{COLUMNS, displace, unit};
 
 /// A node's hold, linear in the M_s.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,32 +1,30 @@
-//! The predicted face — the C1 solve of the model (docs/pipeline.md §5) and, when the
-//! model ran on a coarse copy of the skin, the full skin carried along by shell embedding.
+//! Koch's C1 surface models (`[solve] model = "equilibrium"` or `"koch1996"`; docs/pipeline.md
+//! §5): the skin on tissue springs, solved by `crate::solve`, and — when the model ran on a coarse
+//! copy of the skin — the full skin carried along by shell embedding (paper 002).
 
-use super::inputs::CaseFiles;
-use super::model::rigid_mask;
-use super::volumetric::{self, Volumetric};
-use super::{Recorder, Scene};
-use crate::case::{Case, SolveModel};
-use crate::embed::Shell;
+use super::{Prediction, Solved};
+use crate::case::Case;
+use crate::embed::{Embedding, Shell};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::pipeline::inputs::CaseFiles;
+use crate::pipeline::model::rigid_mask;
+use crate::pipeline::{Recorder, Scene};
 use crate::plan::c1::{self, C1Basis};
 use crate::report::{EmbeddingReport, Stage};
 use crate::solve::{Responses, Solution};
+use std::path::Path;
 
-pub struct Prediction {
-    /// The skin of face_pre: the full skin (the scan as given, or the extracted skin).
-    pub skin: Mesh,
-    /// The predicted face, same vertices in the same order as `skin`, without colours.
-    pub face_post: Mesh,
+/// The solved C1 model: what the outputs, the report and re-solves need of it.
+pub struct C1Solved {
     /// The C1 solution (None when the plan moves nothing).
     pub solution: Option<Solution>,
-    /// The coarse skin that was solved, when it differs from `skin`.
+    /// The coarse skin that was solved, when it differs from the face.
     pub coarse: Option<Mesh>,
     pub embedding: Option<EmbeddingReport>,
-    /// The volumetric model's mesh and solution (`[solve] model = "tet"`).
-    pub volumetric: Option<Volumetric>,
-    /// The plan basis (docs/plan-basis.md), when the model built one.
-    pub basis: Option<crate::plan::PlanBasis>,
+    /// The shell that carried the full skin along the coarse answer, its embedding of the full
+    /// skin and the full skin's rigid vertices: built once, reused by re-solves.
+    carry: Option<(Shell, Embedding, Vec<bool>)>,
 }
 
 pub fn predict(
@@ -35,9 +33,6 @@ pub fn predict(
     files: &CaseFiles,
     rec: &mut Recorder,
 ) -> Result<Prediction> {
-    if case.solve.model == SolveModel::Tet {
-        return predict_volumetric(scene, case, rec);
-    }
     let (face, model) = (&scene.face, &scene.model);
     // The plan basis's unit moves of the spring attachments, answered by the solve's own factor.
     let moves = crate::plan::c1::attachment_moves(&case.osteotomy, &model.springs.attachments);
@@ -57,9 +52,9 @@ pub fn predict(
         face_post.vertices = sol.positions.clone();
     }
     face_post.colors = None;
-    let model_name = match case.solve.model {
-        SolveModel::Koch1996 => "koch1996-linearised",
-        _ => "c1-linearised",
+    let model_name = match model.params.model {
+        crate::solve::Method::Koch1996 => "koch1996-linearised",
+        crate::solve::Method::Equilibrium => "c1-linearised",
     };
     let Some(fine) = &face.fine else {
         rec.skip(Stage::Embed, "the skin was solved as given");
@@ -88,11 +83,13 @@ pub fn predict(
         return Ok(Prediction {
             skin: face.skin.clone(),
             face_post,
-            solution,
-            coarse: None,
-            embedding: None,
-            volumetric: None,
             basis,
+            solved: Solved::C1(C1Solved {
+                solution,
+                coarse: None,
+                embedding: None,
+                carry: None,
+            }),
         });
     };
     let inward = -crate::springs::outward_sign(&face.skin, &scene.vol, &scene.seg.labels);
@@ -167,14 +164,17 @@ pub fn predict(
         }
         None => None,
     };
+    let (shell, e) = shell;
     Ok(Prediction {
         skin: fine.clone(),
         face_post: post,
-        solution,
-        coarse: Some(face.skin.clone()),
-        embedding: Some(embedding),
-        volumetric: None,
         basis,
+        solved: Solved::C1(C1Solved {
+            solution,
+            coarse: Some(face.skin.clone()),
+            embedding: Some(embedding),
+            carry: Some((shell, e, rigid_fine)),
+        }),
     })
 }
 
@@ -197,41 +197,6 @@ fn move_cost(rec: &mut Recorder, wall_s: f64) {
             _ => {}
         }
     }
-}
-
-/// The volumetric model carries the skin at full resolution (a dense scan needs no coarse copy).
-fn predict_volumetric(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<Prediction> {
-    let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
-    let mut face_post = skin.clone();
-    face_post.colors = None;
-    let mut basis = None;
-    let volumetric = match volumetric::predict(scene, case, &skin, rec)? {
-        Some((mut v, post)) => {
-            face_post.vertices = post;
-            basis = v.basis.take();
-            Some(v)
-        }
-        None => {
-            rec.warn("the plan moves no bone: the predicted face is the pre-operative face");
-            rec.skip(Stage::TetMesh, "no bone moves: no tissue to mesh");
-            rec.skip(Stage::Solve, "no bone moves: nothing to solve");
-            rec.skip(Stage::Embed, "no bone moves: the face stays");
-            rec.skip(
-                Stage::PlanBasis,
-                "no bone moves: no plan basis to re-plan from",
-            );
-            None
-        }
-    };
-    Ok(Prediction {
-        skin,
-        face_post,
-        solution: None,
-        coarse: None,
-        embedding: None,
-        volumetric,
-        basis,
-    })
 }
 
 /// The C1 solve and its linearised responses to the attachment `moves`; None when there is
@@ -261,4 +226,66 @@ fn solve(
         Error::ImpossiblePlan { .. } => e.in_file(&files.case_file),
         other => other.in_file(&files.skin_source),
     })
+}
+
+impl C1Solved {
+    /// The face (the run's face's vertex order) solved again with `case`'s spring constants on
+    /// the run's skin, springs and shell (docs/uncertainty.md).
+    pub(super) fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
+        let (face, model) = (&scene.face, &scene.model);
+        let params = crate::pipeline::model::solve_params(case);
+        let sol = crate::solve::solve(
+            &face.skin,
+            &model.springs,
+            &model.plan,
+            &model.rigid,
+            &params,
+        )?;
+        Ok(match &self.carry {
+            None => sol.positions,
+            Some((shell, e, rigid)) => {
+                let carried = shell.carry(e, &shell.deform(&sol.positions));
+                skin.vertices
+                    .iter()
+                    .zip(carried)
+                    .zip(rigid)
+                    .map(|((x, c), r)| if *r { *x } else { c })
+                    .collect()
+            }
+        })
+    }
+
+    /// springs.ply (on the mesh that was solved), face_post_fine.ply (the C1 surface sampled
+    /// `[output] subdivide` times finer, when the skin was solved as given) and
+    /// face_post_coarse.ply (the coarse mesh's answer, when there was one).
+    pub(super) fn write_files(
+        &self,
+        dir: &Path,
+        scene: &Scene,
+        case: &Case,
+        skin: &Mesh,
+    ) -> Result<()> {
+        use crate::mesh;
+        let solved_skin = self.coarse.as_ref().unwrap_or(skin);
+        mesh::ply::write(
+            &scene.model.springs.to_mesh(solved_skin),
+            &dir.join("springs.ply"),
+            mesh::ply::Encoding::BinaryLittleEndian,
+        )?;
+        let Some(sol) = &self.solution else {
+            return Ok(());
+        };
+        match &self.coarse {
+            None if case.output.subdivide > 1 => {
+                let fine = crate::fem::preload::sample(&sol.fem, &sol.a, case.output.subdivide);
+                mesh::write_mesh(&fine, &dir.join("face_post_fine.ply"))
+            }
+            None => Ok(()),
+            Some(coarse) => {
+                let mut m = coarse.clone();
+                m.vertices = sol.positions.clone();
+                mesh::write_mesh(&m, &dir.join("face_post_coarse.ply"))
+            }
+        }
+    }
 }

@@ -1,0 +1,135 @@
+//! The soft-tissue models behind one type (docs/architecture.md "The model seam").
+//!
+//! A case names its model in `[solve] model`: Koch's C1 surface model on tissue springs, solved
+//! to equilibrium (`equilibrium`) or by Koch's eq. 20–23 (`koch1996`) — [`c1`]; or the volumetric
+//! tetrahedral model of the tissue between skin and bone (`tet`, the default) — [`volumetric`].
+//! Whatever the model, [`predict`] builds it on the scene and solves the plan, and the
+//! [`Prediction`] it returns does the rest: the face before and after, the plan basis
+//! ([`Prediction::basis`]), a re-solve with other tissue parameters on the same mesh and face
+//! embedding ([`Prediction::resolve`]), the model's own files and report sections. Nothing outside
+//! this module branches on the model.
+
+pub mod c1;
+pub mod volumetric;
+
+use crate::case::Case;
+use crate::error::Result;
+use crate::mesh::Mesh;
+use crate::pipeline::inputs::CaseFiles;
+use crate::pipeline::{Recorder, Scene};
+use crate::plan::PlanBasis;
+use crate::report::{EmbeddingReport, Report};
+use std::path::Path;
+
+pub use volumetric::{NewtonStep, TetReport, Volumetric};
+
+/// A solved model, kept for its files, its report sections and re-solves.
+pub enum Solved {
+    C1(c1::C1Solved),
+    /// None when the plan moves no bone (no tissue is meshed).
+    Tet(Option<Volumetric>),
+}
+
+/// The predicted face and the model that predicted it.
+pub struct Prediction {
+    /// The skin of face_pre: the full skin (the scan as given, or the extracted skin).
+    pub skin: Mesh,
+    /// The predicted face, same vertices in the same order as `skin`, without colours.
+    pub face_post: Mesh,
+    /// The plan basis (docs/plan-basis.md), when the model built one.
+    pub basis: Option<PlanBasis>,
+    pub solved: Solved,
+}
+
+/// Build the case's model on the scene, solve its plan and carry the answer to the face.
+pub fn predict(
+    scene: &Scene,
+    case: &Case,
+    files: &CaseFiles,
+    rec: &mut Recorder,
+) -> Result<Prediction> {
+    match crate::solve::Method::of(case.solve.model) {
+        Some(_) => c1::predict(scene, case, files, rec),
+        None => volumetric::predict_face(scene, case, rec),
+    }
+}
+
+impl Prediction {
+    /// The face (face_post's vertex order) predicted with `case`'s tissue parameters (moduli,
+    /// Poisson ratios, sliding; the C1 spring constants) on what this prediction built: the
+    /// volumetric model's mesh, node roles, mucosa and face embedding, or the C1 model's springs
+    /// and shell. The plan and the mesh settings must be this run's.
+    pub fn resolve(&self, scene: &Scene, case: &Case) -> Result<Vec<[f64; 3]>> {
+        if !self.moves() {
+            return Ok(self.face_post.vertices.clone());
+        }
+        match &self.solved {
+            Solved::C1(c) => c.resolve(scene, case, &self.skin),
+            Solved::Tet(Some(v)) => {
+                // As the run's face_post: position plus carried displacement.
+                let d = v.resolve(scene, case, &self.skin)?;
+                Ok(self
+                    .skin
+                    .vertices
+                    .iter()
+                    .zip(&d)
+                    .map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]])
+                    .collect())
+            }
+            Solved::Tet(None) => Ok(self.face_post.vertices.clone()),
+        }
+    }
+
+    /// Whether the model moved anything (else every re-solve is the pre-operative face).
+    pub fn moves(&self) -> bool {
+        match &self.solved {
+            Solved::C1(c) => c.solution.is_some(),
+            Solved::Tet(v) => v.is_some(),
+        }
+    }
+
+    /// Whether `[tet] sliding` can change the answer: the mesh has mucosa nodes to slide.
+    pub fn sliding_matters(&self) -> bool {
+        matches!(&self.solved, Solved::Tet(Some(v)) if v.report.mucosa_nodes > 0)
+    }
+
+    /// The model's own files beside the face outputs: the springs (C1; springs.ply), the
+    /// C1 surface sampled finer (face_post_fine.ply) and the coarse mesh's answer
+    /// (face_post_coarse.ply), or the tetrahedral mesh (tets.vtu).
+    pub fn write_model_files(&self, dir: &Path, scene: &Scene, case: &Case) -> Result<()> {
+        match &self.solved {
+            Solved::C1(c) => c.write_files(dir, scene, case, &self.skin),
+            Solved::Tet(Some(v)) => v.write_vtu(&dir.join("tets.vtu")),
+            Solved::Tet(None) => Ok(()),
+        }
+    }
+
+    /// report.json's model sections: `springs`, `solve` and the embedding (C1), `tet`, the
+    /// unknowns and the solved vertices in `counts`.
+    pub fn fill_report(&self, report: &mut Report, scene: &Scene) {
+        match &self.solved {
+            Solved::C1(c) => {
+                report.counts.unknowns = c.solution.as_ref().map_or(0, |s| s.unknowns);
+                report.counts.solved_vertices =
+                    c.solution.as_ref().map_or(0, |s| s.solved_vertices);
+                report.surfaces.embedding = c.embedding.clone();
+                report.springs = Some(scene.model.spring_report.clone());
+                report.solve = c.solution.as_ref().map(|s| s.history.clone());
+            }
+            Solved::Tet(v) => {
+                report.counts.unknowns = v.as_ref().map_or(0, |v| v.report.free_dofs);
+                report.counts.solved_vertices = 0;
+                report.surfaces.embedding = None;
+                report.tet = v.as_ref().map(|v| v.report.clone());
+            }
+        }
+    }
+
+    /// The shell embedding's report, when a coarse C1 model carried the full skin.
+    pub fn embedding(&self) -> Option<&EmbeddingReport> {
+        match &self.solved {
+            Solved::C1(c) => c.embedding.as_ref(),
+            Solved::Tet(_) => None,
+        }
+    }
+}
