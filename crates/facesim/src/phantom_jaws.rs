@@ -797,33 +797,6 @@ impl Shape {
     }
 }
 
-/// Exact volumes (mm³) of the bone pieces inside the box [lo, hi], teeth included, by midpoint
-/// quadrature of `piece_at` on a grid of step `h`.
-pub fn piece_volumes(lo: [f64; 3], hi: [f64; 3], h: f64) -> [f64; 3] {
-    use rayon::prelude::*;
-    let n = [0, 1, 2].map(|a| ((hi[a] - lo[a]) / h).round().max(1.0) as usize);
-    let step = [0, 1, 2].map(|a| (hi[a] - lo[a]) / n[a] as f64);
-    let counts = (0..n[2])
-        .into_par_iter()
-        .map(|k| {
-            let mut c = [0usize; 3];
-            let z = lo[2] + (k as f64 + 0.5) * step[2];
-            for j in 0..n[1] {
-                let y = lo[1] + (j as f64 + 0.5) * step[1];
-                for i in 0..n[0] {
-                    let x = lo[0] + (i as f64 + 0.5) * step[0];
-                    if let Some(piece) = piece_at([x, y, z]) {
-                        c[piece as usize] += 1;
-                    }
-                }
-            }
-            c
-        })
-        .reduce(|| [0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]]);
-    let dv = step[0] * step[1] * step[2];
-    counts.map(|c| c as f64 * dv)
-}
-
 /// The CT of the box [lo, hi].
 pub fn ct_box(opts: &PhantomOptions, lo: [f64; 3], hi: [f64; 3]) -> Volume {
     Shape::default().ct_box(opts, lo, hi)

@@ -205,13 +205,6 @@ impl PlanBasis {
             .collect())
     }
 
-    /// Column `k` of segment `s` as flat float32 `[x0, y0, z0, x1, …]` (for embedding in a page);
-    /// None when there is no such column.
-    pub fn face_displacement_f32(&self, s: usize, k: usize) -> Option<Vec<f32>> {
-        let col = self.segments.get(s)?.columns.get(k)?;
-        Some(col.iter().flatten().map(|v| *v as f32).collect())
-    }
-
     /// The summary report.json carries.
     pub fn report(&self) -> BasisReport {
         BasisReport {

@@ -300,25 +300,6 @@ fn check_rigid(m: &[[f64; 3]; 3]) -> std::result::Result<(), String> {
     Ok(())
 }
 
-/// The text of an AffineTransform_double_3_3 file for `m` as written (for tests and for users
-/// who want to hand a plan to Slicer: write `m.inverse()` to get Slicer's convention).
-pub fn to_text(m: &RigidMove) -> String {
-    let r = m.rotation;
-    let mut p: Vec<f64> = r.iter().flatten().copied().collect();
-    p.extend(m.translation);
-    let join = |v: &[f64]| {
-        v.iter()
-            .map(|x| format!("{x:e}"))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    format!(
-        "#Insight Transform File V1.0\n#Transform 0\nTransform: AffineTransform_double_3_3\nParameters: {}\nFixedParameters: {}\n",
-        join(&p),
-        join(&m.centre)
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

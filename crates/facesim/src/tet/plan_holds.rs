@@ -4,7 +4,7 @@
 
 use super::Hold;
 use crate::case::Osteotomy;
-use crate::plan::basis::{COLUMNS, displace, unit};
+use crate::plan::basis::{COLUMNS, displace};
 
 /// A node's hold, linear in the M_s.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -46,13 +46,6 @@ impl LinearHold {
                 }
             }
         }
-    }
-
-    /// The hold when segment `s` moves by the unit matrix E_k and the others stay.
-    pub fn unit_hold(&self, segments: usize, s: usize, k: usize) -> Hold {
-        let mut ms = vec![[0.0; COLUMNS]; segments];
-        ms[s] = unit(k);
-        self.hold(&ms)
     }
 }
 
