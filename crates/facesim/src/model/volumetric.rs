@@ -83,12 +83,15 @@ impl Volumetric {
             case.tet.sliding,
             r.linear_solve,
         );
-        hold_floating_pieces(
-            &self.mesh.tets,
-            &mut constraint,
-            &mut hold,
-            &mut linear_hold,
-        );
+        match &self.quadratic {
+            Some(q) => hold_floating_pieces(&q.tets, &mut constraint, &mut hold, &mut linear_hold),
+            None => hold_floating_pieces(
+                &self.mesh.tets,
+                &mut constraint,
+                &mut hold,
+                &mut linear_hold,
+            ),
+        };
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
@@ -347,8 +350,11 @@ pub fn predict(
         t.sliding,
         linear_solve,
     );
-    let (pieces, held_still) =
-        hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold, &mut linear_hold);
+    // The solved cells: a 10-node mesh's midpoints are nodes of its cells, not of the corners'.
+    let (pieces, held_still) = match &quadratic {
+        Some(q) => hold_floating_pieces(&q.tets, &mut constraint, &mut hold, &mut linear_hold),
+        None => hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold, &mut linear_hold),
+    };
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"

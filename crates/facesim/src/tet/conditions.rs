@@ -229,17 +229,20 @@ pub(crate) fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]
 
 /// Pieces of the mesh (tetrahedra joined through shared faces; a piece hanging on by a node
 /// or an edge is a hinge) held by fewer than three nodes would float or turn: a singular
-/// system. Their corner nodes are held still. Returns the pieces and nodes so held.
-pub(crate) fn hold_floating_pieces(
-    tets: &[[u32; 4]],
+/// system. Their nodes are held still. `cells` are the solved elements (4-node, or 10-node
+/// with the corners first): a node no cell uses carries no stiffness and is held too. Returns
+/// the pieces and nodes so held.
+pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
+    cells: &[C],
     constraint: &mut [u8],
     hold: &mut [Hold],
     linear: &mut [LinearHold],
 ) -> (usize, usize) {
-    let mut faces: Vec<([u32; 3], u32)> = tets
+    let mut faces: Vec<([u32; 3], u32)> = cells
         .iter()
         .enumerate()
         .flat_map(|(t, q)| {
+            let q = q.as_ref();
             [[0, 1, 2], [0, 1, 3], [0, 2, 3], [1, 2, 3]].map(|f| {
                 let mut k = f.map(|i| q[i]);
                 k.sort_unstable();
@@ -248,7 +251,7 @@ pub(crate) fn hold_floating_pieces(
         })
         .collect();
     faces.sort_unstable();
-    let mut uf = crate::union_find::UnionFind::new(tets.len());
+    let mut uf = crate::union_find::UnionFind::new(cells.len());
     for w in faces.windows(2) {
         if w[0].0 == w[1].0 {
             uf.union(w[0].1 as usize, w[1].1 as usize);
@@ -257,8 +260,8 @@ pub(crate) fn hold_floating_pieces(
     let (label, count) = uf.labels();
     // A piece is anchored by three or more held nodes (one or two let it turn about them).
     let mut held_nodes: Vec<Vec<u32>> = vec![Vec::new(); count];
-    for (t, q) in tets.iter().enumerate() {
-        for n in q {
+    for (t, q) in cells.iter().enumerate() {
+        for n in q.as_ref() {
             if matches!(constraint[*n as usize], FIXED | MOVED) {
                 held_nodes[label[t] as usize].push(*n);
             }
@@ -275,7 +278,10 @@ pub(crate) fn hold_floating_pieces(
     // A node no tetrahedron uses (one of a flattened sliver left out of the mesh) carries no
     // stiffness: hold it.
     let mut used = vec![false; constraint.len()];
-    tets.iter().flatten().for_each(|n| used[*n as usize] = true);
+    cells
+        .iter()
+        .flat_map(|q| q.as_ref())
+        .for_each(|n| used[*n as usize] = true);
     for (n, u) in used.iter().enumerate() {
         if !u && n < hold.len() {
             constraint[n] = FIXED;
@@ -285,13 +291,13 @@ pub(crate) fn hold_floating_pieces(
     }
     let mut pieces = vec![false; count];
     let mut nodes = 0;
-    for (t, q) in tets.iter().enumerate() {
+    for (t, q) in cells.iter().enumerate() {
         let l = label[t] as usize;
         if anchored[l] {
             continue;
         }
         pieces[l] = true;
-        for n in q {
+        for n in q.as_ref() {
             let n = *n as usize;
             if constraint[n] != FIXED {
                 constraint[n] = FIXED;
