@@ -9,8 +9,9 @@ use crate::case::{Case, SolveModel};
 use crate::embed::Shell;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::pipeline::report::EmbeddingReport;
+use crate::pipeline::stage::Stage;
 use crate::plan::c1::{self, C1Basis};
-use crate::report::{EmbeddingReport, Stage};
 use crate::solve::{Responses, Solution};
 
 pub struct Prediction {

@@ -9,9 +9,9 @@ use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::pipeline::stage::Stage;
 use crate::plan::holds::{LinearHold, segment_at};
 use crate::plan::{PlanBasis, SegmentBasis};
-use crate::report::Stage;
 use crate::tet::embed::{SkinEmbedding, boundary_faces};
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
 use crate::tet::nonlinear::{self, Newton};
@@ -19,7 +19,7 @@ use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
 use crate::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
 pub struct Volumetric {
@@ -138,7 +138,7 @@ impl Volumetric {
 }
 
 /// One converged Newton load step of the nonlinear material.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct NewtonStep {
     pub load: f64,
     pub iterations: usize,
@@ -146,7 +146,7 @@ pub struct NewtonStep {
 }
 
 /// report.json's `tet` section.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TetReport {
     pub material: TetMaterial,
     pub element: TetElement,

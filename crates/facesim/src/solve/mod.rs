@@ -23,7 +23,7 @@ use crate::fem::preload::initial_dofs_fields;
 use crate::mesh::{Mesh, norm};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub struct Params {
     pub model: SolveModel,
@@ -40,7 +40,7 @@ pub struct Params {
     pub restrict: bool,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepRecord {
     pub step: usize,
     pub iterations: usize,
