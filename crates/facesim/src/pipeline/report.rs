@@ -1,5 +1,5 @@
 //! report.json as types, both ways (docs/case.md: parameters, per-stage `timings`, counts, the
-//! displacement summary, warnings): every section is a struct, [`assemble`] is the one place a
+//! displacement summary, warnings): every section is a struct, `assemble` is the one place a
 //! report is built (for a run and for `facesim replan`), [`Report::read`] the one place a report
 //! is read back. Stage costs are kept in pipeline order ([`super::stage`]).
 
