@@ -322,7 +322,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         }
         Cmd::Inspect { path } => cmd_inspect(&path),
         Cmd::Replan { out_dir, plan, out } => {
-            let r = facesim::plan::replan::replan(&out_dir, &plan, out.as_deref())?;
+            let r = facesim::commands::replan::replan(&out_dir, &plan, out.as_deref())?;
             eprintln!(
                 "replanned from {}: {} (max displacement {:.2} mm)",
                 out_dir.display(),
@@ -336,7 +336,8 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             sweep,
             out,
         } => {
-            let rows = facesim::plan::sweep::sweep(&out_dir, &sweep, &out)?;
+            let rows = facesim::commands::sweep::sweep(&out_dir, &sweep, &out)?;
+            facesim_lab::sweep_chart::write(&out.join("sweep.svg"), &rows)?;
             eprintln!("{} plans: {}", rows.len(), out.join("sweep.csv").display());
             Ok(())
         }
@@ -384,7 +385,7 @@ fn cmd_run(case_dir: &Path, out: Option<&Path>, set: &[String]) -> Result<()> {
         r.name,
         o.skin.vertices.len(),
         o.skull.vertices.len(),
-        r.costs.wall_s(facesim::report::Stage::Total),
+        r.costs.wall_s(facesim::pipeline::Stage::Total),
         o.out_dir.display()
     );
     for w in &r.warnings {

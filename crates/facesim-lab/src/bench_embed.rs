@@ -182,7 +182,7 @@ fn run_row(o: &Outcome, solved: usize) -> RunRow {
 fn wall(o: &Outcome) -> f64 {
     o.report
         .costs
-        .get(facesim::report::Stage::Total)
+        .get(facesim::pipeline::Stage::Total)
         .map_or(f64::NAN, |c| c.wall_s)
 }
 

@@ -32,11 +32,11 @@ pub fn run(case_toml: &Path, out: &Path, repeats: usize) -> Result<ReplanBench> 
     let (mut case, _) = Case::load(case_toml)?;
     case.solve.model = SolveModel::Tet;
     let outcome = facesim::pipeline::run_case(case, out, &facesim::observe::Quiet)?;
-    let run_s = outcome.report.costs.wall_s(facesim::report::Stage::Total);
+    let run_s = outcome.report.costs.wall_s(facesim::pipeline::Stage::Total);
     let basis_s = outcome
         .report
         .costs
-        .wall_s(facesim::report::Stage::PlanBasis);
+        .wall_s(facesim::pipeline::Stage::PlanBasis);
     let basis: PlanBasis = file::read(&out.join(file::FILE_NAME))?;
     // A plan with rotation and translation on every segment: no entry of M is zero.
     let plan: Vec<Osteotomy> = basis

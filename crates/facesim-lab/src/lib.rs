@@ -18,3 +18,4 @@ pub mod dynamics;
 pub mod memory;
 pub mod scaling;
 pub mod study;
+pub mod sweep_chart;

@@ -142,10 +142,11 @@ fn replan(
     let r = work(py, None, move || {
         let basis = facesim::plan::file::read(&out_dir.join(facesim::plan::file::FILE_NAME))?;
         let plan = match &text {
-            Some(t) => facesim::plan::replan::plan_from_text(t, &file)?,
-            None => facesim::plan::replan::read_plan(&file)?,
+            Some(t) => facesim::commands::replan::plan_from_text(t, &file)?,
+            None => facesim::commands::replan::read_plan(&file)?,
         };
-        let r = facesim::plan::replan::replan_with(&out_dir, &basis, &plan, &file, out.as_deref())?;
+        let r =
+            facesim::commands::replan::replan_with(&out_dir, &basis, &plan, &file, out.as_deref())?;
         Ok((basis, r))
     })?;
     results::from_replan(py, &r.0, &r.1)
@@ -173,15 +174,16 @@ fn sweep<'py>(
         (path_of(sweep)?, None)
     };
     let (names, labels, columns) = work(py, None, move || {
-        use facesim::plan::sweep as sw;
+        use facesim::commands::sweep as sw;
         let basis = facesim::plan::file::read(&out_dir.join(facesim::plan::file::FILE_NAME))?;
         let plans = match &text {
             Some(t) => sw::sweep_from_text(t, &file, &basis)?,
             None => sw::read_sweep(&file, &basis)?,
         };
-        let rows = sw::evaluate(&basis, plans, &file, sw::run_landmarks(&out_dir).as_ref())?;
+        let rows = sw::evaluate(&basis, plans, &file, sw::run_landmarks(&out_dir)?.as_ref())?;
         if let Some(o) = &out {
             sw::write(o, &basis, &rows)?;
+            facesim_lab::sweep_chart::write(&o.join("sweep.svg"), &rows)?;
         }
         let names = sw::value_columns(&basis, &rows);
         let mut columns = vec![Vec::with_capacity(rows.len()); names.len()];

@@ -75,35 +75,48 @@ fn distances(pre: &[[f64; 3]], post: &[[f64; 3]]) -> Vec<f64> {
         .collect()
 }
 
-/// A serde value as the Python object `json.loads` makes of it.
-fn json<'py>(py: Python<'py>, v: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
-    let text = serde_json::to_string(v)
-        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
+/// The report as the Python object `json.loads` makes of report.json, keys in sorted order as
+/// they have always been (made through a sorted JSON map).
+fn json<'py>(
+    py: Python<'py>,
+    report: &facesim::pipeline::report::Report,
+) -> PyResult<Bound<'py, PyAny>> {
+    let err = |e: serde_json::Error| crate::FacesimError::new_err(format!("report: {e}"));
+    let text = serde_json::to_value(report)
+        .and_then(|v| serde_json::to_string(&v))
+        .map_err(err)?;
     py.import("json")?.call_method1("loads", (text,))
 }
 
-/// The landmarks with both positions, from report.json's `landmarks` map.
-fn landmarks<'py>(py: Python<'py>, report: &serde_json::Value) -> PyResult<Bound<'py, PyDict>> {
+/// The landmarks with both positions, from the report's `landmarks`, in label order (the dict's
+/// order since it was first made from report.json as a sorted JSON map).
+fn landmarks<'py>(
+    py: Python<'py>,
+    report: &facesim::pipeline::report::Report,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    let point = |v: &serde_json::Value| -> Option<Vec<f64>> {
-        let a = v.as_array()?;
-        let p: Vec<f64> = a.iter().filter_map(serde_json::Value::as_f64).collect();
-        (p.len() == 3).then_some(p)
-    };
-    if let Some(map) = report.get("landmarks").and_then(|l| l.as_object()) {
-        for (label, l) in map {
-            let (Some(pre), Some(post)) = (point(&l["pre"]), point(&l["post"])) else {
-                continue;
-            };
-            let e = PyDict::new(py);
-            e.set_item("pre", PyArray1::from_vec(py, pre))?;
-            e.set_item("post", PyArray1::from_vec(py, post))?;
-            e.set_item("change_mm", l["change_mm"].as_f64())?;
-            e.set_item("kind", l["kind"].as_str())?;
-            d.set_item(label, e)?;
-        }
+    let mut carried: Vec<_> = report.landmarks.0.iter().collect();
+    carried.sort_by(|a, b| a.0.cmp(&b.0));
+    for (label, l) in carried {
+        let (Some(pre), Some(post)) = (l.pre, l.post) else {
+            continue;
+        };
+        let e = PyDict::new(py);
+        e.set_item("pre", PyArray1::from_vec(py, pre.to_vec()))?;
+        e.set_item("post", PyArray1::from_vec(py, post.to_vec()))?;
+        e.set_item("change_mm", l.change_mm)?;
+        e.set_item("kind", kind_name(l.kind))?;
+        d.set_item(label, e)?;
     }
     Ok(d)
+}
+
+/// A landmark's kind as report.json writes it.
+fn kind_name(k: facesim::landmarks::Kind) -> &'static str {
+    match k {
+        facesim::landmarks::Kind::Soft => "soft",
+        facesim::landmarks::Kind::Bone => "bone",
+    }
 }
 
 /// face_band.ply's `mean`, `p05`, `p95` columns when this run wrote it (modified at or after
@@ -140,8 +153,6 @@ pub fn from_run(
     o: &facesim::pipeline::Outcome,
     since: SystemTime,
 ) -> PyResult<Result> {
-    let report = serde_json::to_value(&o.report)
-        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
     Ok(Result {
         out_dir: o.out_dir.display().to_string(),
         vertices_pre: points(py, &o.skin.vertices)?.unbind(),
@@ -150,8 +161,8 @@ pub fn from_run(
         displacement: PyArray1::from_vec(py, distances(&o.skin.vertices, &o.face_post.vertices))
             .into_any()
             .unbind(),
-        landmarks: landmarks(py, &report)?.into_any().unbind(),
-        report: json(py, &report)?.unbind(),
+        landmarks: landmarks(py, &o.report)?.into_any().unbind(),
+        report: json(py, &o.report)?.unbind(),
         band: band(py, &o.out_dir, since)?.unbind(),
     })
 }
@@ -160,10 +171,8 @@ pub fn from_run(
 pub fn from_replan(
     py: Python<'_>,
     basis: &facesim::plan::PlanBasis,
-    r: &facesim::plan::replan::Replanned,
+    r: &facesim::commands::replan::Replanned,
 ) -> PyResult<Result> {
-    let report = serde_json::to_value(&r.report)
-        .map_err(|e| crate::FacesimError::new_err(format!("report: {e}")))?;
     Ok(Result {
         out_dir: r.out_dir.display().to_string(),
         vertices_pre: points(py, &basis.face_pre)?.unbind(),
@@ -172,8 +181,8 @@ pub fn from_replan(
         displacement: PyArray1::from_vec(py, distances(&basis.face_pre, &r.face_post))
             .into_any()
             .unbind(),
-        landmarks: landmarks(py, &report)?.into_any().unbind(),
-        report: json(py, &report)?.unbind(),
+        landmarks: landmarks(py, &r.report)?.into_any().unbind(),
+        report: json(py, &r.report)?.unbind(),
         band: py.None(),
     })
 }

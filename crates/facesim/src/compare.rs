@@ -4,7 +4,7 @@
 
 use crate::mesh::{Mesh, add, dot, norm, scale, sub};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// Closest point to p on triangle (a, b, c) (Ericson, Real-Time Collision Detection §5.1.5).
@@ -161,7 +161,7 @@ impl<'a> SurfaceIndex<'a> {
     }
 }
 
-#[derive(Clone, Debug, Serialize, PartialEq)]
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct DistanceStats {
     pub mean: f64,
     pub rms: f64,

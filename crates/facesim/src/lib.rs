@@ -5,9 +5,10 @@
 //! case.toml over pipeline/defaults.toml; `volume` reads the CT; `segment` finds the tissues;
 //! `surface` makes skin and skull meshes; `springs`, `fem`, `osteotomy` and `solve` make and solve
 //! the C1 model (docs/pipeline.md); `embed` carries a dense skin along a coarse model;
-//! `pipeline::outputs` writes every file, `report` is report.json. `mesh` reads and writes
-//! OBJ/PLY, `phantom` makes the analytic test head, `compare` measures mesh distances,
-//! `observe` and `meter` report progress and cost.
+//! `pipeline::outputs` writes every file, `pipeline::report` is report.json (both ways);
+//! `commands` holds `replan` and `sweep`, which work on a run's stored outputs. `mesh` reads
+//! and writes OBJ/PLY, `phantom` makes the analytic test head, `compare` measures mesh
+//! distances, `observe` and `meter` report progress and cost.
 
 // `!(x > 0.0)` is deliberate: it rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -17,6 +18,7 @@
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod case;
+pub mod commands;
 pub mod compare;
 pub mod embed;
 pub mod error;
@@ -34,7 +36,6 @@ pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
 pub mod regions;
-pub mod report;
 pub mod report_page;
 pub mod segment;
 pub mod slicer;

@@ -14,7 +14,7 @@ use crate::segment::{self, Segmentation};
 use crate::union_find::UnionFind;
 use crate::volume::{Volume, VoxelMap, sample_field};
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub enum Kind {
@@ -46,14 +46,14 @@ pub struct SpringSet {
     pub misses: Vec<usize>,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct MissRegion {
     pub vertices: usize,
     pub centroid: [f64; 3],
     pub bounds: ([f64; 3], [f64; 3]),
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SpringReport {
     pub main: usize,
     pub struts: usize,

@@ -123,22 +123,42 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
     let mut case = c1();
     case.osteotomy.clear();
     let o = run(case).unwrap();
-    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    let skipped: Vec<&str> = o
+        .report
+        .stages_not_run
+        .iter()
+        .map(|s| s.stage.as_str())
+        .collect();
     assert_eq!(skipped, ["coarsen", "solve", "embed"]);
     assert!(displacement(&o).iter().all(|d| *d == 0.0));
     let o = run(c1()).unwrap();
-    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    let skipped: Vec<&str> = o
+        .report
+        .stages_not_run
+        .iter()
+        .map(|s| s.stage.as_str())
+        .collect();
     assert_eq!(skipped, ["coarsen", "embed"]);
     // The volumetric model (the default) carries the scan whole: it never coarsens, and with
     // no bone move it neither meshes nor solves.
     let mut case = phantom_case();
     case.osteotomy.clear();
     let o = run(case).unwrap();
-    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    let skipped: Vec<&str> = o
+        .report
+        .stages_not_run
+        .iter()
+        .map(|s| s.stage.as_str())
+        .collect();
     assert_eq!(skipped, TET_SKIPS_WITHOUT_MOVE);
     assert!(displacement(&o).iter().all(|d| *d == 0.0));
     let o = run(phantom_case()).unwrap();
-    let skipped: Vec<&str> = o.report.stages_not_run.iter().map(|s| s.stage).collect();
+    let skipped: Vec<&str> = o
+        .report
+        .stages_not_run
+        .iter()
+        .map(|s| s.stage.as_str())
+        .collect();
     assert_eq!(skipped, TET_SKIPS);
 }
 

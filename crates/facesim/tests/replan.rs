@@ -1,18 +1,21 @@
 //! The plan basis (docs/plan-basis.md) on the phantom with jaws and the volumetric model: a
 //! replanned face equals a full `run` of the same plan (two segments, translation and rotation),
-//! the run's own plan comes back, bad plans and bad basis files are refused naming the file with
-//! nothing written, and a sweep writes one row per plan.
+//! the run's own plan comes back, bad plans, bad basis files and a missing or corrupt report.json
+//! are refused naming the file with nothing written, a sweep writes one row per plan, and
+//! report.json reads back into `Report` unchanged.
 
 #[path = "common/browser.rs"]
 mod browser;
 mod common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
+use facesim::commands::{replan, sweep};
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
 use facesim::phantom_jaws::{self, JawsOptions};
+use facesim::pipeline::report::Report;
 use facesim::pipeline::{self, Outcome};
-use facesim::plan::{file, replan, sweep};
+use facesim::plan::file;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -286,8 +289,87 @@ fn a_sweep_writes_one_row_per_plan() {
     for r in &rows {
         assert!(r.face.max >= r.face.p90 && r.face.p90 >= 0.0 && r.face.max >= r.face.mean);
     }
-    let svg = std::fs::read_to_string(out.join("sweep.svg")).unwrap();
-    assert!(svg.starts_with("<svg") && svg.contains("face max"));
+    // The chart is the caller's (crates/facesim-lab sweep_chart): the library draws none.
+    assert!(!out.join("sweep.svg").exists());
+}
+
+/// A directory holding the basis run's plan basis (and skull) and, when given, `report` as its
+/// report.json.
+fn run_dir_with_report(name: &str, report: Option<&[u8]>) -> PathBuf {
+    let a = basis_run();
+    let d = common::kept_dir("facesim-replan-report").join(name);
+    std::fs::create_dir_all(&d).unwrap();
+    for f in [file::FILE_NAME, "skull_pre.ply"] {
+        std::fs::copy(a.out_dir.join(f), d.join(f)).unwrap();
+    }
+    if let Some(r) = report {
+        std::fs::write(d.join("report.json"), r).unwrap();
+    }
+    d
+}
+
+#[test]
+fn a_missing_or_corrupt_report_is_refused_by_replan_and_sweep_naming_it() {
+    let tmp = common::kept_dir("facesim-replan-report-inputs");
+    let plan = tmp.join("plan.toml");
+    write_plan(&plan, &plan_b());
+    let sweep_file = tmp.join("sweep.toml");
+    std::fs::write(
+        &sweep_file,
+        "[[plan]]\n[[plan.move]]\nsegment = \"mandible\"\ntranslate = [0, -5, 0]\n",
+    )
+    .unwrap();
+    let good = std::fs::read(basis_run().out_dir.join("report.json")).unwrap();
+    let cases: [(&str, Option<&[u8]>, &str); 3] = [
+        ("missing", None, "not found"),
+        ("cut", Some(&good[..good.len() / 2]), "line"),
+        ("not-a-report", Some(b"{\"name\": 3}"), "line"),
+    ];
+    for (name, bytes, says) in cases {
+        let d = run_dir_with_report(name, bytes);
+        let report = d.join("report.json");
+        let (dir, p) = (d.clone(), plan.clone());
+        refused(
+            move |out| replan::replan(&dir, &p, Some(out)).map(|_| ()),
+            &report,
+            &format!("replan, {name} report"),
+        );
+        let (dir, s) = (d.clone(), sweep_file.clone());
+        refused(
+            move |out| sweep::sweep(&dir, &s, out).map(|_| ()),
+            &report,
+            &format!("sweep, {name} report"),
+        );
+        let e = Report::read(&report).unwrap_err().to_string();
+        assert!(e.contains(says), "{name}: '{e}' does not say '{says}'");
+    }
+}
+
+#[test]
+fn a_runs_and_a_replans_report_json_read_back_and_written_again_are_the_same_json() {
+    let a = basis_run();
+    let tmp = common::kept_dir("facesim-replan-roundtrip");
+    let b_file = tmp.join("b.toml");
+    write_plan(&b_file, &plan_b());
+    let r = replan::replan(&a.out_dir, &b_file, Some(&tmp.join("b"))).unwrap();
+    for dir in [&a.out_dir, &r.out_dir] {
+        let path = dir.join("report.json");
+        let typed = Report::read(&path).unwrap();
+        assert_eq!(
+            serde_json::to_value(&typed).unwrap(),
+            report_json(dir),
+            "{}",
+            path.display()
+        );
+        // Field order too: written again, the bytes are the file's.
+        let again = serde_json::to_string_pretty(&typed).unwrap();
+        assert_eq!(
+            again.as_bytes(),
+            std::fs::read(&path).unwrap(),
+            "{}",
+            path.display()
+        );
+    }
 }
 
 /// report.json of a run or replan in `dir`.

@@ -7,10 +7,11 @@
 mod common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
+use facesim::commands::replan;
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
 use facesim::pipeline::{self, Recorder, Scene, inputs::CaseFiles};
-use facesim::plan::{PlanBasis, file, replan};
+use facesim::plan::{PlanBasis, file};
 use std::path::PathBuf;
 use std::sync::OnceLock;
 

@@ -5,7 +5,7 @@
 
 use super::Ordered;
 use super::frame::HeadFrame;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub const NAMES: [&str; 5] = ["nose", "upper lip", "lower lip", "chin", "cheeks"];
 
@@ -163,7 +163,7 @@ pub fn regions(v: &[[f64; 3]], frame: &HeadFrame, lms: &[(String, [f64; 3])]) ->
 }
 
 /// report.json `regions`: the displacement (mm) over each region's vertices.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RegionStats {
     pub vertices: usize,
     pub mean: Option<f64>,

@@ -3,12 +3,12 @@
 
 use super::frame::HeadFrame;
 use super::{Carried, Ordered};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Measure {
-    pub unit: &'static str,
-    pub definition: &'static str,
+    pub unit: String,
+    pub definition: String,
     pub before: Option<f64>,
     pub after: Option<f64>,
     pub change: Option<f64>,
@@ -17,7 +17,7 @@ pub struct Measure {
 }
 
 /// Soft over hard tissue movement along the anterior axis for one landmark pair.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Ratio {
     /// Anterior movement of the soft landmark (mm, + forwards).
     pub soft_mm: Option<f64>,
@@ -110,8 +110,8 @@ pub fn measure(c: &[Carried], frame: &HeadFrame) -> (Ordered<Measure>, Ordered<R
         out.0.push((
             name.to_string(),
             Measure {
-                unit,
-                definition,
+                unit: unit.into(),
+                definition: definition.into(),
                 before,
                 after,
                 change: before.zip(after).map(|(b, a)| a - b),

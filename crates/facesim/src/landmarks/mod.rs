@@ -19,6 +19,7 @@ use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::{Error, Result};
 use crate::mesh::{Mesh, norm, sub};
 use crate::osteotomy::Plan;
+use serde::de::{Deserializer, MapAccess, Visitor};
 use serde::ser::{SerializeMap, Serializer};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -126,7 +127,7 @@ pub fn locate(
 }
 
 /// A landmark before and after.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Carried {
     pub label: String,
     pub kind: Kind,
@@ -215,37 +216,6 @@ pub fn carry_anchored(
         .collect()
 }
 
-/// The landmarks and head frame a run found, read back from its report.json (`head_frame`,
-/// `landmarks`: label → kind, source, pre, missing); None when the report has none.
-pub fn from_report(report: &serde_json::Value) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
-    #[derive(Deserialize)]
-    struct Entry {
-        kind: Kind,
-        source: Source,
-        pre: Option<[f64; 3]>,
-        missing: Option<String>,
-    }
-    let map = report.get("landmarks")?.as_object()?;
-    if map.is_empty() {
-        return None;
-    }
-    let frame = report
-        .get("head_frame")
-        .and_then(|f| serde_json::from_value::<HeadFrame>(f.clone()).ok());
-    let mut lms = Vec::with_capacity(map.len());
-    for (label, v) in map {
-        let e: Entry = serde_json::from_value(v.clone()).ok()?;
-        lms.push(Landmark {
-            label: label.clone(),
-            kind: e.kind,
-            position: e.pre,
-            source: e.source,
-            missing: e.missing,
-        });
-    }
-    Some((frame, lms))
-}
-
 /// A map that keeps its insertion order in JSON (report.json's `landmarks`, `measurements`,
 /// `regions`).
 #[derive(Clone, Debug)]
@@ -264,6 +234,30 @@ impl<T: Serialize> Serialize for Ordered<T> {
             m.serialize_entry(k, v)?;
         }
         m.end()
+    }
+}
+
+/// Read in the file's order (a map's keys once each, as written).
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for Ordered<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V<T>(std::marker::PhantomData<T>);
+        impl<'de, T: Deserialize<'de>> Visitor<'de> for V<T> {
+            type Value = Ordered<T>;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a map")
+            }
+            fn visit_map<A: MapAccess<'de>>(
+                self,
+                mut a: A,
+            ) -> std::result::Result<Self::Value, A::Error> {
+                let mut v = Vec::with_capacity(a.size_hint().unwrap_or(0));
+                while let Some(e) = a.next_entry()? {
+                    v.push(e);
+                }
+                Ok(Ordered(v))
+            }
+        }
+        d.deserialize_map(V(std::marker::PhantomData))
     }
 }
 
@@ -296,7 +290,7 @@ pub fn analyse(
     Ok(analyse_located(face_pre, face_post, frame, lms, plan))
 }
 
-/// [`analyse`] of landmarks already located (a run's, read back by [`from_report`]).
+/// [`analyse`] of landmarks already located (a run's, read back from its report.json).
 pub fn analyse_located(
     face_pre: &Mesh,
     face_post: &Mesh,
@@ -346,20 +340,4 @@ pub fn positions(lms: &[Landmark]) -> Vec<(String, [f64; 3])> {
     lms.iter()
         .filter_map(|l| l.position.map(|p| (l.label.clone(), p)))
         .collect()
-}
-
-impl Analysis {
-    /// report.json's `head_frame`, `landmarks`, `measurements`, `soft_hard_ratios`, `regions`.
-    pub fn fill(&self, report: &mut crate::report::Report) {
-        report.head_frame = self.frame;
-        report.landmarks = Ordered(
-            self.carried
-                .iter()
-                .map(|c| (c.label.clone(), c.clone()))
-                .collect(),
-        );
-        report.measurements = self.measurements.clone();
-        report.soft_hard_ratios = self.ratios.clone();
-        report.regions = self.regions.clone();
-    }
 }

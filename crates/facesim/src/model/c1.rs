@@ -9,9 +9,10 @@ use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;
 use crate::pipeline::model::rigid_mask;
+use crate::pipeline::report::EmbeddingReport;
+use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::c1::{self, C1Basis};
-use crate::report::{EmbeddingReport, Stage};
 use crate::solve::{Responses, Solution};
 use std::path::Path;
 

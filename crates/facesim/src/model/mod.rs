@@ -16,9 +16,9 @@ use crate::case::Case;
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;
+use crate::pipeline::report::EmbeddingReport;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::PlanBasis;
-use crate::report::{EmbeddingReport, Report};
 use std::path::Path;
 
 pub use volumetric::{NewtonStep, TetReport, Volumetric};
@@ -28,6 +28,18 @@ pub enum Solved {
     C1(c1::C1Solved),
     /// None when the plan moves no bone (no tissue is meshed).
     Tet(Option<Volumetric>),
+}
+
+/// What report.json says of the model: `counts.unknowns` and `counts.solved_vertices`,
+/// `surfaces.embedding` (a coarse C1 model carried the full skin), `springs` and `solve` (C1),
+/// `tet` (the volumetric model).
+pub struct ModelReport {
+    pub unknowns: usize,
+    pub solved_vertices: usize,
+    pub embedding: Option<EmbeddingReport>,
+    pub springs: Option<crate::springs::SpringReport>,
+    pub solve: Option<Vec<crate::solve::StepRecord>>,
+    pub tet: Option<TetReport>,
 }
 
 /// The predicted face and the model that predicted it.
@@ -104,24 +116,25 @@ impl Prediction {
         }
     }
 
-    /// report.json's model sections: `springs`, `solve` and the embedding (C1), `tet`, the
-    /// unknowns and the solved vertices in `counts`.
-    pub fn fill_report(&self, report: &mut Report, scene: &Scene) {
+    /// report.json's model sections (docs/case.md).
+    pub fn report(&self, scene: &Scene) -> ModelReport {
         match &self.solved {
-            Solved::C1(c) => {
-                report.counts.unknowns = c.solution.as_ref().map_or(0, |s| s.unknowns);
-                report.counts.solved_vertices =
-                    c.solution.as_ref().map_or(0, |s| s.solved_vertices);
-                report.surfaces.embedding = c.embedding.clone();
-                report.springs = Some(scene.model.spring_report.clone());
-                report.solve = c.solution.as_ref().map(|s| s.history.clone());
-            }
-            Solved::Tet(v) => {
-                report.counts.unknowns = v.as_ref().map_or(0, |v| v.report.free_dofs);
-                report.counts.solved_vertices = 0;
-                report.surfaces.embedding = None;
-                report.tet = v.as_ref().map(|v| v.report.clone());
-            }
+            Solved::C1(c) => ModelReport {
+                unknowns: c.solution.as_ref().map_or(0, |s| s.unknowns),
+                solved_vertices: c.solution.as_ref().map_or(0, |s| s.solved_vertices),
+                embedding: c.embedding.clone(),
+                springs: Some(scene.model.spring_report.clone()),
+                solve: c.solution.as_ref().map(|s| s.history.clone()),
+                tet: None,
+            },
+            Solved::Tet(v) => ModelReport {
+                unknowns: v.as_ref().map_or(0, |v| v.report.free_dofs),
+                solved_vertices: 0,
+                embedding: None,
+                springs: None,
+                solve: None,
+                tet: v.as_ref().map(|v| v.report.clone()),
+            },
         }
     }
 

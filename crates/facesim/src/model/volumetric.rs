@@ -9,9 +9,9 @@ use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
+use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
-use crate::report::Stage;
 use crate::tet::conditions::{
     Bone, Holds, Mucosa, hold_floating_pieces, holds, materials, midpoint_kinds, mucosa,
 };
@@ -23,7 +23,7 @@ use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
 use crate::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
 pub struct Volumetric {
@@ -153,7 +153,7 @@ impl Volumetric {
 }
 
 /// One converged Newton load step of the nonlinear material.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct NewtonStep {
     pub load: f64,
     pub iterations: usize,
@@ -161,7 +161,7 @@ pub struct NewtonStep {
 }
 
 /// report.json's `tet` section.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TetReport {
     pub material: TetMaterial,
     pub element: TetElement,

@@ -3,11 +3,12 @@
 //! coarse (u, v)-grid copy and carried along afterwards (docs/pipeline.md §5, paper 002).
 
 use super::Recorder;
+use super::report::{CoarseReport, SurfaceReport};
+use super::stage::Stage;
 use super::surfaces::Surfaces;
 use crate::case::{Case, Parameterization};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::report::{CoarseReport, Stage, SurfaceReport};
 use crate::surface::outer::{self, OuterReport};
 use crate::surface::{self, register};
 use crate::volume::Volume;

@@ -6,7 +6,7 @@ use super::Recorder;
 use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
-use crate::report::Stage;
+use crate::pipeline::stage::Stage;
 use crate::volume::{self, Volume};
 use std::path::{Path, PathBuf};
 

@@ -10,13 +10,16 @@
 //! ```
 //!
 //! Each stage is a function from typed inputs to typed outputs; progress and per-stage cost go
-//! through one [`Recorder`] (the caller's [`Observer`] plus the report's cost table and warnings).
+//! through one [`Recorder`] (the caller's [`Observer`] plus the report's cost table and warnings;
+//! `stage`), and report.json is assembled once at the end (`report`).
 //! `facesim run`, the study (crates/facesim-lab) and the tests call these same functions.
 
 pub mod face;
 pub mod inputs;
 pub mod model;
 pub mod outputs;
+pub mod report;
+pub mod stage;
 pub mod surfaces;
 
 use crate::case::Case;
@@ -24,59 +27,11 @@ use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::meter::Meter;
 use crate::observe::Observer;
-use crate::report::{Costs, Report, Skipped, Stage};
 use crate::segment::Segmentation;
 use crate::volume::Volume;
+use report::{Counts, Report, RunSections};
+pub use stage::{Recorder, Stage};
 use std::path::{Path, PathBuf};
-
-/// What stages report besides their outputs: progress and cost (to the observer and the cost
-/// table), warnings, and the optional stages that did not run.
-pub struct Recorder<'a> {
-    pub obs: &'a dyn Observer,
-    pub costs: Costs,
-    pub warnings: Vec<String>,
-    pub skipped: Vec<Skipped>,
-}
-
-impl<'a> Recorder<'a> {
-    pub fn new(obs: &'a dyn Observer) -> Self {
-        Recorder {
-            obs,
-            costs: Costs::default(),
-            warnings: Vec::new(),
-            skipped: Vec::new(),
-        }
-    }
-
-    /// Run `f` as `stage`, announced as `what` on the observer, and record its cost.
-    pub fn time<T>(
-        &mut self,
-        stage: Stage,
-        what: &str,
-        f: impl FnOnce() -> Result<T>,
-    ) -> Result<T> {
-        if !what.is_empty() {
-            self.obs.started(what);
-        }
-        let m = Meter::start(self.obs.heap());
-        let r = f()?;
-        let c = m.stop();
-        self.obs.finished(stage.key(), &c);
-        self.costs.0.push((stage, c));
-        Ok(r)
-    }
-
-    pub fn warn(&mut self, w: impl Into<String>) {
-        self.warnings.push(w.into());
-    }
-
-    pub fn skip(&mut self, stage: Stage, reason: impl Into<String>) {
-        self.skipped.push(Skipped {
-            stage: stage.key(),
-            reason: reason.into(),
-        });
-    }
-}
 
 /// Tissues from the CT (Koch §2.3; docs/pipeline.md §1).
 pub fn tissues(ct: &Volume, case: &Case, rec: &mut Recorder) -> Result<Segmentation> {
@@ -197,22 +152,17 @@ fn finish(
     mut rec: Recorder,
 ) -> Result<Outcome> {
     let obs = rec.obs;
-    let mut report = Report {
-        name: inputs.case.name.clone().unwrap_or_else(|| {
-            files
-                .dir
-                .file_name()
-                .map(|n| n.to_string_lossy().to_string())
-                .unwrap_or_default()
-        }),
-        case: files.dir.display().to_string(),
-        facesim_version: env!("CARGO_PKG_VERSION").into(),
-        ..Default::default()
-    };
+    let name = inputs.case.name.clone().unwrap_or_else(|| {
+        files
+            .dir
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default()
+    });
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
     let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
-    let dist = outputs::displacement(&prediction);
+    let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
     // Landmarks before any file is written: a user landmark off the face is bad input.
     let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
         crate::landmarks::analyse(
@@ -255,13 +205,20 @@ fn finish(
             ..total.stop()
         },
     ));
-    outputs::fill_report(&mut report, &scene, &prediction, &dist, case, rec);
-    analysis.fill(&mut report);
     // The page colours the face by the band's width (p95 − p05) on request.
     let band_width: Option<Vec<f64>> = band
         .as_ref()
         .map(|b| b.bands.iter().map(|x| x.p95 - x.p05).collect());
-    report.uncertainty = band.map(|b| b.report);
+    let (sections, warnings) = run_sections(&scene, &prediction, rec, band.map(|b| b.report));
+    let report = report::assemble(
+        name,
+        files.dir.display().to_string(),
+        Some(sections),
+        &dist,
+        Some(&analysis),
+        None,
+        warnings,
+    );
     let page_basis = outputs::page_basis(&prediction, case);
     outputs::write_page(
         out_dir,
@@ -284,4 +241,61 @@ fn finish(
         skull: face.skull,
         out_dir: out_dir.to_path_buf(),
     })
+}
+
+/// The report sections of a run's stages, and its warnings (the stages', then the dropped
+/// pieces of the segmentation, then the plan basis's).
+fn run_sections(
+    scene: &Scene,
+    p: &crate::model::Prediction,
+    rec: Recorder,
+    uncertainty: Option<crate::uncertainty::UncertaintyReport>,
+) -> (RunSections, Vec<String>) {
+    let (case, seg, skull) = (&scene.case, &scene.seg, &scene.face.skull);
+    let model = p.report(scene);
+    let counts = Counts {
+        voxels: scene.vol.len(),
+        dims: scene.vol.dims,
+        skin_vertices: p.skin.vertices.len(),
+        skin_triangles: p.skin.triangles.len(),
+        skull_vertices: skull.vertices.len(),
+        skull_triangles: skull.triangles.len(),
+        springs_main: scene.model.spring_report.main,
+        springs_strut: scene.model.spring_report.struts,
+        unknowns: model.unknowns,
+        solved_vertices: model.solved_vertices,
+        max_rss_mb: crate::meter::max_rss_mb(),
+    };
+    let mut surfaces = scene.face.report.clone();
+    surfaces.embedding = model.embedding;
+    let Recorder {
+        costs,
+        mut warnings,
+        skipped,
+        ..
+    } = rec;
+    if seg.report.removed_components > 0 {
+        warnings.push(format!(
+            "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
+            seg.report.removed_components, seg.report.removed_voxels
+        ));
+    }
+    if let Some(b) = &p.basis {
+        warnings.extend(b.warnings.iter().cloned());
+    }
+    let sections = RunSections {
+        costs,
+        counts,
+        segmentation: seg.report.clone(),
+        surfaces,
+        registration: scene.face.registration.clone(),
+        parameters: case.clone(),
+        springs: model.springs,
+        solve: model.solve,
+        tet: model.tet,
+        plan_basis: p.basis.as_ref().map(report::BasisReport::of),
+        uncertainty,
+        stages_not_run: skipped,
+    };
+    (sections, warnings)
 }

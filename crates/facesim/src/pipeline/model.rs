@@ -7,7 +7,7 @@ use super::face::Face;
 use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::osteotomy::Plan;
-use crate::report::Stage;
+use crate::pipeline::stage::Stage;
 use crate::segment::Segmentation;
 use crate::springs::{SpringReport, SpringSet};
 use crate::volume::Volume;

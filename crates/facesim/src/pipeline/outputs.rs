@@ -1,13 +1,14 @@
 //! The one module that writes a run's files (docs/case.md "Outputs"): each to a temporary name and
 //! renamed, independent files in parallel, report.json last.
 
+use super::report::Report;
+use super::stage::Stage;
 use super::{Recorder, Scene};
 use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
 use crate::model::Prediction;
 use crate::output::write_bytes_atomic;
-use crate::report::{Counts, Displacement, Report, Stage};
 use crate::volume;
 use std::path::Path;
 
@@ -30,12 +31,11 @@ pub fn viridis(t: f64) -> [u8; 3] {
     [0, 1, 2].map(|k| (C[i][k] + f * (C[i + 1][k] - C[i][k])).round() as u8)
 }
 
-/// |x_post − x_pre| per skin vertex (mm).
-pub fn displacement(p: &Prediction) -> Vec<f64> {
-    p.skin
-        .vertices
+/// |x_post − x_pre| per vertex of the skin `pre` and the predicted face `post` (mm).
+pub fn displacement(pre: &Mesh, post: &Mesh) -> Vec<f64> {
+    pre.vertices
         .iter()
-        .zip(&p.face_post.vertices)
+        .zip(&post.vertices)
         .map(|(a, b)| mesh::norm(mesh::sub(*a, *b)))
         .collect()
 }
@@ -44,11 +44,11 @@ fn max_of(d: &[f64]) -> f64 {
     d.iter().cloned().fold(0.0, f64::max)
 }
 
-/// The predicted face coloured by its displacement (viridis, 0 → max) with a `displacement`
-/// vertex column.
-pub fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
+/// The predicted face `post` coloured by its displacement (viridis, 0 → max) with a
+/// `displacement` vertex column.
+pub fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
     let dmax = max_of(dist);
-    let mut m = p.face_post.clone();
+    let mut m = post.clone();
     m.colors = Some(
         dist.iter()
             .map(|d| viridis(if dmax > 0.0 { d / dmax } else { 0.0 }))
@@ -61,16 +61,11 @@ pub fn coloured_face(p: &Prediction, dist: &[f64]) -> Mesh {
     m
 }
 
-pub fn displacement_csv(dest: &Path, p: &Prediction, dist: &[f64]) -> Result<()> {
+/// displacement.csv: per vertex of the skin `pre`, its place before and on `post`, and `dist`.
+pub fn displacement_csv(dest: &Path, pre: &Mesh, post: &Mesh, dist: &[f64]) -> Result<()> {
     write_bytes_atomic(dest, |w| {
         writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
-        for (i, (a, b)) in p
-            .skin
-            .vertices
-            .iter()
-            .zip(&p.face_post.vertices)
-            .enumerate()
-        {
+        for (i, (a, b)) in pre.vertices.iter().zip(&post.vertices).enumerate() {
             writeln!(
                 w,
                 "{i},{},{},{},{},{},{},{}",
@@ -123,7 +118,7 @@ pub fn write(
 
 fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &Case) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
-    let coloured = coloured_face(p, dist);
+    let coloured = coloured_face(&p.face_post, dist);
     let skull = &scene.face.skull;
     let mut skull_post = skull.clone();
     skull_post.vertices = scene.model.plan.apply(&skull.vertices, 1.0).0;
@@ -147,7 +142,7 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
         Box::new(|| mesh::write_mesh(&skull_post, &o.join("skull_post.ply"))),
         // The model's own files: springs (C1) or the tetrahedral mesh.
         Box::new(|| p.write_model_files(o, scene, case)),
-        Box::new(|| displacement_csv(&o.join("displacement.csv"), p, dist)),
+        Box::new(|| displacement_csv(&o.join("displacement.csv"), &p.skin, &p.face_post, dist)),
         Box::new(|| match &p.basis {
             Some(b) => crate::plan::file::write(&o.join(crate::plan::file::FILE_NAME), b),
             None => Ok(()),
@@ -164,61 +159,6 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
         .map(|j| j())
         .collect::<Result<Vec<()>>>()?;
     Ok(())
-}
-
-/// Fill the report from the run's stages (costs, counts, sections, warnings).
-pub fn fill_report(
-    report: &mut Report,
-    scene: &Scene,
-    p: &Prediction,
-    dist: &[f64],
-    case: &Case,
-    rec: Recorder,
-) {
-    let dmax = max_of(dist);
-    report.displacement = Displacement {
-        max: dmax,
-        mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
-        colour_scale_mm: [0.0, dmax],
-        colour_map: "viridis",
-    };
-    let (seg, skull) = (&scene.seg, &scene.face.skull);
-    report.counts = Counts {
-        voxels: scene.vol.len(),
-        dims: scene.vol.dims,
-        skin_vertices: p.skin.vertices.len(),
-        skin_triangles: p.skin.triangles.len(),
-        skull_vertices: skull.vertices.len(),
-        skull_triangles: skull.triangles.len(),
-        springs_main: scene.model.spring_report.main,
-        springs_strut: scene.model.spring_report.struts,
-        max_rss_mb: crate::meter::max_rss_mb(),
-        ..Counts::default()
-    };
-    report.surfaces = scene.face.report.clone();
-    report.registration = scene.face.registration.clone();
-    p.fill_report(report, scene);
-    report.segmentation = Some(seg.report.clone());
-    report.plan_basis = p.basis.as_ref().map(|b| b.report());
-    report.parameters = Some(case.clone());
-    let Recorder {
-        costs,
-        mut warnings,
-        skipped,
-        ..
-    } = rec;
-    if seg.report.removed_components > 0 {
-        warnings.push(format!(
-            "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
-            seg.report.removed_components, seg.report.removed_voxels
-        ));
-    }
-    if let Some(b) = &p.basis {
-        warnings.extend(b.warnings.iter().cloned());
-    }
-    report.costs = costs;
-    report.warnings = warnings;
-    report.stages_not_run = skipped;
 }
 
 /// The page's re-planning data from the run's plan basis; None (sliders hidden, the page says

@@ -3,10 +3,11 @@
 //! optional smoothing and decimation, and the (u, v) parameterisation the C1 model needs.
 
 use super::Recorder;
+use super::report::SurfaceReport;
+use super::stage::Stage;
 use crate::case::{Case, ExtractMethod, Parameterization};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::report::{Stage, SurfaceReport};
 use crate::segment::Segmentation;
 use crate::surface::{self, marching, rangescan};
 use crate::volume::Volume;

@@ -34,32 +34,6 @@ pub struct PlanBasis {
     pub run_plan_error_mm: f64,
 }
 
-/// report.json's `plan_basis` section.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct BasisReport {
-    pub file: &'static str,
-    pub model: String,
-    pub exact: bool,
-    pub segments: Vec<String>,
-    pub columns_per_segment: usize,
-    /// See [`PlanBasis::run_plan_error_mm`].
-    pub run_plan_error_mm: f64,
-    pub warnings: Vec<String>,
-}
-
-/// report.json's `replan` section (a report written by `facesim replan`).
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct ReplanReport {
-    /// The run's output directory the basis came from.
-    pub from: String,
-    /// The plan file.
-    pub plan: String,
-    pub basis_model: String,
-    pub exact: bool,
-    /// The plan predicted.
-    pub osteotomy: Vec<Osteotomy>,
-}
-
 /// One segment's columns.
 #[derive(Clone, Debug)]
 pub struct SegmentBasis {
@@ -203,19 +177,6 @@ impl PlanBasis {
             .zip(d)
             .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
             .collect())
-    }
-
-    /// The summary report.json carries.
-    pub fn report(&self) -> BasisReport {
-        BasisReport {
-            file: super::file::FILE_NAME,
-            model: self.model.clone(),
-            exact: self.exact,
-            segments: self.segments.iter().map(|s| s.name.clone()).collect(),
-            columns_per_segment: COLUMNS,
-            run_plan_error_mm: self.run_plan_error_mm,
-            warnings: self.warnings.clone(),
-        }
     }
 
     /// The segment whose name is `name`.

@@ -7,16 +7,14 @@
 //!
 //! - [`basis`]: the basis, its matrices and the prediction of any plan from it;
 //! - [`c1`]: the C1 models' basis, their linearisation at the pre-operative state;
-//! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs;
-//! - [`replan`]: `facesim replan` (a run's face outputs for a new plan);
-//! - [`sweep`]: `facesim sweep` (many plans, a table and a chart; per facial region by
-//!   `crate::regions`).
+//! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs.
+//!
+//! The commands that use a stored basis, `facesim replan` and `facesim sweep`, are
+//! `crate::commands`; this module is the maths and the file only (it imports neither the
+//! pipeline nor the report).
 
 pub mod basis;
 pub mod c1;
-pub mod chart;
 pub mod file;
-pub mod replan;
-pub mod sweep;
 
 pub use basis::{PlanBasis, SegmentBasis, matrix};

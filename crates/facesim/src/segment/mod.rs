@@ -22,7 +22,7 @@ use crate::case::{Tissue, TissueMethod};
 use crate::error::{Error, Result};
 use crate::volume::Volume;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 pub const AIR: u8 = 0;
 pub const SKIN: u8 = 1;
@@ -33,7 +33,7 @@ pub const BONE: u8 = 5;
 pub const LABEL_NAMES: [&str; 6] = ["air", "skin", "fat_dark", "fat_bright", "muscle", "bone"];
 
 /// The HU window bounds actually used.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Windows {
     pub head_threshold: f64,
     pub fat_dark: f64,
@@ -42,15 +42,15 @@ pub struct Windows {
     pub bone: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Gaussian {
-    pub name: &'static str,
+    pub name: String,
     pub weight: f64,
     pub mean: f64,
     pub sigma: f64,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct SegmentReport {
     pub method: String,
     pub windows: Windows,
@@ -190,19 +190,19 @@ fn fit_mixture(hist: &[f64], t: &Tissue) -> Vec<Gaussian> {
     ];
     let mut g = [
         Gaussian {
-            name: "fat",
+            name: "fat".into(),
             weight: 0.2,
             mean: 0.5 * (t.fat_dark + t.soft),
             sigma: 40.0,
         },
         Gaussian {
-            name: "soft",
+            name: "soft".into(),
             weight: 0.4,
             mean: 0.5 * (t.soft + t.bone),
             sigma: 40.0,
         },
         Gaussian {
-            name: "bone",
+            name: "bone".into(),
             weight: 0.1,
             mean: t.bone + 600.0,
             sigma: 250.0,
@@ -582,13 +582,13 @@ mod tests {
     #[test]
     fn mixture_crossing_is_midpoint_for_equal_gaussians() {
         let a = Gaussian {
-            name: "a",
+            name: "a".into(),
             weight: 0.5,
             mean: 0.0,
             sigma: 10.0,
         };
         let b = Gaussian {
-            name: "b",
+            name: "b".into(),
             weight: 0.5,
             mean: 100.0,
             sigma: 10.0,

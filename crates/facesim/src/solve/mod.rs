@@ -22,7 +22,7 @@ use crate::fem::preload::initial_dofs_fields;
 use crate::mesh::{Mesh, norm};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// How the C1 model is solved (the case's `[solve] model`, `crate::case::SolveModel::c1_method`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -70,7 +70,7 @@ pub struct Params {
     pub restrict: bool,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct StepRecord {
     pub step: usize,
     pub iterations: usize,

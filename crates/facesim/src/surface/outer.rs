@@ -25,13 +25,13 @@ use crate::error::{Error, Result};
 use crate::mesh::{Mesh, cross, norm, sub};
 use crate::union_find::UnionFind;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 use std::path::Path;
 
 /// What [`outer_face`] found and dropped (report.json `surfaces.foreign_skin`).
-#[derive(Clone, Debug, Default, Serialize, PartialEq)]
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct OuterReport {
     /// Triangles in the file as read.
     pub triangles_in: usize,

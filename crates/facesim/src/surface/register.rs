@@ -4,7 +4,7 @@
 use crate::error::{Error, NumericalKind, Result};
 use nalgebra::{Matrix3, Vector3};
 
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Transform {
     pub rotation: [[f64; 3]; 3],
     pub translation: [f64; 3],

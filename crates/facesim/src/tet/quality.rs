@@ -9,7 +9,7 @@
 use super::gradients;
 use rayon::prelude::*;
 
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Quality {
     pub min_dihedral_deg: f64,
     pub max_dihedral_deg: f64,

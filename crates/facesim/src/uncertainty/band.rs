@@ -2,11 +2,11 @@
 
 use crate::error::Result;
 use crate::mesh::Mesh;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// Mean and 5–95 % band of one quantity over the samples (mm).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Band {
     pub mean: f64,
     pub p05: f64,

@@ -192,7 +192,7 @@ impl Parameter {
 }
 
 /// A parameter's distribution as used.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(untagged)]
 pub enum Distribution {
     Range(Range),

@@ -10,10 +10,10 @@ use crate::error::Result;
 use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
 use crate::mesh::{Mesh, norm, sub};
 use crate::observe::Observer;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One sample's parameters (those the model samples; the others are absent).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Draw {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub poisson: Option<f64>,
@@ -106,12 +106,12 @@ fn solve_key(c: &Case, sliding_matters: bool) -> Vec<u64> {
 }
 
 /// report.json `uncertainty` (docs/uncertainty.md).
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct UncertaintyReport {
     pub samples: usize,
     pub seed: u64,
-    pub model: &'static str,
-    pub sequence: &'static str,
+    pub model: String,
+    pub sequence: String,
     /// Parameter → its distribution as used (given in case.toml or the default).
     pub parameters: Ordered<Distribution>,
     /// Per sample, the parameters drawn.
@@ -130,7 +130,7 @@ pub struct UncertaintyReport {
     pub regions: Ordered<Band>,
 }
 
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct FaceSummary {
     pub vertices: usize,
     pub max_p95: f64,
@@ -259,8 +259,8 @@ pub fn sample(
         let report = UncertaintyReport {
             samples: n,
             seed: case.uncertainty.seed,
-            model: case.solve.model.name(),
-            sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)",
+            model: case.solve.model.name().into(),
+            sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)".into(),
             parameters: Ordered(
                 case.uncertainty
                     .parameters(case.solve.model)

@@ -1,9 +1,10 @@
 //! `facesim sweep OUT_DIR SWEEP.toml --out DIR` (docs/case.md "SWEEP.toml"): many plans from one
 //! plan basis, written as `sweep.csv` (per plan: its moves, the face displacement's max, mean and
 //! 90th percentile, the same per facial region, each landmark's move and the measurements) and
-//! a chart `sweep.svg`. Regions and landmarks are the run's (its report.json: the landmarks as
-//! it found them and the regions derived from them, docs/landmarks.md); a run without them
-//! (an older report) falls back to the profile regions of `crate::regions`.
+//! a chart `sweep.svg` (drawn by the caller from the returned rows: crates/facesim-lab
+//! `sweep_chart`). Regions and landmarks are the run's (its report.json, which must be there:
+//! the landmarks as it found them and the regions derived from them, docs/landmarks.md); a run
+//! without landmarks falls back to the profile regions of `crate::regions`.
 //!
 //! ```toml
 //! [[plan]]                      # any number of listed plans
@@ -20,10 +21,11 @@
 //! rotate_x = { from = -5, to = 5, steps = 3 }   # any of translate_x/y/z, rotate_x/y/z
 //! ```
 
-use super::basis::PlanBasis;
 use crate::case::Osteotomy;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
+use crate::pipeline::report::Report;
+use crate::plan::{PlanBasis, file};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -257,35 +259,34 @@ fn region_members(basis: &PlanBasis, run: Option<&RunLandmarks>) -> Vec<Option<V
         .unwrap_or_else(|| vec![None; REGION_NAMES.len()])
 }
 
-/// Evaluate every plan of `sweep_file` from the basis in `run_dir`; write sweep.csv and
-/// sweep.svg into `out` (created). Nothing is written when the file or a plan is bad.
+/// Evaluate every plan of `sweep_file` from the basis in `run_dir`; write sweep.csv into `out`
+/// (created) and return the rows (the caller draws sweep.svg from them). Nothing is written
+/// when the file, a plan or the run's report.json is bad.
 pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepRow>> {
-    let basis = super::file::read(&run_dir.join(super::file::FILE_NAME))?;
+    let basis = file::read(&run_dir.join(file::FILE_NAME))?;
     let plans = read_sweep(sweep_file, &basis)?;
-    let run = run_landmarks(run_dir);
+    let run = run_landmarks(run_dir)?;
     let rows = evaluate(&basis, plans, sweep_file, run.as_ref())?;
     write(out, &basis, &rows)?;
     Ok(rows)
 }
 
-/// The landmarks (and head frame) a run found, from its report.json; None for a run without.
+/// The landmarks (and head frame) a run found, from its report.json.
 pub type RunLandmarks = (
     Option<crate::landmarks::HeadFrame>,
     Vec<crate::landmarks::Landmark>,
 );
 
-/// [`RunLandmarks`] of the run in `run_dir`.
-pub fn run_landmarks(run_dir: &Path) -> Option<RunLandmarks> {
-    let run: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(run_dir.join("report.json")).ok()?).ok()?;
-    crate::landmarks::from_report(&run)
+/// [`RunLandmarks`] of the run in `run_dir` (None: its report has no landmarks); a missing or
+/// unreadable report.json is an error naming it.
+pub fn run_landmarks(run_dir: &Path) -> Result<Option<RunLandmarks>> {
+    Ok(Report::read(&run_dir.join("report.json"))?.located_landmarks())
 }
 
-/// Write sweep.csv and sweep.svg for evaluated rows into `out` (created).
+/// Write sweep.csv for evaluated rows into `out` (created).
 pub fn write(out: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
     std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    write_csv(&out.join("sweep.csv"), basis, rows)?;
-    super::chart::write(&out.join("sweep.svg"), rows)
+    write_csv(&out.join("sweep.csv"), basis, rows)
 }
 
 /// Each plan's face displacement statistics, whole face and per region, and the run's

@@ -1,13 +1,12 @@
 //! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/case.md): the face outputs of `run` for
 //! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving.
 
-use super::basis::{PlanBasis, ReplanReport};
 use crate::case::{Osteotomy, Region};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
-use crate::model::{Prediction, Solved};
 use crate::pipeline::outputs;
-use crate::report::{Displacement, Report};
+use crate::pipeline::report::{self, ReplanReport, Report};
+use crate::plan::{PlanBasis, file};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -73,14 +72,14 @@ pub struct Replanned {
 /// report.json into `dest` (default `run_dir/replan`).
 /// Everything is read and computed before the first file is written.
 pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<Replanned> {
-    let basis_path = run_dir.join(super::file::FILE_NAME);
-    let basis = super::file::read(&basis_path)?;
+    let basis = file::read(&run_dir.join(file::FILE_NAME))?;
     let plan = read_plan(plan_file)?;
     replan_with(run_dir, &basis, &plan, plan_file, dest)
 }
 
 /// [`replan`] for a plan already read (`plan_file` names it in errors and the report) and the
-/// run's basis already read from `run_dir`.
+/// run's basis already read from `run_dir`. The run's report.json must be there (its name, case
+/// and landmarks carry over): missing or unreadable, it is an error naming it.
 pub fn replan_with(
     run_dir: &Path,
     basis: &PlanBasis,
@@ -106,75 +105,48 @@ pub fn replan_with(
     } else {
         None
     };
-    let prediction = Prediction {
-        skin,
-        face_post: post,
-        basis: None,
-        solved: Solved::Tet(None),
-    };
-    let dist = outputs::displacement(&prediction);
-    let run_report: Option<serde_json::Value> = std::fs::read(run_dir.join("report.json"))
-        .ok()
-        .and_then(|b| serde_json::from_slice(&b).ok());
-    let field = |k: &str| {
-        run_report
-            .as_ref()
-            .and_then(|r| r.get(k))
-            .and_then(|v| v.as_str())
-            .map(str::to_string)
-            .unwrap_or_default()
-    };
+    let dist = outputs::displacement(&skin, &post);
+    let run_report = Report::read(&run_dir.join("report.json"))?;
     // The run's landmarks (as it found them, not detected again) carried with the new plan.
-    let analysis = run_report
-        .as_ref()
-        .and_then(crate::landmarks::from_report)
-        .map(|(frame, lms)| {
-            crate::landmarks::analyse_located(
-                &prediction.skin,
-                &prediction.face_post,
-                frame,
-                lms,
-                &crate::osteotomy::Plan::new(plan),
-            )
-        });
-    let dmax = dist.iter().cloned().fold(0.0, f64::max);
+    let analysis = run_report.located_landmarks().map(|(frame, lms)| {
+        crate::landmarks::analyse_located(
+            &skin,
+            &post,
+            frame,
+            lms,
+            &crate::osteotomy::Plan::new(plan),
+        )
+    });
     let mut warnings = basis.warnings.clone();
     if skull_post.is_none() {
         warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
     }
-    let mut report = Report {
-        name: field("name"),
-        case: field("case"),
-        facesim_version: env!("CARGO_PKG_VERSION").into(),
-        displacement: Displacement {
-            max: dmax,
-            mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
-            colour_scale_mm: [0.0, dmax],
-            colour_map: "viridis",
-        },
-        replan: Some(ReplanReport {
-            from: run_dir.display().to_string(),
-            plan: plan_file.display().to_string(),
-            basis_model: basis.model.clone(),
-            exact: basis.exact,
-            osteotomy: plan.to_vec(),
-        }),
-        warnings,
-        ..Default::default()
+    let replanned = ReplanReport {
+        from: run_dir.display().to_string(),
+        plan: plan_file.display().to_string(),
+        basis_model: basis.model.clone(),
+        exact: basis.exact,
+        osteotomy: plan.to_vec(),
     };
-    if let Some(a) = &analysis {
-        a.fill(&mut report);
-    }
+    let report = report::assemble(
+        run_report.name,
+        run_report.case,
+        None,
+        &dist,
+        analysis.as_ref(),
+        Some(replanned),
+        warnings,
+    );
     // The writes (each to a temporary name, renamed), report.json last.
     std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
     let o = &out_dir;
-    mesh::write_mesh(&prediction.face_post, &o.join("face_post.obj"))?;
-    mesh::write_mesh(&prediction.face_post, &o.join("face_post.ply"))?;
+    mesh::write_mesh(&post, &o.join("face_post.obj"))?;
+    mesh::write_mesh(&post, &o.join("face_post.ply"))?;
     mesh::write_mesh(
-        &outputs::coloured_face(&prediction, &dist),
+        &outputs::coloured_face(&post, &dist),
         &o.join("face_displacement.ply"),
     )?;
-    outputs::displacement_csv(&o.join("displacement.csv"), &prediction, &dist)?;
+    outputs::displacement_csv(&o.join("displacement.csv"), &skin, &post, &dist)?;
     if let Some(s) = &skull_post {
         mesh::write_mesh(s, &o.join("skull_post.ply"))?;
     }

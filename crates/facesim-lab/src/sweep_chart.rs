@@ -1,14 +1,16 @@
 //! sweep.svg: per plan, the face displacement's mean, 90th percentile and max, and each present
-//! facial region's mean (mm).
+//! facial region's mean (mm). `facesim sweep` and the Python module's `sweep(out=…)` draw it
+//! from the rows `facesim::commands::sweep` returns; the product library has no chart crate.
+//! The font and palette are the lab's study charts' too.
 
-use super::sweep::SweepRow;
-use crate::error::{Error, Result};
-use crate::output::write_atomic;
+use facesim::commands::sweep::{REGION_NAMES, SweepRow};
+use facesim::error::{Error, Result};
+use facesim::output::write_atomic;
 use plotters::prelude::*;
 use std::path::Path;
 
 /// The charts' font and colours, shared with the lab's study charts.
-pub static FONT: &[u8] = include_bytes!("../../../../assets/DejaVuSans.ttf");
+pub static FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 
 pub const PALETTE: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
@@ -39,7 +41,7 @@ fn series(rows: &[SweepRow]) -> Vec<(String, Vec<f64>)> {
             rows.iter().map(|r| r.face.mean).collect(),
         ),
     ];
-    for (i, name) in super::sweep::REGION_NAMES.iter().enumerate() {
+    for (i, name) in REGION_NAMES.iter().enumerate() {
         if rows
             .iter()
             .all(|r| r.regions.get(i).is_some_and(|x| x.is_some()))
@@ -108,4 +110,39 @@ pub fn write(path: &Path, rows: &[SweepRow]) -> Result<()> {
         let root = SVGBackend::new(tmp, (900, 540)).into_drawing_area();
         draw(root, rows).map_err(|e| Error::output(path, e.to_string()))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use facesim::commands::sweep::{Stats, SweepPlan};
+
+    #[test]
+    fn the_chart_draws_the_face_lines_and_the_regions_every_plan_has() {
+        let s = |m: f64| Stats {
+            max: m,
+            mean: m / 2.0,
+            p90: m * 0.9,
+        };
+        let rows: Vec<SweepRow> = (0..3)
+            .map(|i| SweepRow {
+                plan: SweepPlan {
+                    label: format!("plan {i}"),
+                    osteotomy: vec![],
+                },
+                face: s(i as f64),
+                // The first region in every row, the second in one row only.
+                regions: vec![Some(s(1.0)), (i == 0).then(|| s(2.0))],
+                landmarks: vec![],
+                measurements: vec![],
+            })
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("sweep.svg");
+        write(&path, &rows).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        assert!(svg.starts_with("<svg") && svg.contains("face max"));
+        assert!(svg.contains(&format!("{} mean", REGION_NAMES[0])));
+        assert!(!svg.contains(&format!("{} mean", REGION_NAMES[1])));
+    }
 }

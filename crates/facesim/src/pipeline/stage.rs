@@ -1,0 +1,224 @@
+//! The stage vocabulary: the stages' names ([`Stage`]), their cost table ([`Costs`], report.json
+//! `timings` and `stage_costs`), the optional stages that did not run ([`Skipped`]) and the
+//! [`Recorder`] every stage reports through.
+
+use crate::error::Result;
+use crate::meter::{Meter, StageCost};
+use crate::observe::Observer;
+use serde::de::{Deserializer, Error as _};
+use serde::ser::{SerializeMap, Serializer};
+use serde::{Deserialize, Serialize};
+
+/// A pipeline stage, named in report.json's `timings` and `stage_costs` by [`Stage::key`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    ReadCt,
+    Segment,
+    Surfaces,
+    SmoothDecimate,
+    ReadScan,
+    PlaceScan,
+    Coarsen,
+    Springs,
+    TetMesh,
+    Solve,
+    Embed,
+    /// The plan basis: 12 solves per segment on the run's factor (docs/plan-basis.md).
+    PlanBasis,
+    /// Landmarks, measurements and regions (docs/landmarks.md).
+    Landmarks,
+    /// Sampling the tissue parameters (docs/uncertainty.md).
+    Uncertainty,
+    Write,
+    Total,
+}
+
+impl Stage {
+    /// Every stage, in pipeline order (reading a report's keys back).
+    const ALL: [Stage; 16] = [
+        Stage::ReadCt,
+        Stage::Segment,
+        Stage::Surfaces,
+        Stage::SmoothDecimate,
+        Stage::ReadScan,
+        Stage::PlaceScan,
+        Stage::Coarsen,
+        Stage::Springs,
+        Stage::TetMesh,
+        Stage::Solve,
+        Stage::Embed,
+        Stage::PlanBasis,
+        Stage::Landmarks,
+        Stage::Uncertainty,
+        Stage::Write,
+        Stage::Total,
+    ];
+
+    pub fn key(self) -> &'static str {
+        match self {
+            Stage::ReadCt => "read_ct",
+            Stage::Segment => "segment",
+            Stage::Surfaces => "surfaces",
+            Stage::SmoothDecimate => "smooth_decimate",
+            Stage::ReadScan => "read_scan",
+            Stage::PlaceScan => "place_scan",
+            Stage::Coarsen => "coarsen",
+            Stage::Springs => "springs",
+            Stage::TetMesh => "tet_mesh",
+            Stage::Solve => "solve",
+            Stage::Embed => "embed",
+            Stage::PlanBasis => "plan_basis",
+            Stage::Landmarks => "landmarks",
+            Stage::Uncertainty => "uncertainty",
+            Stage::Write => "write",
+            Stage::Total => "total",
+        }
+    }
+
+    /// The stage named `key` in a report ([`Stage::key`]'s inverse).
+    pub(crate) fn from_key(key: &str) -> Option<Stage> {
+        Stage::ALL.into_iter().find(|s| s.key() == key)
+    }
+}
+
+/// Stage costs in the order the stages ran; written as two maps, `timings` (stage → wall
+/// seconds) and `stage_costs` (stage → wall, CPU, peak heap).
+#[derive(Clone, Debug, Default)]
+pub struct Costs(pub Vec<(Stage, StageCost)>);
+
+impl Costs {
+    pub fn get(&self, stage: Stage) -> Option<&StageCost> {
+        self.0.iter().find(|(s, _)| *s == stage).map(|(_, c)| c)
+    }
+    /// Wall seconds of `stage` (0 when it did not run).
+    pub fn wall_s(&self, stage: Stage) -> f64 {
+        self.get(stage).map_or(0.0, |c| c.wall_s)
+    }
+}
+
+impl Serialize for Costs {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        struct Walls<'a>(&'a [(Stage, StageCost)]);
+        impl Serialize for Walls<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+                let mut m = s.serialize_map(Some(self.0.len()))?;
+                for (k, c) in self.0 {
+                    m.serialize_entry(k.key(), &c.wall_s)?;
+                }
+                m.end()
+            }
+        }
+        struct Full<'a>(&'a [(Stage, StageCost)]);
+        impl Serialize for Full<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+                let mut m = s.serialize_map(Some(self.0.len()))?;
+                for (k, c) in self.0 {
+                    m.serialize_entry(k.key(), c)?;
+                }
+                m.end()
+            }
+        }
+        let mut m = s.serialize_map(Some(2))?;
+        m.serialize_entry("timings", &Walls(&self.0))?;
+        m.serialize_entry("stage_costs", &Full(&self.0))?;
+        m.end()
+    }
+}
+
+/// `stage_costs` back into stages, in the file's order. `timings` repeats each stage's wall
+/// seconds; it must name the same stages (a report edited by hand may not).
+impl<'de> Deserialize<'de> for Costs {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        struct Maps {
+            timings: crate::landmarks::Ordered<f64>,
+            stage_costs: crate::landmarks::Ordered<StageCost>,
+        }
+        let m = Maps::deserialize(d)?;
+        let walls = m.timings.0.iter().map(|(k, _)| k);
+        if !walls.eq(m.stage_costs.0.iter().map(|(k, _)| k)) {
+            return Err(D::Error::custom(
+                "`timings` and `stage_costs` name different stages",
+            ));
+        }
+        m.stage_costs
+            .0
+            .into_iter()
+            .map(|(k, c)| {
+                Stage::from_key(&k)
+                    .map(|s| (s, c))
+                    .ok_or_else(|| D::Error::custom(format!("unknown stage '{k}'")))
+            })
+            .collect::<std::result::Result<_, _>>()
+            .map(Costs)
+    }
+}
+
+/// A stage that did not run for this case, and why.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq, Eq)]
+pub struct Skipped {
+    pub stage: String,
+    pub reason: String,
+}
+
+/// What stages report besides their outputs: progress and cost (to the observer and the cost
+/// table), warnings, and the optional stages that did not run.
+pub struct Recorder<'a> {
+    pub obs: &'a dyn Observer,
+    pub costs: Costs,
+    pub warnings: Vec<String>,
+    pub skipped: Vec<Skipped>,
+}
+
+impl<'a> Recorder<'a> {
+    pub fn new(obs: &'a dyn Observer) -> Self {
+        Recorder {
+            obs,
+            costs: Costs::default(),
+            warnings: Vec::new(),
+            skipped: Vec::new(),
+        }
+    }
+
+    /// Run `f` as `stage`, announced as `what` on the observer, and record its cost.
+    pub fn time<T>(
+        &mut self,
+        stage: Stage,
+        what: &str,
+        f: impl FnOnce() -> Result<T>,
+    ) -> Result<T> {
+        if !what.is_empty() {
+            self.obs.started(what);
+        }
+        let m = Meter::start(self.obs.heap());
+        let r = f()?;
+        let c = m.stop();
+        self.obs.finished(stage.key(), &c);
+        self.costs.0.push((stage, c));
+        Ok(r)
+    }
+
+    pub fn warn(&mut self, w: impl Into<String>) {
+        self.warnings.push(w.into());
+    }
+
+    pub fn skip(&mut self, stage: Stage, reason: impl Into<String>) {
+        self.skipped.push(Skipped {
+            stage: stage.key().into(),
+            reason: reason.into(),
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_stage_key_reads_back() {
+        for s in Stage::ALL {
+            assert_eq!(Stage::from_key(s.key()), Some(s));
+        }
+        assert_eq!(Stage::from_key("nope"), None);
+    }
+}
