@@ -311,7 +311,7 @@ fn a_moved_scan_is_registered_back_by_landmarks() {
         .vertices
         .iter()
         .zip(&scan.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
         .fold(0.0, f64::max);
     assert!(
         worst < 1e-6,

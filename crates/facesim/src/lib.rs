@@ -43,6 +43,7 @@ pub mod surface;
 pub mod tet;
 pub mod uncertainty;
 pub mod union_find;
+pub mod vec3;
 pub mod volume;
 
 pub use error::{Error, Result};

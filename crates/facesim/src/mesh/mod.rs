@@ -11,6 +11,7 @@ pub mod vtp;
 
 use crate::error::{Error, Result};
 use crate::union_find::UnionFind;
+use crate::vec3::{add, cross, norm, scale, sub};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -46,29 +47,6 @@ pub struct Mesh {
 pub struct MeshStats {
     pub unreferenced_vertices: usize,
     pub boundary_edges: usize,
-}
-
-pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// Two triangles over four points with fractional coordinates: the file-format tests' mesh.

@@ -344,11 +344,11 @@ fn mucosa(
                 return None;
             }
             let tri = skull.triangles[t].map(|v| skull.vertices[v as usize]);
-            let n = crate::mesh::cross(
-                crate::mesh::sub(tri[1], tri[0]),
-                crate::mesh::sub(tri[2], tri[0]),
+            let n = crate::vec3::cross(
+                crate::vec3::sub(tri[1], tri[0]),
+                crate::vec3::sub(tri[2], tri[0]),
             );
-            let len = crate::mesh::norm(n);
+            let len = crate::vec3::norm(n);
             if !(len > 0.0) {
                 return None;
             }
@@ -359,7 +359,7 @@ fn mucosa(
             let bone_move = [0, 1, 2].map(|c| moved[0][c] - q[c]);
             let normal = if which[0] == which[1] {
                 let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
-                let l = crate::mesh::norm(m);
+                let l = crate::vec3::norm(m);
                 m.map(|v| v / l)
             } else {
                 n
@@ -826,7 +826,7 @@ fn plan_basis(
     basis.run_plan_error_mm = again
         .iter()
         .zip(b.run_face_displacement)
-        .map(|(a, r)| crate::mesh::norm(crate::mesh::sub(*a, *r)))
+        .map(|(a, r)| crate::vec3::norm(crate::vec3::sub(*a, *r)))
         .fold(0.0, f64::max);
     if basis.exact && !(basis.run_plan_error_mm <= 1e-6) {
         basis.exact = false;

@@ -307,7 +307,7 @@ pub fn evaluate(
         let mag: Vec<f64> = d
             .iter()
             .zip(&basis.face_pre)
-            .map(|(a, b)| crate::mesh::norm(crate::mesh::sub(*a, *b)))
+            .map(|(a, b)| crate::vec3::norm(crate::vec3::sub(*a, *b)))
             .collect();
         let face = stats(mag.iter().copied()).unwrap_or(Stats {
             max: 0.0,

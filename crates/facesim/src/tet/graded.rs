@@ -24,9 +24,10 @@
 
 use super::stuffing::{
     ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, NodeKind, Places, Ref, Stuffed, classify, compact,
-    fill, orient, sub,
+    fill, orient,
 };
 use crate::error::{Error, Result};
+use crate::vec3::sub;
 use rayon::prelude::*;
 use std::collections::HashMap;
 

@@ -40,6 +40,7 @@
 //! the warp flattened or inverted would be a reported numerical failure, never a silent one.
 
 use crate::error::{Error, NumericalKind, Result};
+use crate::vec3::{cross, sub};
 use rayon::prelude::*;
 
 /// Warping thresholds of the paper for the [10.7°, 164.8°] dihedral bounds.
@@ -208,16 +209,6 @@ struct Cut {
     kind: NodeKind,
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
 pub(super) fn orient(x: [[f64; 3]; 4]) -> f64 {
     let (a, b, c) = (sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0]));
     let n = cross(a, b);

@@ -8,10 +8,10 @@ use super::sample::ScrambledHalton;
 use crate::case::{Case, SolveModel};
 use crate::error::Result;
 use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
-use crate::mesh::{norm, sub};
 use crate::pipeline::predict::Prediction;
 use crate::pipeline::{Recorder, Scene};
 use crate::report::Stage;
+use crate::vec3::{norm, sub};
 use serde::Serialize;
 
 /// One sample's parameters (those the model samples; the others are absent).
