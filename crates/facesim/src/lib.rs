@@ -32,7 +32,6 @@ pub mod phantom_cohort;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
-pub mod regions;
 pub mod report;
 pub mod report_page;
 pub mod segment;

@@ -252,7 +252,7 @@ fn region_members(basis: &PlanBasis, run: Option<&RunLandmarks>) -> Vec<Option<V
         let pre = crate::landmarks::positions(lms);
         return crate::landmarks::face_regions::regions(&basis.face_pre, frame, &pre).members;
     }
-    crate::regions::regions(&basis.face_pre)
+    crate::landmarks::face_regions::profile::regions(&basis.face_pre)
         .map(|r| r.members)
         .unwrap_or_else(|| vec![None; REGION_NAMES.len()])
 }
