@@ -135,7 +135,7 @@ enum Cmd {
         #[arg(long)]
         case: Option<PathBuf>,
     },
-    /// Render meshes (OBJ or PLY, drawn together) to a PNG picture.
+    /// Render meshes (OBJ, PLY, STL, VTK or VTP; drawn together) to a PNG picture.
     Render {
         #[arg(required = true)]
         meshes: Vec<PathBuf>,
@@ -158,7 +158,7 @@ enum Cmd {
         #[arg(long = "case")]
         cases: Vec<PathBuf>,
     },
-    /// Distances between two meshes (OBJ or PLY).
+    /// Distances between two meshes (OBJ, PLY, STL, VTK or VTP).
     Compare {
         a: PathBuf,
         b: PathBuf,

@@ -3,8 +3,9 @@
 //! without a viewer.
 
 use facesim::error::{Error, Result};
-use facesim::mesh::{Mesh, cross, dot, norm, sub};
+use facesim::mesh::Mesh;
 use facesim::output::write_bytes_atomic;
+use facesim::vec3::{cross, dot, norm, sub};
 use std::path::Path;
 
 /// Views in LPS: the patient's front (camera at −y), left side (camera at +x), top (+z).

@@ -244,11 +244,11 @@ fn write_face(o: &facesim::pipeline::Outcome, dest: &Path) -> Result<()> {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .flat_map(|(a, b)| mesh::sub(*b, *a))
+        .flat_map(|(a, b)| facesim::vec3::sub(*b, *a))
         .collect();
     let mag: Vec<f64> = disp
         .chunks(3)
-        .map(|d| mesh::norm([d[0], d[1], d[2]]))
+        .map(|d| facesim::vec3::norm([d[0], d[1], d[2]]))
         .collect();
     let arrays = [
         mesh::vtk::PointArray {

@@ -1,4 +1,4 @@
-//! `facesim run` and `facesim compare` through the real CLI: good runs write every output,
+//! `facesim run`, `facesim compare` and `facesim render` through the real CLI: good runs write every output,
 //! bad inputs fail with one line naming the file, and nothing is written or changed.
 
 mod cli;
@@ -138,6 +138,66 @@ fn compare_reports_distances_and_refuses_bad_meshes() {
         &facesim(&["compare", face.to_str().unwrap(), bad.to_str().unwrap()]),
         "garbage.ply",
         "PLY",
+    );
+}
+
+/// `compare` and `render` read every face format a run writes: the .vtp gives the .ply's
+/// figures exactly (ASCII, shortest round-trip decimals) and the same picture; the .stl (f32
+/// coordinates, welded vertices) the same printed summary figures.
+#[test]
+fn compare_and_render_read_every_format_a_run_writes() {
+    let out = phantom_dir().join("run_formats");
+    let r = facesim(&[
+        "run",
+        phantom_dir().to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let pre = out.join("face_pre.obj");
+    let compare = |post: &str, json: bool| {
+        let post = out.join(post);
+        let mut args = vec!["compare", pre.to_str().unwrap(), post.to_str().unwrap()];
+        if json {
+            args.push("--json");
+        }
+        let r = facesim(&args);
+        assert_eq!(r.code, 0, "{}: {}", post.display(), r.stderr);
+        r.stdout
+    };
+    let ply = compare("face_post.ply", true);
+    let j: serde_json::Value = serde_json::from_str(&ply).unwrap();
+    assert!(
+        j["max"].as_f64().unwrap() > 0.1,
+        "the plan moved nothing: {ply}"
+    );
+    assert_eq!(compare("face_post.vtp", true), ply, "VTP");
+    // The headline line (surface distances); the per-vertex line needs the vertex order, which
+    // an STL does not keep.
+    let headline = |s: String| s.lines().next().unwrap_or_default().to_string();
+    let want = headline(compare("face_post.ply", false));
+    assert!(want.starts_with("mean "), "{want}");
+    assert_eq!(headline(compare("face_post.stl", false)), want, "STL");
+
+    let picture = |mesh: &str| {
+        let png = out.join(format!("{mesh}.png"));
+        let r = facesim(&[
+            "render",
+            out.join(mesh).to_str().unwrap(),
+            "--out",
+            png.to_str().unwrap(),
+            "--size",
+            "64",
+        ]);
+        assert_eq!(r.code, 0, "render {mesh}: {}", r.stderr);
+        std::fs::read(png).unwrap()
+    };
+    let vtp = picture("face_post.vtp");
+    assert!(vtp.starts_with(b"\x89PNG"), "not a PNG");
+    assert_eq!(
+        vtp,
+        picture("face_post.ply"),
+        "the .vtp renders unlike the .ply"
     );
 }
 
@@ -311,7 +371,7 @@ fn a_moved_scan_is_registered_back_by_landmarks() {
         .vertices
         .iter()
         .zip(&scan.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
         .fold(0.0, f64::max);
     assert!(
         worst < 1e-6,

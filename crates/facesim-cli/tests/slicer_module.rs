@@ -175,7 +175,10 @@ fn called_as_slicer_calls_it_the_module_predicts_the_face_of_the_same_plan() {
         for c in 0..3 {
             assert!((g[c] - w[c]).abs() < 1e-9, "vertex {i}: {g:?} vs {w:?}");
         }
-        moved = moved.max(mesh::norm(mesh::sub(*w, want.skin.vertices[i])));
+        moved = moved.max(facesim::vec3::norm(facesim::vec3::sub(
+            *w,
+            want.skin.vertices[i],
+        )));
     }
     assert!(moved > 1.0, "{moved}");
     let d = arrays.iter().find(|a| a.name == "displacement_mm").unwrap();

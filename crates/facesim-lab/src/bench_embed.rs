@@ -13,10 +13,10 @@
 use crate::study::face::FaceRow;
 use facesim::compare::stats;
 use facesim::error::{Error, Result};
-use facesim::mesh::{norm, sub};
 use facesim::observe::Observer;
 use facesim::output::write_bytes_atomic;
 use facesim::pipeline::Outcome;
+use facesim::vec3::{norm, sub};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 

@@ -82,7 +82,7 @@ pub fn run(case_toml: &Path, models: &[SolveModel]) -> Result<Vec<Row>> {
                     let err: Vec<f64> = lin
                         .iter()
                         .zip(&p.face_post.vertices)
-                        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+                        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
                         .collect();
                     Row {
                         model: name,
@@ -92,7 +92,7 @@ pub fn run(case_toml: &Path, models: &[SolveModel]) -> Result<Vec<Row>> {
                             .vertices
                             .iter()
                             .zip(&p.face_post.vertices)
-                            .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+                            .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
                             .fold(0.0, f64::max),
                         max_error_mm: err.iter().cloned().fold(0.0, f64::max),
                         mean_error_mm: err.iter().sum::<f64>() / err.len().max(1) as f64,

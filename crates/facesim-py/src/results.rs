@@ -1,7 +1,7 @@
 //! The `facesim.Result` class: a run's (or replan's) face as numpy arrays, in LPS millimetres,
 //! equal to the files the command line writes (face_pre/face_post vertex order).
 
-use facesim::mesh::{norm, sub};
+use facesim::vec3::{norm, sub};
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;

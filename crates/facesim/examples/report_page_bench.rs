@@ -36,7 +36,7 @@ fn main() -> facesim::Result<()> {
     // Weight of a face vertex for one half: 1 near the bone, fading over 40 mm.
     let weight = |x: &[f64; 3], left: bool| {
         let side = if (x[0] > mid) == left { 1.0 } else { 0.0 };
-        let r = facesim::mesh::norm(facesim::mesh::sub(*x, centre));
+        let r = facesim::vec3::norm(facesim::vec3::sub(*x, centre));
         side * (-(r / 40.0).powi(2)).exp()
     };
     let columns = |left: bool| -> Vec<Vec<[f64; 3]>> {

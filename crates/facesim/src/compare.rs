@@ -2,7 +2,8 @@
 //! to the closest point on the other's surface, both directions; with equal vertex counts also
 //! the per-vertex (same index) distances.
 
-use crate::mesh::{Mesh, add, dot, norm, scale, sub};
+use crate::mesh::Mesh;
+use crate::vec3::{add, dot, norm, scale, sub};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;

@@ -22,7 +22,8 @@
 
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
-use crate::mesh::{Mesh, add, cross, dot, norm, scale, sub};
+use crate::mesh::Mesh;
+use crate::vec3::{add, cross, dot, norm, scale, sub};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
 

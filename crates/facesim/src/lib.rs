@@ -35,7 +35,6 @@ pub mod phantom_cohort;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
-pub mod regions;
 pub mod report_page;
 pub mod segment;
 pub mod slicer;
@@ -45,6 +44,7 @@ pub mod surface;
 pub mod tet;
 pub mod uncertainty;
 pub mod union_find;
+pub mod vec3;
 pub mod volume;
 
 pub use error::{Error, Result};

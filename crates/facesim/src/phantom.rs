@@ -378,9 +378,9 @@ pub(crate) fn grid_mesh(verts: Vec<[f64; 3]>, nphi: usize, nz: usize) -> Mesh {
     let diag = m.diagonal();
     m.triangles.retain(|t| {
         let [a, b, c] = t.map(|i| m.vertices[i as usize]);
-        crate::mesh::norm(crate::mesh::cross(
-            crate::mesh::sub(b, a),
-            crate::mesh::sub(c, a),
+        crate::vec3::norm(crate::vec3::cross(
+            crate::vec3::sub(b, a),
+            crate::vec3::sub(c, a),
         )) > 1e-9 * diag * diag
     });
     m.compact();

@@ -9,9 +9,10 @@
 //! around i (eq. 21).
 
 use crate::case::{Springs as SpringParams, Stiffness};
-use crate::mesh::{Column, Edges, Mesh, add, norm, scale, sub};
+use crate::mesh::{Column, Edges, Mesh};
 use crate::segment::{self, Segmentation};
 use crate::union_find::UnionFind;
+use crate::vec3::{add, norm, scale, sub};
 use crate::volume::{Volume, VoxelMap, sample_field};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

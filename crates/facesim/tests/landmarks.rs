@@ -8,12 +8,12 @@ mod common;
 use common::kept_dir;
 use facesim::case::Case;
 use facesim::landmarks::{self, Kind, Source, measure};
-use facesim::mesh::{norm, sub};
 use facesim::observe::Quiet;
 use facesim::osteotomy::Plan;
 use facesim::phantom::PhantomOptions;
 use facesim::phantom_jaws::{self as pj};
 use facesim::pipeline::{self, Scene};
+use facesim::vec3::{norm, sub};
 use std::path::Path;
 use std::sync::OnceLock;
 

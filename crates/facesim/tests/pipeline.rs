@@ -48,12 +48,12 @@ fn displacement(o: &Outcome) -> Vec<f64> {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
         .collect()
 }
 
 fn distance_to_centre(p: [f64; 3]) -> f64 {
-    facesim::mesh::norm(facesim::mesh::sub(p, MOVABLE.0))
+    facesim::vec3::norm(facesim::vec3::sub(p, MOVABLE.0))
 }
 
 #[test]

@@ -82,7 +82,7 @@ fn no_bone_move_leaves_the_face_unchanged_in_both_models() {
             .vertices
             .iter()
             .zip(&o.face_post.vertices)
-            .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*a, *b)))
+            .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
             .fold(0.0, f64::max);
         println!("{model}: max |post − pre| = {worst:.2e} mm");
         assert!(worst < 1e-6, "{model}: {worst}");
@@ -103,7 +103,7 @@ fn translation_error(o: &facesim::pipeline::Outcome, t: [f64; 3]) -> f64 {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(facesim::mesh::sub(*b, *a), t)))
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(facesim::vec3::sub(*b, *a), t)))
         .fold(0.0, f64::max)
 }
 
@@ -112,7 +112,7 @@ fn whole_skull_translated_moves_the_skin_rigidly() {
     // Every skin node movable (no [surface] movable), every attachment moved by t.
     let t = [1.0, -2.0, 0.5];
     let o = run(&whole_skull(t));
-    let tn = facesim::mesh::norm(t);
+    let tn = facesim::vec3::norm(t);
     let worst = translation_error(&o, t);
     println!("rigid translation: worst deviation {worst:.2e} mm of a {tn:.3} mm move");
     assert!(worst < 1e-3 * tn, "{worst}");
@@ -123,7 +123,7 @@ fn displacement(o: &facesim::pipeline::Outcome) -> Vec<[f64; 3]> {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::sub(*b, *a))
+        .map(|(a, b)| facesim::vec3::sub(*b, *a))
         .collect()
 }
 
@@ -138,13 +138,13 @@ fn small_moves_give_displacements_linear_in_the_move() {
         let (da, db) = (displacement(&a), displacement(&b));
         let scale = db
             .iter()
-            .map(|d| facesim::mesh::norm(*d))
+            .map(|d| facesim::vec3::norm(*d))
             .fold(0.0, f64::max);
         let worst = da
             .iter()
             .zip(&db)
             .map(|(x, y)| {
-                facesim::mesh::norm(facesim::mesh::sub(*y, facesim::mesh::scale(*x, 2.0)))
+                facesim::vec3::norm(facesim::vec3::sub(*y, facesim::vec3::scale(*x, 2.0)))
             })
             .fold(0.0, f64::max);
         println!(
@@ -188,23 +188,23 @@ fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
         let v = &o.skin.vertices;
         let scale = d
             .iter()
-            .map(|x| facesim::mesh::norm(*x))
+            .map(|x| facesim::vec3::norm(*x))
             .fold(0.0, f64::max);
         let mut worst = 0.0f64;
         for i in 0..v.len() {
             let m = [-v[i][0], v[i][1], v[i][2]];
             let j = (0..v.len())
                 .min_by(|&a, &b| {
-                    facesim::mesh::norm(facesim::mesh::sub(v[a], m))
-                        .total_cmp(&facesim::mesh::norm(facesim::mesh::sub(v[b], m)))
+                    facesim::vec3::norm(facesim::vec3::sub(v[a], m))
+                        .total_cmp(&facesim::vec3::norm(facesim::vec3::sub(v[b], m)))
                 })
                 .unwrap();
             assert!(
-                facesim::mesh::norm(facesim::mesh::sub(v[j], m)) < 1e-6,
+                facesim::vec3::norm(facesim::vec3::sub(v[j], m)) < 1e-6,
                 "scan not symmetric at {i}"
             );
             let mirrored = [-d[j][0], d[j][1], d[j][2]];
-            worst = worst.max(facesim::mesh::norm(facesim::mesh::sub(d[i], mirrored)));
+            worst = worst.max(facesim::vec3::norm(facesim::vec3::sub(d[i], mirrored)));
         }
         println!(
             "{model} mirror symmetry: worst |d_i − M d_mirror(i)| = {worst:.3e} mm of max |d| {scale:.3} mm ({:.2}%)",
@@ -240,21 +240,21 @@ fn two_mesh_densities_give_the_same_displacement_field() {
         let (dc, df) = (displacement(&coarse), displacement(&fine));
         let scale = dc
             .iter()
-            .map(|d| facesim::mesh::norm(*d))
+            .map(|d| facesim::vec3::norm(*d))
             .fold(0.0, f64::max);
         let (mut worst, mut sum, mut n) = (0.0f64, 0.0, 0usize);
         for (i, p) in coarse.skin.vertices.iter().enumerate() {
             let j = (0..fine.skin.vertices.len())
                 .min_by(|&a, &b| {
-                    facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[a], *p)).total_cmp(
-                        &facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[b], *p)),
+                    facesim::vec3::norm(facesim::vec3::sub(fine.skin.vertices[a], *p)).total_cmp(
+                        &facesim::vec3::norm(facesim::vec3::sub(fine.skin.vertices[b], *p)),
                     )
                 })
                 .unwrap();
             // Points of the two meshes within 0.5 mm of each other (the field's gradient is below
             // 0.3, so the offset itself accounts for at most ~0.15 mm).
-            if facesim::mesh::norm(facesim::mesh::sub(fine.skin.vertices[j], *p)) < 0.5 {
-                let e = facesim::mesh::norm(facesim::mesh::sub(dc[i], df[j]));
+            if facesim::vec3::norm(facesim::vec3::sub(fine.skin.vertices[j], *p)) < 0.5 {
+                let e = facesim::vec3::norm(facesim::vec3::sub(dc[i], df[j]));
                 worst = worst.max(e);
                 sum += e;
                 n += 1;
@@ -389,7 +389,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
         "the output is the full scan"
     );
     assert!(dir.join("out/face_post_coarse.ply").is_file());
-    let tn = facesim::mesh::norm(t);
+    let tn = facesim::vec3::norm(t);
     let worst = translation_error(&o, t);
     assert!(
         worst < 1e-3 * tn,

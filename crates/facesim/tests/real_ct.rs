@@ -247,12 +247,12 @@ fn a_stiffer_nose_region_deforms_less() {
         let tip = (0..v.len())
             .min_by(|&a, &b| v[a][1].total_cmp(&v[b][1]))
             .unwrap();
-        let d = |i: usize| facesim::mesh::sub(o.face_post.vertices[i], v[i]);
+        let d = |i: usize| facesim::vec3::sub(o.face_post.vertices[i], v[i]);
         let spread = (0..v.len())
-            .filter(|&i| facesim::mesh::norm(facesim::mesh::sub(v[i], v[tip])) < 10.0)
-            .map(|i| facesim::mesh::norm(facesim::mesh::sub(d(i), d(tip))))
+            .filter(|&i| facesim::vec3::norm(facesim::vec3::sub(v[i], v[tip])) < 10.0)
+            .map(|i| facesim::vec3::norm(facesim::vec3::sub(d(i), d(tip))))
             .fold(0.0, f64::max);
-        (facesim::mesh::norm(d(tip)), spread)
+        (facesim::vec3::norm(d(tip)), spread)
     };
     let (soft_tip, soft) = run_with("");
     let (stiff_tip, stiff) = run_with(

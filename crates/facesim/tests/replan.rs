@@ -112,7 +112,7 @@ fn max_distance(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
     assert_eq!(a.len(), b.len());
     a.iter()
         .zip(b)
-        .map(|(p, q)| facesim::mesh::norm(facesim::mesh::sub(*p, *q)))
+        .map(|(p, q)| facesim::vec3::norm(facesim::vec3::sub(*p, *q)))
         .fold(0.0, f64::max)
 }
 

@@ -290,7 +290,7 @@ fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
         }
     }
     for (p, q) in a.skin.vertices.iter().zip(&a.face_post.vertices) {
-        dmax = dmax.max(facesim::mesh::norm(facesim::mesh::sub(*q, *p)));
+        dmax = dmax.max(facesim::vec3::norm(facesim::vec3::sub(*q, *p)));
     }
     assert!(dmax > 1.0, "the plan moved the face ({dmax} mm)");
     // face_post.vtp: the same points as face_post.obj, displacement_mm = post − pre.

@@ -4,12 +4,9 @@
 
 use facesim::tet::quality::Quality;
 use facesim::tet::stuffing::{self, MAX_DIHEDRAL_BOUND_DEG, MIN_DIHEDRAL_BOUND_DEG, NodeKind};
+use facesim::vec3::{cross, dot, norm, sub};
 use std::collections::HashMap;
 use std::f64::consts::PI;
-
-fn norm(p: [f64; 3]) -> f64 {
-    (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()
-}
 
 /// Faces (sorted node triples) and how many tetrahedra use each.
 fn face_counts(tets: &[[u32; 4]]) -> HashMap<[u32; 3], usize> {
@@ -267,18 +264,11 @@ fn segmented(vol: &Volume) -> Segmentation {
     segment::segment(vol, &case.tissue, Path::new("ct.nii.gz")).unwrap()
 }
 
-fn sub3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// Distance from p to the segment ab.
 fn segment_distance(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
-    let ab = sub3(b, a);
-    let t = (dot3(sub3(p, a), ab) / dot3(ab, ab).max(1e-300)).clamp(0.0, 1.0);
-    norm(sub3(
+    let ab = sub(b, a);
+    let t = (dot(sub(p, a), ab) / dot(ab, ab).max(1e-300)).clamp(0.0, 1.0);
+    norm(sub(
         p,
         [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]],
     ))
@@ -287,27 +277,23 @@ fn segment_distance(p: [f64; 3], a: [f64; 3], b: [f64; 3]) -> f64 {
 /// Distance from p to the triangle abc: to its plane when the projection falls inside,
 /// else to the nearest edge.
 fn triangle_distance(p: [f64; 3], t: [[f64; 3]; 3]) -> f64 {
-    let (e0, e1) = (sub3(t[1], t[0]), sub3(t[2], t[0]));
-    let n = [
-        e0[1] * e1[2] - e0[2] * e1[1],
-        e0[2] * e1[0] - e0[0] * e1[2],
-        e0[0] * e1[1] - e0[1] * e1[0],
-    ];
-    let nn = dot3(n, n);
+    let (e0, e1) = (sub(t[1], t[0]), sub(t[2], t[0]));
+    let n = cross(e0, e1);
+    let nn = dot(n, n);
     if nn > 0.0 {
-        let d = dot3(sub3(p, t[0]), n) / nn;
+        let d = dot(sub(p, t[0]), n) / nn;
         let q = [p[0] - d * n[0], p[1] - d * n[1], p[2] - d * n[2]];
         // Barycentric signs: q inside when on the inner side of each edge.
         let inside = (0..3).all(|k| {
             let (a, b) = (t[k], t[(k + 1) % 3]);
-            let c = sub3(b, a);
-            let w = sub3(q, a);
+            let c = sub(b, a);
+            let w = sub(q, a);
             let x = [
                 c[1] * w[2] - c[2] * w[1],
                 c[2] * w[0] - c[0] * w[2],
                 c[0] * w[1] - c[1] * w[0],
             ];
-            dot3(x, n) >= 0.0
+            dot(x, n) >= 0.0
         });
         if inside {
             return d.abs() * nn.sqrt();
@@ -567,7 +553,7 @@ fn grading_keeps_the_surfaces_fine_and_coarsens_between_them() {
         let mut l: f64 = 0.0;
         for i in 0..t.len() {
             for j in i + 1..t.len() {
-                l = l.max(norm(sub3(m.nodes[t[i] as usize], m.nodes[t[j] as usize])));
+                l = l.max(norm(sub(m.nodes[t[i] as usize], m.nodes[t[j] as usize])));
             }
         }
         l

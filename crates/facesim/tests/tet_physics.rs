@@ -7,6 +7,7 @@ use facesim::error::{Error, NumericalKind};
 use facesim::tet::nonlinear::{self, NeoHooke, Newton};
 use facesim::tet::quadratic::{Rule, Tet10Mesh};
 use facesim::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
+use facesim::vec3::dot;
 
 #[path = "common/tet_grid.rs"]
 mod tet_grid;
@@ -22,10 +23,6 @@ const MUSCLE: Elastic = Elastic {
 };
 
 type V3 = [f64; 3];
-
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 
 fn matvec(m: &[[f64; 3]; 3], v: V3) -> V3 {
     std::array::from_fn(|i| dot(m[i], v))

@@ -50,7 +50,7 @@ fn magnitudes(o: &Outcome) -> Vec<f64> {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::norm(facesim::mesh::sub(*b, *a)))
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*b, *a)))
         .collect()
 }
 

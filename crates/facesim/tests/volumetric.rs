@@ -41,7 +41,7 @@ fn moves(o: &Outcome) -> Vec<[f64; 3]> {
         .vertices
         .iter()
         .zip(&o.face_post.vertices)
-        .map(|(a, b)| facesim::mesh::sub(*b, *a))
+        .map(|(a, b)| facesim::vec3::sub(*b, *a))
         .collect()
 }
 
@@ -101,7 +101,7 @@ fn mandibular_advance_writes_every_output_and_moves_the_lower_face() {
         .iter()
         .zip(&d)
         .filter(|(p, _)| p[2] > t.region.1[2] + 5.0)
-        .map(|(_, v)| facesim::mesh::norm(*v))
+        .map(|(_, v)| facesim::vec3::norm(*v))
         .fold(0.0, f64::max);
     assert_eq!(forehead_max, 0.0);
     let json: serde_json::Value =
@@ -136,7 +136,7 @@ fn the_face_is_exactly_linear_in_the_move_and_still_without_it() {
     ));
     let scale = one
         .iter()
-        .map(|v| facesim::mesh::norm(*v))
+        .map(|v| facesim::vec3::norm(*v))
         .fold(0.0, f64::max);
     assert!(scale > 1.0);
     for (a, b) in one.iter().zip(&two) {

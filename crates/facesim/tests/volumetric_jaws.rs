@@ -41,7 +41,7 @@ fn run(file: &str, sliding: bool) -> Outcome {
 /// The displacement of the face vertex nearest the named landmark.
 fn moved(o: &Outcome, landmark: &str) -> [f64; 3] {
     let at = phantom_jaws::landmark(landmark).unwrap();
-    let d = |p: &[f64; 3]| facesim::mesh::norm(facesim::mesh::sub(*p, at));
+    let d = |p: &[f64; 3]| facesim::vec3::norm(facesim::vec3::sub(*p, at));
     let i = (0..o.skin.vertices.len())
         .min_by(|&a, &b| d(&o.skin.vertices[a]).total_cmp(&d(&o.skin.vertices[b])))
         .unwrap();
@@ -49,7 +49,7 @@ fn moved(o: &Outcome, landmark: &str) -> [f64; 3] {
         d(&o.skin.vertices[i]) < 3.0,
         "{landmark}: no face vertex near it"
     );
-    facesim::mesh::sub(o.face_post.vertices[i], o.skin.vertices[i])
+    facesim::vec3::sub(o.face_post.vertices[i], o.skin.vertices[i])
 }
 
 #[test]
@@ -89,7 +89,7 @@ fn the_inner_lip_slides_on_the_teeth_or_moves_with_them() {
         moved(&attached, "labrale inferius"),
     );
     println!("labrale inferius: sliding {ls:.3?}, attached {la:.3?}");
-    assert!(facesim::mesh::norm(facesim::mesh::sub(ls, la)) > 1e-3);
+    assert!(facesim::vec3::norm(facesim::vec3::sub(ls, la)) > 1e-3);
     // The lower lip comes forward with the teeth either way.
     assert!(ls[1] < -2.0 && la[1] < -2.0);
 }

@@ -24,11 +24,12 @@ use super::volumetric::{self, Kind};
 use facesim::case::{Case, Parameterization, SolveModel, TetElement, TetMaterial};
 use facesim::compare::{DistanceStats, SurfaceIndex, barycentric, stats};
 use facesim::error::{Error, NumericalKind, Result};
-use facesim::mesh::{Mesh, sub};
+use facesim::mesh::Mesh;
 use facesim::observe::Observer;
 use facesim::pipeline::{Scene, prepare_case};
 use facesim::springs::SpringSet;
 use facesim::surface;
+use facesim::vec3::sub;
 use serde::Serialize;
 use std::path::Path;
 
@@ -752,7 +753,7 @@ impl<'a> Study<'a> {
         let to = |a: &[[f64; 3]], b: &[[f64; 3]]| -> Vec<f64> {
             a.iter()
                 .zip(b)
-                .map(|(a, b)| facesim::mesh::norm(sub(*a, *b)))
+                .map(|(a, b)| facesim::vec3::norm(sub(*a, *b)))
                 .collect()
         };
         for (row, answer) in std::mem::take(&mut self.answers) {
@@ -859,7 +860,7 @@ impl<'a> Study<'a> {
                     .zip(ref_d)
                     .zip(&rigid)
                     .filter(|(_, r)| !**r)
-                    .map(|((a, b), _)| facesim::mesh::norm(sub(*a, *b)))
+                    .map(|((a, b), _)| facesim::vec3::norm(sub(*a, *b)))
                     .collect();
                 v.iter().sum::<f64>() / v.len().max(1) as f64
             });
@@ -1003,7 +1004,7 @@ fn mean_norm(d: &[[f64; 3]], rigid: &[bool]) -> f64 {
         .iter()
         .zip(rigid)
         .filter(|(_, r)| !**r)
-        .map(|(d, _)| facesim::mesh::norm(*d))
+        .map(|(d, _)| facesim::vec3::norm(*d))
         .collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }

@@ -12,9 +12,10 @@
 //! lumped masses m_i = k_i (area), the step h = 0.9 × 2/√λ_max (λ_max bounded by Gershgorin on
 //! the stiffness over mass), iterated until |F| < tol |F₀| — not converging is reported.
 
-use facesim::mesh::{Mesh, norm, sub};
+use facesim::mesh::Mesh;
 use facesim::osteotomy::Plan;
 use facesim::springs::SpringSet;
+use facesim::vec3::{norm, sub};
 
 pub struct Relaxed {
     pub positions: Vec<[f64; 3]>,
@@ -27,8 +28,8 @@ pub struct Relaxed {
 fn cot(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     // Cotangent of the angle at a in triangle abc.
     let (u, v) = (sub(b, a), sub(c, a));
-    let cr = facesim::mesh::cross(u, v);
-    facesim::mesh::dot(u, v) / norm(cr).max(1e-300)
+    let cr = facesim::vec3::cross(u, v);
+    facesim::vec3::dot(u, v) / norm(cr).max(1e-300)
 }
 
 /// The surface's springs (a, b, stiffness, rest length), a < b, sorted so that the force sums
@@ -66,7 +67,7 @@ fn surface_springs(skin: &Mesh, alpha: f64, beta: f64) -> Vec<(usize, usize, f64
     }
     for ((b, c), opp) in opposite {
         if let [p, q] = opp[..] {
-            let l2 = facesim::mesh::dot(
+            let l2 = facesim::vec3::dot(
                 sub(x0[b as usize], x0[c as usize]),
                 sub(x0[b as usize], x0[c as usize]),
             )

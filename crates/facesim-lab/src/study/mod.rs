@@ -17,8 +17,8 @@ pub mod chart;
 pub mod face;
 pub mod mass_spring;
 pub mod metrics;
-// The facial regions moved to the product crate (the sweep uses them too).
-pub use facesim::regions;
+// The facial regions without landmarks live in the product crate (the sweep's fallback too).
+pub use facesim::landmarks::face_regions::profile as regions;
 pub mod volumetric;
 
 use crate::dynamics::{Block, Integrator, MP1, MP2, relative_energy_error};
@@ -462,7 +462,10 @@ fn summary(s: &Study, charts: &[String]) -> String {
         ));
     }
     line("\n## Per facial region (mean / p90 distance to the volumetric reference, mm)\n".into());
-    line("Regions: `crates/facesim/src/regions.rs` (docs/study.md §2).\n".into());
+    line(
+        "Regions: `crates/facesim/src/landmarks/face_regions/profile.rs` (docs/study.md §2).\n"
+            .into(),
+    );
     for cs in &s.face_cases {
         if let Some(rg) = &cs.regions {
             let l = &rg.landmarks;

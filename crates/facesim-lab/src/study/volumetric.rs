@@ -419,8 +419,8 @@ fn lattice_springs(
             (false, true) => cb,
             _ => continue,
         };
-        let dv = facesim::mesh::sub(pos[ib], pos[ia]);
-        let l = facesim::mesh::norm(dv);
+        let dv = facesim::vec3::sub(pos[ib], pos[ia]);
+        let l = facesim::vec3::norm(dv);
         spring(t, ia, ib, c * lat.s / l, dv.map(|x| x / l));
     }
 }
@@ -556,7 +556,7 @@ fn nearest_node(lat: &Lattice, nodes: &Nodes, u: &[f64], base: [i64; 3], p: [f64
                 if index[gi] == usize::MAX {
                     continue;
                 }
-                let dist = facesim::mesh::norm(facesim::mesh::sub(lat.pos(gi), p));
+                let dist = facesim::vec3::norm(facesim::vec3::sub(lat.pos(gi), p));
                 if dist < best.0 {
                     best = (dist, [0, 1, 2].map(|k| u[3 * index[gi] + k]));
                 }

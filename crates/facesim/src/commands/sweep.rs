@@ -4,7 +4,7 @@
 //! a chart `sweep.svg` (drawn by the caller from the returned rows: crates/facesim-lab
 //! `sweep_chart`). Regions and landmarks are the run's (its report.json, which must be there:
 //! the landmarks as it found them and the regions derived from them, docs/landmarks.md); a run
-//! without landmarks falls back to the profile regions of `crate::regions`.
+//! without landmarks falls back to the profile regions of `landmarks::face_regions::profile`.
 //!
 //! ```toml
 //! [[plan]]                      # any number of listed plans
@@ -244,7 +244,7 @@ pub struct SweepRow {
 }
 
 /// The facial regions of the sweep's columns (the landmark regions' names; the fallback
-/// `crate::regions` uses the same names in the same order).
+/// `landmarks::face_regions::profile` uses the same names in the same order).
 pub const REGION_NAMES: [&str; 5] = crate::landmarks::face_regions::NAMES;
 
 /// Per region of [`REGION_NAMES`], its vertices' flags (None: absent), from the run's
@@ -254,7 +254,7 @@ fn region_members(basis: &PlanBasis, run: Option<&RunLandmarks>) -> Vec<Option<V
         let pre = crate::landmarks::positions(lms);
         return crate::landmarks::face_regions::regions(&basis.face_pre, frame, &pre).members;
     }
-    crate::regions::regions(&basis.face_pre)
+    crate::landmarks::face_regions::profile::regions(&basis.face_pre)
         .map(|r| r.members)
         .unwrap_or_else(|| vec![None; REGION_NAMES.len()])
 }
@@ -308,7 +308,7 @@ pub fn evaluate(
         let mag: Vec<f64> = d
             .iter()
             .zip(&basis.face_pre)
-            .map(|(a, b)| crate::mesh::norm(crate::mesh::sub(*a, *b)))
+            .map(|(a, b)| crate::vec3::norm(crate::vec3::sub(*a, *b)))
             .collect();
         let face = stats(mag.iter().copied()).unwrap_or(Stats {
             max: 0.0,

@@ -7,7 +7,8 @@
 //! anteriority.
 
 use crate::compare::SurfaceIndex;
-use crate::mesh::{Mesh, add, cross, dot, norm, scale, sub};
+use crate::mesh::Mesh;
+use crate::vec3::{add, cross, dot, norm, scale, sub};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]

@@ -17,8 +17,9 @@ pub mod measure;
 
 use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::{Error, Result};
-use crate::mesh::{Mesh, norm, sub};
+use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
+use crate::vec3::{norm, sub};
 use serde::de::{Deserializer, MapAccess, Visitor};
 use serde::ser::{SerializeMap, Serializer};
 use serde::{Deserialize, Serialize};

@@ -1,5 +1,6 @@
-//! Triangle meshes (skin and skull surfaces, face scans): the data type, its checks,
-//! and OBJ/PLY input/output. Coordinates are LPS millimetres.
+//! Triangle meshes (skin and skull surfaces, face scans): the data type, its checks, one reader
+//! of every format (OBJ, PLY, STL, legacy VTK, VTP: [`read_mesh`] over
+//! [`model_file::read_model`]) and OBJ/PLY output. Coordinates are LPS millimetres.
 
 pub mod inside;
 pub mod model_file;
@@ -11,6 +12,7 @@ pub mod vtp;
 
 use crate::error::{Error, Result};
 use crate::union_find::UnionFind;
+use crate::vec3::{add, cross, norm, scale, sub};
 use std::collections::HashMap;
 use std::path::Path;
 
@@ -46,29 +48,6 @@ pub struct Mesh {
 pub struct MeshStats {
     pub unreferenced_vertices: usize,
     pub boundary_edges: usize,
-}
-
-pub fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-pub fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-pub fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-pub fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-pub fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-pub fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
 }
 
 /// Two triangles over four points with fractional coordinates: the file-format tests' mesh.
@@ -341,23 +320,13 @@ pub fn one_rings(n: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
     nb
 }
 
-/// Read OBJ or PLY by extension, then check it.
+/// Read a mesh in any format a run writes or 3D Slicer saves (OBJ, PLY, STL, legacy VTK,
+/// VTP; by extension) into LPS, then check it. The one reader of `facesim compare`, `render` and
+/// the read-backs; `facesim run`'s inputs use its first half, [`model_file::read_model`], and
+/// check what each needs. A run's .vtp and .stl say SPACE=LPS, so they read back to face_post's
+/// coordinates (the STL's rounded to f32, its vertices welded in the order triangles use them).
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
-    if !path.is_file() {
-        return Err(Error::input(path, "no such file"));
-    }
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_lowercase())
-        .unwrap_or_default();
-    let mesh = crate::error::guard(path, || match ext.as_str() {
-        "obj" => obj::read(path),
-        "ply" => ply::read(path),
-        _ => Err(Error::input(
-            path,
-            "unknown mesh format (expected .obj or .ply)",
-        )),
-    })?;
+    let mesh = model_file::read_model(path)?;
     mesh.check(path)?;
     Ok(mesh)
 }
@@ -392,6 +361,27 @@ mod tests {
             ],
             vec![[0, 1, 2], [0, 2, 3]],
         )
+    }
+
+    #[test]
+    fn read_mesh_reads_every_format_a_run_writes_to_the_same_mesh() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = two_triangles();
+        let at = |name: &str| dir.path().join(name);
+        write_mesh(&m, &at("m.obj")).unwrap();
+        write_mesh(&m, &at("m.ply")).unwrap();
+        stl::write(&m, &at("m.stl"), "facesim SPACE=LPS").unwrap();
+        vtk::write_legacy(&m, &[], &at("m.vtk")).unwrap();
+        vtp::write_vtp(&m, &[], &at("m.vtp")).unwrap();
+        for name in ["m.obj", "m.ply", "m.stl", "m.vtk", "m.vtp"] {
+            let back = read_mesh(&at(name)).unwrap();
+            // The coordinates are exact in f32, so even the STL reads back bit for bit.
+            assert_eq!(back.vertices, m.vertices, "{name}");
+            assert_eq!(back.triangles, m.triangles, "{name}");
+        }
+        std::fs::write(at("m.off"), "OFF\n").unwrap();
+        let e = read_mesh(&at("m.off")).unwrap_err().to_string();
+        assert!(e.contains("m.off") && e.contains("unknown"), "{e}");
     }
 
     #[test]

@@ -22,8 +22,9 @@ pub fn declared_ras(header: &str) -> Option<bool> {
     }
 }
 
-/// Read a model file by extension (.stl, .ply, .obj, .vtk, .vtp) into LPS; the mesh is not
-/// checked (callers check what they need: a closed surface, a manifold skin).
+/// Read a model file by extension (.stl, .ply, .obj, .vtk, .vtp) into LPS: the format dispatch
+/// of the one mesh reader. The mesh is not checked (callers check what they need: a closed
+/// surface, a manifold skin; [`super::read_mesh`] adds the general check).
 pub fn read_model(path: &Path) -> Result<Mesh> {
     if !path.is_file() {
         return Err(Error::input(path, "no such file"));
@@ -33,10 +34,14 @@ pub fn read_model(path: &Path) -> Result<Mesh> {
         .map(|e| e.to_string_lossy().to_lowercase())
         .unwrap_or_default();
     let head = || -> Result<String> {
-        // The header of a PLY (up to end_header) or the comments of an OBJ are in the first KB.
-        let b = std::fs::read(path).map_err(|e| Error::input(path, e))?;
-        let n = b.len().min(4096);
-        Ok(String::from_utf8_lossy(&b[..n]).into_owned())
+        // The header of a PLY (up to end_header) or the comments of an OBJ are in the first KB:
+        // read only those, not the whole mesh a second time.
+        use std::io::Read;
+        let mut b = Vec::with_capacity(4096);
+        std::fs::File::open(path)
+            .and_then(|f| f.take(4096).read_to_end(&mut b))
+            .map_err(|e| Error::input(path, e))?;
+        Ok(String::from_utf8_lossy(&b).into_owned())
     };
     let (mut mesh, ras) = crate::error::guard(path, || match ext.as_str() {
         "stl" => {

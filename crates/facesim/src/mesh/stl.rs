@@ -106,8 +106,8 @@ pub fn write(mesh: &Mesh, path: &Path, header: &str) -> Result<()> {
         w.write_all(&(mesh.triangles.len() as u32).to_le_bytes())?;
         for t in &mesh.triangles {
             let p = t.map(|v| mesh.vertices[v as usize]);
-            let n = super::cross(super::sub(p[1], p[0]), super::sub(p[2], p[0]));
-            let l = super::norm(n);
+            let n = crate::vec3::cross(crate::vec3::sub(p[1], p[0]), crate::vec3::sub(p[2], p[0]));
+            let l = crate::vec3::norm(n);
             let n = if l > 0.0 { n.map(|c| c / l) } else { n };
             for c in n.iter().chain(p.iter().flatten()) {
                 w.write_all(&(*c as f32).to_le_bytes())?;

@@ -146,7 +146,7 @@ pub fn predict(
                 let offset = still(displacement_of(&fine.vertices, &at_rest));
                 let offset = offset
                     .iter()
-                    .any(|d| crate::mesh::norm(*d) > 1e-9)
+                    .any(|d| crate::vec3::norm(*d) > 1e-9)
                     .then_some(offset);
                 c1::basis(
                     C1Basis {
@@ -184,7 +184,7 @@ fn displacement_of(before: &[[f64; 3]], after: &[[f64; 3]]) -> Vec<[f64; 3]> {
     before
         .iter()
         .zip(after)
-        .map(|(b, a)| crate::mesh::sub(*a, *b))
+        .map(|(b, a)| crate::vec3::sub(*a, *b))
         .collect()
 }
 

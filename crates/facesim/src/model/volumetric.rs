@@ -609,7 +609,7 @@ fn plan_basis(
     basis.run_plan_error_mm = again
         .iter()
         .zip(b.run_face_displacement)
-        .map(|(a, r)| crate::mesh::norm(crate::mesh::sub(*a, *r)))
+        .map(|(a, r)| crate::vec3::norm(crate::vec3::sub(*a, *r)))
         .fold(0.0, f64::max);
     if basis.exact && !(basis.run_plan_error_mm <= 1e-6) {
         basis.exact = false;

@@ -36,7 +36,7 @@ pub fn displacement(pre: &Mesh, post: &Mesh) -> Vec<f64> {
     pre.vertices
         .iter()
         .zip(&post.vertices)
-        .map(|(a, b)| mesh::norm(mesh::sub(*a, *b)))
+        .map(|(a, b)| crate::vec3::norm(crate::vec3::sub(*a, *b)))
         .collect()
 }
 
@@ -84,7 +84,7 @@ pub fn write_face_vtp(p: &Prediction, dist: &[f64], path: &Path) -> Result<()> {
         .vertices
         .iter()
         .zip(&p.face_post.vertices)
-        .flat_map(|(a, b)| mesh::sub(*b, *a))
+        .flat_map(|(a, b)| crate::vec3::sub(*b, *a))
         .collect();
     let arrays = [
         mesh::vtk::PointArray {

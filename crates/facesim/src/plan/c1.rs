@@ -88,7 +88,7 @@ pub fn basis(b: C1Basis, osteotomies: &[Osteotomy]) -> Result<PlanBasis> {
     basis.run_plan_error_mm = again
         .iter()
         .zip(b.run_face_displacement)
-        .map(|(a, r)| crate::mesh::norm(crate::mesh::sub(*a, *r)))
+        .map(|(a, r)| crate::vec3::norm(crate::vec3::sub(*a, *r)))
         .fold(0.0, f64::max);
     basis.warnings.push(format!(
         "linear preview: the plan basis is the {} model linearised at the pre-operative state (its springs are nonlinear); at the run's own plan it is {:.3} mm from the solved face, and the error grows with the square of the move (docs/plan-basis.md)",

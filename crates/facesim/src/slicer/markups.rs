@@ -113,12 +113,12 @@ pub fn parse_plane(v: &Value) -> std::result::Result<Plane, String> {
                 .get(..3)
                 .and_then(|s| <[[f64; 3]; 3]>::try_from(s).ok())
                 .ok_or("a threePoints plane needs 3 control points")?;
-            let (a, b) = (crate::mesh::sub(p1, p0), crate::mesh::sub(p2, p0));
-            (p0, crate::mesh::cross(a, b))
+            let (a, b) = (crate::vec3::sub(p1, p0), crate::vec3::sub(p2, p0));
+            (p0, crate::vec3::cross(a, b))
         }
         other => return Err(format!("planeType '{other}' is not supported")),
     };
-    let n = crate::mesh::norm(normal);
+    let n = crate::vec3::norm(normal);
     if !(n > 1e-12) {
         return Err("the plane's normal is zero".into());
     }

@@ -1,9 +1,10 @@
 //! Plans no skin can follow, refused with the place (impossible-plan errors, not numerics).
 
 use crate::error::{Error, Result};
-use crate::mesh::{Mesh, norm, sub};
+use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
+use crate::vec3::{norm, sub};
 
 /// A plan that moves bone through the skin is impossible, whatever the tissue: after the solve,
 /// no main spring may point the other way than before (skin outside its bone attachment).
@@ -23,7 +24,7 @@ pub(super) fn check_not_through_skin(
     {
         let pre = sub(skin.vertices[s.skin], springs.attachments[s.bone]);
         let post = sub(positions[s.skin], moved[s.bone]);
-        let along = crate::mesh::dot(pre, post) / norm(pre).max(1e-12);
+        let along = crate::vec3::dot(pre, post) / norm(pre).max(1e-12);
         if along <= 0.0 {
             flipped += 1;
             if worst.is_none_or(|(_, a)| along < a) {
@@ -56,7 +57,7 @@ pub(super) fn check_plan_reach(skin: &Mesh, springs: &SpringSet, plan: &Plan) ->
         let pre = sub(skin.vertices[s.skin], springs.attachments[s.bone]);
         let l = norm(pre).max(1e-12);
         // Signed distance of the moved bone point in front of the pre-operative skin.
-        let beyond = -crate::mesh::dot(pre, sub(skin.vertices[s.skin], moved[s.bone])) / l;
+        let beyond = -crate::vec3::dot(pre, sub(skin.vertices[s.skin], moved[s.bone])) / l;
         if beyond > l {
             count += 1;
             if worst.is_none_or(|(_, b, _)| beyond > b) {

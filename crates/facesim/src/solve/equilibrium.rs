@@ -24,7 +24,7 @@ use crate::fem::dofs::Dofs;
 use crate::fem::pcg::pcg;
 use crate::fem::precond::Precond;
 use crate::fem::sparse::SymmetricCsr;
-use crate::mesh::{norm, sub};
+use crate::vec3::{norm, sub};
 use std::collections::HashMap;
 
 /// Relative residual at which load increments before the last stop.

@@ -10,9 +10,9 @@ use super::{Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::sparse::SymmetricCsr;
-use crate::mesh::{norm, sub};
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
+use crate::vec3::{norm, sub};
 
 /// The DOFs of x, y, z after the last load increment, the per-increment records, and the
 /// linearised recursion's responses to `moves` (linearised.rs), on the same factor of K.

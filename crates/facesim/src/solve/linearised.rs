@@ -16,7 +16,7 @@
 //! the square of the move (measured in docs/plan-basis.md).
 
 use super::Problem;
-use crate::mesh::{norm, sub};
+use crate::vec3::{norm, sub};
 
 pub(super) type Block = [[f64; 3]; 3];
 

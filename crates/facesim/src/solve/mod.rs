@@ -19,9 +19,10 @@ use crate::error::{Error, Result};
 use crate::fem::assembly::{FemMesh, rigid_dofs};
 use crate::fem::element::Material;
 use crate::fem::preload::initial_dofs_fields;
-use crate::mesh::{Mesh, norm};
+use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
+use crate::vec3::norm;
 use serde::{Deserialize, Serialize};
 
 /// How the C1 model is solved (the case's `[solve] model`, `crate::case::SolveModel::c1_method`).
@@ -249,7 +250,7 @@ fn materials(skin: &Mesh, p: &Params) -> Vec<Material> {
             let c = t
                 .iter()
                 .fold([0.0; 3], |a, &v| {
-                    crate::mesh::add(a, skin.vertices[v as usize])
+                    crate::vec3::add(a, skin.vertices[v as usize])
                 })
                 .map(|x| x / 3.0);
             let (al, be) = p

@@ -4,7 +4,8 @@
 //! faces match and the surface is watertight and manifold without marching cubes' ambiguous
 //! cases or its 256-entry tables. Vertices on shared edges are welded through an edge map.
 
-use crate::mesh::{Mesh, cross, dot, sub};
+use crate::mesh::Mesh;
+use crate::vec3::{cross, dot, sub};
 use crate::volume::Volume;
 use std::collections::HashMap;
 

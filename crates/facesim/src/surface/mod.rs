@@ -294,7 +294,7 @@ fn keep_largest_piece(m: &mut Mesh) {
 /// flipping each sliver's longest edge: for sliver (a, b, c) with c on ab and neighbour
 /// (b, a, d), the quad a→d→b→c becomes (a, d, c) and (d, b, c). Returns the flips made.
 pub fn flip_slivers(mesh: &mut Mesh) -> usize {
-    use crate::mesh::{cross, norm, sub};
+    use crate::vec3::{cross, norm, sub};
     let diag = mesh.diagonal();
     let tiny = 1e-12 * diag * diag; // the same bound as Mesh::check
     let mut flips = 0;
@@ -468,7 +468,7 @@ mod tests {
         for t in &m.triangles {
             for e in 0..3 {
                 let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
-                let d3 = crate::mesh::norm(crate::mesh::sub(m.vertices[a], m.vertices[b]));
+                let d3 = crate::vec3::norm(crate::vec3::sub(m.vertices[a], m.vertices[b]));
                 let d2 = ((u[a] - u[b]).powi(2) + (v[a] - v[b]).powi(2)).sqrt();
                 assert!((d3 - d2).abs() < 1e-12);
             }

@@ -22,8 +22,9 @@
 //! 5. the piece is wound consistently with its normals pointing away from the axis.
 
 use crate::error::{Error, Result};
-use crate::mesh::{Mesh, cross, norm, sub};
+use crate::mesh::Mesh;
 use crate::union_find::UnionFind;
+use crate::vec3::{cross, norm, sub};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;

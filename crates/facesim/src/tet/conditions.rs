@@ -169,11 +169,11 @@ pub(crate) fn mucosa(
                 return None;
             }
             let tri = skull.triangles[t].map(|v| skull.vertices[v as usize]);
-            let n = crate::mesh::cross(
-                crate::mesh::sub(tri[1], tri[0]),
-                crate::mesh::sub(tri[2], tri[0]),
+            let n = crate::vec3::cross(
+                crate::vec3::sub(tri[1], tri[0]),
+                crate::vec3::sub(tri[2], tri[0]),
             );
-            let len = crate::mesh::norm(n);
+            let len = crate::vec3::norm(n);
             if !(len > 0.0) {
                 return None;
             }
@@ -184,7 +184,7 @@ pub(crate) fn mucosa(
             let bone_move = [0, 1, 2].map(|c| moved[0][c] - q[c]);
             let normal = if which[0] == which[1] {
                 let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
-                let l = crate::mesh::norm(m);
+                let l = crate::vec3::norm(m);
                 m.map(|v| v / l)
             } else {
                 n

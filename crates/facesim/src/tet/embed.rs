@@ -185,8 +185,8 @@ mod tests {
             // Outward: the tet's fourth node lies behind the face.
             let other = tets[*t].iter().find(|n| !f.contains(n)).unwrap();
             let [a, b, c] = f.map(|n| nodes[n as usize]);
-            let nrm = crate::mesh::cross(crate::mesh::sub(b, a), crate::mesh::sub(c, a));
-            let d = crate::mesh::dot(nrm, crate::mesh::sub(nodes[*other as usize], a));
+            let nrm = crate::vec3::cross(crate::vec3::sub(b, a), crate::vec3::sub(c, a));
+            let d = crate::vec3::dot(nrm, crate::vec3::sub(nodes[*other as usize], a));
             assert!(d < 0.0);
         }
     }

@@ -24,9 +24,10 @@
 
 use super::stuffing::{
     ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, NodeKind, Places, Ref, Stuffed, classify, compact,
-    fill, orient, sub,
+    cut_on_edge, fill, orient,
 };
 use crate::error::{Error, Result};
+use crate::vec3::sub;
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -397,52 +398,21 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
     let cuts: Vec<Cut> = pairs
         .par_iter()
         .map(|&(u, w)| {
-            let (a, b) = (pd(u), pd(w));
-            let at = |t: f64| [0, 1, 2].map(|k| a[k] + t * (b[k] - a[k]));
-            let mut tg = f64::INFINITY;
-            if values[w as usize].1 > 0.0 {
-                for k in 0..3 {
-                    for plane in [bg.box_lo[k], bg.box_hi[k]] {
-                        let (ga, gb) = (a[k] - plane, b[k] - plane);
-                        let out = if plane == bg.box_lo[k] {
-                            ga > 0.0 && gb < 0.0
-                        } else {
-                            ga < 0.0 && gb > 0.0
-                        };
-                        if out {
-                            tg = tg.min(ga / (ga - gb));
-                        }
-                    }
-                }
-            }
-            let mut tf = f64::INFINITY;
-            let (mut f0, mut f1) = (values[u as usize].0, values[w as usize].0);
-            if f1 > 0.0 {
-                let (mut t0, mut t1) = (0.0, 1.0);
-                for _ in 0..12 {
-                    let tm = 0.5 * (t0 + t1);
-                    let fm = f(bg.point(at(tm)));
-                    if fm < 0.0 {
-                        (t0, f0) = (tm, fm);
-                    } else {
-                        (t1, f1) = (tm, fm);
-                    }
-                }
-                tf = if f1 > f0 {
-                    t0 + (t1 - t0) * (-f0 / (f1 - f0))
-                } else {
-                    t1
-                };
-            }
-            let (t, kind) = if tf <= tg {
-                (tf, NodeKind::Surface)
-            } else {
-                (tg, NodeKind::Cut)
-            };
+            let (t, kind) = cut_on_edge(
+                pd(u),
+                pd(w),
+                (
+                    values[u as usize].0,
+                    values[w as usize].0,
+                    values[w as usize].1,
+                ),
+                (bg.box_lo, bg.box_hi),
+                |d| f(bg.point(d)),
+            );
             Cut {
                 neg: u,
                 pos: w,
-                t: t.clamp(0.0, 1.0),
+                t,
                 kind,
             }
         })

@@ -18,6 +18,7 @@
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::cholesky::Ordering;
+use crate::vec3::{cross, dot};
 
 /// A node's boundary condition (displacements in mm, LPS).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,18 +45,6 @@ pub struct Frame {
     pub axes: Option<[[f64; 3]; 3]>,
     pub held: usize,
     pub values: [f64; 3],
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 fn unit(v: [f64; 3], node: usize, what: &str) -> Result<[f64; 3]> {

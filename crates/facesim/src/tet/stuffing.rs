@@ -12,7 +12,8 @@
 //!    them are exactly zero and the box's cut faces keep lattice quality (BCC tetrahedra halved
 //!    by the plane; no warping happens there, since those cut points sit mid-edge).
 //! 3. Cut points: on each edge whose ends have strictly opposite signs, the zero of f (bisection
-//!    on f itself, then one secant step) or of g (exact, g is linear on the edge).
+//!    on f itself, then one secant step) or of g (exact, g is linear on the edge): `cut_on_edge`,
+//!    shared with the graded stuffing.
 //! 4. Warping (paper §3): a lattice vertex closer to a cut point on one of its edges than α times
 //!    that edge's length (α_long = 0.24999, α_short = 0.41189) moves onto the nearest such cut
 //!    point and becomes zero; the cut points on its edges disappear.
@@ -40,6 +41,7 @@
 //! the warp flattened or inverted would be a reported numerical failure, never a silent one.
 
 use crate::error::{Error, NumericalKind, Result};
+use crate::vec3::{cross, sub};
 use rayon::prelude::*;
 
 /// Warping thresholds of the paper for the [10.7°, 164.8°] dihedral bounds.
@@ -208,16 +210,65 @@ struct Cut {
     kind: NodeKind,
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+/// Where the edge from a negative point `a` to a positive point `b` (doubled lattice
+/// coordinates, the uniform and the graded stuffing alike) leaves {F < 0}, as the fraction of the
+/// edge from `a` (in [0, 1]) and the kind of the cut: `Surface` where f = 0 comes first, `Cut`
+/// where a face of the box does. `ends` is (f(a), f(b), g(b)); `f_at` is f at a point in
+/// doubled coordinates. f's zero: 12 bisections on f itself, then one secant step in the final
+/// bracket (f is smooth at that scale). The box's: exact, g is linear along each of its planes;
+/// the first plane crossed. `a` is strictly inside the box (it is negative), so only planes `b`
+/// lies strictly beyond can be crossed.
+pub(super) fn cut_on_edge(
+    a: [f64; 3],
+    b: [f64; 3],
+    ends: (f64, f64, f64),
+    (box_lo, box_hi): ([f64; 3], [f64; 3]),
+    f_at: impl Fn([f64; 3]) -> f64,
+) -> (f64, NodeKind) {
+    let (mut f0, mut f1, gb) = ends;
+    let mut tg = f64::INFINITY;
+    if gb > 0.0 {
+        for k in 0..3 {
+            for plane in [box_lo[k], box_hi[k]] {
+                let (ga, gb) = (a[k] - plane, b[k] - plane);
+                let out = if plane == box_lo[k] {
+                    ga > 0.0 && gb < 0.0
+                } else {
+                    ga < 0.0 && gb > 0.0
+                };
+                if out {
+                    tg = tg.min(ga / (ga - gb));
+                }
+            }
+        }
+    }
+    let mut tf = f64::INFINITY;
+    if f1 > 0.0 {
+        let at = |t: f64| [0, 1, 2].map(|k| a[k] + t * (b[k] - a[k]));
+        let (mut t0, mut t1) = (0.0, 1.0);
+        for _ in 0..12 {
+            let tm = 0.5 * (t0 + t1);
+            let fm = f_at(at(tm));
+            if fm < 0.0 {
+                (t0, f0) = (tm, fm);
+            } else {
+                (t1, f1) = (tm, fm);
+            }
+        }
+        tf = if f1 > f0 {
+            t0 + (t1 - t0) * (-f0 / (f1 - f0))
+        } else {
+            t1
+        };
+    }
+    let (t, kind) = if tf <= tg {
+        (tf, NodeKind::Surface)
+    } else {
+        (tg, NodeKind::Cut)
+    };
+    (t.clamp(0.0, 1.0), kind)
 }
-pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
+
 pub(super) fn orient(x: [[f64; 3]; 4]) -> f64 {
     let (a, b, c) = (sub(x[1], x[0]), sub(x[2], x[0]), sub(x[3], x[0]));
     let n = cross(a, b);
@@ -306,53 +357,17 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
                     if sign[w] <= 0 {
                         return None;
                     }
-                    let (a, b) = (du.map(|x| x as f64), dw.map(|x| x as f64));
-                    let at = |t: f64| [0, 1, 2].map(|k| a[k] + t * (b[k] - a[k]));
-                    // The box: g is linear on each of its planes; the first plane crossed.
-                    let mut tg = f64::INFINITY;
-                    if values[w].1 > 0.0 {
-                        for k in 0..3 {
-                            for (plane, out) in
-                                [(lat.box_lo[k], a[k] - b[k]), (lat.box_hi[k], b[k] - a[k])]
-                            {
-                                if out > 0.0 {
-                                    let t = (plane - a[k]).abs() / out;
-                                    if t < tg && (a[k] - plane) * (b[k] - plane) <= 0.0 {
-                                        tg = t;
-                                    }
-                                }
-                            }
-                        }
-                    }
-                    let mut tf = f64::INFINITY;
-                    if values[w].0 > 0.0 {
-                        let (mut t0, mut t1) = (0.0, 1.0);
-                        let (mut f0, mut f1) = (values[u].0, values[w].0);
-                        for _ in 0..12 {
-                            let tm = 0.5 * (t0 + t1);
-                            let fm = f(lat.point(at(tm)));
-                            if fm < 0.0 {
-                                (t0, f0) = (tm, fm);
-                            } else {
-                                (t1, f1) = (tm, fm);
-                            }
-                        }
-                        // One secant step in the final bracket (f is smooth at this scale).
-                        tf = if f1 > f0 {
-                            t0 + (t1 - t0) * (-f0 / (f1 - f0))
-                        } else {
-                            t1
-                        };
-                    }
-                    let (t, kind) = if tf <= tg {
-                        (tf, NodeKind::Surface)
-                    } else {
-                        (tg, NodeKind::Cut)
-                    };
+                    let (t, kind) = cut_on_edge(
+                        du.map(|x| x as f64),
+                        dw.map(|x| x as f64),
+                        (values[u].0, values[w].0, values[w].1),
+                        (lat.box_lo, lat.box_hi),
+                        |d| f(lat.point(d)),
+                    );
                     Some(Cut {
                         from: u,
                         slot,
-                        t: t.clamp(0.0, 1.0),
+                        t,
                         kind,
                     })
                 })

@@ -6,7 +6,7 @@
 //! written in Rust's shortest round-trip form, so [`read`] returns exactly the values written and
 //! a re-solve from the file starts from the model's own numbers.
 //!
-//! The reader reads what [`write`] writes (ASCII DataArrays inside one Piece), which is also what
+//! The reader reads what [`write()`] writes (ASCII DataArrays inside one Piece), which is also what
 //! ParaView writes when told to save ASCII; it is not a general VTK reader.
 
 use crate::error::{Error, Result};
@@ -251,7 +251,7 @@ fn ints(
     writeln!(w, "\n</DataArray>")
 }
 
-/// Read a tets.vtu written by [`write`] (or an ASCII equivalent); every problem is a one-line
+/// Read a tets.vtu written by [`write()`] (or an ASCII equivalent); every problem is a one-line
 /// error naming the file.
 pub fn read(path: &Path) -> Result<TetsVtuOwned> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;

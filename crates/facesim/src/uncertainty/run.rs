@@ -8,8 +8,9 @@ use super::sample::ScrambledHalton;
 use crate::case::Case;
 use crate::error::Result;
 use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
-use crate::mesh::{Mesh, norm, sub};
+use crate::mesh::Mesh;
 use crate::observe::Observer;
+use crate::vec3::{norm, sub};
 use serde::{Deserialize, Serialize};
 
 /// One sample's parameters (those the model samples; the others are absent).

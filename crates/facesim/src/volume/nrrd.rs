@@ -109,7 +109,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Volume> {
                 .ok_or_else(|| bad(format!("space directions '{d}' are not 3 vectors")))?;
             let v = <[[f64; 3]; 3]>::try_from(v)
                 .map_err(|_| bad("space directions must be 3 vectors".into()))?;
-            let sp = v.map(crate::mesh::norm);
+            let sp = v.map(crate::vec3::norm);
             if sp.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
                 return Err(bad("a space direction is zero or not finite".into()));
             }

@@ -1,7 +1,16 @@
-//! Facial regions from the landmarks (docs/landmarks.md "Regions"): nose, upper lip, lower lip,
-//! chin, cheeks, as sets of skin vertices, by height v, lateral offset s and anteriority a in
-//! the head frame. A vertex belongs to at most one region (the first that claims it). A region
-//! whose bounding landmarks are missing is absent, with the reason.
+//! The facial regions — nose, upper lip, lower lip, chin, cheeks, in that order ([`NAMES`]) —
+//! as sets of skin vertices: the one place that names them, orders them and decides membership.
+//! A vertex belongs to at most one region (the first that claims it); a region whose bounding
+//! landmarks are missing is absent, with the reason.
+//!
+//! - [`regions`]: from the run's landmarks (docs/landmarks.md "Regions"), by height v, lateral
+//!   offset s and anteriority a in the head frame. Every run with landmarks uses these: the
+//!   report's per-region statistics, the uncertainty study, the sweep, `compare --regions`.
+//! - [`profile::regions`]: the fallback for a face without landmarks (the solver study's meshes,
+//!   the sweep of a run whose report has none): the same regions from the soft-tissue profile of
+//!   the skin alone, in LPS (anterior −y, superior +z), with the profile's own landmarks.
+
+pub mod profile;
 
 use super::Ordered;
 use super::frame::HeadFrame;

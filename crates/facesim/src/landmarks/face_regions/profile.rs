@@ -1,5 +1,6 @@
-//! Facial regions for the study's and the sweep's per-region statistics (issue 5 item 5: nose, upper lip, lower
-//! lip, chin, cheeks), found on the face itself.
+//! The facial regions of a face without landmarks (the fallback of [`super`]; issue 5 item 5),
+//! found on the skin itself: the solver study's and the landmark-less sweep's per-region
+//! statistics.
 //!
 //! **Head frame.** LPS: anterior is −y, superior +z (facesim reads every CT into LPS). The
 //! midsagittal plane is x = x_m, the middle of the skin's x-extent (2nd–98th percentile) at the
@@ -36,10 +37,9 @@
 //! nose tip instead (Farkas 1994: prn–sn 18 mm, sn–sto 22 mm, sto–sm 20 mm, sm–pg 12 mm), and the
 //! regions say so (`Rule::Proportional`).
 
+/// The region names in report order: the same regions as from the landmarks.
+pub use super::NAMES;
 use serde::Serialize;
-
-/// The region names in report order.
-pub const NAMES: [&str; 5] = ["nose", "upper lip", "lower lip", "chin", "cheeks"];
 
 /// How the landmarks under the nose were found.
 #[derive(Clone, Copy, Debug, Serialize, PartialEq, Eq)]
