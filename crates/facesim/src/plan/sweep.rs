@@ -281,11 +281,13 @@ pub fn run_landmarks(run_dir: &Path) -> Option<RunLandmarks> {
     crate::landmarks::from_report(&run)
 }
 
-/// Write sweep.csv and sweep.svg for evaluated rows into `out` (created).
+/// Write sweep.csv and sweep.svg for evaluated rows into `out`, as one unit
+/// (`output::RunDir`: `out` is replaced whole).
 pub fn write(out: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    write_csv(&out.join("sweep.csv"), basis, rows)?;
-    super::chart::write(&out.join("sweep.svg"), rows)
+    let unit = crate::output::RunDir::create(out)?;
+    write_csv(&unit.path().join("sweep.csv"), basis, rows)?;
+    super::chart::write(&unit.path().join("sweep.svg"), rows)?;
+    unit.commit().map(|_| ())
 }
 
 /// Each plan's face displacement statistics, whole face and per region, and the run's
