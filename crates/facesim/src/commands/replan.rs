@@ -137,9 +137,9 @@ pub fn replan_with(
         Some(replanned),
         warnings,
     );
-    // The writes (each to a temporary name, renamed), report.json last.
-    std::fs::create_dir_all(&out_dir).map_err(|e| Error::output(&out_dir, e))?;
-    let o = &out_dir;
+    // The writes, as one unit swapped in for `out_dir` (`output::RunDir`).
+    let unit = crate::output::RunDir::create(&out_dir)?;
+    let o = unit.path();
     mesh::write_mesh(&post, &o.join("face_post.obj"))?;
     mesh::write_mesh(&post, &o.join("face_post.ply"))?;
     mesh::write_mesh(
@@ -155,7 +155,7 @@ pub fn replan_with(
     }
     outputs::write_report(o, &report)?;
     Ok(Replanned {
-        out_dir,
+        out_dir: unit.commit()?,
         face_post,
         report,
     })

@@ -283,10 +283,12 @@ pub fn run_landmarks(run_dir: &Path) -> Result<Option<RunLandmarks>> {
     Ok(Report::read(&run_dir.join("report.json"))?.located_landmarks())
 }
 
-/// Write sweep.csv for evaluated rows into `out` (created).
+/// Write sweep.csv for evaluated rows into `out`, as one unit (`output::RunDir`: `out` is
+/// replaced whole; the command line draws sweep.svg into it afterwards).
 pub fn write(out: &Path, basis: &PlanBasis, rows: &[SweepRow]) -> Result<()> {
-    std::fs::create_dir_all(out).map_err(|e| Error::output(out, e))?;
-    write_csv(&out.join("sweep.csv"), basis, rows)
+    let unit = crate::output::RunDir::create(out)?;
+    write_csv(&unit.path().join("sweep.csv"), basis, rows)?;
+    unit.commit().map(|_| ())
 }
 
 /// Each plan's face displacement statistics, whole face and per region, and the run's

@@ -6,7 +6,8 @@
 //!   Surfaces + scan ─ face::place ─▶ Face { skin the model is built on, fine skin if coarsened }
 //!   Face + tissues ─ model::build ─▶ Model { springs, plan, rigid skin, solver parameters }
 //!   Model ─ predict::predict ─▶ Prediction { face_post, the C1 solution, embedding }
-//!   everything ─ outputs::write ─▶ the output directory (the only file writes) and report.json
+//!   everything ─ outputs::write ─▶ the output directory (the only file writes) and report.json,
+//!                                 written as one unit (`output::RunDir`)
 //! ```
 //!
 //! Each stage is a function from typed inputs to typed outputs; progress and per-stage cost go
@@ -152,6 +153,10 @@ fn finish(
     mut rec: Recorder,
 ) -> Result<Outcome> {
     let obs = rec.obs;
+    // The outputs are one unit (docs/case.md "Outputs"): written into `unit.path()` and
+    // swapped in for `out_dir` at the end; an error before then leaves `out_dir` as it was.
+    let unit = crate::output::RunDir::create(out_dir)?;
+    let dir = unit.path();
     let name = inputs.case.name.clone().unwrap_or_else(|| {
         files
             .dir
@@ -191,11 +196,11 @@ fn finish(
             })?,
         )
     };
-    outputs::write(out_dir, &scene, &prediction, &dist, case, &mut rec)?;
+    outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
     if let Some(b) = &band {
-        crate::uncertainty::write_band(out_dir, &prediction.face_post, b)?;
+        crate::uncertainty::write_band(dir, &prediction.face_post, b)?;
     }
-    crate::landmarks::markups::write_pre_post(out_dir, &analysis.carried)?;
+    crate::landmarks::markups::write_pre_post(dir, &analysis.carried)?;
     rec.costs.0.push((
         Stage::Total,
         // Stage meters reset the heap high-water mark, so the whole run's peak is the
@@ -221,7 +226,7 @@ fn finish(
     );
     let page_basis = outputs::page_basis(&prediction, case);
     outputs::write_page(
-        out_dir,
+        dir,
         &scene,
         &prediction,
         &report,
@@ -229,7 +234,8 @@ fn finish(
         &analysis,
         band_width.as_deref(),
     )?;
-    outputs::write_report(out_dir, &report)?;
+    outputs::write_report(dir, &report)?;
+    let out_dir = unit.commit()?;
     obs.done();
     let Scene { vol, seg, face, .. } = scene;
     Ok(Outcome {
@@ -239,7 +245,7 @@ fn finish(
         segmentation: seg,
         skin: prediction.skin,
         skull: face.skull,
-        out_dir: out_dir.to_path_buf(),
+        out_dir,
     })
 }
 
