@@ -378,7 +378,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
 
 fn cmd_run(case_dir: &Path, out: Option<&Path>, set: &[String]) -> Result<()> {
     let overrides = facesim::case::overrides_table(set)?;
-    let o = facesim::pipeline::run_with(case_dir, out, &overrides, &Progress::auto())?;
+    let o = facesim::commands::run_with(case_dir, out, &overrides, &Progress::auto())?;
     let r = &o.report;
     println!(
         "{}: {} skin vertices, {} skull vertices in {:.2} s; outputs in {}",

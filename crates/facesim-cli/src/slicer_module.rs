@@ -238,7 +238,7 @@ fn write_case(a: &Args, dir: &Path) -> Result<()> {
 }
 
 /// The predicted face in the format its file name asks for (.vtp, .vtk, .stl, .ply, .obj).
-fn write_face(o: &facesim::pipeline::Outcome, dest: &Path) -> Result<()> {
+fn write_face(o: &facesim::commands::Outcome, dest: &Path) -> Result<()> {
     let disp: Vec<f64> = o
         .skin
         .vertices
@@ -288,7 +288,7 @@ fn run(a: &Args) -> Result<()> {
         let obs = FilterProgress {
             started: AtomicUsize::new(0),
         };
-        let outcome = facesim::pipeline::run(&dir, None, &obs)?;
+        let outcome = facesim::commands::run(&dir, None, &obs)?;
         write_face(&outcome, dest)?;
         if let Some(l) = &a.landmarks {
             // Landmarks exist once facesim detects them (issue 16 item 1); without them the

@@ -161,7 +161,7 @@ fn called_as_slicer_calls_it_the_module_predicts_the_face_of_the_same_plan() {
         ),
     )
     .unwrap();
-    let want = facesim::pipeline::run(&case, None, &facesim::observe::Quiet).unwrap();
+    let want = facesim::commands::run(&case, None, &facesim::observe::Quiet).unwrap();
     let (got, arrays) = mesh::vtp::read_vtp(&face_out).unwrap();
     assert_eq!(got.vertices.len(), want.face_post.vertices.len());
     assert_eq!(got.triangles, want.face_post.triangles);

@@ -11,11 +11,11 @@
 //! accuracy-vs-time chart.
 
 use crate::study::face::FaceRow;
+use facesim::commands::Outcome;
 use facesim::compare::stats;
 use facesim::error::{Error, Result};
 use facesim::observe::Observer;
 use facesim::output::write_bytes_atomic;
-use facesim::pipeline::Outcome;
 use facesim::vec3::{norm, sub};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -147,7 +147,7 @@ impl<'a> Workspace<'a> {
 
 /// The one call into the pipeline, kept alone so that it is easy to re-point.
 fn run_case(dir: PathBuf) -> Result<Outcome> {
-    let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
+    let o = facesim::commands::run(&dir, None, &facesim::observe::Quiet)?;
     let _ = std::fs::remove_dir_all(dir.join("out"));
     Ok(o)
 }

@@ -31,7 +31,7 @@ pub fn run(case_toml: &Path, out: &Path, repeats: usize) -> Result<ReplanBench> 
     // Case::load resolves the case's paths against its directory.
     let (mut case, _) = Case::load(case_toml)?;
     case.solve.model = SolveModel::Tet;
-    let outcome = facesim::pipeline::run_case(case, out, &facesim::observe::Quiet)?;
+    let outcome = facesim::commands::run_case(case, out, &facesim::observe::Quiet)?;
     let run_s = outcome.report.costs.wall_s(facesim::pipeline::Stage::Total);
     let basis_s = outcome
         .report

@@ -160,13 +160,13 @@ fn ct_size(work_dir: &Path, s: f64, progress: &dyn Observer) -> Result<CtSize> {
 }
 
 /// The one call into the pipeline, kept alone so that it is easy to re-point.
-fn run_case(dir: PathBuf) -> Result<facesim::pipeline::Outcome> {
-    let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet)?;
+fn run_case(dir: PathBuf) -> Result<facesim::commands::Outcome> {
+    let o = facesim::commands::run(&dir, None, &facesim::observe::Quiet)?;
     Ok(o)
 }
 
 /// A CT-series point per stage in report.json's `stage_costs`.
-fn stage_points(o: &facesim::pipeline::Outcome, voxels: f64) -> Vec<Point> {
+fn stage_points(o: &facesim::commands::Outcome, voxels: f64) -> Vec<Point> {
     let mut points = Vec::new();
     for (stage, c) in &o.report.costs.0 {
         points.push(Point {

@@ -97,7 +97,7 @@ fn run(
         let out = out.unwrap_or_else(|| dir.join("out"));
         work(py, threads, move || {
             let case = Case::from_text(&text, &file, &dir)?;
-            facesim::pipeline::run_parsed(case, &file, &dir, &out, &Quiet)
+            facesim::commands::run_parsed(case, &file, &dir, &out, &Quiet)
         })?
     } else {
         if base_dir.is_some() {
@@ -107,7 +107,7 @@ fn run(
         }
         let path = path_of(case)?;
         work(py, threads, move || {
-            facesim::pipeline::run(&path, out.as_deref(), &Quiet)
+            facesim::commands::run(&path, out.as_deref(), &Quiet)
         })?
     };
     results::from_run(py, &outcome, started)

@@ -77,10 +77,7 @@ fn distances(pre: &[[f64; 3]], post: &[[f64; 3]]) -> Vec<f64> {
 
 /// The report as the Python object `json.loads` makes of report.json, keys in sorted order as
 /// they have always been (made through a sorted JSON map).
-fn json<'py>(
-    py: Python<'py>,
-    report: &facesim::pipeline::report::Report,
-) -> PyResult<Bound<'py, PyAny>> {
+fn json<'py>(py: Python<'py>, report: &facesim::report::Report) -> PyResult<Bound<'py, PyAny>> {
     let err = |e: serde_json::Error| crate::FacesimError::new_err(format!("report: {e}"));
     let text = serde_json::to_value(report)
         .and_then(|v| serde_json::to_string(&v))
@@ -92,7 +89,7 @@ fn json<'py>(
 /// order since it was first made from report.json as a sorted JSON map).
 fn landmarks<'py>(
     py: Python<'py>,
-    report: &facesim::pipeline::report::Report,
+    report: &facesim::report::Report,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let mut carried: Vec<_> = report.landmarks.0.iter().collect();
@@ -150,7 +147,7 @@ fn band<'py>(py: Python<'py>, out_dir: &Path, since: SystemTime) -> PyResult<Bou
 /// A run's outputs (`since`: when the run started).
 pub fn from_run(
     py: Python<'_>,
-    o: &facesim::pipeline::Outcome,
+    o: &facesim::commands::Outcome,
     since: SystemTime,
 ) -> PyResult<Result> {
     Ok(Result {

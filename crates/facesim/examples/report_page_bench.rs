@@ -15,7 +15,7 @@ fn main() -> facesim::Result<()> {
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from("target/report-page-bench"));
     let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real/case.toml");
-    let o = facesim::pipeline::run(&case, Some(&out), &Quiet)?;
+    let o = facesim::commands::run(&case, Some(&out), &Quiet)?;
     let face = &o.skin.vertices;
     let osteotomy = &o
         .report

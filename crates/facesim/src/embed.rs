@@ -20,12 +20,14 @@
 //! - The dynamic part of the paper (§3, vibration around the goal positions) does not apply to a
 //!   static prediction and is not built.
 
+use crate::compare::DistanceStats;
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::mesh::Mesh;
 use crate::vec3::{add, cross, dot, norm, scale, sub};
 use nalgebra::Matrix3;
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
 
 /// The rest shell and the factorised offset fit (eq. 1), ready to deform many times.
 pub struct Shell {
@@ -406,4 +408,12 @@ impl Shell {
     pub fn rest(&self) -> &[[f64; 3]] {
         &self.rest
     }
+}
+
+/// The shell embedding that carried the full skin along the coarse answer.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct EmbeddingReport {
+    pub shell_mm: f64,
+    pub poisson: f64,
+    pub fine_to_coarse_mm: DistanceStats,
 }

@@ -5,7 +5,7 @@
 //! case.toml over pipeline/defaults.toml; `volume` reads the CT; `segment` finds the tissues;
 //! `surface` makes skin and skull meshes; `springs`, `fem`, `osteotomy` and `solve` make and solve
 //! the C1 model (docs/pipeline.md); `embed` carries a dense skin along a coarse model;
-//! `pipeline::outputs` writes every file, `pipeline::report` is report.json (both ways);
+//! `commands::outputs` writes every file, `pipeline::report` is report.json (both ways);
 //! `commands` holds `replan` and `sweep`, which work on a run's stored outputs. `mesh` reads
 //! and writes OBJ/PLY, `phantom` makes the analytic test head, `compare` measures mesh
 //! distances, `observe` and `meter` report progress and cost.
@@ -35,6 +35,7 @@ pub mod phantom_cohort;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
+pub mod report;
 pub mod report_page;
 pub mod segment;
 pub mod slicer;

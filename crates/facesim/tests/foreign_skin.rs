@@ -72,10 +72,10 @@ fn foreign_case() -> &'static Path {
 }
 
 /// `facesim run CASE --out OUT --set SETS…`.
-fn run(case: &Path, out: &Path, sets: &[&str]) -> facesim::pipeline::Outcome {
+fn run(case: &Path, out: &Path, sets: &[&str]) -> facesim::commands::Outcome {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let over = facesim::case::overrides_table(&sets).unwrap();
-    facesim::pipeline::run_with(case, Some(out), &over, &facesim::observe::Quiet)
+    facesim::commands::run_with(case, Some(out), &over, &facesim::observe::Quiet)
         .unwrap_or_else(|e| panic!("{sets:?}: {e}"))
 }
 

@@ -65,7 +65,7 @@ fn segmentation_volumes_match_the_analytic_phantom_fit() {
 }
 
 /// Run the pipeline on the phantom with the skin extracted from the CT (no scan).
-fn extracted_skin(method: ExtractMethod, ct: &str) -> facesim::pipeline::Outcome {
+fn extracted_skin(method: ExtractMethod, ct: &str) -> facesim::commands::Outcome {
     let dir = common::kept_dir("facesim-run");
     let dir = &dir;
     let m = if method == ExtractMethod::Marching {
@@ -82,7 +82,7 @@ fn extracted_skin(method: ExtractMethod, ct: &str) -> facesim::pipeline::Outcome
         ),
     )
     .unwrap();
-    facesim::pipeline::run(dir.as_path(), None, &facesim::observe::Quiet).unwrap()
+    facesim::commands::run(dir.as_path(), None, &facesim::observe::Quiet).unwrap()
 }
 
 fn rms_radial(points: &[[f64; 3]]) -> (f64, f64) {

@@ -5,9 +5,9 @@ mod common;
 
 use common::phantom_dir;
 use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
+use facesim::commands::{self, Outcome};
 use facesim::error::Error;
 use facesim::observe::Quiet;
-use facesim::pipeline::{self, Outcome};
 use std::path::PathBuf;
 
 /// The phantom case of data-samples/phantom, built in memory (no case.toml).
@@ -40,7 +40,7 @@ const TET_SKIPS: [&str; 1] = ["coarsen"];
 const MOVABLE: ([f64; 3], f64) = ([0.0, -60.0, -45.0], 70.0);
 
 fn run(case: Case) -> facesim::Result<Outcome> {
-    pipeline::run_case(case, &common::kept_dir("facesim-pipeline"), &Quiet)
+    commands::run_case(case, &common::kept_dir("facesim-pipeline"), &Quiet)
 }
 
 fn displacement(o: &Outcome) -> Vec<f64> {

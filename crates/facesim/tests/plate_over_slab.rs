@@ -101,7 +101,7 @@ translate = [0.0, 0.0, {LIFT}]
     mesh.vertices.len()
 }
 
-fn centre_lift(o: &facesim::pipeline::Outcome) -> (f64, f64) {
+fn centre_lift(o: &facesim::commands::Outcome) -> (f64, f64) {
     let c = (0..o.skin.vertices.len())
         .min_by(|&a, &b| {
             let d = |i: usize| o.skin.vertices[i][0].powi(2) + o.skin.vertices[i][1].powi(2);
@@ -121,7 +121,7 @@ fn koch1996_lift_gives_the_clamped_plate_deflection() {
     let d = tempfile::tempdir().unwrap();
     let k_c = 1e-6;
     write_case(d.path(), "koch1996", "koch_k_c", k_c);
-    let o = facesim::pipeline::run(d.path(), None, &facesim::observe::Quiet).unwrap();
+    let o = facesim::commands::run(d.path(), None, &facesim::observe::Quiet).unwrap();
     let (w, c) = centre_lift(&o);
     // eq. 20 with k_i = Σ areas around i (3× the vertex's share) and a lift δ: a uniform load
     // q = 3 k_c c δ per unit area, lumped at the nodes.
@@ -140,7 +140,7 @@ fn equilibrium_lift_gives_the_clamped_plate_on_a_foundation() {
     // Springs and bending of the same order: 0.00126 κ a⁴ / D ≈ 1.
     let k_c = 1e-6;
     write_case(d.path(), "equilibrium", "k_c", k_c);
-    let o = facesim::pipeline::run(d.path(), None, &facesim::observe::Quiet).unwrap();
+    let o = facesim::commands::run(d.path(), None, &facesim::observe::Quiet).unwrap();
     let (w, c) = centre_lift(&o);
     // Linearised: D∇⁴w + κ (w − δ) = 0 with κ = 3 k_c c per area (lumped springs): the clamped
     // plate on a Winkler foundation κ under q = κ δ. Reference: the C1 plate solver with that

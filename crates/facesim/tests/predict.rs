@@ -27,8 +27,8 @@ fn case(extra: &str) -> PathBuf {
     d
 }
 
-fn run(extra: &str) -> facesim::pipeline::Outcome {
-    facesim::pipeline::run(&case(extra), None, &facesim::observe::Quiet).unwrap()
+fn run(extra: &str) -> facesim::commands::Outcome {
+    facesim::commands::run(&case(extra), None, &facesim::observe::Quiet).unwrap()
 }
 
 #[test]
@@ -98,7 +98,7 @@ fn whole_skull(t: [f64; 3]) -> String {
 }
 
 /// Worst |(x_post − x_pre) − t| over the skin (mm).
-fn translation_error(o: &facesim::pipeline::Outcome, t: [f64; 3]) -> f64 {
+fn translation_error(o: &facesim::commands::Outcome, t: [f64; 3]) -> f64 {
     o.skin
         .vertices
         .iter()
@@ -118,7 +118,7 @@ fn whole_skull_translated_moves_the_skin_rigidly() {
     assert!(worst < 1e-3 * tn, "{worst}");
 }
 
-fn displacement(o: &facesim::pipeline::Outcome) -> Vec<[f64; 3]> {
+fn displacement(o: &facesim::commands::Outcome) -> Vec<[f64; 3]> {
     o.skin
         .vertices
         .iter()
@@ -183,7 +183,7 @@ fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
             format!("{text}[solve]\nmodel = \"{model}\"\n"),
         )
         .unwrap();
-        let o = facesim::pipeline::run(&case_dir, None, &facesim::observe::Quiet).unwrap();
+        let o = facesim::commands::run(&case_dir, None, &facesim::observe::Quiet).unwrap();
         let d = displacement(&o);
         let v = &o.skin.vertices;
         let scale = d
@@ -233,7 +233,7 @@ fn two_mesh_densities_give_the_same_displacement_field() {
             format!("[ct]\npath = \"{}\"\n[skin]\npath = \"scan.ply\"\n[solve]\nmodel = \"{model}\"\n{MANDIBLE}translate = [0.0, -3.0, 0.0]\n", ct.display()),
         )
         .unwrap();
-            facesim::pipeline::run(&d, None, &facesim::observe::Quiet).unwrap()
+            facesim::commands::run(&d, None, &facesim::observe::Quiet).unwrap()
         };
         let coarse = run_scan(3.0);
         let fine = run_scan(2.0);
@@ -316,7 +316,7 @@ fn the_predicted_face_does_not_depend_on_the_load_increments() {
     // path; the solver therefore converges only the last increment to the tolerance (earlier
     // ones stop at 1e-2, src/solve.rs). One increment, two and four must give the same face.
     let plan = format!("{MANDIBLE}translate = [0.0, -6.0, 0.0]\n");
-    let faces: Vec<facesim::pipeline::Outcome> = [1, 2, 4]
+    let faces: Vec<facesim::commands::Outcome> = [1, 2, 4]
         .iter()
         .map(|n| {
             run(&format!(
@@ -376,7 +376,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     let dir = dense_case(&format!(
         "{skull}[solve]\nmodel = \"equilibrium\"\ncoarse_triangles = 4000\n"
     ));
-    let o = facesim::pipeline::run(&dir, None, &facesim::observe::Quiet).unwrap();
+    let o = facesim::commands::run(&dir, None, &facesim::observe::Quiet).unwrap();
     let coarse = o.report.surfaces.coarse.as_ref().unwrap();
     let (nc, nf) = (coarse.triangles, coarse.fine_triangles);
     assert!(
@@ -401,7 +401,7 @@ fn a_coarse_model_carries_the_full_scan_rigidly_and_keeps_rigid_skin_exact() {
     let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
                 [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\
                 translate = [0.0, -6.0, 0.0]\n[solve]\nmodel = \"equilibrium\"\ncoarse_triangles = 4000\n";
-    let o = facesim::pipeline::run(&dense_case(plan), None, &facesim::observe::Quiet).unwrap();
+    let o = facesim::commands::run(&dense_case(plan), None, &facesim::observe::Quiet).unwrap();
     let inside = |p: &[f64; 3]| {
         (p[0]).powi(2) + (p[1] + 60.0).powi(2) + (p[2] + 45.0).powi(2) <= 70.0f64.powi(2)
     };

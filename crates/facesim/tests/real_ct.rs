@@ -9,7 +9,7 @@ use facesim::surface::rangescan;
 use facesim::volume::read_volume;
 use std::path::Path;
 
-fn run_real(extra: &str) -> facesim::pipeline::Outcome {
+fn run_real(extra: &str) -> facesim::commands::Outcome {
     let ct = common::real_ct();
     let dir = common::kept_dir("facesim-real");
     std::fs::write(
@@ -17,7 +17,7 @@ fn run_real(extra: &str) -> facesim::pipeline::Outcome {
         format!("[ct]\npath = \"{}\"\n{extra}", ct.display()),
     )
     .unwrap();
-    facesim::pipeline::run(&dir, None, &facesim::observe::Quiet).unwrap()
+    facesim::commands::run(&dir, None, &facesim::observe::Quiet).unwrap()
 }
 
 #[test]
@@ -185,7 +185,7 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
     let ct = common::real_ct();
     let case_dir = ct.parent().unwrap();
     let out = tempfile::tempdir().unwrap();
-    let o = facesim::pipeline::run(case_dir, Some(out.path()), &facesim::observe::Quiet).unwrap();
+    let o = facesim::commands::run(case_dir, Some(out.path()), &facesim::observe::Quiet).unwrap();
     let pre = &o.skin.vertices;
     let post = &o.face_post.vertices;
     let tip = (0..pre.len())
@@ -242,7 +242,7 @@ fn a_stiffer_nose_region_deforms_less() {
         ) + "\n[solve]\nmodel = \"equilibrium\"\n"
             + extra;
         std::fs::write(d.path().join("case.toml"), text).unwrap();
-        let o = facesim::pipeline::run(d.path(), None, &facesim::observe::Quiet).unwrap();
+        let o = facesim::commands::run(d.path(), None, &facesim::observe::Quiet).unwrap();
         let v = &o.skin.vertices;
         let tip = (0..v.len())
             .min_by(|&a, &b| v[a][1].total_cmp(&v[b][1]))

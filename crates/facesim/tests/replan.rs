@@ -9,13 +9,13 @@ mod browser;
 mod common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
+use facesim::commands::{self, Outcome};
 use facesim::commands::{replan, sweep};
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
 use facesim::phantom_jaws::{self, JawsOptions};
-use facesim::pipeline::report::Report;
-use facesim::pipeline::{self, Outcome};
 use facesim::plan::file;
+use facesim::report::Report;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -69,7 +69,7 @@ fn two_segments(moves: [([f64; 3], [f64; 3], [f64; 3]); 2]) -> Vec<Osteotomy> {
 fn run_plan(osteotomy: Vec<Osteotomy>, prefix: &str) -> Outcome {
     let mut case = jaws_case();
     case.osteotomy = osteotomy;
-    pipeline::run_case(case, &common::kept_dir(prefix), &Quiet).unwrap()
+    commands::run_case(case, &common::kept_dir(prefix), &Quiet).unwrap()
 }
 
 /// The run whose basis the tests re-plan from: both segments advanced.

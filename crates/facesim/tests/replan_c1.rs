@@ -7,6 +7,7 @@
 mod common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
+use facesim::commands;
 use facesim::commands::replan;
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
@@ -141,7 +142,7 @@ fn on_a_coarse_skin_the_carried_face_is_linearised_too() {
 fn a_c1_run_replans_end_to_end_as_a_linear_preview() {
     let case = phantom_case(SolveModel::Equilibrium);
     let out = common::kept_dir("facesim-replan-c1");
-    let run = pipeline::run_case(case.clone(), &out, &Quiet).unwrap();
+    let run = commands::run_case(case.clone(), &out, &Quiet).unwrap();
     let report = run.report.plan_basis.as_ref().unwrap();
     assert_eq!(report.model, "c1-linearised");
     assert!(!report.exact);
@@ -176,7 +177,7 @@ fn a_c1_run_replans_end_to_end_as_a_linear_preview() {
     let r = replan::replan(&out, &plan_file, None).unwrap();
     let mut full_case = case;
     full_case.osteotomy = plan;
-    let full = pipeline::run_case(
+    let full = commands::run_case(
         full_case,
         &common::kept_dir("facesim-replan-c1-full"),
         &Quiet,

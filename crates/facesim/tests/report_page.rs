@@ -219,7 +219,7 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
 }
 
 /// Run the capsule phantom with the linear volumetric model, the mandible moved by `translate`.
-fn tet_run(translate: [f64; 3], out: &Path) -> facesim::pipeline::Outcome {
+fn tet_run(translate: [f64; 3], out: &Path) -> facesim::commands::Outcome {
     let (mut case, _) = Case::load(&common::phantom_dir().join("case.toml")).unwrap();
     case.solve.model = SolveModel::Tet;
     case.tet.sliding = false;
@@ -228,7 +228,7 @@ fn tet_run(translate: [f64; 3], out: &Path) -> facesim::pipeline::Outcome {
     case.osteotomy.truncate(1);
     case.osteotomy[0].translate = translate;
     case.osteotomy[0].rotate_deg = [0.0; 3];
-    facesim::pipeline::run_case(case, out, &Quiet).unwrap()
+    facesim::commands::run_case(case, out, &Quiet).unwrap()
 }
 
 #[test]
@@ -242,7 +242,7 @@ fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
     let x_plan = [0.0, -3.0, 2.0];
     let x = tet_run(x_plan, &dir.join("x"));
     assert_eq!(y.skin.vertices, x.skin.vertices);
-    let column = |o: &facesim::pipeline::Outcome, per: f64| -> Vec<[f64; 3]> {
+    let column = |o: &facesim::commands::Outcome, per: f64| -> Vec<[f64; 3]> {
         o.face_post
             .vertices
             .iter()

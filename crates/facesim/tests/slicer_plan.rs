@@ -280,8 +280,8 @@ fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
     )
     .unwrap();
     let quiet = facesim::observe::Quiet;
-    let a = facesim::pipeline::run(&numbers, None, &quiet).unwrap();
-    let b = facesim::pipeline::run(&files, None, &quiet).unwrap();
+    let a = facesim::commands::run(&numbers, None, &quiet).unwrap();
+    let b = facesim::commands::run(&files, None, &quiet).unwrap();
     assert_eq!(a.face_post.vertices.len(), b.face_post.vertices.len());
     let mut dmax = 0.0f64;
     for (p, q) in a.face_post.vertices.iter().zip(&b.face_post.vertices) {

@@ -7,8 +7,8 @@
 mod common;
 
 use facesim::case::{Case, SolveModel};
+use facesim::commands::{self, Outcome};
 use facesim::observe::Quiet;
-use facesim::pipeline::{self, Outcome};
 use facesim::uncertainty::distributions::{Chance, Range};
 use std::path::Path;
 
@@ -32,7 +32,7 @@ fn points(c: &mut Case, samples: usize, nu: f64, muscle_fat: f64, skin_fat: f64,
 }
 
 fn run(c: Case, name: &str) -> Outcome {
-    pipeline::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+    commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
 }
 
 fn json(o: &Outcome) -> serde_json::Value {

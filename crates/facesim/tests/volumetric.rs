@@ -6,8 +6,8 @@
 mod common;
 
 use facesim::case::{Case, Region};
+use facesim::commands::{self, Outcome};
 use facesim::observe::Quiet;
-use facesim::pipeline::{self, Outcome};
 
 fn case(region: Region, translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
     common::coarse_tet_phantom("volumetric", region, translate, rotate_deg)
@@ -33,7 +33,7 @@ fn whole_skull(translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
 }
 
 fn run(c: Case, name: &str) -> Outcome {
-    pipeline::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+    commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
 }
 
 fn moves(o: &Outcome) -> Vec<[f64; 3]> {

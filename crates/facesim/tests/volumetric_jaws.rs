@@ -6,10 +6,10 @@
 mod common;
 
 use facesim::case::{Case, SolveModel};
+use facesim::commands::{self, Outcome};
 use facesim::observe::Quiet;
 use facesim::phantom::PhantomOptions;
 use facesim::phantom_jaws::{self, JawsOptions};
-use facesim::pipeline::{self, Outcome};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
@@ -35,7 +35,7 @@ fn run(file: &str, sliding: bool) -> Outcome {
     case.tet.skin_size_mm = 6.0;
     case.tet.deep_size_mm = 12.0;
     case.tet.sliding = sliding;
-    pipeline::run_case(case, &common::kept_dir("facesim-jaws-run"), &Quiet).unwrap()
+    commands::run_case(case, &common::kept_dir("facesim-jaws-run"), &Quiet).unwrap()
 }
 
 /// The displacement of the face vertex nearest the named landmark.

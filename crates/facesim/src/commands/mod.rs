@@ -1,10 +1,16 @@
-//! Commands above the library's stages: they read a run's stored outputs (its plan basis and
-//! report.json), call the plan basis and write their own outputs, without running a stage.
+//! Commands above the library's stages and models: each reads its inputs, calls the stages, the
+//! model or a run's stored plan basis, and writes its own outputs as one unit.
 //!
+//! - [`run`]: `facesim run` (the pipeline, the model, landmarks, uncertainty; every output file and
+//!   report.json, written by [`outputs`]);
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/plan-basis.md);
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
 //!   library carries no chart crate.
 
+pub mod outputs;
 pub mod replan;
+pub mod run;
 pub mod sweep;
+
+pub use run::{Outcome, run, run_case, run_parsed, run_with};

@@ -1,12 +1,12 @@
 //! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/case.md): the face outputs of `run` for
 //! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving.
 
+use super::outputs;
 use crate::case::{Osteotomy, Region};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
-use crate::pipeline::outputs;
-use crate::pipeline::report::{self, ReplanReport, Report};
 use crate::plan::{PlanBasis, file};
+use crate::report::{self, ReplanReport, Report};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 

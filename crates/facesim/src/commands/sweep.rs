@@ -24,8 +24,8 @@
 use crate::case::Osteotomy;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
-use crate::pipeline::report::Report;
 use crate::plan::{PlanBasis, file};
+use crate::report::Report;
 use serde::Deserialize;
 use std::path::Path;
 

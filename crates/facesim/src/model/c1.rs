@@ -4,12 +4,12 @@
 
 use super::{Prediction, Solved};
 use crate::case::Case;
+use crate::embed::EmbeddingReport;
 use crate::embed::{Embedding, Shell};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;
 use crate::pipeline::model::rigid_mask;
-use crate::pipeline::report::EmbeddingReport;
 use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::c1::{self, C1Basis};

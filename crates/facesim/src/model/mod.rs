@@ -13,10 +13,10 @@ pub mod c1;
 pub mod volumetric;
 
 use crate::case::Case;
+use crate::embed::EmbeddingReport;
 use crate::error::Result;
 use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;
-use crate::pipeline::report::EmbeddingReport;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::PlanBasis;
 use std::path::Path;

@@ -3,9 +3,8 @@
 //! coarse (u, v)-grid copy and carried along afterwards (docs/pipeline.md §5, paper 002).
 
 use super::Recorder;
-use super::report::{CoarseReport, SurfaceReport};
 use super::stage::Stage;
-use super::surfaces::Surfaces;
+use super::surfaces::{CoarseReport, SurfaceReport, Surfaces};
 use crate::case::{Case, Parameterization};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;

@@ -3,14 +3,16 @@
 //! optional smoothing and decimation, and the (u, v) parameterisation the C1 model needs.
 
 use super::Recorder;
-use super::report::SurfaceReport;
 use super::stage::Stage;
 use crate::case::{Case, ExtractMethod, Parameterization};
+use crate::compare::DistanceStats;
+use crate::embed::EmbeddingReport;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::segment::Segmentation;
 use crate::surface::{self, marching, rangescan};
 use crate::volume::Volume;
+use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The extracted skin and skull, with the cylinder (axis (x, y), radius) of the (u, v) map.
@@ -210,4 +212,49 @@ pub fn drop_small_components(m: &mut Mesh, min_fraction: f64) -> usize {
         .collect();
     m.compact();
     keep.iter().filter(|k| !**k).count()
+}
+
+/// How the skin and skull were made, and what was dropped or changed on the way.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct SurfaceReport {
+    /// "rangescan" or "marching".
+    pub method: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rays: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_misses: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skull_misses: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub axis_xy: Option<[f64; 2]>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub r0: Option<f64>,
+    pub skin_islands_dropped: usize,
+    pub skull_islands_dropped: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skin_decimation_error_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub skull_decimation_error_mm: Option<f64>,
+    pub extracted_skin_components: usize,
+    pub skull_components: usize,
+    /// A given face scan's distance to the CT's skin.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scan_to_ct_skin_mm: Option<DistanceStats>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coarse: Option<CoarseReport>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub embedding: Option<EmbeddingReport>,
+    /// A given skin that was not a clean face (another program's iso-surface): what keeping
+    /// its outer face dropped (surface::outer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub foreign_skin: Option<crate::surface::outer::OuterReport>,
+}
+
+/// The coarse copy a dense skin was solved on (`[solve] coarse_triangles`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CoarseReport {
+    pub triangles: usize,
+    pub vertices: usize,
+    pub fine_triangles: usize,
+    pub fine_vertices: usize,
 }

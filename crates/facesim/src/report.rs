@@ -3,14 +3,14 @@
 //! report is built (for a run and for `facesim replan`), [`Report::read`] the one place a report
 //! is read back. Stage costs are kept in pipeline order ([`super::stage`]).
 
-use super::stage::{Costs, Skipped};
 use crate::case::{Case, Osteotomy};
-use crate::compare::DistanceStats;
 use crate::error::{Error, Result};
 use crate::landmarks::face_regions::RegionStats;
 use crate::landmarks::measure::{Measure, Ratio};
 use crate::landmarks::{Analysis, Carried, HeadFrame, Landmark, Ordered};
 use crate::model::TetReport;
+use crate::pipeline::stage::{Costs, Skipped};
+use crate::pipeline::surfaces::SurfaceReport;
 use crate::plan::PlanBasis;
 use crate::segment::SegmentReport;
 use crate::solve::StepRecord;
@@ -36,59 +36,6 @@ pub struct Counts {
     pub solved_vertices: usize,
     /// The process's peak resident set (MB) at the end of the run.
     pub max_rss_mb: f64,
-}
-
-/// How the skin and skull were made, and what was dropped or changed on the way.
-#[derive(Clone, Debug, Default, Serialize, Deserialize)]
-pub struct SurfaceReport {
-    /// "rangescan" or "marching".
-    pub method: String,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub rays: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skin_misses: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skull_misses: Option<usize>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub axis_xy: Option<[f64; 2]>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub r0: Option<f64>,
-    pub skin_islands_dropped: usize,
-    pub skull_islands_dropped: usize,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skin_decimation_error_mm: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub skull_decimation_error_mm: Option<f64>,
-    pub extracted_skin_components: usize,
-    pub skull_components: usize,
-    /// A given face scan's distance to the CT's skin.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub scan_to_ct_skin_mm: Option<DistanceStats>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub coarse: Option<CoarseReport>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub embedding: Option<EmbeddingReport>,
-    /// A given skin that was not a clean face (another program's iso-surface): what keeping
-    /// its outer face dropped (surface::outer).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub foreign_skin: Option<crate::surface::outer::OuterReport>,
-}
-
-/// The coarse copy a dense skin was solved on (`[solve] coarse_triangles`).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct CoarseReport {
-    pub triangles: usize,
-    pub vertices: usize,
-    pub fine_triangles: usize,
-    pub fine_vertices: usize,
-}
-
-/// The shell embedding that carried the full skin along the coarse answer.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct EmbeddingReport {
-    pub shell_mm: f64,
-    pub poisson: f64,
-    pub fine_to_coarse_mm: DistanceStats,
 }
 
 /// |x_post − x_pre| over the skin (mm), and the colour scale of face_displacement.ply.

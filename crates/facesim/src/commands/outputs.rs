@@ -1,14 +1,14 @@
 //! The one module that writes a run's files (docs/case.md "Outputs"): each to a temporary name and
 //! renamed, independent files in parallel, report.json last.
 
-use super::report::Report;
-use super::stage::Stage;
-use super::{Recorder, Scene};
 use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
 use crate::model::Prediction;
 use crate::output::write_bytes_atomic;
+use crate::pipeline::stage::Stage;
+use crate::pipeline::{Recorder, Scene};
+use crate::report::Report;
 use crate::volume;
 use std::path::Path;
 

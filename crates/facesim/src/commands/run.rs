@@ -1,0 +1,242 @@
+//! `facesim run` (docs/case.md): read the case, run the stages (`crate::pipeline`), predict the
+//! face with the case's model (`crate::model`), find the landmarks, sample the tissue parameters
+//! when asked, and write every output as one unit (`outputs`, `crate::output::RunDir`) with
+//! report.json assembled once (`crate::report`).
+
+use super::outputs;
+use crate::case::Case;
+use crate::error::Result;
+use crate::mesh::Mesh;
+use crate::meter::Meter;
+use crate::observe::Observer;
+use crate::pipeline::{Recorder, Scene, Stage, inputs, prepare};
+use crate::report::{self, Counts, Report, RunSections};
+use crate::segment::Segmentation;
+use crate::volume::Volume;
+use std::path::{Path, PathBuf};
+
+/// Everything a run produced, kept in memory for callers (tests, the study, bindings).
+pub struct Outcome {
+    pub report: Report,
+    /// The predicted skin, same vertex order as `skin`.
+    pub face_post: Mesh,
+    pub volume: Volume,
+    pub segmentation: Segmentation,
+    pub skin: Mesh,
+    pub skull: Mesh,
+    pub out_dir: PathBuf,
+}
+
+/// `facesim run`: read the case, run every stage, write every output into `out` (default
+/// `CASE_DIR/out`).
+pub fn run(case_path: &Path, out: Option<&Path>, obs: &dyn Observer) -> Result<Outcome> {
+    run_with(case_path, out, &toml::Table::new(), obs)
+}
+
+/// `run` with `overrides` (`case::overrides_table`, the CLI's `--set`) laid over the case file.
+pub fn run_with(
+    case_path: &Path,
+    out: Option<&Path>,
+    overrides: &toml::Table,
+    obs: &dyn Observer,
+) -> Result<Outcome> {
+    let total = Meter::start(obs.heap());
+    let mut rec = Recorder::new(obs);
+    let (inputs, files) = inputs::read_with(case_path, overrides, &mut rec)?;
+    let out_dir = out
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| files.dir.join("out"));
+    finish(inputs, &files, &out_dir, total, rec)
+}
+
+/// Run a case built in memory (`Case { ct, ..Case::default() }`; paths absolute or relative to
+/// the working directory) and write its outputs into `out_dir`.
+pub fn run_case(case: Case, out_dir: &Path, obs: &dyn Observer) -> Result<Outcome> {
+    let total = Meter::start(obs.heap());
+    let mut rec = Recorder::new(obs);
+    let files = inputs::CaseFiles::in_memory(&case);
+    let inputs = inputs::read_case(case, &mut rec)?;
+    finish(inputs, &files, out_dir, total, rec)
+}
+
+/// Run a case parsed from text ([`Case::from_text`]; the Python package's case given as a
+/// dict): `case_file` names it in errors, `dir` is its directory; outputs go into `out_dir`.
+pub fn run_parsed(
+    case: Case,
+    case_file: &Path,
+    dir: &Path,
+    out_dir: &Path,
+    obs: &dyn Observer,
+) -> Result<Outcome> {
+    let total = Meter::start(obs.heap());
+    let mut rec = Recorder::new(obs);
+    let files = inputs::CaseFiles {
+        dir: dir.to_path_buf(),
+        case_file: case_file.to_path_buf(),
+        ..inputs::CaseFiles::in_memory(&case)
+    };
+    let inputs = inputs::read_case(case, &mut rec)?;
+    finish(inputs, &files, out_dir, total, rec)
+}
+
+/// Stages 2–5, the outputs and report.json, for read inputs.
+fn finish(
+    inputs: inputs::Inputs,
+    files: &inputs::CaseFiles,
+    out_dir: &Path,
+    total: Meter,
+    mut rec: Recorder,
+) -> Result<Outcome> {
+    let obs = rec.obs;
+    // The outputs are one unit (docs/case.md "Outputs"): written into `unit.path()` and
+    // swapped in for `out_dir` at the end; an error before then leaves `out_dir` as it was.
+    let unit = crate::output::RunDir::create(out_dir)?;
+    let dir = unit.path();
+    let name = inputs.case.name.clone().unwrap_or_else(|| {
+        files
+            .dir
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default()
+    });
+    let scene = prepare(inputs, &mut rec)?;
+    let case = &scene.case;
+    let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
+    let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
+    // Landmarks before any file is written: a user landmark off the face is bad input.
+    let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
+        crate::landmarks::analyse(
+            &prediction.skin,
+            &prediction.face_post,
+            Some(&scene.face.skull),
+            &scene.model.plan,
+            &case.user_landmarks()?,
+            &files.case_file,
+        )
+    })?;
+    // The band before any file is written: a failed sample leaves no outputs half-written.
+    let band = if case.uncertainty.samples == 0 {
+        None
+    } else {
+        let nominal = crate::uncertainty::Nominal {
+            skin: &prediction.skin,
+            face_post: &prediction.face_post.vertices,
+            moves: prediction.moves(),
+            sliding_matters: prediction.sliding_matters(),
+        };
+        let resolve = |c: &Case| prediction.resolve(&scene, c);
+        Some(
+            rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+                crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs)
+            })?,
+        )
+    };
+    outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
+    if let Some(b) = &band {
+        crate::uncertainty::write_band(dir, &prediction.face_post, b)?;
+    }
+    crate::landmarks::markups::write_pre_post(dir, &analysis.carried)?;
+    rec.costs.0.push((
+        Stage::Total,
+        // Stage meters reset the heap high-water mark, so the whole run's peak is the
+        // process's resident maximum (counts.max_rss_mb) instead.
+        crate::meter::StageCost {
+            peak_heap_mb: None,
+            ..total.stop()
+        },
+    ));
+    // The page colours the face by the band's width (p95 − p05) on request.
+    let band_width: Option<Vec<f64>> = band
+        .as_ref()
+        .map(|b| b.bands.iter().map(|x| x.p95 - x.p05).collect());
+    let (sections, warnings) = run_sections(&scene, &prediction, rec, band.map(|b| b.report));
+    let report = report::assemble(
+        name,
+        files.dir.display().to_string(),
+        Some(sections),
+        &dist,
+        Some(&analysis),
+        None,
+        warnings,
+    );
+    let page_basis = outputs::page_basis(&prediction, case);
+    outputs::write_page(
+        dir,
+        &scene,
+        &prediction,
+        &report,
+        page_basis,
+        &analysis,
+        band_width.as_deref(),
+    )?;
+    outputs::write_report(dir, &report)?;
+    let out_dir = unit.commit()?;
+    obs.done();
+    let Scene { vol, seg, face, .. } = scene;
+    Ok(Outcome {
+        report,
+        face_post: prediction.face_post,
+        volume: vol,
+        segmentation: seg,
+        skin: prediction.skin,
+        skull: face.skull,
+        out_dir,
+    })
+}
+
+/// The report sections of a run's stages, and its warnings (the stages', then the dropped
+/// pieces of the segmentation, then the plan basis's).
+fn run_sections(
+    scene: &Scene,
+    p: &crate::model::Prediction,
+    rec: Recorder,
+    uncertainty: Option<crate::uncertainty::UncertaintyReport>,
+) -> (RunSections, Vec<String>) {
+    let (case, seg, skull) = (&scene.case, &scene.seg, &scene.face.skull);
+    let model = p.report(scene);
+    let counts = Counts {
+        voxels: scene.vol.len(),
+        dims: scene.vol.dims,
+        skin_vertices: p.skin.vertices.len(),
+        skin_triangles: p.skin.triangles.len(),
+        skull_vertices: skull.vertices.len(),
+        skull_triangles: skull.triangles.len(),
+        springs_main: scene.model.spring_report.main,
+        springs_strut: scene.model.spring_report.struts,
+        unknowns: model.unknowns,
+        solved_vertices: model.solved_vertices,
+        max_rss_mb: crate::meter::max_rss_mb(),
+    };
+    let mut surfaces = scene.face.report.clone();
+    surfaces.embedding = model.embedding;
+    let Recorder {
+        costs,
+        mut warnings,
+        skipped,
+        ..
+    } = rec;
+    if seg.report.removed_components > 0 {
+        warnings.push(format!(
+            "{} pieces above the head threshold ({} voxels) are not the head and were dropped (CT table, head rest)",
+            seg.report.removed_components, seg.report.removed_voxels
+        ));
+    }
+    if let Some(b) = &p.basis {
+        warnings.extend(b.warnings.iter().cloned());
+    }
+    let sections = RunSections {
+        costs,
+        counts,
+        segmentation: seg.report.clone(),
+        surfaces,
+        registration: scene.face.registration.clone(),
+        parameters: case.clone(),
+        springs: model.springs,
+        solve: model.solve,
+        tet: model.tet,
+        plan_basis: p.basis.as_ref().map(report::BasisReport::of),
+        uncertainty,
+        stages_not_run: skipped,
+    };
+    (sections, warnings)
+}
