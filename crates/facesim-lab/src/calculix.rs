@@ -152,7 +152,7 @@ pub fn held_nodes(prescribed: &[Option<[f64; 3]>]) -> Vec<Dof> {
         .collect()
 }
 
-/// The input deck. Numbers are written by [`num`], in at most the 20 characters CalculiX reads.
+/// The input deck. Numbers are written by `num`, in at most the 20 characters CalculiX reads.
 pub fn deck(p: &Problem) -> Result<String> {
     let (n, c) = (p.nodes.len(), p.cells.len());
     if p.material.len() != c {

@@ -5,8 +5,8 @@
 //! the files those commands write. The work runs with the interpreter lock released
 //! (`Python::detach`); facesim's errors raise `FacesimError` with facesim's one-line message.
 //!
-//! - [`tables`]: a Python dict (case, plan, sweep) turned into TOML text, read as a file would be;
-//! - [`results`]: the `Result` class and the numpy arrays (LPS mm).
+//! - `tables`: a Python dict (case, plan, sweep) turned into TOML text, read as a file would be;
+//! - `results`: the `Result` class and the numpy arrays (LPS mm).
 
 mod results;
 mod tables;

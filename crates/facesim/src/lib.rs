@@ -1,14 +1,46 @@
-//! facesim — predicting a patient's face after cranio-maxillofacial surgery, after
+//! facesim — predicting a patient's face after cranio-maxillofacial surgery (a jaw advancement,
+//! a Le Fort I, a genioplasty) from a CT, an optional face scan and a plan of bone moves, after
 //! Koch, Gross et al. 1996 ("Simulating Facial Surgery Using Finite Element Models").
 //!
-//! `pipeline` runs the stages in order, as typed functions (docs/architecture.md): `case` reads
-//! case.toml over pipeline/defaults.toml; `volume` reads the CT; `segment` finds the tissues;
-//! `surface` makes skin and skull meshes; `springs`, `fem`, `osteotomy` and `solve` make and solve
-//! the C1 model (docs/pipeline.md); `embed` carries a dense skin along a coarse model;
-//! `commands::outputs` writes every file, `pipeline::report` is report.json (both ways);
-//! `commands` holds `replan` and `sweep`, which work on a run's stored outputs. `mesh` reads
-//! and writes OBJ/PLY, `phantom` makes the analytic test head, `compare` measures mesh
-//! distances, `observe` and `meter` report progress and cost.
+//! The library is built in layers (docs/architecture.md), each importing only from below:
+//!
+//! - **formats**: [`mesh`] (OBJ, PLY, STL, VTK, VTP), [`volume`] (NIfTI, NRRD, DICOM, InVesalius),
+//!   [`slicer`] (3D Slicer's plan files), [`output`] (atomic files; a run's directory as one unit);
+//! - **numerics**: [`case`] (case.toml), [`segment`], [`surface`], [`springs`], [`fem`] and
+//!   [`solve`] (Koch's C1 surface model), [`tet`] (the volumetric model's elements, meshing and
+//!   boundary conditions), [`embed`], [`osteotomy`], [`landmarks`], [`plan`] (the plan basis),
+//!   [`uncertainty`];
+//! - **stages**: [`pipeline`] — inputs, tissues, surfaces, face, springs and plan, giving a
+//!   [`pipeline::Scene`]; progress and cost through one [`pipeline::Recorder`];
+//! - **models**: [`model`] — the three soft-tissue models behind one type: [`model::predict`]
+//!   gives a [`model::Prediction`] that also re-solves with other tissue parameters
+//!   ([`model::Prediction::resolve`]) and carries the plan basis;
+//! - **commands**: [`report`] (report.json as types, both ways) and [`commands`] — `run`,
+//!   `replan`, `sweep`, each writing its outputs as one unit.
+//!
+//! Lengths are millimetres in the LPS frame of the CT (x to the patient's left, y to the back, z
+//! up); moduli are kPa. Every failure is an [`Error`] that names the file or the parameter.
+//!
+//! Running a case from Rust, as `facesim run` does:
+//!
+//! ```no_run
+//! use facesim::{commands, observe::Quiet};
+//! use std::path::Path;
+//!
+//! fn main() -> facesim::Result<()> {
+//!     let run = commands::run(Path::new("data-samples/phantom"), None, &Quiet)?;
+//!     println!(
+//!         "{} vertices, up to {:.2} mm; outputs in {}",
+//!         run.face_post.vertices.len(),
+//!         run.report.displacement.max,
+//!         run.out_dir.display()
+//!     );
+//!     Ok(())
+//! }
+//! ```
+//!
+//! A case built in memory (`Case { ct, ..Case::default() }`) runs with [`commands::run_case`];
+//! the stages alone with [`pipeline::prepare_case`] and [`model::predict`].
 
 // `!(x > 0.0)` is deliberate: it rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -1,7 +1,7 @@
 //! report.json as types, both ways (docs/case.md: parameters, per-stage `timings`, counts, the
 //! displacement summary, warnings): every section is a struct, `assemble` is the one place a
 //! report is built (for a run and for `facesim replan`), [`Report::read`] the one place a report
-//! is read back. Stage costs are kept in pipeline order ([`super::stage`]).
+//! is read back. Stage costs are kept in pipeline order (`pipeline::stage`).
 
 use crate::case::{Case, Osteotomy};
 use crate::error::{Error, Result};

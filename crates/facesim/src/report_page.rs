@@ -27,7 +27,7 @@ pub struct PageSegment {
     pub translate: [f64; 3],
     pub rotate_deg: [f64; 3],
     /// 12 columns (k = 4·i + j of M = [R − I | t′], row-major), each one displacement per face
-    /// vertex (mm per unit entry): the face moves by d = Σ_k m_k · columns[k].
+    /// vertex (mm per unit entry): the face moves by d = Σ_k m_k · columns\[k\].
     pub columns: Vec<Vec<[f64; 3]>>,
 }
 

@@ -1,7 +1,7 @@
 //! Commands above the library's stages and models: each reads its inputs, calls the stages, the
 //! model or a run's stored plan basis, and writes its own outputs as one unit.
 //!
-//! - [`run`]: `facesim run` (the pipeline, the model, landmarks, uncertainty; every output file and
+//! - [`mod@run`]: `facesim run` (the pipeline, the model, landmarks, uncertainty; every output file and
 //!   report.json, written by [`outputs`]);
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/plan-basis.md);
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,

@@ -7,7 +7,7 @@
 //!
 //! - [`basis`]: the basis, its matrices and the prediction of any plan from it;
 //! - [`c1`]: the C1 models' basis, their linearisation at the pre-operative state;
-//! - [`file`]: `plan_basis.bin`, the basis stored with a run's outputs.
+//! - [`mod@file`]: `plan_basis.bin`, the basis stored with a run's outputs.
 //!
 //! The commands that use a stored basis, `facesim replan` and `facesim sweep`, are
 //! `crate::commands`; this module is the maths and the file only (it imports neither the

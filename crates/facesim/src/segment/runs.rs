@@ -9,7 +9,7 @@
 use crate::union_find::UnionFind;
 use rayon::prelude::*;
 
-/// Runs [x0, x1) of set voxels per row; row r = j + ny·k owns runs[row_start[r]..row_start[r+1]].
+/// Runs [x0, x1) of set voxels per row; row r = j + ny·k owns runs\[row_start\[r\]..row_start\[r+1\]\].
 pub struct Runs {
     pub dims: [usize; 3],
     pub row_start: Vec<usize>,
