@@ -21,7 +21,7 @@
 //! Lengths are millimetres in the LPS frame of the CT (x to the patient's left, y to the back, z
 //! up); moduli are kPa. Every failure is an [`Error`] that names the file or the parameter.
 //!
-//! Running a case from Rust, as `facesim run` does:
+//! Running a case from Rust, as `facesim run` does (`examples/run_case.rs`):
 //!
 //! ```no_run
 //! use facesim::{commands, observe::Quiet};
