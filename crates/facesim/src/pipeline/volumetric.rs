@@ -18,7 +18,7 @@ use crate::tet::nonlinear::{self, Newton};
 use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
-use crate::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
+use crate::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use serde::Serialize;
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
@@ -29,7 +29,7 @@ pub struct Volumetric {
     /// Per solved node (the corners, then the midpoints when quadratic): FREE, FIXED or MOVED.
     pub constraint: Vec<u8>,
     /// Per tetrahedron.
-    pub material: Vec<Elastic>,
+    pub material: Vec<TissueElastic>,
     /// Per solved node (mm).
     pub displacement: Vec<[f64; 3]>,
     pub report: TetReport,
@@ -484,12 +484,12 @@ fn counted(a: &[u8], c: u8) -> usize {
 }
 
 /// Per tetrahedron, the material of its tissue label (`[tet]`).
-fn materials(tissue: &[u8], case: &Case) -> Vec<Elastic> {
+fn materials(tissue: &[u8], case: &Case) -> Vec<TissueElastic> {
     tissue
         .iter()
         .map(|l| {
             let m = case.tet.elastic(*l);
-            Elastic {
+            TissueElastic {
                 youngs_kpa: m.youngs_kpa,
                 poisson: m.poisson,
             }
