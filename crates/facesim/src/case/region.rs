@@ -57,7 +57,7 @@ impl std::fmt::Debug for SurfaceFile {
 }
 
 impl SurfaceFile {
-    pub(crate) fn contains(&self, p: [f64; 3]) -> bool {
+    fn contains(&self, p: [f64; 3]) -> bool {
         let Some(s) = &self.surface else {
             // Read before any stage runs, like masks (pipeline::inputs::read_masks).
             debug_assert!(

@@ -123,7 +123,7 @@ pub fn read_masks(case: &mut Case) -> Result<()> {
 
 /// Read the voxels of every mask region and the closed surface of every surface region in
 /// `regions` that has not been read yet (a mask file once, however many regions name it).
-pub fn read_region_files<'a>(regions: impl Iterator<Item = &'a mut Region>) -> Result<()> {
+pub(crate) fn read_region_files<'a>(regions: impl Iterator<Item = &'a mut Region>) -> Result<()> {
     let mut read: Vec<(PathBuf, std::sync::Arc<Volume>)> = Vec::new();
     for r in regions {
         if let Region::Surface(s) = r
