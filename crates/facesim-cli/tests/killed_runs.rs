@@ -58,10 +58,12 @@ fn temporaries(parent: &Path) -> Vec<String> {
     v
 }
 
-/// Wait until `child`'s temporary output directory holds an entry (its write stage began);
-/// false if the child exited first.
-fn wait_for_write_stage(child: &mut Child, parent: &Path) -> bool {
+/// Wait until `child`'s temporary output directory holds an entry (its write stage began) —
+/// or, for a build that writes into the output directory itself, a file's temporary appears
+/// there — false if the child exited first.
+fn wait_for_write_stage(child: &mut Child, parent: &Path, out: &Path) -> bool {
     let tag = format!(".facesim-run-{}-", child.id());
+    let file_tmp = format!(".facesim-tmp-{}-", child.id());
     loop {
         if child.try_wait().unwrap().is_some() {
             return false;
@@ -70,6 +72,9 @@ fn wait_for_write_stage(child: &mut Child, parent: &Path) -> bool {
             n.contains(&tag)
                 && n.ends_with(".new")
                 && std::fs::read_dir(parent.join(n)).is_ok_and(|mut d| d.next().is_some())
+        }) || std::fs::read_dir(out).is_ok_and(|d| {
+            d.filter_map(|e| e.ok())
+                .any(|e| e.file_name().to_string_lossy().starts_with(&file_tmp))
         });
         if writing {
             return true;
@@ -166,7 +171,7 @@ fn a_killed_run_leaves_one_complete_run_or_none_and_the_next_run_cleans_up() {
     for case in &cases {
         let mut child = start(case, &out);
         assert!(
-            wait_for_write_stage(&mut child, &parent),
+            wait_for_write_stage(&mut child, &parent, &out),
             "no write stage seen"
         );
         let t = Instant::now();
@@ -193,7 +198,7 @@ fn a_killed_run_leaves_one_complete_run_or_none_and_the_next_run_cleans_up() {
     while kills < 16 && (kills < 6 || began.elapsed() < Duration::from_secs(35)) {
         let next = state.map_or(0, |s| 1 - s);
         let mut child = start(&cases[next], &out);
-        if !wait_for_write_stage(&mut child, &parent) {
+        if !wait_for_write_stage(&mut child, &parent, &out) {
             panic!("the run ended before writing: {:?}", child.wait());
         }
         // The killed run before this one left its temporaries; this run removed them.

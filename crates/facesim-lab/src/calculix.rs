@@ -17,7 +17,7 @@
 
 use facesim::error::{Error, NumericalKind, Result};
 use facesim::tet::vtu::Cells;
-use facesim::tet::{Elastic, TetMesh};
+use facesim::tet::{TetMesh, TissueElastic};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -31,7 +31,7 @@ pub enum Material {
 }
 
 impl Material {
-    pub fn linear(e: Elastic) -> Self {
+    pub fn linear(e: TissueElastic) -> Self {
         Material::Linear {
             youngs_kpa: e.youngs_kpa,
             poisson: e.poisson,
@@ -40,7 +40,7 @@ impl Material {
 
     /// The neo-Hookean material with the same small-strain shear and bulk moduli as `e`:
     /// C10 = μ / 2, D1 = 2 / K with K = E / (3 (1 − 2ν)).
-    pub fn neo_hooke(e: Elastic) -> Self {
+    pub fn neo_hooke(e: TissueElastic) -> Self {
         let (_, mu) = e.lame();
         let bulk = e.youngs_kpa / (3.0 * (1.0 - 2.0 * e.poisson));
         Material::NeoHooke {

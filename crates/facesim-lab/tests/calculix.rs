@@ -13,17 +13,17 @@
 #![allow(clippy::needless_range_loop)]
 
 use facesim::tet::vtu::{self, Cells, TetsVtu};
-use facesim::tet::{Elastic, TetMesh};
+use facesim::tet::{TetMesh, TissueElastic};
 use facesim_lab::calculix::{self, Dof, Material, Problem, Step};
 
 #[path = "../../facesim/tests/common/tet_grid.rs"]
 mod tet_grid;
 
-const FAT: Elastic = Elastic {
+const FAT: TissueElastic = TissueElastic {
     youngs_kpa: 3.0,
     poisson: 0.45,
 };
-const MUSCLE: Elastic = Elastic {
+const MUSCLE: TissueElastic = TissueElastic {
     youngs_kpa: 15.0,
     poisson: 0.3,
 };
@@ -84,11 +84,11 @@ fn linear_tetrahedra_agree_with_calculix() {
     for (soft, stiff) in [
         (FAT, MUSCLE),
         (
-            Elastic {
+            TissueElastic {
                 poisson: 0.49,
                 ..FAT
             },
-            Elastic {
+            TissueElastic {
                 poisson: 0.49,
                 ..MUSCLE
             },

@@ -55,6 +55,7 @@ pub mod compare;
 pub mod embed;
 pub mod error;
 pub mod fem;
+pub mod labels;
 pub mod landmarks;
 pub mod mesh;
 pub mod meter;

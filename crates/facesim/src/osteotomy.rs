@@ -41,7 +41,7 @@ pub fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
 }
 
 impl Plan {
-    /// The plan of `osteotomies`, whose mask regions have been read (`Case::read_masks`).
+    /// The plan of `osteotomies`, whose mask regions have been read (`pipeline::inputs::read_masks`).
     pub fn new(osteotomies: &[Osteotomy]) -> Plan {
         Plan {
             steps: osteotomies.to_vec(),

@@ -254,7 +254,7 @@ fn user_landmarks_override_detection_and_must_lie_on_the_face() {
         landmarks: Some(dir.join("mine.mrk.json")),
         ..case
     };
-    let user = case.user_landmarks().unwrap();
+    let user = facesim::pipeline::inputs::user_landmarks(&case).unwrap();
     assert_eq!(user.len(), 2);
     let got = user.iter().find(|(l, _)| l == "Prn").unwrap().1;
     assert!(norm(sub(got, mine)) < 1e-9, "{got:?}");

@@ -70,7 +70,7 @@ fn load(dir: &Path, osteotomy: &str) -> facesim::Result<Case> {
     )
     .unwrap();
     let (mut case, _) = Case::load(dir)?;
-    case.read_masks()?;
+    facesim::pipeline::inputs::read_masks(&mut case)?;
     Ok(case)
 }
 

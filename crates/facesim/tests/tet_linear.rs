@@ -3,17 +3,17 @@
 //! material, exact linearity in the prescribed move, and a refused inverted element.
 
 use facesim::error::{Error, NumericalKind};
-use facesim::tet::{Elastic, TetMesh};
+use facesim::tet::{TetMesh, TissueElastic};
 
 #[path = "common/tet_grid.rs"]
 mod tet_grid;
 use tet_grid::{cube, kuhn_cell};
 
-const FAT: Elastic = Elastic {
+const FAT: TissueElastic = TissueElastic {
     youngs_kpa: 3.0,
     poisson: 0.45,
 };
-const MUSCLE: Elastic = Elastic {
+const MUSCLE: TissueElastic = TissueElastic {
     youngs_kpa: 15.0,
     poisson: 0.3,
 };
@@ -142,7 +142,7 @@ fn an_inverted_element_is_a_reported_failure() {
 /// r = a and u_b at r = b: u_r = A r + B / r (any homogeneous material; from the equilibrium
 /// equation d/dr (1/r d(r u_r)/dr) = 0). A full annulus of one layer, every node's u_z held at 0;
 /// returns the largest nodal error of u_r relative to max |u_r|, and the in-plane mesh size.
-fn lame_cylinder(nr: usize, m: Elastic) -> (f64, f64) {
+fn lame_cylinder(nr: usize, m: TissueElastic) -> (f64, f64) {
     let (a, b, ua, ub) = (10.0, 20.0, 0.5, 0.1);
     let nt = 8 * nr;
     let h = (b - a) / nr as f64;

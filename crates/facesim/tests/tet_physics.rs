@@ -6,18 +6,18 @@
 use facesim::error::{Error, NumericalKind};
 use facesim::tet::nonlinear::{self, NeoHooke, Newton};
 use facesim::tet::quadratic::{Rule, Tet10Mesh};
-use facesim::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
+use facesim::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use facesim::vec3::dot;
 
 #[path = "common/tet_grid.rs"]
 mod tet_grid;
 use tet_grid::kuhn_cell;
 
-const FAT: Elastic = Elastic {
+const FAT: TissueElastic = TissueElastic {
     youngs_kpa: 3.0,
     poisson: 0.45,
 };
-const MUSCLE: Elastic = Elastic {
+const MUSCLE: TissueElastic = TissueElastic {
     youngs_kpa: 15.0,
     poisson: 0.3,
 };
@@ -48,8 +48,8 @@ fn rotation(axis: V3, deg: f64) -> [[f64; 3]; 3] {
 fn grid(
     n: [usize; 3],
     pos: &dyn Fn(usize, usize, usize) -> V3,
-    soft: Elastic,
-    stiff: Elastic,
+    soft: TissueElastic,
+    stiff: TissueElastic,
 ) -> (TetMesh, Vec<[usize; 3]>) {
     let id = |i: usize, j: usize, k: usize| ((k * (n[1] + 1) + j) * (n[0] + 1) + i) as u32;
     let (mut nodes, mut ijk) = (Vec::new(), Vec::new());
@@ -278,7 +278,7 @@ fn plane_holds(nodes: &[V3], planes: &[Plane]) -> Vec<Hold> {
 fn uniaxial_stretch_of_a_neo_hookean_block_matches_the_closed_form() {
     let (l, n, stretch) = (10.0, 2, 1.6);
     let h = l / n as f64;
-    let mat = Elastic {
+    let mat = TissueElastic {
         youngs_kpa: 10.0,
         poisson: 0.45,
     };
@@ -533,7 +533,7 @@ enum Element {
 /// largest nodal error |u − u_exact| relative to u_r(a), and the radial cell size.
 fn lame_sphere(n: usize, nu: f64, element: Element) -> (f64, f64) {
     let (a, b, e, p) = (10.0, 20.0, 10.0, 1.0);
-    let m = Elastic {
+    let m = TissueElastic {
         youngs_kpa: e,
         poisson: nu,
     };

@@ -98,7 +98,7 @@ pub fn replan_with(
     let skull_post = if skull_pre.exists() {
         // The bone each segment moves: mask and surface regions read as the run read them.
         let mut plan = plan.to_vec();
-        crate::case::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
+        crate::pipeline::inputs::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
         let mut s = mesh::read_mesh(&skull_pre)?;
         s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
         Some(s)

@@ -110,7 +110,7 @@ fn finish(
             &prediction.face_post,
             Some(&scene.face.skull),
             &scene.model.plan,
-            &case.user_landmarks()?,
+            &inputs::user_landmarks(case)?,
             &files.case_file,
         )
     })?;

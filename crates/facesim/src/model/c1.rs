@@ -2,7 +2,7 @@
 //! §5): the skin on tissue springs, solved by `crate::solve`, and — when the model ran on a coarse
 //! copy of the skin — the full skin carried along by shell embedding (paper 002).
 
-use super::{Prediction, Solved};
+use super::predicted::Predicted;
 use crate::case::Case;
 use crate::embed::EmbeddingReport;
 use crate::embed::{Embedding, Shell};
@@ -33,7 +33,7 @@ pub fn predict(
     case: &Case,
     files: &CaseFiles,
     rec: &mut Recorder,
-) -> Result<Prediction> {
+) -> Result<Predicted<C1Solved>> {
     let (face, model) = (&scene.face, &scene.model);
     // The plan basis's unit moves of the spring attachments, answered by the solve's own factor.
     let moves = crate::plan::c1::attachment_moves(&case.osteotomy, &model.springs.attachments);
@@ -81,16 +81,16 @@ pub fn predict(
             }
             None => None,
         };
-        return Ok(Prediction {
+        return Ok(Predicted {
             skin: face.skin.clone(),
             face_post,
             basis,
-            solved: Solved::C1(C1Solved {
+            solved: C1Solved {
                 solution,
                 coarse: None,
                 embedding: None,
                 carry: None,
-            }),
+            },
         });
     };
     let inward = -crate::springs::outward_sign(&face.skin, &scene.vol, &scene.seg.labels);
@@ -166,16 +166,16 @@ pub fn predict(
         None => None,
     };
     let (shell, e) = shell;
-    Ok(Prediction {
+    Ok(Predicted {
         skin: fine.clone(),
         face_post: post,
         basis,
-        solved: Solved::C1(C1Solved {
+        solved: C1Solved {
             solution,
             coarse: Some(face.skin.clone()),
             embedding: Some(embedding),
             carry: Some((shell, e, rigid_fine)),
-        }),
+        },
     })
 }
 

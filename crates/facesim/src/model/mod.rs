@@ -10,17 +10,17 @@
 //! this module branches on the model.
 
 pub mod c1;
+pub mod predicted;
 pub mod volumetric;
 
 use crate::case::Case;
 use crate::embed::EmbeddingReport;
 use crate::error::Result;
-use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;
 use crate::pipeline::{Recorder, Scene};
-use crate::plan::PlanBasis;
 use std::path::Path;
 
+pub use predicted::Predicted;
 pub use volumetric::{NewtonStep, TetReport, Volumetric};
 
 /// A solved model, kept for its files, its report sections and re-solves.
@@ -43,15 +43,7 @@ pub struct ModelReport {
 }
 
 /// The predicted face and the model that predicted it.
-pub struct Prediction {
-    /// The skin of face_pre: the full skin (the scan as given, or the extracted skin).
-    pub skin: Mesh,
-    /// The predicted face, same vertices in the same order as `skin`, without colours.
-    pub face_post: Mesh,
-    /// The plan basis (docs/plan-basis.md), when the model built one.
-    pub basis: Option<PlanBasis>,
-    pub solved: Solved,
-}
+pub type Prediction = Predicted<Solved>;
 
 /// Build the case's model on the scene, solve its plan and carry the answer to the face.
 pub fn predict(
@@ -61,8 +53,8 @@ pub fn predict(
     rec: &mut Recorder,
 ) -> Result<Prediction> {
     match crate::solve::Method::of(case.solve.model) {
-        Some(_) => c1::predict(scene, case, files, rec),
-        None => volumetric::predict_face(scene, case, rec),
+        Some(_) => Ok(c1::predict(scene, case, files, rec)?.map(Solved::C1)),
+        None => Ok(volumetric::predict_face(scene, case, rec)?.map(Solved::Tet)),
     }
 }
 

@@ -4,7 +4,7 @@
 //! held, the skin is free; the solved displacement carries the face (the extracted skin or the
 //! given scan, at full resolution).
 
-use super::{Prediction, Solved};
+use super::predicted::Predicted;
 use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
@@ -22,7 +22,7 @@ use crate::tet::plan_holds::LinearHold;
 use crate::tet::quadratic::{Rule, Tet10Mesh};
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
-use crate::tet::{Constrained, Elastic, Hold, Loads, TetMesh};
+use crate::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use serde::{Deserialize, Serialize};
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
@@ -33,7 +33,7 @@ pub struct Volumetric {
     /// Per solved node (the corners, then the midpoints when quadratic): FREE, FIXED or MOVED.
     pub constraint: Vec<u8>,
     /// Per tetrahedron.
-    pub material: Vec<Elastic>,
+    pub material: Vec<TissueElastic>,
     /// Per solved node (mm).
     pub displacement: Vec<[f64; 3]>,
     pub report: TetReport,
@@ -259,7 +259,11 @@ const LARGE_MOVE_MM: f64 = 25.0;
 
 /// The volumetric model's prediction: it carries the skin at full resolution (a dense scan
 /// needs no coarse copy).
-pub(super) fn predict_face(scene: &Scene, case: &Case, rec: &mut Recorder) -> Result<Prediction> {
+pub(super) fn predict_face(
+    scene: &Scene,
+    case: &Case,
+    rec: &mut Recorder,
+) -> Result<Predicted<Option<Volumetric>>> {
     let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
     let mut face_post = skin.clone();
     face_post.colors = None;
@@ -282,11 +286,11 @@ pub(super) fn predict_face(scene: &Scene, case: &Case, rec: &mut Recorder) -> Re
             None
         }
     };
-    Ok(Prediction {
+    Ok(Predicted {
         skin,
         face_post,
         basis,
-        solved: Solved::Tet(volumetric),
+        solved: volumetric,
     })
 }
 

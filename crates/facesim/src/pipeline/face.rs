@@ -2,7 +2,7 @@
 //! CT frame, checked against the CT's skin and parameterised like it; a dense skin is solved on a
 //! coarse (u, v)-grid copy and carried along afterwards (docs/pipeline.md §5, paper 002).
 
-use super::Recorder;
+use super::stage::Recorder;
 use super::stage::Stage;
 use super::surfaces::{CoarseReport, SurfaceReport, Surfaces};
 use crate::case::{Case, Parameterization};
@@ -61,8 +61,7 @@ pub fn place(
                 ));
             }
             report.scan_to_ct_skin_mm = Some(st);
-            if report.foreign_skin.is_some() && crate::solve::Method::of(case.solve.model).is_some()
-            {
+            if report.foreign_skin.is_some() && case.solve.model.on_springs() {
                 c1_target = Some(extracted.triangles.len());
             }
             (m, t)

@@ -2,8 +2,8 @@
 //! nowhere else, after checking that every named file exists (a missing scan is reported before
 //! the CT is read).
 
-use super::Recorder;
-use crate::case::Case;
+use super::stage::Recorder;
+use crate::case::{Case, Region};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
 use crate::pipeline::stage::Stage;
@@ -71,7 +71,7 @@ pub fn read_with(
 /// Read the files a case built in memory names (paths absolute or relative to the working
 /// directory).
 pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
-    case.read_masks()?;
+    read_masks(&mut case)?;
     if let Some(skin) = &case.skin
         && !skin.path.is_file()
     {
@@ -112,4 +112,67 @@ fn read_skin(path: &Path) -> Result<Mesh> {
         return Err(Error::input(path, "empty mesh (no triangles)"));
     }
     Ok(m)
+}
+
+/// Read every mask region's voxels (once per file) and every surface region's closed surface
+/// of `case` (`[surface] movable`, the osteotomies): so that no stage reads files and
+/// `Region::contains` is right for masks and surfaces.
+pub fn read_masks(case: &mut Case) -> Result<()> {
+    read_region_files(case.regions_mut())
+}
+
+/// Read the voxels of every mask region and the closed surface of every surface region in
+/// `regions` that has not been read yet (a mask file once, however many regions name it).
+pub(crate) fn read_region_files<'a>(regions: impl Iterator<Item = &'a mut Region>) -> Result<()> {
+    let mut read: Vec<(PathBuf, std::sync::Arc<Volume>)> = Vec::new();
+    for r in regions {
+        if let Region::Surface(s) = r
+            && s.surface.is_none()
+        {
+            if !s.path.is_file() {
+                return Err(Error::input(&s.path, "region surface file not found"));
+            }
+            let mesh = mesh::model_file::read_model(&s.path)?;
+            let closed = mesh::inside::ClosedSurface::new(&mesh, &s.path)?;
+            s.surface = Some(std::sync::Arc::new(closed));
+            continue;
+        }
+        let Region::Mask(m) = r else { continue };
+        if m.voxels.is_some() {
+            continue;
+        }
+        if !m.path.is_file() {
+            return Err(Error::input(&m.path, "region mask file not found"));
+        }
+        let v = match read.iter().find(|(p, _)| *p == m.path) {
+            Some((_, v)) => v.clone(),
+            None => {
+                let v = std::sync::Arc::new(volume::read_volume(&m.path)?);
+                read.push((m.path.clone(), v.clone()));
+                v
+            }
+        };
+        m.voxels = Some(v);
+    }
+    Ok(())
+}
+
+/// The user landmarks of `case`: `[[landmark]]` entries, then the points of its markups file
+/// (`landmarks = "file.mrk.json"`, read here; a label given twice: the later wins). Errors name
+/// case.toml or the markups file.
+pub fn user_landmarks(case: &Case) -> Result<Vec<(String, [f64; 3])>> {
+    let mut out: Vec<(String, [f64; 3])> = Vec::new();
+    let mut add = |label: String, p: [f64; 3]| match out.iter_mut().find(|(l, _)| *l == label) {
+        Some(e) => e.1 = p,
+        None => out.push((label, p)),
+    };
+    for l in &case.landmark {
+        add(l.label.clone(), l.position);
+    }
+    if let Some(path) = &case.landmarks {
+        for (label, p) in crate::landmarks::markups::read(path)? {
+            add(label, p);
+        }
+    }
+    Ok(out)
 }

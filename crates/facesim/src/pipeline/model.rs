@@ -2,8 +2,8 @@
 //! to the skull (Koch §2.5–2.6; docs/pipeline.md §3), the bone-move plan, and the parameters of
 //! the C1 solve.
 
-use super::Recorder;
 use super::face::Face;
+use super::stage::Recorder;
 use crate::case::Case;
 use crate::error::{Error, Result};
 use crate::osteotomy::Plan;
@@ -71,7 +71,7 @@ pub fn build(
             skin.vertices.len()
         )));
     }
-    if crate::solve::Method::of(case.solve.model).is_none() {
+    if !case.solve.model.on_springs() {
         return volumetric_model(face, rigid, case);
     }
     let want = crate::springs::wanted(&rigid, case.solve.restrict);

@@ -2,7 +2,7 @@
 //! cylindrical range scan with its (u, v) grid, or marching tetrahedra — then islands dropped,
 //! optional smoothing and decimation, and the (u, v) parameterisation the C1 model needs.
 
-use super::Recorder;
+use super::stage::Recorder;
 use super::stage::Stage;
 use crate::case::{Case, ExtractMethod, Parameterization};
 use crate::compare::DistanceStats;

@@ -24,13 +24,7 @@ use crate::volume::Volume;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-pub const AIR: u8 = 0;
-pub const SKIN: u8 = 1;
-pub const FAT_DARK: u8 = 2;
-pub const FAT_BRIGHT: u8 = 3;
-pub const MUSCLE: u8 = 4;
-pub const BONE: u8 = 5;
-pub const LABEL_NAMES: [&str; 6] = ["air", "skin", "fat_dark", "fat_bright", "muscle", "bone"];
+pub use crate::labels::{AIR, BONE, FAT_BRIGHT, FAT_DARK, LABEL_NAMES, MUSCLE, SKIN};
 
 /// The HU window bounds actually used.
 #[derive(Clone, Debug, Serialize, Deserialize)]

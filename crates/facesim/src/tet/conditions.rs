@@ -9,7 +9,7 @@ use super::from_ct::NodeKind;
 use super::plan_holds::{LinearHold, segment_at};
 use super::quadratic::Tet10Mesh;
 use super::vtu::{FIXED, FREE, MOVED, SLIDING};
-use super::{Elastic, Hold};
+use super::{Hold, TissueElastic};
 use crate::case::{Osteotomy, Tet};
 use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
@@ -311,15 +311,6 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
 }
 
 /// Per tetrahedron, the material of its tissue label (`[tet]`).
-pub(crate) fn materials(tissue: &[u8], tet: &Tet) -> Vec<Elastic> {
-    tissue
-        .iter()
-        .map(|l| {
-            let m = tet.elastic(*l);
-            Elastic {
-                youngs_kpa: m.youngs_kpa,
-                poisson: m.poisson,
-            }
-        })
-        .collect()
+pub(crate) fn materials(tissue: &[u8], tet: &Tet) -> Vec<TissueElastic> {
+    tissue.iter().map(|l| tet.elastic(*l)).collect()
 }

@@ -40,30 +40,15 @@ use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::cholesky::Ordering;
 
-/// Young's modulus (kPa) and Poisson ratio of an element.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Elastic {
-    pub youngs_kpa: f64,
-    pub poisson: f64,
-}
-
-impl Elastic {
-    /// Lamé's (λ, μ).
-    pub fn lame(self) -> (f64, f64) {
-        let (e, nu) = (self.youngs_kpa, self.poisson);
-        (
-            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
-            e / (2.0 * (1.0 + nu)),
-        )
-    }
-}
+// An element's material is the case's `TissueElastic` (one type for `[tet.skin]` and the mesh).
+pub use crate::case::TissueElastic;
 
 /// Nodes (LPS mm), tetrahedra (four node indices, positive volume: the fourth node on the side
 /// the first three wind counter-clockwise about) and one material per tetrahedron.
 pub struct TetMesh {
     pub nodes: Vec<[f64; 3]>,
     pub tets: Vec<[u32; 4]>,
-    pub material: Vec<Elastic>,
+    pub material: Vec<TissueElastic>,
 }
 
 /// Volume and shape-function gradients of a tetrahedron; None when it is flat or inverted.
@@ -94,7 +79,7 @@ pub fn gradients(x: [[f64; 3]; 4]) -> Option<(f64, [[f64; 3]; 4])> {
 }
 
 /// The 12×12 element stiffness (row 3a + i, column 3b + j).
-pub fn element_stiffness(x: [[f64; 3]; 4], m: Elastic) -> Option<[[f64; 12]; 12]> {
+pub fn element_stiffness(x: [[f64; 3]; 4], m: TissueElastic) -> Option<[[f64; 12]; 12]> {
     let (v, g) = gradients(x)?;
     let (lambda, mu) = m.lame();
     let mut k = [[0.0; 12]; 12];
@@ -207,7 +192,7 @@ mod tests {
         [0.2, 1.7, 0.1],
         [0.4, 0.5, 2.2],
     ];
-    const M: Elastic = Elastic {
+    const M: TissueElastic = TissueElastic {
         youngs_kpa: 3.0,
         poisson: 0.3,
     };

@@ -29,7 +29,7 @@
 //! the solve fails with [`NumericalKind::NotConverged`] and the residual history.
 
 use super::holds::{Frame, Hold, Loads, frames, rotate_lower, to_global, to_local};
-use super::{Elastic, TetMesh, gradients};
+use super::{TetMesh, TissueElastic, gradients};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::cholesky::Ordering;
@@ -48,7 +48,7 @@ pub type Tangent = [[f64; 9]; 9];
 
 impl NeoHooke {
     /// The neo-Hookean material with the small-strain behaviour of `m`.
-    pub fn from_elastic(m: Elastic) -> NeoHooke {
+    pub fn from_elastic(m: TissueElastic) -> NeoHooke {
         let (lambda, mu) = m.lame();
         NeoHooke {
             mu,
@@ -555,7 +555,7 @@ mod tests {
 
     #[test]
     fn stress_and_tangent_are_the_derivatives_of_the_energy() {
-        let m = NeoHooke::from_elastic(Elastic {
+        let m = NeoHooke::from_elastic(TissueElastic {
             youngs_kpa: 10.0,
             poisson: 0.45,
         });
@@ -581,7 +581,7 @@ mod tests {
         }
         // The small-strain limit: A(I) = λ δij δkl + μ (δik δjl + δil δjk).
         let (_, t0) = m.stress_tangent(&Matrix3::identity()).unwrap();
-        let (lambda, mu) = Elastic {
+        let (lambda, mu) = TissueElastic {
             youngs_kpa: 10.0,
             poisson: 0.45,
         }

@@ -18,7 +18,7 @@
 //!   four: tests/tet_physics.rs measures that it does not lock (Lamé's sphere at ν = 0.4999).
 
 use super::holds::{Constrained, Hold, Loads};
-use super::{Elastic, TetMesh, gradients};
+use super::{TetMesh, TissueElastic, gradients};
 use crate::error::{Error, NumericalKind, Result};
 use std::collections::HashMap;
 
@@ -41,7 +41,7 @@ pub struct Tet10Mesh {
     /// Each edge as (low, high) corner indices; its midpoint is node `corners + e`.
     pub edges: Vec<[u32; 2]>,
     pub tets: Vec<[u32; 10]>,
-    pub material: Vec<Elastic>,
+    pub material: Vec<TissueElastic>,
     pub rule: Rule,
     edge_index: HashMap<(u32, u32), u32>,
 }
@@ -75,7 +75,11 @@ fn add_point(k: &mut [[f64; 30]; 30], d: &[[f64; 3]; 10], lambda: f64, mu: f64) 
 }
 
 /// The 30×30 element stiffness of a straight-sided 10-node tetrahedron with corners `x`.
-pub fn element_stiffness(x: [[f64; 3]; 4], m: Elastic, rule: Rule) -> Option<[[f64; 30]; 30]> {
+pub fn element_stiffness(
+    x: [[f64; 3]; 4],
+    m: TissueElastic,
+    rule: Rule,
+) -> Option<[[f64; 30]; 30]> {
     let (v, g) = gradients(x)?;
     let (lambda, mu) = m.lame();
     // The degree-2 rule: weights V/4 at the permutations of (a, b, b, b).
@@ -236,7 +240,7 @@ mod tests {
 
     #[test]
     fn stiffness_has_six_rigid_modes_and_the_exact_stretch_energy() {
-        let m = Elastic {
+        let m = TissueElastic {
             youngs_kpa: 3.0,
             poisson: 0.45,
         };

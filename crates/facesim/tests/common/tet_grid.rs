@@ -2,7 +2,7 @@
 //! includes this file by `#[path]`): Kuhn tetrahedra on grids, a sheared two-material cube.
 #![allow(dead_code)]
 
-use facesim::tet::{Elastic, TetMesh};
+use facesim::tet::{TetMesh, TissueElastic};
 
 /// The six Kuhn tetrahedra of the grid cell whose lowest corner has indices `c` (the paths from
 /// that corner to the opposite one along the three axes in each order), each with positive
@@ -39,7 +39,7 @@ pub fn kuhn_cell(
 
 /// An n×n×n grid of cubes of side h, each split into the six Kuhn tetrahedra around its main
 /// diagonal; materials alternate between two tissues by cube (a checkerboard).
-pub fn cube(n: usize, h: f64, soft: Elastic, stiff: Elastic) -> TetMesh {
+pub fn cube(n: usize, h: f64, soft: TissueElastic, stiff: TissueElastic) -> TetMesh {
     let id = |i: usize, j: usize, k: usize| ((k * (n + 1) + j) * (n + 1) + i) as u32;
     let mut nodes = Vec::new();
     for k in 0..=n {

@@ -1,0 +1,217 @@
+//! The case directory (docs/case.md): case.toml merged over pipeline/defaults.toml, validated.
+//!
+//! Unknown keys and wrong types are errors that name case.toml and the key; relative paths are
+//! resolved against the case directory.
+
+use crate::error::{Error, Result};
+use std::path::{Path, PathBuf};
+
+mod defaults;
+mod region;
+mod schema;
+mod solve_model;
+pub(crate) mod uncertainty;
+mod validate;
+
+pub use defaults::DEFAULTS_TOML;
+pub use region::{Mask, Region, SurfaceFile};
+pub use schema::*;
+pub use uncertainty::Uncertainty;
+
+/// Recursively lay `over` on top of `base` (tables merge, everything else replaces).
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
+}
+
+/// `KEY=VALUE` overrides (the CLI's `run --set tet.sliding=false`, docs/case.md) as a table to
+/// lay over a case file: a dotted key names nested tables; the value is TOML, and a bare word
+/// that is not TOML is a string (`solve.model=tet`).
+pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
+    let mut out = toml::Table::new();
+    for set in sets {
+        let Some((key, value)) = set.split_once('=') else {
+            return Err(Error::config(format!(
+                "--set {set}: expected KEY=VALUE (e.g. tet.sliding=false)"
+            )));
+        };
+        let keys: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+        if keys.iter().any(|k| k.is_empty()) {
+            return Err(Error::config(format!("--set {set}: empty key")));
+        }
+        let value = value.trim();
+        let parsed = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut table = &mut out;
+        for k in &keys[..keys.len() - 1] {
+            let entry = table
+                .entry(k.to_string())
+                .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+            let toml::Value::Table(t) = entry else {
+                return Err(Error::config(format!(
+                    "--set {set}: {k} is already set to a value"
+                )));
+            };
+            table = t;
+        }
+        table.insert(keys[keys.len() - 1].to_string(), parsed);
+    }
+    Ok(out)
+}
+
+impl Case {
+    /// Parse case text (as if from `path`) over the defaults.
+    pub fn parse(text: &str, path: &Path) -> Result<Case> {
+        Case::parse_with(text, path, &toml::Table::new())
+    }
+
+    /// Parse case text over the defaults, then lay `overrides` (`overrides_table`) on top.
+    pub fn parse_with(text: &str, path: &Path, overrides: &toml::Table) -> Result<Case> {
+        let mut base: toml::Table = toml::from_str(DEFAULTS_TOML)
+            .map_err(|e| Error::config(format!("pipeline/defaults.toml: {e}")))?;
+        let mut over: toml::Table =
+            toml::from_str(text).map_err(|e| Error::input(path, e.message()))?;
+        // Slicer's files in the plan (transform files, markups planes) become plan keys.
+        let dir = path.parent().unwrap_or(Path::new(""));
+        crate::slicer::resolve_plan_files(&mut over, dir, path)?;
+        merge(&mut base, over);
+        merge(&mut base, overrides.clone());
+        let case: Case = toml::Value::Table(base)
+            .try_into()
+            .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
+        case.validate(path)?;
+        Ok(case)
+    }
+
+    /// Load `CASE_DIR/case.toml` (or a .toml file given directly), resolving paths.
+    pub fn load(case: &Path) -> Result<(Case, PathBuf)> {
+        Case::load_with(case, &toml::Table::new())
+    }
+
+    /// `load` with `overrides` laid over the case file.
+    pub fn load_with(case: &Path, overrides: &toml::Table) -> Result<(Case, PathBuf)> {
+        let (file, dir) = if case.is_dir() {
+            (case.join("case.toml"), case.to_path_buf())
+        } else {
+            (
+                case.to_path_buf(),
+                case.parent().map(Path::to_path_buf).unwrap_or_default(),
+            )
+        };
+        let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
+        Ok((Case::from_text_with(&text, &file, &dir, overrides)?, dir))
+    }
+
+    /// Parse case text as if read from `file`, resolving relative paths against `dir` (what
+    /// [`Case::load`] does after reading the file; bindings use it for a case given as a table).
+    pub fn from_text(text: &str, file: &Path, dir: &Path) -> Result<Case> {
+        Case::from_text_with(text, file, dir, &toml::Table::new())
+    }
+
+    /// [`Case::from_text`] with `overrides` laid over the text.
+    pub fn from_text_with(
+        text: &str,
+        file: &Path,
+        dir: &Path,
+        overrides: &toml::Table,
+    ) -> Result<Case> {
+        let mut c = Case::parse_with(text, file, overrides)?;
+        let resolve = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = dir.join(&*p);
+            }
+        };
+        resolve(&mut c.ct.path);
+        if let Some(s) = &mut c.skin {
+            resolve(&mut s.path);
+        }
+        if let Some(l) = &mut c.landmarks {
+            resolve(l);
+        }
+        for r in c.regions_mut() {
+            match r {
+                Region::Mask(m) => resolve(&mut m.path),
+                Region::Surface(s) => resolve(&mut s.path),
+                _ => {}
+            }
+        }
+        Ok(c)
+    }
+
+    /// The regions that may be masks or surfaces: `[surface] movable` and each osteotomy's
+    /// region (their files are read by `pipeline::inputs::read_masks`).
+    pub(crate) fn regions_mut(&mut self) -> impl Iterator<Item = &mut Region> {
+        self.surface
+            .movable
+            .iter_mut()
+            .chain(self.osteotomy.iter_mut().map(|o| &mut o.region))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MIN: &str = "[ct]\npath = \"ct.nii.gz\"\n";
+
+    #[test]
+    fn defaults_fill_in_and_overrides_apply() {
+        let c = Case::parse(
+            &format!("{MIN}[tissue]\nmethod = \"fit\"\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap();
+        assert_eq!(c.tissue.method, TissueMethod::Fit);
+        assert_eq!(c.tissue.bone, 300.0);
+        assert_eq!(c.solve.model, SolveModel::Tet);
+    }
+
+    #[test]
+    fn unknown_keys_and_wrong_types_name_the_key() {
+        let e = Case::parse(
+            &format!("{MIN}[springs]\nmax_lenght_mm = 3.0\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("case.toml") && e.contains("max_lenght_mm"),
+            "{e}"
+        );
+        let e = Case::parse(
+            &format!("{MIN}[surface]\nalpha = \"x\"\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("case.toml"), "{e}");
+        assert!(!e.contains('\n'));
+    }
+
+    #[test]
+    fn regions_parse_and_select() {
+        let c = Case::parse(
+            &format!(
+                "{MIN}[[osteotomy]]\nname = \"m\"\nregion = {{ half_space = {{ point = [0,0,0], normal = [0,0,-1] }} }}\ntranslate = [0,-6,0]\n"
+            ),
+            Path::new("case.toml"),
+        )
+        .unwrap();
+        assert!(c.osteotomy[0].region.contains([0.0, 0.0, -1.0]));
+        assert!(!c.osteotomy[0].region.contains([0.0, 0.0, 1.0]));
+        let e = Case::parse(
+            &format!("{MIN}[[osteotomy]]\nname = \"m\"\nregion = {{ sphere = {{ center = [0,0,0], radius = -1 }} }}\n"),
+            Path::new("case.toml"),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("osteotomy 'm'"));
+    }
+}

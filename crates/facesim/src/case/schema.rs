@@ -1,0 +1,281 @@
+//! The serde types of case.toml (docs/case.md): what each section holds. Defaults are in
+//! `defaults.rs`, checks in `validate.rs`, region shapes in `region.rs`.
+
+use super::region::Region;
+pub use super::solve_model::SolveModel;
+use super::uncertainty::Uncertainty;
+use crate::labels::{FAT_BRIGHT, FAT_DARK, SKIN};
+use serde::{Deserialize, Serialize};
+use std::path::PathBuf;
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Case {
+    #[serde(default)]
+    pub name: Option<String>,
+    pub ct: PathSection,
+    #[serde(default)]
+    pub skin: Option<PathSection>,
+    #[serde(default)]
+    pub registration: Option<Registration>,
+    pub tissue: Tissue,
+    pub extract: Extract,
+    pub springs: Springs,
+    pub surface: Surface,
+    #[serde(default)]
+    pub osteotomy: Vec<Osteotomy>,
+    pub solve: Solve,
+    pub tet: Tet,
+    pub output: Output,
+    /// `[uncertainty]`: sampling the tissue parameters (docs/uncertainty.md).
+    #[serde(default)]
+    pub uncertainty: Uncertainty,
+    /// User landmarks (`[[landmark]]` label and LPS position), overriding detection
+    /// (docs/landmarks.md).
+    #[serde(default, rename = "landmark")]
+    pub landmark: Vec<UserLandmark>,
+    /// Which series of a DICOM directory holding several is the CT (`[dicom] series`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dicom: Option<Dicom>,
+    /// A 3D Slicer markups file of user landmarks (`landmarks = "file.mrk.json"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmarks: Option<PathBuf>,
+}
+
+/// `[dicom]`: `series` is a SeriesInstanceUID, or a SeriesNumber, of the series to read from a
+/// `[ct] path` directory holding several (docs/dicom.md). Without it the largest CT series is
+/// read, with a warning.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Dicom {
+    pub series: String,
+}
+
+/// One `[[landmark]]`: a label (docs/landmarks.md) and its position (LPS mm).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct UserLandmark {
+    pub label: String,
+    pub position: [f64; 3],
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PathSection {
+    pub path: PathBuf,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Registration {
+    pub scan: Vec<[f64; 3]>,
+    pub ct: Vec<[f64; 3]>,
+    #[serde(default)]
+    pub scale: bool,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum TissueMethod {
+    Windows,
+    Fit,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stiffness {
+    pub skin: f64,
+    pub muscle: f64,
+    pub fat_dark: f64,
+    pub fat_bright: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tissue {
+    pub method: TissueMethod,
+    pub head_threshold: f64,
+    pub skin_thickness_mm: f64,
+    pub min_bone_component_mm3: f64,
+    pub fat_dark: f64,
+    pub fat_bright: f64,
+    pub soft: f64,
+    pub bone: f64,
+    pub stiffness: Stiffness,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ExtractMethod {
+    Rangescan,
+    Marching,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Extract {
+    pub method: ExtractMethod,
+    pub angle_step_deg: f64,
+    pub z_step_mm: f64,
+    pub smooth_iterations: usize,
+    pub decimate_target: usize,
+    pub decimate_max_error_mm: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Springs {
+    pub max_length_mm: f64,
+    pub struts: bool,
+}
+
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Parameterization {
+    Cylindrical,
+    Planar,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Surface {
+    pub alpha: f64,
+    pub beta: f64,
+    pub parameterization: Parameterization,
+    #[serde(default)]
+    pub movable: Option<Region>,
+    /// Per-region stretching/bending (`[[surface.region]]`), applied by triangle centroid; later
+    /// entries win where regions overlap.
+    #[serde(default, rename = "region")]
+    pub regions: Vec<SurfaceRegion>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SurfaceRegion {
+    pub shape: Region,
+    pub alpha: f64,
+    pub beta: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Osteotomy {
+    pub name: String,
+    pub region: Region,
+    #[serde(default)]
+    pub translate: [f64; 3],
+    #[serde(default)]
+    pub rotate_deg: [f64; 3],
+    #[serde(default)]
+    pub pivot: [f64; 3],
+}
+
+/// The volumetric model's constitutive law.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TetMaterial {
+    /// Small-strain isotropic linear elasticity.
+    Linear,
+    /// Compressible neo-Hookean (CalculiX's NEO HOOKE form), geometrically nonlinear: exact
+    /// for rigid moves of any size.
+    NeoHookean,
+}
+
+/// The volumetric model's element.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum TetElement {
+    /// 4-node tetrahedra (locks as ν → 0.5).
+    Linear,
+    /// 10-node tetrahedra (CalculiX C3D10), which do not lock; linear material only.
+    Quadratic,
+}
+
+/// Young's modulus (kPa) and Poisson ratio of one tissue: `[tet.skin]` etc., and the material
+/// of each element of the volumetric model (`crate::tet`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TissueElastic {
+    pub youngs_kpa: f64,
+    pub poisson: f64,
+}
+
+impl TissueElastic {
+    /// Lamé's (λ, μ).
+    pub fn lame(self) -> (f64, f64) {
+        let (e, nu) = (self.youngs_kpa, self.poisson);
+        (
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+            e / (2.0 * (1.0 + nu)),
+        )
+    }
+}
+
+/// `[tet]`: the volumetric model (used when `[solve] model = "tet"`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tet {
+    pub material: TetMaterial,
+    pub element: TetElement,
+    /// Newton load steps of the nonlinear material.
+    pub load_steps: usize,
+    /// Mucosa (tissue surface facing a cavity, e.g. the inner lip across the vestibule) within
+    /// `mucosa_gap_mm` of the skull: true slides along the bone (its normal displacement follows
+    /// the bone, tangential free), false is attached (moves with the bone).
+    pub sliding: bool,
+    pub mucosa_gap_mm: f64,
+    /// Element edge length (mm) at the skin inside the region the plan reaches.
+    pub skin_size_mm: f64,
+    /// Element edge length (mm) deep in the tissue and far from the moved bone.
+    pub deep_size_mm: f64,
+    /// The modelled region: the box around the moved bone grown by this much (mm); its cut
+    /// faces are held fixed.
+    pub margin_mm: f64,
+    pub skin: TissueElastic,
+    pub muscle: TissueElastic,
+    pub fat_dark: TissueElastic,
+    pub fat_bright: TissueElastic,
+}
+
+impl Tet {
+    /// The material of a tissue label (`crate::labels`) (soft labels; anything else is
+    /// muscle, the bulk of the face's soft tissue).
+    pub fn elastic(&self, label: u8) -> TissueElastic {
+        match label {
+            SKIN => self.skin,
+            FAT_DARK => self.fat_dark,
+            FAT_BRIGHT => self.fat_bright,
+            _ => self.muscle,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Solve {
+    pub model: SolveModel,
+    pub steps: usize,
+    /// Spring stiffness per unit relative stiffness c per mm² (equilibrium model).
+    pub k_c: f64,
+    /// Force scale k_c of eq. 20 for the koch1996 model (forces are loads there, not springs,
+    /// so the scale is a different quantity; docs/pipeline.md).
+    pub koch_k_c: f64,
+    /// Solve only on the movable skin and its ring of rigid neighbours (exact: elements whose
+    /// DOFs are all fixed add nothing). Off solves on the whole skin.
+    pub restrict: bool,
+    /// Solve on a copy of the skin decimated to this many triangles and carry the full skin
+    /// along by shell embedding (paper 002), when the skin has more than twice as many.
+    /// 0 = always solve on the skin as given.
+    pub coarse_triangles: usize,
+    /// Depth of the embedding shell below the coarse skin (mm).
+    pub shell_mm: f64,
+    /// Poisson ratio of the shell's thickness rule (paper 002 eq. 2), in [0, 0.5].
+    pub shell_poisson: f64,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Output {
+    pub subdivide: usize,
+}
