@@ -6,7 +6,7 @@
 //!
 //! An edge is a path in code (comments and strings are skipped): `crate::a::b`, `super::x`,
 //! `self::x`, a `use` tree under them (`use crate::{a, b::c}`), and a bare path starting with a
-//! child module of the file's module (`inputs::read` in pipeline/mod.rs). A path resolves to
+//! child module of the file's module (`inputs::read` in crates/facesim/src/pipeline/mod.rs). A path resolves to
 //! the longest prefix that is a module file. Paths inside inline `mod … { }` blocks resolve
 //! from that block; `#[cfg(test)] mod … { }` blocks are skipped (test code is not the library's
 //! layering). Paths that
@@ -22,8 +22,8 @@ const ALLOWED_MODULE_CYCLES: &[&[&str]] = &[];
 /// Files still in a cycle, each a strongly connected set (module paths). Remove an entry when
 /// the work it names lands. What is left is a folder's mod.rs that defines the types its
 /// children use (through `super::`) and also calls those children: item 4 removes each by
-/// moving the shared types into a child file both take them from (as `model/predicted.rs` did
-/// for the model seam and `pipeline/stage.rs` for the stages).
+/// moving the shared types into a child file both take them from (as `crates/facesim/src/model/predicted.rs` did
+/// for the model seam and `crates/facesim/src/pipeline/stage.rs` for the stages).
 const ALLOWED_FILE_CYCLES: &[&[&str]] = &[
     // landmarks/mod.rs: Landmark, Kind, Source, Carried, Ordered; calls detect, measure,
     // markups, face_regions.
