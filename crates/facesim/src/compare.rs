@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
 /// Closest point to p on triangle (a, b, c) (Ericson, Real-Time Collision Detection §5.1.5).
-pub fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
+pub(crate) fn closest_on_triangle(p: [f64; 3], a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
     let (ab, ac, ap) = (sub(b, a), sub(c, a), sub(p, a));
     let (d1, d2) = (dot(ab, ap), dot(ac, ap));
     if d1 <= 0.0 && d2 <= 0.0 {
@@ -211,7 +211,7 @@ pub struct Comparison {
     pub vertex_max: Option<f64>,
 }
 
-pub fn point_to_surface(points: &[[f64; 3]], surface: &Mesh) -> Vec<f64> {
+pub(crate) fn point_to_surface(points: &[[f64; 3]], surface: &Mesh) -> Vec<f64> {
     let idx = SurfaceIndex::new(surface);
     points.par_iter().map(|p| idx.closest(*p).0).collect()
 }

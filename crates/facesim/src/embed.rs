@@ -378,7 +378,7 @@ impl Shell {
     /// triangles' normals and areas, so the carry is not linear in the base; its derivative is
     /// taken by central differences with the largest step 1e-3 mm (truncation O(step²),
     /// rounding ~1e-13 mm per unit).
-    pub fn carry_derivative(
+    pub(crate) fn carry_derivative(
         &self,
         e: &Embedding,
         base: &[[f64; 3]],

@@ -16,7 +16,7 @@ pub enum Error {
     Config(String),
     /// The skin surface cannot carry the C1 model (its (u, v) map folds, an element is
     /// degenerate, a vertex has too few neighbours): a property of the input surface, not a
-    /// numerical failure. The pipeline names the surface's source with [`Error::in_file`].
+    /// numerical failure. The pipeline names the surface's source with `Error::in_file`.
     #[error("{0}")]
     Surface(String),
     /// The plan moves bone where no skin can follow (through the skin; wrong units or
@@ -74,7 +74,7 @@ impl Error {
     pub fn surface(msg: impl std::fmt::Display) -> Self {
         Error::Surface(one_line(&msg.to_string()))
     }
-    pub fn impossible_plan(msg: impl std::fmt::Display) -> Self {
+    pub(crate) fn impossible_plan(msg: impl std::fmt::Display) -> Self {
         Error::ImpossiblePlan {
             file: None,
             msg: one_line(&msg.to_string()),
@@ -83,7 +83,7 @@ impl Error {
 
     /// Name the file an input-shaped error comes from: a surface problem becomes an input error
     /// about `file`, an impossible plan names `file`; other errors are returned as they are.
-    pub fn in_file(self, file: impl AsRef<Path>) -> Self {
+    pub(crate) fn in_file(self, file: impl AsRef<Path>) -> Self {
         match self {
             Error::Surface(msg) => Error::Input {
                 path: file.as_ref().to_path_buf(),
@@ -104,7 +104,7 @@ fn one_line(s: &str) -> String {
 }
 
 /// Attach a path to any displayable error.
-pub trait Context<T> {
+pub(crate) trait Context<T> {
     fn at(self, path: impl AsRef<Path>) -> Result<T>;
 }
 

@@ -72,7 +72,7 @@ impl Plan {
     }
 
     /// Each segment must select something, or the plan is surely wrong.
-    pub fn check_selects(&self, points: &[[f64; 3]], what: &str) -> Result<()> {
+    pub(crate) fn check_selects(&self, points: &[[f64; 3]], what: &str) -> Result<()> {
         for o in &self.steps {
             if !points.iter().any(|p| o.region.contains(*p)) {
                 return Err(Error::config(format!(

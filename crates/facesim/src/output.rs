@@ -61,7 +61,7 @@ const UNIT_FILES: [&str; 2] = ["report.json", "sweep.csv"];
 const RUN_TAG: &str = ".facesim-run-";
 
 /// An output directory written as one unit: write into [`RunDir::path`], then
-/// [`RunDir::commit`] swaps it in for `dest`. Dropped without a commit (an error, a panic), the
+/// `RunDir::commit` swaps it in for `dest`. Dropped without a commit (an error, a panic), the
 /// temporary is removed and `dest` stays as it was; a process killed mid-write leaves its
 /// temporaries, which the next `RunDir::create` in the same parent removes (their lock is free).
 pub struct RunDir {
@@ -78,7 +78,7 @@ impl RunDir {
     /// Start writing the unit that will become `dest`: remove stale temporaries of dead runs
     /// beside it, check `dest` is absent, empty or a previous facesim output, and create the
     /// temporary directory (same parent, so the swap is a rename on one filesystem).
-    pub fn create(dest: &Path) -> Result<RunDir> {
+    pub(crate) fn create(dest: &Path) -> Result<RunDir> {
         let name = dest
             .file_name()
             .ok_or_else(|| Error::output(dest, "not a directory name"))?
@@ -110,7 +110,7 @@ impl RunDir {
         })
     }
 
-    /// Where the unit's files are written until [`RunDir::commit`].
+    /// Where the unit's files are written until `RunDir::commit`.
     pub fn path(&self) -> &Path {
         &self.new
     }
@@ -123,7 +123,7 @@ impl RunDir {
     /// Swap the written directory in for `dest`: the previous output is renamed aside, the new
     /// one renamed in, the previous one removed. Killed in between, `dest` is absent for the
     /// moment of two renames and the next run removes the one set aside.
-    pub fn commit(mut self) -> Result<PathBuf> {
+    pub(crate) fn commit(mut self) -> Result<PathBuf> {
         sync_dir(&self.new);
         let had_old = match std::fs::rename(&self.dest, &self.old) {
             Ok(()) => true,

@@ -24,26 +24,25 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 
 pub const Z_HALF: f64 = 40.0;
-pub const R_BRAIN: f64 = 60.0;
+pub(crate) const R_BRAIN: f64 = 60.0;
 pub const R_BONE: f64 = 67.0;
-pub const R_MUSCLE: f64 = 73.0;
-pub const R_FAT: f64 = 78.0;
+pub(crate) const R_MUSCLE: f64 = 73.0;
+pub(crate) const R_FAT: f64 = 78.0;
 pub const R_SKIN: f64 = 80.0;
-pub const SKIN_THICKNESS: f64 = R_SKIN - R_FAT;
-pub const HU_AIR: f64 = -1000.0;
-pub const HU_SOFT: f64 = 45.0;
-pub const HU_BRAIN: f64 = 35.0;
-pub const HU_FAT: f64 = -100.0;
-pub const HU_BONE: f64 = 600.0;
+pub(crate) const HU_AIR: f64 = -1000.0;
+pub(crate) const HU_SOFT: f64 = 45.0;
+pub(crate) const HU_BRAIN: f64 = 35.0;
+pub(crate) const HU_FAT: f64 = -100.0;
+pub(crate) const HU_BONE: f64 = 600.0;
 /// Nose: height (mm), angular and vertical Gaussian widths, centre height.
-pub const NOSE_H: f64 = 18.0;
-pub const NOSE_SIG_PHI: f64 = 0.13; // rad (≈ 10 mm of arc at ρ = 80)
-pub const NOSE_SIG_Z: f64 = 12.0;
-pub const NOSE_Z: f64 = 0.0;
+pub(crate) const NOSE_H: f64 = 18.0;
+pub(crate) const NOSE_SIG_PHI: f64 = 0.13; // rad (≈ 10 mm of arc at ρ = 80)
+pub(crate) const NOSE_SIG_Z: f64 = 12.0;
+pub(crate) const NOSE_Z: f64 = 0.0;
 /// Half-thickness of the bone cuts.
-pub const GAP_HALF: f64 = 1.5;
-pub const OCCLUSAL_Z: f64 = -25.0;
-pub const LEFORT_Z: f64 = 5.0;
+pub(crate) const GAP_HALF: f64 = 1.5;
+pub(crate) const OCCLUSAL_Z: f64 = -25.0;
+pub(crate) const LEFORT_Z: f64 = 5.0;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Tissue {
@@ -110,7 +109,7 @@ pub fn tissue_at(p: [f64; 3]) -> Tissue {
     }
 }
 
-pub fn hu_at(p: [f64; 3]) -> f64 {
+pub(crate) fn hu_at(p: [f64; 3]) -> f64 {
     match tissue_at(p) {
         Tissue::Air => HU_AIR,
         Tissue::Skin | Tissue::Soft => {

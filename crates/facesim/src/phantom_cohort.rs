@@ -11,7 +11,7 @@ use std::path::Path;
 /// (the spread of adult head breadth); soft tissue −2..+4 mm (thin to obese faces);
 /// prognathism ±3 mm and midline shift ±2 mm (Class II to Class III, mild laterognathia);
 /// chin −2..+3 mm.
-pub const DRAW_RANGES: [(&str, f64, f64); 5] = [
+pub(crate) const DRAW_RANGES: [(&str, f64, f64); 5] = [
     ("scale", 0.92, 1.08),
     ("soft_mm", -2.0, 4.0),
     ("mandible_mm", -3.0, 3.0),
@@ -54,7 +54,7 @@ pub fn given_or_default(given: [Option<f64>; 5]) -> Shape {
 }
 
 /// The seed of case `k` of a cohort drawn with `seed`.
-pub fn case_seed(seed: u64, k: usize) -> u64 {
+pub(crate) fn case_seed(seed: u64, k: usize) -> u64 {
     mix(seed ^ mix(k as u64 + 1))
 }
 

@@ -44,19 +44,19 @@ use crate::volume::Volume;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 
-pub const HU_AIR: f64 = -1000.0;
-pub const HU_SOFT: f64 = 45.0;
-pub const HU_BRAIN: f64 = 35.0;
-pub const HU_FAT: f64 = -100.0;
-pub const HU_BONE: f64 = 600.0;
-pub const HU_TOOTH: f64 = 1500.0;
+pub(crate) const HU_AIR: f64 = -1000.0;
+pub(crate) const HU_SOFT: f64 = 45.0;
+pub(crate) const HU_BRAIN: f64 = 35.0;
+pub(crate) const HU_FAT: f64 = -100.0;
+pub(crate) const HU_BONE: f64 = 600.0;
+pub(crate) const HU_TOOTH: f64 = 1500.0;
 
 /// Skin and subcutaneous fat, radially under R_s.
-pub const SKIN_MM: f64 = 2.0;
-pub const FAT_MM: f64 = 4.0;
+pub(crate) const SKIN_MM: f64 = 2.0;
+pub(crate) const FAT_MM: f64 = 4.0;
 
 /// Cranium (the capsule's cylinder) and the skull base.
-pub const R_BRAIN: f64 = 60.0;
+pub(crate) const R_BRAIN: f64 = 60.0;
 pub const R_BONE: f64 = 67.0;
 pub const Z_SKULL_BASE: f64 = 4.5;
 pub const Z_BRAIN: f64 = 9.5;
@@ -64,13 +64,13 @@ pub const Z_BRAIN: f64 = 9.5;
 pub const Z_MAXILLA_TOP: f64 = 1.5;
 
 /// Arch ellipses: common centre y, upper and lower semi-axes (x, y).
-pub const Y_ARCH: f64 = -24.0;
-pub const ARCH_UPPER: [f64; 2] = [31.5, 48.0];
-pub const ARCH_LOWER: [f64; 2] = [29.0, 45.5];
+pub(crate) const Y_ARCH: f64 = -24.0;
+pub(crate) const ARCH_UPPER: [f64; 2] = [31.5, 48.0];
+pub(crate) const ARCH_LOWER: [f64; 2] = [29.0, 45.5];
 
 /// Occlusion and crowns.
-pub const Z_OCCLUSAL: f64 = -25.0;
-pub const Z_UPPER_EDGE: f64 = -23.0;
+pub(crate) const Z_OCCLUSAL: f64 = -25.0;
+pub(crate) const Z_UPPER_EDGE: f64 = -23.0;
 pub const Z_UPPER_CEJ: f64 = -13.0;
 pub const Z_LOWER_EDGE: f64 = -27.0;
 pub const Z_LOWER_CEJ: f64 = -36.0;
@@ -98,7 +98,7 @@ const BAR_Z: [f64; 2] = [-54.0, -36.0];
 const RAMUS: [[f64; 2]; 3] = [[38.0, 47.0], [-8.0, 18.0], [-56.0, -10.0]];
 const NECK: [[f64; 2]; 3] = [[40.0, 48.0], [2.0, 12.0], [-10.0, -4.0]];
 /// Condyle centre (the +x one; the other mirrors it) and semi-axes.
-pub const CONDYLE: [f64; 3] = [48.0, 7.0, -3.0];
+pub(crate) const CONDYLE: [f64; 3] = [48.0, 7.0, -3.0];
 const CONDYLE_AXES: [f64; 3] = [10.0, 5.0, 4.0];
 /// The pivot of a mandibular rotation: on the condylar axis, in the mid-sagittal plane.
 pub const CONDYLAR_PIVOT: [f64; 3] = [0.0, CONDYLE[1], CONDYLE[2]];
@@ -107,13 +107,13 @@ pub const CONDYLAR_PIVOT: [f64; 3] = [0.0, CONDYLE[1], CONDYLE[2]];
 const MAX_SKIN_RADIUS: f64 = 110.0;
 
 /// Vestibule.
-pub const VESTIBULE_MM: f64 = 2.0;
-pub const Z_SULCUS_UPPER: f64 = -3.0;
-pub const Z_SULCUS_LOWER: f64 = -45.0;
+pub(crate) const VESTIBULE_MM: f64 = 2.0;
+pub(crate) const Z_SULCUS_UPPER: f64 = -3.0;
+pub(crate) const Z_SULCUS_LOWER: f64 = -45.0;
 const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
 
 /// Field of view of `ct`.
-pub const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
+pub(crate) const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
 pub const FOV_HI: [f64; 3] = [92.0, 90.0, 40.0];
 
 /// One synthetic patient: how a jaws phantom differs from the standard head (docs/phantom.md,
@@ -152,7 +152,7 @@ impl Default for Shape {
 /// The accepted range of each shape parameter: (name as in phantom.toml and the CLI, min, max).
 /// Inside them the three bone pieces stay separate, every plan's boxes still select exactly
 /// their segment and the skin stays inside the field of view (docs/phantom.md).
-pub const SHAPE_RANGES: [(&str, f64, f64); 5] = [
+pub(crate) const SHAPE_RANGES: [(&str, f64, f64); 5] = [
     ("scale", 0.8, 1.2),
     ("soft_mm", -3.0, 5.0),
     ("mandible_mm", -4.0, 4.0),
@@ -374,11 +374,6 @@ fn in_crown(bounds: &[f64; 8], t: f64, n: f64, z: f64, edge: f64, cej: f64) -> b
     n <= 0.0 && n >= -thick
 }
 
-/// Which bone piece contains p, and whether it is a tooth there.
-pub fn bone_at(p: [f64; 3]) -> Option<(Piece, bool)> {
-    bone(&Shape::default(), p)
-}
-
 /// `bone_at` of a shaped head, in its standard frame.
 fn bone(sh: &Shape, p: [f64; 3]) -> Option<(Piece, bool)> {
     let [x, y, z] = p;
@@ -545,10 +540,6 @@ fn tissue(sh: &Shape, p: [f64; 3]) -> Tissue {
     Tissue::Soft
 }
 
-pub fn hu_at(p: [f64; 3]) -> f64 {
-    Shape::default().hu_at(p)
-}
-
 fn hu_of(t: Tissue) -> f64 {
     match t {
         Tissue::Air => HU_AIR,
@@ -571,7 +562,7 @@ impl Shape {
         tissue(self, self.standard_of(p))
     }
 
-    pub fn hu_at(&self, p: [f64; 3]) -> f64 {
+    pub(crate) fn hu_at(&self, p: [f64; 3]) -> f64 {
         hu_of(self.tissue_at(p))
     }
 
@@ -791,7 +782,7 @@ impl Shape {
     }
 
     /// The pivot of a mandibular rotation (world mm): CONDYLAR_PIVOT moved with the mandible.
-    pub fn condylar_pivot(&self) -> [f64; 3] {
+    pub(crate) fn condylar_pivot(&self) -> [f64; 3] {
         let [x, y, z] = CONDYLAR_PIVOT;
         self.world_of([x + self.asymmetry_mm, y - self.mandible_mm, z])
     }
@@ -1009,7 +1000,7 @@ pub fn write_shaped_case(dir: &std::path::Path, opts: &JawsOptions, shape: &Shap
 impl Shape {
     /// phantom.toml: `[shape]` with the parameters and `[landmarks]` with the analytic
     /// landmarks (world mm, LPS), so a cohort's known geometry travels with each case.
-    pub fn phantom_toml(&self) -> String {
+    pub(crate) fn phantom_toml(&self) -> String {
         let mut s = String::from(
             "# The jaws phantom's shape and analytic landmarks (LPS mm; docs/phantom.md, \"Cohort parameters\").\n[shape]\n",
         );

@@ -230,7 +230,7 @@ impl Report {
     /// label order; None for a report without landmarks. Label order is the order replan's
     /// report and markups and sweep's columns have always had (the report used to be read
     /// back through a sorted JSON map).
-    pub fn located_landmarks(&self) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
+    pub(crate) fn located_landmarks(&self) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
         if self.landmarks.0.is_empty() {
             return None;
         }

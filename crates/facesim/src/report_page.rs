@@ -9,7 +9,7 @@ use crate::output::write_bytes_atomic;
 use std::path::Path;
 
 /// The page logic (three.js included), rebuilt by `npm run build` in `web/`.
-pub const BUNDLE: &str = include_str!("../assets/report.bundle.js");
+pub(crate) const BUNDLE: &str = include_str!("../assets/report.bundle.js");
 
 /// The plan basis as the page uses it: per segment, the 12 displacement columns of the face.
 pub struct PageBasis {
@@ -94,7 +94,7 @@ pub fn write_report_html(dir: &Path, data: &PageData) -> Result<()> {
 }
 
 /// The whole page as text; an error names what is inconsistent in `data`.
-pub fn page_html(data: &PageData) -> std::result::Result<String, String> {
+pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> {
     let n = data.face_pre.len();
     if data.face_post.len() != n {
         return Err(format!(
@@ -280,7 +280,7 @@ fn f32_bytes(v: &[f32]) -> Vec<u8> {
 }
 
 /// Standard base64 with padding (RFC 4648), what the page's `atob` reads.
-pub fn base64(bytes: &[u8]) -> String {
+pub(crate) fn base64(bytes: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
     let mut s = String::with_capacity(bytes.len().div_ceil(3) * 4);
     for c in bytes.chunks(3) {

@@ -124,7 +124,7 @@ fn compliance(
 
 /// +1 when the mesh's (counter-clockwise) vertex normals point out of the head, −1 when they
 /// point into tissue (probed in the label volume two voxels either side).
-pub fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
+pub(crate) fn outward_sign(mesh: &Mesh, vol: &Volume, labels: &[u8]) -> f64 {
     sign_of_normals(mesh, &mesh.vertex_normals(), vol, labels)
 }
 
@@ -411,7 +411,7 @@ impl SpringSet {
 
     /// springs.ply (docs/case.md): skin vertices then attachments; edges (skin, skull) with
     /// `stiffness` and `kind` (0 main, 1 strut).
-    pub fn to_mesh(&self, skin: &Mesh) -> Mesh {
+    pub(crate) fn to_mesh(&self, skin: &Mesh) -> Mesh {
         let nv = skin.vertices.len();
         let vertices = skin
             .vertices

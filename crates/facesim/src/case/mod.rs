@@ -74,7 +74,7 @@ impl Case {
     }
 
     /// Parse case text over the defaults, then lay `overrides` (`overrides_table`) on top.
-    pub fn parse_with(text: &str, path: &Path, overrides: &toml::Table) -> Result<Case> {
+    pub(crate) fn parse_with(text: &str, path: &Path, overrides: &toml::Table) -> Result<Case> {
         let mut base: toml::Table = toml::from_str(DEFAULTS_TOML)
             .map_err(|e| Error::config(format!("pipeline/defaults.toml: {e}")))?;
         let mut over: toml::Table =
@@ -97,7 +97,7 @@ impl Case {
     }
 
     /// `load` with `overrides` laid over the case file.
-    pub fn load_with(case: &Path, overrides: &toml::Table) -> Result<(Case, PathBuf)> {
+    pub(crate) fn load_with(case: &Path, overrides: &toml::Table) -> Result<(Case, PathBuf)> {
         let (file, dir) = if case.is_dir() {
             (case.join("case.toml"), case.to_path_buf())
         } else {
@@ -117,7 +117,7 @@ impl Case {
     }
 
     /// [`Case::from_text`] with `overrides` laid over the text.
-    pub fn from_text_with(
+    pub(crate) fn from_text_with(
         text: &str,
         file: &Path,
         dir: &Path,

@@ -15,7 +15,7 @@ pub enum SolveModel {
 impl SolveModel {
     /// Koch's C1 surface models hang the skin on tissue springs (Koch §2.5–2.6); the volumetric
     /// model meshes the tissue instead. What else differs lives behind `crate::model`.
-    pub fn on_springs(self) -> bool {
+    pub(crate) fn on_springs(self) -> bool {
         self != SolveModel::Tet
     }
 

@@ -10,7 +10,7 @@ use std::path::Path;
 
 /// More samples than this would hold `8 · samples · face vertices` bytes of magnitudes in memory
 /// for the percentiles (docs/uncertainty.md): beyond it the band needs streaming quantiles.
-pub const MAX_SAMPLES: usize = 4096;
+pub(crate) const MAX_SAMPLES: usize = 4096;
 
 /// A range: exactly one of `uniform = [min, max]` or `log_uniform = [min, max]` (uniform in the
 /// logarithm, for ratios). `min == max` is a point: no spread.
@@ -135,15 +135,15 @@ impl Default for Uncertainty {
 pub mod defaults {
     use super::{Chance, Range};
     /// Soft tissue ν 0.45–0.49.
-    pub const POISSON: Range = Range::uniform(0.45, 0.49);
+    pub(crate) const POISSON: Range = Range::uniform(0.45, 0.49);
     /// Muscle 5–15 kPa over fat 1–3 kPa: 5/3 to 15.
-    pub const MUSCLE_FAT: Range = Range::log_uniform(1.7, 15.0);
+    pub(crate) const MUSCLE_FAT: Range = Range::log_uniform(1.7, 15.0);
     /// Skin over fat: Koch's Table 1 spans 10–20; widened to 5–30.
-    pub const SKIN_FAT: Range = Range::log_uniform(5.0, 30.0);
+    pub(crate) const SKIN_FAT: Range = Range::log_uniform(5.0, 30.0);
     /// Sliding or attached mucosa: no preference.
-    pub const SLIDING: Chance = Chance { probability: 0.5 };
+    pub(crate) const SLIDING: Chance = Chance { probability: 0.5 };
     /// A factor of 3 overall (√3 either way), the spread of the fat and muscle moduli ranges.
-    pub const SPRING_SCALE: Range =
+    pub(crate) const SPRING_SCALE: Range =
         Range::log_uniform(0.577_350_269_189_625_8, 1.732_050_807_568_877_2);
 }
 
@@ -187,7 +187,7 @@ impl Parameter {
 
     /// The sequence dimension of the parameter: fixed, so a parameter's draws do not depend on
     /// which others are sampled.
-    pub fn dimension(self) -> usize {
+    pub(crate) fn dimension(self) -> usize {
         self as usize
     }
 }

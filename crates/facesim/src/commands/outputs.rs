@@ -13,7 +13,7 @@ use crate::volume;
 use std::path::Path;
 
 /// Viridis colour map (matplotlib's, 9 control points, linear in between) at t ∈ [0, 1].
-pub fn viridis(t: f64) -> [u8; 3] {
+pub(crate) fn viridis(t: f64) -> [u8; 3] {
     const C: [[f64; 3]; 9] = [
         [68.0, 1.0, 84.0],
         [71.0, 44.0, 122.0],
@@ -46,7 +46,7 @@ fn max_of(d: &[f64]) -> f64 {
 
 /// The predicted face `post` coloured by its displacement (viridis, 0 → max) with a
 /// `displacement` vertex column.
-pub fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
+pub(crate) fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
     let dmax = max_of(dist);
     let mut m = post.clone();
     m.colors = Some(
@@ -62,7 +62,7 @@ pub fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
 }
 
 /// displacement.csv: per vertex of the skin `pre`, its place before and on `post`, and `dist`.
-pub fn displacement_csv(dest: &Path, pre: &Mesh, post: &Mesh, dist: &[f64]) -> Result<()> {
+pub(crate) fn displacement_csv(dest: &Path, pre: &Mesh, post: &Mesh, dist: &[f64]) -> Result<()> {
     write_bytes_atomic(dest, |w| {
         writeln!(w, "vertex,x_pre,y_pre,z_pre,x_post,y_post,z_post,dist")?;
         for (i, (a, b)) in pre.vertices.iter().zip(&post.vertices).enumerate() {
@@ -78,7 +78,7 @@ pub fn displacement_csv(dest: &Path, pre: &Mesh, post: &Mesh, dist: &[f64]) -> R
 
 /// The predicted face as VTK XML PolyData: point data `displacement_mm` (x_post − x_pre, 3
 /// components, LPS mm) and `displacement_magnitude_mm` (its length).
-pub fn write_face_vtp(p: &Prediction, dist: &[f64], path: &Path) -> Result<()> {
+pub(crate) fn write_face_vtp(p: &Prediction, dist: &[f64], path: &Path) -> Result<()> {
     let vector = p
         .skin
         .vertices
@@ -163,7 +163,7 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
 
 /// The page's re-planning data from the run's plan basis; None (sliders hidden, the page says
 /// why) without a basis or when the basis has a constant term the page does not carry.
-pub fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_page::PageBasis> {
+pub(crate) fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_page::PageBasis> {
     let b = p.basis.as_ref()?;
     if b.offset.is_some() {
         return None;
@@ -190,7 +190,7 @@ pub fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_page::Pag
 
 /// report.html (docs/report-page.md): the face and skull before and after, report.json's key
 /// figures and warnings; re-planning sliders once the run has a plan basis.
-pub fn write_page(
+pub(crate) fn write_page(
     dir: &Path,
     scene: &Scene,
     p: &Prediction,
@@ -310,7 +310,7 @@ fn page_landmarks(
         .collect()
 }
 
-pub fn write_report(dir: &Path, report: &Report) -> Result<()> {
+pub(crate) fn write_report(dir: &Path, report: &Report) -> Result<()> {
     let text = serde_json::to_string_pretty(report).map_err(|e| Error::output(dir, e))?;
     write_bytes_atomic(&dir.join("report.json"), |w| w.write_all(text.as_bytes()))
 }

@@ -47,7 +47,7 @@ pub fn plan_from_text(text: &str, path: &Path) -> Result<Vec<Osteotomy>> {
 }
 
 /// The basis's prediction for `plan`, a bad plan named as `plan_file`'s error.
-pub fn predict_plan(
+pub(crate) fn predict_plan(
     basis: &PlanBasis,
     plan: &[Osteotomy],
     plan_file: &Path,

@@ -30,7 +30,7 @@ use serde::Deserialize;
 use std::path::Path;
 
 /// The grid's axes in column order.
-pub const AXES: [&str; 6] = [
+pub(crate) const AXES: [&str; 6] = [
     "translate_x",
     "translate_y",
     "translate_z",
@@ -272,12 +272,12 @@ pub fn sweep(run_dir: &Path, sweep_file: &Path, out: &Path) -> Result<Vec<SweepR
 }
 
 /// The landmarks (and head frame) a run found, from its report.json.
-pub type RunLandmarks = (
+pub(crate) type RunLandmarks = (
     Option<crate::landmarks::HeadFrame>,
     Vec<crate::landmarks::Landmark>,
 );
 
-/// [`RunLandmarks`] of the run in `run_dir` (None: its report has no landmarks); a missing or
+/// `RunLandmarks` of the run in `run_dir` (None: its report has no landmarks); a missing or
 /// unreadable report.json is an error naming it.
 pub fn run_landmarks(run_dir: &Path) -> Result<Option<RunLandmarks>> {
     Ok(Report::read(&run_dir.join("report.json"))?.located_landmarks())

@@ -311,7 +311,7 @@ fn sum_duplicates(mut t: Vec<(usize, usize, f64)>) -> Vec<(usize, usize, f64)> {
 
 /// The largest Cholesky factor a solve may allocate: a model that needs more is refused with
 /// its size (before the allocation fails and aborts the process).
-pub const MAX_FACTOR_BYTES: usize = 12 << 30;
+pub(crate) const MAX_FACTOR_BYTES: usize = 12 << 30;
 
 /// K y = b on the free DOFs, with the fixed ones prescribed; factored once.
 pub struct System {
@@ -335,7 +335,7 @@ impl System {
     }
 
     /// As `new`, with the factor's fill-reducing ordering chosen.
-    pub fn with_ordering(
+    pub(crate) fn with_ordering(
         n: usize,
         k: Vec<(usize, usize, f64)>,
         fixed: &[bool],

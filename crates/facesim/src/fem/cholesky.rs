@@ -35,11 +35,11 @@ pub enum Ordering {
 }
 
 impl Pattern {
-    pub fn analyse(lower: SymbolicSparseColMatRef<'_, usize>) -> Result<Pattern, FaerError> {
+    pub(crate) fn analyse(lower: SymbolicSparseColMatRef<'_, usize>) -> Result<Pattern, FaerError> {
         Self::analyse_with(lower, Ordering::Amd)
     }
 
-    pub fn analyse_with(
+    pub(crate) fn analyse_with(
         lower: SymbolicSparseColMatRef<'_, usize>,
         ordering: Ordering,
     ) -> Result<Pattern, FaerError> {
@@ -111,7 +111,7 @@ impl<T: ComplexField + Copy> Cholesky<T> {
         Ok(())
     }
 
-    pub fn pattern(&self) -> &Pattern {
+    pub(crate) fn pattern(&self) -> &Pattern {
         &self.pattern
     }
 

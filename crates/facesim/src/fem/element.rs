@@ -265,6 +265,8 @@ impl Element {
         ]
     }
 
+    // Only the unit tests use it (a reference the production path does not need).
+    #[cfg(test)]
     /// Element stiffness (eq. 15) and load vector for a uniform load q (eq. 16), with an
     /// `n`×`n` Gauss rule on each of the six Duffy sub-triangles. E = aᵀKa − 2Fᵀa.
     pub fn stiffness_and_load(

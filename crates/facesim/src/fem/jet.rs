@@ -5,7 +5,7 @@ use std::ops::{Add, Div, Mul, Neg, Sub};
 
 /// f and its derivatives with respect to two variables (x, y).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Jet {
+pub(crate) struct Jet {
     pub v: f64,
     pub x: f64,
     pub y: f64,
@@ -26,7 +26,7 @@ impl Jet {
         }
     }
     /// The independent variables at (x0, y0).
-    pub fn vars(x0: f64, y0: f64) -> (Jet, Jet) {
+    pub(crate) fn vars(x0: f64, y0: f64) -> (Jet, Jet) {
         (
             Jet {
                 v: x0,
@@ -50,7 +50,7 @@ impl Jet {
             yy: k * self.yy,
         }
     }
-    pub fn recip(self) -> Jet {
+    pub(crate) fn recip(self) -> Jet {
         let g = self.v;
         let g2 = g * g;
         let g3 = g2 * g;

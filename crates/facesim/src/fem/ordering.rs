@@ -82,7 +82,7 @@ fn supervariables(ptr: &[usize], adj: &[usize]) -> (Vec<usize>, Vec<usize>) {
 /// A nested-dissection ordering of the lower-triangle pattern: `(forward, inverse)` with
 /// `forward[new] = old`, as faer's `PermRef` takes it. None when METIS fails (the caller falls
 /// back to AMD) or the matrix is too small to be worth it.
-pub fn nested_dissection(
+pub(crate) fn nested_dissection(
     lower: SymbolicSparseColMatRef<'_, usize>,
 ) -> Option<(Vec<usize>, Vec<usize>)> {
     let n = lower.ncols();

@@ -5,7 +5,7 @@
 /// product), from x = 0 to |r| ≤ tol |b|. Returns the solution and the iterations, or None on
 /// negative curvature (A not positive definite), a non-finite value or no convergence in
 /// `max_it` iterations.
-pub fn pcg(
+pub(crate) fn pcg(
     a: impl Fn(&[f64]) -> Vec<f64>,
     p: impl Fn(&[f64]) -> Vec<f64>,
     b: &[f64],

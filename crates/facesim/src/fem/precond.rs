@@ -19,7 +19,7 @@ enum Factor {
     Double(Cholesky<f64>),
 }
 
-pub struct Precond {
+pub(crate) struct Precond {
     n: usize,
     /// Free DOFs in increasing order (fixed DOFs get zero).
     free: Vec<usize>,

@@ -132,7 +132,7 @@ pub fn initial_dofs(mesh: &FemMesh, values: &[f64]) -> Result<Vec<f64>> {
 
 /// Initial DOFs for several fields over the same mesh (x, y, z of the skin): the fits share
 /// their neighbourhoods and design matrices, so three fields cost one least-squares solve per fit.
-pub fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
+pub(crate) fn initial_dofs_fields(mesh: &FemMesh, fields: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
     let nb = crate::mesh::one_rings(mesh.uv.len(), &mesh.tris);
     let nv = mesh.uv.len();
     let nf = fields.len();

@@ -8,7 +8,7 @@
 //! tensor Gauss–Legendre rule converges exponentially (tested in `element.rs`).
 
 /// Gauss–Legendre nodes and weights on [0, 1] (Newton on P_n, Golub–Welsch not needed).
-pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
+pub(crate) fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
         let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
@@ -37,7 +37,7 @@ pub fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
 
 /// Points (ξ, η) in the reference triangle (0,0), (1,0), (0,1) with weights summing to ½
 /// (its area), from six Duffy-collapsed sub-triangles, `n`×`n` points each.
-pub fn triangle_rule(n: usize) -> Vec<([f64; 2], f64)> {
+pub(crate) fn triangle_rule(n: usize) -> Vec<([f64; 2], f64)> {
     let gl = gauss_legendre(n);
     let corners = [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]];
     let g = [1.0 / 3.0, 1.0 / 3.0];

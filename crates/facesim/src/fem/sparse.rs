@@ -11,14 +11,14 @@ pub fn multiply(k: &[(usize, usize, f64)], x: &[f64]) -> Vec<f64> {
 
 /// A symmetric matrix (given by lower-triangle triplets, duplicates summed) stored by rows with
 /// both triangles, so a product is one pass over each row, rows in parallel.
-pub struct SymmetricCsr {
+pub(crate) struct SymmetricCsr {
     start: Vec<usize>,
     cols: Vec<u32>,
     vals: Vec<f64>,
 }
 
 impl SymmetricCsr {
-    pub fn from_lower(n: usize, lower: &[(usize, usize, f64)]) -> SymmetricCsr {
+    pub(crate) fn from_lower(n: usize, lower: &[(usize, usize, f64)]) -> SymmetricCsr {
         let mut t: Vec<(u32, u32, f64)> = Vec::with_capacity(2 * lower.len());
         for &(r, c, v) in lower {
             t.push((r as u32, c as u32, v));
@@ -65,7 +65,7 @@ impl SymmetricCsr {
     }
 
     /// y = (I₃ ⊗ K) v for v stacked as three blocks of n.
-    pub fn apply3(&self, v: &[f64], n: usize) -> Vec<f64> {
+    pub(crate) fn apply3(&self, v: &[f64], n: usize) -> Vec<f64> {
         use rayon::prelude::*;
         let rows: Vec<[f64; 3]> = (0..n)
             .into_par_iter()

@@ -28,7 +28,7 @@ fn unit(a: [f64; 3]) -> [f64; 3] {
 
 impl HeadFrame {
     /// The frame with midsagittal plane through `origin` with normal `lateral`.
-    pub fn from_plane(origin: [f64; 3], lateral: [f64; 3], residual: f64) -> HeadFrame {
+    pub(crate) fn from_plane(origin: [f64; 3], lateral: [f64; 3], residual: f64) -> HeadFrame {
         let lateral = unit(lateral);
         let up = [0.0, 0.0, 1.0];
         let vertical = unit(sub(up, scale(lateral, dot(up, lateral))));
@@ -184,7 +184,7 @@ pub struct Profile {
     pub a: Vec<f64>,
 }
 
-pub const STEP_MM: f64 = 0.25;
+pub(crate) const STEP_MM: f64 = 0.25;
 
 impl Profile {
     pub fn height(&self, i: usize) -> f64 {

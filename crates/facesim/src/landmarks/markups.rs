@@ -7,7 +7,7 @@ use crate::output::write_bytes_atomic;
 use serde_json::{Value, json};
 use std::path::Path;
 
-pub const SCHEMA: &str = "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/Resources/Schema/markups-schema-v1.0.3.json#";
+pub(crate) const SCHEMA: &str = "https://raw.githubusercontent.com/slicer/slicer/master/Modules/Loadable/Markups/Resources/Schema/markups-schema-v1.0.3.json#";
 
 /// The markups document of labelled points (LPS mm).
 pub fn document(name: &str, points: &[(String, [f64; 3])]) -> Value {

@@ -48,7 +48,8 @@ pub fn to_line(p: [f64; 2], e1: [f64; 2], e2: [f64; 2]) -> f64 {
     (p[0] - e1[0]) * n[0] + (p[1] - e1[1]) * n[1]
 }
 
-pub const PAIRS: [(&str, &str); 4] = [("Pog'", "Pog"), ("Ls", "A"), ("Li", "B"), ("Sn", "ANS")];
+pub(crate) const PAIRS: [(&str, &str); 4] =
+    [("Pog'", "Pog"), ("Ls", "A"), ("Li", "B"), ("Sn", "ANS")];
 
 /// The measurements and soft/hard ratios of carried landmarks.
 pub fn measure(c: &[Carried], frame: &HeadFrame) -> (Ordered<Measure>, Ordered<Ratio>) {

@@ -65,10 +65,10 @@ impl Landmark {
 }
 
 /// A user landmark farther than this from the face (soft) is an input error.
-pub const USER_MAX_OFF_FACE_MM: f64 = 10.0;
+pub(crate) const USER_MAX_OFF_FACE_MM: f64 = 10.0;
 
 /// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
-pub fn kind_of(label: &str) -> Kind {
+pub(crate) fn kind_of(label: &str) -> Kind {
     if BONE.contains(&label) {
         Kind::Bone
     } else {
@@ -79,7 +79,7 @@ pub fn kind_of(label: &str) -> Kind {
 /// The landmarks of a pre-operative face: detected on `skin` and `skull` in the head frame,
 /// then each user landmark (`[[landmark]]`, or a markups file read into them) replaces the
 /// detected one of its label or is added. A soft user landmark more than
-/// [`USER_MAX_OFF_FACE_MM`] from the skin is an error naming `case_file`.
+/// `USER_MAX_OFF_FACE_MM` from the skin is an error naming `case_file`.
 pub fn locate(
     skin: &Mesh,
     skull: Option<&Mesh>,
@@ -172,7 +172,7 @@ impl SurfaceAnchor {
 }
 
 /// The surface anchors of the soft landmarks of `lms` on `face_pre` (None: bony or missing).
-pub fn anchors(lms: &[Landmark], face_pre: &Mesh) -> Vec<Option<SurfaceAnchor>> {
+pub(crate) fn anchors(lms: &[Landmark], face_pre: &Mesh) -> Vec<Option<SurfaceAnchor>> {
     let index = SurfaceIndex::new(face_pre);
     lms.iter()
         .map(|l| match (l.kind, l.position) {
@@ -191,7 +191,7 @@ pub fn carry(lms: &[Landmark], face_pre: &Mesh, face_post: &Mesh, plan: &Plan) -
 }
 
 /// [`carry`] with the anchors already found (a sweep carries the same landmarks many times).
-pub fn carry_anchored(
+pub(crate) fn carry_anchored(
     lms: &[Landmark],
     anchors: &[Option<SurfaceAnchor>],
     face_post: &Mesh,
@@ -279,7 +279,7 @@ pub struct Analysis {
 }
 
 /// Landmarks, measurements and region statistics of one prediction.
-pub fn analyse(
+pub(crate) fn analyse(
     face_pre: &Mesh,
     face_post: &Mesh,
     skull: Option<&Mesh>,
@@ -292,7 +292,7 @@ pub fn analyse(
 }
 
 /// [`analyse`] of landmarks already located (a run's, read back from its report.json).
-pub fn analyse_located(
+pub(crate) fn analyse_located(
     face_pre: &Mesh,
     face_post: &Mesh,
     frame: Option<HeadFrame>,

@@ -104,7 +104,7 @@ impl Mesh {
     }
 
     /// Twice-area normal of triangle t (not normalised).
-    pub fn face_normal(&self, t: usize) -> [f64; 3] {
+    pub(crate) fn face_normal(&self, t: usize) -> [f64; 3] {
         let [a, b, c] = self.triangles[t].map(|i| self.vertices[i as usize]);
         cross(sub(b, a), sub(c, a))
     }
@@ -248,7 +248,7 @@ impl Mesh {
     }
 
     /// Drop vertices no triangle uses (keeping the order of the rest).
-    pub fn compact(&mut self) {
+    pub(crate) fn compact(&mut self) {
         let mut map = vec![u32::MAX; self.vertices.len()];
         for tri in &self.triangles {
             for &v in tri {
@@ -304,7 +304,7 @@ impl Mesh {
 }
 
 /// Vertex → neighbouring vertices (one ring, sorted) of `n` vertices joined by `triangles`.
-pub fn one_rings(n: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
+pub(crate) fn one_rings(n: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
     let mut nb = vec![Vec::new(); n];
     for tri in triangles {
         for e in 0..3 {

@@ -11,7 +11,7 @@ use crate::error::{Error, Result};
 use std::path::Path;
 
 /// The frame a header text declares, if any.
-pub fn declared_ras(header: &str) -> Option<bool> {
+pub(crate) fn declared_ras(header: &str) -> Option<bool> {
     let h = header.to_ascii_uppercase();
     if h.contains("SPACE=RAS") {
         Some(true)

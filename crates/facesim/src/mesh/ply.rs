@@ -229,7 +229,7 @@ fn column_value(name: &str, v: f64) -> Property {
 }
 
 /// Coordinates are written as double: the predicted face must keep sub-micron precision.
-pub fn to_ply(mesh: &Mesh, encoding: Encoding) -> Ply<DefaultElement> {
+pub(crate) fn to_ply(mesh: &Mesh, encoding: Encoding) -> Ply<DefaultElement> {
     let mut ply = Ply::<DefaultElement>::new();
     ply.header.encoding = encoding;
     ply.header

@@ -93,14 +93,14 @@ impl Prediction {
     }
 
     /// Whether `[tet] sliding` can change the answer: the mesh has mucosa nodes to slide.
-    pub fn sliding_matters(&self) -> bool {
+    pub(crate) fn sliding_matters(&self) -> bool {
         matches!(&self.solved, Solved::Tet(Some(v)) if v.report.mucosa_nodes > 0)
     }
 
     /// The model's own files beside the face outputs: the springs (C1; springs.ply), the
     /// C1 surface sampled finer (face_post_fine.ply) and the coarse mesh's answer
     /// (face_post_coarse.ply), or the tetrahedral mesh (tets.vtu).
-    pub fn write_model_files(&self, dir: &Path, scene: &Scene, case: &Case) -> Result<()> {
+    pub(crate) fn write_model_files(&self, dir: &Path, scene: &Scene, case: &Case) -> Result<()> {
         match &self.solved {
             Solved::C1(c) => c.write_files(dir, scene, case, &self.skin),
             Solved::Tet(Some(v)) => v.write_vtu(&dir.join("tets.vtu")),

@@ -129,7 +129,7 @@ impl Volumetric {
 
     /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell materials
     /// and tissue labels.
-    pub fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
+    pub(crate) fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
         use crate::tet::vtu::{Cells, TetsVtu};
         let youngs: Vec<f64> = self.material.iter().map(|m| m.youngs_kpa).collect();
         let poisson: Vec<f64> = self.material.iter().map(|m| m.poisson).collect();

@@ -49,7 +49,7 @@ pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)>
 }
 
 /// `read` with `overrides` (`case::overrides_table`) laid over the case file.
-pub fn read_with(
+pub(crate) fn read_with(
     case_path: &Path,
     overrides: &toml::Table,
     rec: &mut Recorder,
@@ -70,7 +70,7 @@ pub fn read_with(
 
 /// Read the files a case built in memory names (paths absolute or relative to the working
 /// directory).
-pub fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
+pub(crate) fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
     read_masks(&mut case)?;
     if let Some(skin) = &case.skin
         && !skin.path.is_file()

@@ -48,7 +48,7 @@ pub struct Scene {
 }
 
 /// Stages 1–4 on a case whose files are read: tissues, surfaces, face, model.
-pub fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scene> {
+pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scene> {
     let inputs::Inputs { case, ct, scan } = inputs;
     let seg = tissues(&ct, &case, rec)?;
     rec.warnings.extend(seg.report.warnings.iter().cloned());

@@ -36,7 +36,7 @@ pub fn rigid_mask(case: &Case, vertices: &[[f64; 3]]) -> Vec<bool> {
 }
 
 /// The C1 solve's parameters from the case.
-pub fn solve_params(case: &Case) -> crate::solve::Params {
+pub(crate) fn solve_params(case: &Case) -> crate::solve::Params {
     // The volumetric model has no C1 solve; a C1 study of its case solves to equilibrium.
     let method =
         crate::solve::Method::of(case.solve.model).unwrap_or(crate::solve::Method::Equilibrium);

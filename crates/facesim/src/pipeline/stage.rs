@@ -198,7 +198,7 @@ impl<'a> Recorder<'a> {
         Ok(r)
     }
 
-    pub fn warn(&mut self, w: impl Into<String>) {
+    pub(crate) fn warn(&mut self, w: impl Into<String>) {
         self.warnings.push(w.into());
     }
 

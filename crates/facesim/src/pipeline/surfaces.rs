@@ -189,7 +189,7 @@ fn smooth_and_decimate(
 /// Drop connected pieces with fewer than `min_fraction` of the triangles (range-scan islands
 /// at the edge of the field of view, stray iso-surface bits); every piece tied for largest is
 /// kept. Returns how many were dropped.
-pub fn drop_small_components(m: &mut Mesh, min_fraction: f64) -> usize {
+pub(crate) fn drop_small_components(m: &mut Mesh, min_fraction: f64) -> usize {
     let (comp, n) = m.components();
     if n <= 1 {
         return 0;

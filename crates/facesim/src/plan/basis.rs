@@ -61,7 +61,7 @@ pub fn matrix(o: &Osteotomy) -> [f64; COLUMNS] {
 }
 
 /// M·[x; 1]: the displacement of the point `x` under the move with matrix `m`.
-pub fn displace(m: &[f64; COLUMNS], x: [f64; 3]) -> [f64; 3] {
+pub(crate) fn displace(m: &[f64; COLUMNS], x: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| {
         m[4 * i] * x[0] + m[4 * i + 1] * x[1] + m[4 * i + 2] * x[2] + m[4 * i + 3]
     })
@@ -74,7 +74,7 @@ pub fn unit(k: usize) -> [f64; COLUMNS] {
 
 /// Regions compare by their case.toml form; a mask or a surface by its file (the same file
 /// named by two paths, e.g. relative to the case and to a plan elsewhere, is the same).
-pub fn same_region(a: &Region, b: &Region) -> bool {
+pub(crate) fn same_region(a: &Region, b: &Region) -> bool {
     let file = |r: &Region| match r {
         Region::Mask(m) => Some(m.path.clone()),
         Region::Surface(s) => Some(s.path.clone()),
@@ -144,7 +144,7 @@ impl PlanBasis {
     }
 
     /// The face displacement (mm, per face_pre vertex) for segment matrices `ms`.
-    pub fn displacement_of(&self, ms: &[[f64; COLUMNS]]) -> Vec<[f64; 3]> {
+    pub(crate) fn displacement_of(&self, ms: &[[f64; COLUMNS]]) -> Vec<[f64; 3]> {
         let n = self.face_pre.len();
         let mut out = self.offset.clone().unwrap_or_else(|| vec![[0.0; 3]; n]);
         // One axpy per non-zero entry: streaming passes over columns that fit in cache.

@@ -11,12 +11,15 @@ use crate::mesh::Mesh;
 /// The attachments' moves for the basis, column s·12 + k: segment s moved by E_k, the others
 /// still. Linearised at rest, an attachment inside several segments' regions moves by the sum
 /// of their moves (the first-order part of the plan's composition); those segments are listed.
-pub struct AttachmentMoves {
+pub(crate) struct AttachmentMoves {
     pub columns: Vec<Vec<[f64; 3]>>,
     pub overlapping_segments: Vec<usize>,
 }
 
-pub fn attachment_moves(osteotomies: &[Osteotomy], attachments: &[[f64; 3]]) -> AttachmentMoves {
+pub(crate) fn attachment_moves(
+    osteotomies: &[Osteotomy],
+    attachments: &[[f64; 3]],
+) -> AttachmentMoves {
     let inside: Vec<Vec<bool>> = osteotomies
         .iter()
         .map(|o| attachments.iter().map(|p| o.region.contains(*p)).collect())

@@ -24,8 +24,8 @@ use crate::output::write_bytes_atomic;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
-pub const MAGIC: &[u8; 8] = b"FSPLANB\0";
-pub const FORMAT_VERSION: u32 = 1;
+pub(crate) const MAGIC: &[u8; 8] = b"FSPLANB\0";
+pub(crate) const FORMAT_VERSION: u32 = 1;
 /// The file's name in a run's output directory.
 pub const FILE_NAME: &str = "plan_basis.bin";
 

@@ -122,7 +122,7 @@ impl Runs {
     }
 
     /// The runs of run-row r = j + ny·k.
-    pub fn runs_in_row(&self, r: usize) -> &[[u32; 2]] {
+    pub(crate) fn runs_in_row(&self, r: usize) -> &[[u32; 2]] {
         &self.runs[self.row_start[r]..self.row_start[r + 1]]
     }
 
@@ -138,7 +138,7 @@ impl Runs {
     }
 
     /// The mask as one bool per voxel.
-    pub fn paint(&self) -> Vec<bool> {
+    pub(crate) fn paint(&self) -> Vec<bool> {
         let mut m = vec![false; self.dims.iter().product()];
         self.paint_into(&mut m, true);
         m
@@ -146,7 +146,7 @@ impl Runs {
 
     /// Set `value` at every voxel of the mask in `field` (one entry per voxel; slices in
     /// parallel).
-    pub fn paint_into<T: Copy + Send + Sync>(&self, field: &mut [T], value: T) {
+    pub(crate) fn paint_into<T: Copy + Send + Sync>(&self, field: &mut [T], value: T) {
         let [nx, ny, _] = self.dims;
         if nx * ny == 0 {
             return;

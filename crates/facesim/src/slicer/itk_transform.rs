@@ -43,6 +43,8 @@ impl Direction {
 }
 
 impl RigidMove {
+    // Only the unit tests use it (a reference the production path does not need).
+    #[cfg(test)]
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         let d = [0, 1, 2].map(|a| p[a] - self.centre[a]);
         [0, 1, 2].map(|i| {

@@ -18,7 +18,7 @@ pub struct Plane {
     pub normal: [f64; 3],
 }
 
-pub fn read_plane(path: &Path) -> Result<Plane> {
+pub(crate) fn read_plane(path: &Path) -> Result<Plane> {
     let bytes = std::fs::read(path).map_err(|e| Error::input(path, e))?;
     let v: Value =
         serde_json::from_slice(&bytes).map_err(|e| Error::input(path, format!("not JSON: {e}")))?;
@@ -55,7 +55,7 @@ fn mat3(v: &Value, what: &str) -> std::result::Result<[[f64; 3]; 3], String> {
     }))
 }
 
-pub fn parse_plane(v: &Value) -> std::result::Result<Plane, String> {
+pub(crate) fn parse_plane(v: &Value) -> std::result::Result<Plane, String> {
     let markups = v
         .get("markups")
         .and_then(Value::as_array)

@@ -8,7 +8,7 @@
 //! types (and the plan basis, replan and report.html that use them) as they were; report.json's
 //! `parameters` show the move as numbers.
 
-pub mod itk_transform;
+pub(crate) mod itk_transform;
 pub mod markups;
 
 use crate::error::{Error, Result};
@@ -17,7 +17,7 @@ use std::path::Path;
 /// Replace every osteotomy's `transform` (with optional `transform_direction`) and every
 /// `plane` region (osteotomies and `[surface] movable`) in `table` by the plan's keys, reading
 /// the named files relative to `dir`. `file` (case.toml) is named in errors about keys.
-pub fn resolve_plan_files(table: &mut toml::Table, dir: &Path, file: &Path) -> Result<()> {
+pub(crate) fn resolve_plan_files(table: &mut toml::Table, dir: &Path, file: &Path) -> Result<()> {
     if let Some(toml::Value::Table(surface)) = table.get_mut("surface")
         && let Some(region) = surface.get_mut("movable")
     {

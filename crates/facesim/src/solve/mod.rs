@@ -134,7 +134,7 @@ pub fn solve(
 
 /// The model's response to small attachment moves, linearised at the pre-operative state
 /// (linearised.rs, docs/plan-basis.md): per requested move, the skin vertices' displacement.
-pub struct Responses {
+pub(crate) struct Responses {
     /// Per move, one displacement (mm per unit move) per skin vertex (`skin`'s order).
     pub columns: Vec<Vec<[f64; 3]>>,
     /// Wall time of the tangent solves (s), which run on the solve's own factor.
@@ -144,7 +144,7 @@ pub struct Responses {
 /// [`solve`], and the linearised responses to `moves` (each one displacement per attachment of
 /// `springs`, LPS mm), solved with the run's own factor (the equilibrium model's
 /// preconditioner, koch1996's K).
-pub fn solve_linearised(
+pub(crate) fn solve_linearised(
     skin: &Mesh,
     springs: &SpringSet,
     plan: &Plan,

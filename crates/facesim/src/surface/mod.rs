@@ -5,14 +5,14 @@
 pub mod marching;
 pub mod outer;
 pub mod rangescan;
-pub mod register;
+pub(crate) mod register;
 
 use crate::mesh::{Column, Mesh};
 use rayon::prelude::*;
 
 /// Taubin λ|μ low-pass smoothing (Taubin 1995): a shrink step λ = 0.5 and an inflate step
 /// μ = −0.53 per iteration, umbrella Laplacian; boundary vertices stay fixed.
-pub fn taubin_smooth(mesh: &mut Mesh, iterations: usize) {
+pub(crate) fn taubin_smooth(mesh: &mut Mesh, iterations: usize) {
     if iterations == 0 {
         return;
     }
@@ -56,7 +56,7 @@ pub fn taubin_smooth(mesh: &mut Mesh, iterations: usize) {
 /// Adaptive decimation by quadric edge collapse (meshoptimizer's simplifier), to at most
 /// `target` triangles while the geometric error stays below `max_error` mm. Borders are locked
 /// so the mesh keeps its outline. Returns the error reached (mm).
-pub fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
+pub(crate) fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
     if target == 0 || mesh.triangles.len() <= target {
         return 0.0;
     }
@@ -82,7 +82,7 @@ pub fn decimate(mesh: &mut Mesh, target: usize, max_error: f64) -> f64 {
 }
 
 /// Triangles whose (u, v) orientation disagrees with the majority (a fold of the map).
-pub fn uv_folds(m: &Mesh) -> usize {
+pub(crate) fn uv_folds(m: &Mesh) -> usize {
     let (Some(u), Some(v)) = (m.column("u"), m.column("v")) else {
         return 0;
     };
@@ -122,7 +122,7 @@ pub fn decimate_unfolded(mesh: &Mesh, target: usize, uv: impl Fn(&mut Mesh)) -> 
 /// grid in the parameter domain cannot fold. Cells with a node outside the skin's (u, v) domain
 /// are dropped, and only the largest connected piece is kept. None without u, v columns or when
 /// nothing is left.
-pub fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
+pub(crate) fn resample_uv(mesh: &Mesh, target: usize) -> Option<Mesh> {
     let (u, v) = (mesh.column("u")?, mesh.column("v")?);
     let uv = |i: u32| [u[i as usize], v[i as usize]];
     let signed = |t: &[u32; 3]| {
@@ -293,7 +293,7 @@ fn keep_largest_piece(m: &mut Mesh) {
 /// Remove zero-area slivers (the collapse can leave a vertex on its neighbour's edge) by
 /// flipping each sliver's longest edge: for sliver (a, b, c) with c on ab and neighbour
 /// (b, a, d), the quad a→d→b→c becomes (a, d, c) and (d, b, c). Returns the flips made.
-pub fn flip_slivers(mesh: &mut Mesh) -> usize {
+pub(crate) fn flip_slivers(mesh: &mut Mesh) -> usize {
     use crate::vec3::{cross, norm, sub};
     let diag = mesh.diagonal();
     let tiny = 1e-12 * diag * diag; // the same bound as Mesh::check

@@ -74,7 +74,7 @@ impl OuterReport {
 
 /// Whether a mesh is usable as given: manifold, consistently wound, one piece, with a boundary
 /// (a face scan is open; a closed surface is a whole head, internals and all).
-pub fn is_clean_face(m: &Mesh) -> bool {
+pub(crate) fn is_clean_face(m: &Mesh) -> bool {
     match m.check(Path::new("")) {
         Ok(stats) => stats.boundary_edges > 0 && m.components().1 == 1,
         Err(_) => false,

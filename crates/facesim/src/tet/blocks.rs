@@ -9,7 +9,7 @@
 use crate::error::Result;
 
 /// A dense symmetric element matrix over the element's nodes' DOFs (3 per node, node-major).
-pub trait ElementMatrix {
+pub(crate) trait ElementMatrix {
     fn entry(&self, a: usize, b: usize) -> f64;
 }
 
@@ -81,7 +81,7 @@ impl Pattern {
 /// The lower triangle (row ≥ column) of Σ_e Kₑ over `elements` on `nodes` nodes, one triplet
 /// per entry, DOF 3n + c for component c of node n. `element(e)` gives Kₑ or the error that
 /// stops the assembly (a degenerate element).
-pub fn lower_triplets<const K: usize, M: ElementMatrix>(
+pub(crate) fn lower_triplets<const K: usize, M: ElementMatrix>(
     nodes: usize,
     elements: &[[u32; K]],
     element: impl Fn(usize) -> Result<M>,

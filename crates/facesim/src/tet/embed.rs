@@ -13,7 +13,7 @@ use rayon::prelude::*;
 
 /// The faces of `tets` used by exactly one tetrahedron, each with that tetrahedron and wound
 /// so its normal points out of it.
-pub fn boundary_faces(tets: &[[u32; 4]]) -> Vec<(usize, [u32; 3])> {
+pub(crate) fn boundary_faces(tets: &[[u32; 4]]) -> Vec<(usize, [u32; 3])> {
     // Each face of a positively oriented tet [a, b, c, d], wound outward.
     const FACES: [[usize; 3]; 4] = [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]];
     let mut all: Vec<([u32; 3], usize, [u32; 3])> = tets
@@ -45,7 +45,7 @@ pub fn boundary_faces(tets: &[[u32; 4]]) -> Vec<(usize, [u32; 3])> {
 }
 
 /// Where each face vertex sits: its tetrahedron and barycentric weights, or None (at rest).
-pub struct SkinEmbedding {
+pub(crate) struct SkinEmbedding {
     pub tet: Vec<Option<u32>>,
     pub weights: Vec<[f64; 4]>,
     /// Distance (mm) from each face vertex to the mesh's skin boundary.
@@ -126,7 +126,7 @@ impl SkinEmbedding {
     /// The same for 10-node tetrahedra (`tets10[t]` extends linear tetrahedron t with its edge
     /// midpoints in `quadratic::EDGES` order): N_a = λ_a (2λ_a − 1) at the corners and
     /// 4 λ_a λ_b at the midpoints, so quadratic fields are carried exactly too.
-    pub fn carry_quadratic(&self, tets10: &[[u32; 10]], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    pub(crate) fn carry_quadratic(&self, tets10: &[[u32; 10]], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
         self.tet
             .iter()
             .zip(&self.weights)
@@ -148,7 +148,7 @@ impl SkinEmbedding {
     }
 
     /// Face vertices outside the reach of the mesh (they stay at rest).
-    pub fn unreached(&self) -> usize {
+    pub(crate) fn unreached(&self) -> usize {
         self.tet.iter().filter(|t| t.is_none()).count()
     }
 }

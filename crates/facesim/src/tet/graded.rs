@@ -35,7 +35,7 @@ use std::collections::HashMap;
 const MAX_FINE_CELLS: usize = 40_000_000;
 
 /// A cube's wanted size (mm) from its LPS bounds: the smallest size asked for inside it.
-pub type Sizing<'a> = &'a (dyn Fn([f64; 3], [f64; 3]) -> f64 + Sync);
+pub(crate) type Sizing<'a> = &'a (dyn Fn([f64; 3], [f64; 3]) -> f64 + Sync);
 
 /// The graded background: points in doubled fine coordinates (units of h/2 from `origin`),
 /// positively oriented tetrahedra, the box in the same units.

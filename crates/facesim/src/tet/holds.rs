@@ -169,7 +169,7 @@ impl Hold {
 }
 
 /// Local components of a global vector at a node: Rᵀ v.
-pub fn to_local(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn to_local(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
     match axes {
         None => v,
         Some(r) => r.map(|e| dot(e, v)),
@@ -177,7 +177,7 @@ pub fn to_local(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
 }
 
 /// The global vector of local components: R v′.
-pub fn to_global(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn to_global(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
     match axes {
         None => v,
         Some(r) => std::array::from_fn(|c| (0..3).map(|k| r[k][c] * v[k]).sum()),
@@ -186,7 +186,10 @@ pub fn to_global(axes: &Option<[[f64; 3]; 3]>, v: [f64; 3]) -> [f64; 3] {
 
 /// Rᵀ K R for a lower-triangle triplet list of a 3-DOF-per-node matrix (duplicates allowed);
 /// nodes with the identity frame keep their entries as they are.
-pub fn rotate_lower(k: &[(usize, usize, f64)], frames: &[Frame]) -> Vec<(usize, usize, f64)> {
+pub(crate) fn rotate_lower(
+    k: &[(usize, usize, f64)],
+    frames: &[Frame],
+) -> Vec<(usize, usize, f64)> {
     let mut out = Vec::with_capacity(k.len() + k.len() / 4);
     for &(r, c, v) in k {
         let (fr, fc) = (&frames[r / 3].axes, &frames[c / 3].axes);
@@ -338,7 +341,7 @@ impl Loads {
     }
 
     /// −p · (area vector) = −p (x₁ − x₀) × (x₂ − x₀) / 2 of each pressure face, with its face.
-    pub fn face_forces<'a>(
+    pub(crate) fn face_forces<'a>(
         &'a self,
         nodes: &'a [[f64; 3]],
     ) -> impl Iterator<Item = Result<([u32; 3], [f64; 3])>> + 'a {
@@ -371,7 +374,7 @@ impl Loads {
     }
 
     /// The nodal forces alone, as a global vector.
-    pub fn nodal_vector(&self, nodes: usize) -> Result<Vec<f64>> {
+    pub(crate) fn nodal_vector(&self, nodes: usize) -> Result<Vec<f64>> {
         let mut f = vec![0.0; 3 * nodes];
         for (v, force) in &self.nodal {
             if *v >= nodes || force.iter().any(|c| !c.is_finite()) {

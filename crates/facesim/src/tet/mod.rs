@@ -28,7 +28,7 @@ pub mod from_ct;
 pub mod graded;
 pub mod holds;
 pub mod nonlinear;
-pub mod plan_holds;
+pub(crate) mod plan_holds;
 pub mod quadratic;
 pub mod quality;
 pub mod stuffing;
@@ -79,7 +79,7 @@ pub fn gradients(x: [[f64; 3]; 4]) -> Option<(f64, [[f64; 3]; 4])> {
 }
 
 /// The 12×12 element stiffness (row 3a + i, column 3b + j).
-pub fn element_stiffness(x: [[f64; 3]; 4], m: TissueElastic) -> Option<[[f64; 12]; 12]> {
+pub(crate) fn element_stiffness(x: [[f64; 3]; 4], m: TissueElastic) -> Option<[[f64; 12]; 12]> {
     let (v, g) = gradients(x)?;
     let (lambda, mu) = m.lame();
     let mut k = [[0.0; 12]; 12];

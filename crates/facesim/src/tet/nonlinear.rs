@@ -44,7 +44,7 @@ pub struct NeoHooke {
 }
 
 /// ∂P_iJ/∂F_kL, indexed [3i + J][3k + L].
-pub type Tangent = [[f64; 9]; 9];
+pub(crate) type Tangent = [[f64; 9]; 9];
 
 impl NeoHooke {
     /// The neo-Hookean material with the small-strain behaviour of `m`.
@@ -89,7 +89,7 @@ impl NeoHooke {
     }
 
     /// The stress and the consistent tangent ∂P/∂F; None when J ≤ 0.
-    pub fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)> {
+    pub(crate) fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)> {
         let j = f.determinant();
         if !(j > 0.0) {
             return None;

@@ -8,7 +8,7 @@ use crate::plan::basis::{COLUMNS, displace};
 
 /// A node's hold, linear in the M_s.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LinearHold {
+pub(crate) enum LinearHold {
     Free,
     /// Held at rest (bone outside every segment, the region's cut faces, rigid skin).
     Still,
@@ -51,7 +51,7 @@ impl LinearHold {
 
 /// The segment whose region holds `p` at rest (the first), and the names of all segments that
 /// do when more than one does (their moves compose: not linear in the M_s).
-pub fn segment_at(osteotomies: &[Osteotomy], p: [f64; 3]) -> (Option<usize>, Vec<usize>) {
+pub(crate) fn segment_at(osteotomies: &[Osteotomy], p: [f64; 3]) -> (Option<usize>, Vec<usize>) {
     let all: Vec<usize> = osteotomies
         .iter()
         .enumerate()

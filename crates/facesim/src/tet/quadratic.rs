@@ -23,7 +23,7 @@ use crate::error::{Error, NumericalKind, Result};
 use std::collections::HashMap;
 
 /// Local corner pairs of the six edges, in C3D10 order.
-pub const EDGES: [[usize; 2]; 6] = [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]];
+pub(crate) const EDGES: [[usize; 2]; 6] = [[0, 1], [1, 2], [2, 0], [0, 3], [1, 3], [2, 3]];
 
 /// How the element stiffness is integrated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,7 +75,7 @@ fn add_point(k: &mut [[f64; 30]; 30], d: &[[f64; 3]; 10], lambda: f64, mu: f64) 
 }
 
 /// The 30×30 element stiffness of a straight-sided 10-node tetrahedron with corners `x`.
-pub fn element_stiffness(
+pub(crate) fn element_stiffness(
     x: [[f64; 3]; 4],
     m: TissueElastic,
     rule: Rule,
@@ -167,7 +167,7 @@ impl Tet10Mesh {
     /// nothing on its corners and a third of the face's force on each edge midpoint (∫ of the
     /// corner functions Lᵢ(2Lᵢ − 1) over a triangle is 0, of 4 Lᵢ Lⱼ is A/3). Pressure faces are
     /// given by their three corners.
-    pub fn load_vector(&self, loads: &Loads) -> Result<Vec<f64>> {
+    pub(crate) fn load_vector(&self, loads: &Loads) -> Result<Vec<f64>> {
         let mut f = loads.nodal_vector(self.nodes.len())?;
         for r in loads.face_forces(&self.nodes) {
             let (face, force) = r?;

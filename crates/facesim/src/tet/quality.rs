@@ -23,7 +23,7 @@ pub struct Quality {
 }
 
 /// The six dihedral angles (degrees) and the aspect ratio of a positive tetrahedron.
-pub fn tet_shape(x: [[f64; 3]; 4]) -> Option<([f64; 6], f64, f64)> {
+pub(crate) fn tet_shape(x: [[f64; 3]; 4]) -> Option<([f64; 6], f64, f64)> {
     let (v, g) = gradients(x)?;
     let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let mut angles = [0.0; 6];

@@ -45,8 +45,8 @@ use crate::vec3::{cross, sub};
 use rayon::prelude::*;
 
 /// Warping thresholds of the paper for the [10.7°, 164.8°] dihedral bounds.
-pub const ALPHA_LONG: f64 = 0.24999;
-pub const ALPHA_SHORT: f64 = 0.41189;
+pub(crate) const ALPHA_LONG: f64 = 0.24999;
+pub(crate) const ALPHA_SHORT: f64 = 0.41189;
 /// The proven dihedral angle bounds (degrees) of uniform stuffing with these α.
 pub const MIN_DIHEDRAL_BOUND_DEG: f64 = 10.7;
 pub const MAX_DIHEDRAL_BOUND_DEG: f64 = 164.8;
@@ -75,7 +75,7 @@ pub struct Stuffed {
 }
 
 /// The implicit domain function: negative inside.
-pub type Implicit<'a> = &'a (dyn Fn([f64; 3]) -> f64 + Sync);
+pub(crate) type Implicit<'a> = &'a (dyn Fn([f64; 3]) -> f64 + Sync);
 
 /// The 14 lattice neighbours in doubled coordinates: 6 long, then 8 short.
 const NEIGHBOURS: [[i64; 3]; 14] = [

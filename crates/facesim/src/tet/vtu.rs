@@ -38,7 +38,7 @@ impl Cells<'_> {
         self.len() == 0
     }
     /// Nodes per cell (4 or 10).
-    pub fn nodes_per_cell(&self) -> usize {
+    pub(crate) fn nodes_per_cell(&self) -> usize {
         match self {
             Cells::Linear(_) => 4,
             Cells::Quadratic(_) => 10,
@@ -79,7 +79,7 @@ impl CellsOwned {
 pub const FREE: u8 = 0;
 pub const FIXED: u8 = 1;
 pub const MOVED: u8 = 2;
-pub const SLIDING: u8 = 3;
+pub(crate) const SLIDING: u8 = 3;
 
 /// What tets.vtu holds, borrowed from the model: one entry per node for `nodes`, `displacement`
 /// and `constraint`, one per cell for `youngs_kpa`, `poisson` and `tissue`.

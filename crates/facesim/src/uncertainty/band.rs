@@ -40,7 +40,7 @@ pub fn mean(v: &[f64]) -> f64 {
 
 /// The q-quantile of sorted values, linear between order statistics (Hyndman and Fan type 7,
 /// numpy's default): position q·(n−1).
-pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
     let n = sorted.len();
     if n == 0 {
         return f64::NAN;
@@ -54,7 +54,7 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 /// Per vertex, the band of the displacement magnitude; `samples[s][v]` is sample s's
 /// magnitude at vertex v.
-pub fn per_vertex(samples: &[Vec<f64>], vertices: usize) -> Vec<Band> {
+pub(crate) fn per_vertex(samples: &[Vec<f64>], vertices: usize) -> Vec<Band> {
     use rayon::prelude::*;
     (0..vertices)
         .into_par_iter()
@@ -67,7 +67,7 @@ pub fn per_vertex(samples: &[Vec<f64>], vertices: usize) -> Vec<Band> {
 
 /// face_band.ply: `face` (the nominal predicted face) with float vertex properties `mean`,
 /// `p05`, `p95` (mm), binary little-endian, written to a temporary name and renamed.
-pub fn write_ply(face: &Mesh, bands: &[Band], path: &Path) -> Result<()> {
+pub(crate) fn write_ply(face: &Mesh, bands: &[Band], path: &Path) -> Result<()> {
     let mut m = face.clone();
     m.colors = None;
     m.vertex_columns.clear();

@@ -19,7 +19,7 @@ pub use distributions::Uncertainty;
 pub use run::{Nominal, Sampled, UncertaintyReport, sample};
 
 /// face_band.ply in `dir`: the nominal predicted face with the band per vertex.
-pub fn write_band(
+pub(crate) fn write_band(
     dir: &std::path::Path,
     face_post: &crate::mesh::Mesh,
     s: &Sampled,

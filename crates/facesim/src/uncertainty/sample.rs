@@ -61,6 +61,8 @@ impl ScrambledHalton {
         ScrambledHalton { perms }
     }
 
+    // Only the unit tests use it (a reference the production path does not need).
+    #[cfg(test)]
     pub fn dims(&self) -> usize {
         self.perms.len()
     }
@@ -82,6 +84,8 @@ impl ScrambledHalton {
         x.min(1.0 - f64::EPSILON / 2.0)
     }
 
+    // Only the unit tests use it (a reference the production path does not need).
+    #[cfg(test)]
     /// Point `index` in every dimension.
     pub fn point(&self, index: u64) -> Vec<f64> {
         (0..self.dims()).map(|d| self.at(index, d)).collect()

@@ -74,7 +74,7 @@ impl SliceHeader {
 }
 
 /// Whether `path` has the DICOM preamble (`DICM` at byte 128), whatever its name.
-pub fn is_dicom_file(path: &Path) -> bool {
+pub(crate) fn is_dicom_file(path: &Path) -> bool {
     use std::io::Read;
     let mut buf = [0u8; 132];
     std::fs::File::open(path)
@@ -322,7 +322,7 @@ pub fn read_chosen_series(dir: &Path, series: Option<&str>) -> Result<(Volume, V
 
 /// Read one DICOM file that holds a whole volume: a multi-frame (enhanced) CT object, which
 /// `[ct] path` may name directly. A single-frame file is one slice: its directory is the series.
-pub fn read_multiframe_file(path: &Path) -> Result<(Volume, Vec<String>)> {
+pub(crate) fn read_multiframe_file(path: &Path) -> Result<(Volume, Vec<String>)> {
     let headers = read_headers(path)?;
     match headers.len() {
         0 => Err(Error::input(path, "a DICOM file without an image")),

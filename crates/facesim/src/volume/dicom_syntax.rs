@@ -11,7 +11,7 @@ use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
 
 /// `uid` with its standard name, e.g. `1.2.840.10008.1.2.4.70 (JPEG Lossless, Non-Hierarchical,
 /// First-Order Prediction)`; unknown UIDs are said to be unknown.
-pub fn describe(uid: &str) -> String {
+pub(crate) fn describe(uid: &str) -> String {
     match TransferSyntaxRegistry.get(uid) {
         Some(ts) => format!("{uid} ({})", ts.name()),
         None => format!("{uid} (not a transfer syntax this DICOM library knows)"),
@@ -20,7 +20,7 @@ pub fn describe(uid: &str) -> String {
 
 /// Whether the pixel data of transfer syntax `uid` can be decoded; `Err` says why not in words
 /// that fit after the file's name.
-pub fn check_decodable(uid: &str) -> std::result::Result<(), String> {
+pub(crate) fn check_decodable(uid: &str) -> std::result::Result<(), String> {
     match TransferSyntaxRegistry.get(uid) {
         Some(ts) if ts.can_decode_all() => Ok(()),
         _ => Err(format!(

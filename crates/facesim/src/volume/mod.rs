@@ -4,7 +4,7 @@
 //! downstream works in the LPS world frame (docs/case.md "Frames and units").
 
 pub mod dicom_io;
-pub mod dicom_syntax;
+pub(crate) mod dicom_syntax;
 pub mod inv3;
 pub mod nifti_io;
 pub mod nrrd;
@@ -16,7 +16,7 @@ use std::path::Path;
 
 /// Largest volume we agree to allocate (voxels). 1024³ f32 is 4 GiB: refuse anything larger
 /// before allocating, so a corrupt header cannot exhaust memory.
-pub const MAX_VOXELS: usize = 1 << 30;
+pub(crate) const MAX_VOXELS: usize = 1 << 30;
 
 #[derive(Clone, Debug)]
 pub struct Volume {
@@ -46,7 +46,7 @@ pub struct Inspect {
 
 impl Volume {
     /// Validate geometry and size; used by every reader before it allocates voxel data.
-    pub fn check_geometry(
+    pub(crate) fn check_geometry(
         path: &Path,
         dims: [usize; 3],
         spacing: [f64; 3],
@@ -122,7 +122,7 @@ impl Volume {
 
     /// The LPS mm → voxel map with the direction matrix inverted once, for loops that map many
     /// points (ray marching, spring tracing).
-    pub fn voxel_map(&self) -> VoxelMap {
+    pub(crate) fn voxel_map(&self) -> VoxelMap {
         VoxelMap {
             origin: self.origin,
             inv: inv3(self.direction),
@@ -196,7 +196,7 @@ impl Volume {
     }
 
     /// Reject NaN/infinite voxels: they would poison every threshold downstream.
-    pub fn check_finite(&self, path: &Path) -> Result<()> {
+    pub(crate) fn check_finite(&self, path: &Path) -> Result<()> {
         if let Some(i) = self.data.iter().position(|v| !v.is_finite()) {
             return Err(Error::input(
                 path,
@@ -274,7 +274,7 @@ pub fn sample_field(data: &[f32], dims: [usize; 3], c: [f64; 3], outside: f32) -
     acc as f32
 }
 
-pub fn det3(m: [[f64; 3]; 3]) -> f64 {
+pub(crate) fn det3(m: [[f64; 3]; 3]) -> f64 {
     m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])

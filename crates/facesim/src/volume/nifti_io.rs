@@ -11,7 +11,7 @@ use nifti::{IntoNdArray, NiftiHeader, NiftiObject, NiftiType, NiftiVolume, Reade
 use std::path::Path;
 
 /// Voxel→RAS affine (3×4, rows) of a header, by the docs/case.md precedence.
-pub fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
+pub(crate) fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
     if h.sform_code > 0 {
         let r = |row: [f32; 4]| row.map(|x| x as f64);
         return [r(h.srow_x), r(h.srow_y), r(h.srow_z)];
@@ -361,7 +361,7 @@ pub fn write(vol: &Volume, dest: &Path) -> Result<()> {
 }
 
 /// Write a label volume (u8) on the geometry of `vol`.
-pub fn write_labels(vol: &Volume, labels: &[u8], dest: &Path) -> Result<()> {
+pub(crate) fn write_labels(vol: &Volume, labels: &[u8], dest: &Path) -> Result<()> {
     write_typed(vol, labels.to_vec(), dest)
 }
 

@@ -13,7 +13,7 @@ use rayon::prelude::*;
 /// The in-plane offset of each slice from the first, in pixels along the rows (i) and columns
 /// (j), given each slice's ImagePositionPatient, the row and column directions and the pixel
 /// spacing (along i, along j).
-pub fn drift_pixels(
+pub(crate) fn drift_pixels(
     positions: &[[f64; 3]],
     row: [f64; 3],
     col: [f64; 3],
@@ -34,7 +34,7 @@ pub fn drift_pixels(
 /// output pixel (i, j) of slice k lies where input pixel (i − di, j − dj) of that slice does
 /// (the slice's origin is di, dj pixels from the grid's), read bilinearly; `fill` where that
 /// point lies outside the slice.
-pub fn resample(data: &mut [f32], dims: [usize; 3], drift: &[[f64; 2]], fill: f32) {
+pub(crate) fn resample(data: &mut [f32], dims: [usize; 3], drift: &[[f64; 2]], fill: f32) {
     let [ni, nj, _] = dims;
     // Positions are decimal strings of limited precision: a drift within 1e-4 pixel (0.1 µm) of
     // a whole number is that number, so whole-pixel shifts copy values exactly.

@@ -27,10 +27,10 @@ pub struct Regions {
 }
 
 /// A vertex in no region (in [`Regions::index`]).
-pub const NONE: u8 = 255;
+pub(crate) const NONE: u8 = 255;
 
 impl Regions {
-    /// Per vertex (of `n`), the index in [`NAMES`] of its region, or [`NONE`].
+    /// Per vertex (of `n`), the index in [`NAMES`] of its region, or `NONE`.
     pub fn index(&self, n: usize) -> Vec<u8> {
         let mut out = vec![NONE; n];
         for (k, m) in self.members.iter().enumerate() {
@@ -190,7 +190,7 @@ fn p90(mut d: Vec<f64>) -> f64 {
 }
 
 /// Per region: count, mean, 90th percentile and max of `dist` (one value per vertex).
-pub fn displacement_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionStats> {
+pub(crate) fn displacement_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionStats> {
     let mut out = Ordered::default();
     for (k, name) in NAMES.iter().enumerate() {
         let d: Vec<f64> = r.members[k]
