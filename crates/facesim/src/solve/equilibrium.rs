@@ -17,7 +17,7 @@
 //! Stacked unknowns: coordinate c of DOF g at c·nd + g.
 
 use super::linearised::{DofResponses, RestSprings};
-use super::{Problem, StepRecord};
+use super::problem::{Params, Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::dofs::Dofs;
@@ -469,7 +469,7 @@ impl<'a> Newton<'a> {
 }
 
 /// Not converging within the iteration limit is an error, never a silent result.
-fn not_converged(p: &super::Params, step: usize, res_hist: &[f64], r0: Option<f64>) -> Error {
+fn not_converged(p: &Params, step: usize, res_hist: &[f64], r0: Option<f64>) -> Error {
     Error::numerical(
         NumericalKind::NotConverged,
         format!(

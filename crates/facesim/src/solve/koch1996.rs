@@ -6,7 +6,7 @@
 //! K a = F_init + F_def (eq. 23), forces recomputed at each increment.
 
 use super::linearised::{DofResponses, RestSprings};
-use super::{Problem, StepRecord};
+use super::problem::{Problem, StepRecord};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
 use crate::fem::sparse::SymmetricCsr;

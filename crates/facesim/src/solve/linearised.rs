@@ -15,7 +15,7 @@
 //! plan (the springs turn and stretch), so the basis is a linear preview whose error grows with
 //! the square of the move (measured in docs/plan-basis.md).
 
-use super::Problem;
+use super::problem::Problem;
 use crate::vec3::{norm, sub};
 
 pub(super) type Block = [[f64; 3]; 3];

@@ -13,6 +13,7 @@ mod checks;
 mod equilibrium;
 mod koch1996;
 mod linearised;
+mod problem;
 mod restrict;
 
 use crate::error::{Error, Result};
@@ -22,78 +23,8 @@ use crate::fem::preload::initial_dofs_fields;
 use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
 use crate::springs::SpringSet;
-use crate::vec3::norm;
-use serde::{Deserialize, Serialize};
-
-/// How the C1 model is solved (the case's `[solve] model`, `crate::case::SolveModel::c1_method`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
-    /// Newton's method on the equilibrium equations (docs/pipeline.md §5).
-    Equilibrium,
-    /// Koch's load steps, eq. 20–23.
-    Koch1996,
-}
-
-impl Method {
-    /// The C1 method of a case's `[solve] model`; None for the volumetric model, which is no C1
-    /// model (`crate::model` dispatches on this).
-    pub fn of(model: crate::case::SolveModel) -> Option<Method> {
-        use crate::case::SolveModel;
-        match model {
-            SolveModel::Equilibrium => Some(Method::Equilibrium),
-            SolveModel::Koch1996 => Some(Method::Koch1996),
-            SolveModel::Tet => None,
-        }
-    }
-
-    /// The spring force scale k_c (Koch eq. 20) of `[solve]`: Koch's own iteration was
-    /// calibrated with its own constant (docs/pipeline.md).
-    pub fn k_c(self, solve: &crate::case::Solve) -> f64 {
-        match self {
-            Method::Koch1996 => solve.koch_k_c,
-            Method::Equilibrium => solve.k_c,
-        }
-    }
-}
-
-pub struct Params {
-    pub model: Method,
-    pub steps: usize,
-    pub alpha: f64,
-    pub beta: f64,
-    /// Per-region (α, β) overrides, later ones winning.
-    pub regions: Vec<crate::case::SurfaceRegion>,
-    /// Force scale k_c (eq. 20): spring stiffness per unit c per mm² of skin.
-    pub k_c: f64,
-    pub tolerance: f64,
-    pub max_iterations: usize,
-    /// Solve only on the skin the bone moves can reach (exact; `[solve] restrict`).
-    pub restrict: bool,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct StepRecord {
-    pub step: usize,
-    pub iterations: usize,
-    pub residual_history: Vec<f64>,
-    /// Coupled tangent factorisations in this step (equilibrium model; only when conjugate
-    /// gradients stall).
-    pub factorizations: usize,
-    /// Preconditioned conjugate-gradient iterations in this step (equilibrium model).
-    pub cg_iterations: usize,
-    pub max_displacement_mm: f64,
-}
-
-pub struct Solution {
-    pub fem: FemMesh,
-    /// DOFs of x, y, z.
-    pub a: [Vec<f64>; 3],
-    pub positions: Vec<[f64; 3]>,
-    pub history: Vec<StepRecord>,
-    pub unknowns: usize,
-    /// Skin vertices in the mesh the equations were assembled on (the restricted piece or all).
-    pub solved_vertices: usize,
-}
+use problem::Problem;
+pub use problem::{Method, Params, Solution, StepRecord};
 
 /// The C1 mesh over the skin's (u, v) parameter columns.
 fn fem_mesh(skin: &Mesh) -> Result<FemMesh> {
@@ -207,38 +138,6 @@ pub(crate) fn solve_linearised(
             wall_s: piece_responses.wall_s,
         },
     ))
-}
-
-/// What both models solve: the C1 skin with its preloaded DOFs, per-element materials, fixed
-/// DOFs, the scalar stiffness K (lower triangle) and the spring weights k_c k_i c_ij (eq. 20).
-struct Problem<'a> {
-    skin: &'a Mesh,
-    springs: &'a SpringSet,
-    plan: &'a Plan,
-    p: &'a Params,
-    fem: FemMesh,
-    a_init: [Vec<f64>; 3],
-    mats: Vec<Material>,
-    fixed: Vec<bool>,
-    k: Vec<(usize, usize, f64)>,
-    weight: Vec<f64>,
-}
-
-impl Problem<'_> {
-    fn material(&self, t: usize) -> Material {
-        self.mats[t]
-    }
-
-    /// Largest skin displacement from a_init over the vertices.
-    fn max_displacement(&self, a: &[Vec<f64>; 3]) -> f64 {
-        let dofs = self.fem.dofs();
-        (0..self.skin.vertices.len())
-            .map(|i| {
-                let g = dofs.value(i);
-                norm([0, 1, 2].map(|c| a[c][g] - self.a_init[c][g]))
-            })
-            .fold(0.0, f64::max)
-    }
 }
 
 /// Per-element (α, β): the defaults, or the last [[surface.region]] containing the triangle's

@@ -1,7 +1,7 @@
 //! The exact restriction of the solve to the skin piece the bone moves can reach, and the
 //! mapping of C1 DOFs between that piece and the whole face.
 
-use super::Solution;
+use super::problem::Solution;
 use crate::fem::assembly::FemMesh;
 use crate::mesh::Mesh;
 use crate::springs::SpringSet;
