@@ -6,10 +6,10 @@
 
 mod common;
 
+use facesim::case::uncertainty::{Chance, Range};
 use facesim::case::{Case, SolveModel};
 use facesim::commands::{self, Outcome};
 use facesim::observe::Quiet;
-use facesim::uncertainty::distributions::{Chance, Range};
 use std::path::Path;
 
 fn case() -> Case {

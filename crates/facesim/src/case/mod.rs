@@ -10,7 +10,7 @@ mod defaults;
 mod region;
 mod schema;
 mod solve_model;
-pub(crate) mod uncertainty;
+pub mod uncertainty;
 mod validate;
 
 pub use defaults::DEFAULTS_TOML;

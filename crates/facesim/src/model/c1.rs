@@ -4,8 +4,7 @@
 
 use super::predicted::Predicted;
 use crate::case::Case;
-use crate::embed::EmbeddingReport;
-use crate::embed::{Embedding, Shell};
+use crate::embed::{Embedding, EmbeddingReport, Shell};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::pipeline::inputs::CaseFiles;

@@ -69,17 +69,7 @@ impl Prediction {
         }
         match &self.solved {
             Solved::C1(c) => c.resolve(scene, case, &self.skin),
-            Solved::Tet(Some(v)) => {
-                // As the run's face_post: position plus carried displacement.
-                let d = v.resolve(scene, case, &self.skin)?;
-                Ok(self
-                    .skin
-                    .vertices
-                    .iter()
-                    .zip(&d)
-                    .map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]])
-                    .collect())
-            }
+            Solved::Tet(Some(v)) => v.resolve(scene, case, &self.skin),
             Solved::Tet(None) => Ok(self.face_post.vertices.clone()),
         }
     }

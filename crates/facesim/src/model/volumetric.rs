@@ -62,36 +62,22 @@ impl Volumetric {
             .map_or(&self.mesh.nodes, |q| &q.nodes)
     }
 
-    /// The face displacement (per vertex of `skin`, the run's face) with other tissue
+    /// The face positions (per vertex of `skin`, the run's face) with other tissue
     /// parameters (`case.tet`'s moduli, Poisson ratios and sliding; the plan and mesh settings
     /// must be the run's): the stiffness is assembled and factored again, the mesh, node roles,
     /// mucosa and face embedding are the run's.
     pub fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
         let r = &self.reuse;
         let nodes = self.nodes();
-        let Holds {
-            mut constraint,
-            mut hold,
-            linear: mut linear_hold,
-            ..
-        } = holds(
-            nodes,
+        let (Holds { hold, .. }, _) = hold_tissue(
+            &self.mesh,
+            self.quadratic.as_ref(),
             &r.kind,
             &r.mucosa,
-            &crate::pipeline::model::rigid_mask(case, nodes),
             &bone(scene, case),
-            case.tet.sliding,
+            case,
             r.linear_solve,
         );
-        match &self.quadratic {
-            Some(q) => hold_floating_pieces(&q.tets, &mut constraint, &mut hold, &mut linear_hold),
-            None => hold_floating_pieces(
-                &self.mesh.tets,
-                &mut constraint,
-                &mut hold,
-                &mut linear_hold,
-            ),
-        };
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
@@ -116,7 +102,7 @@ impl Volumetric {
             };
             nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?.displacements
         };
-        Ok(carry_face(
+        let carried = carry_face(
             &r.embedding,
             quadratic.as_ref(),
             &self.mesh.tets,
@@ -124,7 +110,8 @@ impl Volumetric {
             skin,
             &r.face_rigid,
             r.roi,
-        ))
+        );
+        Ok(displaced(skin, &carried))
     }
 
     /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell materials
@@ -202,6 +189,37 @@ fn bone<'a>(scene: &'a Scene, case: &'a Case) -> Bone<'a> {
     }
 }
 
+/// Every solved node's hold (`tet::conditions::holds`; the nodes are the corners, then the
+/// midpoints when `quadratic`), then the pieces of the mesh too loosely held to solve held still;
+/// with how many pieces and nodes were so held. The run and its re-solves hold the tissue alike.
+fn hold_tissue(
+    mesh: &SoftTissueMesh,
+    quadratic: Option<&Tet10Mesh>,
+    kind: &[NodeKind],
+    mucosa: &[Option<Mucosa>],
+    bone: &Bone,
+    case: &Case,
+    rest_normals: bool,
+) -> (Holds, (usize, usize)) {
+    let nodes = quadratic.map_or(&mesh.nodes, |q| &q.nodes);
+    let rigid = crate::pipeline::model::rigid_mask(case, nodes);
+    let mut h = holds(
+        nodes,
+        kind,
+        mucosa,
+        &rigid,
+        bone,
+        case.tet.sliding,
+        rest_normals,
+    );
+    // The solved cells: a 10-node mesh's midpoints are nodes of its cells, not of the corners'.
+    let held = match quadratic {
+        Some(q) => hold_floating_pieces(&q.tets, &mut h.constraint, &mut h.hold, &mut h.linear),
+        None => hold_floating_pieces(&mesh.tets, &mut h.constraint, &mut h.hold, &mut h.linear),
+    };
+    (h, held)
+}
+
 /// The box (LPS mm) around the skull points the plan moves, grown by `margin` and kept inside
 /// the CT's voxel centres (where the scan ends, the tissue is cut and held like the region's other
 /// cut faces, not left as a free surface); None when the plan moves none.
@@ -251,6 +269,15 @@ fn carry_face(
         }
     }
     carried
+}
+
+/// The face's positions moved by the carried displacement `d`, as face_post is written.
+fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    skin.vertices
+        .iter()
+        .zip(d)
+        .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+        .collect()
 }
 
 /// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
@@ -340,25 +367,23 @@ pub fn predict(
     );
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
-    let Holds {
-        mut constraint,
-        mut hold,
-        linear: mut linear_hold,
-        overlapping_segments,
-    } = holds(
-        nodes,
+    let (
+        Holds {
+            constraint,
+            hold,
+            linear: linear_hold,
+            overlapping_segments,
+        },
+        (pieces, held_still),
+    ) = hold_tissue(
+        &mesh,
+        quadratic.as_ref(),
         &kind,
         &mucosa,
-        &crate::pipeline::model::rigid_mask(case, nodes),
         &bone,
-        t.sliding,
+        case,
         linear_solve,
     );
-    // The solved cells: a 10-node mesh's midpoints are nodes of its cells, not of the corners'.
-    let (pieces, held_still) = match &quadratic {
-        Some(q) => hold_floating_pieces(&q.tets, &mut constraint, &mut hold, &mut linear_hold),
-        None => hold_floating_pieces(&mesh.tets, &mut constraint, &mut hold, &mut linear_hold),
-    };
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
@@ -500,12 +525,7 @@ pub fn predict(
         face_vertices_unreached: embedding.unreached(),
         face_to_mesh_mm: stats(&reached),
     };
-    let face_post = skin
-        .vertices
-        .iter()
-        .zip(&carried)
-        .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-        .collect();
+    let face_post = displaced(skin, &carried);
     Ok(Some((
         Volumetric {
             mesh,

@@ -4,18 +4,17 @@
 //! band of the displacement magnitude per face vertex (face_band.ply), landmark and region
 //! (report.json `uncertainty`). The deterministic prediction stays the nominal parameters'.
 //!
-//! - `distributions`: `[uncertainty]` in case.toml, the literature defaults, validation;
+//! - `[uncertainty]` in case.toml, its literature defaults and validation are the case schema's
+//!   (`crate::case::uncertainty`);
 //! - `sample`: the scrambled Halton sequence;
 //! - `band`: mean and percentiles, face_band.ply;
 //! - `run`: drawing, solving and reducing the samples.
 
 pub mod band;
-pub mod distributions;
 pub mod run;
 pub mod sample;
 
 pub use band::Band;
-pub use distributions::Uncertainty;
 pub use run::{Nominal, Sampled, UncertaintyReport, sample};
 
 /// face_band.ply in `dir`: the nominal predicted face with the band per vertex.

@@ -3,9 +3,9 @@
 //! displacement magnitudes to the band per vertex, landmark and region.
 
 use super::band::{self, Band};
-use super::distributions::{Distribution, Parameter};
 use super::sample::ScrambledHalton;
 use crate::case::Case;
+use crate::case::uncertainty::{Distribution, Parameter};
 use crate::error::Result;
 use crate::landmarks::{Analysis, Kind, Ordered, SurfaceAnchor, face_regions};
 use crate::mesh::Mesh;
@@ -175,128 +175,126 @@ pub fn sample(
     obs: &dyn Observer,
 ) -> Result<Sampled> {
     let n = case.uncertainty.samples;
-    {
-        let start = std::time::Instant::now();
-        let skin = run.skin;
-        // Positions, not displacements, so that the nominal sample gives the run's own figures
-        // bit for bit (report.json's are computed from face_pre and face_post).
-        let nominal = run.face_post;
-        let draws = draws(case);
-        let sliding_matters = run.sliding_matters;
-        let nominal_key = solve_key(case, sliding_matters);
-        // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
-        let trackers: Vec<(String, Tracker)> = analysis
-            .carried
-            .iter()
-            .zip(&analysis.anchors)
-            .filter_map(|(c, anchor)| {
-                let pre = c.pre?;
-                let t = match (c.kind, anchor) {
-                    (Kind::Soft, Some(a)) => Tracker::Soft(*a, pre),
-                    _ => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
-                };
-                Some((c.label.clone(), t))
-            })
-            .collect();
-        let regions = analysis.frame.as_ref().map(|f| {
-            face_regions::regions(
-                &skin.vertices,
-                f,
-                &crate::landmarks::positions(&analysis.landmarks),
-            )
-        });
-        let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
-        let mut solve_s = 0.0;
-        let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
-        let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
-        let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
-        for (i, d) in draws.iter().enumerate() {
-            obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
-            let c = d.apply(case);
-            let key = solve_key(&c, sliding_matters);
-            let post: &[[f64; 3]] = if key == nominal_key || !run.moves {
-                nominal
-            } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
-                &solved[k].1
-            } else {
-                let t = std::time::Instant::now();
-                let u = resolve(&c)?;
-                solve_s += t.elapsed().as_secs_f64();
-                solved.push((key, u));
-                &solved[solved.len() - 1].1
+    let start = std::time::Instant::now();
+    let skin = run.skin;
+    // Positions, not displacements, so that the nominal sample gives the run's own figures
+    // bit for bit (report.json's are computed from face_pre and face_post).
+    let nominal = run.face_post;
+    let draws = draws(case);
+    let sliding_matters = run.sliding_matters;
+    let nominal_key = solve_key(case, sliding_matters);
+    // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
+    let trackers: Vec<(String, Tracker)> = analysis
+        .carried
+        .iter()
+        .zip(&analysis.anchors)
+        .filter_map(|(c, anchor)| {
+            let pre = c.pre?;
+            let t = match (c.kind, anchor) {
+                (Kind::Soft, Some(a)) => Tracker::Soft(*a, pre),
+                _ => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
             };
-            // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
-            let mag: Vec<f64> = skin
-                .vertices
-                .iter()
-                .zip(post)
-                .map(|(a, b)| norm(sub(*a, *b)))
-                .collect();
-            for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
-                out.push(match t {
-                    Tracker::Soft(a, pre) => norm(sub(a.place(&skin.triangles, post), *pre)),
-                    Tracker::Fixed(m) => *m,
-                });
-            }
-            if let Some(r) = &regions {
-                for (members, out) in r.members.iter().zip(&mut in_regions) {
-                    if let Some(m) = members {
-                        // As report.json `regions` `mean`: the sum over the members / their count.
-                        let v: Vec<f64> = m
-                            .iter()
-                            .zip(&mag)
-                            .filter(|(b, _)| **b)
-                            .map(|(_, x)| *x)
-                            .collect();
-                        out.push(v.iter().sum::<f64>() / v.len() as f64);
-                    }
+            Some((c.label.clone(), t))
+        })
+        .collect();
+    let regions = analysis.frame.as_ref().map(|f| {
+        face_regions::regions(
+            &skin.vertices,
+            f,
+            &crate::landmarks::positions(&analysis.landmarks),
+        )
+    });
+    let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
+    let mut solve_s = 0.0;
+    let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
+    let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
+    let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
+    for (i, d) in draws.iter().enumerate() {
+        obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
+        let c = d.apply(case);
+        let key = solve_key(&c, sliding_matters);
+        let post: &[[f64; 3]] = if key == nominal_key || !run.moves {
+            nominal
+        } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
+            &solved[k].1
+        } else {
+            let t = std::time::Instant::now();
+            let u = resolve(&c)?;
+            solve_s += t.elapsed().as_secs_f64();
+            solved.push((key, u));
+            &solved[solved.len() - 1].1
+        };
+        // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
+        let mag: Vec<f64> = skin
+            .vertices
+            .iter()
+            .zip(post)
+            .map(|(a, b)| norm(sub(*a, *b)))
+            .collect();
+        for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
+            out.push(match t {
+                Tracker::Soft(a, pre) => norm(sub(a.place(&skin.triangles, post), *pre)),
+                Tracker::Fixed(m) => *m,
+            });
+        }
+        if let Some(r) = &regions {
+            for (members, out) in r.members.iter().zip(&mut in_regions) {
+                if let Some(m) = members {
+                    // As report.json `regions` `mean`: the sum over the members / their count.
+                    let v: Vec<f64> = m
+                        .iter()
+                        .zip(&mag)
+                        .filter(|(b, _)| **b)
+                        .map(|(_, x)| *x)
+                        .collect();
+                    out.push(v.iter().sum::<f64>() / v.len() as f64);
                 }
             }
-            magnitudes.push(mag);
         }
-        let bands = band::per_vertex(&magnitudes, skin.vertices.len());
-        let widths: Vec<f64> = bands.iter().map(Band::width).collect();
-        let seconds = start.elapsed().as_secs_f64();
-        let report = UncertaintyReport {
-            samples: n,
-            seed: case.uncertainty.seed,
-            model: case.solve.model.name().into(),
-            sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)".into(),
-            parameters: Ordered(
-                case.uncertainty
-                    .parameters(case.solve.model)
-                    .into_iter()
-                    .map(|(p, d)| (p.key().to_string(), d))
-                    .collect(),
-            ),
-            solves: solved.len(),
-            reused: n - solved.len(),
-            seconds,
-            seconds_per_sample: seconds / n as f64,
-            seconds_per_solve: (!solved.is_empty()).then(|| solve_s / solved.len() as f64),
-            face: FaceSummary {
-                vertices: bands.len(),
-                max_p95: bands.iter().map(|b| b.p95).fold(0.0, f64::max),
-                mean_width: band::mean(&widths),
-                max_width: widths.iter().cloned().fold(0.0, f64::max),
-            },
-            landmarks: Ordered(
-                trackers
-                    .iter()
-                    .zip(&at_landmarks)
-                    .map(|((l, _), v)| (l.clone(), Band::of(v)))
-                    .collect(),
-            ),
-            regions: Ordered(
-                face_regions::NAMES
-                    .iter()
-                    .zip(&in_regions)
-                    .filter(|(_, v)| !v.is_empty())
-                    .map(|(name, v)| (name.to_string(), Band::of(v)))
-                    .collect(),
-            ),
-            draws,
-        };
-        Ok(Sampled { bands, report })
+        magnitudes.push(mag);
     }
+    let bands = band::per_vertex(&magnitudes, skin.vertices.len());
+    let widths: Vec<f64> = bands.iter().map(Band::width).collect();
+    let seconds = start.elapsed().as_secs_f64();
+    let report = UncertaintyReport {
+        samples: n,
+        seed: case.uncertainty.seed,
+        model: case.solve.model.name().into(),
+        sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)".into(),
+        parameters: Ordered(
+            case.uncertainty
+                .parameters(case.solve.model)
+                .into_iter()
+                .map(|(p, d)| (p.key().to_string(), d))
+                .collect(),
+        ),
+        solves: solved.len(),
+        reused: n - solved.len(),
+        seconds,
+        seconds_per_sample: seconds / n as f64,
+        seconds_per_solve: (!solved.is_empty()).then(|| solve_s / solved.len() as f64),
+        face: FaceSummary {
+            vertices: bands.len(),
+            max_p95: bands.iter().map(|b| b.p95).fold(0.0, f64::max),
+            mean_width: band::mean(&widths),
+            max_width: widths.iter().cloned().fold(0.0, f64::max),
+        },
+        landmarks: Ordered(
+            trackers
+                .iter()
+                .zip(&at_landmarks)
+                .map(|((l, _), v)| (l.clone(), Band::of(v)))
+                .collect(),
+        ),
+        regions: Ordered(
+            face_regions::NAMES
+                .iter()
+                .zip(&in_regions)
+                .filter(|(_, v)| !v.is_empty())
+                .map(|(name, v)| (name.to_string(), Band::of(v)))
+                .collect(),
+        ),
+        draws,
+    };
+    Ok(Sampled { bands, report })
 }
