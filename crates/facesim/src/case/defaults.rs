@@ -115,6 +115,8 @@ impl Default for Tet {
             load_steps: 4,
             sliding: true,
             mucosa_gap_mm: 3.0,
+            cut_release_mm: 8.0,
+            accept_inverted: false,
             skin_size_mm: 4.0,
             deep_size_mm: 8.0,
             margin_mm: 30.0,

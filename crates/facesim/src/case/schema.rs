@@ -225,6 +225,13 @@ pub struct Tet {
     /// the bone, tangential free), false is attached (moves with the bone).
     pub sliding: bool,
     pub mucosa_gap_mm: f64,
+    /// The periosteum raised at each saw line: bone nodes nearer than this (mm), or than half
+    /// the step the plan makes there, to bone of another piece are not attached
+    /// (`tet::conditions::release_at_cuts`).
+    pub cut_release_mm: f64,
+    /// A solved displacement that turns elements inside out is a numerical failure (outputs
+    /// written, non-zero exit) unless this is true.
+    pub accept_inverted: bool,
     /// Element edge length (mm) at the skin inside the region the plan reaches.
     pub skin_size_mm: f64,
     /// Element edge length (mm) deep in the tissue and far from the moved bone.

@@ -88,6 +88,9 @@ impl Case {
                     .into(),
             );
         }
+        if !(t.cut_release_mm >= 0.0 && t.cut_release_mm.is_finite()) {
+            return bad("[tet] cut_release_mm must be finite and >= 0".into());
+        }
         if !(t.mucosa_gap_mm >= 0.0 && t.mucosa_gap_mm.is_finite()) {
             return bad("[tet] mucosa_gap_mm must be finite and >= 0".into());
         }

@@ -159,6 +159,9 @@ fn finish(
         None,
         warnings,
     );
+    // Elements turned inside out make the prediction no valid solution: a reported numerical
+    // result (the outputs are written for inspection), not a success, unless asked for.
+    let inverted = prediction.inverted_elements();
     let page_basis = outputs::page_basis(&prediction, case);
     outputs::write_page(
         dir,
@@ -172,6 +175,15 @@ fn finish(
     outputs::write_report(dir, &report)?;
     let out_dir = unit.commit()?;
     obs.done();
+    if inverted > 0 && !case.tet.accept_inverted {
+        return Err(crate::error::Error::numerical(
+            crate::error::NumericalKind::DegenerateElement,
+            format!(
+                "the solved displacement turns {inverted} tetrahedra inside out: not a valid prediction (the outputs in {} are written for inspection; [tet] accept_inverted = true accepts them)",
+                out_dir.display()
+            ),
+        ));
+    }
     let Scene { vol, seg, face, .. } = scene;
     Ok(Outcome {
         report,

@@ -120,6 +120,14 @@ impl Prediction {
         }
     }
 
+    /// Tetrahedra the solved displacement turns inside out (0 for the C1 models).
+    pub fn inverted_elements(&self) -> usize {
+        match &self.solved {
+            Solved::Tet(Some(v)) => v.report.inverted_elements,
+            _ => 0,
+        }
+    }
+
     /// The shell embedding's report, when a coarse C1 model carried the full skin.
     pub fn embedding(&self) -> Option<&EmbeddingReport> {
         match &self.solved {

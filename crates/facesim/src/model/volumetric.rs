@@ -13,7 +13,8 @@ use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
 use crate::tet::conditions::{
-    Bone, Holds, Mucosa, hold_floating_pieces, holds, materials, midpoint_kinds, mucosa,
+    Bone, Holds, Mucosa, follow_bone, hold_floating_pieces, holds, materials, midpoint_kinds,
+    mucosa, release_at_cuts,
 };
 use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
@@ -69,7 +70,7 @@ impl Volumetric {
     pub fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
         let r = &self.reuse;
         let nodes = self.nodes();
-        let (Holds { hold, .. }, _) = hold_tissue(
+        let (Holds { hold, .. }, _, _) = hold_tissue(
             &self.mesh,
             self.quadratic.as_ref(),
             &r.kind,
@@ -172,6 +173,12 @@ pub struct TetReport {
     pub inverted_elements: usize,
     /// Of those, the ones with nodes on both moved and held bone (the osteotomy's gap).
     pub inverted_between_moved_and_held_bone: usize,
+    /// Bone nodes at the saw lines left unattached (`[tet] cut_release_mm`).
+    #[serde(default)]
+    pub released_at_cuts: usize,
+    /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
+    #[serde(default)]
+    pub floating_pieces: usize,
     /// Nonlinear material: the load steps.
     pub newton: Option<Vec<NewtonStep>>,
     /// Face vertices farther from the mesh's skin than the reach (they stay at rest).
@@ -200,7 +207,7 @@ fn hold_tissue(
     bone: &Bone,
     case: &Case,
     rest_normals: bool,
-) -> (Holds, (usize, usize)) {
+) -> (Holds, usize, (usize, usize)) {
     let nodes = quadratic.map_or(&mesh.nodes, |q| &q.nodes);
     let rigid = crate::pipeline::model::rigid_mask(case, nodes);
     let mut h = holds(
@@ -213,11 +220,20 @@ fn hold_tissue(
         rest_normals,
     );
     // The solved cells: a 10-node mesh's midpoints are nodes of its cells, not of the corners'.
-    let held = match quadratic {
-        Some(q) => hold_floating_pieces(&q.tets, &mut h.constraint, &mut h.hold, &mut h.linear),
-        None => hold_floating_pieces(&mesh.tets, &mut h.constraint, &mut h.hold, &mut h.linear),
+    let ms: Vec<_> = case.osteotomy.iter().map(crate::plan::basis::matrix).collect();
+    let follow = follow_bone(bone, nodes);
+    let band = case.tet.cut_release_mm;
+    let (released, held) = match quadratic {
+        Some(q) => (
+            release_at_cuts(&q.tets, kind, &mut h, band),
+            hold_floating_pieces(&q.tets, &mut h, &follow, &ms),
+        ),
+        None => (
+            release_at_cuts(&mesh.tets, kind, &mut h, band),
+            hold_floating_pieces(&mesh.tets, &mut h, &follow, &ms),
+        ),
     };
-    (h, held)
+    (h, released, held)
 }
 
 /// The box (LPS mm) around the skull points the plan moves, grown by `margin` and kept inside
@@ -373,7 +389,9 @@ pub fn predict(
             hold,
             linear: linear_hold,
             overlapping_segments,
+            ..
         },
+        released_at_cuts,
         (pieces, held_still),
     ) = hold_tissue(
         &mesh,
@@ -386,7 +404,7 @@ pub fn predict(
     );
     if pieces > 0 {
         rec.warn(format!(
-            "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: held still (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
+            "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: each moves rigidly with the bone it lies on (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
         ));
     }
     // The tissue follows its bone, so a move no skin could follow (centimetres typed as
@@ -521,6 +539,8 @@ pub fn predict(
         quality: mesh.quality.clone(),
         inverted_elements: inverted,
         inverted_between_moved_and_held_bone: at_cuts,
+        released_at_cuts,
+        floating_pieces: pieces,
         newton,
         face_vertices_unreached: embedding.unreached(),
         face_to_mesh_mm: stats(&reached),

@@ -95,6 +95,7 @@ pub(crate) fn holds(
     overlaps.sort_unstable();
     overlaps.dedup();
     out.overlapping_segments = overlaps;
+    out.at = nodes.to_vec();
     out
 }
 
@@ -102,6 +103,8 @@ pub(crate) fn holds(
 /// some node lies in together.
 #[derive(Default)]
 pub(crate) struct Holds {
+    /// The nodes' rest positions (LPS mm).
+    pub at: Vec<[f64; 3]>,
     pub constraint: Vec<u8>,
     pub hold: Vec<Hold>,
     pub linear: Vec<LinearHold>,
@@ -229,14 +232,18 @@ pub(crate) fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]
 
 /// Pieces of the mesh (tetrahedra joined through shared faces; a piece hanging on by a node
 /// or an edge is a hinge) held by fewer than three nodes would float or turn: a singular
-/// system. Their nodes are held still. `cells` are the solved elements (4-node, or 10-node
-/// with the corners first): a node no cell uses carries no stiffness and is held too. Returns
-/// the pieces and nodes so held.
+/// system. Each such piece moves rigidly with what holds it already (the bone of its one or two
+/// held nodes, most of them), else with the bone it lies on (`follow`, given the piece's nodes:
+/// the segment most of its nodes are nearest to, or still): in a head whose bone all
+/// moves, nothing is held still (issue 25: 36 pieces held still made a rigid move of the whole
+/// skull 24 % non-rigid). `cells` are the solved elements (4-node, or 10-node with the corners
+/// first): a node no cell uses carries no stiffness and follows its bone too. Returns the pieces
+/// and nodes so held.
 pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
     cells: &[C],
-    constraint: &mut [u8],
-    hold: &mut [Hold],
-    linear: &mut [LinearHold],
+    h: &mut Holds,
+    follow: &dyn Fn(&[usize]) -> LinearHold,
+    ms: &[[f64; crate::plan::basis::COLUMNS]],
 ) -> (usize, usize) {
     let mut faces: Vec<([u32; 3], u32)> = cells
         .iter()
@@ -262,7 +269,7 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
     let mut held_nodes: Vec<Vec<u32>> = vec![Vec::new(); count];
     for (t, q) in cells.iter().enumerate() {
         for n in q.as_ref() {
-            if matches!(constraint[*n as usize], FIXED | MOVED) {
+            if matches!(h.constraint[*n as usize], FIXED | MOVED) {
                 held_nodes[label[t] as usize].push(*n);
             }
         }
@@ -275,39 +282,266 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
             h.len() >= 3
         })
         .collect();
+    let hold_with = |nodes: &[usize], h: &mut Holds| {
+        // The piece follows what already holds it (a hinge node's bone), else its nearest bone.
+        let mut votes: Vec<(LinearHold, usize)> = Vec::new();
+        for &n in nodes {
+            let l = match (h.constraint[n], h.linear[n]) {
+                (MOVED, LinearHold::Moves { segment, .. }) => LinearHold::Moves {
+                    segment,
+                    at: h.at[n],
+                },
+                (FIXED, _) => LinearHold::Still,
+                _ => continue,
+            };
+            let same = |a: &LinearHold| match (a, &l) {
+                (LinearHold::Moves { segment: x, .. }, LinearHold::Moves { segment: y, .. }) => {
+                    x == y
+                }
+                (LinearHold::Still, LinearHold::Still) => true,
+                _ => false,
+            };
+            match votes.iter_mut().find(|(a, _)| same(a)) {
+                Some((_, c)) => *c += 1,
+                None => votes.push((l, 1)),
+            }
+        }
+        let l = votes
+            .iter()
+            .max_by_key(|(_, c)| *c)
+            .map_or_else(|| follow(nodes), |(l, _)| *l);
+        let hold = l.hold(ms);
+        let code = match l {
+            LinearHold::Moves { .. } => MOVED,
+            _ => FIXED,
+        };
+        let mut count = 0;
+        for &n in nodes {
+            if !matches!(h.constraint[n], FIXED | MOVED) {
+                // Each node moves as the piece's bone carries its own position.
+                h.linear[n] = match l {
+                    LinearHold::Moves { segment, .. } => LinearHold::Moves {
+                        segment,
+                        at: h.at[n],
+                    },
+                    other => other,
+                };
+                h.hold[n] = match l {
+                    LinearHold::Moves { .. } => h.linear[n].hold(ms),
+                    _ => hold,
+                };
+                h.constraint[n] = code;
+                count += 1;
+            }
+        }
+        count
+    };
     // A node no tetrahedron uses (one of a flattened sliver left out of the mesh) carries no
-    // stiffness: hold it.
-    let mut used = vec![false; constraint.len()];
+    // stiffness: it follows its bone.
+    let mut used = vec![false; h.constraint.len()];
     cells
         .iter()
         .flat_map(|q| q.as_ref())
         .for_each(|n| used[*n as usize] = true);
-    for (n, u) in used.iter().enumerate() {
-        if !u && n < hold.len() {
-            constraint[n] = FIXED;
-            hold[n] = Hold::Fixed([0.0; 3]);
-            linear[n] = LinearHold::Still;
+    for n in 0..used.len().min(h.hold.len()) {
+        if !used[n] {
+            hold_with(&[n], h);
         }
     }
-    let mut pieces = vec![false; count];
-    let mut nodes = 0;
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); count];
     for (t, q) in cells.iter().enumerate() {
         let l = label[t] as usize;
-        if anchored[l] {
-            continue;
+        if !anchored[l] {
+            members[l].extend(q.as_ref().iter().map(|n| *n as usize));
         }
-        pieces[l] = true;
-        for n in q.as_ref() {
+    }
+    let mut pieces = 0;
+    let mut nodes = 0;
+    for mut m in members.into_iter().filter(|m| !m.is_empty()) {
+        m.sort_unstable();
+        m.dedup();
+        pieces += 1;
+        nodes += hold_with(&m, h);
+    }
+    (pieces, nodes)
+}
+
+/// For [`hold_floating_pieces`]: the hold of a piece of tissue with nodes at `nodes` (indices
+/// into `at`), the rigid move of the segment most of its nodes' nearest bone points lie in, or
+/// still when they lie on bone no segment moves.
+pub(crate) fn follow_bone<'a>(
+    bone: &'a Bone<'a>,
+    at: &'a [[f64; 3]],
+) -> impl Fn(&[usize]) -> LinearHold + 'a {
+    let index = crate::compare::SurfaceIndex::new(bone.skull);
+    move |nodes: &[usize]| {
+        let mut votes = vec![0usize; bone.osteotomy.len() + 1];
+        for &n in nodes {
+            let (_, q, _) = index.closest_triangle(at[n]);
+            let s = segment_at(bone.osteotomy, q).0;
+            votes[s.map_or(0, |s| s + 1)] += 1;
+        }
+        let best = (0..votes.len()).max_by_key(|i| votes[*i]).unwrap_or(0);
+        match best {
+            0 => LinearHold::Still,
+            s => LinearHold::Moves {
+                segment: s - 1,
+                at: at[nodes[0]],
+            },
+        }
+    }
+}
+
+/// The saw line (issue 25 item 3): the tissue is not one continuum through an osteotomy. Where
+/// pieces held differently meet (a segment's bone and the bone left in place, two segments, or a
+/// segment and held skin or the region's cut faces), the surgeon has raised the periosteum and
+/// the tissue over the cut is not attached: the held nodes of every element joining two pieces,
+/// and every held bone node nearer than `max(band_mm, |u_a − u_b| / 2)` to a node of another
+/// piece (u: the two pieces' moves there), are released. So no element joins two pieces, and the
+/// band widens with the step the plan makes at the cut (a 25 mm move releases 12.5 mm each side),
+/// which the tissue bridges instead of one element being sheared inside out.
+///
+/// A released node is free where the other piece's relative move lifts the tissue off its bone,
+/// and slides on its own bone (n · u = n · u_bone, tangential free) where that move would drag
+/// the tissue into it: a segment advanced into its tissue, or the bone left in place behind a
+/// setback. n is the direction from the node into the tissue around it (the mean of its
+/// elements' centroids), so the bone mesh's orientation does not matter. Returns the released
+/// nodes.
+pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
+    cells: &[C],
+    kind: &[NodeKind],
+    h: &mut Holds,
+    band_mm: f64,
+) -> usize {
+    // The piece a held node belongs to: 0 still, s + 1 segment s.
+    let piece: Vec<Option<usize>> = (0..h.constraint.len())
+        .map(|n| match (h.constraint[n], h.linear[n]) {
+            (MOVED, LinearHold::Moves { segment, .. }) => Some(segment + 1),
+            (FIXED, _) => Some(0),
+            _ => None,
+        })
+        .collect();
+    let is_bone = |n: usize| matches!(kind.get(n), Some(NodeKind::Bone));
+    let moves: Vec<[f64; 3]> = h
+        .hold
+        .iter()
+        .map(|hold| match hold {
+            Hold::Fixed(u) => *u,
+            _ => [0.0; 3],
+        })
+        .collect();
+    let moved = |n: usize| moves[n];
+    // Per released node, the move of the other piece it was released for.
+    let mut release: Vec<Option<[f64; 3]>> = vec![None; piece.len()];
+    for q in cells {
+        let q = q.as_ref();
+        let first = q.iter().find_map(|n| piece[*n as usize]);
+        let Some(other) = q
+            .iter()
+            .find(|n| piece[**n as usize].is_some_and(|p| Some(p) != first))
+        else {
+            continue;
+        };
+        let first_node = q.iter().find(|n| piece[**n as usize] == first);
+        for n in q {
             let n = *n as usize;
-            if constraint[n] != FIXED {
-                constraint[n] = FIXED;
-                hold[n] = Hold::Fixed([0.0; 3]);
-                linear[n] = LinearHold::Still;
-                nodes += 1;
+            if let Some(p) = piece[n] {
+                let o = if Some(p) == first {
+                    *other as usize
+                } else {
+                    first_node.map_or(n, |f| *f as usize)
+                };
+                release[n].get_or_insert(moved(o));
             }
         }
     }
-    (pieces.iter().filter(|p| **p).count(), nodes)
+    // Nearest held nodes of other pieces, on a grid of cells as wide as the widest band.
+    let held: Vec<usize> = (0..piece.len()).filter(|n| piece[*n].is_some()).collect();
+    let largest = held
+        .iter()
+        .map(|n| crate::vec3::norm(moved(*n)))
+        .fold(0.0, f64::max);
+    let cell = band_mm.max(largest).max(1e-6);
+    let key = |p: [f64; 3]| p.map(|c| (c / cell).floor() as i64);
+    let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = Default::default();
+    for &n in &held {
+        grid.entry(key(h.at[n])).or_default().push(n);
+    }
+    let unreleased: Vec<usize> = held
+        .iter()
+        .copied()
+        .filter(|n| is_bone(*n) && release[*n].is_none())
+        .collect();
+    for n in unreleased {
+        let k = key(h.at[n]);
+        let mut nearest: Option<(f64, usize)> = None;
+        for a in -1..=1 {
+            for b in -1..=1 {
+                for c in -1..=1 {
+                    let Some(others) = grid.get(&[k[0] + a, k[1] + b, k[2] + c]) else {
+                        continue;
+                    };
+                    for &m in others.iter().filter(|m| piece[**m] != piece[n]) {
+                        let step = crate::vec3::norm(crate::vec3::sub(moved(n), moved(m)));
+                        let dist = crate::vec3::norm(crate::vec3::sub(h.at[n], h.at[m]));
+                        if dist < band_mm.max(step / 2.0) && nearest.is_none_or(|(d, _)| dist < d)
+                        {
+                            nearest = Some((dist, m));
+                        }
+                    }
+                }
+            }
+        }
+        if let Some((_, m)) = nearest {
+            release[n] = Some(moved(m));
+        }
+    }
+    // Into the tissue from each node: the mean of its elements' centroids.
+    let mut inward = vec![[0.0; 3]; piece.len()];
+    for q in cells {
+        let q = q.as_ref();
+        let corners = &q[..4];
+        let centroid: [f64; 3] =
+            std::array::from_fn(|c| corners.iter().map(|n| h.at[*n as usize][c]).sum::<f64>() / 4.0);
+        for n in q {
+            let n = *n as usize;
+            if release[n].is_some() {
+                let d = crate::vec3::sub(centroid, h.at[n]);
+                inward[n] = crate::vec3::add(inward[n], d);
+            }
+        }
+    }
+    let mut count = 0;
+    for n in 0..release.len() {
+        let Some(other) = release[n] else { continue };
+        count += 1;
+        let own = moved(n);
+        let len = crate::vec3::norm(inward[n]);
+        let normal = inward[n].map(|c| c / len.max(1e-300));
+        // The other piece drags the tissue towards its bone by (other − own) · n < 0.
+        let drags_in = len > 0.0 && crate::vec3::dot(crate::vec3::sub(other, own), normal) < 0.0;
+        if drags_in && is_bone(n) {
+            let segment = match h.linear[n] {
+                LinearHold::Moves { segment, .. } => Some(segment),
+                _ => None,
+            };
+            h.constraint[n] = SLIDING;
+            h.hold[n] = Hold::Slide {
+                normal,
+                value: crate::vec3::dot(normal, own),
+            };
+            h.linear[n] = LinearHold::Slides {
+                normal,
+                segment,
+                at: h.at[n],
+            };
+        } else {
+            h.constraint[n] = FREE;
+            h.hold[n] = Hold::Free;
+            h.linear[n] = LinearHold::Free;
+        }
+    }
+    count
 }
 
 /// Per tetrahedron, the material of its tissue label (`[tet]`).

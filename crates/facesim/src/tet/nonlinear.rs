@@ -20,13 +20,19 @@
 //! bone's). Loads are dead loads (fixed in the reference configuration).
 //!
 //! Solution: the held values and loads are applied in load steps s = 1/n, 2/n, …, 1. In each step
-//! Newton's method solves K′ Δ′ = −r′ in the nodes' hold frames (the held components of Δ′
-//! take the remaining gap to their target), with a backtracking line search that halves the step
-//! while an element inverts (J ≤ 0) or the potential energy does not decrease (Armijo). A step
-//! converges when the relative free residual ‖r_free‖ / max(‖f_int‖, ‖f_ext‖, f₀) falls below the
-//! tolerance (f₀: the internal-force norm of a 10⁻⁴ strain, so a rigid move converges); a step
-//! that does not converge in `max_iterations` is cut in half, up to `max_cuts` times, and then
-//! the solve fails with [`NumericalKind::NotConverged`] and the residual history.
+//! Newton's method solves K′ Δ′ = −r′ in the nodes' hold frames. The first iteration applies the
+//! step's held increments whole (the held components of Δ′ are the gap to their target) with the
+//! free nodes' linearised response; if that inverts an element the step is cut, never
+//! shortened (a shortened step leaves part of the gap, and halving it again each iteration never
+//! closes it). Later iterations keep the held values and search the line (halving while an element
+//! inverts, J ≤ 0, or the potential energy does not decrease: Armijo). A step converges when the
+//! held values are reached and either the relative free residual ‖r_free‖ / max(‖f_int‖, ‖f_ext‖,
+//! ‖r₁‖, f₀) falls below the tolerance (‖r₁‖: the step's own out-of-balance force after its held
+//! increments; f₀: the internal-force norm of a 10⁻⁴ strain, so a rigid move converges) or the
+//! last correction's work |Δ·r| is below 10⁻²⁰ of the step's first (the energy criterion). A
+//! step that does not converge in `max_iterations` is cut in half, up to `max_cuts` times in a
+//! row, and then the solve fails with [`NumericalKind::NotConverged`] and the residual history; a
+//! step that converges in a few iterations lets the next grow back (adaptive load steps).
 
 use super::holds::{Frame, Hold, Loads, frames, rotate_lower, to_global, to_local};
 use super::{TetMesh, TissueElastic, gradients};
@@ -235,6 +241,10 @@ pub fn internal_state(mesh: &TetMesh, u: &[[f64; 3]], with_tangent: bool) -> Res
     })
 }
 
+/// The energy criterion's tolerance: the last correction's work against the residual relative
+/// to the step's first (quadratic convergence takes it from 1 to round-off in a few iterations).
+const ENERGY_TOLERANCE: f64 = 1e-20;
+
 /// Newton's method settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Newton {
@@ -328,7 +338,7 @@ pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Re
     };
     let mut u = vec![[0.0; 3]; mesh.nodes.len()];
     let mut steps = Vec::new();
-    let (mut done, mut ds, mut cuts) = (0.0_f64, 1.0 / opts.load_steps as f64, 0);
+    let (mut done, mut ds, mut cuts, mut in_a_row) = (0.0_f64, 1.0 / opts.load_steps as f64, 0, 0);
     while done < 1.0 {
         let s = if done + ds > 1.0 - 1e-12 {
             1.0
@@ -337,23 +347,30 @@ pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Re
         };
         match solver.step(&mut u, s) {
             Ok(step) => {
+                // Adaptive load steps: a step that converged quickly lets the next grow back
+                // towards the first size.
+                if step.iterations <= 6 {
+                    ds = (ds * 2.0).min(1.0 / opts.load_steps as f64);
+                }
                 steps.push(step);
                 done = s;
+                in_a_row = 0;
             }
             Err(fail) => {
-                if cuts >= opts.max_cuts {
+                if in_a_row >= opts.max_cuts {
                     let history: Vec<String> =
                         fail.residuals.iter().map(|r| format!("{r:.3e}")).collect();
                     return Err(Error::numerical(
                         NumericalKind::NotConverged,
                         format!(
-                            "the nonlinear (neo-Hookean) solve did not converge at load {s:.4} after {cuts} step cuts: {}; relative residual history [{}] (try more load steps or Newton iterations)",
+                            "the nonlinear (neo-Hookean) solve did not converge at load {s:.4} after {in_a_row} step cuts in a row: {}; relative residual history [{}] (try more load steps or Newton iterations)",
                             fail.why,
                             history.join(", ")
                         ),
                     ));
                 }
                 cuts += 1;
+                in_a_row += 1;
                 ds /= 2.0;
             }
         }
@@ -402,6 +419,8 @@ impl Solver<'_> {
     fn step(&mut self, u: &mut Vec<[f64; 3]>, s: f64) -> std::result::Result<Step, StepFailure> {
         let mut x = u.clone();
         let mut residuals = Vec::new();
+        let mut step_scale: Option<f64> = None;
+        let (mut first_work, mut last_work): (Option<f64>, Option<f64>) = (None, None);
         let fail = |why: String, residuals: &[f64]| StepFailure {
             why,
             residuals: residuals.to_vec(),
@@ -436,14 +455,31 @@ impl Solver<'_> {
                 .zip(&self.fixed)
                 .map(|(r, h)| if *h { 0.0 } else { *r })
                 .collect();
-            let reference = norm(&f_int).max(s * norm(&self.f_ext)).max(self.f0);
-            let rel = norm(&free) / reference;
+            // The step's own residual scale: the out-of-balance force its held increments
+            // cause (the first iterate after they are applied), else the internal and external
+            // forces, else f₀ (a rigid move has none of them).
+            let held = gap_max <= 1e-13 * (1.0 + target_max);
+            let free_norm = norm(&free);
+            if held && step_scale.is_none() {
+                step_scale = Some(free_norm);
+            }
+            let reference = norm(&f_int)
+                .max(s * norm(&self.f_ext))
+                .max(step_scale.unwrap_or(0.0))
+                .max(self.f0);
+            let rel = free_norm / reference;
             residuals.push(rel);
             if !rel.is_finite() {
                 return Err(fail("the residual is not finite".into(), &residuals));
             }
-            let held = gap_max <= 1e-13 * (1.0 + target_max);
-            if held && rel <= self.opts.tolerance && it > 0 {
+            // Force criterion, or the energy criterion of the last Newton correction (the work
+            // of the correction against the residual, relative to the step's first; Bathe,
+            // Finite Element Procedures §8.4.4): either means no further digit is to be had.
+            let energy_converged = match (first_work, last_work) {
+                (Some(w0), Some(w)) => w <= ENERGY_TOLERANCE * w0,
+                _ => false,
+            };
+            if held && it > 0 && (rel <= self.opts.tolerance || energy_converged) {
                 *u = x;
                 return Ok(Step {
                     load: s,
@@ -463,9 +499,19 @@ impl Solver<'_> {
                 .zip(&self.fixed)
                 .map(|((r, d), h)| if *h { 0.0 } else { r * d })
                 .sum();
+            if held {
+                last_work = Some(slope.abs());
+                first_work.get_or_insert(slope.abs());
+            }
             let mut alpha = 1.0;
             let mut accepted = None;
-            for _ in 0..30 {
+            // The held increments are applied whole: a shortened step would leave a fraction
+            // of the gap for the next iteration, and halving it again and again never closes
+            // it (the failure issue 25 measured: a free residual at round-off, the gap open
+            // after 25 iterations). If the whole increment inverts an element, the load step
+            // is cut instead.
+            let tries = if held { 30 } else { 1 };
+            for _ in 0..tries {
                 let trial: Vec<[f64; 3]> = x
                     .iter()
                     .zip(self.frames.iter())
@@ -492,6 +538,12 @@ impl Solver<'_> {
             }
             match accepted {
                 Some(t) => x = t,
+                None if !held => {
+                    return Err(fail(
+                        "the step's held increments invert an element when applied whole".into(),
+                        &residuals,
+                    ));
+                }
                 None => {
                     return Err(fail(
                         "the line search found no step that keeps every element uninverted and lowers the energy".into(),
