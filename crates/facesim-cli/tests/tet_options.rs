@@ -17,8 +17,13 @@ struct Face {
 /// Run the bundled sample (data-samples/phantom: the mandible advanced 6 mm) with `sets`
 /// (`--set KEY=VALUE`) into a fresh directory.
 fn run(name: &str, sets: &[&str]) -> Face {
-    let out = common::kept_dir(name);
     let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom");
+    run_case(&case, name, sets).0
+}
+
+/// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
+fn run_case(case: &Path, name: &str, sets: &[&str]) -> (Face, serde_json::Value) {
+    let out = common::kept_dir(name);
     let mut args = vec![
         "run",
         case.to_str().unwrap(),
@@ -30,6 +35,12 @@ fn run(name: &str, sets: &[&str]) -> Face {
     }
     let r = facesim(&args);
     assert_eq!(r.code, 0, "facesim run {sets:?} failed: {}", r.stderr);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    (read_face(&out), report)
+}
+
+fn read_face(out: &Path) -> Face {
     let csv = std::fs::read_to_string(out.join("displacement.csv")).unwrap();
     let rows: Vec<Vec<f64>> = csv
         .lines()
@@ -39,6 +50,181 @@ fn run(name: &str, sets: &[&str]) -> Face {
     Face {
         pre: rows.iter().map(|v| [v[1], v[2], v[3]]).collect(),
         post: rows.iter().map(|v| [v[4], v[5], v[6]]).collect(),
+    }
+}
+
+fn mean_distance(a: &Face, b: &Face) -> f64 {
+    assert_eq!(a.pre, b.pre);
+    a.post
+        .iter()
+        .zip(&b.post)
+        .map(|(p, q)| dist(*p, *q))
+        .sum::<f64>()
+        / a.post.len() as f64
+}
+
+fn largest_move(f: &Face) -> f64 {
+    f.pre
+        .iter()
+        .zip(&f.post)
+        .map(|(a, b)| dist(*a, *b))
+        .fold(0.0, f64::max)
+}
+
+/// R = Rz·Ry·Rx (degrees), as case.toml's rotate_deg.
+fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
+    let [a, b, c] = deg.map(f64::to_radians);
+    let rx = [
+        [1.0, 0.0, 0.0],
+        [0.0, a.cos(), -a.sin()],
+        [0.0, a.sin(), a.cos()],
+    ];
+    let ry = [
+        [b.cos(), 0.0, b.sin()],
+        [0.0, 1.0, 0.0],
+        [-b.sin(), 0.0, b.cos()],
+    ];
+    let rz = [
+        [c.cos(), -c.sin(), 0.0],
+        [c.sin(), c.cos(), 0.0],
+        [0.0, 0.0, 1.0],
+    ];
+    let mul = |p: [[f64; 3]; 3], q: [[f64; 3]; 3]| {
+        std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| p[i][k] * q[k][j]).sum()))
+    };
+    mul(rz, mul(ry, rx))
+}
+
+/// The real CT's case with its whole skull as one segment moved by `translate`, `rotate_deg`
+/// about `pivot`, every skin node movable: the exact answer is the same rigid motion of the face.
+fn whole_skull_case(
+    name: &str,
+    translate: [f64; 3],
+    rotate: [f64; 3],
+    pivot: [f64; 3],
+) -> std::path::PathBuf {
+    let dir = common::kept_dir(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    let ct = common::real_ct();
+    std::fs::write(
+        dir.join("case.toml"),
+        format!(
+            r#"name = "{name}"
+[ct]
+path = "{}"
+[surface]
+movable = {{ sphere = {{ center = [125.0, 30.0, 15.0], radius = 500.0 }} }}
+[[osteotomy]]
+name = "skull"
+region = {{ box = {{ min = [-1000.0, -1000.0, -1000.0], max = [1000.0, 1000.0, 1000.0] }} }}
+translate = {translate:?}
+rotate_deg = {rotate:?}
+pivot = {pivot:?}
+"#,
+            ct.display()
+        ),
+    )
+    .unwrap();
+    dir
+}
+
+/// Issue 25 item 2: a rigid move of all bone on the real CT gives the rigid face. The tissue
+/// mesher leaves pieces hinged by a node or an edge; they were held still, and the face of a
+/// translated skull came out 23.6 % of the move off the rigid translation. Now each follows its
+/// bone. Translation: every element and material is exact (0 strain). Rotation: the linear
+/// material's small-strain error is of order θ × the move (3° ≈ 5 %; 1.2 % measured). (The
+/// neo-Hookean material on the whole real CT does not finish in a test's time yet: issue 25.)
+#[test]
+fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
+    let pivot = [125.0, 60.0, 20.0];
+    let t = [1.5, -2.0, 1.0];
+    for (name, rotate, sets, bound) in [
+        (
+            "rigid-translate-linear",
+            [0.0; 3],
+            &["tet.sliding=false"][..],
+            1e-6,
+        ),
+        (
+            "rigid-translate-sliding",
+            [0.0; 3],
+            &["tet.sliding=true"][..],
+            1e-6,
+        ),
+        (
+            "rigid-rotate-linear",
+            [2.0, -3.0, 1.5],
+            &["tet.sliding=false"][..],
+            0.05,
+        ),
+    ] {
+        let case = whole_skull_case(&format!("facesim-{name}-case"), t, rotate, pivot);
+        let (face, report) = run_case(&case, &format!("facesim-{name}"), sets);
+        assert_eq!(
+            report["tet"]["fixed_nodes"], 0,
+            "{name}: nothing is held still"
+        );
+        assert_eq!(report["tet"]["inverted_elements"], 0, "{name}");
+        let r = rotation(rotate);
+        let mut worst: f64 = 0.0;
+        let mut moved: f64 = 0.0;
+        for (p, q) in face.pre.iter().zip(&face.post) {
+            let exact: [f64; 3] = std::array::from_fn(|i| {
+                (0..3).map(|j| r[i][j] * (p[j] - pivot[j])).sum::<f64>() + pivot[i] + t[i]
+            });
+            worst = worst.max(dist(exact, *q));
+            moved = moved.max(dist(exact, *p));
+        }
+        assert!(
+            worst <= bound * moved,
+            "{name}: the face is {worst:.4} mm off the rigid move (largest move {moved:.2} mm)"
+        );
+    }
+}
+
+/// Issue 25 item 1: every [tet] option through `facesim run` on the bundled sample (8/16 mm
+/// mesh, so the 10-node system fits): each follows the 6 mm advance, exits 0, turns no element
+/// inside out, and agrees with the default combination within what the model difference
+/// explains — element order and material (0.5 mm mean at a 6 mm move, the issue's bound), and
+/// sliding (a few tenths of a millimetre on the face: only the inner lips slide).
+#[test]
+fn every_tet_option_follows_the_bone_on_the_bundled_sample() {
+    let mesh = ["tet.skin_size_mm=8", "tet.deep_size_mm=16"];
+    let mut faces = Vec::new();
+    for element in ["linear", "quadratic"] {
+        for material in ["linear", "neo-hookean"] {
+            if element == "quadratic" && material == "neo-hookean" {
+                // The nonlinear material is solved on 4-node elements only: refused, not
+                // silently solved on another element.
+                continue;
+            }
+            for sliding in ["true", "false"] {
+                let sets = [
+                    format!("tet.element={element}"),
+                    format!("tet.material={material}"),
+                    format!("tet.sliding={sliding}"),
+                ];
+                let sets: Vec<&str> = sets.iter().map(String::as_str).chain(mesh).collect();
+                let name = format!("facesim-opt-{element}-{material}-{sliding}");
+                let (face, report) = run_case(
+                    &Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom"),
+                    &name,
+                    &sets,
+                );
+                let max = largest_move(&face);
+                assert!(
+                    (5.0..=6.5).contains(&max),
+                    "{name}: the face moves {max:.3} mm at most for a 6 mm advance"
+                );
+                assert_eq!(report["tet"]["inverted_elements"], 0, "{name}");
+                faces.push((name, face));
+            }
+        }
+    }
+    let (base_name, base) = &faces[0];
+    for (name, face) in &faces[1..] {
+        let mean = mean_distance(base, face);
+        assert!(mean < 0.5, "{name} vs {base_name}: mean {mean:.3} mm");
     }
 }
 

@@ -176,6 +176,10 @@ pub struct TetReport {
     /// Bone nodes at the saw lines left unattached (`[tet] cut_release_mm`).
     #[serde(default)]
     pub released_at_cuts: usize,
+    /// Sliding nodes of elements the first solve turned inside out, freed (the tissue lifts
+    /// off the bone there) before solving again.
+    #[serde(default)]
+    pub lifted_off: usize,
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
@@ -220,16 +224,20 @@ fn hold_tissue(
         rest_normals,
     );
     // The solved cells: a 10-node mesh's midpoints are nodes of its cells, not of the corners'.
-    let ms: Vec<_> = case.osteotomy.iter().map(crate::plan::basis::matrix).collect();
+    let ms: Vec<_> = case
+        .osteotomy
+        .iter()
+        .map(crate::plan::basis::matrix)
+        .collect();
     let follow = follow_bone(bone, nodes);
     let band = case.tet.cut_release_mm;
     let (released, held) = match quadratic {
         Some(q) => (
-            release_at_cuts(&q.tets, kind, &mut h, band),
+            release_at_cuts(&q.tets, kind, &mut h, band, case.tet.sliding),
             hold_floating_pieces(&q.tets, &mut h, &follow, &ms),
         ),
         None => (
-            release_at_cuts(&mesh.tets, kind, &mut h, band),
+            release_at_cuts(&mesh.tets, kind, &mut h, band, case.tet.sliding),
             hold_floating_pieces(&mesh.tets, &mut h, &follow, &ms),
         ),
     };
@@ -295,6 +303,9 @@ fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
         .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
         .collect()
 }
+
+/// Rounds of freeing sliding nodes of inverted elements and solving again (linear models).
+const RELEASE_ROUNDS: usize = 3;
 
 /// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
 /// within about 15 mm, distraction of the maxilla reaches ~20.
@@ -443,12 +454,46 @@ pub fn predict(
         None => linear.assemble(),
     };
     // The linear models keep their factor for the plan basis (no second factorisation).
+    let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
+    let mut lifted_off = 0;
     let (displacement, newton, factor) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
             if linear_solve {
-                let c = Constrained::new(&stiffness()?, &hold, nodes.len())?;
+                let k = stiffness()?;
                 let f = Loads::none().nodal_vector(nodes.len())?;
-                let u = c.solve(&[(&hold, &f)])?.remove(0);
+                let mut c = Constrained::new(&k, &hold, nodes.len())?;
+                let mut u = c.solve(&[(&hold, &f)])?.remove(0);
+                // Where a node sliding on its bone is in an element the solution turns inside
+                // out, the bone would drag the tissue through itself: that tissue lifts off
+                // (the node is freed) and the model is solved again, a few rounds at most.
+                for _ in 0..RELEASE_ROUNDS {
+                    let inverted = match &quadratic {
+                        Some(q) => q.inverted_after(&u),
+                        None => linear.inverted_after(&u),
+                    };
+                    let mut freed = 0;
+                    for e in inverted {
+                        let cell: Vec<u32> = match &quadratic {
+                            Some(q) => q.tets[e].to_vec(),
+                            None => mesh.tets[e].to_vec(),
+                        };
+                        for n in cell {
+                            let n = n as usize;
+                            if constraint[n] == SLIDING {
+                                constraint[n] = FREE;
+                                hold[n] = Hold::Free;
+                                linear_hold[n] = LinearHold::Free;
+                                freed += 1;
+                            }
+                        }
+                    }
+                    if freed == 0 {
+                        break;
+                    }
+                    lifted_off += freed;
+                    c = Constrained::new(&k, &hold, nodes.len())?;
+                    u = c.solve(&[(&hold, &f)])?.remove(0);
+                }
                 return Ok((u, None, Some(c)));
             }
             let opts = Newton {
@@ -540,6 +585,7 @@ pub fn predict(
         inverted_elements: inverted,
         inverted_between_moved_and_held_bone: at_cuts,
         released_at_cuts,
+        lifted_off,
         floating_pieces: pieces,
         newton,
         face_vertices_unreached: embedding.unreached(),

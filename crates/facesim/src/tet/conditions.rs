@@ -405,13 +405,15 @@ pub(crate) fn follow_bone<'a>(
 /// and slides on its own bone (n · u = n · u_bone, tangential free) where that move would drag
 /// the tissue into it: a segment advanced into its tissue, or the bone left in place behind a
 /// setback. n is the direction from the node into the tissue around it (the mean of its
-/// elements' centroids), so the bone mesh's orientation does not matter. Returns the released
+/// elements' centroids), so the bone mesh's orientation does not matter. With `slide` false
+/// (`[tet] sliding = false`: nothing slides) every released node is free. Returns the released
 /// nodes.
 pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     cells: &[C],
     kind: &[NodeKind],
     h: &mut Holds,
     band_mm: f64,
+    slide: bool,
 ) -> usize {
     // The piece a held node belongs to: 0 still, s + 1 segment s.
     let piece: Vec<Option<usize>> = (0..h.constraint.len())
@@ -484,8 +486,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
                     for &m in others.iter().filter(|m| piece[**m] != piece[n]) {
                         let step = crate::vec3::norm(crate::vec3::sub(moved(n), moved(m)));
                         let dist = crate::vec3::norm(crate::vec3::sub(h.at[n], h.at[m]));
-                        if dist < band_mm.max(step / 2.0) && nearest.is_none_or(|(d, _)| dist < d)
-                        {
+                        if dist < band_mm.max(step / 2.0) && nearest.is_none_or(|(d, _)| dist < d) {
                             nearest = Some((dist, m));
                         }
                     }
@@ -501,8 +502,9 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     for q in cells {
         let q = q.as_ref();
         let corners = &q[..4];
-        let centroid: [f64; 3] =
-            std::array::from_fn(|c| corners.iter().map(|n| h.at[*n as usize][c]).sum::<f64>() / 4.0);
+        let centroid: [f64; 3] = std::array::from_fn(|c| {
+            corners.iter().map(|n| h.at[*n as usize][c]).sum::<f64>() / 4.0
+        });
         for n in q {
             let n = *n as usize;
             if release[n].is_some() {
@@ -520,7 +522,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
         let normal = inward[n].map(|c| c / len.max(1e-300));
         // The other piece drags the tissue towards its bone by (other − own) · n < 0.
         let drags_in = len > 0.0 && crate::vec3::dot(crate::vec3::sub(other, own), normal) < 0.0;
-        if drags_in && is_bone(n) {
+        if slide && drags_in && is_bone(n) {
             let segment = match h.linear[n] {
                 LinearHold::Moves { segment, .. } => Some(segment),
                 _ => None,
