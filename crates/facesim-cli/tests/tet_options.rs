@@ -189,7 +189,12 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
 /// sliding (a few tenths of a millimetre on the face: only the inner lips slide).
 #[test]
 fn every_tet_option_follows_the_bone_on_the_bundled_sample() {
-    let mesh = ["tet.skin_size_mm=8", "tet.deep_size_mm=16"];
+    let mesh = [
+        "tet.skin_size_mm=8",
+        "tet.deep_size_mm=16",
+        "tet.release_cuts=true",
+        "tet.accept_inverted=false",
+    ];
     let mut faces = Vec::new();
     for element in ["linear", "quadratic"] {
         for material in ["linear", "neo-hookean"] {

@@ -233,11 +233,19 @@ fn hold_tissue(
     let band = case.tet.cut_release_mm;
     let (released, held) = match quadratic {
         Some(q) => (
-            release_at_cuts(&q.tets, kind, &mut h, band, case.tet.sliding),
+            if case.tet.release_cuts {
+                release_at_cuts(&q.tets, kind, &mut h, band, case.tet.sliding)
+            } else {
+                0
+            },
             hold_floating_pieces(&q.tets, &mut h, &follow, &ms),
         ),
         None => (
-            release_at_cuts(&mesh.tets, kind, &mut h, band, case.tet.sliding),
+            if case.tet.release_cuts {
+                release_at_cuts(&mesh.tets, kind, &mut h, band, case.tet.sliding)
+            } else {
+                0
+            },
             hold_floating_pieces(&mesh.tets, &mut h, &follow, &ms),
         ),
     };
@@ -466,7 +474,8 @@ pub fn predict(
                 // Where a node sliding on its bone is in an element the solution turns inside
                 // out, the bone would drag the tissue through itself: that tissue lifts off
                 // (the node is freed) and the model is solved again, a few rounds at most.
-                for _ in 0..RELEASE_ROUNDS {
+                let rounds = if t.release_cuts { RELEASE_ROUNDS } else { 0 };
+                for _ in 0..rounds {
                     let inverted = match &quadratic {
                         Some(q) => q.inverted_after(&u),
                         None => linear.inverted_after(&u),
