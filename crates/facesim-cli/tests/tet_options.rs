@@ -71,30 +71,6 @@ fn largest_move(f: &Face) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// R = Rz·Ry·Rx (degrees), as case.toml's rotate_deg.
-fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
-    let [a, b, c] = deg.map(f64::to_radians);
-    let rx = [
-        [1.0, 0.0, 0.0],
-        [0.0, a.cos(), -a.sin()],
-        [0.0, a.sin(), a.cos()],
-    ];
-    let ry = [
-        [b.cos(), 0.0, b.sin()],
-        [0.0, 1.0, 0.0],
-        [-b.sin(), 0.0, b.cos()],
-    ];
-    let rz = [
-        [c.cos(), -c.sin(), 0.0],
-        [c.sin(), c.cos(), 0.0],
-        [0.0, 0.0, 1.0],
-    ];
-    let mul = |p: [[f64; 3]; 3], q: [[f64; 3]; 3]| {
-        std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| p[i][k] * q[k][j]).sum()))
-    };
-    mul(rz, mul(ry, rx))
-}
-
 /// The real CT's case with its whole skull as one segment moved by `translate`, `rotate_deg`
 /// about `pivot`, every skin node movable: the exact answer is the same rigid motion of the face.
 fn whole_skull_case(
@@ -165,7 +141,7 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
             "{name}: nothing is held still"
         );
         assert_eq!(report["tet"]["inverted_elements"], 0, "{name}");
-        let r = rotation(rotate);
+        let r = facesim::osteotomy::rotation(rotate);
         let mut worst: f64 = 0.0;
         let mut moved: f64 = 0.0;
         for (p, q) in face.pre.iter().zip(&face.post) {

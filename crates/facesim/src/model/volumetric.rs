@@ -230,24 +230,26 @@ fn hold_tissue(
         .map(crate::plan::basis::matrix)
         .collect();
     let follow = follow_bone(bone, nodes);
-    let band = case.tet.cut_release_mm;
+    // Release the saw lines, then hold what floats; generic over the 4- and 10-node cells.
+    fn condition<C: AsRef<[u32]>>(
+        cells: &[C],
+        nodes: &[[f64; 3]],
+        kind: &[NodeKind],
+        h: &mut Holds,
+        tet: &crate::case::Tet,
+        follow: &dyn Fn(&[usize]) -> Option<usize>,
+        ms: &[[f64; crate::plan::basis::COLUMNS]],
+    ) -> (usize, (usize, usize)) {
+        let released = if tet.release_cuts {
+            release_at_cuts(cells, nodes, kind, h, tet.cut_release_mm, tet.sliding)
+        } else {
+            0
+        };
+        (released, hold_floating_pieces(cells, nodes, h, follow, ms))
+    }
     let (released, held) = match quadratic {
-        Some(q) => (
-            if case.tet.release_cuts {
-                release_at_cuts(&q.tets, kind, &mut h, band, case.tet.sliding)
-            } else {
-                0
-            },
-            hold_floating_pieces(&q.tets, &mut h, &follow, &ms),
-        ),
-        None => (
-            if case.tet.release_cuts {
-                release_at_cuts(&mesh.tets, kind, &mut h, band, case.tet.sliding)
-            } else {
-                0
-            },
-            hold_floating_pieces(&mesh.tets, &mut h, &follow, &ms),
-        ),
+        Some(q) => condition(&q.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
+        None => condition(&mesh.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
     };
     (h, released, held)
 }

@@ -95,7 +95,6 @@ pub(crate) fn holds(
     overlaps.sort_unstable();
     overlaps.dedup();
     out.overlapping_segments = overlaps;
-    out.at = nodes.to_vec();
     out
 }
 
@@ -103,8 +102,6 @@ pub(crate) fn holds(
 /// some node lies in together.
 #[derive(Default)]
 pub(crate) struct Holds {
-    /// The nodes' rest positions (LPS mm).
-    pub at: Vec<[f64; 3]>,
     pub constraint: Vec<u8>,
     pub hold: Vec<Hold>,
     pub linear: Vec<LinearHold>,
@@ -241,8 +238,9 @@ pub(crate) fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]
 /// and nodes so held.
 pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
     cells: &[C],
+    at: &[[f64; 3]],
     h: &mut Holds,
-    follow: &dyn Fn(&[usize]) -> LinearHold,
+    follow: &dyn Fn(&[usize]) -> Option<usize>,
     ms: &[[f64; crate::plan::basis::COLUMNS]],
 ) -> (usize, usize) {
     let mut faces: Vec<([u32; 3], u32)> = cells
@@ -284,53 +282,27 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
         .collect();
     let hold_with = |nodes: &[usize], h: &mut Holds| {
         // The piece follows what already holds it (a hinge node's bone), else its nearest bone.
-        let mut votes: Vec<(LinearHold, usize)> = Vec::new();
-        for &n in nodes {
-            let l = match (h.constraint[n], h.linear[n]) {
-                (MOVED, LinearHold::Moves { segment, .. }) => LinearHold::Moves {
-                    segment,
-                    at: h.at[n],
-                },
-                (FIXED, _) => LinearHold::Still,
-                _ => continue,
-            };
-            let same = |a: &LinearHold| match (a, &l) {
-                (LinearHold::Moves { segment: x, .. }, LinearHold::Moves { segment: y, .. }) => {
-                    x == y
-                }
-                (LinearHold::Still, LinearHold::Still) => true,
-                _ => false,
-            };
-            match votes.iter_mut().find(|(a, _)| same(a)) {
+        let mut votes: Vec<(Option<usize>, usize)> = Vec::new();
+        for p in nodes.iter().filter_map(|n| held_piece(h, *n)) {
+            match votes.iter_mut().find(|(q, _)| *q == p) {
                 Some((_, c)) => *c += 1,
-                None => votes.push((l, 1)),
+                None => votes.push((p, 1)),
             }
         }
-        let l = votes
+        let segment = votes
             .iter()
             .max_by_key(|(_, c)| *c)
-            .map_or_else(|| follow(nodes), |(l, _)| *l);
-        let hold = l.hold(ms);
-        let code = match l {
-            LinearHold::Moves { .. } => MOVED,
-            _ => FIXED,
-        };
+            .map_or_else(|| follow(nodes), |(p, _)| *p);
         let mut count = 0;
         for &n in nodes {
             if !matches!(h.constraint[n], FIXED | MOVED) {
                 // Each node moves as the piece's bone carries its own position.
-                h.linear[n] = match l {
-                    LinearHold::Moves { segment, .. } => LinearHold::Moves {
-                        segment,
-                        at: h.at[n],
-                    },
-                    other => other,
-                };
-                h.hold[n] = match l {
-                    LinearHold::Moves { .. } => h.linear[n].hold(ms),
-                    _ => hold,
-                };
-                h.constraint[n] = code;
+                h.linear[n] = segment.map_or(LinearHold::Still, |segment| LinearHold::Moves {
+                    segment,
+                    at: at[n],
+                });
+                h.hold[n] = h.linear[n].hold(ms);
+                h.constraint[n] = if segment.is_some() { MOVED } else { FIXED };
                 count += 1;
             }
         }
@@ -366,13 +338,13 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
     (pieces, nodes)
 }
 
-/// For [`hold_floating_pieces`]: the hold of a piece of tissue with nodes at `nodes` (indices
-/// into `at`), the rigid move of the segment most of its nodes' nearest bone points lie in, or
-/// still when they lie on bone no segment moves.
+/// For [`hold_floating_pieces`]: the bone a piece of tissue with nodes at `nodes` (indices
+/// into `at`) lies on: the segment most of its nodes' nearest bone points lie in, or None (still)
+/// when that is bone no segment moves.
 pub(crate) fn follow_bone<'a>(
     bone: &'a Bone<'a>,
     at: &'a [[f64; 3]],
-) -> impl Fn(&[usize]) -> LinearHold + 'a {
+) -> impl Fn(&[usize]) -> Option<usize> + 'a {
     let index = crate::compare::SurfaceIndex::new(bone.skull);
     move |nodes: &[usize]| {
         let mut votes = vec![0usize; bone.osteotomy.len() + 1];
@@ -382,13 +354,17 @@ pub(crate) fn follow_bone<'a>(
             votes[s.map_or(0, |s| s + 1)] += 1;
         }
         let best = (0..votes.len()).max_by_key(|i| votes[*i]).unwrap_or(0);
-        match best {
-            0 => LinearHold::Still,
-            s => LinearHold::Moves {
-                segment: s - 1,
-                at: at[nodes[0]],
-            },
-        }
+        best.checked_sub(1)
+    }
+}
+
+/// The piece of bone a held node moves with: Some(Some(s)) segment s, Some(None) still (bone
+/// left in place, held skin, the region's cut faces), None not held (free or sliding).
+fn held_piece(h: &Holds, n: usize) -> Option<Option<usize>> {
+    match (h.constraint[n], h.linear[n]) {
+        (MOVED, LinearHold::Moves { segment, .. }) => Some(Some(segment)),
+        (FIXED, _) => Some(None),
+        _ => None,
     }
 }
 
@@ -410,19 +386,14 @@ pub(crate) fn follow_bone<'a>(
 /// nodes.
 pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     cells: &[C],
+    at: &[[f64; 3]],
     kind: &[NodeKind],
     h: &mut Holds,
     band_mm: f64,
     slide: bool,
 ) -> usize {
-    // The piece a held node belongs to: 0 still, s + 1 segment s.
-    let piece: Vec<Option<usize>> = (0..h.constraint.len())
-        .map(|n| match (h.constraint[n], h.linear[n]) {
-            (MOVED, LinearHold::Moves { segment, .. }) => Some(segment + 1),
-            (FIXED, _) => Some(0),
-            _ => None,
-        })
-        .collect();
+    let piece: Vec<Option<Option<usize>>> =
+        (0..h.constraint.len()).map(|n| held_piece(h, n)).collect();
     let is_bone = |n: usize| matches!(kind.get(n), Some(NodeKind::Bone));
     let moves: Vec<[f64; 3]> = h
         .hold
@@ -467,7 +438,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     let key = |p: [f64; 3]| p.map(|c| (c / cell).floor() as i64);
     let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = Default::default();
     for &n in &held {
-        grid.entry(key(h.at[n])).or_default().push(n);
+        grid.entry(key(at[n])).or_default().push(n);
     }
     let unreleased: Vec<usize> = held
         .iter()
@@ -475,7 +446,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
         .filter(|n| is_bone(*n) && release[*n].is_none())
         .collect();
     for n in unreleased {
-        let k = key(h.at[n]);
+        let k = key(at[n]);
         let mut nearest: Option<(f64, usize)> = None;
         for a in -1..=1 {
             for b in -1..=1 {
@@ -485,7 +456,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
                     };
                     for &m in others.iter().filter(|m| piece[**m] != piece[n]) {
                         let step = crate::vec3::norm(crate::vec3::sub(moved(n), moved(m)));
-                        let dist = crate::vec3::norm(crate::vec3::sub(h.at[n], h.at[m]));
+                        let dist = crate::vec3::norm(crate::vec3::sub(at[n], at[m]));
                         if dist < band_mm.max(step / 2.0) && nearest.is_none_or(|(d, _)| dist < d) {
                             nearest = Some((dist, m));
                         }
@@ -502,13 +473,12 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     for q in cells {
         let q = q.as_ref();
         let corners = &q[..4];
-        let centroid: [f64; 3] = std::array::from_fn(|c| {
-            corners.iter().map(|n| h.at[*n as usize][c]).sum::<f64>() / 4.0
-        });
+        let centroid: [f64; 3] =
+            std::array::from_fn(|c| corners.iter().map(|n| at[*n as usize][c]).sum::<f64>() / 4.0);
         for n in q {
             let n = *n as usize;
             if release[n].is_some() {
-                let d = crate::vec3::sub(centroid, h.at[n]);
+                let d = crate::vec3::sub(centroid, at[n]);
                 inward[n] = crate::vec3::add(inward[n], d);
             }
         }
@@ -535,7 +505,7 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
             h.linear[n] = LinearHold::Slides {
                 normal,
                 segment,
-                at: h.at[n],
+                at: at[n],
             };
         } else {
             h.constraint[n] = FREE;
