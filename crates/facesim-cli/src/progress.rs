@@ -44,4 +44,8 @@ impl Observer for Progress {
     fn heap(&self) -> Option<&dyn HeapProbe> {
         facesim_lab::memory::Probe::if_installed()
     }
+
+    fn warn(&self, msg: &str) {
+        eprintln!("warning: {msg}");
+    }
 }

@@ -409,13 +409,16 @@ fn impossible_plans_and_empty_cts_are_refused() {
     let forty = "[[osteotomy]]\nname = \"mandible\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\ntranslate = [0.0, -40.0, 0.0]\n";
     let c = case_with(&format!("[solve]\nmodel = \"equilibrium\"\n{forty}"));
     fails_writing_nothing(&c, "case.toml", "moves through the skin");
-    // The volumetric model (default): the tissue follows its bone, so the run ends, and says the
-    // move is beyond orthognathic size and what to check.
+    // The volumetric model (default): the tissue follows its bone, the solution turns elements
+    // inside out, and the run says so with a non-zero exit, the move beyond orthognathic size
+    // and what to check (the outputs written for inspection).
     let c = case_with(forty);
     let r = run(&c);
-    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(r.code, 1, "{}", r.stderr);
     assert!(
-        r.stderr.contains("moves bone up to 40 mm") && r.stderr.contains("translate (mm)"),
+        r.stderr.contains("moves bone up to 40 mm")
+            && r.stderr.contains("translate (mm)")
+            && r.stderr.contains("tetrahedra inside out"),
         "{}",
         r.stderr
     );

@@ -41,7 +41,16 @@ fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert_eq!(r.code, 0, "{file}: {}", r.stderr);
+    if file == "case_rotation.toml" {
+        // Turning the mandible 5° about the condyles without moving the maxilla drives the lower
+        // incisors about 6 mm up into the upper ones: the lip tissue caught between the teeth is
+        // crushed and a few elements turn inside out. A reported numerical result: exit 1, the
+        // count, and the outputs written for inspection.
+        assert_eq!(r.code, 1, "{file}: {}", r.stderr);
+        assert!(r.stderr.contains("tetrahedra inside out"), "{}", r.stderr);
+    } else {
+        assert_eq!(r.code, 0, "{file}: {}", r.stderr);
+    }
     let pre = facesim::mesh::read_mesh(&out.join("face_pre.ply")).unwrap();
     let post = facesim::mesh::read_mesh(&out.join("face_post.ply")).unwrap();
     assert_eq!(pre.vertices.len(), post.vertices.len());

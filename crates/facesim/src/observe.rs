@@ -11,6 +11,8 @@ pub trait Observer: Sync {
     fn finished(&self, _stage: &str, _cost: &StageCost) {}
     /// The whole run is over (a progress display clears itself).
     fn done(&self) {}
+    /// A warning of a run that ends in an error (a successful run's are in its report).
+    fn warn(&self, _msg: &str) {}
     /// The counter of heap bytes, when the program has one.
     fn heap(&self) -> Option<&dyn HeapProbe> {
         None

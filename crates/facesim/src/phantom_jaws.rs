@@ -933,10 +933,10 @@ fn case_files_of(shape: &Shape, model: Option<&str>) -> Vec<(&'static str, Strin
             case_text(
                 "phantom-jaws-mandible-setback-4mm",
                 "mandibular setback 4 mm",
-                &[
-                    ("mandible_rami", back, tr([0.0, 4.0, 0.0])),
-                    ("mandible", front, tr([0.0, 4.0, 0.0])),
-                ],
+                // A sagittal split setback moves the tooth-bearing segment back; the rami and
+                // condyles (the proximal segments) stay in their joints: moving them 4 mm back
+                // would push the condyles into the skull base.
+                &[("mandible", front, tr([0.0, 4.0, 0.0]))],
                 model,
                 shape,
             ),

@@ -556,8 +556,12 @@ fn osteotomy_boxes_select_exactly_their_segment_and_the_plans_move_it_rigidly() 
         assert!(!text.contains("[solve]"));
         let case = Case::parse(text, Path::new(file)).unwrap();
         let (moved, _) = Plan::new(&case.osteotomy).apply(&points, 1.0);
+        // The setback (a sagittal split) moves the tooth-bearing front of the mandible only.
+        let [lo, hi] = pj::MANDIBLE_FRONT_BOX;
+        let in_front = |p: &[f64; 3]| (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a]);
         for ((p, pc), q) in samples.iter().zip(&moved) {
-            let want = if *pc == piece { motion(*p) } else { *p };
+            let moves = *pc == piece && (file != "case_setback.toml" || in_front(p));
+            let want = if moves { motion(*p) } else { *p };
             let err = (0..3).map(|a| (q[a] - want[a]).abs()).fold(0.0, f64::max);
             assert!(
                 err < 1e-9,

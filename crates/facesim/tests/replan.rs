@@ -37,6 +37,13 @@ fn jaws_case() -> Case {
     assert_eq!(case.solve.model, SolveModel::Tet);
     case.tet.skin_size_mm = 6.0;
     case.tet.deep_size_mm = 12.0;
+    // Tissue lifting off the bone at a saw line (the lift-off rounds, docs/pipeline.md) is a
+    // contact state the plan chooses: the face is linear in the plan, and the basis exact, within
+    // one state. With nothing sliding every released node is free, one state for every plan.
+    case.tet.sliding = false;
+    // The re-plans turn the maxilla 4° into the phantom's 3 mm nasal floor, which 6 mm elements
+    // cannot follow without a few turning inside out; these tests are of the basis, not the mesh.
+    case.tet.accept_inverted = true;
     case
 }
 

@@ -77,9 +77,11 @@ fn the_inner_lip_slides_on_the_teeth_or_moves_with_them() {
     );
     // The vestibule's mucosa faces the teeth across 2 mm of air: found, and sliding or attached.
     assert!(s.mucosa_nodes > 20, "{s:?}");
-    // (a piece of tissue held by fewer than three nodes is held still, mucosa and all)
+    // (a piece of tissue held by fewer than three nodes follows its bone, mucosa and all); the
+    // bone at the saw lines slides too (released, not lifted off).
     assert!(
-        s.sliding_nodes <= s.mucosa_nodes && 10 * s.sliding_nodes >= 9 * s.mucosa_nodes,
+        s.sliding_nodes <= s.mucosa_nodes + s.released_at_cuts - s.lifted_off
+            && 10 * s.sliding_nodes >= 9 * s.mucosa_nodes,
         "{s:?}"
     );
     assert_eq!(a.sliding_nodes, 0);

@@ -121,6 +121,18 @@ pub fn replan_with(
     if skull_post.is_none() {
         warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
     }
+    // Tissue lifted off the bone is a contact state the run's plan chose: the basis is exact
+    // for plans in that state, and one that lifts off other tissue needs a full run.
+    if let Some(lifted) = run_report
+        .tet
+        .as_ref()
+        .map(|t| t.lifted_off)
+        .filter(|n| *n > 0)
+    {
+        warnings.push(format!(
+            "the run lifted {lifted} tissue nodes off the bone at the saw lines: the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`"
+        ));
+    }
     let replanned = ReplanReport {
         from: run_dir.display().to_string(),
         plan: plan_file.display().to_string(),

@@ -176,6 +176,7 @@ fn finish(
     let out_dir = unit.commit()?;
     obs.done();
     if inverted > 0 && !case.tet.accept_inverted {
+        report.warnings.iter().for_each(|w| obs.warn(w));
         return Err(crate::error::Error::numerical(
             crate::error::NumericalKind::DegenerateElement,
             format!(

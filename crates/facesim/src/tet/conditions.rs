@@ -289,13 +289,25 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
                 None => votes.push((p, 1)),
             }
         }
-        let segment = votes
+        // Most votes; a tie goes to the bone the piece lies on when that is one of them.
+        let most = votes.iter().map(|(_, c)| *c).max();
+        let tied: Vec<Option<usize>> = votes
             .iter()
-            .max_by_key(|(_, c)| *c)
-            .map_or_else(|| follow(nodes), |(p, _)| *p);
+            .filter(|(_, c)| Some(*c) == most)
+            .map(|(p, _)| *p)
+            .collect();
+        let segment = match tied.as_slice() {
+            [] => follow(nodes),
+            [one] => *one,
+            _ => Some(follow(nodes))
+                .filter(|s| tied.contains(s))
+                .unwrap_or(tied[0]),
+        };
         let mut count = 0;
         for &n in nodes {
-            if !matches!(h.constraint[n], FIXED | MOVED) {
+            // A node held by another piece's bone (a piece hinged on both sides of a cut) moves
+            // with the piece too: a rigid sliver cannot follow two bones.
+            if held_piece(h, n) != Some(segment) {
                 // Each node moves as the piece's bone carries its own position.
                 h.linear[n] = segment.map_or(LinearHold::Still, |segment| LinearHold::Moves {
                     segment,
@@ -320,13 +332,24 @@ pub(crate) fn hold_floating_pieces<C: AsRef<[u32]>>(
             hold_with(&[n], h);
         }
     }
+    // A node an anchored piece shares (the hinge) is solved with that piece: holding it with
+    // the floating one would join two bones in the anchored piece's elements (a released saw-line
+    // node re-held with the other bone turns them inside out).
+    let mut in_anchored = vec![false; h.constraint.len()];
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); count];
     for (t, q) in cells.iter().enumerate() {
         let l = label[t] as usize;
-        if !anchored[l] {
+        if anchored[l] {
+            q.as_ref()
+                .iter()
+                .for_each(|n| in_anchored[*n as usize] = true);
+        } else {
             members[l].extend(q.as_ref().iter().map(|n| *n as usize));
         }
     }
+    members
+        .iter_mut()
+        .for_each(|m| m.retain(|n| !in_anchored[*n]));
     let mut pieces = 0;
     let mut nodes = 0;
     for mut m in members.into_iter().filter(|m| !m.is_empty()) {
@@ -372,18 +395,18 @@ fn held_piece(h: &Holds, n: usize) -> Option<Option<usize>> {
 /// pieces held differently meet (a segment's bone and the bone left in place, two segments, or a
 /// segment and held skin or the region's cut faces), the surgeon has raised the periosteum and
 /// the tissue over the cut is not attached: the held nodes of every element joining two pieces,
-/// and every held bone node nearer than `max(band_mm, |u_a − u_b| / 2)` to a node of another
-/// piece (u: the two pieces' moves there), are released. So no element joins two pieces, and the
-/// band widens with the step the plan makes at the cut (a 25 mm move releases 12.5 mm each side),
-/// which the tissue bridges instead of one element being sheared inside out.
+/// and every held bone node nearer than `band_mm` to a held node of another piece, are released.
+/// So no element joins two pieces: the tissue bridges the step instead of one element being
+/// sheared inside out.
 ///
-/// A released node is free where the other piece's relative move lifts the tissue off its bone,
-/// and slides on its own bone (n · u = n · u_bone, tangential free) where that move would drag
-/// the tissue into it: a segment advanced into its tissue, or the bone left in place behind a
-/// setback. n is the direction from the node into the tissue around it (the mean of its
-/// elements' centroids), so the bone mesh's orientation does not matter. With `slide` false
-/// (`[tet] sliding = false`: nothing slides) every released node is free. Returns the released
-/// nodes.
+/// A released bone node slides on its own bone (n · u = n · u_bone, tangential free): the tissue
+/// stays on the bone it covers, as it does after the periosteum is closed, but is not dragged
+/// along it. n is the direction from the node into the tissue around it (the mean of its
+/// elements' centroids), so the bone mesh's orientation does not matter. A released node that is
+/// not bone (held skin, the region's cut faces), or any released node with `slide` false (`[tet]
+/// sliding = false`: nothing slides), is free. The set depends on the segments and the geometry,
+/// not on how far the plan moves them, so the face stays linear in the move and the plan basis
+/// exact. Returns the released nodes.
 pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     cells: &[C],
     at: &[[f64; 3]],
@@ -395,77 +418,45 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
     let piece: Vec<Option<Option<usize>>> =
         (0..h.constraint.len()).map(|n| held_piece(h, n)).collect();
     let is_bone = |n: usize| matches!(kind.get(n), Some(NodeKind::Bone));
-    let moves: Vec<[f64; 3]> = h
-        .hold
-        .iter()
-        .map(|hold| match hold {
-            Hold::Fixed(u) => *u,
-            _ => [0.0; 3],
-        })
-        .collect();
-    let moved = |n: usize| moves[n];
-    // Per released node, the move of the other piece it was released for.
-    let mut release: Vec<Option<[f64; 3]>> = vec![None; piece.len()];
+    let mut release = vec![false; piece.len()];
     for q in cells {
         let q = q.as_ref();
         let first = q.iter().find_map(|n| piece[*n as usize]);
-        let Some(other) = q
-            .iter()
-            .find(|n| piece[**n as usize].is_some_and(|p| Some(p) != first))
-        else {
-            continue;
-        };
-        let first_node = q.iter().find(|n| piece[**n as usize] == first);
-        for n in q {
-            let n = *n as usize;
-            if let Some(p) = piece[n] {
-                let o = if Some(p) == first {
-                    *other as usize
-                } else {
-                    first_node.map_or(n, |f| *f as usize)
-                };
-                release[n].get_or_insert(moved(o));
-            }
+        if q.iter()
+            .any(|n| piece[*n as usize].is_some_and(|p| Some(p) != first))
+        {
+            q.iter()
+                .filter(|n| piece[**n as usize].is_some())
+                .for_each(|n| release[*n as usize] = true);
         }
     }
-    // Nearest held nodes of other pieces, on a grid of cells as wide as the widest band.
+    // Held nodes of other pieces within the band, on a grid of cells as wide as the band.
     let held: Vec<usize> = (0..piece.len()).filter(|n| piece[*n].is_some()).collect();
-    let largest = held
-        .iter()
-        .map(|n| crate::vec3::norm(moved(*n)))
-        .fold(0.0, f64::max);
-    let cell = band_mm.max(largest).max(1e-6);
+    let cell = band_mm.max(1e-6);
     let key = |p: [f64; 3]| p.map(|c| (c / cell).floor() as i64);
     let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = Default::default();
     for &n in &held {
         grid.entry(key(at[n])).or_default().push(n);
     }
-    let unreleased: Vec<usize> = held
-        .iter()
-        .copied()
-        .filter(|n| is_bone(*n) && release[*n].is_none())
-        .collect();
-    for n in unreleased {
+    let near_other = |n: usize| {
         let k = key(at[n]);
-        let mut nearest: Option<(f64, usize)> = None;
-        for a in -1..=1 {
-            for b in -1..=1 {
-                for c in -1..=1 {
-                    let Some(others) = grid.get(&[k[0] + a, k[1] + b, k[2] + c]) else {
-                        continue;
-                    };
-                    for &m in others.iter().filter(|m| piece[**m] != piece[n]) {
-                        let step = crate::vec3::norm(crate::vec3::sub(moved(n), moved(m)));
-                        let dist = crate::vec3::norm(crate::vec3::sub(at[n], at[m]));
-                        if dist < band_mm.max(step / 2.0) && nearest.is_none_or(|(d, _)| dist < d) {
-                            nearest = Some((dist, m));
-                        }
-                    }
-                }
-            }
-        }
-        if let Some((_, m)) = nearest {
-            release[n] = Some(moved(m));
+        (-1..=1).any(|a| {
+            (-1..=1).any(|b| {
+                (-1..=1).any(|c| {
+                    grid.get(&[k[0] + a, k[1] + b, k[2] + c])
+                        .is_some_and(|others| {
+                            others.iter().any(|m| {
+                                piece[*m] != piece[n]
+                                    && crate::vec3::norm(crate::vec3::sub(at[n], at[*m])) < band_mm
+                            })
+                        })
+                })
+            })
+        })
+    };
+    for &n in &held {
+        if is_bone(n) && !release[n] && near_other(n) {
+            release[n] = true;
         }
     }
     // Into the tissue from each node: the mean of its elements' centroids.
@@ -477,22 +468,22 @@ pub(crate) fn release_at_cuts<C: AsRef<[u32]>>(
             std::array::from_fn(|c| corners.iter().map(|n| at[*n as usize][c]).sum::<f64>() / 4.0);
         for n in q {
             let n = *n as usize;
-            if release[n].is_some() {
+            if release[n] {
                 let d = crate::vec3::sub(centroid, at[n]);
                 inward[n] = crate::vec3::add(inward[n], d);
             }
         }
     }
     let mut count = 0;
-    for n in 0..release.len() {
-        let Some(other) = release[n] else { continue };
+    for n in (0..release.len()).filter(|n| release[*n]) {
         count += 1;
-        let own = moved(n);
         let len = crate::vec3::norm(inward[n]);
-        let normal = inward[n].map(|c| c / len.max(1e-300));
-        // The other piece drags the tissue towards its bone by (other − own) · n < 0.
-        let drags_in = len > 0.0 && crate::vec3::dot(crate::vec3::sub(other, own), normal) < 0.0;
-        if slide && drags_in && is_bone(n) {
+        if slide && len > 0.0 && is_bone(n) {
+            let normal = inward[n].map(|c| c / len);
+            let own = match h.hold[n] {
+                Hold::Fixed(u) => u,
+                _ => [0.0; 3],
+            };
             let segment = match h.linear[n] {
                 LinearHold::Moves { segment, .. } => Some(segment),
                 _ => None,
