@@ -225,12 +225,12 @@ pub struct Tet {
     /// the bone, tangential free), false is attached (moves with the bone).
     pub sliding: bool,
     pub mucosa_gap_mm: f64,
-    /// The periosteum raised at each saw line: bone nodes nearer than this (mm), or than half
-    /// the step the plan makes there, to bone of another piece are not attached
+    /// The periosteum raised at each saw line: bone nodes nearer than this (mm) to bone of
+    /// another piece slide on their bone instead of being attached
     /// (`tet::conditions::release_at_cuts`).
     pub cut_release_mm: f64,
     /// Release the tissue at the saw lines (`cut_release_mm`) and free sliding nodes of inverted
-    /// elements (opt-in until the test suite's cases are re-baselined; issue 25).
+    /// elements (issue 25; default true).
     pub release_cuts: bool,
     /// A solved displacement that turns elements inside out is a numerical failure (outputs
     /// written, non-zero exit) unless this is true.
