@@ -326,6 +326,23 @@ pub struct System {
     /// The factor; its symbolic analysis is reused when only values change.
     llt: Cholesky<f64>,
     pub nnz_lower: usize,
+    /// DOFs fixed when factored and freed since ([`System::free_more`]).
+    border: Option<Border>,
+}
+
+/// Fixed DOFs freed after factoring, solved by bordering the factor instead of refactoring:
+/// with A the factored free block, B = K[free, added] and C = K[added, added], the added
+/// unknowns y solve the Schur complement S y = g − Bᵀ A⁻¹ b (S = C − Bᵀ A⁻¹ B, dense k × k),
+/// then x = A⁻¹ b − A⁻¹ B y. k triangular solves once, instead of a second factorisation.
+struct Border {
+    added: Vec<usize>,
+    /// B: (free index, border index, value).
+    b: Vec<(usize, usize, f64)>,
+    /// K between an added DOF and a DOF still fixed: (border index, global DOF, value).
+    coupling: Vec<(usize, usize, f64)>,
+    /// A⁻¹ B (free × k).
+    w: faer::Mat<f64>,
+    s: nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>,
 }
 
 impl System {
@@ -384,7 +401,65 @@ impl System {
             k,
             llt,
             nnz_lower,
+            border: None,
         })
+    }
+
+    /// Free the fixed DOFs `dofs` (with those freed before) without refactoring: the system is
+    /// bordered (see [`Border`]); k = all DOFs freed so far costs k triangular solves.
+    pub fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
+        let mut added: Vec<usize> = self.border.take().map_or_else(Vec::new, |b| b.added);
+        added.extend(dofs.iter().filter(|g| self.free_index[**g] == usize::MAX));
+        added.sort_unstable();
+        added.dedup();
+        let k = added.len();
+        let mut pos = std::collections::HashMap::with_capacity(k);
+        for (i, g) in added.iter().enumerate() {
+            pos.insert(*g, i);
+        }
+        let mut c = nalgebra::DMatrix::<f64>::zeros(k, k);
+        let (mut b, mut coupling) = (Vec::new(), Vec::new());
+        let mut off = |e: usize, other: usize, v: f64| match self.free_index[other] {
+            usize::MAX => coupling.push((e, other, v)),
+            f => b.push((f, e, v)),
+        };
+        for &(r, col, v) in &self.k {
+            match (pos.get(&r), pos.get(&col)) {
+                (Some(&a), Some(&d)) => {
+                    c[(a, d)] += v;
+                    if a != d {
+                        c[(d, a)] += v;
+                    }
+                }
+                (Some(&a), None) => off(a, col, v),
+                (None, Some(&d)) => off(d, r, v),
+                (None, None) => {}
+            }
+        }
+        let mut w = faer::Mat::<f64>::zeros(self.free.len(), k);
+        for &(f, e, v) in &b {
+            w[(f, e)] += v;
+        }
+        self.llt.solve_in_place(w.as_mut());
+        for &(f, e, v) in &b {
+            for d in 0..k {
+                c[(e, d)] -= v * w[(f, d)];
+            }
+        }
+        let s = nalgebra::linalg::Cholesky::new(c).ok_or_else(|| {
+            Error::numerical(
+                NumericalKind::Singular,
+                format!("freeing {k} held components leaves the system singular"),
+            )
+        })?;
+        self.border = Some(Border {
+            added,
+            b,
+            coupling,
+            w,
+            s,
+        });
+        Ok(())
     }
 
     /// Nonzeros of the Cholesky factor L (for reports).
@@ -417,6 +492,13 @@ impl System {
     pub fn solve(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Vec<Vec<f64>> {
         let nf = self.free.len();
         let m = rhs.len();
+        // Freed DOFs are unknowns: no prescribed value of theirs enters the right-hand side.
+        let mut prescribed = prescribed.to_vec();
+        if let Some(bd) = &self.border {
+            for p in &mut prescribed {
+                bd.added.iter().for_each(|g| p[*g] = 0.0);
+            }
+        }
         let mut b = faer::Mat::<f64>::zeros(nf, m);
         for c in 0..m {
             for (i, &g) in self.free.iter().enumerate() {
@@ -427,7 +509,31 @@ impl System {
             }
         }
         self.llt.solve_in_place(b.as_mut());
-        let x = b;
+        let mut x = b;
+        if let Some(bd) = &self.border {
+            let k = bd.added.len();
+            for c in 0..m {
+                let mut g =
+                    nalgebra::DVector::<f64>::from_iterator(k, bd.added.iter().map(|a| rhs[c][*a]));
+                for &(e, col, v) in &bd.coupling {
+                    g[e] -= v * prescribed[c][col];
+                }
+                for &(f, e, v) in &bd.b {
+                    g[e] -= v * x[(f, c)];
+                }
+                let y = bd.s.solve(&g);
+                for f in 0..nf {
+                    let mut d = 0.0;
+                    for e in 0..k {
+                        d += bd.w[(f, e)] * y[e];
+                    }
+                    x[(f, c)] -= d;
+                }
+                for (e, a) in bd.added.iter().enumerate() {
+                    prescribed[c][*a] = y[e];
+                }
+            }
+        }
         (0..m)
             .map(|c| {
                 let mut a = prescribed[c].clone();
@@ -536,6 +642,48 @@ mod tests {
         for (a, b) in k.iter().zip(&reference) {
             assert_eq!((a.0, a.1), (b.0, b.1));
             assert_eq!(a.2.to_bits(), b.2.to_bits(), "entry {:?}", (a.0, a.1));
+        }
+    }
+
+    /// Freeing fixed DOFs by bordering the factor gives what a factorisation with them free
+    /// gives, for loads and prescribed values alike, over two rounds of freeing.
+    #[test]
+    fn bordered_freeing_equals_factoring_with_the_dofs_free() {
+        // A 1-D chain of springs with ground springs, stiffness varying: SPD, fully coupled.
+        let n = 40;
+        let mut k = Vec::new();
+        for i in 0..n {
+            k.push((i, i, 2.5 + (i % 7) as f64 * 0.3));
+            if i > 0 {
+                k.push((i, i - 1, -1.0 - (i % 3) as f64 * 0.2));
+            }
+            if i > 4 {
+                k.push((i, i - 5, -0.1));
+            }
+        }
+        let mut fixed = vec![false; n];
+        for i in [0, 3, 4, 11, 12, 20, 27, 39] {
+            fixed[i] = true;
+        }
+        let rhs: Vec<f64> = (0..n).map(|i| ((i * 13) % 5) as f64 - 2.0).collect();
+        let pre: Vec<f64> = (0..n)
+            .map(|i| if fixed[i] { 0.1 * i as f64 } else { 0.0 })
+            .collect();
+        let mut bordered = System::new(n, k.clone(), &fixed).unwrap();
+        for freed in [vec![11, 27], vec![4, 12, 39]] {
+            bordered.free_more(&freed).unwrap();
+            freed.iter().for_each(|g| fixed[*g] = false);
+            let fresh = System::new(n, k.clone(), &fixed).unwrap();
+            let a = &bordered.solve(&[rhs.clone()], &[pre.clone()])[0];
+            let b = &fresh.solve(&[rhs.clone()], &[pre.clone()])[0];
+            for i in 0..n {
+                assert!(
+                    (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
+                    "{i}: {} {}",
+                    a[i],
+                    b[i]
+                );
+            }
         }
     }
 }

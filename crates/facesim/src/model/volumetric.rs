@@ -482,7 +482,7 @@ pub fn predict(
                         Some(q) => q.inverted_after(&u),
                         None => linear.inverted_after(&u),
                     };
-                    let mut freed = 0;
+                    let mut freed = Vec::new();
                     for e in inverted {
                         let cell: Vec<u32> = match &quadratic {
                             Some(q) => q.tets[e].to_vec(),
@@ -494,15 +494,16 @@ pub fn predict(
                                 constraint[n] = FREE;
                                 hold[n] = Hold::Free;
                                 linear_hold[n] = LinearHold::Free;
-                                freed += 1;
+                                freed.push(n);
                             }
                         }
                     }
-                    if freed == 0 {
+                    if freed.is_empty() {
                         break;
                     }
-                    lifted_off += freed;
-                    c = Constrained::new(&k, &hold, nodes.len())?;
+                    lifted_off += freed.len();
+                    // The factor bordered by the freed components: no second factorisation.
+                    c.free_nodes(&freed)?;
                     u = c.solve(&[(&hold, &f)])?.remove(0);
                 }
                 return Ok((u, None, Some(c)));

@@ -273,6 +273,19 @@ impl Constrained {
         Ok(Constrained { frames, sys })
     }
 
+    /// Free `nodes` (held or sliding when factored) without refactoring: the factor is bordered
+    /// by their held components (`fem::assembly::System::free_more`).
+    pub fn free_nodes(&mut self, nodes: &[usize]) -> Result<()> {
+        let mut dofs = Vec::new();
+        for &n in nodes {
+            let f = &mut self.frames[n];
+            dofs.extend((0..f.held).map(|i| 3 * n + i));
+            f.held = 0;
+            f.values = [0.0; 3];
+        }
+        self.sys.free_more(&dofs)
+    }
+
     /// The displacements for each (holds, nodal force vector of length 3 · nodes) pair. The holds
     /// must constrain the same components along the same axes as at construction (their values
     /// may differ).
@@ -291,7 +304,8 @@ impl Constrained {
             let mut b = vec![0.0; 3 * n];
             let mut p = vec![0.0; 3 * n];
             for (v, (now, was)) in fr.iter().zip(&self.frames).enumerate() {
-                if now.held != was.held || now.axes != was.axes {
+                // A free node is free in any frame (one freed after factoring keeps its axes).
+                if now.held != was.held || (now.held > 0 && now.axes != was.axes) {
                     return Err(Error::config(format!(
                         "volumetric model: node {v}'s hold differs in kind or direction from the factored one"
                     )));
