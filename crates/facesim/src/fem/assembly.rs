@@ -674,8 +674,8 @@ mod tests {
             bordered.free_more(&freed).unwrap();
             freed.iter().for_each(|g| fixed[*g] = false);
             let fresh = System::new(n, k.clone(), &fixed).unwrap();
-            let a = &bordered.solve(&[rhs.clone()], &[pre.clone()])[0];
-            let b = &fresh.solve(&[rhs.clone()], &[pre.clone()])[0];
+            let a = &bordered.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
+            let b = &fresh.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
             for i in 0..n {
                 assert!(
                     (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
