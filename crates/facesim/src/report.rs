@@ -84,6 +84,10 @@ pub struct Report {
     /// `[uncertainty] samples > 0`: the band per landmark and region (docs/uncertainty.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintyReport>,
+    /// The volumetric model's estimated discretisation error on the face, per region
+    /// (`model::discretisation`; `[tet] error_estimate`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub discretisation_error: Option<crate::model::discretisation::DiscretisationError>,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
     /// coarsening or embedding, ...).

@@ -122,6 +122,45 @@ fn all_bone_translated_translates_the_face_exactly() {
             assert!((v[c] - t[c]).abs() < 1e-9, "vertex {i}: {v:?}");
         }
     }
+    // Any mesh carries a translation exactly: the discretisation-error estimate is zero.
+    let e = o.report.discretisation_error.as_ref().unwrap();
+    assert!(
+        e.moving_face.vertices > 0 && e.moving_face.max.unwrap() < 1e-9,
+        "{e:?}"
+    );
+}
+
+/// The discretisation-error estimate (the case again at twice the element size, Richardson for
+/// order 2) against the error it estimates: the distance from the run's face to the face at half
+/// the element size, on the face vertices that move, agree within a factor of 3 on the mean.
+#[test]
+fn the_discretisation_error_estimate_is_the_size_of_the_error() {
+    let o = run(
+        case(MANDIBLE, [0.0, -5.0, 0.0], [0.0; 3]),
+        "facesim-tet-estimate",
+    );
+    let mut fine = case(MANDIBLE, [0.0, -5.0, 0.0], [0.0; 3]);
+    fine.tet.skin_size_mm /= 2.0;
+    fine.tet.deep_size_mm /= 2.0;
+    fine.tet.error_estimate = false;
+    let f = run(fine, "facesim-tet-estimate-fine");
+    assert!(f.report.discretisation_error.is_none());
+    let (a, b) = (moves(&o), moves(&f));
+    let d: Vec<f64> = a
+        .iter()
+        .zip(&b)
+        .filter(|(a, b)| facesim::vec3::norm(**a).max(facesim::vec3::norm(**b)) > 0.1)
+        .map(|(a, b)| facesim::vec3::norm(facesim::vec3::sub(*a, *b)))
+        .collect();
+    let observed = d.iter().sum::<f64>() / d.len() as f64;
+    let e = o.report.discretisation_error.as_ref().unwrap();
+    let estimated = e.moving_face.mean.unwrap();
+    println!(
+        "estimated {estimated:.3} mm (coarse {} mm), observed against half the size {observed:.3} mm over {} vertices",
+        e.coarse_skin_size_mm,
+        d.len()
+    );
+    assert!(estimated > observed / 3.0 && estimated < 3.0 * observed);
 }
 
 /// With nothing sliding, every node released at the saw line is free whatever the plan: one

@@ -118,6 +118,7 @@ impl Default for Tet {
             cut_release_mm: 8.0,
             release_cuts: true,
             accept_inverted: false,
+            error_estimate: true,
             skin_size_mm: 4.0,
             deep_size_mm: 8.0,
             margin_mm: 30.0,

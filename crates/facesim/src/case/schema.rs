@@ -235,6 +235,9 @@ pub struct Tet {
     /// A solved displacement that turns elements inside out is a numerical failure (outputs
     /// written, non-zero exit) unless this is true.
     pub accept_inverted: bool,
+    /// Estimate the discretisation error on the face by solving again at twice the element
+    /// size (report.json `discretisation_error`; `model::discretisation`).
+    pub error_estimate: bool,
     /// Element edge length (mm) at the skin inside the region the plan reaches.
     pub skin_size_mm: f64,
     /// Element edge length (mm) deep in the tissue and far from the moved bone.

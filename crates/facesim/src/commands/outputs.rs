@@ -234,6 +234,29 @@ pub(crate) fn write_page(
         ("CT voxels".into(), format!("{:?}", c.dims)),
         ("unknowns".into(), c.unknowns.to_string()),
     ];
+    if let Some(e) = &report.discretisation_error {
+        let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
+        let regions: Vec<String> = e
+            .regions
+            .0
+            .iter()
+            .filter(|(_, r)| r.mean.is_some())
+            .map(|(n, r)| format!("{n} {}", mm(r.mean)))
+            .collect();
+        figures.push((
+            "discretisation error (estimate)".into(),
+            format!(
+                "mean {} mm, p90 {} mm on the moving face; per region (mean, mm): {}",
+                mm(e.moving_face.mean),
+                mm(e.moving_face.p90),
+                if regions.is_empty() {
+                    "none found".into()
+                } else {
+                    regions.join(", ")
+                }
+            ),
+        ));
+    }
     for o in &case.osteotomy {
         figures.push((
             format!("plan: {}", o.name),

@@ -131,6 +131,30 @@ fn finish(
             })?,
         )
     };
+    // The discretisation error: the case again at twice the element size (Richardson).
+    let discretisation = if case.tet.error_estimate {
+        let started = std::time::Instant::now();
+        obs.started("estimating the discretisation error");
+        match prediction.coarse_face(&scene, case) {
+            Some(Ok((size, coarse))) => Some(crate::model::discretisation::estimate(
+                &prediction.skin.vertices,
+                &prediction.face_post.vertices,
+                &coarse,
+                &analysis.region_of,
+                size,
+                started.elapsed().as_secs_f64(),
+            )),
+            Some(Err(e)) => {
+                rec.warn(format!(
+                    "no discretisation-error estimate: the solve at twice the element size failed ({e})"
+                ));
+                None
+            }
+            None => None,
+        }
+    } else {
+        None
+    };
     outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
     if let Some(b) = &band {
         crate::uncertainty::write_band(dir, &prediction.face_post, b)?;
@@ -150,7 +174,7 @@ fn finish(
         .as_ref()
         .map(|b| b.bands.iter().map(|x| x.p95 - x.p05).collect());
     let (sections, warnings) = run_sections(&scene, &prediction, rec, band.map(|b| b.report));
-    let report = report::assemble(
+    let mut report = report::assemble(
         name,
         files.dir.display().to_string(),
         Some(sections),
@@ -159,6 +183,7 @@ fn finish(
         None,
         warnings,
     );
+    report.discretisation_error = discretisation;
     // Elements turned inside out make the prediction no valid solution: a reported numerical
     // result (the outputs are written for inspection), not a success, unless asked for.
     let inverted = prediction.inverted_elements();

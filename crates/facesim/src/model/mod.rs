@@ -10,6 +10,7 @@
 //! this module branches on the model.
 
 pub mod c1;
+pub mod discretisation;
 pub mod predicted;
 pub mod volumetric;
 
@@ -72,6 +73,27 @@ impl Prediction {
             Solved::Tet(Some(v)) => v.resolve(scene, case, &self.skin),
             Solved::Tet(None) => Ok(self.face_post.vertices.clone()),
         }
+    }
+
+    /// The face solved again at twice the element size, for the discretisation-error estimate
+    /// ([`discretisation`]); None for the C1 models (their surface is the skin's own mesh) and
+    /// when nothing moves. Inverted elements in the coarse solve are accepted: it is a yardstick.
+    pub fn coarse_face(&self, scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
+        let Solved::Tet(Some(_)) = &self.solved else {
+            return None;
+        };
+        let mut coarse = case.clone();
+        coarse.tet.skin_size_mm *= 2.0;
+        coarse.tet.deep_size_mm *= 2.0;
+        coarse.tet.accept_inverted = true;
+        coarse.uncertainty.samples = 0;
+        let mut rec = Recorder::new(&crate::observe::Quiet);
+        Some(
+            volumetric::predict(scene, &coarse, &self.skin, &mut rec).map(|o| {
+                let face = o.map_or_else(|| self.skin.vertices.clone(), |(_, post)| post);
+                (coarse.tet.skin_size_mm, face)
+            }),
+        )
     }
 
     /// Whether the model moved anything (else every re-solve is the pre-operative face).
