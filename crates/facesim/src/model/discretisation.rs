@@ -7,7 +7,7 @@
 //! the 10-node and finer answers).
 
 use crate::landmarks::Ordered;
-use crate::landmarks::face_regions::{NAMES, NONE, RegionStats};
+use crate::landmarks::face_regions::{self, NAMES, NONE, RegionStats};
 use serde::{Deserialize, Serialize};
 
 /// The order of convergence assumed (linear tetrahedra, displacement).
@@ -29,21 +29,11 @@ pub struct DiscretisationError {
     pub seconds: f64,
 }
 
-fn stats(mut d: Vec<f64>) -> RegionStats {
-    d.sort_by(f64::total_cmp);
-    let n = d.len();
-    let at = |q: f64| {
-        d.get(((q * (n.max(1) - 1) as f64).round()) as usize)
-            .copied()
-    };
-    RegionStats {
-        vertices: n,
-        mean: (n > 0).then(|| d.iter().sum::<f64>() / n as f64),
-        p90: at(0.9),
-        max: d.last().copied(),
-        absent: (n == 0).then(|| "no face vertex of this region moves".into()),
-        note: None,
-    }
+fn stats(d: Vec<f64>) -> RegionStats {
+    let absent = d
+        .is_empty()
+        .then(|| "no face vertex of this region moves".into());
+    face_regions::stats_of(d, absent, None)
 }
 
 /// The estimate from the face before (`pre`), as solved (`fine`) and at twice the element size

@@ -203,20 +203,25 @@ pub(crate) fn displacement_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionSta
                     .collect()
             })
             .unwrap_or_default();
-        let n = d.len();
         out.0.push((
             name.to_string(),
-            RegionStats {
-                vertices: n,
-                mean: (n > 0).then(|| d.iter().sum::<f64>() / n as f64),
-                max: (n > 0).then(|| d.iter().cloned().fold(0.0, f64::max)),
-                p90: (n > 0).then(|| p90(d)),
-                absent: r.absent[k].clone(),
-                note: r.notes[k].clone(),
-            },
+            stats_of(d, r.absent[k].clone(), r.notes[k].clone()),
         ));
     }
     out
+}
+
+/// Count, mean, max and 90th percentile of `d` (non-negative values, one per vertex).
+pub(crate) fn stats_of(d: Vec<f64>, absent: Option<String>, note: Option<String>) -> RegionStats {
+    let n = d.len();
+    RegionStats {
+        vertices: n,
+        mean: (n > 0).then(|| d.iter().sum::<f64>() / n as f64),
+        max: (n > 0).then(|| d.iter().cloned().fold(0.0, f64::max)),
+        p90: (n > 0).then(|| p90(d)),
+        absent,
+        note,
+    }
 }
 
 /// `facesim compare A B --regions OUT_DIR`: per region, A's vertices' distances to surface B
