@@ -599,7 +599,11 @@ fn neo_hookean_tetrahedra_agree_with_calculix_nlgeom_far_below_the_discretisatio
             .iter()
             .map(|p| p.map_or(Hold::Free, Hold::Fixed))
             .collect();
-        let sol = nonlinear::solve(&m, &holds, &Loads::none(), &Newton::default()).unwrap();
+        let opts = Newton {
+            energy: nonlinear::Energy::CalculixNeoHooke,
+            ..Newton::default()
+        };
+        let sol = nonlinear::solve(&m, &holds, &Loads::none(), &opts).unwrap();
         (m, ijk, prescribed, sol.displacements)
     };
     let neo = |m: &TetMesh| -> Vec<Material> {

@@ -88,6 +88,10 @@ pub struct Report {
     /// (`model::discretisation`; `[tet] error_estimate`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub discretisation_error: Option<crate::model::discretisation::DiscretisationError>,
+    /// `[tet] material = "neo-hookean"`: how far its face lies from the linear model's, per
+    /// region (`model::discretisation::nonlinear_vs_linear`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nonlinear_vs_linear: Option<crate::model::discretisation::ModelDifference>,
     pub warnings: Vec<String>,
     /// Optional stages this case did not need (no plan → no solve, a skin solved as given → no
     /// coarsening or embedding, ...).

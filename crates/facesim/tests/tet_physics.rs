@@ -4,7 +4,7 @@
 //! by quadratic ones on Lamé's thick-walled sphere.
 
 use facesim::error::{Error, NumericalKind};
-use facesim::tet::nonlinear::{self, NeoHooke, Newton};
+use facesim::tet::nonlinear::{self, Energy, NeoHooke, Newton};
 use facesim::tet::quadratic::{Rule, Tet10Mesh};
 use facesim::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use facesim::vec3::dot;
@@ -301,6 +301,7 @@ fn uniaxial_stretch_of_a_neo_hookean_block_matches_the_closed_form() {
     let opts = Newton {
         load_steps: 6,
         tolerance: 1e-13,
+        energy: Energy::CalculixNeoHooke,
         ..Newton::default()
     };
     let sol = nonlinear::solve(&m, &holds, &Loads::none(), &opts).unwrap();
@@ -347,6 +348,7 @@ fn a_nonlinear_solve_that_does_not_converge_reports_its_residual_history() {
         max_iterations: 2,
         tolerance: 1e-10,
         max_cuts: 0,
+        energy: Energy::StableNeoHooke,
     };
     match nonlinear::solve(&m, &holds, &Loads::none(), &opts) {
         Err(Error::Numerical {
@@ -755,8 +757,11 @@ fn large_twists_converge_by_cutting_steps_and_do_not_depend_on_the_load_path() {
             .map(|(h, c)| if c[2] == 3 { Hold::Fixed([0.0; 3]) } else { h })
             .collect()
     };
+    // CalculiX's energy: the factored path's step cutting is what this test is about (the
+    // stable energy's projected tangent converges only linearly in this factored path).
     let opts = Newton {
         tolerance: 1e-12,
+        energy: Energy::CalculixNeoHooke,
         ..Newton::default()
     };
     // A hyperelastic equilibrium does not depend on how the load was applied.
@@ -793,4 +798,85 @@ fn large_twists_converge_by_cutting_steps_and_do_not_depend_on_the_load_path() {
             .all(|st| st.residuals.last().is_some_and(|r| *r <= 1e-12))
     );
     assert!(m.inverted_after(&s.displacements).is_empty());
+}
+
+/// The product's nonlinear path (`tet::newton_krylov`: Newton from the linear answer, the
+/// linear factor preconditioning CG) with the stable neo-Hookean energy of Smith, de Goes & Kim
+/// 2018 against the closed form of a uniaxial stretch: F = diag(λ₁, λ₂, λ₂) with zero lateral
+/// stress, P₂₂ = μ (1 − 1/(I_C + 1)) λ₂ + λ (J − α) λ₁ λ₂ = 0 (bisection on λ₂), and against the
+/// factored load-stepped Newton of `tet::nonlinear` with the same energy.
+#[test]
+fn stable_neo_hookean_newton_krylov_matches_the_closed_form_uniaxial_stretch() {
+    use facesim::tet::nonlinear::StableNeoHooke;
+    let (l, n, stretch) = (10.0, 2, 1.3);
+    let h = l / n as f64;
+    let mat = TissueElastic {
+        youngs_kpa: 10.0,
+        poisson: 0.45,
+    };
+    let (m, _) = grid(
+        [n, n, n],
+        &|i, j, k| [i as f64 * h, j as f64 * h, k as f64 * h],
+        mat,
+        mat,
+    );
+    let near = |a: f64, b: f64| (a - b).abs() < 1e-9;
+    let holds = plane_holds(
+        &m.nodes,
+        &[
+            ([1.0, 0.0, 0.0], 0.0, &|p: V3| near(p[0], 0.0)),
+            ([1.0, 0.0, 0.0], (stretch - 1.0) * l, &|p: V3| near(p[0], l)),
+            ([0.0, 1.0, 0.0], 0.0, &|p: V3| near(p[1], 0.0)),
+            ([0.0, 0.0, 1.0], 0.0, &|p: V3| near(p[2], 0.0)),
+        ],
+    );
+    let c = Constrained::new(&m.assemble().unwrap(), &holds, m.nodes.len()).unwrap();
+    let f = vec![0.0; 3 * m.nodes.len()];
+    let start = c.solve(&[(&holds, &f)]).unwrap().remove(0);
+    let opts = facesim::tet::newton_krylov::Options {
+        displacement_tolerance_mm: 0.0,
+        tolerance: 1e-12,
+        ..Default::default()
+    };
+    let sol = facesim::tet::newton_krylov::solve(&m, &c, &start, &opts).unwrap();
+    let s = StableNeoHooke::from_elastic(mat);
+    let p22 = |l2: f64| {
+        let (j, ic) = (stretch * l2 * l2, stretch * stretch + 2.0 * l2 * l2);
+        s.mu * (1.0 - 1.0 / (ic + 1.0)) * l2 + s.lambda * (j - s.alpha) * stretch * l2
+    };
+    let (mut lo, mut hi) = (0.3, 1.0);
+    assert!(p22(lo) < 0.0 && p22(hi) > 0.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if p22(mid) < 0.0 { lo = mid } else { hi = mid }
+    }
+    let l2 = 0.5 * (lo + hi);
+    let exact: Vec<V3> = m
+        .nodes
+        .iter()
+        .map(|p| [(stretch - 1.0) * p[0], (l2 - 1.0) * p[1], (l2 - 1.0) * p[2]])
+        .collect();
+    let off = max_diff(&sol.displacements, &exact);
+    let linear_off = max_diff(&start, &exact);
+    println!(
+        "stable neo-Hookean, stretch {stretch}: lateral {l2:.10} (closed form), Newton–Krylov off by {off:.2e} mm in {:?} (the linear start: {linear_off:.3} mm)",
+        sol.steps
+            .iter()
+            .map(|s| (s.iterations, s.krylov_iterations))
+            .collect::<Vec<_>>()
+    );
+    assert!(off < 1e-8, "{off}");
+    assert!(linear_off > 0.1, "the start is not already the answer");
+    // The factored, load-stepped Newton with the same energy reaches the same equilibrium.
+    let factored = nonlinear::solve(
+        &m,
+        &holds,
+        &Loads::none(),
+        &Newton {
+            tolerance: 1e-12,
+            ..Newton::default()
+        },
+    )
+    .unwrap();
+    assert!(max_diff(&factored.displacements, &sol.displacements) < 1e-8);
 }

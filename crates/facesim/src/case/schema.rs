@@ -218,7 +218,8 @@ impl TissueElastic {
 pub struct Tet {
     pub material: TetMaterial,
     pub element: TetElement,
-    /// Newton load steps of the nonlinear material.
+    /// Load steps of the nonlinear material's fallback solve (used when Newton from the linear
+    /// answer fails; `tet::newton_krylov`).
     pub load_steps: usize,
     /// Mucosa (tissue surface facing a cavity, e.g. the inner lip across the vestibule) within
     /// `mucosa_gap_mm` of the skull: true slides along the bone (its normal displacement follows

@@ -257,6 +257,25 @@ pub(crate) fn write_page(
             ),
         ));
     }
+    if let Some(e) = &report.nonlinear_vs_linear {
+        let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
+        let regions: Vec<String> = e
+            .regions
+            .0
+            .iter()
+            .filter(|(_, r)| r.mean.is_some())
+            .map(|(n, r)| format!("{n} {}", mm(r.mean)))
+            .collect();
+        figures.push((
+            "neo-Hookean vs linear".into(),
+            format!(
+                "mean {} mm, p90 {} mm on the moving face; per region (mean, mm): {}",
+                mm(e.moving_face.mean),
+                mm(e.moving_face.p90),
+                regions.join(", ")
+            ),
+        ));
+    }
     for o in &case.osteotomy {
         figures.push((
             format!("plan: {}", o.name),

@@ -184,6 +184,14 @@ fn finish(
         warnings,
     );
     report.discretisation_error = discretisation;
+    report.nonlinear_vs_linear = prediction.linear_face().map(|linear| {
+        crate::model::discretisation::nonlinear_vs_linear(
+            &prediction.skin.vertices,
+            &prediction.face_post.vertices,
+            linear,
+            &analysis.region_of,
+        )
+    });
     // Elements turned inside out make the prediction no valid solution: a reported numerical
     // result (the outputs are written for inspection), not a success, unless asked for.
     let inverted = prediction.inverted_elements();

@@ -36,6 +36,66 @@ fn stats(d: Vec<f64>) -> RegionStats {
     face_regions::stats_of(d, absent, None)
 }
 
+/// report.json `nonlinear_vs_linear` (mm): per face vertex, the distance between the
+/// hyperelastic model's face and the linear model's under the same holds and mesh.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelDifference {
+    pub method: String,
+    /// Over the face vertices that move (> 0.1 mm in either solve).
+    pub moving_face: RegionStats,
+    /// Per facial region (docs/landmarks.md), as report.json `regions`.
+    pub regions: Ordered<RegionStats>,
+}
+
+/// How far the nonlinear face (`nonlinear`) lies from the linear one (`linear`), from the face
+/// before (`pre`).
+pub(crate) fn nonlinear_vs_linear(
+    pre: &[[f64; 3]],
+    nonlinear: &[[f64; 3]],
+    linear: &[[f64; 3]],
+    region_of: &[u8],
+) -> ModelDifference {
+    let (moving_face, regions) = differences(pre, nonlinear, linear, region_of, 1.0);
+    ModelDifference {
+        method: "|u(neo-Hookean) - u(linear)| per face vertex, same mesh and holds".into(),
+        moving_face,
+        regions,
+    }
+}
+
+/// Per face vertex that moves, |a − b| / scale: over the moving face and per region.
+fn differences(
+    pre: &[[f64; 3]],
+    a: &[[f64; 3]],
+    b: &[[f64; 3]],
+    region_of: &[u8],
+    scale: f64,
+) -> (RegionStats, Ordered<RegionStats>) {
+    let moved = |a: [f64; 3], b: [f64; 3]| crate::vec3::norm(crate::vec3::sub(a, b));
+    let mut moving = Vec::new();
+    let mut per_region: Vec<Vec<f64>> = vec![Vec::new(); NAMES.len()];
+    for (i, ((p, f), c)) in pre.iter().zip(a).zip(b).enumerate() {
+        if moved(*f, *p).max(moved(*c, *p)) <= MOVING_MM {
+            continue;
+        }
+        let e = moved(*f, *c) / scale;
+        moving.push(e);
+        if let Some(&r) = region_of.get(i).filter(|r| **r != NONE) {
+            per_region[r as usize].push(e);
+        }
+    }
+    (
+        stats(moving),
+        Ordered(
+            NAMES
+                .iter()
+                .zip(per_region)
+                .map(|(n, d)| (n.to_string(), stats(d)))
+                .collect(),
+        ),
+    )
+}
+
 /// The estimate from the face before (`pre`), as solved (`fine`) and at twice the element size
 /// (`coarse`); `region_of` is each vertex's region index (`face_regions::NONE`: none).
 pub(crate) fn estimate(
@@ -47,32 +107,14 @@ pub(crate) fn estimate(
     seconds: f64,
 ) -> DiscretisationError {
     let scale = 2f64.powf(ORDER) - 1.0;
-    let moved = |a: [f64; 3], b: [f64; 3]| crate::vec3::norm(crate::vec3::sub(a, b));
-    let mut moving = Vec::new();
-    let mut per_region: Vec<Vec<f64>> = vec![Vec::new(); NAMES.len()];
-    for (i, ((p, f), c)) in pre.iter().zip(fine).zip(coarse).enumerate() {
-        if moved(*f, *p).max(moved(*c, *p)) <= MOVING_MM {
-            continue;
-        }
-        let e = moved(*f, *c) / scale;
-        moving.push(e);
-        if let Some(&r) = region_of.get(i).filter(|r| **r != NONE) {
-            per_region[r as usize].push(e);
-        }
-    }
+    let (moving_face, regions) = differences(pre, fine, coarse, region_of, scale);
     DiscretisationError {
         method: format!(
             "Richardson: |u(2h) - u(h)| / (2^{ORDER} - 1), the case solved again at twice the element size"
         ),
         coarse_skin_size_mm,
-        moving_face: stats(moving),
-        regions: Ordered(
-            NAMES
-                .iter()
-                .zip(per_region)
-                .map(|(n, d)| (n.to_string(), stats(d)))
-                .collect(),
-        ),
+        moving_face,
+        regions,
         seconds,
     }
 }

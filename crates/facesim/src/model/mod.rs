@@ -96,6 +96,14 @@ impl Prediction {
         )
     }
 
+    /// The hyperelastic run's linear face under the same holds (None for linear models).
+    pub fn linear_face(&self) -> Option<&[[f64; 3]]> {
+        match &self.solved {
+            Solved::Tet(Some(v)) => v.linear_face.as_deref(),
+            _ => None,
+        }
+    }
+
     /// Whether the model moved anything (else every re-solve is the pre-operative face).
     pub fn moves(&self) -> bool {
         match &self.solved {

@@ -18,6 +18,7 @@ use crate::tet::conditions::{
 };
 use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
+use crate::tet::newton_krylov;
 use crate::tet::nonlinear::{self, Newton};
 use crate::tet::plan_holds::LinearHold;
 use crate::tet::quadratic::{Rule, Tet10Mesh};
@@ -42,6 +43,9 @@ pub struct Volumetric {
     pub basis: Option<PlanBasis>,
     /// What a solve with other tissue parameters reuses ([`Volumetric::resolve`]).
     pub reuse: Reuse,
+    /// The nonlinear material: the linear model's face under the same holds (the Newton
+    /// start), to report how far the two differ per region.
+    pub linear_face: Option<Vec<[f64; 3]>>,
 }
 
 /// The parts of a run that do not depend on the tissue parameters: the node roles, the mucosa
@@ -97,11 +101,12 @@ impl Volumetric {
             let f = Loads::none().nodal_vector(nodes.len())?;
             c.solve(&[(&hold, &f)])?.remove(0)
         } else {
-            let opts = Newton {
-                load_steps: case.tet.load_steps,
-                ..Newton::default()
-            };
-            nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?.displacements
+            // As the run: Newton from the linear answer, preconditioned by its factor.
+            let c = Constrained::new(&linear.assemble()?, &hold, nodes.len())?;
+            let f = Loads::none().nodal_vector(nodes.len())?;
+            let start = c.solve(&[(&hold, &f)])?.remove(0);
+            newton_krylov::solve(&linear, &c, &start, &newton_krylov::Options::default())?
+                .displacements
         };
         let carried = carry_face(
             &r.embedding,
@@ -146,6 +151,9 @@ pub struct NewtonStep {
     pub load: f64,
     pub iterations: usize,
     pub residual: f64,
+    /// Conjugate-gradient iterations of the step's Newton systems (0: factored).
+    #[serde(default)]
+    pub krylov_iterations: usize,
 }
 
 /// report.json's `tet` section.
@@ -466,9 +474,10 @@ pub fn predict(
     // The linear models keep their factor for the plan basis (no second factorisation).
     let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
     let mut lifted_off = 0;
-    let (displacement, newton, factor) =
+    let mut fallback = None;
+    let (displacement, newton, factor, linear_start) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
-            if linear_solve {
+            {
                 let k = stiffness()?;
                 let f = Loads::none().nodal_vector(nodes.len())?;
                 let mut c = Constrained::new(&k, &hold, nodes.len())?;
@@ -506,24 +515,48 @@ pub fn predict(
                     c.free_nodes(&freed)?;
                     u = c.solve(&[(&hold, &f)])?.remove(0);
                 }
-                return Ok((u, None, Some(c)));
+                if linear_solve {
+                    return Ok((u, None, Some(c), None));
+                }
+                // The hyperelastic model: Newton from the linear answer, the linear factor
+                // preconditioning each Newton system (tet::newton_krylov).
+                let s = match newton_krylov::solve(
+                    &linear,
+                    &c,
+                    &u,
+                    &newton_krylov::Options::default(),
+                ) {
+                    Ok(s) => s,
+                    // Too far from the linear answer for Newton to start there: load steps,
+                    // each Newton system factored (slower, more robust).
+                    Err(e) => {
+                        fallback = Some(format!(
+                            "the nonlinear solve from the linear answer failed ({e}); solved again in {} load steps",
+                            t.load_steps
+                        ));
+                        let opts = Newton {
+                            load_steps: t.load_steps,
+                            ..Newton::default()
+                        };
+                        nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?
+                    }
+                };
+                let steps = s
+                    .steps
+                    .iter()
+                    .map(|s| NewtonStep {
+                        load: s.load,
+                        iterations: s.iterations,
+                        residual: s.residuals.last().copied().unwrap_or(0.0),
+                        krylov_iterations: s.krylov_iterations,
+                    })
+                    .collect();
+                Ok((s.displacements, Some(steps), Some(c), Some(u)))
             }
-            let opts = Newton {
-                load_steps: t.load_steps,
-                ..Newton::default()
-            };
-            let s = nonlinear::solve(&linear, &hold, &Loads::none(), &opts)?;
-            let steps = s
-                .steps
-                .iter()
-                .map(|s| NewtonStep {
-                    load: s.load,
-                    iterations: s.iterations,
-                    residual: s.residuals.last().copied().unwrap_or(0.0),
-                })
-                .collect();
-            Ok((s.displacements, Some(steps), None))
         })?;
+    if let Some(w) = fallback {
+        rec.warn(w);
+    }
     let inverted_tets = match &quadratic {
         Some(q) => q.inverted_after(&displacement),
         None => linear.inverted_after(&displacement),
@@ -555,13 +588,12 @@ pub fn predict(
         Ok((carry(&e, &displacement), e))
     })?;
     let basis = rec.time(Stage::PlanBasis, "building the plan basis", || {
+        // The nonlinear material slides on the moved bone's normals: where a rotation turned
+        // them, the basis (the linear model at rest) needs its own factor.
+        let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
         let factor = match factor {
-            Some(c) => c,
-            // The nonlinear material: the linear model at rest, factored for the basis alone.
-            None => {
-                let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
-                Constrained::new(&stiffness()?, &rest, nodes.len())?
-            }
+            Some(c) if c.takes(&rest) => c,
+            _ => Constrained::new(&stiffness()?, &rest, nodes.len())?,
         };
         let inputs = BasisInputs {
             factor: &factor,
@@ -604,8 +636,10 @@ pub fn predict(
         face_to_mesh_mm: stats(&reached),
     };
     let face_post = displaced(skin, &carried);
+    let linear_face = linear_start.map(|u| displaced(skin, &carry(&embedding, &u)));
     Ok(Some((
         Volumetric {
+            linear_face,
             mesh,
             quadratic,
             constraint,

@@ -286,6 +286,29 @@ impl Constrained {
         self.sys.free_more(&dofs)
     }
 
+    /// The node frames the factor was made in (a freed node: nothing held).
+    pub(crate) fn frames(&self) -> &[Frame] {
+        &self.frames
+    }
+
+    /// Whether `holds` constrain the same components along the same axes as the factor (so
+    /// [`Constrained::solve`] takes them).
+    pub fn takes(&self, holds: &[Hold]) -> bool {
+        frames(holds, self.frames.len()).is_ok_and(|fr| {
+            fr.iter()
+                .zip(&self.frames)
+                .all(|(now, was)| now.held == was.held && (now.held == 0 || now.axes == was.axes))
+        })
+    }
+
+    /// K⁻¹ r for r in the local frames with the held components' values zero: the linear
+    /// model's factor as the preconditioner of a nonlinear tangent (`tet::newton_krylov`).
+    pub(crate) fn solve_local(&self, r: &[f64]) -> Vec<f64> {
+        self.sys
+            .solve(&[r.to_vec()], &[vec![0.0; r.len()]])
+            .remove(0)
+    }
+
     /// The displacements for each (holds, nodal force vector of length 3 · nodes) pair. The holds
     /// must constrain the same components along the same axes as at construction (their values
     /// may differ).

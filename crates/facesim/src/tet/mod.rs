@@ -27,11 +27,14 @@ pub mod embed;
 pub mod from_ct;
 pub mod graded;
 pub mod holds;
+pub mod newton_krylov;
 pub mod nonlinear;
 pub(crate) mod plan_holds;
 pub mod quadratic;
 pub mod quality;
+pub mod stable_neo_hooke;
 pub mod stuffing;
+pub(crate) mod tangent;
 pub mod vtu;
 
 pub use holds::{Constrained, Hold, Loads};

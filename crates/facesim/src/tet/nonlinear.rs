@@ -35,6 +35,7 @@
 //! step that converges in a few iterations lets the next grow back (adaptive load steps).
 
 use super::holds::{Frame, Hold, Loads, frames, rotate_lower, to_global, to_local};
+pub use super::stable_neo_hooke::StableNeoHooke;
 use super::{TetMesh, TissueElastic, gradients};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::System;
@@ -50,7 +51,26 @@ pub struct NeoHooke {
 }
 
 /// ∂P_iJ/∂F_kL, indexed [3i + J][3k + L].
-pub(crate) type Tangent = [[f64; 9]; 9];
+pub type Tangent = [[f64; 9]; 9];
+
+/// A hyperelastic material: its strain energy density W(F), first Piola–Kirchhoff stress and
+/// consistent tangent; None where it is undefined (J ≤ 0 for the classical forms).
+pub trait Hyperelastic {
+    fn energy(&self, f: &Matrix3<f64>) -> Option<f64>;
+    fn stress(&self, f: &Matrix3<f64>) -> Option<Matrix3<f64>>;
+    fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)>;
+}
+
+/// Which strain energy the nonlinear solve uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Energy {
+    /// CalculiX's `*HYPERELASTIC, NEO HOOKE` ([`NeoHooke`]): undefined for J ≤ 0, so every
+    /// iterate must keep every element uninverted. Kept for the cross-check with CalculiX.
+    CalculixNeoHooke,
+    /// The stable neo-Hookean of Smith, de Goes & Kim 2018 ([`StableNeoHooke`]): defined for
+    /// every F, the product's choice.
+    StableNeoHooke,
+}
 
 impl NeoHooke {
     /// The neo-Hookean material with the small-strain behaviour of `m`.
@@ -71,9 +91,11 @@ impl NeoHooke {
     pub fn d1(&self) -> f64 {
         2.0 / self.kappa
     }
+}
 
+impl Hyperelastic for NeoHooke {
     /// W(F); None when J ≤ 0.
-    pub fn energy(&self, f: &Matrix3<f64>) -> Option<f64> {
+    fn energy(&self, f: &Matrix3<f64>) -> Option<f64> {
         let j = f.determinant();
         if !(j > 0.0) {
             return None;
@@ -83,7 +105,7 @@ impl NeoHooke {
     }
 
     /// The first Piola–Kirchhoff stress P(F); None when J ≤ 0.
-    pub fn stress(&self, f: &Matrix3<f64>) -> Option<Matrix3<f64>> {
+    fn stress(&self, f: &Matrix3<f64>) -> Option<Matrix3<f64>> {
         let j = f.determinant();
         if !(j > 0.0) {
             return None;
@@ -95,7 +117,7 @@ impl NeoHooke {
     }
 
     /// The stress and the consistent tangent ∂P/∂F; None when J ≤ 0.
-    pub(crate) fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)> {
+    fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)> {
         let j = f.determinant();
         if !(j > 0.0) {
             return None;
@@ -125,14 +147,36 @@ impl NeoHooke {
     }
 }
 
+/// ∂P/∂F with its negative eigenvalues set to zero (projected Newton, Teran, Sifakis, Irving &
+/// Fedkiw 2005): the element tangent V Gᵀ A G is then positive semi-definite, so the Newton
+/// system stays a minimisation and its conjugate gradients meet no negative curvature. A
+/// positive definite A (every element at small strain) is left as it is (one 9×9 Cholesky).
+fn project_to_psd(t: &mut Tangent) {
+    let a = nalgebra::SMatrix::<f64, 9, 9>::from_fn(|i, j| 0.5 * (t[i][j] + t[j][i]));
+    if a.cholesky().is_some() {
+        return;
+    }
+    let e = a.symmetric_eigen();
+    let clamped = e.eigenvalues.map(|v| v.max(0.0));
+    let p = e.eigenvectors
+        * nalgebra::SMatrix::<f64, 9, 9>::from_diagonal(&clamped)
+        * e.eigenvectors.transpose();
+    for (i, row) in t.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = p[(i, j)];
+        }
+    }
+}
+
 /// One element's energy, internal forces (12) and, when asked, tangent (12×12).
-type ElementState = (f64, [f64; 12], Option<Box<[[f64; 12]; 12]>>);
+pub(crate) type ElementState = (f64, [f64; 12], Option<Box<[[f64; 12]; 12]>>);
 
 fn element_state(
     x: [[f64; 3]; 4],
     u: [[f64; 3]; 4],
-    m: NeoHooke,
+    m: &impl Hyperelastic,
     with_tangent: bool,
+    project: bool,
 ) -> Option<ElementState> {
     let (v, g) = gradients(x)?;
     let mut f = Matrix3::identity();
@@ -146,7 +190,10 @@ fn element_state(
     let w = m.energy(&f)?;
     let mut force = [0.0; 12];
     let tangent = if with_tangent {
-        let (p, t) = m.stress_tangent(&f)?;
+        let (p, mut t) = m.stress_tangent(&f)?;
+        if project {
+            project_to_psd(&mut t);
+        }
         for a in 0..4 {
             for i in 0..3 {
                 force[3 * a + i] = v * (0..3).map(|jj| p[(i, jj)] * g[a][jj]).sum::<f64>();
@@ -194,16 +241,53 @@ pub struct Internal {
 /// The mesh's stored energy, internal forces and, when asked, tangent at displacement `u`; an
 /// element with J ≤ 0 (or flat) is a reported `DegenerateElement` failure naming it.
 pub fn internal_state(mesh: &TetMesh, u: &[[f64; 3]], with_tangent: bool) -> Result<Internal> {
-    let per: Vec<Option<ElementState>> = mesh
-        .tets
-        .par_iter()
-        .zip(&mesh.material)
-        .map(|(t, m)| {
-            element_state(
-                t.map(|n| mesh.nodes[n as usize]),
-                t.map(|n| u[n as usize]),
-                NeoHooke::from_elastic(*m),
+    internal_state_of(mesh, u, with_tangent, Energy::CalculixNeoHooke)
+}
+
+/// One element's state with the chosen energy.
+pub(crate) fn element_state_of(
+    mesh: &TetMesh,
+    e: usize,
+    u: &[[f64; 3]],
+    with_tangent: bool,
+    project: bool,
+    energy: Energy,
+) -> Option<ElementState> {
+    let (t, m) = (mesh.tets[e], mesh.material[e]);
+    let (x, ue) = (t.map(|n| mesh.nodes[n as usize]), t.map(|n| u[n as usize]));
+    match energy {
+        Energy::CalculixNeoHooke => {
+            element_state(x, ue, &NeoHooke::from_elastic(m), with_tangent, project)
+        }
+        Energy::StableNeoHooke => element_state(
+            x,
+            ue,
+            &StableNeoHooke::from_elastic(m),
+            with_tangent,
+            project,
+        ),
+    }
+}
+
+/// As [`internal_state`], with the chosen energy.
+pub fn internal_state_of(
+    mesh: &TetMesh,
+    u: &[[f64; 3]],
+    with_tangent: bool,
+    energy: Energy,
+) -> Result<Internal> {
+    let per: Vec<Option<ElementState>> = (0..mesh.tets.len())
+        .into_par_iter()
+        // The stable energy's tangent turns indefinite under compression: projected for the
+        // factored Newton steps, which need a positive definite matrix.
+        .map(|e| {
+            element_state_of(
+                mesh,
+                e,
+                u,
                 with_tangent,
+                energy == Energy::StableNeoHooke,
+                energy,
             )
         })
         .collect();
@@ -254,6 +338,7 @@ pub struct Newton {
     pub tolerance: f64,
     /// How many times a failing step may be halved.
     pub max_cuts: usize,
+    pub energy: Energy,
 }
 
 impl Default for Newton {
@@ -263,6 +348,7 @@ impl Default for Newton {
             max_iterations: 25,
             tolerance: 1e-10,
             max_cuts: 6,
+            energy: Energy::StableNeoHooke,
         }
     }
 }
@@ -275,6 +361,8 @@ pub struct Step {
     pub iterations: usize,
     /// The relative free residual before each iteration and at convergence.
     pub residuals: Vec<f64>,
+    /// Conjugate-gradient iterations in all (`newton_krylov`; 0 for factored Newton steps).
+    pub krylov_iterations: usize,
 }
 
 /// The nonlinear solution: displacements (mm) and the steps taken.
@@ -292,20 +380,10 @@ struct StepFailure {
     residuals: Vec<f64>,
 }
 
-/// The neo-Hookean solve with `holds` and dead `loads` (see the module docs).
-pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Result<Solution> {
-    if opts.load_steps == 0 || opts.max_iterations == 0 || !(opts.tolerance > 0.0) {
-        return Err(Error::config(
-            "nonlinear volumetric model: load steps and Newton iterations must be ≥ 1 and the tolerance > 0",
-        ));
-    }
-    let fr = frames(holds, mesh.nodes.len())?;
-    let f_ext = loads.vector_linear(&mesh.nodes)?;
-    let fixed: Vec<bool> = fr
-        .iter()
-        .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
-        .collect();
-    // f₀: the internal-force norm of a 10⁻⁴ strain in the stiffest tissue.
+/// The force and energy scales of convergence tests: f₀, the internal-force norm of a 10⁻⁴
+/// strain in the stiffest tissue (a rigid move has no other force scale), and the energy below
+/// which a difference is round-off (sums of W V with W = O(E) round-off each: Ī₁ − 3 cancels).
+pub(crate) fn scales(mesh: &TetMesh) -> (f64, f64) {
     let e_max = mesh
         .material
         .iter()
@@ -323,9 +401,23 @@ pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Re
             .map(|v| v.powf(4.0 / 3.0))
             .sum::<f64>()
             .sqrt();
-    // Energies are sums of W V with W = O(E) round-off each (Ī₁ − 3 cancels): below this, an
-    // energy difference is noise.
-    let energy_noise = 1e-13 * e_max * volumes.iter().sum::<f64>();
+    (f0, 1e-13 * e_max * volumes.iter().sum::<f64>())
+}
+
+/// The neo-Hookean solve with `holds` and dead `loads` (see the module docs).
+pub fn solve(mesh: &TetMesh, holds: &[Hold], loads: &Loads, opts: &Newton) -> Result<Solution> {
+    if opts.load_steps == 0 || opts.max_iterations == 0 || !(opts.tolerance > 0.0) {
+        return Err(Error::config(
+            "nonlinear volumetric model: load steps and Newton iterations must be ≥ 1 and the tolerance > 0",
+        ));
+    }
+    let fr = frames(holds, mesh.nodes.len())?;
+    let f_ext = loads.vector_linear(&mesh.nodes)?;
+    let fixed: Vec<bool> = fr
+        .iter()
+        .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
+        .collect();
+    let (f0, energy_noise) = scales(mesh);
     let mut solver = Solver {
         mesh,
         frames: fr,
@@ -405,7 +497,9 @@ impl Solver<'_> {
     }
 
     fn energy(&self, u: &[[f64; 3]], s: f64) -> Option<f64> {
-        let w = internal_state(self.mesh, u, false).ok()?.energy;
+        let w = internal_state_of(self.mesh, u, false, self.opts.energy)
+            .ok()?
+            .energy;
         let work: f64 = u
             .iter()
             .flatten()
@@ -430,7 +524,8 @@ impl Solver<'_> {
                 energy,
                 forces: f_int,
                 tangent: k,
-            } = internal_state(self.mesh, &x, true).map_err(|e| fail(e.to_string(), &residuals))?;
+            } = internal_state_of(self.mesh, &x, true, self.opts.energy)
+                .map_err(|e| fail(e.to_string(), &residuals))?;
             let r: Vec<f64> = f_int
                 .iter()
                 .zip(&self.f_ext)
@@ -485,6 +580,7 @@ impl Solver<'_> {
                     load: s,
                     iterations: it,
                     residuals,
+                    krylov_iterations: 0,
                 });
             }
             if it == self.opts.max_iterations {
