@@ -181,8 +181,8 @@ fn near_tooth(p: [f64; 3], r: f64) -> bool {
 /// the bone's tangential move is less than the bone's (ratio < 1; attached it is exactly 1).
 #[test]
 fn lips_closed_on_the_teeth_slide_on_them() {
-    let on = run_sized(closed_lips_dir(), "case.toml", true, 4.0);
-    let off = run_sized(closed_lips_dir(), "case.toml", false, 4.0);
+    let on = run_sized(closed_lips_dir(), "case.toml", true, 6.0);
+    let off = run_sized(closed_lips_dir(), "case.toml", false, 6.0);
     let (s, a) = (
         on.report.tet.as_ref().unwrap(),
         off.report.tet.as_ref().unwrap(),
