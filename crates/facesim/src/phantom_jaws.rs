@@ -135,6 +135,10 @@ pub struct Shape {
     /// Mandibular midline shift towards the patient's left (+x): the mandible, the lower
     /// vestibule and the lower face's skin (by an angle asymmetry_mm / 85 mm about the axis).
     pub asymmetry_mm: f64,
+    /// Lips and cheeks closed on the teeth: the vestibule is a potential space (soft tissue, no
+    /// air), as in most CTs, so the lip's inner surface lies on the crowns and the alveolar bone
+    /// (the lip–tooth contact of issue 25 item 5). Not a cohort parameter (`values` leaves it out).
+    pub closed_lips: bool,
 }
 
 impl Default for Shape {
@@ -145,6 +149,7 @@ impl Default for Shape {
             mandible_mm: 0.0,
             chin_mm: 0.0,
             asymmetry_mm: 0.0,
+            closed_lips: false,
         }
     }
 }
@@ -184,6 +189,7 @@ impl Shape {
             mandible_mm: v[2],
             chin_mm: v[3],
             asymmetry_mm: v[4],
+            closed_lips: false,
         }
     }
 
@@ -525,7 +531,7 @@ fn tissue(sh: &Shape, p: [f64; 3]) -> Tissue {
     if rho >= r - SKIN_MM {
         return Tissue::Skin;
     }
-    if vestibule(sh, p) {
+    if !sh.closed_lips && vestibule(sh, p) {
         return Tissue::Air;
     }
     if let Some((_, tooth)) = bone(sh, p) {
@@ -574,6 +580,7 @@ impl Shape {
         }
     }
 
+    /// Is p in the vestibule (with `closed_lips`: where it would be, now soft tissue)?
     pub fn in_vestibule(&self, p: [f64; 3]) -> bool {
         vestibule(self, self.standard_of(p))
     }

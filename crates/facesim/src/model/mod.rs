@@ -112,9 +112,10 @@ impl Prediction {
         }
     }
 
-    /// Whether `[tet] sliding` can change the answer: the mesh has mucosa nodes to slide.
+    /// Whether `[tet] sliding` can change the answer: the mesh has mucosa or lip–tooth contact
+    /// nodes to slide.
     pub(crate) fn sliding_matters(&self) -> bool {
-        matches!(&self.solved, Solved::Tet(Some(v)) if v.report.mucosa_nodes > 0)
+        matches!(&self.solved, Solved::Tet(Some(v)) if v.report.mucosa_nodes + v.report.contact_nodes > 0)
     }
 
     /// The model's own files beside the face outputs: the springs (C1; springs.ply), the

@@ -13,8 +13,8 @@ use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
 use crate::tet::conditions::{
-    Bone, Holds, Mucosa, follow_bone, hold_floating_pieces, holds, materials, midpoint_kinds,
-    mucosa, release_at_cuts,
+    Bone, Holds, Mucosa, contact, follow_bone, hold_floating_pieces, holds, materials,
+    midpoint_kinds, mucosa, release_at_cuts,
 };
 use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
@@ -173,6 +173,14 @@ pub struct TetReport {
     /// of them that slide (`[tet] sliding`; otherwise they move with the bone).
     pub mucosa_nodes: usize,
     pub sliding_nodes: usize,
+    /// Bone-kind nodes where lip or cheek rests on a tooth with no air between
+    /// (`tet::conditions::contact`: the tooth by its HU, the lip or cheek by the face's air
+    /// reached through soft tissue), and those of them sliding in the solve (`[tet] sliding`, not
+    /// lifted off); otherwise they stay attached to their bone.
+    #[serde(default)]
+    pub contact_nodes: usize,
+    #[serde(default)]
+    pub contact_sliding_nodes: usize,
     pub moved_nodes: usize,
     pub fixed_nodes: usize,
     pub quality: Quality,
@@ -410,6 +418,23 @@ pub fn predict(
         &scene.seg.outside,
         t.mucosa_gap_mm,
     );
+    // Lip and cheek on the teeth (bone-kind nodes; the mucosa above is skin-kind): one list.
+    let contact = contact(
+        &mesh.nodes,
+        &mesh.tets,
+        &mesh.kind,
+        &bone,
+        &scene.vol,
+        &scene.seg,
+        &|p| !crate::pipeline::model::rigid_mask(case, &[p])[0],
+    );
+    let contact_nodes = contact.iter().filter(|m| m.is_some()).count();
+    let mucosa_nodes = mucosa.iter().filter(|m| m.is_some()).count();
+    let mucosa: Vec<Option<Mucosa>> = mucosa
+        .into_iter()
+        .zip(contact)
+        .map(|(m, c)| m.or(c))
+        .collect();
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
     let (
@@ -621,8 +646,13 @@ pub fn predict(
         dofs: 3 * nodes.len(),
         free_dofs: 3 * counted(&constraint, FREE),
         skin_nodes: kind.iter().filter(|k| **k == NodeKind::Skin).count(),
-        mucosa_nodes: mucosa.iter().filter(|m| m.is_some()).count(),
+        mucosa_nodes,
         sliding_nodes: counted(&constraint, SLIDING),
+        contact_nodes,
+        contact_sliding_nodes: (0..mesh.nodes.len())
+            .filter(|n| mesh.kind[*n] == NodeKind::Bone && mucosa[*n].is_some())
+            .filter(|n| constraint[*n] == SLIDING)
+            .count(),
         moved_nodes: counted(&constraint, MOVED),
         fixed_nodes: counted(&constraint, FIXED),
         quality: mesh.quality.clone(),

@@ -36,8 +36,30 @@ pub(crate) fn holds(
     let (moved_to, moved) = bone.plan.apply(nodes, 1.0);
     let mut overlaps = Vec::new();
     let mut out = Holds::default();
+    // n · u = n · u_bone, tangential free.
+    let slide = |m: &Mucosa| {
+        let normal = if rest_normals {
+            m.rest_normal
+        } else {
+            m.normal
+        };
+        (
+            SLIDING,
+            Hold::Slide {
+                normal,
+                value: (0..3).map(|c| normal[c] * m.bone_move[c]).sum(),
+            },
+            LinearHold::Slides {
+                normal: m.rest_normal,
+                segment: m.segment,
+                at: m.bone_at,
+            },
+        )
+    };
     for (n, k) in kind.iter().enumerate() {
         let (c, h, l) = match (k, mucosa.get(n).copied().flatten()) {
+            // Lip or cheek on a tooth (`contact`): slides on it, or is attached like other bone.
+            (NodeKind::Bone, Some(m)) if sliding => slide(&m),
             (NodeKind::Bone, _) if moved[n] => {
                 let (s, over) = segment_at(bone.osteotomy, nodes[n]);
                 overlaps.extend(over);
@@ -54,25 +76,7 @@ pub(crate) fn holds(
                 (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still)
             }
             (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still),
-            (NodeKind::Skin, Some(m)) if sliding => {
-                let normal = if rest_normals {
-                    m.rest_normal
-                } else {
-                    m.normal
-                };
-                (
-                    SLIDING,
-                    Hold::Slide {
-                        normal,
-                        value: (0..3).map(|c| normal[c] * m.bone_move[c]).sum(),
-                    },
-                    LinearHold::Slides {
-                        normal: m.rest_normal,
-                        segment: m.segment,
-                        at: m.bone_at,
-                    },
-                )
-            }
+            (NodeKind::Skin, Some(m)) if sliding => slide(&m),
             (NodeKind::Skin, Some(m)) => (
                 if m.bone_move == [0.0; 3] {
                     FIXED
@@ -195,6 +199,133 @@ pub(crate) fn mucosa(
                 rest_normal: n,
                 bone_at: q,
                 segment: segment_at(bone.osteotomy, q).0,
+            })
+        })
+        .collect()
+}
+
+/// Tooth: the median HU at [`TOOTH_DEPTHS_MM`] under a bone node (into the bone) at or above
+/// this. Enamel and dentine are the brightest tissue of a head CT (dentine ≈ 1600–2400 HU, enamel
+/// above 2500, metal saturated; the real CT's crowns 1650–2150 at a node), the alveolar and basal
+/// bone below it (the maxilla's thin cortex over cancellous bone); the jaws phantom's teeth are
+/// 1500. The median ignores one bright metal streak or one dark beam-hardening band.
+pub(crate) const TOOTH_HU: f64 = 1450.0;
+
+/// Depths (mm) into the bone where [`TOOTH_HU`] is tested: the median needs three of the five,
+/// so the bone must be that dense at 3 mm or deeper. A crown is dense right through (5–10 mm
+/// labio-lingually above its edge); the skull's cortex is a 1.5–3 mm table over cancellous bone
+/// or diploë (300–800 HU) (the real CT's occipital and mastoid cortex reaches 1590 HU 1–3 mm
+/// deep).
+pub(crate) const TOOTH_DEPTHS_MM: [f64; 5] = [1.5, 2.25, 3.0, 3.75, 4.5];
+
+/// How far (mm) into the tissue the face's outside air must be reached from a tooth's surface for
+/// lip or cheek to lie on it: the upper lip is 11–17 mm thick at the incisors, the cheek 15–30 mm
+/// at the molars.
+pub(crate) const LIP_REACH_MM: f64 = 35.0;
+
+/// The lip–tooth and cheek–tooth contact (issue 25 item 5): `Bone`-kind nodes where lip or cheek
+/// rests on the crowns with no air between (the vestibule is a potential space: the lip is not
+/// attached to the teeth). A bone node is in contact when (1) it lies on a tooth: the median HU
+/// at [`TOOTH_DEPTHS_MM`] into the bone, along the normal, is at least [`TOOTH_HU`]; and (2) lip or cheek
+/// covers it: from the node into the tissue (the normal: the mean direction to its elements'
+/// centroids) the air outside the head is reached within [`LIP_REACH_MM`] through soft tissue
+/// alone (no bone on the way), at the face (`face`: the skin `[surface] movable` lets move, not
+/// the scalp): the labial and buccal faces of the dental arch, not the lingual, palatal or
+/// occlusal ones (tongue, the other jaw). Everything here is the anatomy at rest, not
+/// the plan, so the set keeps the model linear in the plan. The rest of the bone (gingiva and
+/// periosteum on the alveolar process and elsewhere) stays attached.
+pub(crate) fn contact(
+    nodes: &[[f64; 3]],
+    tets: &[[u32; 4]],
+    kind: &[NodeKind],
+    bone: &Bone,
+    vol: &Volume,
+    seg: &crate::segment::Segmentation,
+    face: &(dyn Fn([f64; 3]) -> bool + Sync),
+) -> Vec<Option<Mucosa>> {
+    use rayon::prelude::*;
+    let mut inward = vec![[0.0; 3]; nodes.len()];
+    for q in tets {
+        let c: [f64; 3] =
+            std::array::from_fn(|k| q.iter().map(|n| nodes[*n as usize][k]).sum::<f64>() / 4.0);
+        for n in q {
+            let n = *n as usize;
+            if kind[n] == NodeKind::Bone {
+                inward[n] = crate::vec3::add(inward[n], crate::vec3::sub(c, nodes[n]));
+            }
+        }
+    }
+    let step = 0.5 * vol.spacing.iter().copied().fold(f64::INFINITY, f64::min);
+    let voxel = |p: [f64; 3]| {
+        let c = vol.to_voxel(p).map(|v| v.round() as i64);
+        (c.iter()
+            .zip(vol.dims)
+            .all(|(c, d)| *c >= 0 && (*c as usize) < d))
+        .then(|| c.map(|v| v as usize))
+    };
+    // From p along n: true at the outside air; false at bone or beyond the reach.
+    let reaches_outside = |p: [f64; 3], n: [f64; 3]| {
+        let mut d = step;
+        while d <= LIP_REACH_MM {
+            let q = [0, 1, 2].map(|c| p[c] + d * n[c]);
+            let Some([i, j, k]) = voxel(q) else {
+                return false;
+            };
+            if seg.outside.contains(i, j, k) {
+                return face(q);
+            }
+            // Past the first millimetre (the node's own bone surface, partial volume).
+            if d > 1.0 && seg.labels[vol.idx(i, j, k)] == crate::segment::BONE {
+                return false;
+            }
+            d += step;
+        }
+        false
+    };
+    let plan = bone.plan;
+    let rows: Vec<Option<(f64, bool)>> = nodes
+        .par_iter()
+        .zip(kind)
+        .zip(&inward)
+        .map(|((p, k), w)| {
+            let len = crate::vec3::norm(*w);
+            if *k != NodeKind::Bone || !(len > 0.0) {
+                return None;
+            }
+            let n = w.map(|c| c / len);
+            let mut hu = TOOTH_DEPTHS_MM
+                .map(|d| vol.sample([0, 1, 2].map(|c| p[c] - d * n[c]), -1000.0) as f64);
+            hu.sort_by(f64::total_cmp);
+            Some((hu[hu.len() / 2], reaches_outside(*p, n)))
+        })
+        .collect();
+    nodes
+        .iter()
+        .zip(&rows)
+        .zip(&inward)
+        .map(|((p, r), w)| {
+            let (hu, out) = (*r)?;
+            if !(hu >= TOOTH_HU && out) {
+                return None;
+            }
+            let n = w.map(|c| c / crate::vec3::norm(*w));
+            // The normal carried by the bone's move: the image of p + εn minus that of p.
+            let eps = 1e-3;
+            let (moved, which) = plan.apply(&[*p, [0, 1, 2].map(|c| p[c] + eps * n[c])], 1.0);
+            let bone_move = [0, 1, 2].map(|c| moved[0][c] - p[c]);
+            let normal = if which[0] == which[1] {
+                let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
+                let l = crate::vec3::norm(m);
+                m.map(|v| v / l)
+            } else {
+                n
+            };
+            Some(Mucosa {
+                normal,
+                bone_move,
+                rest_normal: n,
+                bone_at: *p,
+                segment: segment_at(bone.osteotomy, *p).0,
             })
         })
         .collect()
