@@ -1,9 +1,8 @@
 //! The Rust defaults of every case.toml key, equal to pipeline/defaults.toml (tested below): a
-//! caller builds a case in memory with `Case { ct: PathSection { path }, ..Case::default() }`
+//! caller builds a case in memory with `Case { ct: CtSection::new(path), ..Case::default() }`
 //! and no case.toml.
 
 use super::schema::*;
-use std::path::PathBuf;
 
 /// The documented defaults, compiled in so the binary works from any directory.
 pub const DEFAULTS_TOML: &str = include_str!("../../../../pipeline/defaults.toml");
@@ -12,9 +11,7 @@ impl Default for Case {
     fn default() -> Case {
         Case {
             name: None,
-            ct: PathSection {
-                path: PathBuf::new(),
-            },
+            ct: CtSection::default(),
             skin: None,
             registration: None,
             tissue: Tissue::default(),
@@ -147,9 +144,7 @@ mod tests {
     fn rust_defaults_equal_defaults_toml() {
         let parsed = Case::parse(MIN, Path::new("case.toml")).unwrap();
         let built = Case {
-            ct: PathSection {
-                path: "ct.nii.gz".into(),
-            },
+            ct: CtSection::new("ct.nii.gz"),
             ..Case::default()
         };
         let json = |c: &Case| serde_json::to_value(c).unwrap();

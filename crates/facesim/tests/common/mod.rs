@@ -73,12 +73,10 @@ pub fn coarse_tet_phantom(
     translate: [f64; 3],
     rotate_deg: [f64; 3],
 ) -> facesim::case::Case {
-    use facesim::case::{Case, Osteotomy, PathSection, SolveModel};
+    use facesim::case::{Case, CtSection, Osteotomy, PathSection, SolveModel};
     let mut c = Case {
         name: Some(name.into()),
-        ct: PathSection {
-            path: phantom_dir().join("ct.nii.gz"),
-        },
+        ct: CtSection::new(phantom_dir().join("ct.nii.gz")),
         skin: Some(PathSection {
             path: phantom_dir().join("face.ply"),
         }),
