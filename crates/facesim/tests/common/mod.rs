@@ -107,6 +107,19 @@ pub fn real_ct() -> PathBuf {
     p
 }
 
+/// The second real sample: VTK's headsq as vtk.js ships it (a dataset folder), fetched by
+/// data-samples/fetch-real-mandible.sh (scripts/test-setup.sh runs it).
+pub fn real_mandible_ct() -> PathBuf {
+    let p =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real-mandible/headsq.vti");
+    assert!(
+        p.join("index.json").is_file(),
+        "{} missing: run data-samples/fetch-real-mandible.sh (the README's test command does)",
+        p.display()
+    );
+    p
+}
+
 /// Every file below `dir` with its bytes (to prove nothing changed).
 pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut v = Vec::new();
