@@ -7,28 +7,7 @@ use super::schema::*;
 /// The documented defaults, compiled in so the binary works from any directory.
 pub const DEFAULTS_TOML: &str = include_str!("../../../../pipeline/defaults.toml");
 
-impl Default for Case {
-    fn default() -> Case {
-        Case {
-            name: None,
-            ct: CtSection::default(),
-            skin: None,
-            registration: None,
-            tissue: Tissue::default(),
-            extract: Extract::default(),
-            springs: Springs::default(),
-            surface: Surface::default(),
-            osteotomy: Vec::new(),
-            solve: Solve::default(),
-            tet: Tet::default(),
-            output: Output::default(),
-            uncertainty: Default::default(),
-            landmark: Vec::new(),
-            dicom: None,
-            landmarks: None,
-        }
-    }
-}
+// `Case::default()` is derived: every section's default below, no lists, no optional parts.
 
 impl Default for Tissue {
     fn default() -> Tissue {

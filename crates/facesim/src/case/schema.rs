@@ -8,7 +8,7 @@ use crate::labels::{FAT_BRIGHT, FAT_DARK, SKIN};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Case {
     #[serde(default)]
