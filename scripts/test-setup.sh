@@ -45,6 +45,12 @@ need_real_ct() {
   "$root/data-samples/fetch-real.sh"
 }
 
+# The second real sample, VTK's headsq with the mandible (BSD-3 data from npm's vtk.js@6.4.1,
+# fetched, never committed); needs npm, so after need_browser.
+need_real_mandible() {
+  "$root/data-samples/fetch-real-mandible.sh"
+}
+
 # Headless Chromium for report.html's browser test (Debian's chromium, never a downloaded
 # browser), and node/npm to drive it (docs/report-page.md).
 need_browser() {
@@ -116,6 +122,7 @@ need_calculix
 need_dicom_tools
 need_real_ct
 need_browser
+need_real_mandible
 need_npm
 need_python_venv
 need_cohort_tools

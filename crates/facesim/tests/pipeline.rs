@@ -4,7 +4,7 @@
 mod common;
 
 use common::phantom_dir;
-use facesim::case::{Case, Osteotomy, PathSection, Region, SolveModel};
+use facesim::case::{Case, CtSection, Osteotomy, PathSection, Region, SolveModel};
 use facesim::commands::{self, Outcome};
 use facesim::error::Error;
 use facesim::observe::Quiet;
@@ -14,9 +14,7 @@ use std::path::PathBuf;
 fn phantom_case() -> Case {
     Case {
         name: Some("in memory".into()),
-        ct: PathSection {
-            path: phantom_dir().join("ct.nii.gz"),
-        },
+        ct: CtSection::new(phantom_dir().join("ct.nii.gz")),
         skin: Some(PathSection {
             path: phantom_dir().join("face.ply"),
         }),

@@ -1,37 +1,13 @@
 //! The Rust defaults of every case.toml key, equal to pipeline/defaults.toml (tested below): a
-//! caller builds a case in memory with `Case { ct: PathSection { path }, ..Case::default() }`
+//! caller builds a case in memory with `Case { ct: CtSection::new(path), ..Case::default() }`
 //! and no case.toml.
 
 use super::schema::*;
-use std::path::PathBuf;
 
 /// The documented defaults, compiled in so the binary works from any directory.
 pub const DEFAULTS_TOML: &str = include_str!("../../../../pipeline/defaults.toml");
 
-impl Default for Case {
-    fn default() -> Case {
-        Case {
-            name: None,
-            ct: PathSection {
-                path: PathBuf::new(),
-            },
-            skin: None,
-            registration: None,
-            tissue: Tissue::default(),
-            extract: Extract::default(),
-            springs: Springs::default(),
-            surface: Surface::default(),
-            osteotomy: Vec::new(),
-            solve: Solve::default(),
-            tet: Tet::default(),
-            output: Output::default(),
-            uncertainty: Default::default(),
-            landmark: Vec::new(),
-            dicom: None,
-            landmarks: None,
-        }
-    }
-}
+// `Case::default()` is derived: every section's default below, no lists, no optional parts.
 
 impl Default for Tissue {
     fn default() -> Tissue {
@@ -147,9 +123,7 @@ mod tests {
     fn rust_defaults_equal_defaults_toml() {
         let parsed = Case::parse(MIN, Path::new("case.toml")).unwrap();
         let built = Case {
-            ct: PathSection {
-                path: "ct.nii.gz".into(),
-            },
+            ct: CtSection::new("ct.nii.gz"),
             ..Case::default()
         };
         let json = |c: &Case| serde_json::to_value(c).unwrap();

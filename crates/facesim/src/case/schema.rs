@@ -8,12 +8,12 @@ use crate::labels::{FAT_BRIGHT, FAT_DARK, SKIN};
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Case {
     #[serde(default)]
     pub name: Option<String>,
-    pub ct: PathSection,
+    pub ct: CtSection,
     #[serde(default)]
     pub skin: Option<PathSection>,
     #[serde(default)]
@@ -57,6 +57,33 @@ pub struct Dicom {
 pub struct UserLandmark {
     pub label: String,
     pub position: [f64; 3],
+}
+
+/// `[ct]`: the CT file, and what a file that does not say it needs stated (docs/case.md): the
+/// patient directions of its voxel axes and the offset from its numbers to HU.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct CtSection {
+    pub path: PathBuf,
+    /// Where the voxel axes i, j, k point in the patient, three letters of L/R, P/A, S/I
+    /// (e.g. "LAI": i to the left, j anterior, k inferior). Replaces the file's orientation
+    /// (origin and spacing kept): for formats with no patient frame (a vtk.js dataset).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub axes: Option<String>,
+    /// Added to every voxel value (after the file's own rescale, if any) to give HU: e.g.
+    /// -1024 for a CT stored as HU + 1024 with no rescale in the file.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub intercept: Option<f64>,
+}
+
+impl CtSection {
+    /// `[ct] path` alone.
+    pub fn new(path: impl Into<PathBuf>) -> CtSection {
+        CtSection {
+            path: path.into(),
+            ..CtSection::default()
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]

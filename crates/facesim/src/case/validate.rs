@@ -17,6 +17,16 @@ impl Case {
                 ));
             }
         }
+        if let Some(code) = &self.ct.axes
+            && crate::volume::axes_code(code).is_none()
+        {
+            return bad(format!(
+                "[ct] axes = \"{code}\" must be three letters, one of L/R, one of P/A and one of S/I (e.g. \"LAI\")"
+            ));
+        }
+        if self.ct.intercept.is_some_and(|b| !b.is_finite()) {
+            return bad("[ct] intercept must be finite".into());
+        }
         let t = &self.tissue;
         let bounds = [t.head_threshold, t.fat_dark, t.fat_bright, t.soft, t.bone];
         if bounds.iter().any(|b| !b.is_finite()) || bounds.windows(2).any(|w| w[0] >= w[1]) {

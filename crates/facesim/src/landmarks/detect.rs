@@ -207,10 +207,10 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
             s.is_finite() && a > s - BONE_DEPTH_MM
         })
     });
-    match (skull, bone_prof) {
-        (Some(m), Some(bp)) => bone_landmarks(&bp, m, frame, &mut f),
+    match (skull, &bone_prof) {
+        (Some(_), Some(bp)) => bone_landmarks(bp, &mut f),
         _ => {
-            for l in BONE {
+            for l in ["N", "ANS", "A"] {
                 f.put(
                     l,
                     Kind::Bone,
@@ -219,6 +219,7 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
             }
         }
     }
+    chin_landmarks(&sp, skull.zip(bone_prof.as_ref()), frame, &mut f);
     // Soft menton: the skin below bony menton (on its vertical line in the plane).
     let me_soft = match f.get("Me") {
         Some(me) => {
@@ -236,7 +237,18 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
                 })
                 .max_by(f64::total_cmp)
                 .map(|v| [v, me[1]])
-                .ok_or_else(|| "no skin below bony menton in the midsagittal plane".to_string())
+                .ok_or_else(|| {
+                    // Where the skin's section stops (the scan's lower edge, or an open mesh).
+                    let low = seg
+                        .iter()
+                        .flat_map(|s| [s[0][0], s[1][0]])
+                        .fold(f64::INFINITY, f64::min);
+                    format!(
+                        "no skin below bony menton in the midsagittal plane (the skin's \
+                         section ends {:.1} mm below menton's height)",
+                        me[0] - low
+                    )
+                })
         }
         None => Err("defined below bony menton (Me), which is missing".into()),
     };
@@ -315,8 +327,6 @@ fn soft_landmarks(p: &Profile, f: &mut Found) {
         ("Ls", Ext::Convex, "the fold under the nose"),
         ("Sto", Ext::Concave, "labrale superius"),
         ("Li", Ext::Convex, "stomion"),
-        ("B'", Ext::Concave, "labrale inferius"),
-        ("Pog'", Ext::Convex, "soft B point"),
     ];
     let mut at = Some(prn);
     let mut prev_label = "Prn";
@@ -368,7 +378,7 @@ fn soft_landmarks(p: &Profile, f: &mut Found) {
     );
 }
 
-fn bone_landmarks(p: &Profile, skull: &Mesh, frame: &HeadFrame, f: &mut Found) {
+fn bone_landmarks(p: &Profile, f: &mut Found) {
     let va = |i: usize| [p.height(i), p.a[i]];
     let window_miss = |what: &str, anchor: &str| {
         format!("the bony midsagittal profile has no {what} near {anchor}")
@@ -403,34 +413,209 @@ fn bone_landmarks(p: &Profile, skull: &Mesh, frame: &HeadFrame, f: &mut Found) {
         _ => Err("defined above A point, which is missing".into()),
     };
     f.put("ANS", Kind::Bone, ans);
-    // Pogonion: the most anterior convexity within 12 mm of soft pogonion's height; B: the
-    // deepest concavity between it and 5 mm above Li.
-    let pog = match f.get("Pog'") {
-        Some([v, _]) => extremum_in(p, v - 12.0, v + 12.0, Ext::Convex)
-            .ok_or_else(|| window_miss("convexity", "soft pogonion")),
-        None => Err(anchor_miss("soft pogonion (Pog')")),
-    };
-    f.put("Pog", Kind::Bone, pog.clone().map(va));
-    let b = match (&pog, f.get("Li")) {
-        (Ok(pi), Some(li)) => extremum_in(p, p.height(*pi), li[0] + 5.0, Ext::Concave)
-            .map(va)
-            .ok_or_else(|| window_miss("concavity", "the lower lip")),
-        _ => Err(anchor_miss("pogonion and labrale inferius (Pog, Li)")),
-    };
-    f.put("B", Kind::Bone, b);
-    // Menton: the lowest point of the skull's section within 15 mm behind pogonion and 30 mm
-    // below it.
-    let me = match pog {
-        Ok(pi) => {
-            let [vp, ap] = va(pi);
-            section(skull, frame)
-                .iter()
-                .flat_map(|s| [s[0], s[1]])
-                .filter(|q| q[1] > ap - 15.0 && q[1] < ap + 5.0 && q[0] < vp && q[0] > vp - 30.0)
-                .min_by(|x, y| x[0].total_cmp(&y[0]))
-                .ok_or_else(|| "no bone below pogonion".to_string())
+}
+
+/// (index, offset) of the profile sample strictly between heights of `top` and `bottom` (v, a;
+/// top above bottom) that lies farthest in front of the chord top–bottom (`e` Convex; offset in
+/// mm, perpendicular to the chord) or farthest behind it (Concave). None when no sample lies
+/// between them.
+fn off_chord(p: &Profile, top: [f64; 2], bottom: [f64; 2], e: Ext) -> Option<(usize, f64)> {
+    let (dv, da) = (bottom[0] - top[0], bottom[1] - top[1]);
+    let len = (dv * dv + da * da).sqrt().max(1e-12);
+    (0..p.a.len())
+        .filter(|i| {
+            let v = p.height(*i);
+            p.a[*i].is_finite() && v < top[0] && v > bottom[0]
+        })
+        .map(|i| {
+            // In front of the chord (+) for a chord running down.
+            let front = (da * (p.height(i) - top[0]) - dv * (p.a[i] - top[1])) / len;
+            (i, e.sign() * front)
+        })
+        .max_by(|x, y| x.1.total_cmp(&y.1))
+}
+
+/// Below labrale inferius, the chin (docs/landmarks.md "The chin"): defined by chords between
+/// neighbouring landmarks, not by the frame's vertical, so that a head pitched in the scanner
+/// (VTK's headsq lies some 25° face-down) keeps them. Bone: infradentale Id (the top of the
+/// bony run at the lower lip, at most 5 mm above Li) and menton Me (the lowest bone of that
+/// run's symphysis); pogonion Pog the bony profile's point farthest in front of the chord
+/// Id–Me; B the deepest behind Id–Pog. Soft: Pog' the skin profile's point farthest in front of
+/// the chord from Li to the skin at Me's height; B' the deepest behind Li–Pog'. Each must stand
+/// out by PROMINENCE_MM from its chord.
+fn chin_landmarks(sp: &Profile, bone: Option<(&Mesh, &Profile)>, frame: &HeadFrame, f: &mut Found) {
+    let Some(li) = f.get("Li") else {
+        for (l, k) in [
+            ("B'", Kind::Soft),
+            ("Pog'", Kind::Soft),
+            ("B", Kind::Bone),
+            ("Pog", Kind::Bone),
+            ("Me", Kind::Bone),
+        ] {
+            f.put(
+                l,
+                k,
+                Err("defined below labrale inferius (Li), which is missing".into()),
+            );
         }
-        Err(_) => Err("defined below pogonion (Pog), which is missing".into()),
+        return;
     };
-    f.put("Me", Kind::Bone, me);
+    let bony = bone_chin(li, bone, frame);
+    let (b, pog, me, id) = match bony {
+        Ok(x) => (x.0, x.1, x.2, Some(x.3)),
+        Err(why) => (Err(why.clone()), Err(why.clone()), Err(why), None),
+    };
+    let b_v = b.as_ref().ok().copied();
+    f.put("B", Kind::Bone, b);
+    f.put("Pog", Kind::Bone, pog);
+    f.put("Me", Kind::Bone, me.clone());
+    let va = |i: usize| [sp.height(i), sp.a[i]];
+    // The soft chin's lower end: the skin profile at menton's height (or the lowest skin above
+    // it, in labrale inferius' run).
+    let (pog_s, b_s) = match me {
+        Ok(me) if id.is_some() => {
+            let id = id.unwrap_or(me);
+            let (lo, _) = sp.index(li[0]).map_or((0, 0), |i| run(sp, i));
+            let end = sp
+                .index(li[0])
+                .and_then(|top| {
+                    (lo..top)
+                        .filter(|i| sp.a[*i].is_finite() && sp.height(*i) >= me[0])
+                        .min_by(|x, y| sp.height(*x).total_cmp(&sp.height(*y)))
+                })
+                .map(va);
+            match end {
+                Some(end) => {
+                    // Below bony B, the soft chin's tangent parallel to the bony chord Id–Me.
+                    let tangent = b_v.and_then(|b0| {
+                        let (dv, da) = (me[0] - id[0], me[1] - id[1]);
+                        (0..sp.a.len())
+                            .filter(|i| {
+                                let v = sp.height(*i);
+                                sp.a[*i].is_finite() && v < b0[0] && v >= end[0]
+                            })
+                            .max_by(|x, y| {
+                                let front = |i: usize| da * sp.height(i) - dv * sp.a[i];
+                                front(*x).total_cmp(&front(*y))
+                            })
+                    });
+                    let pog_s = match tangent.map(va) {
+                        Some(pg)
+                            if off_chord(sp, li, pg, Ext::Concave)
+                                .is_some_and(|(_, d)| d >= PROMINENCE_MM) =>
+                        {
+                            Ok(pg)
+                        }
+                        Some(_) => Err(format!(
+                            "the skin between labrale inferius and the soft chin in front of \
+                             the bony chin lies less than {PROMINENCE_MM} mm behind their chord"
+                        )),
+                        None if b_v.is_none() => {
+                            Err("searched below bony B point, which is missing".into())
+                        }
+                        None => Err("no skin in front of the bony chin".into()),
+                    };
+                    let b_s = match &pog_s {
+                        Ok(pg) => match off_chord(sp, li, *pg, Ext::Concave) {
+                            Some((i, d)) if d >= PROMINENCE_MM => Ok(va(i)),
+                            _ => Err(format!(
+                                "the skin between labrale inferius and soft pogonion lies less \
+                                 than {PROMINENCE_MM} mm behind their chord"
+                            )),
+                        },
+                        Err(_) => Err("defined between Li and Pog', which is missing".into()),
+                    };
+                    (pog_s, b_s)
+                }
+                None => {
+                    let why = "the skin profile does not reach from labrale inferius down to \
+                               menton's height"
+                        .to_string();
+                    (Err(why.clone()), Err(why))
+                }
+            }
+        }
+        _ => {
+            let why = "the soft chin is bounded by bony menton (Me), which is missing".to_string();
+            (Err(why.clone()), Err(why))
+        }
+    };
+    f.put("B'", Kind::Soft, b_s);
+    f.put("Pog'", Kind::Soft, pog_s);
+}
+
+type Chin = (Spot, Spot, Spot, [f64; 2]);
+
+/// B, Pog, Me (see `chin_landmarks`), or why the bony chin is not there.
+fn bone_chin(
+    li: [f64; 2],
+    bone: Option<(&Mesh, &Profile)>,
+    frame: &HeadFrame,
+) -> std::result::Result<Chin, String> {
+    let Some((skull, p)) = bone else {
+        return Err("the skull has no midsagittal section within 35 mm of the face".into());
+    };
+    let va = |i: usize| [p.height(i), p.a[i]];
+    // The bony run at the lower lip: the bone sample nearest Li's height within 5 mm.
+    let start = (0..p.a.len())
+        .filter(|i| p.a[*i].is_finite() && (p.height(*i) - li[0]).abs() <= 5.0)
+        .min_by(|x, y| {
+            (p.height(*x) - li[0])
+                .abs()
+                .total_cmp(&(p.height(*y) - li[0]).abs())
+        })
+        .ok_or_else(|| {
+            "the bony midsagittal profile has no bone within 5 mm of labrale inferius' height"
+                .to_string()
+        })?;
+    let (lo, hi) = run(p, start);
+    // Infradentale: the run's top, at most 5 mm above Li; the run's lowest sample, at most
+    // 50 mm below Li.
+    let id = (start..=hi)
+        .filter(|i| p.a[*i].is_finite() && p.height(*i) <= li[0] + 5.0)
+        .max_by(|x, y| p.height(*x).total_cmp(&p.height(*y)))
+        .map(va)
+        .unwrap_or(va(start));
+    let bottom = (lo..=start)
+        .filter(|i| p.a[*i].is_finite() && p.height(*i) >= li[0] - 50.0)
+        .min_by(|x, y| p.height(*x).total_cmp(&p.height(*y)))
+        .map(va)
+        .unwrap_or(va(start));
+    // Menton: the lowest point of the skull's section within 15 mm behind and 5 mm in front of
+    // the run's lowest sample, and at most 15 mm below it.
+    let me = section(skull, frame)
+        .iter()
+        .flat_map(|s| [s[0], s[1]])
+        .filter(|q| {
+            q[1] > bottom[1] - 15.0
+                && q[1] < bottom[1] + 5.0
+                && q[0] < id[0]
+                && q[0] > bottom[0] - 15.0
+        })
+        .min_by(|x, y| x[0].total_cmp(&y[0]))
+        .ok_or_else(|| "no bone below labrale inferius".to_string())?;
+    if id[0] - me[0] < 5.0 {
+        return Err(format!(
+            "the bony chin below labrale inferius spans only {:.1} mm in height",
+            id[0] - me[0]
+        ));
+    }
+    let pog = match off_chord(p, id, me, Ext::Convex) {
+        Some((i, d)) if d >= PROMINENCE_MM => Ok(va(i)),
+        _ => Err(format!(
+            "the bony chin stands less than {PROMINENCE_MM} mm in front of the chord from \
+             infradentale to menton"
+        )),
+    };
+    let b = match &pog {
+        Ok(pg) => match off_chord(p, id, *pg, Ext::Concave) {
+            Some((i, d)) if d >= PROMINENCE_MM => Ok(va(i)),
+            _ => Err(format!(
+                "the bone between infradentale and pogonion lies less than {PROMINENCE_MM} mm \
+                 behind their chord"
+            )),
+        },
+        Err(_) => Err("defined between infradentale and pogonion (Pog), which is missing".into()),
+    };
+    Ok((b, pog, Ok(me), id))
 }

@@ -78,9 +78,17 @@ pub(crate) fn read_case(mut case: Case, rec: &mut Recorder) -> Result<Inputs> {
         return Err(Error::input(&skin.path, "face scan not found"));
     }
     let series = case.dicom.as_ref().map(|d| d.series.as_str());
-    let (ct, notes) = rec.time(Stage::ReadCt, "reading CT", || {
+    let (mut ct, notes) = rec.time(Stage::ReadCt, "reading CT", || {
         volume::read_ct(&case.ct.path, series)
     })?;
+    // What the file does not say, the case states (`[ct] axes`, `[ct] intercept`).
+    if let Some(code) = case.ct.axes.as_deref() {
+        ct.direction = volume::axes_code(code)
+            .ok_or_else(|| Error::Config(format!("[ct] axes = \"{code}\" is not an axes code")))?;
+    }
+    if let Some(b) = case.ct.intercept {
+        ct.data.iter_mut().for_each(|v| *v += b as f32);
+    }
     for w in notes {
         rec.warn(w);
     }

@@ -1,6 +1,6 @@
 //! The CT volume: voxels in Hounsfield units with a voxel-to-LPS affine (mm).
 //!
-//! Readers for NIfTI, DICOM series and InVesalius projects all produce a [`Volume`]; everything
+//! Readers for NIfTI, NRRD, DICOM series, InVesalius projects and vtk.js dataset folders all produce a [`Volume`]; everything
 //! downstream works in the LPS world frame (docs/case.md "Frames and units").
 
 pub mod dicom_io;
@@ -9,6 +9,7 @@ pub mod inv3;
 pub mod nifti_io;
 pub mod nrrd;
 pub mod tilt;
+pub mod vtkjs;
 
 use crate::error::{Error, Result};
 use serde::Serialize;
@@ -304,6 +305,34 @@ pub fn inv3(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     ]
 }
 
+/// The LPS directions of the voxel axes i, j, k named by a three-letter patient-direction code,
+/// one letter of L/R, P/A and S/I each (`[ct] axes`; "LPS" is the identity, "LAI" = i to the
+/// left, j anterior, k inferior); `None` for anything else.
+pub fn axes_code(code: &str) -> Option<[[f64; 3]; 3]> {
+    let letters: Vec<char> = code.trim().to_uppercase().chars().collect();
+    if letters.len() != 3 {
+        return None;
+    }
+    let mut d = [[0.0; 3]; 3];
+    let mut used = [false; 3];
+    for (a, c) in letters.iter().enumerate() {
+        let (row, sign) = match c {
+            'L' => (0, 1.0),
+            'R' => (0, -1.0),
+            'P' => (1, 1.0),
+            'A' => (1, -1.0),
+            'S' => (2, 1.0),
+            'I' => (2, -1.0),
+            _ => return None,
+        };
+        if std::mem::replace(&mut used[row], true) {
+            return None;
+        }
+        d[a][row] = sign;
+    }
+    Some(d)
+}
+
 /// Read the case's CT: like [`read_volume`], with a DICOM directory's series chosen by
 /// `series` (`[dicom] series`); returns notes for the report (a directory of several series
 /// read without a choice, a gantry tilt resampled).
@@ -327,7 +356,9 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>
         .unwrap_or_default();
     let none = |v: Volume| (v, Vec::new());
     let (vol, notes) = crate::error::guard(path, || {
-        if path.is_dir() {
+        if vtkjs::is_dataset(path) || name == "index.json" {
+            vtkjs::read(path).map(none)
+        } else if path.is_dir() {
             dicom_io::read_chosen_series(path, series)
         } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
             nifti_io::read(path).map(none)
@@ -340,7 +371,7 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>
         } else {
             Err(Error::input(
                 path,
-                "unknown volume format (expected .nii, .nii.gz, .nrrd, .inv3, a DICOM series directory or a multi-frame DICOM file)",
+                "unknown volume format (expected .nii, .nii.gz, .nrrd, .inv3, a DICOM series directory, a multi-frame DICOM file or a vtk.js dataset folder)",
             ))
         }
     })?;
@@ -349,7 +380,8 @@ pub fn read_ct(path: &Path, series: Option<&str>) -> Result<(Volume, Vec<String>
 }
 
 /// Read any supported volume: `.nii`, `.nii.gz`, `.nrrd`, `.inv3`, a directory holding a DICOM
-/// series (the largest CT series when it holds several) or a multi-frame DICOM file.
+/// series (the largest CT series when it holds several), a multi-frame DICOM file or a vtk.js
+/// dataset folder (a directory with an `index.json`, e.g. `headsq.vti/`).
 pub fn read_volume(path: &Path) -> Result<Volume> {
     read_ct(path, None).map(|(v, _)| v)
 }
@@ -366,6 +398,25 @@ mod tests {
             origin: [10.0, -3.0, 7.0],
             direction: [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, -1.0]],
             data: (0..120).map(|i| i as f32).collect(),
+        }
+    }
+
+    #[test]
+    fn axes_codes() {
+        assert_eq!(
+            axes_code("LPS"),
+            Some([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        );
+        assert_eq!(
+            axes_code("lai"),
+            Some([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])
+        );
+        assert_eq!(
+            axes_code("SRA"),
+            Some([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+        );
+        for bad in ["LL S", "LLS", "LR", "LPX", "", "LPSI"] {
+            assert_eq!(axes_code(bad), None, "{bad}");
         }
     }
 

@@ -73,12 +73,10 @@ pub fn coarse_tet_phantom(
     translate: [f64; 3],
     rotate_deg: [f64; 3],
 ) -> facesim::case::Case {
-    use facesim::case::{Case, Osteotomy, PathSection, SolveModel};
+    use facesim::case::{Case, CtSection, Osteotomy, PathSection, SolveModel};
     let mut c = Case {
         name: Some(name.into()),
-        ct: PathSection {
-            path: phantom_dir().join("ct.nii.gz"),
-        },
+        ct: CtSection::new(phantom_dir().join("ct.nii.gz")),
         skin: Some(PathSection {
             path: phantom_dir().join("face.ply"),
         }),
@@ -104,6 +102,19 @@ pub fn real_ct() -> PathBuf {
     assert!(
         p.is_file(),
         "{} missing: run data-samples/fetch-real.sh (the README's test command does)",
+        p.display()
+    );
+    p
+}
+
+/// The second real sample: VTK's headsq as vtk.js ships it (a dataset folder), fetched by
+/// data-samples/fetch-real-mandible.sh (scripts/test-setup.sh runs it).
+pub fn real_mandible_ct() -> PathBuf {
+    let p =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real-mandible/headsq.vti");
+    assert!(
+        p.join("index.json").is_file(),
+        "{} missing: run data-samples/fetch-real-mandible.sh (the README's test command does)",
         p.display()
     );
     p

@@ -1,0 +1,124 @@
+//! The second real sample (data-samples/real-mandible: VTK's headsq, with the mandible) through
+//! the real `facesim run`: a 5 mm BSSO advancement must run with the defaults, invert nothing,
+//! and carry the chin and lower lip forward (issue 26 item 1).
+
+mod cli;
+#[path = "../../facesim/tests/common/mod.rs"]
+mod common;
+
+use cli::facesim;
+use serde_json::Value;
+use std::path::Path;
+
+/// `facesim run data-samples/real-mandible --out <fresh>` (must exit 0) and its report.json.
+fn run() -> Value {
+    run_in().0
+}
+
+/// The same, with the output folder.
+fn run_in() -> (Value, std::path::PathBuf) {
+    common::real_mandible_ct();
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real-mandible");
+    let out = common::kept_dir("facesim-real-mandible");
+    let r = facesim(&[
+        "run",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(r.code, 0, "facesim run failed: {}", r.stderr);
+    let r = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap());
+    (r.unwrap(), out)
+}
+
+fn landmark(report: &Value, label: &str) -> Option<([f64; 3], [f64; 3])> {
+    let l = &report["landmarks"][label];
+    let p = |v: &Value| -> Option<[f64; 3]> {
+        let a = v.as_array()?;
+        Some([a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?])
+    };
+    Some((p(&l["pre"])?, p(&l["post"])?))
+}
+
+#[test]
+fn bsso_advance_runs_and_moves_the_lower_lip() {
+    let r = run();
+    assert_eq!(r["tet"]["inverted_elements"], 0);
+    // The lips are found on the face; the upper lip stays, the lower lip follows the mandible
+    // forward (−y) by a good part of the 5 mm.
+    for l in ["Prn", "Sn", "Ls", "Sto", "Li"] {
+        assert!(landmark(&r, l).is_some(), "{l}: {}", r["landmarks"][l]);
+    }
+    let (ls0, ls1) = landmark(&r, "Ls").unwrap();
+    let (li0, li1) = landmark(&r, "Li").unwrap();
+    assert!((ls1[1] - ls0[1]).abs() < 1.0, "Ls moved {:?}", ls1);
+    let li_forward = li0[1] - li1[1];
+    assert!((2.5..=6.0).contains(&li_forward), "Li forward {li_forward}");
+    // Stomion between the lips.
+    let (sto, _) = landmark(&r, "Sto").unwrap();
+    assert!(ls0[2] > sto[2] && sto[2] > li0[2]);
+}
+
+/// The chin landmarks found where they belong (docs/landmarks.md "The chin": chord definitions
+/// that hold on this head, which lies some 25° face-down), and the soft/hard ratio at the chin
+/// within a broad physical range. Soft menton is not in this scan: the CT's last slice is 4.5 mm
+/// under bony menton, and the soft tissue under the chin runs on past it (docs/real-ct.md); it
+/// must be reported missing with that reason, never placed at the scan's edge.
+#[test]
+fn chin_landmarks_and_ratios() {
+    let (r, out) = run_in();
+    for l in ["Pog", "B", "Me", "Pog'", "B'", "Li", "Sto"] {
+        assert!(landmark(&r, l).is_some(), "{l}: {}", r["landmarks"][l]);
+    }
+    let (li, _) = landmark(&r, "Li").unwrap();
+    let (b_s, _) = landmark(&r, "B'").unwrap();
+    let (pog, _) = landmark(&r, "Pog").unwrap();
+    let (pog_s, _) = landmark(&r, "Pog'").unwrap();
+    let (me, _) = landmark(&r, "Me").unwrap();
+    let (b, _) = landmark(&r, "B").unwrap();
+    // In order down the chin: Li, B', Pog' on the skin; B, Pog, Me on the bone.
+    assert!(
+        li[2] > b_s[2] && b_s[2] > pog_s[2],
+        "Li {li:?} B' {b_s:?} Pog' {pog_s:?}"
+    );
+    assert!(b[2] > pog[2], "B {b:?} Pog {pog:?}");
+    // Soft pogonion in front of bony pogonion (−y) by a soft-tissue thickness, at about its
+    // height.
+    let t = pog[1] - pog_s[1];
+    assert!((5.0..=20.0).contains(&t), "chin soft tissue {t} mm");
+    assert!(
+        (pog[2] - pog_s[2]).abs() < 10.0,
+        "Pog {pog:?} Pog' {pog_s:?}"
+    );
+    // Menton lowest of the chin; the CT's last slice (z = -1.5 * 92 = -138) is below it.
+    assert!(me[2] < pog[2] && me[2] < b[2], "Me {me:?}");
+    assert!(me[2] > -138.0);
+    // The soft landmarks lie on the face mesh (face_pre.ply): within one 3.2 mm voxel of a
+    // vertex, and on the skin's midline (x of Li).
+    let face = facesim::mesh::ply::read(&out.join("face_pre.ply")).unwrap();
+    for p in [b_s, pog_s, li] {
+        let d = face
+            .vertices
+            .iter()
+            .map(|v| (0..3).map(|k| (v[k] - p[k]).powi(2)).sum::<f64>().sqrt())
+            .fold(f64::INFINITY, f64::min);
+        assert!(d < 3.2, "{p:?} is {d:.2} mm from the face mesh");
+        assert!((p[0] - li[0]).abs() < 2.0, "{p:?} off the midline");
+    }
+    // Soft menton: missing, because the scan stops under the chin.
+    let why = r["landmarks"]["Me'"]["missing"]
+        .as_str()
+        .unwrap_or_default();
+    assert!(
+        landmark(&r, "Me'").is_none() && why.contains("section ends"),
+        "Me': {}",
+        r["landmarks"]["Me'"]
+    );
+    let ratio = r["soft_hard_ratios"]["Pog'/Pog"]["ratio"].as_f64().unwrap();
+    println!(
+        "Pog'/Pog {ratio:.3}, Li/B {}",
+        r["soft_hard_ratios"]["Li/B"]["ratio"]
+    );
+    assert!((0.5..=1.2).contains(&ratio), "Pog'/Pog {ratio}");
+    assert!(r["soft_hard_ratios"]["Li/B"]["ratio"].as_f64().is_some());
+}
