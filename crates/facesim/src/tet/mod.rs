@@ -27,6 +27,7 @@ pub mod embed;
 pub mod from_ct;
 pub mod graded;
 pub mod holds;
+pub mod hyperelastic;
 pub mod newton_krylov;
 pub mod nonlinear;
 pub(crate) mod plan_holds;

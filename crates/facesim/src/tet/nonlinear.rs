@@ -35,6 +35,7 @@
 //! step that converges in a few iterations lets the next grow back (adaptive load steps).
 
 use super::holds::{Frame, Hold, Loads, frames, rotate_lower, to_global, to_local};
+pub use super::hyperelastic::{Hyperelastic, Tangent};
 pub use super::stable_neo_hooke::StableNeoHooke;
 use super::{TetMesh, TissueElastic, gradients};
 use crate::error::{Error, NumericalKind, Result};
@@ -48,17 +49,6 @@ use rayon::prelude::*;
 pub struct NeoHooke {
     pub mu: f64,
     pub kappa: f64,
-}
-
-/// ∂P_iJ/∂F_kL, indexed [3i + J][3k + L].
-pub type Tangent = [[f64; 9]; 9];
-
-/// A hyperelastic material: its strain energy density W(F), first Piola–Kirchhoff stress and
-/// consistent tangent; None where it is undefined (J ≤ 0 for the classical forms).
-pub trait Hyperelastic {
-    fn energy(&self, f: &Matrix3<f64>) -> Option<f64>;
-    fn stress(&self, f: &Matrix3<f64>) -> Option<Matrix3<f64>>;
-    fn stress_tangent(&self, f: &Matrix3<f64>) -> Option<(Matrix3<f64>, Tangent)>;
 }
 
 /// Which strain energy the nonlinear solve uses.

@@ -20,7 +20,7 @@
 //! differences of Ψ.
 
 use super::TissueElastic;
-use super::nonlinear::{Hyperelastic, Tangent};
+use super::hyperelastic::{Hyperelastic, Tangent};
 use nalgebra::Matrix3;
 
 /// Stable neo-Hookean material: its own Lamé constants μ, λ (kPa) and rest offset α.
