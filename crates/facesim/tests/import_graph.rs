@@ -52,6 +52,7 @@ const ALLOWED_FILE_CYCLES: &[&[&str]] = &[
         "volume::inv3",
         "volume::nifti_io",
         "volume::nrrd",
+        "volume::vtkjs",
     ],
 ];
 
