@@ -235,45 +235,15 @@ pub(crate) fn write_page(
         ("unknowns".into(), c.unknowns.to_string()),
     ];
     if let Some(e) = &report.discretisation_error {
-        let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
-        let regions: Vec<String> = e
-            .regions
-            .0
-            .iter()
-            .filter(|(_, r)| r.mean.is_some())
-            .map(|(n, r)| format!("{n} {}", mm(r.mean)))
-            .collect();
         figures.push((
             "discretisation error (estimate)".into(),
-            format!(
-                "mean {} mm, p90 {} mm on the moving face; per region (mean, mm): {}",
-                mm(e.moving_face.mean),
-                mm(e.moving_face.p90),
-                if regions.is_empty() {
-                    "none found".into()
-                } else {
-                    regions.join(", ")
-                }
-            ),
+            face_stats_line(&e.moving_face, &e.regions),
         ));
     }
     if let Some(e) = &report.nonlinear_vs_linear {
-        let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
-        let regions: Vec<String> = e
-            .regions
-            .0
-            .iter()
-            .filter(|(_, r)| r.mean.is_some())
-            .map(|(n, r)| format!("{n} {}", mm(r.mean)))
-            .collect();
         figures.push((
             "neo-Hookean vs linear".into(),
-            format!(
-                "mean {} mm, p90 {} mm on the moving face; per region (mean, mm): {}",
-                mm(e.moving_face.mean),
-                mm(e.moving_face.p90),
-                regions.join(", ")
-            ),
+            face_stats_line(&e.moving_face, &e.regions),
         ));
     }
     for o in &case.osteotomy {
@@ -355,4 +325,29 @@ fn page_landmarks(
 pub(crate) fn write_report(dir: &Path, report: &Report) -> Result<()> {
     let text = serde_json::to_string_pretty(report).map_err(|e| Error::output(dir, e))?;
     write_bytes_atomic(&dir.join("report.json"), |w| w.write_all(text.as_bytes()))
+}
+
+/// "mean … mm, p90 … mm on the moving face; per region (mean, mm): …" for a per-face-vertex
+/// distance in mm (the discretisation estimate, the nonlinear-vs-linear difference).
+fn face_stats_line(
+    moving: &crate::landmarks::face_regions::RegionStats,
+    regions: &crate::landmarks::Ordered<crate::landmarks::face_regions::RegionStats>,
+) -> String {
+    let mm = |v: Option<f64>| v.map_or("–".into(), |v| format!("{v:.2}"));
+    let per: Vec<String> = regions
+        .0
+        .iter()
+        .filter(|(_, r)| r.mean.is_some())
+        .map(|(n, r)| format!("{n} {}", mm(r.mean)))
+        .collect();
+    format!(
+        "mean {} mm, p90 {} mm on the moving face; per region (mean, mm): {}",
+        mm(moving.mean),
+        mm(moving.p90),
+        if per.is_empty() {
+            "none found".into()
+        } else {
+            per.join(", ")
+        }
+    )
 }
