@@ -52,18 +52,37 @@ impl Plan {
     /// translation and rotation angles scaled). Returns the moved points and, per point,
     /// whether any segment moved it.
     pub fn apply(&self, points: &[[f64; 3]], scale: f64) -> (Vec<[f64; 3]>, Vec<bool>) {
+        self.carry(points, points, scale)
+    }
+
+    /// Move each point with the segments that move its anchor (a step moves both when its
+    /// region holds the anchor's current position): tissue off the bone is carried rigidly
+    /// as the bone point under it is, so a rigid plan moves it rigidly (issue 25: the mucosa
+    /// held with its bone point's displacement made a rotated skull's face 0.3 % non-rigid).
+    /// Returns the moved points and whether any segment moved each.
+    pub(crate) fn carry(
+        &self,
+        points: &[[f64; 3]],
+        anchors: &[[f64; 3]],
+        scale: f64,
+    ) -> (Vec<[f64; 3]>, Vec<bool>) {
         let mut out = points.to_vec();
+        let mut anchor = anchors.to_vec();
         let mut moved = vec![false; points.len()];
         for o in &self.steps {
             let r = rotation(o.rotate_deg.map(|d| d * scale));
-            for (p, m) in out.iter_mut().zip(moved.iter_mut()) {
-                if o.region.contains(*p) {
-                    let d = [p[0] - o.pivot[0], p[1] - o.pivot[1], p[2] - o.pivot[2]];
-                    for a in 0..3 {
-                        p[a] = (0..3).map(|k| r[a][k] * d[k]).sum::<f64>()
-                            + o.pivot[a]
-                            + scale * o.translate[a];
-                    }
+            let turn = |p: &mut [f64; 3]| {
+                let d = [p[0] - o.pivot[0], p[1] - o.pivot[1], p[2] - o.pivot[2]];
+                for a in 0..3 {
+                    p[a] = (0..3).map(|k| r[a][k] * d[k]).sum::<f64>()
+                        + o.pivot[a]
+                        + scale * o.translate[a];
+                }
+            };
+            for ((p, q), m) in out.iter_mut().zip(anchor.iter_mut()).zip(moved.iter_mut()) {
+                if o.region.contains(*q) {
+                    turn(p);
+                    turn(q);
                     *m = true;
                 }
             }
@@ -106,5 +125,41 @@ mod tests {
             (w[0]).abs() < 1e-12 && (w[1]).abs() < 1e-12 && (w[2] + 1.0).abs() < 1e-12,
             "{w:?}"
         );
+    }
+
+    #[test]
+    fn a_carried_point_moves_rigidly_with_its_anchor_not_with_the_region_it_lies_in() {
+        use crate::case::Region;
+        // The segment: everything with x < 0, turned and moved.
+        let seg = Osteotomy {
+            name: "s".into(),
+            region: Region::Box {
+                min: [-1e3, -1e3, -1e3],
+                max: [0.0, 1e3, 1e3],
+            },
+            translate: [1.0, -2.0, 0.5],
+            rotate_deg: [10.0, -20.0, 5.0],
+            pivot: [-3.0, 4.0, 1.0],
+        };
+        let plan = Plan::new(&[seg.clone()]);
+        let rigid = |p: [f64; 3]| {
+            let r = rotation(seg.rotate_deg);
+            let d = [0, 1, 2].map(|c| p[c] - seg.pivot[c]);
+            [0, 1, 2].map(|a| {
+                (0..3).map(|k| r[a][k] * d[k]).sum::<f64>() + seg.pivot[a] + seg.translate[a]
+            })
+        };
+        // Anchored in the segment, lying outside it: moved by the segment's rigid transform.
+        let (out, moved) = plan.carry(&[[5.0, 2.0, 3.0]], &[[-1.0, 2.0, 3.0]], 1.0);
+        let want = rigid([5.0, 2.0, 3.0]);
+        assert!(moved[0]);
+        assert!(
+            (0..3).all(|c| (out[0][c] - want[c]).abs() < 1e-12),
+            "{out:?} {want:?}"
+        );
+        // Anchored outside, lying inside: stays.
+        let (out, moved) = plan.carry(&[[-5.0, 2.0, 3.0]], &[[1.0, 2.0, 3.0]], 1.0);
+        assert!(!moved[0]);
+        assert_eq!(out[0], [-5.0, 2.0, 3.0]);
     }
 }

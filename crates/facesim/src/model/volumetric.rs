@@ -201,7 +201,7 @@ pub struct TetReport {
     pub floating_pieces: usize,
     /// Nonlinear material: the load steps.
     pub newton: Option<Vec<NewtonStep>>,
-    /// Face vertices farther from the mesh's skin than the reach (they stay at rest).
+    /// Face vertices farther from the mesh's skin than the reach (carried by extrapolation).
     pub face_vertices_unreached: usize,
     /// Distance from each carried face vertex to the mesh's skin boundary (mm).
     pub face_to_mesh_mm: DistanceStats,
@@ -630,12 +630,9 @@ pub fn predict(
         };
         plan_basis(&inputs, case, |u| carry(&embedding, u))
     })?;
-    let reached: Vec<f64> = embedding
-        .distance
-        .iter()
-        .zip(&embedding.tet)
-        .filter(|(_, t)| t.is_some())
-        .map(|(d, _)| *d)
+    let reached: Vec<f64> = (0..embedding.distance.len())
+        .filter(|i| embedding.reached(*i))
+        .map(|i| embedding.distance[i])
         .collect();
     let report = TetReport {
         material: t.material,

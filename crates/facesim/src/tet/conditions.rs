@@ -47,12 +47,12 @@ pub(crate) fn holds(
             SLIDING,
             Hold::Slide {
                 normal,
-                value: (0..3).map(|c| normal[c] * m.bone_move[c]).sum(),
+                value: (0..3).map(|c| normal[c] * m.node_move[c]).sum(),
             },
             LinearHold::Slides {
                 normal: m.rest_normal,
                 segment: m.segment,
-                at: m.bone_at,
+                at: m.at,
             },
         )
     };
@@ -78,16 +78,16 @@ pub(crate) fn holds(
             (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still),
             (NodeKind::Skin, Some(m)) if sliding => slide(&m),
             (NodeKind::Skin, Some(m)) => (
-                if m.bone_move == [0.0; 3] {
+                if m.node_move == [0.0; 3] {
                     FIXED
                 } else {
                     MOVED
                 },
-                Hold::Fixed(m.bone_move),
+                Hold::Fixed(m.node_move),
                 m.segment
                     .map_or(LinearHold::Still, |segment| LinearHold::Moves {
                         segment,
-                        at: m.bone_at,
+                        at: m.at,
                     }),
             ),
             (NodeKind::Skin | NodeKind::Interior, _) => (FREE, Hold::Free, LinearHold::Free),
@@ -121,14 +121,16 @@ pub(crate) struct Bone<'a> {
 }
 
 /// A mucosa node: the bone surface's unit normal at the nearest skull point (after the move)
-/// and that point's displacement.
+/// and the node's displacement as that bone point's segment carries it (not the bone point's
+/// own displacement: under a rotation the two differ by the turn of the gap between them).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Mucosa {
     normal: [f64; 3],
-    bone_move: [f64; 3],
-    /// The bone surface's normal at rest, the nearest skull point and its segment (at rest).
+    node_move: [f64; 3],
+    /// The bone surface's normal at rest, the node at rest and the segment of its nearest skull
+    /// point.
     rest_normal: [f64; 3],
-    bone_at: [f64; 3],
+    at: [f64; 3],
     segment: Option<usize>,
 }
 
@@ -182,22 +184,18 @@ pub(crate) fn mucosa(
                 return None;
             }
             let n = n.map(|v| v / len);
-            // The normal carried by the bone's move: the image of q + εn minus that of q.
+            // The node and the normal carried by the bone's move at q: the image of q + εn
+            // minus that of q.
             let eps = 1e-3;
-            let (moved, which) = plan.apply(&[q, [0, 1, 2].map(|c| q[c] + eps * n[c])], 1.0);
-            let bone_move = [0, 1, 2].map(|c| moved[0][c] - q[c]);
-            let normal = if which[0] == which[1] {
-                let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
-                let l = crate::vec3::norm(m);
-                m.map(|v| v / l)
-            } else {
-                n
-            };
+            let (moved, _) =
+                plan.carry(&[*p, q, [0, 1, 2].map(|c| q[c] + eps * n[c])], &[q; 3], 1.0);
+            let normal = [0, 1, 2].map(|c| (moved[2][c] - moved[1][c]) / eps);
+            let l = crate::vec3::norm(normal);
             Some(Mucosa {
-                normal,
-                bone_move,
+                normal: normal.map(|v| v / l),
+                node_move: [0, 1, 2].map(|c| moved[0][c] - p[c]),
                 rest_normal: n,
-                bone_at: q,
+                at: *p,
                 segment: segment_at(bone.osteotomy, q).0,
             })
         })
@@ -312,7 +310,7 @@ pub(crate) fn contact(
             // The normal carried by the bone's move: the image of p + εn minus that of p.
             let eps = 1e-3;
             let (moved, which) = plan.apply(&[*p, [0, 1, 2].map(|c| p[c] + eps * n[c])], 1.0);
-            let bone_move = [0, 1, 2].map(|c| moved[0][c] - p[c]);
+            let node_move = [0, 1, 2].map(|c| moved[0][c] - p[c]);
             let normal = if which[0] == which[1] {
                 let m = [0, 1, 2].map(|c| (moved[1][c] - moved[0][c]) / eps);
                 let l = crate::vec3::norm(m);
@@ -322,9 +320,9 @@ pub(crate) fn contact(
             };
             Some(Mucosa {
                 normal,
-                bone_move,
+                node_move,
                 rest_normal: n,
-                bone_at: *p,
+                at: *p,
                 segment: segment_at(bone.osteotomy, *p).0,
             })
         })

@@ -4,8 +4,11 @@
 //! when the vertex lies just outside (the face and the mesh's skin are two discretisations of the
 //! same iso-surface, up to half a voxel apart). An affine displacement field (a rigid move, a
 //! uniform strain) is therefore carried exactly, inside or out.
-//! Face vertices farther than `reach` from the skin boundary (outside the modelled region) do
-//! not move: the region's cut faces are held, so the tissue beyond them is at rest.
+//! Face vertices farther than `reach` from the skin boundary (beyond the modelled region, or
+//! where a coarse mesh does not reach the scan's edge) are "unreached": they take the linear
+//! extrapolation of their nearest skin tetrahedron's corners — at rest when that tetrahedron is
+//! held still (the region's cut faces), moving with the head when everything moves (issue 25: a
+//! face vertex must never stay still in a moving head), still exact for affine fields.
 
 use crate::compare::SurfaceIndex;
 use crate::mesh::Mesh;
@@ -44,12 +47,15 @@ pub(crate) fn boundary_faces(tets: &[[u32; 4]]) -> Vec<(usize, [u32; 3])> {
     out
 }
 
-/// Where each face vertex sits: its tetrahedron and barycentric weights, or None (at rest).
+/// Where each face vertex sits: its tetrahedron and barycentric weights, or None (not searched:
+/// at rest).
 pub(crate) struct SkinEmbedding {
     pub tet: Vec<Option<u32>>,
     pub weights: Vec<[f64; 4]>,
     /// Distance (mm) from each face vertex to the mesh's skin boundary.
     pub distance: Vec<f64>,
+    /// Beyond this distance a vertex is carried by its tetrahedron's corners only.
+    reach: f64,
 }
 
 /// Barycentric coordinates of `p` in the tetrahedron `x` (Σ λ = 1; negative outside).
@@ -81,6 +87,7 @@ impl SkinEmbedding {
             tet: vec![None; points.len()],
             weights: vec![[0.0; 4]; points.len()],
             distance: vec![f64::INFINITY; points.len()],
+            reach,
         };
         if faces.is_empty() {
             return none();
@@ -96,8 +103,8 @@ impl SkinEmbedding {
                 let (d, _, f) = index.closest_triangle(p);
                 let t = faces[f].0;
                 match barycentric(tets[t].map(|n| nodes[n as usize]), p) {
-                    Some(w) if d <= reach => (Some(t as u32), w, d),
-                    _ => (None, [0.0; 4], d),
+                    Some(w) => (Some(t as u32), w, d),
+                    None => (None, [0.0; 4], d),
                 }
             })
             .collect();
@@ -105,7 +112,13 @@ impl SkinEmbedding {
             tet: found.iter().map(|f| f.0).collect(),
             weights: found.iter().map(|f| f.1).collect(),
             distance: found.iter().map(|f| f.2).collect(),
+            reach,
         }
+    }
+
+    /// Whether vertex `i` lies within reach of the mesh's skin.
+    pub(crate) fn reached(&self, i: usize) -> bool {
+        self.tet[i].is_some() && self.distance[i] <= self.reach
     }
 
     /// The displacement at each face vertex for node displacements `u`.
@@ -126,12 +139,19 @@ impl SkinEmbedding {
     /// The same for 10-node tetrahedra (`tets10[t]` extends linear tetrahedron t with its edge
     /// midpoints in `quadratic::EDGES` order): N_a = λ_a (2λ_a − 1) at the corners and
     /// 4 λ_a λ_b at the midpoints, so quadratic fields are carried exactly too.
+    /// An unreached vertex takes the corners' linear extrapolation: the quadratic shape
+    /// functions grow with the square of the distance outside the element.
     pub(crate) fn carry_quadratic(&self, tets10: &[[u32; 10]], u: &[[f64; 3]]) -> Vec<[f64; 3]> {
         self.tet
             .iter()
             .zip(&self.weights)
-            .map(|(t, l)| match t {
+            .enumerate()
+            .map(|(i, (t, l))| match t {
                 None => [0.0; 3],
+                Some(t) if !self.reached(i) => {
+                    let tet = tets10[*t as usize];
+                    [0, 1, 2].map(|c| (0..4).map(|a| l[a] * u[tet[a] as usize][c]).sum())
+                }
                 Some(t) => {
                     let tet = tets10[*t as usize];
                     let mut n = [0.0; 10];
@@ -147,9 +167,9 @@ impl SkinEmbedding {
             .collect()
     }
 
-    /// Face vertices outside the reach of the mesh (they stay at rest).
+    /// Face vertices outside the reach of the mesh (carried by extrapolation, or at rest).
     pub(crate) fn unreached(&self) -> usize {
-        self.tet.iter().filter(|t| t.is_none()).count()
+        (0..self.tet.len()).filter(|i| !self.reached(*i)).count()
     }
 }
 
@@ -217,16 +237,23 @@ mod tests {
                 assert!((v[c] - want[c]).abs() < 1e-12, "{p:?}: {v:?} vs {want:?}");
             }
         }
-        // Beyond reach: at rest.
+        // Beyond reach: unreached, carried by extrapolation (exact for an affine field); beyond
+        // the searched box: at rest.
         let far = SkinEmbedding::new(
             &nodes,
             &tets,
             |_| true,
-            &[[5.0, 5.0, 5.0]],
+            &[[5.0, 5.0, 5.0], [50.0, 5.0, 5.0]],
             1.0,
             ([-9.0; 3], [9.0; 3]),
         );
-        assert_eq!(far.unreached(), 1);
-        assert_eq!(far.carry(&tets, &u), vec![[0.0; 3]]);
+        assert_eq!(far.unreached(), 2);
+        let v = far.carry(&tets, &u);
+        let want = affine([5.0, 5.0, 5.0]);
+        assert!(
+            (0..3).all(|c| (v[0][c] - want[c]).abs() < 1e-12),
+            "{v:?} vs {want:?}"
+        );
+        assert_eq!(v[1], [0.0; 3]);
     }
 }
