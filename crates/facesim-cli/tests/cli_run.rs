@@ -37,16 +37,40 @@ fn fails_writing_nothing(case: &Path, file: &str, problem: &str) {
     assert_eq!(snapshot(case), before, "the case directory changed");
 }
 
+/// One full run of the bundled sample, shared by the tests that read its outputs (a run costs
+/// ~15 s; CI time matters).
+fn bundled_run() -> &'static Path {
+    static OUT: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    OUT.get_or_init(|| {
+        let out = phantom_dir().join("run1");
+        let r = facesim(&[
+            "run",
+            phantom_dir().to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        out
+    })
+}
+
+/// A model-only `--set` that leaves every stage before the solve as it is: a coarse tetrahedral
+/// mesh and no error estimate, for tests of what happens before and around the solve.
+const COARSE: [&str; 6] = [
+    "--set",
+    "tet.skin_size_mm=12",
+    "--set",
+    "tet.deep_size_mm=24",
+    "--set",
+    "tet.error_estimate=false",
+];
+
+/// The same in case.toml.
+const COARSE_TOML: &str = "[tet]\nskin_size_mm = 12\ndeep_size_mm = 24\nerror_estimate = false\n";
+
 #[test]
 fn phantom_case_runs_and_writes_every_output() {
-    let r = facesim(&[
-        "run",
-        phantom_dir().to_str().unwrap(),
-        "--out",
-        phantom_dir().join("run1").to_str().unwrap(),
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let out = phantom_dir().join("run1");
+    let out = bundled_run();
     for f in [
         "face_pre.obj",
         "face_pre.ply",
@@ -89,14 +113,18 @@ fn phantom_case_runs_and_writes_every_output() {
     assert_eq!(labels.dims, ct.dims);
     assert_eq!(labels.data.iter().cloned().fold(0.0, f32::max), 5.0);
 
-    // Running again gives byte-identical meshes (determinism with rayon).
-    let r = facesim(&[
+    // Running again gives byte-identical meshes (determinism with rayon); what is compared is
+    // made before the solve, so the second run's model may be coarse.
+    let run2 = phantom_dir().join("run2");
+    let mut args = vec![
         "run",
         phantom_dir().to_str().unwrap(),
         "--out",
-        phantom_dir().join("run2").to_str().unwrap(),
-    ]);
-    assert_eq!(r.code, 0);
+        run2.to_str().unwrap(),
+    ];
+    args.extend(COARSE);
+    let r = facesim(&args);
+    assert_eq!(r.code, 0, "{}", r.stderr);
     for f in ["face_pre.ply", "skull_pre.ply", "labels.nii.gz"] {
         assert_eq!(
             std::fs::read(out.join(f)).unwrap(),
@@ -146,14 +174,7 @@ fn compare_reports_distances_and_refuses_bad_meshes() {
 /// coordinates, welded vertices) the same printed summary figures.
 #[test]
 fn compare_and_render_read_every_format_a_run_writes() {
-    let out = phantom_dir().join("run_formats");
-    let r = facesim(&[
-        "run",
-        phantom_dir().to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
+    let out = bundled_run();
     let pre = out.join("face_pre.obj");
     let compare = |post: &str, json: bool| {
         let post = out.join(post);
@@ -353,8 +374,9 @@ fn a_moved_scan_is_registered_back_by_landmarks() {
             .collect::<Vec<_>>()
             .join(", ")
     };
+    // The registration is checked, not the solve: a coarse model.
     let c_dir = case_with(&format!(
-        "[skin]\npath = \"moved.ply\"\n[registration]\nscan = [{}]\nct = [{}]\n",
+        "{COARSE_TOML}[skin]\npath = \"moved.ply\"\n[registration]\nscan = [{}]\nct = [{}]\n",
         fmt(ct_pts.iter().map(|p| mv(*p)).collect()),
         fmt(ct_pts.to_vec())
     ));
@@ -382,7 +404,7 @@ fn a_moved_scan_is_registered_back_by_landmarks() {
             .unwrap();
     assert!(report["registration"]["rms_residual"].as_f64().unwrap() < 1e-6);
     // Without the registration, the moved scan is far from the CT skin and the report warns.
-    let c2 = case_with("[skin]\npath = \"moved.ply\"\n");
+    let c2 = case_with(&format!("{COARSE_TOML}[skin]\npath = \"moved.ply\"\n"));
     facesim::mesh::ply::write(
         &moved,
         &c2.join("moved.ply"),
@@ -412,7 +434,7 @@ fn impossible_plans_and_empty_cts_are_refused() {
     // The volumetric model (default): the tissue follows its bone, the solution turns elements
     // inside out, and the run says so with a non-zero exit, the move beyond orthognathic size
     // and what to check (the outputs written for inspection).
-    let c = case_with(forty);
+    let c = case_with(&format!("{COARSE_TOML}{forty}"));
     let r = run(&c);
     assert_eq!(r.code, 1, "{}", r.stderr);
     assert!(
