@@ -10,9 +10,10 @@ use facesim::error::Error;
 use facesim::observe::Quiet;
 use std::path::PathBuf;
 
-/// The phantom case of data-samples/phantom, built in memory (no case.toml).
+/// The phantom case of data-samples/phantom, built in memory (no case.toml), with a coarse
+/// tetrahedral mesh: these tests check the stages around the solve, not its accuracy (CI time).
 fn phantom_case() -> Case {
-    Case {
+    let mut case = Case {
         name: Some("in memory".into()),
         ct: CtSection::new(phantom_dir().join("ct.nii.gz")),
         skin: Some(PathSection {
@@ -29,7 +30,10 @@ fn phantom_case() -> Case {
             pivot: [0.0; 3],
         }],
         ..Case::default()
-    }
+    };
+    case.tet.skin_size_mm = 12.0;
+    case.tet.deep_size_mm = 24.0;
+    case
 }
 
 const TET_SKIPS_WITHOUT_MOVE: [&str; 5] = ["coarsen", "tet_mesh", "solve", "embed", "plan_basis"];
