@@ -75,7 +75,7 @@ pub struct Row {
     pub forward_mm: Option<f64>,
     pub up_mm: Option<f64>,
     pub ratio: Option<f64>,
-    /// Why there is no ratio.
+    /// Why there is no ratio, or what bears on it (a landmark near the tissue mesh's held faces).
     pub why: Option<String>,
 }
 
@@ -534,7 +534,7 @@ fn run_one(
     s: Surgery,
     run_dir: &Path,
     obs: &dyn Observer,
-) -> Result<Vec<Carried>> {
+) -> Result<RunLandmarks> {
     let mut osteotomies = Vec::new();
     for (seg, toward, mm) in moves(s) {
         let t = scale(unit_of(&case.info, *toward), *mm);
@@ -563,13 +563,35 @@ fn run_one(
     over.insert("tet".into(), toml::Value::Table(tet));
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
     prune(&outcome.out_dir);
-    Ok(outcome
-        .report
-        .landmarks
-        .0
-        .into_iter()
-        .map(|(_, c)| c)
-        .collect())
+    let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
+    Ok(RunLandmarks {
+        carried: outcome
+            .report
+            .landmarks
+            .0
+            .into_iter()
+            .map(|(_, c)| c)
+            .collect(),
+        mesh_box,
+    })
+}
+
+/// What a run tells about its landmarks: where they went, and the box of the tissue mesh (the
+/// moved bone's box grown by `[tet] margin_mm`; its faces are held).
+struct RunLandmarks {
+    carried: Vec<Carried>,
+    mesh_box: Option<([f64; 3], [f64; 3])>,
+}
+
+/// A landmark nearer than this to the tissue mesh's held faces is noted: the hold, not the
+/// tissue, may set its move.
+const NEAR_HELD_FACE_MM: f64 = 10.0;
+
+/// Distance (mm) from p inside the box to its nearest face; negative outside.
+fn depth_in(b: &([f64; 3], [f64; 3]), p: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|a| (p[a] - b.0[a]).min(b.1[a] - p[a]))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// The files of a run kept under runs/: its report, landmarks and faces (the rest, ~35 MB a run,
@@ -594,7 +616,7 @@ fn prune(dir: &Path) {
 }
 
 /// The published rows of a surgery measured on a run (or each saying why not).
-fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<Vec<Carried>>) -> Vec<Row> {
+fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Row> {
     crate::landmarks::published::rows_of(s)
         .map(|p| {
             let (_, toward, mm) = moves(s)
@@ -616,8 +638,8 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<Vec<Carried>>) -> Vec<Ro
                 row.why = Some(u.to_string());
                 return row;
             }
-            let carried = match &run {
-                Ok(c) => c,
+            let (carried, mesh_box) = match &run {
+                Ok(r) => (&r.carried, r.mesh_box),
                 Err(e) => {
                     row.why = Some(format!("the run failed: {e}"));
                     return row;
@@ -630,11 +652,34 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<Vec<Carried>>) -> Vec<Ro
                     .iter()
                     .any(|c| c.label == *label && c.change_mm.is_some_and(|d| d < 1e-6))
             });
+            let depth = |label: &str| -> Option<f64> {
+                let p = carried.iter().find(|c| c.label == label)?.pre?;
+                Some(depth_in(mesh_box.as_ref()?, p))
+            };
             if let Some((label, _)) = still {
-                row.why = Some(format!(
-                    "{label} did not move (< 1e-6 mm): the model holds the skin there still (rigid skin outside [surface] movable, or tissue held by bone that stays)"
-                ));
+                row.why = Some(match depth(label) {
+                    Some(d) if d < 0.0 => format!(
+                        "{label} did not move: it lies {:.1} mm outside the tissue mesh (the moved bone's box grown by [tet] margin_mm; report.json tet.region), which holds it still",
+                        -d
+                    ),
+                    _ => format!(
+                        "{label} did not move (< 1e-6 mm): the model holds the skin there still (rigid skin outside [surface] movable)"
+                    ),
+                });
                 return row;
+            }
+            let near: Vec<String> = p
+                .terms
+                .iter()
+                .filter_map(|(label, _)| {
+                    let d = depth(label)?;
+                    (d < NEAR_HELD_FACE_MM).then(|| {
+                        format!("{label} is {d:.1} mm from the tissue mesh's held boundary (report.json tet.region)")
+                    })
+                })
+                .collect();
+            if !near.is_empty() {
+                row.why = Some(near.join("; "));
             }
             match along(carried, p.terms, unit_of(info, toward)) {
                 Ok(d) => {

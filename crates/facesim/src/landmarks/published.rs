@@ -99,6 +99,8 @@ pub struct Published {
     pub unmeasured: Option<&'static str>,
 }
 
+// One argument per column of the table, in its order.
+#[allow(clippy::too_many_arguments)]
 const fn row(
     surgery: Surgery,
     soft: &'static str,
