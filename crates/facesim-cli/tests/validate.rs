@@ -162,9 +162,9 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
         }
     }
     assert!(measured >= 3, "only {measured} rows measured: {rows:?}");
-    // The chart names the case and draws a range bar per measured row.
+    // The chart names the case and each measured row (SVG escapes the prime as &apos;).
     let svg = std::fs::read_to_string(out.join("validation.svg")).unwrap();
-    assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog'"));
+    assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog&apos; (horizontal)"));
 }
 
 #[test]
