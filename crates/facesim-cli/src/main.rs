@@ -60,6 +60,33 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Every surgery type of the published soft/hard ratio table (docs/validation.md) on every
+    /// real sample that has the bone and on a phantom cohort, with the product's defaults:
+    /// validation.md, validation.csv and validation.svg in --out.
+    Validate {
+        /// Output directory.
+        #[arg(long, default_value = "validation")]
+        out: PathBuf,
+        /// The samples directory (each sub-directory with a validation.toml is a case).
+        #[arg(long, default_value = "data-samples")]
+        samples: PathBuf,
+        /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
+        #[arg(long, default_value_t = 4)]
+        phantoms: usize,
+        /// The cohort's seed (the other shape parameters are drawn from it).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The phantoms' voxel size (mm).
+        #[arg(long, default_value_t = 2.0)]
+        phantom_spacing: f64,
+        /// Only this surgery (repeatable): lefort-advance, lefort-impaction, lefort-setback,
+        /// bsso-advance, bsso-setback, genioplasty, bimax.
+        #[arg(long)]
+        surgery: Vec<String>,
+        /// Only this case (repeatable): a samples sub-directory's name, or `phantom`.
+        #[arg(long = "case")]
+        cases: Vec<String>,
+    },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
         dir: PathBuf,
@@ -261,6 +288,7 @@ fn main() -> ExitCode {
         Cmd::Bench { .. } => None,
         Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
         Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
+        Cmd::Validate { out, .. } => Some(format!("the validation into {}", out.display())),
     };
     if let Some(s) = subject {
         let _ = SUBJECT.set(s);
@@ -321,6 +349,53 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             Ok(())
         }
         Cmd::Inspect { path } => cmd_inspect(&path),
+        Cmd::Validate {
+            out,
+            samples,
+            phantoms,
+            seed,
+            phantom_spacing,
+            surgery,
+            cases,
+        } => {
+            let surgeries = surgery
+                .iter()
+                .map(|s| {
+                    facesim::landmarks::published::Surgery::from_key(s).ok_or_else(|| {
+                        Error::config(format!(
+                            "validate: unknown surgery '{s}' (lefort-advance, lefort-impaction, lefort-setback, bsso-advance, bsso-setback, genioplasty, bimax)"
+                        ))
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let opts = facesim::commands::validate::Options {
+                out,
+                samples,
+                phantoms,
+                seed,
+                phantom_spacing_mm: phantom_spacing,
+                surgeries,
+                cases,
+                command: std::env::args().collect::<Vec<_>>().join(" "),
+            };
+            let v = facesim::commands::validate::validate(&opts, &Progress::auto())?;
+            facesim_lab::validation_chart::write(&v.out_dir.join("validation.svg"), &v)?;
+            let outside = v.rows.iter().filter(|r| r.inside() == Some(false)).count();
+            let inside = v.rows.iter().filter(|r| r.inside() == Some(true)).count();
+            for k in &v.skipped {
+                let what = k
+                    .surgery
+                    .map(|s| format!(" {}", s.key()))
+                    .unwrap_or_default();
+                eprintln!("not run: {}{what}: {}", k.case, k.why);
+            }
+            println!(
+                "{inside} landmarks inside their published range, {outside} outside, {} not measured: {}",
+                v.rows.len() - inside - outside,
+                v.out_dir.join("validation.md").display()
+            );
+            Ok(())
+        }
         Cmd::Replan { out_dir, plan, out } => {
             let r = facesim::commands::replan::replan(&out_dir, &plan, out.as_deref())?;
             eprintln!(

@@ -19,3 +19,4 @@ pub mod memory;
 pub mod scaling;
 pub mod study;
 pub mod sweep_chart;
+pub mod validation_chart;

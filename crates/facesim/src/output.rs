@@ -51,9 +51,9 @@ where
 }
 
 /// Files one of which a directory that facesim wrote as a unit holds (report.json of `run` and
-/// `replan`, sweep.csv of `sweep`): a non-empty directory without any is not replaced, since
+/// `replan`, sweep.csv of `sweep`, validation.csv of `validate`): a non-empty directory without any is not replaced, since
 /// the swap removes everything in it.
-const UNIT_FILES: [&str; 2] = ["report.json", "sweep.csv"];
+const UNIT_FILES: [&str; 3] = ["report.json", "sweep.csv", "validation.csv"];
 
 /// Names of a unit's temporaries in the output directory's parent: `.{name}.facesim-run-{pid}-{n}`
 /// plus `.new` (the directory being written), `.old` (the previous output during the swap) and

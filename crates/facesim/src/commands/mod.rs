@@ -6,11 +6,14 @@
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/plan-basis.md);
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
-//!   library carries no chart crate.
+//!   library carries no chart crate;
+//! - [`validate`]: `facesim validate` (every surgery type on the real samples and a phantom
+//!   cohort against the published soft/hard ratios; its chart is the caller's too).
 
 pub mod outputs;
 pub mod replan;
 pub mod run;
 pub mod sweep;
+pub mod validate;
 
 pub use run::{Outcome, run, run_case, run_parsed, run_with};

@@ -51,6 +51,28 @@ pub fn to_line(p: [f64; 2], e1: [f64; 2], e2: [f64; 2]) -> f64 {
 pub(crate) const PAIRS: [(&str, &str); 4] =
     [("Pog'", "Pog"), ("Ls", "A"), ("Li", "B"), ("Sn", "ANS")];
 
+/// The displacement (mm) along the unit vector `dir` of Σ weight × landmark over `terms`
+/// (one landmark, or a difference such as a lip's height), or why it cannot be measured.
+pub fn along(c: &[Carried], terms: &[(&str, f64)], dir: [f64; 3]) -> Result<f64, String> {
+    let mut sum = 0.0;
+    for (label, w) in terms {
+        let l = c
+            .iter()
+            .find(|l| l.label == *label)
+            .ok_or_else(|| format!("{label} is not a landmark of this run"))?;
+        match (l.pre, l.post) {
+            (Some(a), Some(b)) => sum += w * crate::vec3::dot(crate::vec3::sub(b, a), dir),
+            _ => {
+                return Err(format!(
+                    "{label} not found: {}",
+                    l.missing.as_deref().unwrap_or("no position")
+                ));
+            }
+        }
+    }
+    Ok(sum)
+}
+
 /// The measurements and soft/hard ratios of carried landmarks.
 pub fn measure(c: &[Carried], frame: &HeadFrame) -> (Ordered<Measure>, Ordered<Ratio>) {
     let get = |label: &str, post: bool| -> Option<[f64; 2]> {

@@ -14,6 +14,7 @@ pub mod face_regions;
 pub mod frame;
 pub mod markups;
 pub mod measure;
+pub mod published;
 
 use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::{Error, Result};

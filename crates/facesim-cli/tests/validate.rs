@@ -1,0 +1,250 @@
+//! `facesim validate` through the real binary (issue 26 item 2): one coarse phantom and one
+//! surgery, its ratios recomputed from the run's own report.json and its ranges held against
+//! docs/validation.md's table; the real headsq's BSSO advance against the published chin ratio;
+//! bad input as one line.
+
+mod cli;
+#[path = "../../facesim/tests/common/mod.rs"]
+mod common;
+
+use cli::{assert_clean_failure, facesim};
+use serde_json::Value;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// validation.csv as maps column → value (a small quoted-CSV reader: the sources hold commas).
+fn read_csv(path: &Path) -> Vec<HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let split = |line: &str| -> Vec<String> {
+        let (mut out, mut cur, mut quoted, mut chars) =
+            (Vec::new(), String::new(), false, line.chars().peekable());
+        while let Some(c) = chars.next() {
+            match (c, quoted) {
+                ('"', true) if chars.peek() == Some(&'"') => {
+                    cur.push('"');
+                    chars.next();
+                }
+                ('"', _) => quoted = !quoted,
+                (',', false) => out.push(std::mem::take(&mut cur)),
+                _ => cur.push(c),
+            }
+        }
+        out.push(cur);
+        out
+    };
+    let mut lines = text.lines();
+    let head = split(lines.next().unwrap());
+    lines
+        .map(|l| {
+            let f = split(l);
+            assert_eq!(f.len(), head.len(), "{l}");
+            head.iter().cloned().zip(f).collect()
+        })
+        .collect()
+}
+
+/// docs/validation.md's published table: (surgery, soft) → (low, high).
+fn documented_ranges() -> HashMap<(String, String), (f64, f64)> {
+    let text = std::fs::read_to_string(root().join("docs/validation.md")).unwrap();
+    let mut out = HashMap::new();
+    for line in text.lines() {
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        let keys = [
+            "lefort-advance",
+            "lefort-impaction",
+            "lefort-setback",
+            "bsso-advance",
+            "bsso-setback",
+            "genioplasty",
+            "bimax",
+        ];
+        if cells.len() < 8 || !keys.contains(&cells[1]) {
+            continue;
+        }
+        let Some((lo, hi)) = cells[5].split_once('–') else {
+            continue;
+        };
+        if let (Ok(lo), Ok(hi)) = (lo.parse::<f64>(), hi.parse::<f64>()) {
+            out.insert((cells[1].to_string(), cells[2].to_string()), (lo, hi));
+        }
+    }
+    assert!(out.len() >= 20, "docs/validation.md's table: {out:?}");
+    out
+}
+
+fn vec3(v: &Value) -> Option<[f64; 3]> {
+    let a = v.as_array()?;
+    Some([a[0].as_f64()?, a[1].as_f64()?, a[2].as_f64()?])
+}
+
+fn num(s: &str) -> Option<f64> {
+    s.parse().ok()
+}
+
+/// Each measured row's ratio from the run's report.json alone: the landmark's pre/post and the
+/// segment's translation in `parameters.osteotomy` (ratio = Δ · t / |t|²).
+fn recompute(run: &Value, row: &HashMap<String, String>) -> f64 {
+    let seg = &row["segment"];
+    let t = run["parameters"]["osteotomy"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|o| o["name"].as_str() == Some(seg))
+        .and_then(|o| vec3(&o["translate"]))
+        .unwrap();
+    let lm = &run["landmarks"][row["landmark"].as_str()];
+    let (a, b) = (vec3(&lm["pre"]).unwrap(), vec3(&lm["post"]).unwrap());
+    let t2: f64 = t.iter().map(|x| x * x).sum();
+    (0..3).map(|k| (b[k] - a[k]) * t[k]).sum::<f64>() / t2
+}
+
+#[test]
+fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_ranges() {
+    let out = common::kept_dir("facesim-validate-phantom").join("v");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        root().join("data-samples").to_str().unwrap(),
+        "--case",
+        "phantom",
+        "--phantoms",
+        "1",
+        "--phantom-spacing",
+        "3",
+        "--surgery",
+        "bsso-advance",
+    ]);
+    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    for f in ["validation.md", "validation.csv", "validation.svg"] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let rows = read_csv(&out.join("validation.csv"));
+    let ranges = documented_ranges();
+    let run: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("runs/phantom01/bsso-advance/report.json")).unwrap(),
+    )
+    .unwrap();
+    // The published BSSO advance rows: Li, B', Pog', Me'.
+    assert_eq!(rows.len(), 4, "{rows:?}");
+    let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    let mut measured = 0;
+    for row in &rows {
+        assert_eq!(row["case"], "phantom01");
+        assert_eq!(row["surgery"], "bsso-advance");
+        let key = (row["surgery"].clone(), row["landmark"].clone());
+        let (lo, hi) = ranges[&key];
+        assert_eq!(
+            (num(&row["published_low"]), num(&row["published_high"])),
+            (Some(lo), Some(hi)),
+            "{key:?}: validation.csv's range is not docs/validation.md's"
+        );
+        match num(&row["predicted_ratio"]) {
+            Some(ratio) => {
+                measured += 1;
+                let again = recompute(&run, row);
+                assert!(
+                    (ratio - again).abs() < 1.5e-3,
+                    "{key:?}: csv {ratio} but the run's landmarks give {again}"
+                );
+                let inside = (lo - 5e-3..=hi + 5e-3).contains(&ratio);
+                assert_eq!(row["inside"], if inside { "yes" } else { "no" }, "{key:?}");
+                if !inside {
+                    assert!(md.contains("**OUTSIDE**"), "an outside row is not shown");
+                }
+            }
+            None => assert!(!row["note"].is_empty(), "{key:?}: no ratio and no reason"),
+        }
+    }
+    assert!(measured >= 3, "only {measured} rows measured: {rows:?}");
+    // The chart names the case and each measured row (SVG escapes the prime as &apos;).
+    let svg = std::fs::read_to_string(out.join("validation.svg")).unwrap();
+    assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog&apos; (horizontal)"));
+}
+
+#[test]
+fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range() {
+    common::real_mandible_ct();
+    common::real_ct();
+    let out = common::kept_dir("facesim-validate-headsq").join("v");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        root().join("data-samples").to_str().unwrap(),
+        "--case",
+        "real-mandible",
+        "--case",
+        "real",
+        "--phantoms",
+        "0",
+        "--surgery",
+        "bsso-advance",
+    ]);
+    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    // ProMED 0051 has no mandible: the BSSO is skipped, and says why.
+    assert!(
+        r.stderr.contains("not run: real bsso-advance") && r.stderr.contains("no mandible"),
+        "{}",
+        r.stderr
+    );
+    let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    assert!(md.contains("no mandible"), "validation.md does not say why");
+    let rows = read_csv(&out.join("validation.csv"));
+    let pog = rows
+        .iter()
+        .find(|r| r["case"] == "real-mandible" && r["landmark"] == "Pog'")
+        .expect("no Pog' row for headsq");
+    let ratio = num(&pog["predicted_ratio"]).expect("Pog' not measured on headsq");
+    // Hallulli & Sjöström 2026 (20 articles): 0.80–1.33.
+    assert!(
+        (0.80..=1.33).contains(&ratio),
+        "headsq BSSO advance Pog'/Pog {ratio}"
+    );
+    assert_eq!(pog["inside"], "yes");
+    // The move is the head's forward, not the scanner's: headsq's pitch turns it down.
+    let run: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("runs/real-mandible/bsso-advance/report.json")).unwrap(),
+    )
+    .unwrap();
+    let t = vec3(&run["parameters"]["osteotomy"][0]["translate"]).unwrap();
+    assert!(t[2] < -1.0 && t[1] < -4.5, "{t:?}");
+}
+
+#[test]
+fn bad_input_is_one_line() {
+    let out = common::kept_dir("facesim-validate-bad").join("v");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--surgery",
+        "le-fort-ii",
+    ]);
+    assert_clean_failure(&r, "le-fort-ii", "unknown surgery");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        root().join("data-samples").to_str().unwrap(),
+        "--case",
+        "nosuch",
+    ]);
+    assert_clean_failure(&r, "nosuch", "no case");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        "/nonexistent-samples",
+    ]);
+    assert_clean_failure(&r, "/nonexistent-samples", "not found");
+    assert!(!out.exists(), "a failed validation left {}", out.display());
+}

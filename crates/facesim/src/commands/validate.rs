@@ -1,0 +1,963 @@
+//! `facesim validate` (docs/validation.md): every surgery type of the published table
+//! (`landmarks::published`) run with the product's defaults on every real sample that has the
+//! bone and on a seeded cohort of jaws phantoms; per soft landmark the predicted ratio beside the
+//! published range. Writes validation.csv and validation.md as one unit (`output::RunDir`), with
+//! each run's report.json, landmarks and faces under `runs/`; the chart (validation.svg) is the
+//! caller's (crates/facesim-lab `validation_chart`).
+
+use crate::error::{Error, Result};
+use crate::landmarks::measure::along;
+use crate::landmarks::published::{PUBLISHED, Published, Surgery};
+use crate::landmarks::{Carried, HeadFrame};
+use crate::observe::Observer;
+use crate::phantom_jaws::{JawsOptions, Shape};
+use crate::pipeline::{Recorder, inputs, surfaces, tissues};
+use crate::vec3::{add, scale};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// What to validate and where.
+pub struct Options {
+    /// The output directory (validation.csv, validation.md, runs/, phantoms/).
+    pub out: PathBuf,
+    /// The samples directory: each sub-directory with a case.toml and a validation.toml is a case.
+    pub samples: PathBuf,
+    /// Jaws phantoms in the cohort (soft tissue spread evenly over −2..+4 mm).
+    pub phantoms: usize,
+    /// The cohort's seed (the other shape parameters are drawn from it).
+    pub seed: u64,
+    /// The phantoms' voxel size (mm).
+    pub phantom_spacing_mm: f64,
+    /// Only these surgeries (empty: all).
+    pub surgeries: Vec<Surgery>,
+    /// Only these cases: sample directory names and/or "phantom" (empty: all).
+    pub cases: Vec<String>,
+    /// The command line, for validation.md's header.
+    pub command: String,
+}
+
+/// The moves, in the head's directions: advance and setback along its forward axis, impaction
+/// along its up axis. Sizes are those of common plans (docs/validation.md, "The moves").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Toward {
+    Forward,
+    Back,
+    Up,
+}
+
+/// (segment, direction, mm) per surgery, in the order they apply: each segment moves the points
+/// inside its region at their current position, so the mandible goes before the maxilla (a
+/// forward move of a pitched head's maxilla takes it down, into the mandible's region).
+pub fn moves(s: Surgery) -> &'static [(&'static str, Toward, f64)] {
+    use Toward::*;
+    match s {
+        Surgery::LeFortAdvance => &[("maxilla", Forward, 5.0)],
+        Surgery::LeFortImpaction => &[("maxilla", Up, 4.0)],
+        Surgery::LeFortSetback => &[("maxilla", Back, 4.0)],
+        Surgery::BssoAdvance => &[("mandible", Forward, 5.0)],
+        Surgery::BssoSetback => &[("mandible", Back, 4.0)],
+        Surgery::Genioplasty => &[("chin", Forward, 6.0)],
+        Surgery::Bimaxillary => &[("mandible", Forward, 5.0), ("maxilla", Forward, 5.0)],
+    }
+}
+
+/// One published row on one case.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub case: String,
+    pub published: &'static Published,
+    /// The segment's move (mm).
+    pub move_mm: f64,
+    /// The soft displacement along the move (mm).
+    pub along_mm: Option<f64>,
+    /// The soft displacement along the head's forward and up axes (mm; single landmarks).
+    pub forward_mm: Option<f64>,
+    pub up_mm: Option<f64>,
+    pub ratio: Option<f64>,
+    /// Why there is no ratio, or what bears on it (a landmark near the tissue mesh's held faces).
+    pub why: Option<String>,
+}
+
+impl Row {
+    /// Inside the published range; None when not measured.
+    pub fn inside(&self) -> Option<bool> {
+        self.ratio
+            .map(|r| r >= self.published.low - 5e-3 && r <= self.published.high + 5e-3)
+    }
+}
+
+/// A case, or a surgery on it, not run, and why.
+#[derive(Clone, Debug)]
+pub struct Skip {
+    pub case: String,
+    pub surgery: Option<Surgery>,
+    pub why: String,
+}
+
+/// How a case was set up: its head directions and segments.
+#[derive(Clone, Debug)]
+pub struct CaseInfo {
+    pub name: String,
+    pub about: String,
+    pub pitch_deg: f64,
+    pub forward: [f64; 3],
+    pub up: [f64; 3],
+    /// (segment, region as written in case.toml syntax, how it was placed).
+    pub segments: Vec<(String, String, String)>,
+    pub seconds: f64,
+}
+
+pub struct Validation {
+    pub rows: Vec<Row>,
+    pub skipped: Vec<Skip>,
+    pub cases: Vec<CaseInfo>,
+    pub out_dir: PathBuf,
+}
+
+/// validation.toml beside a sample's case.toml (docs/validation.md, "The cases").
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CaseFile {
+    about: String,
+    /// The head's pitch in the CT (degrees, face down +): forward and up are the landmark
+    /// frame's anterior and vertical turned by it about the frame's lateral axis.
+    #[serde(default)]
+    pitch_deg: f64,
+    #[serde(default)]
+    pitch_note: String,
+    /// The skin that may move, when case.toml's leaves out what a surgery type moves (the nose).
+    #[serde(default)]
+    movable: Option<toml::Value>,
+    #[serde(default)]
+    movable_note: String,
+    #[serde(default)]
+    segments: BTreeMap<String, SegmentFile>,
+    /// Segments this CT cannot have, and why.
+    #[serde(default)]
+    missing: BTreeMap<String, String>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SegmentFile {
+    region: toml::Value,
+    placed: String,
+}
+
+/// A case ready to run: its directory, directions and segment regions.
+struct Prepared {
+    info: CaseInfo,
+    dir: PathBuf,
+    regions: BTreeMap<String, toml::Value>,
+    missing: BTreeMap<String, String>,
+    /// `[surface] movable` over case.toml's.
+    movable: Option<toml::Value>,
+}
+
+/// An observer that names the case and surgery in front of each stage and leaves the display
+/// to the caller's between runs.
+struct Prefixed<'a> {
+    inner: &'a dyn Observer,
+    prefix: String,
+}
+
+impl Observer for Prefixed<'_> {
+    fn started(&self, what: &str) {
+        self.inner.started(&format!("{} {what}", self.prefix));
+    }
+    fn warn(&self, msg: &str) {
+        self.inner.warn(&format!("{} {msg}", self.prefix));
+    }
+    fn heap(&self) -> Option<&dyn crate::meter::HeapProbe> {
+        self.inner.heap()
+    }
+}
+
+/// `facesim validate`.
+pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
+    if opts.phantoms > 0 && !(opts.phantom_spacing_mm >= 0.5 && opts.phantom_spacing_mm <= 4.0) {
+        return Err(Error::config(format!(
+            "validate: --phantom-spacing {} mm must be in [0.5, 4]",
+            opts.phantom_spacing_mm
+        )));
+    }
+    let surgeries: Vec<Surgery> = if opts.surgeries.is_empty() {
+        Surgery::ALL.to_vec()
+    } else {
+        opts.surgeries.clone()
+    };
+    let wanted = |name: &str| opts.cases.is_empty() || opts.cases.iter().any(|c| c == name);
+    let unit = crate::output::RunDir::create(&opts.out)?;
+    let dir = unit.path().to_path_buf();
+    let mut skipped = Vec::new();
+    let mut todo: Vec<(String, PathBuf, Option<Shape>)> = Vec::new();
+    for (name, case_dir) in samples(&opts.samples)? {
+        if !wanted(&name) {
+            continue;
+        }
+        match fetched(&case_dir) {
+            Ok(()) => todo.push((name, case_dir, None)),
+            Err(why) => skipped.push(Skip {
+                case: name.clone(),
+                surgery: None,
+                why: format!(
+                    "{why}; fetch it with {}",
+                    opts.samples.join(format!("fetch-{name}.sh")).display()
+                ),
+            }),
+        }
+    }
+    for c in &opts.cases {
+        if c != "phantom"
+            && !todo.iter().any(|t| &t.0 == c)
+            && !skipped.iter().any(|s| &s.case == c)
+        {
+            return Err(Error::config(format!(
+                "validate: no case '{c}' (the cases are the directories of {} with a validation.toml, and 'phantom')",
+                opts.samples.display()
+            )));
+        }
+    }
+    if wanted("phantom") {
+        for (k, (name, shape)) in cohort(opts.phantoms, opts.seed).into_iter().enumerate() {
+            obs.started(&format!("writing phantom {} of {}", k + 1, opts.phantoms));
+            let case_dir = dir.join("phantoms").join(&name);
+            let jaws = JawsOptions {
+                phantom: crate::phantom::PhantomOptions {
+                    spacing: [opts.phantom_spacing_mm; 3],
+                    ..Default::default()
+                },
+                solve_model: None,
+            };
+            crate::phantom_jaws::write_shaped_case(&case_dir, &jaws, &shape)?;
+            todo.push((name, case_dir, Some(shape)));
+        }
+    }
+    let total_runs = todo.len() * surgeries.len();
+    let mut done = 0;
+    let mut rows = Vec::new();
+    let mut cases = Vec::new();
+    for (name, case_dir, shape) in todo {
+        let started = std::time::Instant::now();
+        let prefix = format!("[{}/{total_runs}] {name}:", done + 1);
+        let frame = head_frame(
+            &case_dir,
+            &Prefixed {
+                inner: obs,
+                prefix: prefix.clone(),
+            },
+        )?;
+        let mut case = match &shape {
+            Some(s) => phantom_case(&name, &case_dir, s, &frame),
+            None => sample_case(&name, &case_dir, &frame)?,
+        };
+        for &s in &surgeries {
+            done += 1;
+            let prefix = format!("[{done}/{total_runs}] {name} {}:", s.key());
+            if let Some((seg, why)) = moves(s)
+                .iter()
+                .find(|(seg, _, _)| !case.regions.contains_key(*seg))
+                .map(|(seg, _, _)| {
+                    let why =
+                        case.missing.get(*seg).cloned().unwrap_or_else(|| {
+                            "no such segment in the case's validation.toml".into()
+                        });
+                    (seg, why)
+                })
+            {
+                skipped.push(Skip {
+                    case: name.clone(),
+                    surgery: Some(s),
+                    why: format!("needs the {seg} segment: {why}"),
+                });
+                continue;
+            }
+            let run_dir = dir.join("runs").join(&name).join(s.key());
+            let result = run_one(&case, s, &run_dir, &Prefixed { inner: obs, prefix });
+            rows.extend(rows_of_run(&case.info, s, result));
+        }
+        case.info.seconds = started.elapsed().as_secs_f64();
+        cases.push(case.info);
+    }
+    let v = Validation {
+        rows,
+        skipped,
+        cases,
+        out_dir: opts.out.clone(),
+    };
+    obs.started("writing validation.csv and validation.md");
+    crate::output::write_bytes_atomic(&dir.join("validation.csv"), |w| {
+        w.write_all(csv(&v).as_bytes())
+    })?;
+    crate::output::write_bytes_atomic(&dir.join("validation.md"), |w| {
+        w.write_all(markdown(&v, opts).as_bytes())
+    })?;
+    let out_dir = unit.commit()?;
+    obs.done();
+    Ok(Validation { out_dir, ..v })
+}
+
+/// The sample directories holding a validation.toml, by name.
+fn samples(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
+    if !dir.is_dir() {
+        return Err(Error::input(dir, "samples directory not found"));
+    }
+    let mut out: Vec<(String, PathBuf)> = std::fs::read_dir(dir)
+        .map_err(|e| Error::input(dir, e))?
+        .filter_map(|e| e.ok())
+        .map(|e| e.path())
+        .filter(|p| p.join("validation.toml").is_file() && p.join("case.toml").is_file())
+        .map(|p| {
+            (
+                p.file_name().unwrap_or_default().to_string_lossy().into(),
+                p,
+            )
+        })
+        .collect();
+    out.sort();
+    Ok(out)
+}
+
+/// Whether the CT a sample's case.toml names is there.
+fn fetched(case_dir: &Path) -> std::result::Result<(), String> {
+    let (case, _) = crate::case::Case::load(case_dir).map_err(|e| e.to_string())?;
+    if case.ct.path.exists() {
+        Ok(())
+    } else {
+        Err(format!("its CT {} is not fetched", case.ct.path.display()))
+    }
+}
+
+/// The phantom cohort: soft tissue spread evenly over the cohort's −2..+4 mm, the other shape
+/// parameters drawn from the seed (`phantom_cohort`).
+fn cohort(n: usize, seed: u64) -> Vec<(String, Shape)> {
+    (0..n)
+        .map(|k| {
+            let soft = if n == 1 {
+                1.0
+            } else {
+                -2.0 + 6.0 * k as f64 / (n - 1) as f64
+            };
+            let soft = (soft * 100.0).round() / 100.0;
+            let shape = crate::phantom_cohort::draw(
+                crate::phantom_cohort::case_seed(seed, k),
+                [None, Some(soft), None, None, None],
+            );
+            (format!("phantom{:02}", k + 1), shape)
+        })
+        .collect()
+}
+
+/// The head frame of a case's pre-operative skin, as `facesim run`'s landmark stage finds it
+/// (report.json `head_frame`): the stages up to the skin, no model.
+fn head_frame(case_dir: &Path, obs: &dyn Observer) -> Result<HeadFrame> {
+    let mut rec = Recorder::new(obs);
+    let (inputs, files) = inputs::read_with(case_dir, &toml::Table::new(), &mut rec)?;
+    let inputs::Inputs { case, ct, scan } = inputs;
+    let seg = tissues(&ct, &case, &mut rec)?;
+    let field = seg.bone_field(&ct);
+    let surf = surfaces::extract(&ct, &seg, &field, &case, &mut rec)?;
+    let face = crate::pipeline::face::place(surf, scan, &ct, &case, &mut rec)?;
+    crate::landmarks::head_frame(&face.skin).ok_or_else(|| {
+        Error::input(
+            &files.case_file,
+            "validate: no head frame (the skin is empty)",
+        )
+    })
+}
+
+/// Forward and up of the head: the frame's anterior and vertical turned face-down by `pitch`.
+fn directions(frame: &HeadFrame, pitch_deg: f64) -> ([f64; 3], [f64; 3]) {
+    let (s, c) = pitch_deg.to_radians().sin_cos();
+    (
+        add(scale(frame.anterior, c), scale(frame.vertical, -s)),
+        add(scale(frame.vertical, c), scale(frame.anterior, s)),
+    )
+}
+
+fn region_text(v: &toml::Value) -> String {
+    v.to_string()
+}
+
+fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
+    let file = dir.join("validation.toml");
+    let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
+    let cf: CaseFile = toml::from_str(&text).map_err(|e| Error::input(&file, e.message()))?;
+    if !cf.pitch_deg.is_finite() || cf.pitch_deg.abs() > 60.0 {
+        return Err(Error::input(&file, "pitch_deg must be within ±60 degrees"));
+    }
+    for seg in cf.segments.keys() {
+        if !["maxilla", "mandible", "chin"].contains(&seg.as_str()) {
+            return Err(Error::input(
+                &file,
+                format!("segment '{seg}': the segments are maxilla, mandible and chin"),
+            ));
+        }
+    }
+    let (forward, up) = directions(frame, cf.pitch_deg);
+    let mut about = cf.about;
+    if !cf.pitch_note.is_empty() {
+        about = format!("{about} Pitch: {}", cf.pitch_note);
+    }
+    if let Some(m) = &cf.movable {
+        about = format!(
+            "{about} Movable skin: `{}` over case.toml's: {}",
+            region_text(m),
+            cf.movable_note
+        );
+    }
+    Ok(Prepared {
+        info: CaseInfo {
+            name: name.into(),
+            about,
+            pitch_deg: cf.pitch_deg,
+            forward,
+            up,
+            segments: cf
+                .segments
+                .iter()
+                .map(|(k, s)| (k.clone(), region_text(&s.region), s.placed.clone()))
+                .collect(),
+            seconds: 0.0,
+        },
+        dir: dir.to_path_buf(),
+        regions: cf
+            .segments
+            .into_iter()
+            .map(|(k, s)| (k, s.region))
+            .collect(),
+        missing: cf.missing,
+        movable: cf.movable,
+    })
+}
+
+/// The standard head's genioplasty level (mm): below the lower vestibule's sulcus (z −45) and
+/// the B-point dip (−42), above the bony pogonion (−55); the phantom's teeth have no roots.
+const PHANTOM_CHIN_CUT_Z: f64 = -48.0;
+
+fn box_value(b: [[f64; 3]; 2]) -> toml::Value {
+    let arr = |p: [f64; 3]| {
+        toml::Value::Array(
+            p.iter()
+                .map(|x| toml::Value::Float((x * 10.0).round() / 10.0))
+                .collect(),
+        )
+    };
+    let mut inner = toml::Table::new();
+    inner.insert("min".into(), arr(b[0]));
+    inner.insert("max".into(), arr(b[1]));
+    let mut t = toml::Table::new();
+    t.insert("box".into(), toml::Value::Table(inner));
+    toml::Value::Table(t)
+}
+
+fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Prepared {
+    let [front, _back, maxilla] = shape.boxes();
+    let mut chin = front;
+    chin[1][2] = PHANTOM_CHIN_CUT_Z * shape.scale;
+    let segs = [
+        (
+            "maxilla",
+            maxilla,
+            "the phantom's maxilla box (Shape::boxes): the occlusal plane to the Le Fort I gap, in front of the rami",
+        ),
+        (
+            "mandible",
+            front,
+            "the distal segment of a sagittal split: the phantom's mandible-front box (Shape::boxes), below the occlusal plane in front of the rami; the rami stay",
+        ),
+        (
+            "chin",
+            chin,
+            "the mandible-front box below z = −48 mm (scaled): under the lower sulcus and the B-point dip, above pogonion",
+        ),
+    ];
+    let (forward, up) = directions(frame, 0.0);
+    let v = shape.values();
+    // The phantom case's movable sphere (centre (0, −30, −35) mm, radius 85 mm, scaled) has the
+    // nose tip on its edge; 10 mm more takes it in, as the Le Fort I types need.
+    let centre = [0.0, -30.0 * shape.scale, -35.0 * shape.scale];
+    let radius = 95.0 * shape.scale;
+    let movable: toml::Value = toml::from_str::<toml::Table>(&format!(
+        "v = {{ sphere = {{ center = [{:.1}, {:.1}, {:.1}], radius = {radius:.1} }} }}",
+        centre[0], centre[1], centre[2]
+    ))
+    .ok()
+    .and_then(|mut t| t.remove("v"))
+    .unwrap_or(toml::Value::Boolean(false));
+    Prepared {
+        info: CaseInfo {
+            name: name.into(),
+            about: format!(
+                "jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                v[0],
+                v[1],
+                v[2],
+                v[3],
+                v[4],
+                region_text(&movable)
+            ),
+            pitch_deg: 0.0,
+            forward,
+            up,
+            segments: segs
+                .iter()
+                .map(|(n, b, how)| (n.to_string(), region_text(&box_value(*b)), how.to_string()))
+                .collect(),
+            seconds: 0.0,
+        },
+        dir: dir.to_path_buf(),
+        regions: segs
+            .iter()
+            .map(|(n, b, _)| (n.to_string(), box_value(*b)))
+            .collect(),
+        missing: BTreeMap::new(),
+        movable: Some(movable),
+    }
+}
+
+/// The unit vector of a move toward `t`.
+fn unit_of(info: &CaseInfo, t: Toward) -> [f64; 3] {
+    match t {
+        Toward::Forward => info.forward,
+        Toward::Back => scale(info.forward, -1.0),
+        Toward::Up => info.up,
+    }
+}
+
+/// One surgery on one case through `facesim run`'s library call, with the product's defaults
+/// except the discretisation-error estimate (a second solve at twice the element size that
+/// reports, and does not change, the face). Returns the carried landmarks.
+fn run_one(
+    case: &Prepared,
+    s: Surgery,
+    run_dir: &Path,
+    obs: &dyn Observer,
+) -> Result<RunLandmarks> {
+    let mut osteotomies = Vec::new();
+    for (seg, toward, mm) in moves(s) {
+        let t = scale(unit_of(&case.info, *toward), *mm);
+        let mut o = toml::Table::new();
+        o.insert("name".into(), toml::Value::String(seg.to_string()));
+        o.insert("region".into(), case.regions[*seg].clone());
+        o.insert(
+            "translate".into(),
+            toml::Value::Array(t.iter().map(|x| toml::Value::Float(*x)).collect()),
+        );
+        osteotomies.push(toml::Value::Table(o));
+    }
+    let mut over = toml::Table::new();
+    over.insert(
+        "name".into(),
+        toml::Value::String(format!("validate-{}-{}", case.info.name, s.key())),
+    );
+    over.insert("osteotomy".into(), toml::Value::Array(osteotomies));
+    if let Some(m) = &case.movable {
+        let mut surface = toml::Table::new();
+        surface.insert("movable".into(), m.clone());
+        over.insert("surface".into(), toml::Value::Table(surface));
+    }
+    let mut tet = toml::Table::new();
+    tet.insert("error_estimate".into(), toml::Value::Boolean(false));
+    over.insert("tet".into(), toml::Value::Table(tet));
+    let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
+    prune(&outcome.out_dir);
+    let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
+    Ok(RunLandmarks {
+        carried: outcome
+            .report
+            .landmarks
+            .0
+            .into_iter()
+            .map(|(_, c)| c)
+            .collect(),
+        mesh_box,
+    })
+}
+
+/// What a run tells about its landmarks: where they went, and the box of the tissue mesh (the
+/// moved bone's box grown by `[tet] margin_mm`; its faces are held).
+struct RunLandmarks {
+    carried: Vec<Carried>,
+    mesh_box: Option<([f64; 3], [f64; 3])>,
+}
+
+/// A landmark nearer than this to the tissue mesh's held faces is noted: the hold, not the
+/// tissue, may set its move.
+const NEAR_HELD_FACE_MM: f64 = 10.0;
+
+/// Distance (mm) from p inside the box to its nearest face; negative outside.
+fn depth_in(b: &([f64; 3], [f64; 3]), p: [f64; 3]) -> f64 {
+    (0..3)
+        .map(|a| (p[a] - b.0[a]).min(b.1[a] - p[a]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The files of a run kept under runs/: its report, landmarks and faces (the rest, ~35 MB a run,
+/// `facesim run` on the same case and plan writes again).
+const KEPT: [&str; 5] = [
+    "report.json",
+    "landmarks_pre.mrk.json",
+    "landmarks_post.mrk.json",
+    "face_pre.ply",
+    "face_post.ply",
+];
+
+fn prune(dir: &Path) {
+    if let Ok(entries) = std::fs::read_dir(dir) {
+        for e in entries.flatten() {
+            let keep = KEPT.iter().any(|k| e.file_name() == *k);
+            if !keep && e.path().is_file() {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+}
+
+/// The published rows of a surgery measured on a run (or each saying why not).
+fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Row> {
+    crate::landmarks::published::rows_of(s)
+        .map(|p| {
+            let (_, toward, mm) = moves(s)
+                .iter()
+                .find(|(seg, _, _)| *seg == p.segment)
+                .copied()
+                .unwrap_or(("", Toward::Forward, f64::NAN));
+            let mut row = Row {
+                case: info.name.clone(),
+                published: p,
+                move_mm: mm,
+                along_mm: None,
+                forward_mm: None,
+                up_mm: None,
+                ratio: None,
+                why: None,
+            };
+            if let Some(u) = p.unmeasured {
+                row.why = Some(u.to_string());
+                return row;
+            }
+            let (carried, mesh_box) = match &run {
+                Ok(r) => (&r.carried, r.mesh_box),
+                Err(e) => {
+                    row.why = Some(format!("the run failed: {e}"));
+                    return row;
+                }
+            };
+            // A landmark held still by construction (rigid skin, no tissue mesh under it) has
+            // no predicted ratio: say so rather than report 0.
+            let still = p.terms.iter().find(|(label, _)| {
+                carried
+                    .iter()
+                    .any(|c| c.label == *label && c.change_mm.is_some_and(|d| d < 1e-6))
+            });
+            let depth = |label: &str| -> Option<f64> {
+                let p = carried.iter().find(|c| c.label == label)?.pre?;
+                Some(depth_in(mesh_box.as_ref()?, p))
+            };
+            if let Some((label, _)) = still {
+                row.why = Some(match depth(label) {
+                    Some(d) if d < 0.0 => format!(
+                        "{label} did not move: it lies {:.1} mm outside the tissue mesh (the moved bone's box grown by [tet] margin_mm; report.json tet.region), which holds it still",
+                        -d
+                    ),
+                    _ => format!(
+                        "{label} did not move (< 1e-6 mm): the model holds the skin there still (rigid skin outside [surface] movable)"
+                    ),
+                });
+                return row;
+            }
+            let near: Vec<String> = p
+                .terms
+                .iter()
+                .filter_map(|(label, _)| {
+                    let d = depth(label)?;
+                    (d < NEAR_HELD_FACE_MM).then(|| {
+                        format!("{label} is {d:.1} mm from the tissue mesh's held boundary (report.json tet.region)")
+                    })
+                })
+                .collect();
+            if !near.is_empty() {
+                row.why = Some(near.join("; "));
+            }
+            match along(carried, p.terms, unit_of(info, toward)) {
+                Ok(d) => {
+                    row.along_mm = Some(d);
+                    row.ratio = Some(d / mm);
+                    row.forward_mm = along(carried, p.terms, info.forward).ok();
+                    row.up_mm = along(carried, p.terms, info.up).ok();
+                }
+                Err(why) => row.why = Some(why),
+            }
+            row
+        })
+        .collect()
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn num(x: Option<f64>, digits: usize) -> String {
+    x.map(|v| format!("{v:.digits$}")).unwrap_or_default()
+}
+
+/// validation.csv: one row per case, surgery and published row.
+pub fn csv(v: &Validation) -> String {
+    let mut s = String::from(
+        "case,surgery,landmark,hard_reference,segment,axis,move_mm,soft_along_mm,soft_forward_mm,soft_up_mm,predicted_ratio,published_low,published_high,inside,range_note,source,note\n",
+    );
+    for r in &v.rows {
+        let p = r.published;
+        let inside = match r.inside() {
+            Some(true) => "yes",
+            Some(false) => "no",
+            None => "",
+        };
+        let fields = [
+            r.case.clone(),
+            p.surgery.key().into(),
+            p.soft.into(),
+            p.hard.into(),
+            p.segment.into(),
+            p.axis.name().into(),
+            format!("{}", r.move_mm),
+            num(r.along_mm, 3),
+            num(r.forward_mm, 3),
+            num(r.up_mm, 3),
+            num(r.ratio, 3),
+            format!("{}", p.low),
+            format!("{}", p.high),
+            inside.into(),
+            p.range_note.into(),
+            p.source.into(),
+            r.why.clone().unwrap_or_default(),
+        ];
+        let line: Vec<String> = fields.iter().map(|f| csv_field(f)).collect();
+        s.push_str(&line.join(","));
+        s.push('\n');
+    }
+    s
+}
+
+/// This machine, for validation.md's header: the CPU model and the cores.
+fn machine() -> String {
+    let cpu = std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|t| {
+            t.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, m)| m.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".into());
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    format!(
+        "{cpu}, {cores} cores available, {} {}",
+        std::env::consts::OS,
+        std::env::consts::ARCH
+    )
+}
+
+fn v3(a: [f64; 3]) -> String {
+    format!("({:.3}, {:.3}, {:.3})", a[0], a[1], a[2])
+}
+
+/// validation.md: the header, the moves, the cases, then per surgery the table.
+pub fn markdown(v: &Validation, opts: &Options) -> String {
+    let mut s = String::from(
+        "# facesim validate: predicted soft/hard ratios against the published ranges\n\n",
+    );
+    s.push_str(&format!(
+        "- command: `{}`\n- facesim {}\n- machine: {}\n- time: {:.0} s\n\n",
+        opts.command,
+        env!("CARGO_PKG_VERSION"),
+        machine(),
+        v.cases.iter().map(|c| c.seconds).sum::<f64>()
+    ));
+    let (inside, outside, none) = v
+        .rows
+        .iter()
+        .fold((0, 0, 0), |(a, b, c), r| match r.inside() {
+            Some(true) => (a + 1, b, c),
+            Some(false) => (a, b + 1, c),
+            None => (a, b, c + 1),
+        });
+    s.push_str(&format!(
+        "**{inside} inside their published range, {outside} outside, {none} not measured** (each below, with why).\n\n"
+    ));
+    s.push_str("Ratio = the soft landmark's displacement along the bone's move ÷ the move (a pure translation moves every bone point by the plan's translation). Every run uses the product's defaults except `[tet] error_estimate = false` (the estimate solves again at twice the element size and reports, without changing, the face). Forward and up are the head's (below, per case).\n\n## The moves\n\n| surgery | segments moved |\n|---|---|\n");
+    for srg in Surgery::ALL {
+        let m: Vec<String> = moves(srg)
+            .iter()
+            .map(|(seg, t, mm)| format!("{seg} {mm} mm {}", format!("{t:?}").to_lowercase()))
+            .collect();
+        s.push_str(&format!("| {} | {} |\n", srg.title(), m.join(", then ")));
+    }
+    s.push_str("\n## The cases\n\n");
+    for c in &v.cases {
+        s.push_str(&format!(
+            "### {}\n\n{}\n\n- forward {} and up {} (LPS; pitch {}°); {:.0} s\n",
+            c.name,
+            c.about,
+            v3(c.forward),
+            v3(c.up),
+            c.pitch_deg,
+            c.seconds
+        ));
+        for (seg, region, how) in &c.segments {
+            s.push_str(&format!("- {seg}: `{region}`: {how}\n"));
+        }
+        s.push('\n');
+    }
+    if !v.skipped.is_empty() {
+        s.push_str("## Not run\n\n");
+        for k in &v.skipped {
+            let what = k
+                .surgery
+                .map(|x| format!("{} ", x.title()))
+                .unwrap_or_default();
+            s.push_str(&format!("- {} {what}: {}\n", k.case, k.why));
+        }
+        s.push('\n');
+    }
+    for srg in Surgery::ALL {
+        let rows: Vec<&Row> = v
+            .rows
+            .iter()
+            .filter(|r| r.published.surgery == srg)
+            .collect();
+        if rows.is_empty() {
+            continue;
+        }
+        s.push_str(&format!(
+            "## {}\n\n| case | soft (hard ref.) | axis | predicted | published | | soft fwd / up mm | note |\n|---|---|---|---|---|---|---|---|\n",
+            srg.title()
+        ));
+        for r in rows {
+            let p = r.published;
+            let verdict = match r.inside() {
+                Some(true) => "inside",
+                Some(false) => "**OUTSIDE**",
+                None => "not measured",
+            };
+            let fwd_up = match (r.forward_mm, r.up_mm) {
+                (Some(f), Some(u)) => format!("{f:+.2} / {u:+.2}"),
+                _ => String::new(),
+            };
+            let mut note = r.why.clone().unwrap_or_default();
+            if !p.range_note.is_empty() {
+                if !note.is_empty() {
+                    note.push_str("; ");
+                }
+                note.push_str("range: ");
+                note.push_str(p.range_note);
+            }
+            s.push_str(&format!(
+                "| {} | {} ({}) | {} | {} | {}–{} | {verdict} | {fwd_up} | {} |\n",
+                r.case,
+                p.soft,
+                p.hard,
+                p.axis.name(),
+                num(r.ratio, 2),
+                p.low,
+                p.high,
+                note.replace('|', "/")
+            ));
+        }
+        s.push('\n');
+    }
+    s.push_str("## Sources\n\n");
+    for p in &PUBLISHED {
+        s.push_str(&format!(
+            "- {} {} ({}): {}–{}: {}\n",
+            p.surgery.title(),
+            p.soft,
+            p.hard,
+            p.low,
+            p.high,
+            p.source
+        ));
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vec3::dot;
+
+    fn row(p: &'static Published, ratio: Option<f64>) -> Row {
+        Row {
+            case: "c".into(),
+            published: p,
+            move_mm: 5.0,
+            along_mm: ratio.map(|r| r * 5.0),
+            forward_mm: None,
+            up_mm: None,
+            ratio,
+            why: ratio.is_none().then(|| "Me' not found: no skin".into()),
+        }
+    }
+
+    #[test]
+    fn a_ratio_outside_its_range_is_flagged_in_the_table_and_the_page() {
+        let pog = PUBLISHED
+            .iter()
+            .find(|p| p.surgery == Surgery::BssoAdvance && p.soft == "Pog'")
+            .unwrap();
+        let v = Validation {
+            rows: vec![row(pog, Some(1.5)), row(pog, Some(1.0)), row(pog, None)],
+            skipped: vec![],
+            cases: vec![],
+            out_dir: PathBuf::new(),
+        };
+        assert_eq!(
+            v.rows.iter().map(Row::inside).collect::<Vec<_>>(),
+            [Some(false), Some(true), None]
+        );
+        let table = csv(&v);
+        let lines: Vec<&str> = table.lines().collect();
+        assert!(lines[1].contains(",1.500,0.8,1.33,no,"), "{}", lines[1]);
+        assert!(lines[2].contains(",1.000,0.8,1.33,yes,"), "{}", lines[2]);
+        assert!(lines[3].ends_with("Me' not found: no skin"), "{}", lines[3]);
+        let opts = Options {
+            out: PathBuf::new(),
+            samples: PathBuf::new(),
+            phantoms: 0,
+            seed: 1,
+            phantom_spacing_mm: 2.0,
+            surgeries: vec![],
+            cases: vec![],
+            command: "facesim validate".into(),
+        };
+        let md = markdown(&v, &opts);
+        assert!(md.contains("| 1.50 | 0.8–1.33 | **OUTSIDE** |"), "{md}");
+        assert!(md.contains("1 inside their published range, 1 outside, 1 not measured"));
+    }
+
+    #[test]
+    fn the_pitch_turns_forward_down_and_keeps_the_axes_orthonormal() {
+        let f = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let (fwd, up) = directions(&f, 16.0);
+        assert!((dot(fwd, fwd) - 1.0).abs() < 1e-12 && (dot(up, up) - 1.0).abs() < 1e-12);
+        assert!(dot(fwd, up).abs() < 1e-12);
+        // Face down: forward points anterior (−y) and down (−z).
+        assert!(fwd[1] < -0.95 && (fwd[2] + 16f64.to_radians().sin()).abs() < 1e-12);
+        assert_eq!(directions(&f, 0.0), (f.anterior, f.vertical));
+    }
+
+    #[test]
+    fn the_cohort_spans_thin_to_thick_soft_tissue() {
+        let c = cohort(4, 1);
+        let soft: Vec<f64> = c.iter().map(|(_, s)| s.soft_mm).collect();
+        assert_eq!(soft, [-2.0, 0.0, 2.0, 4.0]);
+        assert!(c.iter().all(|(_, s)| s.validate().is_ok()));
+        assert_ne!(c[0].1.scale, c[1].1.scale);
+    }
+}

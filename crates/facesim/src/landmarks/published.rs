@@ -1,0 +1,415 @@
+//! The clinic's measured soft-to-hard movement ratios per surgery type and soft landmark, with
+//! their sources (docs/validation.md, "The published ratios"): what `facesim validate` holds each
+//! prediction against. Encoded once, here.
+//!
+//! Ratio = the soft landmark's displacement along the bone's move ÷ the move: a pure translation
+//! moves every bone point by the plan's translation, so the hard displacement is the plan's.
+//! The ranges are the spread of study means, not of patients. Where the literature gives one
+//! value (one study, or "≈ x") the range is x ± 25 %, about one standard deviation of a single
+//! study's mean ratio (Rosen 1988: Sn 0.51 ± 0.13, Ls 0.82 ± 0.13); each such row says so.
+
+/// The surgery types of the published table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Surgery {
+    LeFortAdvance,
+    LeFortImpaction,
+    LeFortSetback,
+    BssoAdvance,
+    BssoSetback,
+    Genioplasty,
+    Bimaxillary,
+}
+
+impl Surgery {
+    pub const ALL: [Surgery; 7] = [
+        Surgery::LeFortAdvance,
+        Surgery::LeFortImpaction,
+        Surgery::LeFortSetback,
+        Surgery::BssoAdvance,
+        Surgery::BssoSetback,
+        Surgery::Genioplasty,
+        Surgery::Bimaxillary,
+    ];
+
+    /// The name on the command line and in validation.csv.
+    pub fn key(self) -> &'static str {
+        match self {
+            Surgery::LeFortAdvance => "lefort-advance",
+            Surgery::LeFortImpaction => "lefort-impaction",
+            Surgery::LeFortSetback => "lefort-setback",
+            Surgery::BssoAdvance => "bsso-advance",
+            Surgery::BssoSetback => "bsso-setback",
+            Surgery::Genioplasty => "genioplasty",
+            Surgery::Bimaxillary => "bimax",
+        }
+    }
+
+    pub fn title(self) -> &'static str {
+        match self {
+            Surgery::LeFortAdvance => "Le Fort I advancement",
+            Surgery::LeFortImpaction => "Le Fort I impaction",
+            Surgery::LeFortSetback => "Le Fort I setback",
+            Surgery::BssoAdvance => "BSSO advancement",
+            Surgery::BssoSetback => "BSSO setback",
+            Surgery::Genioplasty => "advancement genioplasty",
+            Surgery::Bimaxillary => "bimaxillary advancement",
+        }
+    }
+
+    pub fn from_key(key: &str) -> Option<Surgery> {
+        Surgery::ALL.into_iter().find(|s| s.key() == key)
+    }
+}
+
+/// The axis a published ratio is measured along (the bone's move is along it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    Horizontal,
+    Vertical,
+}
+
+impl Axis {
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::Horizontal => "horizontal",
+            Axis::Vertical => "vertical",
+        }
+    }
+}
+
+/// One row of the published table.
+#[derive(Clone, Copy, Debug)]
+pub struct Published {
+    pub surgery: Surgery,
+    /// The soft-tissue quantity, as the table names it.
+    pub soft: &'static str,
+    /// The soft displacement measured: Σ weight × (post − pre) of these landmarks, along the move.
+    pub terms: &'static [(&'static str, f64)],
+    /// The hard reference as published.
+    pub hard: &'static str,
+    /// The moved segment whose translation is the hard move.
+    pub segment: &'static str,
+    pub axis: Axis,
+    pub low: f64,
+    pub high: f64,
+    /// How the range was read from the literature, when not taken as printed.
+    pub range_note: &'static str,
+    pub source: &'static str,
+    /// Why facesim cannot measure it, when it cannot.
+    pub unmeasured: Option<&'static str>,
+}
+
+// One argument per column of the table, in its order.
+#[allow(clippy::too_many_arguments)]
+const fn row(
+    surgery: Surgery,
+    soft: &'static str,
+    terms: &'static [(&'static str, f64)],
+    hard: &'static str,
+    segment: &'static str,
+    axis: Axis,
+    range: (f64, f64),
+    range_note: &'static str,
+    source: &'static str,
+) -> Published {
+    Published {
+        surgery,
+        soft,
+        terms,
+        hard,
+        segment,
+        axis,
+        low: range.0,
+        high: range.1,
+        range_note,
+        source,
+        unmeasured: None,
+    }
+}
+
+use Axis::{Horizontal as H, Vertical as V};
+use Surgery::*;
+
+/// The published table (docs/validation.md, "The published ratios").
+pub const PUBLISHED: [Published; 23] = [
+    row(
+        LeFortAdvance,
+        "Prn",
+        &[("Prn", 1.0)],
+        "A / U1",
+        "maxilla",
+        H,
+        (0.17, 0.36),
+        "",
+        "systematic review of Le Fort I (15 studies, 419 pts: 0.24–0.35); Dann 1976 0.28; Hack 1993 0.36; Proffit & Epker 1980 0.17; Jung 2018 (3D, n 32, Head Face Med 14:21) 0.17",
+    ),
+    row(
+        LeFortAdvance,
+        "Sn",
+        &[("Sn", 1.0)],
+        "A",
+        "maxilla",
+        H,
+        (0.24, 0.60),
+        "",
+        "Rosen 1988 Plast Reconstr Surg 81:171 (0.51 ± 0.13, n 41); Gupta & Schendel 2022 (Peterson's Principles of OMFS, 4th ed., ch. 67)",
+    ),
+    row(
+        LeFortAdvance,
+        "Ls",
+        &[("Ls", 1.0)],
+        "U1",
+        "maxilla",
+        H,
+        (0.5, 0.9),
+        "the 2D range; 3D studies report lower ratios (0.21–0.52)",
+        "Rosen 1988 (0.82 ± 0.13); Gupta & Schendel 2022; Jung 2018; 3D meta-analysis (4 studies, 105 pts)",
+    ),
+    Published {
+        unmeasured: Some(
+            "facesim finds no alar points (its soft landmarks are G', N', Prn, Sn, Ls, Sto, Li, B', Pog', Me')",
+        ),
+        ..row(
+            LeFortAdvance,
+            "alar base width",
+            &[],
+            "advance",
+            "maxilla",
+            H,
+            (0.6, 1.33),
+            "widening ÷ advance, from 3–4 mm for a 3–5 mm advance",
+            "prospective and 3D studies (Jung 2018)",
+        )
+    },
+    row(
+        LeFortImpaction,
+        "upper lip Sn–Sto shortening",
+        &[("Sto", 1.0), ("Sn", -1.0)],
+        "impaction",
+        "maxilla",
+        V,
+        (0.2, 0.4),
+        "read as the shortening of the lip's height Sn–Sto (Sto rising more than Sn)",
+        "Schendel 1976; Radney & Jacobs 1981; Rosen 1988 (without muscle re-orientation)",
+    ),
+    row(
+        LeFortImpaction,
+        "Prn",
+        &[("Prn", 1.0)],
+        "impaction",
+        "maxilla",
+        V,
+        (0.15, 0.2),
+        "",
+        "Schendel 1976; Radney & Jacobs 1981; Rosen 1988",
+    ),
+    row(
+        LeFortImpaction,
+        "Sn",
+        &[("Sn", 1.0)],
+        "impaction",
+        "maxilla",
+        V,
+        (0.21, 0.35),
+        "≈ 0.28 published; ± 25 %",
+        "Schendel 1976; Radney & Jacobs 1981; Rosen 1988",
+    ),
+    row(
+        LeFortSetback,
+        "Ls",
+        &[("Ls", 1.0)],
+        "U1",
+        "maxilla",
+        H,
+        (0.66, 0.76),
+        "published −0.66 to −0.76 on a forward-positive axis: the lip follows the bone back; 2D (3D: 0.14, Jung 2018)",
+        "2D studies; Jung 2018 (3D); JKAOMS 46(6), n 50: the ratio roughly doubles beyond a 4 mm setback",
+    ),
+    row(
+        LeFortSetback,
+        "Sn",
+        &[("Sn", 1.0)],
+        "A",
+        "maxilla",
+        H,
+        (0.25, 0.41),
+        "≈ −0.33 published (forward-positive axis); ± 25 %",
+        "2D studies",
+    ),
+    row(
+        BssoAdvance,
+        "Li",
+        &[("Li", 1.0)],
+        "lower incisor",
+        "mandible",
+        H,
+        (0.26, 0.85),
+        "",
+        "Gupta & Schendel 2022 (9 studies); Eur J Orthod 2017 (doi 10.1093/ejo/cjx003) 0.76 (n 109); Jung 2018 3D 0.66 (n 32)",
+    ),
+    row(
+        BssoAdvance,
+        "B'",
+        &[("B'", 1.0)],
+        "B",
+        "mandible",
+        H,
+        (0.86, 1.19),
+        "",
+        "Gupta & Schendel 2022 (8 studies)",
+    ),
+    row(
+        BssoAdvance,
+        "Pog'",
+        &[("Pog'", 1.0)],
+        "Pog",
+        "mandible",
+        H,
+        (0.80, 1.33),
+        "the widest published span (20 articles); 8 studies 0.94–1.10; ≈ 1:1 (Mobarak 2001)",
+        "Hallulli & Sjöström 2026 BMC Oral Health; Gupta & Schendel 2022; Mobarak 2001 AJODO 119:353 (n 61)",
+    ),
+    row(
+        BssoAdvance,
+        "Me'",
+        &[("Me'", 1.0)],
+        "Me",
+        "mandible",
+        H,
+        (0.87, 1.04),
+        "",
+        "Gupta & Schendel 2022",
+    ),
+    row(
+        BssoSetback,
+        "Li",
+        &[("Li", 1.0)],
+        "lower incisor",
+        "mandible",
+        H,
+        (0.75, 1.05),
+        "Joss 2010's 0.75–1.02 and the 2016 meta-analysis's 0.92–1.05 together",
+        "Joss et al. 2010 J Oral Maxillofac Surg 68:2792 (8 studies); J Craniomaxillofac Surg 2016 (PMID 26874555)",
+    ),
+    row(
+        BssoSetback,
+        "B'",
+        &[("B'", 1.0)],
+        "B",
+        "mandible",
+        H,
+        (0.92, 1.09),
+        "Joss 2010's 1.0–1.09 and the 2016 meta-analysis's 0.92–1.05 together",
+        "Joss et al. 2010; J Craniomaxillofac Surg 2016 (PMID 26874555)",
+    ),
+    row(
+        BssoSetback,
+        "Pog'",
+        &[("Pog'", 1.0)],
+        "Pog",
+        "mandible",
+        H,
+        (0.83, 1.05),
+        "Joss 2010's 0.83–1.04 and the 2016 meta-analysis's 0.92–1.05 together; ≈ 1:1 short term, lower long term",
+        "Joss et al. 2010; J Craniomaxillofac Surg 2016 (PMID 26874555)",
+    ),
+    row(
+        Genioplasty,
+        "Pog'",
+        &[("Pog'", 1.0)],
+        "Pog",
+        "chin",
+        H,
+        (0.57, 1.0),
+        "2D, 8 studies; 0.77–0.91 at ≥ 2 years",
+        "2D studies (8); systematic review doi 10.1007/s10006-021-00991-7",
+    ),
+    row(
+        Genioplasty,
+        "Li",
+        &[("Li", 1.0)],
+        "Pog",
+        "chin",
+        H,
+        (0.33, 0.55),
+        "≈ 0.44 published; ± 25 %",
+        "Busquets & Sassouni 1981",
+    ),
+    row(
+        Bimaxillary,
+        "Sn",
+        &[("Sn", 1.0)],
+        "ANS",
+        "maxilla",
+        H,
+        (0.60, 0.90),
+        "",
+        "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+    ),
+    row(
+        Bimaxillary,
+        "Ls",
+        &[("Ls", 1.0)],
+        "U1",
+        "maxilla",
+        H,
+        (0.60, 1.00),
+        "",
+        "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+    ),
+    row(
+        Bimaxillary,
+        "Li",
+        &[("Li", 1.0)],
+        "lower incisor",
+        "mandible",
+        H,
+        (0.55, 0.91),
+        "0.73 published (one study); ± 25 %",
+        "Jensen 1992 AJODO 101:266 (lower lip 0.73, rising to 1.0 at pogonion)",
+    ),
+    row(
+        Bimaxillary,
+        "B'",
+        &[("B'", 1.0)],
+        "B",
+        "mandible",
+        H,
+        (0.75, 1.25),
+        "1.00 published (one value); ± 25 %",
+        "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+    ),
+    row(
+        Bimaxillary,
+        "Pog'",
+        &[("Pog'", 1.0)],
+        "Pog",
+        "mandible",
+        H,
+        (0.90, 1.00),
+        "",
+        "systematic review \"Part III: double jaw\" (16 studies, low evidence); Jensen 1992 AJODO 101:266 ≈ 1.0 at pogonion",
+    ),
+];
+
+/// The rows of one surgery type, in table order.
+pub fn rows_of(surgery: Surgery) -> impl Iterator<Item = &'static Published> {
+    PUBLISHED.iter().filter(move |p| p.surgery == surgery)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_surgery_has_rows_and_every_range_is_ordered() {
+        for s in Surgery::ALL {
+            assert!(rows_of(s).count() > 0, "{s:?}");
+            assert_eq!(Surgery::from_key(s.key()), Some(s));
+        }
+        for p in &PUBLISHED {
+            assert!(0.0 < p.low && p.low < p.high && p.high < 2.0, "{p:?}");
+            assert_eq!(p.terms.is_empty(), p.unmeasured.is_some(), "{p:?}");
+        }
+    }
+}
