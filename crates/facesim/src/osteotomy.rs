@@ -141,7 +141,7 @@ mod tests {
             rotate_deg: [10.0, -20.0, 5.0],
             pivot: [-3.0, 4.0, 1.0],
         };
-        let plan = Plan::new(&[seg.clone()]);
+        let plan = Plan::new(std::slice::from_ref(&seg));
         let rigid = |p: [f64; 3]| {
             let r = rotation(seg.rotate_deg);
             let d = [0, 1, 2].map(|c| p[c] - seg.pivot[c]);
