@@ -128,10 +128,7 @@ impl SkinEmbedding {
             .zip(&self.weights)
             .map(|(t, w)| match t {
                 None => [0.0; 3],
-                Some(t) => {
-                    let tet = tets[*t as usize];
-                    [0, 1, 2].map(|c| (0..4).map(|a| w[a] * u[tet[a] as usize][c]).sum())
-                }
+                Some(t) => weighted(&tets[*t as usize], w, u),
             })
             .collect()
     }
@@ -148,10 +145,7 @@ impl SkinEmbedding {
             .enumerate()
             .map(|(i, (t, l))| match t {
                 None => [0.0; 3],
-                Some(t) if !self.reached(i) => {
-                    let tet = tets10[*t as usize];
-                    [0, 1, 2].map(|c| (0..4).map(|a| l[a] * u[tet[a] as usize][c]).sum())
-                }
+                Some(t) if !self.reached(i) => weighted(&tets10[*t as usize][..4], l, u),
                 Some(t) => {
                     let tet = tets10[*t as usize];
                     let mut n = [0.0; 10];
@@ -161,7 +155,7 @@ impl SkinEmbedding {
                     for (e, [a, b]) in super::quadratic::EDGES.iter().enumerate() {
                         n[4 + e] = 4.0 * l[*a] * l[*b];
                     }
-                    [0, 1, 2].map(|c| (0..10).map(|k| n[k] * u[tet[k] as usize][c]).sum())
+                    weighted(&tet, &n, u)
                 }
             })
             .collect()
@@ -171,6 +165,17 @@ impl SkinEmbedding {
     pub(crate) fn unreached(&self) -> usize {
         (0..self.tet.len()).filter(|i| !self.reached(*i)).count()
     }
+}
+
+/// Σ_k n_k u[nodes_k]: the displacement interpolated with shape-function values `n`.
+fn weighted(nodes: &[u32], n: &[f64], u: &[[f64; 3]]) -> [f64; 3] {
+    [0, 1, 2].map(|c| {
+        nodes
+            .iter()
+            .zip(n)
+            .map(|(v, w)| w * u[*v as usize][c])
+            .sum()
+    })
 }
 
 #[cfg(test)]
