@@ -34,6 +34,7 @@ use super::holds::{Constrained, to_global, to_local};
 use super::nonlinear::{ElementState, Energy, Solution, Step, element_state_of, scales};
 use super::tangent::BlockMatrix;
 use crate::error::{Error, NumericalKind, Result};
+use crate::fem::pcg::truncated_pcg;
 use rayon::prelude::*;
 
 /// Settings of the Newton–Krylov solve.
@@ -285,49 +286,4 @@ fn not_converged(why: &str, residuals: &[f64]) -> Error {
             history.join(", ")
         ),
     )
-}
-
-/// Preconditioned CG for A x = b from x = 0 to ‖b − A x‖ ≤ tol ‖b‖, truncated at non-positive
-/// curvature (Steihaug 1983): the iterate so far, or the preconditioned right-hand side when
-/// that happens at once. Returns the direction and the iterations taken.
-fn truncated_pcg(
-    a: impl Fn(&[f64]) -> Vec<f64>,
-    p: impl Fn(&[f64]) -> Vec<f64>,
-    b: &[f64],
-    tol: f64,
-    max_it: usize,
-) -> (Vec<f64>, usize) {
-    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>();
-    let bn = dot(b, b).sqrt();
-    let mut x = vec![0.0; b.len()];
-    if bn == 0.0 {
-        return (x, 0);
-    }
-    let mut r = b.to_vec();
-    let mut z = p(&r);
-    let mut d = z.clone();
-    let mut rz = dot(&r, &z);
-    for it in 1..=max_it {
-        let ad = a(&d);
-        let curv = dot(&d, &ad);
-        if !(curv > 0.0) {
-            return if it == 1 { (d, it) } else { (x, it) };
-        }
-        let alpha = rz / curv;
-        for i in 0..x.len() {
-            x[i] += alpha * d[i];
-            r[i] -= alpha * ad[i];
-        }
-        if dot(&r, &r).sqrt() <= tol * bn {
-            return (x, it);
-        }
-        z = p(&r);
-        let rz_new = dot(&r, &z);
-        let beta = rz_new / rz;
-        rz = rz_new;
-        for i in 0..d.len() {
-            d[i] = z[i] + beta * d[i];
-        }
-    }
-    (x, max_it)
 }
