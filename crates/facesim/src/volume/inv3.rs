@@ -43,10 +43,13 @@ pub fn read(path: &Path) -> Result<Volume> {
         )
     })?;
     let n = dims[0] * dims[1] * dims[2];
-    let width = match dtype {
-        "int16" | "uint16" => 2,
-        "float32" | "int32" => 4,
-        "uint8" | "int8" => 1,
+    let (kind, width) = match dtype {
+        "int16" => ('i', 2),
+        "uint16" => ('u', 2),
+        "int32" => ('i', 4),
+        "float32" => ('f', 4),
+        "int8" => ('i', 1),
+        "uint8" => ('u', 1),
         other => {
             return Err(Error::input(
                 path,
@@ -69,7 +72,7 @@ pub fn read(path: &Path) -> Result<Volume> {
         spacing,
         origin,
         direction,
-        data: decode(raw, dtype),
+        data: super::decode_samples(raw, kind, width, false),
     })
 }
 
@@ -164,29 +167,4 @@ fn read_main_plist(path: &Path, main: &[u8]) -> Result<MainPlist> {
         shape,
         spacing,
     })
-}
-
-/// The voxel values of a raw little-endian matrix of `dtype` (one of those `read` accepts;
-/// int8 otherwise).
-fn decode(raw: &[u8], dtype: &str) -> Vec<f32> {
-    match dtype {
-        "int16" => raw
-            .chunks_exact(2)
-            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        "uint16" => raw
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        "int32" => raw
-            .chunks_exact(4)
-            .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32)
-            .collect(),
-        "float32" => raw
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-        "uint8" => raw.iter().map(|&b| b as f32).collect(),
-        _ => raw.iter().map(|&b| b as i8 as f32).collect(),
-    }
 }

@@ -196,29 +196,12 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Volume> {
     // Raw data sits at the end of the file (NRRD allows a skipped prefix).
     let data = &data[data.len() - n * size..];
     let big = get("endian") == Some("big");
-    let value = |c: &[u8]| -> f32 {
-        let mut b = [0u8; 8];
-        b[..size].copy_from_slice(c);
-        if big {
-            b[..size].reverse();
-        }
-        match (kind, size) {
-            ('i', 1) => b[0] as i8 as f32,
-            ('u', 1) => b[0] as f32,
-            ('i', 2) => i16::from_le_bytes([b[0], b[1]]) as f32,
-            ('u', 2) => u16::from_le_bytes([b[0], b[1]]) as f32,
-            ('i', 4) => i32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
-            ('u', 4) => u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f32,
-            ('f', 4) => f32::from_le_bytes([b[0], b[1], b[2], b[3]]),
-            _ => f64::from_le_bytes(b) as f32,
-        }
-    };
     Ok(Volume {
         dims,
         spacing,
         origin,
         direction,
-        data: data.chunks_exact(size).map(value).collect(),
+        data: super::decode_samples(data, kind, size, big),
     })
 }
 

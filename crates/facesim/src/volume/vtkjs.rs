@@ -158,11 +158,15 @@ pub fn read(path: &Path) -> Result<Volume> {
             h.extent
         )));
     }
-    let width = match array.data_type.as_str() {
-        "Int8Array" | "Uint8Array" => 1,
-        "Int16Array" | "Uint16Array" => 2,
-        "Int32Array" | "Uint32Array" | "Float32Array" => 4,
-        "Float64Array" => 8,
+    let (kind, width) = match array.data_type.as_str() {
+        "Int8Array" => ('i', 1),
+        "Uint8Array" => ('u', 1),
+        "Int16Array" => ('i', 2),
+        "Uint16Array" => ('u', 2),
+        "Int32Array" => ('i', 4),
+        "Uint32Array" => ('u', 4),
+        "Float32Array" => ('f', 4),
+        "Float64Array" => ('f', 8),
         other => return Err(bad(format!("unsupported dataType {other}"))),
     };
     let reference = array.reference.as_ref().ok_or_else(|| {
@@ -194,7 +198,7 @@ pub fn read(path: &Path) -> Result<Volume> {
         spacing,
         origin,
         direction,
-        data: decode(&raw.1, &array.data_type),
+        data: super::decode_samples(&raw.1, kind, width, false),
     })
 }
 
@@ -235,37 +239,6 @@ fn read_values(base: &Path, id: &str, want: usize) -> Result<(PathBuf, Vec<u8>)>
             &gz,
             "the voxel values named by index.json are missing (neither <id>.gz nor <id>)",
         ))
-    }
-}
-
-fn decode(raw: &[u8], data_type: &str) -> Vec<f32> {
-    match data_type {
-        "Int8Array" => raw.iter().map(|&b| b as i8 as f32).collect(),
-        "Uint8Array" => raw.iter().map(|&b| b as f32).collect(),
-        "Int16Array" => raw
-            .chunks_exact(2)
-            .map(|c| i16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        "Uint16Array" => raw
-            .chunks_exact(2)
-            .map(|c| u16::from_le_bytes([c[0], c[1]]) as f32)
-            .collect(),
-        "Int32Array" => raw
-            .chunks_exact(4)
-            .map(|c| i32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32)
-            .collect(),
-        "Uint32Array" => raw
-            .chunks_exact(4)
-            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f32)
-            .collect(),
-        "Float32Array" => raw
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect(),
-        _ => raw
-            .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])) as f32)
-            .collect(),
     }
 }
 
