@@ -5,42 +5,16 @@ mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use cli::facesim;
 use facesim::landmarks::face_regions::{NAMES, regions};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// `facesim run data-samples/real --out <fresh> --set …`, which must exit 0: the output
 /// directory and report.json.
 fn run_real(name: &str, sets: &[&str]) -> (PathBuf, serde_json::Value) {
     let ct = common::real_ct();
-    let case = ct.parent().unwrap();
     let out = common::kept_dir(name);
-    let mut args = vec![
-        "run",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    for s in sets {
-        args.extend(["--set", s]);
-    }
-    let r = facesim(&args);
-    assert_eq!(r.code, 0, "facesim run {sets:?} failed: {}", r.stderr);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let report = cli::run_ok(ct.parent().unwrap(), &out, sets);
     (out, report)
-}
-
-/// displacement.csv's pre and post positions per face vertex.
-fn face(out: &Path) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-    let csv = std::fs::read_to_string(out.join("displacement.csv")).unwrap();
-    csv.lines()
-        .skip(1)
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-            ([v[1], v[2], v[3]], [v[4], v[5], v[6]])
-        })
-        .unzip()
 }
 
 fn count(r: &serde_json::Value, key: &str) -> u64 {
@@ -69,8 +43,8 @@ fn lips_slide_on_the_teeth_of_the_real_ct() {
     );
     assert!(sliding > 0 && sliding <= found);
     // The face on vs off, vertex by vertex, per region of the run (its landmarks).
-    let (pre, post_on) = face(&on_dir);
-    let (pre_off, post_off) = face(&off_dir);
+    let (pre, post_on) = cli::face_positions(&on_dir);
+    let (pre_off, post_off) = cli::face_positions(&off_dir);
     assert_eq!(pre, pre_off);
     let skin = facesim::mesh::read_mesh(&on_dir.join("face_pre.ply")).unwrap();
     let frame = facesim::landmarks::frame::head_frame(&skin).unwrap();

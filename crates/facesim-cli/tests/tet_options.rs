@@ -5,7 +5,6 @@ mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use cli::facesim;
 use std::path::Path;
 
 /// A face before and after (displacement.csv: x_pre.. and x_post.. per vertex).
@@ -24,33 +23,9 @@ fn run(name: &str, sets: &[&str]) -> Face {
 /// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
 fn run_case(case: &Path, name: &str, sets: &[&str]) -> (Face, serde_json::Value) {
     let out = common::kept_dir(name);
-    let mut args = vec![
-        "run",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    for s in sets {
-        args.extend(["--set", s]);
-    }
-    let r = facesim(&args);
-    assert_eq!(r.code, 0, "facesim run {sets:?} failed: {}", r.stderr);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    (read_face(&out), report)
-}
-
-fn read_face(out: &Path) -> Face {
-    let csv = std::fs::read_to_string(out.join("displacement.csv")).unwrap();
-    let rows: Vec<Vec<f64>> = csv
-        .lines()
-        .skip(1)
-        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
-        .collect();
-    Face {
-        pre: rows.iter().map(|v| [v[1], v[2], v[3]]).collect(),
-        post: rows.iter().map(|v| [v[4], v[5], v[6]]).collect(),
-    }
+    let report = cli::run_ok(case, &out, sets);
+    let (pre, post) = cli::face_positions(&out);
+    (Face { pre, post }, report)
 }
 
 fn mean_distance(a: &Face, b: &Face) -> f64 {

@@ -2,6 +2,7 @@
 //! the file and the problem).
 #![allow(dead_code)]
 
+use std::path::Path;
 use std::process::Command;
 
 pub struct CliResult {
@@ -43,4 +44,33 @@ pub fn assert_clean_failure(r: &CliResult, file: &str, problem: &str) {
         lines[0]
     );
     assert!(!lines[0].contains("internal error"), "{}", lines[0]);
+}
+
+/// `facesim run CASE --out OUT --set …` (each of `sets` a KEY=VALUE), which must exit 0; its
+/// report.json.
+pub fn run_ok(case: &Path, out: &Path, sets: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "run",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    let r = facesim(&args);
+    assert_eq!(r.code, 0, "facesim run {sets:?} failed: {}", r.stderr);
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+/// displacement.csv's pre and post positions per face vertex (columns x_pre.. and x_post..).
+pub fn face_positions(out: &Path) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    let csv = std::fs::read_to_string(out.join("displacement.csv")).unwrap();
+    csv.lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            ([v[1], v[2], v[3]], [v[4], v[5], v[6]])
+        })
+        .unzip()
 }
