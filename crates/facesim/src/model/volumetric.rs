@@ -192,7 +192,7 @@ pub struct TetReport {
     /// Bone nodes at the saw lines left unattached (`[tet] cut_release_mm`).
     #[serde(default)]
     pub released_at_cuts: usize,
-    /// Sliding nodes of elements the first solve turned inside out, freed (the tissue lifts
+    /// Bone and sliding nodes of elements a solve turned inside out, freed (the tissue lifts
     /// off the bone there) before solving again.
     #[serde(default)]
     pub lifted_off: usize,
@@ -330,8 +330,8 @@ fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// Rounds of freeing sliding nodes of inverted elements and solving again (linear models).
-const RELEASE_ROUNDS: usize = 3;
+/// Rounds of freeing the bone and sliding nodes of inverted elements and solving again.
+const RELEASE_ROUNDS: usize = 6;
 
 /// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
 /// within about 15 mm, distraction of the maxilla reaches ~20.
@@ -507,9 +507,12 @@ pub fn predict(
                 let f = Loads::none().nodal_vector(nodes.len())?;
                 let mut c = Constrained::new(&k, &hold, nodes.len())?;
                 let mut u = c.solve(&[(&hold, &f)])?.remove(0);
-                // Where a node sliding on its bone is in an element the solution turns inside
-                // out, the bone would drag the tissue through itself: that tissue lifts off
-                // (the node is freed) and the model is solved again, a few rounds at most.
+                // Where the solution turns an element next to bone inside out, the bone would
+                // drag that tissue through itself or through the bone of another piece (the
+                // tissue behind an advanced segment, or between it and the skull it slides
+                // past): the tissue there lifts off (the element's nodes that move with a
+                // segment, are held on bone or slide are freed) and the model is solved again,
+                // a few rounds at most. The region's cut faces and held skin stay held.
                 let rounds = if t.release_cuts { RELEASE_ROUNDS } else { 0 };
                 for _ in 0..rounds {
                     let inverted = match &quadratic {
@@ -524,7 +527,10 @@ pub fn predict(
                         };
                         for n in cell {
                             let n = n as usize;
-                            if constraint[n] == SLIDING {
+                            let lifts = constraint[n] == SLIDING
+                                || constraint[n] == MOVED
+                                || (constraint[n] == FIXED && kind[n] == NodeKind::Bone);
+                            if lifts {
                                 constraint[n] = FREE;
                                 hold[n] = Hold::Free;
                                 linear_hold[n] = LinearHold::Free;
