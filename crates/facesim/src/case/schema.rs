@@ -250,7 +250,8 @@ pub struct Tet {
     pub load_steps: usize,
     /// Mucosa (tissue surface facing a cavity, e.g. the inner lip across the vestibule) within
     /// `mucosa_gap_mm` of the skull: true slides along the bone (its normal displacement follows
-    /// the bone, tangential free), false is attached (moves with the bone).
+    /// the bone, tangential free), false is attached (moves with the bone). With false nothing
+    /// slides or lifts off anywhere: the tissue is bonded to the bone it touches.
     pub sliding: bool,
     pub mucosa_gap_mm: f64,
     /// The periosteum raised at each saw line: bone nodes nearer than this (mm) to bone of

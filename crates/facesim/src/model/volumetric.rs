@@ -512,8 +512,14 @@ pub fn predict(
                 // tissue behind an advanced segment, or between it and the skull it slides
                 // past): the tissue there lifts off (the element's nodes that move with a
                 // segment, are held on bone or slide are freed) and the model is solved again,
-                // a few rounds at most. The region's cut faces and held skin stay held.
-                let rounds = if t.release_cuts { RELEASE_ROUNDS } else { 0 };
+                // a few rounds at most. The region's cut faces and held skin stay held. Lift-off
+                // is contact, as sliding is: with `sliding = false` the tissue stays bonded (and a
+                // plan basis exact for every plan, with no contact state to choose).
+                let rounds = if t.release_cuts && t.sliding {
+                    RELEASE_ROUNDS
+                } else {
+                    0
+                };
                 for _ in 0..rounds {
                     let inverted = match &quadratic {
                         Some(q) => q.inverted_after(&u),
