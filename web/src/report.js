@@ -505,6 +505,26 @@ function main() {
     side.appendChild(mt);
   }
 
+  // ---- the plan held against the clinic: published soft/hard ratios of its surgery type ----
+  const clinic = data.published;
+  if (clinic) {
+    side.appendChild(el("h2", {}, `against the clinic${clinic.title ? `: ${clinic.title}` : ""}`));
+    side.appendChild(el("p", { class: "clinic-reading" }, clinic.surgery
+      ? `Soft/hard ratios published for this surgery type (the spread of study means; hover a row for its source). The plan: ${clinic.reading}.`
+      : `No published ratios for this plan: ${clinic.reading}.`));
+    if ((clinic.rows || []).length > 0) {
+      const ct = table(["", "predicted", "published", ""]);
+      ct.classList.add("clinic");
+      for (const r of clinic.rows) {
+        const verdict = r.inside === true ? "inside" : r.inside === false ? "outside" : "not measured";
+        const notes = [r.missing, `hard: ${r.hard}${r.hard_at ? ` (taken at ${r.hard_at})` : ""}`, r.range_note, r.source].filter(Boolean);
+        row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted), `${fmt(r.low)}–${fmt(r.high)}`, verdict], notes.join("; "));
+        ct.lastChild.classList.add(r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
+      }
+      side.appendChild(ct);
+    }
+  }
+
   const u = data.uncertainty;
   if (u && u.samples > 0) {
     side.appendChild(el("h2", {}, `uncertainty: ${u.samples} samples (the run's plan)`));

@@ -67,6 +67,10 @@ try {
     box.click();
     return title;
   });
+  // The "against the clinic" table: each row's class (inside / outside / unmeasured) and text.
+  result.clinic = await page.evaluate(() =>
+    Array.from(document.querySelectorAll("table.clinic tr")).map((tr) => [tr.className, tr.textContent]),
+  );
   // The full-resolution frame that follows a drag, drawn now rather than after its delay.
   await page.evaluate(() => window.facesim.render());
   result.canvas_final = await canvasStats(page);

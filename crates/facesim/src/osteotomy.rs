@@ -48,6 +48,11 @@ impl Plan {
         }
     }
 
+    /// The segments, in the order they apply.
+    pub fn segments(&self) -> &[Osteotomy] {
+        &self.steps
+    }
+
     /// Move points; `scale` ∈ [0, 1] applies a fraction of every move (load increments:
     /// translation and rotation angles scaled). Returns the moved points and, per point,
     /// whether any segment moved it.

@@ -5,6 +5,7 @@
 
 use crate::case::{Case, Osteotomy};
 use crate::error::{Error, Result};
+use crate::landmarks::clinic::Clinic;
 use crate::landmarks::face_regions::RegionStats;
 use crate::landmarks::measure::{Measure, Ratio};
 use crate::landmarks::{Analysis, Carried, HeadFrame, Landmark, Ordered};
@@ -79,6 +80,10 @@ pub struct Report {
     pub measurements: Ordered<Measure>,
     /// Soft over hard tissue anterior movement per landmark pair (e.g. Pog'/Pog).
     pub soft_hard_ratios: Ordered<Ratio>,
+    /// The plan read as a surgery type of the published table, and its ratios as predicted beside
+    /// the published ranges and sources (`landmarks::clinic`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub published_ratios: Option<Clinic>,
     /// Region → vertices, mean, p90, max of the displacement (mm).
     pub regions: Ordered<RegionStats>,
     /// `[uncertainty] samples > 0`: the band per landmark and region (docs/uncertainty.md).
@@ -212,6 +217,7 @@ pub(crate) fn assemble(
         );
         r.measurements = a.measurements.clone();
         r.soft_hard_ratios = a.ratios.clone();
+        r.published_ratios = a.clinic.clone();
         r.regions = a.regions.clone();
     }
     r

@@ -78,6 +78,9 @@ pub struct PageData<'a> {
     /// report.json's `measurements` and `soft_hard_ratios` (the run's plan), shown as tables.
     pub measurements: serde_json::Value,
     pub ratios: serde_json::Value,
+    /// report.json's `published_ratios`: the plan's surgery type and its ratios beside the
+    /// published ranges (null when none).
+    pub published: serde_json::Value,
     /// With `[uncertainty] samples > 0`: per face vertex the width p95 − p05 of the sampled
     /// displacement magnitude (mm), and report.json's `uncertainty`.
     pub band_width: Option<Vec<f64>>,
@@ -189,6 +192,7 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
         "region_of": base64(&data.region_of),
         "measurements": data.measurements,
         "ratios": data.ratios,
+        "published": data.published,
         "band_width": data.band_width.as_ref().map(|b| {
             let f: Vec<f32> = b.iter().map(|x| *x as f32).collect();
             base64(&f32_bytes(&f))
@@ -220,7 +224,9 @@ grid-template-columns:60px 1fr 60px;align-items:center}.scale{margin:8px 0;displ
 grid-template-columns:1fr 1fr}.scale>span:first-child{grid-column:1/3}.ramp{grid-column:1/3;\
 height:12px;border:1px solid #999}.scale .max{text-align:right}.label,.why{font-weight:bold;\
 color:#a40}table.figures{border-collapse:collapse}table.figures th{text-align:left;\
-font-weight:normal;color:#555;padding-right:8px}ul.warnings{padding-left:18px;color:#a40}";
+font-weight:normal;color:#555;padding-right:8px}ul.warnings{padding-left:18px;color:#a40}\
+table.clinic tr.outside td{color:#b00;font-weight:bold}table.clinic tr.inside td:last-child{\
+color:#070}.clinic-reading{font-size:12px;color:#555}";
 
 fn escape_html(s: &str) -> String {
     s.replace('&', "&amp;")

@@ -149,6 +149,19 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
             ],
         }),
         band_width: Some(face.iter().map(|p| p[0].abs() * 0.01).collect()),
+        published: json!({
+            "surgery": "lefort-advance", "title": "Le Fort I advancement",
+            "reading": "'maxilla' (maxilla) moves +5.0 mm forward, +0.0 mm up at A",
+            "rows": [
+                {"soft": "Ls", "axis": "horizontal", "segment": "maxilla", "hard": "U1",
+                 "hard_at": "Ls", "soft_mm": 4.8, "hard_mm": 5.0, "predicted": 0.96,
+                 "low": 0.5, "high": 0.9, "inside": false, "source": "a source <b>"},
+                {"soft": "Prn", "axis": "horizontal", "segment": "maxilla", "hard": "A / U1",
+                 "hard_at": "", "soft_mm": null, "hard_mm": null, "predicted": null,
+                 "low": 0.17, "high": 0.36, "inside": null, "source": "another",
+                 "missing": "Prn not found"}
+            ]
+        }),
         ..Default::default()
     };
     let dir = common::kept_dir("facesim-page-analytic");
@@ -170,6 +183,24 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
             .is_some_and(|t| t.contains("band width")),
         "{}",
         r["band_shown"]
+    );
+    // The plan against the clinic: a row outside its range marked so, one not measured.
+    let clinic: Vec<(String, String)> = r["clinic"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| (x[0].as_str().unwrap().into(), x[1].as_str().unwrap().into()))
+        .collect();
+    assert_eq!(clinic.len(), 3, "{clinic:?}");
+    assert!(
+        clinic[1].0 == "outside"
+            && clinic[1].1.contains("0.96")
+            && clinic[1].1.contains("0.50–0.90"),
+        "{clinic:?}"
+    );
+    assert!(
+        clinic[2].0 == "unmeasured" && clinic[2].1.contains("not measured"),
+        "{clinic:?}"
     );
     // Before any plan: the run's face_post (float32 in the page).
     assert!(max_diff(&flat(&r["vertices_initial"]), &face_post) < 1e-4);

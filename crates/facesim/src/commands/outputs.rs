@@ -286,6 +286,7 @@ pub(crate) fn write_page(
         region_of: analysis.region_of.clone(),
         measurements: serde_json::to_value(&report.measurements).unwrap_or_default(),
         ratios: serde_json::to_value(&report.soft_hard_ratios).unwrap_or_default(),
+        published: serde_json::to_value(&report.published_ratios).unwrap_or_default(),
         band_width: band_width.map(<[f64]>::to_vec),
         uncertainty: serde_json::to_value(&report.uncertainty).unwrap_or_default(),
         no_basis_reason: "No plan basis was stored with this run, so the page cannot re-plan: \

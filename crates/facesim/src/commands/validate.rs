@@ -82,8 +82,7 @@ pub struct Row {
 impl Row {
     /// Inside the published range; None when not measured.
     pub fn inside(&self) -> Option<bool> {
-        self.ratio
-            .map(|r| r >= self.published.low - 5e-3 && r <= self.published.high + 5e-3)
+        self.ratio.map(|r| self.published.contains(r))
     }
 }
 

@@ -9,6 +9,7 @@
 //! [`locate`] finds the landmarks of a pre-operative face (user landmarks override detection);
 //! [`carry`] takes them to the predicted face as the same material points.
 
+pub mod clinic;
 pub mod detect;
 pub mod face_regions;
 pub mod frame;
@@ -274,6 +275,8 @@ pub struct Analysis {
     pub carried: Vec<Carried>,
     pub measurements: Ordered<measure::Measure>,
     pub ratios: Ordered<measure::Ratio>,
+    /// The plan's surgery type and its published ratios as predicted (None without a head frame).
+    pub clinic: Option<clinic::Clinic>,
     pub regions: Ordered<face_regions::RegionStats>,
     /// Per face vertex, its region's index in `face_regions::NAMES` (`face_regions::NONE`: none).
     pub region_of: Vec<u8>,
@@ -306,6 +309,9 @@ pub(crate) fn analyse_located(
         Some(f) => measure::measure(&carried, f),
         None => (Ordered::default(), Ordered::default()),
     };
+    let clinic = frame
+        .as_ref()
+        .map(|f| clinic::against_published(plan.segments(), &carried, f));
     let (regions, region_of) = match &frame {
         Some(f) => {
             let r = face_regions::regions(&face_pre.vertices, f, &positions(&lms));
@@ -332,6 +338,7 @@ pub(crate) fn analyse_located(
         carried,
         measurements,
         ratios,
+        clinic,
         regions,
         region_of,
     }

@@ -99,6 +99,14 @@ pub struct Published {
     pub unmeasured: Option<&'static str>,
 }
 
+impl Published {
+    /// A ratio inside the published range, to the table's printed precision (0.01: a ratio
+    /// that rounds to the range's end is inside).
+    pub fn contains(&self, ratio: f64) -> bool {
+        ratio >= self.low - 5e-3 && ratio <= self.high + 5e-3
+    }
+}
+
 // One argument per column of the table, in its order.
 #[allow(clippy::too_many_arguments)]
 const fn row(
