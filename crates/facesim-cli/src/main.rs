@@ -86,6 +86,10 @@ enum Cmd {
         /// Only this case (repeatable): a samples sub-directory's name, or `phantom`.
         #[arg(long = "case")]
         cases: Vec<String>,
+        /// Lay KEY=VALUE over every run's case, as `run --set` does (repeatable; e.g.
+        /// `--set tet.fat_dark.youngs_kpa=3`): the same table under other tissue parameters.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
@@ -357,7 +361,9 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             phantom_spacing,
             surgery,
             cases,
+            set,
         } => {
+            let overrides = facesim::case::overrides_table(&set)?;
             let surgeries = surgery
                 .iter()
                 .map(|s| {
@@ -376,6 +382,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 phantom_spacing_mm: phantom_spacing,
                 surgeries,
                 cases,
+                overrides,
                 command: std::env::args().collect::<Vec<_>>().join(" "),
             };
             let v = facesim::commands::validate::validate(&opts, &Progress::auto())?;

@@ -119,6 +119,8 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
         "3",
         "--surgery",
         "bsso-advance",
+        "--set",
+        "tet.fat_dark.youngs_kpa=2.5",
     ]);
     assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
     for f in ["validation.md", "validation.csv", "validation.svg"] {
@@ -133,6 +135,15 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
     // The published BSSO advance rows: Li, B', Pog', Me'.
     assert_eq!(rows.len(), 4, "{rows:?}");
     let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    // --set reached the run, and the table says it is not the defaults.
+    assert_eq!(
+        run["parameters"]["tet"]["fat_dark"]["youngs_kpa"].as_f64(),
+        Some(2.5)
+    );
+    assert!(md.contains("Not the product's defaults"), "{md}");
+    // The run's own report holds the plan against the same table (report.json
+    // published_ratios), read as a BSSO advance, with the same ratios.
+    assert_eq!(run["published_ratios"]["surgery"], "bsso-advance");
     let mut measured = 0;
     for row in &rows {
         assert_eq!(row["case"], "phantom01");
@@ -151,6 +162,17 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
                 assert!(
                     (ratio - again).abs() < 1.5e-3,
                     "{key:?}: csv {ratio} but the run's landmarks give {again}"
+                );
+                let own = run["published_ratios"]["rows"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .find(|r| r["soft"] == row["landmark"].as_str())
+                    .and_then(|r| r["predicted"].as_f64())
+                    .expect("the run's report has no such row");
+                assert!(
+                    (ratio - own).abs() < 1.5e-3,
+                    "{key:?}: csv {ratio} but the run's published_ratios {own}"
                 );
                 let inside = (lo - 5e-3..=hi + 5e-3).contains(&ratio);
                 assert_eq!(row["inside"], if inside { "yes" } else { "no" }, "{key:?}");
@@ -246,5 +268,7 @@ fn bad_input_is_one_line() {
         "/nonexistent-samples",
     ]);
     assert_clean_failure(&r, "/nonexistent-samples", "not found");
+    let r = facesim(&["validate", "--out", out.to_str().unwrap(), "--set", "tet"]);
+    assert_clean_failure(&r, "--set tet", "expected KEY=VALUE");
     assert!(!out.exists(), "a failed validation left {}", out.display());
 }

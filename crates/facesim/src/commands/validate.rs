@@ -33,6 +33,9 @@ pub struct Options {
     pub surgeries: Vec<Surgery>,
     /// Only these cases: sample directory names and/or "phantom" (empty: all).
     pub cases: Vec<String>,
+    /// Laid over every run's case after the surgery's plan (`case::overrides_table`, the CLI's
+    /// `--set`): other tissue parameters for the same table. Empty: the product's defaults.
+    pub overrides: toml::Table,
     /// The command line, for validation.md's header.
     pub command: String,
 }
@@ -273,7 +276,13 @@ pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
                 continue;
             }
             let run_dir = dir.join("runs").join(&name).join(s.key());
-            let result = run_one(&case, s, &run_dir, &Prefixed { inner: obs, prefix });
+            let result = run_one(
+                &case,
+                s,
+                &run_dir,
+                &opts.overrides,
+                &Prefixed { inner: obs, prefix },
+            );
             rows.extend(rows_of_run(&case.info, s, result));
         }
         case.info.seconds = started.elapsed().as_secs_f64();
@@ -532,6 +541,7 @@ fn run_one(
     case: &Prepared,
     s: Surgery,
     run_dir: &Path,
+    overrides: &toml::Table,
     obs: &dyn Observer,
 ) -> Result<RunLandmarks> {
     let mut osteotomies = Vec::new();
@@ -560,6 +570,7 @@ fn run_one(
     let mut tet = toml::Table::new();
     tet.insert("error_estimate".into(), toml::Value::Boolean(false));
     over.insert("tet".into(), toml::Value::Table(tet));
+    merge(&mut over, overrides);
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
     prune(&outcome.out_dir);
     let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
@@ -573,6 +584,18 @@ fn run_one(
             .collect(),
         mesh_box,
     })
+}
+
+/// Lay `top` over `base`, table by table (a value in `top` replaces `base`'s).
+fn merge(base: &mut toml::Table, top: &toml::Table) {
+    for (k, v) in top {
+        match (base.get_mut(k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(t)) => merge(b, t),
+            _ => {
+                base.insert(k.clone(), v.clone());
+            }
+        }
+    }
 }
 
 /// What a run tells about its landmarks: where they went, and the box of the tissue mesh (the
@@ -779,6 +802,17 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
         machine(),
         v.cases.iter().map(|c| c.seconds).sum::<f64>()
     ));
+    if !opts.overrides.is_empty() {
+        s.push_str(&format!(
+            "**Not the product's defaults**: every run with `{}` laid over its case.
+
+",
+            toml::to_string(&opts.overrides)
+                .unwrap_or_default()
+                .trim()
+                .replace('\n', "; ")
+        ));
+    }
     let (inside, outside, none) = v
         .rows
         .iter()
@@ -933,6 +967,7 @@ mod tests {
             phantom_spacing_mm: 2.0,
             surgeries: vec![],
             cases: vec![],
+            overrides: toml::Table::new(),
             command: "facesim validate".into(),
         };
         let md = markdown(&v, &opts);
