@@ -26,10 +26,11 @@ const ALLOWED_MODULE_CYCLES: &[&[&str]] = &[];
 /// for the model seam, `crates/facesim/src/pipeline/stage.rs` for the stages and
 /// `crates/facesim/src/solve/problem.rs` for the C1 solve).
 const ALLOWED_FILE_CYCLES: &[&[&str]] = &[
-    // landmarks/mod.rs: Landmark, Kind, Source, Carried, Ordered; calls detect, measure,
-    // markups, face_regions.
+    // landmarks/mod.rs: Landmark, Kind, Source, Carried, Ordered; calls clinic, detect,
+    // measure, markups, face_regions.
     &[
         "landmarks",
+        "landmarks::clinic",
         "landmarks::detect",
         "landmarks::face_regions",
         "landmarks::markups",
