@@ -288,6 +288,14 @@ pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
         case.info.seconds = started.elapsed().as_secs_f64();
         cases.push(case.info);
     }
+    // A failed run's message names its outputs under the temporary directory, which becomes
+    // `opts.out` at the commit below: name them where they will be.
+    let (tmp, out) = (dir.display().to_string(), opts.out.display().to_string());
+    for r in &mut rows {
+        if let Some(why) = &mut r.why {
+            *why = why.replace(&tmp, &out);
+        }
+    }
     let v = Validation {
         rows,
         skipped,
