@@ -19,7 +19,7 @@ pub use schema::*;
 pub use uncertainty::Uncertainty;
 
 /// Recursively lay `over` on top of `base` (tables merge, everything else replaces).
-fn merge(base: &mut toml::Table, over: toml::Table) {
+pub(crate) fn merge(base: &mut toml::Table, over: toml::Table) {
     for (k, v) in over {
         match (base.get_mut(&k), v) {
             (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),

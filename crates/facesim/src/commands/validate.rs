@@ -578,7 +578,7 @@ fn run_one(
     let mut tet = toml::Table::new();
     tet.insert("error_estimate".into(), toml::Value::Boolean(false));
     over.insert("tet".into(), toml::Value::Table(tet));
-    merge(&mut over, overrides);
+    crate::case::merge(&mut over, overrides.clone());
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
     prune(&outcome.out_dir);
     let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
@@ -592,18 +592,6 @@ fn run_one(
             .collect(),
         mesh_box,
     })
-}
-
-/// Lay `top` over `base`, table by table (a value in `top` replaces `base`'s).
-fn merge(base: &mut toml::Table, top: &toml::Table) {
-    for (k, v) in top {
-        match (base.get_mut(k), v) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(t)) => merge(b, t),
-            _ => {
-                base.insert(k.clone(), v.clone());
-            }
-        }
-    }
 }
 
 /// What a run tells about its landmarks: where they went, and the box of the tissue mesh (the

@@ -23,7 +23,8 @@ use super::frame::HeadFrame;
 use super::measure::along;
 use super::published::{Axis, Published, Surgery, rows_of};
 use crate::case::Osteotomy;
-use crate::vec3::{dot, sub};
+use crate::plan::basis::{displace, matrix};
+use crate::vec3::dot;
 use serde::{Deserialize, Serialize};
 
 /// The plan read as a surgery type, and that type's published rows as this run predicts them.
@@ -111,11 +112,9 @@ fn jaw_of(name: &str) -> Option<Jaw> {
 /// Moves smaller than this (mm, along the deciding axis) give no surgery type.
 const LEAST_MOVE_MM: f64 = 0.5;
 
-/// The displacement of `x` under the segment's rigid move: R (x − pivot) + pivot + t − x.
+/// The displacement of `x` under the segment's rigid move (the plan basis's M·[x; 1]).
 fn displacement(o: &Osteotomy, x: [f64; 3]) -> [f64; 3] {
-    let r = crate::osteotomy::rotation(o.rotate_deg);
-    let d = sub(x, o.pivot);
-    std::array::from_fn(|i| dot(r[i], d) + o.pivot[i] + o.translate[i] - x[i])
+    displace(&matrix(o), x)
 }
 
 /// A plan read as a surgery type: the type, how it was read, and each jaw's segment (index).
@@ -292,6 +291,7 @@ mod tests {
     use super::*;
     use crate::case::Region;
     use crate::landmarks::{Kind, Source};
+    use crate::vec3::sub;
 
     fn frame() -> HeadFrame {
         // LPS: anterior is −y, up is +z.
