@@ -60,6 +60,19 @@ enum Cmd {
         #[arg(long)]
         out: PathBuf,
     },
+    /// The soft-tissue landmarks and measurements of a face mesh alone — a 3D photo, any format
+    /// facesim reads, no CT (docs/landmarks.md "A face mesh alone"): landmarks.mrk.json (the
+    /// mesh file's own coordinates) and measurements.json in --out.
+    Landmarks {
+        mesh: PathBuf,
+        /// Output directory (default: MESH's stem + `_landmarks`, beside it).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// `auto`: up, front and the midsagittal plane found from the mesh; `lps`: the file's
+        /// axes are LPS (x left, y back, z up), as a CT's skin.
+        #[arg(long, value_parser = ["auto", "lps"], default_value = "auto")]
+        frame: String,
+    },
     /// Every surgery type of the published soft/hard ratio table (docs/validation.md) on every
     /// real sample that has the bone and on a phantom cohort, with the product's defaults:
     /// validation.md, validation.csv and validation.svg in --out.
@@ -293,6 +306,7 @@ fn main() -> ExitCode {
         Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
         Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
         Cmd::Validate { out, .. } => Some(format!("the validation into {}", out.display())),
+        Cmd::Landmarks { mesh, .. } => Some(mesh.display().to_string()),
     };
     if let Some(s) = subject {
         let _ = SUBJECT.set(s);
@@ -353,6 +367,36 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             Ok(())
         }
         Cmd::Inspect { path } => cmd_inspect(&path),
+        Cmd::Landmarks { mesh, out, frame } => {
+            let from = if frame == "lps" {
+                facesim::landmarks::scan::FrameFrom::Lps
+            } else {
+                facesim::landmarks::scan::FrameFrom::Shape
+            };
+            let out = out.unwrap_or_else(|| facesim::commands::landmarks::default_out(&mesh));
+            let (dir, found) = facesim::commands::landmarks::landmarks(&mesh, &out, from)?;
+            let n = found
+                .landmarks
+                .iter()
+                .filter(|l| l.position.is_some())
+                .count();
+            println!(
+                "{n} of {} soft-tissue landmarks found on {} (unit {}; vertical along {}) → {}",
+                found.landmarks.len(),
+                mesh.display(),
+                found.unit.name,
+                found.frame.vertical_from,
+                dir.display()
+            );
+            for l in found.landmarks.iter().filter(|l| l.position.is_none()) {
+                println!(
+                    "  {} missing: {}",
+                    l.label,
+                    l.missing.as_deref().unwrap_or("")
+                );
+            }
+            Ok(())
+        }
         Cmd::Validate {
             out,
             samples,

@@ -51,9 +51,15 @@ where
 }
 
 /// Files one of which a directory that facesim wrote as a unit holds (report.json of `run` and
-/// `replan`, sweep.csv of `sweep`, validation.csv of `validate`): a non-empty directory without any is not replaced, since
-/// the swap removes everything in it.
-const UNIT_FILES: [&str; 3] = ["report.json", "sweep.csv", "validation.csv"];
+/// `replan`, sweep.csv of `sweep`, validation.csv of `validate`, measurements.json of
+/// `landmarks`): a non-empty directory without any is not replaced, since the swap removes
+/// everything in it.
+const UNIT_FILES: [&str; 4] = [
+    "report.json",
+    "sweep.csv",
+    "validation.csv",
+    "measurements.json",
+];
 
 /// Names of a unit's temporaries in the output directory's parent: `.{name}.facesim-run-{pid}-{n}`
 /// plus `.new` (the directory being written), `.old` (the previous output during the swap) and

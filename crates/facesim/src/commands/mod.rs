@@ -7,9 +7,12 @@
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
 //!   library carries no chart crate;
+//! - [`landmarks`]: `facesim landmarks` (the soft landmarks and measurements of a face mesh
+//!   alone, a 3D photo with no CT);
 //! - [`validate`]: `facesim validate` (every surgery type on the real samples and a phantom
 //!   cohort against the published soft/hard ratios; its chart is the caller's too).
 
+pub mod landmarks;
 pub mod outputs;
 pub mod replan;
 pub mod run;

@@ -19,6 +19,8 @@ const REACH_MM: f64 = 15.0;
 const GAP_MM: f64 = 2.0;
 /// Bone farther behind the soft profile than this is not facial bone.
 const BONE_DEPTH_MM: f64 = 35.0;
+/// Without a skull, skin farther behind the most anterior point than this is not the face.
+const FACE_DEPTH_MM: f64 = 70.0;
 
 /// Convex: a local maximum of anteriority (a bump); concave: a local minimum (a fold).
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -188,7 +190,14 @@ impl Found {
 /// Detect the soft-tissue landmarks on `skin` and the bony ones on `skull` (None: no skull).
 pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
     let mut f = Found { list: Vec::new() };
-    let soft = profile(&section(skin, frame), |_, _| true);
+    let seg = section(skin, frame);
+    // A face mesh alone may be a whole head: its profile is the face's, not the back of the head
+    // where the frame's heights run on past the face's ends.
+    let front = seg
+        .iter()
+        .flat_map(|s| [s[0][1], s[1][1]])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let soft = profile(&seg, |_, a| skull.is_some() || a > front - FACE_DEPTH_MM);
     let Some(sp) = soft else {
         let why = "the skin has no midsagittal section".to_string();
         return SOFT
@@ -200,7 +209,7 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
             )
             .collect();
     };
-    soft_landmarks(&sp, &mut f);
+    soft_landmarks(&sp, skull.is_none(), &mut f);
     let bone_prof = skull.and_then(|m| {
         profile(&section(m, frame), |v, a| {
             let s = sp.at(v);
@@ -218,6 +227,11 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
                 );
             }
         }
+    }
+    if skull.is_none() {
+        // A face mesh alone (a 3D photo): the soft chin by its own shape.
+        soft_chin(&sp, &seg, &mut f);
+        return in_order(&f, frame);
     }
     chin_landmarks(&sp, skull.zip(bone_prof.as_ref()), frame, &mut f);
     // Soft menton: the skin below bony menton (on its vertical line in the plane).
@@ -253,7 +267,11 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
         None => Err("defined below bony menton (Me), which is missing".into()),
     };
     f.put("Me'", Kind::Soft, me_soft);
-    // In the documented order, as LPS points.
+    in_order(&f, frame)
+}
+
+/// The landmarks found, in the documented order, as LPS points.
+fn in_order(f: &Found, frame: &HeadFrame) -> Vec<Landmark> {
     SOFT.iter()
         .map(|l| (*l, Kind::Soft))
         .chain(BONE.iter().map(|l| (*l, Kind::Bone)))
@@ -278,14 +296,78 @@ pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landm
         .collect()
 }
 
-fn soft_landmarks(p: &Profile, f: &mut Found) {
+/// The soft chin without bone (docs/landmarks.md "A face mesh alone"): B' the first concavity
+/// of the profile below Li, Pog' the first convexity below B', Me' the lowest point of the
+/// midsagittal section within 20 mm behind Pog' — only where the skin goes on behind it (the
+/// underside of the chin), not where the scan simply ends.
+fn soft_chin(sp: &Profile, seg: &[[[f64; 2]; 2]], f: &mut Found) {
+    let va = |i: usize| [sp.height(i), sp.a[i]];
+    let li = f.get("Li").and_then(|li| sp.index(li[0]));
+    let b = li.and_then(|i| walk(sp, i, Ext::Concave, true));
+    let pog = b.and_then(|i| walk(sp, i, Ext::Convex, true));
+    let li_v = f.get("Li").map_or(f64::NAN, |l| l[0]);
+    let end = |what: &str| {
+        let lo = (0..sp.a.len()).find(|i| sp.a[*i].is_finite()).unwrap_or(0);
+        format!(
+            "the midsagittal skin profile has no {what} (it ends {:.0} mm below labrale inferius)",
+            li_v - sp.height(lo)
+        )
+    };
+    let missing_li = || "defined below labrale inferius (Li), which is missing".to_string();
+    f.put(
+        "B'",
+        Kind::Soft,
+        match (li, b) {
+            (_, Some(i)) => Ok(va(i)),
+            (Some(_), None) => Err(end("concavity below labrale inferius")),
+            _ => Err(missing_li()),
+        },
+    );
+    f.put(
+        "Pog'",
+        Kind::Soft,
+        match (b, pog) {
+            (_, Some(i)) => Ok(va(i)),
+            (Some(_), None) => Err(end("convexity below soft B point")),
+            _ => Err("defined below soft B point (B'), which is missing".into()),
+        },
+    );
+    let me = match pog.map(va) {
+        Some([vp, ap]) => {
+            let pts = seg.iter().flat_map(|s| [s[0], s[1]]);
+            let low = pts
+                .clone()
+                .filter(|q| q[0] < vp && q[1] <= ap + 0.5 && q[1] >= ap - 20.0)
+                .min_by(|x, y| x[0].total_cmp(&y[0]));
+            match low {
+                Some(m)
+                    if pts.clone().any(|q| {
+                        q[1] < m[1] - 5.0 && q[1] > m[1] - 30.0 && (q[0] - m[0]).abs() < 12.0
+                    }) =>
+                {
+                    Ok(m)
+                }
+                Some(_) => {
+                    Err("the skin's midsagittal section ends at the chin (no skin under it)".into())
+                }
+                None => Err("no skin below soft pogonion".into()),
+            }
+        }
+        None => Err("defined below soft pogonion (Pog'), which is missing".into()),
+    };
+    f.put("Me'", Kind::Soft, me);
+}
+
+fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
     let end_lo = (0..p.a.len()).find(|i| p.a[*i].is_finite()).unwrap_or(0);
     let end_hi = (0..p.a.len())
         .rev()
         .find(|i| p.a[*i].is_finite())
         .unwrap_or(0);
+    // Without a skull (a face mesh alone, perhaps cut off at the lips) the tip must stand out
+    // as a convexity: the scan's cut edge can lie in front of it.
     let Some(prn) = (0..p.a.len())
-        .filter(|i| p.a[*i].is_finite())
+        .filter(|i| p.a[*i].is_finite() && (!scan || is_extremum(p, *i, Ext::Convex)))
         .max_by(|a, b| p.a[*a].total_cmp(&p.a[*b]))
     else {
         return;

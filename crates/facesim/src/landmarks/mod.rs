@@ -16,6 +16,7 @@ pub mod frame;
 pub mod markups;
 pub mod measure;
 pub mod published;
+pub mod scan;
 
 use crate::compare::{SurfaceIndex, barycentric};
 use crate::error::{Error, Result};

@@ -1,0 +1,148 @@
+//! Landmarks on a face mesh alone, no CT (issue 27 item 1; docs/landmarks.md "A face mesh
+//! alone"): a real head's skin made by another program (scikit-image's marching cubes of
+//! VTK's headsq CT, tests/python/isosurface.py), cut to its outer face, and the same mesh as a
+//! scanner would hand it over — turned into a y-up frame, yawed, in metres. The landmarks must
+//! come back rotated and scaled with the mesh.
+
+mod common;
+
+use facesim::landmarks::scan::{FaceLandmarks, FrameFrom, landmarks_of};
+use facesim::mesh::Mesh;
+use std::sync::OnceLock;
+
+/// headsq's whole iso-surface at −500 HU by scikit-image, cut to what a range scan sees.
+fn headsq_face() -> &'static Mesh {
+    static FACE: OnceLock<Mesh> = OnceLock::new();
+    FACE.get_or_init(|| {
+        let ct = facesim::volume::read_volume(&common::real_mandible_ct()).unwrap();
+        let dir = common::kept_dir("facesim-face-scan");
+        let raw = dir.join("ct.f32");
+        let bytes: Vec<u8> = ct.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+        std::fs::write(&raw, bytes).unwrap();
+        let meta = serde_json::json!({
+            "dims": ct.dims, "spacing": ct.spacing, "origin": ct.origin, "direction": ct.direction,
+        });
+        let meta_path = dir.join("ct.json");
+        std::fs::write(&meta_path, meta.to_string()).unwrap();
+        let out = dir.join("iso.obj");
+        // −500 HU; headsq's voxels are HU + 1024 as vtk.js ships them.
+        let lowest = ct.data.iter().copied().fold(f32::INFINITY, f32::min);
+        let level = if lowest >= -1.0 { "524" } else { "-500" };
+        common::run_python_script(
+            "isosurface.py",
+            &[
+                raw.as_os_str(),
+                meta_path.as_os_str(),
+                level.as_ref(),
+                out.as_os_str(),
+            ],
+        );
+        let iso = facesim::mesh::model_file::read_model(&out).unwrap();
+        let (lo, hi) = iso.bounds();
+        let axis = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+        facesim::surface::outer::outer_face(&iso, axis, &out)
+            .unwrap()
+            .0
+    })
+}
+
+/// A rotation about a unit axis by `deg`.
+fn rotation(axis: [f64; 3], deg: f64) -> [[f64; 3]; 3] {
+    let (s, c) = deg.to_radians().sin_cos();
+    let [x, y, z] = axis;
+    [
+        [
+            c + x * x * (1.0 - c),
+            x * y * (1.0 - c) - z * s,
+            x * z * (1.0 - c) + y * s,
+        ],
+        [
+            y * x * (1.0 - c) + z * s,
+            c + y * y * (1.0 - c),
+            y * z * (1.0 - c) - x * s,
+        ],
+        [
+            z * x * (1.0 - c) - y * s,
+            z * y * (1.0 - c) + x * s,
+            c + z * z * (1.0 - c),
+        ],
+    ]
+}
+
+fn apply(r: &[[f64; 3]; 3], k: f64, p: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| k * (r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2]))
+}
+
+fn moved(m: &Mesh, r: &[[f64; 3]; 3], k: f64) -> Mesh {
+    Mesh::new(
+        m.vertices.iter().map(|p| apply(r, k, *p)).collect(),
+        m.triangles.clone(),
+    )
+}
+
+fn position(f: &FaceLandmarks, label: &str) -> Option<[f64; 3]> {
+    f.landmarks
+        .iter()
+        .find(|l| l.label == label)
+        .and_then(|l| l.position)
+}
+
+#[test]
+fn a_real_face_by_another_program_has_its_landmarks_in_face_order() {
+    let face = headsq_face();
+    let f = landmarks_of(face, FrameFrom::Shape).unwrap();
+    assert_eq!(f.unit.name, "mm");
+    let height = |l: &str| {
+        let p = position(&f, l).unwrap_or_else(|| panic!("{l} missing: {:?}", f.landmarks));
+        facesim::vec3::dot(p, f.frame.vertical)
+    };
+    // The nose and lips, top to bottom, spaced as a face's (the search's own rules are wider).
+    let order = ["Prn", "Sn", "Ls", "Sto", "Li"];
+    for w in order.windows(2) {
+        let drop = height(w[0]) - height(w[1]);
+        assert!(
+            (1.0..30.0).contains(&drop),
+            "{} above {} by {drop:.1} mm",
+            w[0],
+            w[1]
+        );
+    }
+    // The frame's front is the face's: pronasale in front of subnasale and the lips.
+    let front = |l: &str| facesim::vec3::dot(position(&f, l).unwrap(), f.frame.anterior);
+    for (l, by) in [("Sn", 5.0), ("Ls", 2.0), ("Li", 2.0)] {
+        let d = front("Prn") - front(l);
+        assert!(d > by, "Prn only {d:.1} mm in front of {l}");
+    }
+    assert!(
+        f.measurements
+            .0
+            .iter()
+            .any(|(k, m)| k == "nasolabial_angle" && m.before.is_some())
+    );
+}
+
+#[test]
+fn a_scan_in_another_frame_or_in_metres_gives_the_same_landmarks_moved_with_it() {
+    let face = headsq_face();
+    let base = landmarks_of(face, FrameFrom::Shape).unwrap();
+    // A scanner's y-up, z-forward frame (LPS turned about x); a 30° yaw; the y-up frame in
+    // metres.
+    let cases = [
+        (rotation([1.0, 0.0, 0.0], -90.0), 1.0, "mm"),
+        (rotation([0.0, 0.0, 1.0], 30.0), 1.0, "mm"),
+        (rotation([1.0, 0.0, 0.0], -90.0), 0.001, "m"),
+    ];
+    for (r, k, unit) in cases {
+        let f = landmarks_of(&moved(face, &r, k), FrameFrom::Shape).unwrap();
+        assert_eq!(f.unit.name, unit);
+        for label in ["Prn", "Sn", "Ls", "Sto", "Li"] {
+            let want = apply(&r, k, position(&base, label).unwrap());
+            let got = position(&f, label).unwrap_or_else(|| panic!("{label} missing ({unit})"));
+            let d = facesim::vec3::norm(facesim::vec3::sub(got, want)) / k;
+            assert!(
+                d < 1.0,
+                "{label}: {d:.2} mm off the moved landmark ({unit})"
+            );
+        }
+    }
+}
