@@ -421,9 +421,33 @@ fn front_frame(mesh: &Mesh, frame: &HeadFrame, lms: &[Landmark]) -> Option<HeadF
     ))
 }
 
+/// The width (mm, side to side) of the skin within 5 mm behind the tip of `lms` and 2 mm of its
+/// height: a nose tip is narrow (about 15 mm there); a lip, a chin or a brow is not.
+fn tip_width(mesh: &Mesh, frame: &HeadFrame, lms: &[Landmark]) -> f64 {
+    let Some(tip) = lms
+        .iter()
+        .find(|l| l.label == "Prn")
+        .and_then(|l| l.position)
+    else {
+        return f64::INFINITY;
+    };
+    let t = frame.coords(tip);
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for p in &mesh.vertices {
+        let c = frame.coords(*p);
+        if (c[1] - t[1]).abs() < 2.0 && c[2] > t[2] - 5.0 && c[2] < t[2] + 1.0 {
+            lo = lo.min(c[0]);
+            hi = hi.max(c[0]);
+        }
+    }
+    if hi > lo { hi - lo } else { f64::INFINITY }
+}
+
 /// The best of 72 frames in the plane (o, n): both sides of the plane as the patient's left,
-/// every 10° as up, each turned to its nose tip's front (`front_frame`). Score
-/// (`face_score`), then landmarks found, decide.
+/// every 10° as up, each turned to its nose tip's front (`front_frame`). Of those that read
+/// as a face (`face_score` ≥ 2), the one with the narrowest tip (`tip_width`) wins: the finer
+/// score is brittle at its ranges' edges (a 10° turn moves a landmark across one), the nose's
+/// narrowness is not, and read upside down a lower lip passes every other rule.
 fn best_up(
     mesh: &Mesh,
     border: &VertexGrid,
@@ -464,12 +488,16 @@ fn best_up(
                 }
                 None => (*f, lms),
             };
-            let found = lms.iter().filter(|l| l.position.is_some()).count();
-            (face_score(mesh, border, &lms, &f), found, f, lms)
+            (
+                face_score(mesh, border, &lms, &f),
+                tip_width(mesh, &f, &lms),
+                f,
+                lms,
+            )
         })
         .collect::<Vec<_>>()
         .into_iter()
-        .max_by(|a, b| a.0.cmp(&b.0).then(a.1.cmp(&b.1)))
+        .max_by(|a, b| (a.0 >= 2).cmp(&(b.0 >= 2)).then(b.1.total_cmp(&a.1)))
         .map(|(s, _, f, l)| (s, f, l))
         .unwrap_or_else(|| (0, frame_with(o, n, e1, residual), Vec::new()))
 }
