@@ -157,3 +157,66 @@ fn a_scan_in_another_frame_or_in_metres_gives_the_same_landmarks_moved_with_it()
         eprintln!("{unit}, {r:.2?}: at most {worst:.2} mm off");
     }
 }
+
+/// `facesim landmarks` (the command's body): a face in metres written as PLY gives
+/// landmarks.mrk.json in the file's own metres (read back equal to the landmarks found) and
+/// measurements.json stating the unit; a sphere gets one line naming the file, and no output.
+#[test]
+fn the_command_writes_markups_in_the_files_units_and_refuses_a_sphere() {
+    let dir = common::kept_dir("facesim-landmarks-cmd");
+    let face = moved(headsq_face(), &rotation([1.0, 0.0, 0.0], -90.0), 0.001);
+    let mesh = dir.join("photo.ply");
+    facesim::mesh::write_mesh(&face, &mesh).unwrap();
+    let out = dir.join("lm");
+    let (written, found) =
+        facesim::commands::landmarks::landmarks(&mesh, &out, FrameFrom::Shape).unwrap();
+    assert_eq!(written, out);
+    let back = facesim::landmarks::markups::read(&out.join("landmarks.mrk.json")).unwrap();
+    let want = facesim::landmarks::positions(&found.landmarks);
+    assert_eq!(back.len(), want.len());
+    for ((l1, p1), (l2, p2)) in back.iter().zip(&want) {
+        assert_eq!(l1, l2);
+        assert!(facesim::vec3::norm(facesim::vec3::sub(*p1, *p2)) < 1e-9);
+        // Metres: a face's landmarks lie within 0.3 of each other, not 300.
+        assert!(facesim::vec3::norm(facesim::vec3::sub(*p1, want[0].1)) < 0.3);
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["unit"]["name"], "m");
+    assert_eq!(m["unit"]["mm_per_unit"], 1000.0);
+
+    // A sphere: not a face, nothing written.
+    let mut v = Vec::new();
+    let mut t = Vec::new();
+    let (nu, nv) = (24u32, 12u32);
+    for j in 0..=nv {
+        // A sphere without its pole caps (no degenerate triangles there).
+        let th = 0.2 + (std::f64::consts::PI - 0.4) * j as f64 / nv as f64;
+        for i in 0..nu {
+            let ph = 2.0 * std::f64::consts::PI * i as f64 / nu as f64;
+            v.push([
+                90.0 * th.sin() * ph.cos(),
+                90.0 * th.sin() * ph.sin(),
+                90.0 * th.cos(),
+            ]);
+        }
+    }
+    for j in 0..nv {
+        for i in 0..nu {
+            let (a, b) = (j * nu + i, j * nu + (i + 1) % nu);
+            t.push([a, a + nu, b]);
+            t.push([b, a + nu, b + nu]);
+        }
+    }
+    let ball = dir.join("ball.obj");
+    facesim::mesh::write_mesh(&Mesh::new(v, t), &ball).unwrap();
+    let none = dir.join("ball_out");
+    let e = facesim::commands::landmarks::landmarks(&ball, &none, FrameFrom::Shape)
+        .unwrap_err()
+        .to_string();
+    assert!(e.starts_with(&ball.display().to_string()), "{e}");
+    assert!(e.contains("not a face"), "{e}");
+    assert!(!e.contains('\n'), "{e}");
+    assert!(!none.exists());
+}
