@@ -213,6 +213,14 @@ enum Cmd {
         /// and landmarks_pre.mrk.json; docs/landmarks.md).
         #[arg(long, value_name = "OUT_DIR")]
         regions: Option<PathBuf>,
+        /// Two faces of one person (any frames and units): register A onto B on the skin
+        /// surgery leaves (forehead, eyes, nasal bridge), then per landmark the distance and per
+        /// facial region mean / p90 / % within 2 mm (docs/landmarks.md "Two faces of one person").
+        #[arg(long, conflicts_with = "regions")]
+        landmarks: bool,
+        /// With --landmarks: a PNG of A (registered) coloured by its distance to B, from the front.
+        #[arg(long, requires = "landmarks", value_name = "PNG")]
+        picture: Option<PathBuf>,
     },
 }
 
@@ -498,7 +506,16 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             b,
             json,
             regions,
+            landmarks: false,
+            ..
         } => cmd_compare(&a, &b, json, regions.as_deref()),
+        Cmd::Compare {
+            a,
+            b,
+            json,
+            picture,
+            ..
+        } => cmd_compare_faces(&a, &b, json, picture.as_deref()),
     }
 }
 
@@ -703,6 +720,54 @@ fn cmd_study(out_dir: &Path, quick: bool, cases: Vec<PathBuf>) -> Result<()> {
         s.wall_s,
         s.face.len()
     );
+    Ok(())
+}
+
+fn cmd_compare_faces(a: &Path, b: &Path, json: bool, picture: Option<&Path>) -> Result<()> {
+    let ma = facesim::mesh::read_mesh(a)?;
+    let mb = facesim::mesh::read_mesh(b)?;
+    let o = facesim::landmarks::outcome::compare_faces(&ma, &mb).map_err(|e| {
+        // Name the face the message is about.
+        match e.strip_prefix("B: ") {
+            Some(rest) => Error::input(b, rest),
+            None => Error::input(a, e.strip_prefix("A: ").unwrap_or(&e)),
+        }
+    })?;
+    if let Some(png) = picture {
+        let coloured = facesim::commands::outputs::coloured_face(&o.a_in_frame, &o.distances);
+        let size = 800;
+        let rgb = render::render(&[&coloured], render::View::Front, size);
+        render::write_png(&rgb, size, png)?;
+    }
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&o).map_err(|e| Error::output(a, e))?
+        );
+        return Ok(());
+    }
+    println!(
+        "registered on {} vertices ({}): rms {:.3} mm after {} iterations",
+        o.registration.vertices,
+        o.registration.on,
+        o.registration.rms_mm,
+        o.registration.iterations
+    );
+    for (label, d) in &o.landmarks.0 {
+        match d.distance_mm {
+            Some(x) => println!("{label}: {x:.2} mm"),
+            None => println!("{label}: {}", d.missing.as_deref().unwrap_or("missing")),
+        }
+    }
+    for (name, r) in &o.regions.0 {
+        match &r.stats {
+            Some(s) => println!(
+                "{name}: {} vertices, mean {:.3} mm, p90 {:.3} mm, within 2 mm {:.1}%",
+                r.vertices, s.mean, s.p90, s.pct_within_2mm
+            ),
+            None => println!("{name}: {}", r.absent.as_deref().unwrap_or("absent")),
+        }
+    }
     Ok(())
 }
 

@@ -46,7 +46,7 @@ fn max_of(d: &[f64]) -> f64 {
 
 /// The predicted face `post` coloured by its displacement (viridis, 0 → max) with a
 /// `displacement` vertex column.
-pub(crate) fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
+pub fn coloured_face(post: &Mesh, dist: &[f64]) -> Mesh {
     let dmax = max_of(dist);
     let mut m = post.clone();
     m.colors = Some(

@@ -15,6 +15,7 @@ pub mod face_regions;
 pub mod frame;
 pub mod markups;
 pub mod measure;
+pub mod outcome;
 pub mod published;
 pub mod scan;
 

@@ -1,0 +1,315 @@
+//! Outcomes measured the clinic's way (`facesim compare A B --landmarks`, docs/landmarks.md
+//! "Two faces of one person"): two face meshes of one person — a prediction and the
+//! post-operative 3D photo, or two photos — each in its own frame and unit, registered rigidly
+//! on what surgery does not move, then compared per landmark and per facial region (mean, p90,
+//! % within 2 mm: the measures of Liebregts et al. 2015 and the studies of VALIDATION.md).
+
+use super::face_regions::{self, NAMES, RegionDistance};
+use super::scan::{FaceLandmarks, FrameFrom, landmarks_of};
+use super::{Landmark, Ordered, positions};
+use crate::compare::{SurfaceIndex, point_to_surface, stats};
+use crate::mesh::Mesh;
+use crate::vec3::{add, dot, norm, scale, sub};
+use nalgebra::{Matrix3, Vector3};
+use serde::Serialize;
+
+/// A rigid motion p ↦ R p + t (mm).
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct Rigid {
+    pub rotation: [[f64; 3]; 3],
+    pub translation: [f64; 3],
+}
+
+impl Rigid {
+    fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = &self.rotation;
+        add(
+            [0, 1, 2].map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2]),
+            self.translation,
+        )
+    }
+}
+
+/// How A was laid onto B.
+#[derive(Clone, Debug, Serialize)]
+pub struct Registration {
+    /// Which of A's skin took part, in words.
+    pub on: String,
+    pub vertices: usize,
+    /// RMS distance of those vertices to B after the fit (mm; the worse 10 % left out).
+    pub rms_mm: f64,
+    pub iterations: usize,
+    /// A (in mm) to B (in mm).
+    pub motion: Rigid,
+}
+
+/// One landmark's distance between the faces after registration.
+#[derive(Clone, Debug, Serialize)]
+pub struct LandmarkDistance {
+    pub distance_mm: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub missing: Option<String>,
+}
+
+/// `compare --landmarks`: the faces' units and landmarks, the registration, and the distances.
+#[derive(Clone, Debug, Serialize)]
+pub struct Outcome {
+    pub a: FaceLandmarks,
+    pub b: FaceLandmarks,
+    pub registration: Registration,
+    pub landmarks: Ordered<LandmarkDistance>,
+    /// Per facial region of A (after registration): its vertices' distances to B's surface.
+    pub regions: Ordered<RegionDistance>,
+    /// A laid onto B, in B's head frame as LPS (x to the left, −y forward, z up; mm), and each
+    /// of its vertices' distance to B: for a picture.
+    #[serde(skip)]
+    pub a_in_frame: Mesh,
+    #[serde(skip)]
+    pub distances: Vec<f64>,
+}
+
+/// The rotation and translation that best map `from` onto `to` (least squares; Kabsch).
+fn kabsch(from: &[[f64; 3]], to: &[[f64; 3]]) -> Rigid {
+    let n = from.len().max(1) as f64;
+    let ca = scale(from.iter().fold([0.0; 3], |s, p| add(s, *p)), 1.0 / n);
+    let cb = scale(to.iter().fold([0.0; 3], |s, p| add(s, *p)), 1.0 / n);
+    let mut h = Matrix3::<f64>::zeros();
+    for (p, q) in from.iter().zip(to) {
+        let a = Vector3::from(sub(*p, ca));
+        let b = Vector3::from(sub(*q, cb));
+        h += a * b.transpose();
+    }
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u.unwrap_or_default(), svd.v_t.unwrap_or_default());
+    let mut d = Matrix3::identity();
+    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = vt.transpose() * d * u.transpose();
+    let rotation = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[(i, j)]));
+    let rc = Rigid {
+        rotation,
+        translation: [0.0; 3],
+    }
+    .apply(ca);
+    Rigid {
+        rotation,
+        translation: sub(cb, rc),
+    }
+}
+
+fn compose(second: &Rigid, first: &Rigid) -> Rigid {
+    let r = |i: usize, j: usize| {
+        (0..3)
+            .map(|k| second.rotation[i][k] * first.rotation[k][j])
+            .sum()
+    };
+    Rigid {
+        rotation: [0, 1, 2].map(|i| [0, 1, 2].map(|j| r(i, j))),
+        translation: second.apply(first.translation),
+    }
+}
+
+fn found(f: &FaceLandmarks, label: &str) -> Option<[f64; 3]> {
+    f.landmarks
+        .iter()
+        .find(|l| l.label == label)
+        .and_then(|l| l.position)
+        .map(|p| scale(p, f.unit.mm_per_unit))
+}
+
+fn in_mm(m: &Mesh, f: &FaceLandmarks) -> Mesh {
+    let k = f.unit.mm_per_unit;
+    Mesh::new(
+        m.vertices.iter().map(|p| scale(*p, k)).collect(),
+        m.triangles.clone(),
+    )
+}
+
+/// Skin above this far over pronasale's height is what a jaw operation leaves in place: the
+/// forehead, the eyes, the nasal bridge (mm; Le Fort I cuts below the nose's bony base).
+const STABLE_ABOVE_PRN_MM: f64 = 15.0;
+
+/// Compare face A with face B (any frames and units): A is laid onto B by its stable skin and
+/// both are measured in mm. Errors say which face is not a face.
+pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
+    let fa = landmarks_of(a, FrameFrom::Shape).map_err(|e| format!("A: {e}"))?;
+    let fb = landmarks_of(b, FrameFrom::Shape).map_err(|e| format!("B: {e}"))?;
+    let (am, bm) = (in_mm(a, &fa), in_mm(b, &fb));
+    // Start: A's head frame onto B's, A's soft nasion (else its nose tip) onto B's.
+    let axes = |f: &FaceLandmarks| [f.frame.lateral, f.frame.vertical, f.frame.anterior];
+    let (xa, xb) = (axes(&fa), axes(&fb));
+    let rotation = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| xb[k][i] * xa[k][j]).sum()));
+    let anchor = ["N'", "Prn"]
+        .into_iter()
+        .find_map(|l| Some((found(&fa, l)?, found(&fb, l)?)))
+        .ok_or("A and B share neither a soft nasion nor a pronasale to start the fit from")?;
+    let turn = Rigid {
+        rotation,
+        translation: [0.0; 3],
+    };
+    let mut motion = Rigid {
+        rotation,
+        translation: sub(anchor.1, turn.apply(anchor.0)),
+    };
+    // The stable skin of A: above pronasale by STABLE_ABOVE_PRN_MM in A's frame.
+    let prn = found(&fa, "Prn").ok_or("A: no pronasale")?;
+    let v_prn = dot(prn, fa.frame.vertical);
+    let stable: Vec<[f64; 3]> = am
+        .vertices
+        .iter()
+        .filter(|p| dot(**p, fa.frame.vertical) > v_prn + STABLE_ABOVE_PRN_MM)
+        .copied()
+        .collect();
+    if stable.len() < 100 {
+        return Err(format!(
+            "A has {} vertices more than {STABLE_ABOVE_PRN_MM} mm above its nose tip: too little forehead and nasal bridge to register on",
+            stable.len()
+        ));
+    }
+    let step = (stable.len() / 3000).max(1);
+    let stable: Vec<[f64; 3]> = stable.into_iter().step_by(step).collect();
+    let index = SurfaceIndex::new(&bm);
+    // ICP: each stable point to its closest point on B, the better 90 % fitted (Kabsch).
+    let mut rms = f64::NAN;
+    let mut iterations = 0;
+    for it in 0..60 {
+        iterations = it + 1;
+        let moved: Vec<[f64; 3]> = stable.iter().map(|p| motion.apply(*p)).collect();
+        let mut pairs: Vec<([f64; 3], [f64; 3], f64)> = moved
+            .iter()
+            .map(|p| {
+                let (d, q) = index.closest(*p);
+                (*p, q, d)
+            })
+            .collect();
+        pairs.sort_by(|x, y| x.2.total_cmp(&y.2));
+        pairs.truncate((pairs.len() * 9).div_ceil(10));
+        rms = (pairs.iter().map(|x| x.2 * x.2).sum::<f64>() / pairs.len() as f64).sqrt();
+        let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|x| (x.0, x.1)).unzip();
+        let step = kabsch(&from, &to);
+        let shift = from
+            .iter()
+            .map(|p| norm(sub(step.apply(*p), *p)))
+            .fold(0.0, f64::max);
+        motion = compose(&step, &motion);
+        if shift < 1e-4 {
+            break;
+        }
+    }
+    let a_on_b: Vec<[f64; 3]> = am.vertices.iter().map(|p| motion.apply(*p)).collect();
+    let lms_a: Vec<(String, [f64; 3])> = positions(&fa.landmarks)
+        .into_iter()
+        .map(|(l, p)| (l, motion.apply(scale(p, fa.unit.mm_per_unit))))
+        .collect();
+    let mut landmarks = Ordered::default();
+    for l in &fa.landmarks {
+        let why = |f: &FaceLandmarks, which: &str| {
+            f.landmarks
+                .iter()
+                .find(|x| x.label == l.label)
+                .and_then(|x: &Landmark| x.missing.clone())
+                .map(|m| format!("not found on {which}: {m}"))
+        };
+        let pa = lms_a.iter().find(|(k, _)| *k == l.label).map(|x| x.1);
+        let pb = found(&fb, &l.label);
+        landmarks.0.push((
+            l.label.clone(),
+            match (pa, pb) {
+                (Some(p), Some(q)) => LandmarkDistance {
+                    distance_mm: Some(norm(sub(p, q))),
+                    missing: None,
+                },
+                _ => LandmarkDistance {
+                    distance_mm: None,
+                    missing: why(&fa, "A").or_else(|| why(&fb, "B")),
+                },
+            },
+        ));
+    }
+    // Regions of A (registered), in B's head frame.
+    let frame_b = super::HeadFrame {
+        origin: scale(fb.frame.origin, fb.unit.mm_per_unit),
+        lateral: fb.frame.lateral,
+        vertical: fb.frame.vertical,
+        anterior: fb.frame.anterior,
+        symmetry_residual_mm: fb.frame.symmetry_residual_mm,
+    };
+    let r = face_regions::regions(&a_on_b, &frame_b, &lms_a);
+    let mut regions = Ordered::default();
+    for (k, name) in NAMES.iter().enumerate() {
+        let pts: Vec<[f64; 3]> = r.members[k]
+            .as_ref()
+            .map(|m| {
+                a_on_b
+                    .iter()
+                    .zip(m)
+                    .filter(|(_, b)| **b)
+                    .map(|(p, _)| *p)
+                    .collect()
+            })
+            .unwrap_or_default();
+        regions.0.push((
+            name.to_string(),
+            RegionDistance {
+                vertices: pts.len(),
+                stats: (!pts.is_empty()).then(|| stats(&point_to_surface(&pts, &bm))),
+                absent: r.absent[k].clone(),
+            },
+        ));
+    }
+    let distances = point_to_surface(&a_on_b, &bm);
+    let a_in_frame = Mesh::new(
+        a_on_b
+            .iter()
+            .map(|p| {
+                let c = frame_b.coords(*p);
+                [c[0], -c[2], c[1]]
+            })
+            .collect(),
+        am.triangles.clone(),
+    );
+    Ok(Outcome {
+        a_in_frame,
+        distances,
+        registration: Registration {
+            on: format!(
+                "A's skin more than {STABLE_ABOVE_PRN_MM} mm above its pronasale (forehead, eyes, nasal bridge)"
+            ),
+            vertices: stable.len(),
+            rms_mm: rms,
+            iterations,
+            motion,
+        },
+        a: fa,
+        b: fb,
+        landmarks,
+        regions,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kabsch_recovers_a_rigid_motion() {
+        let pts = [
+            [0.0, 0.0, 0.0],
+            [10.0, 0.0, 0.0],
+            [0.0, 20.0, 0.0],
+            [0.0, 0.0, 30.0],
+            [5.0, 7.0, -3.0],
+        ];
+        let (s, c) = 0.4f64.sin_cos();
+        let m = Rigid {
+            rotation: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
+            translation: [1.0, -2.0, 3.0],
+        };
+        let to: Vec<[f64; 3]> = pts.iter().map(|p| m.apply(*p)).collect();
+        let k = kabsch(&pts, &to);
+        for p in &pts {
+            assert!(norm(sub(k.apply(*p), m.apply(*p))) < 1e-9);
+        }
+    }
+}
