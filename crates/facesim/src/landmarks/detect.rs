@@ -370,6 +370,11 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
         .filter(|i| p.a[*i].is_finite() && (!scan || is_extremum(p, *i, Ext::Convex)))
         .max_by(|a, b| p.a[*a].total_cmp(&p.a[*b]))
     else {
+        f.put(
+            "Prn",
+            Kind::Soft,
+            Err("the midsagittal skin profile has no convexity to be a nose tip".into()),
+        );
         return;
     };
     let va = |i: usize| [p.height(i), p.a[i]];
