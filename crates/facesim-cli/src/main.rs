@@ -726,13 +726,7 @@ fn cmd_study(out_dir: &Path, quick: bool, cases: Vec<PathBuf>) -> Result<()> {
 fn cmd_compare_faces(a: &Path, b: &Path, json: bool, picture: Option<&Path>) -> Result<()> {
     let ma = facesim::mesh::read_mesh(a)?;
     let mb = facesim::mesh::read_mesh(b)?;
-    let o = facesim::landmarks::outcome::compare_faces(&ma, &mb).map_err(|e| {
-        // Name the face the message is about.
-        match e.strip_prefix("B: ") {
-            Some(rest) => Error::input(b, rest),
-            None => Error::input(a, e.strip_prefix("A: ").unwrap_or(&e)),
-        }
-    })?;
+    let o = facesim::landmarks::outcome::compare_faces(&ma, a, &mb, b)?;
     if let Some(png) = picture {
         let coloured = facesim::commands::outputs::coloured_face(&o.a_in_frame, &o.distances);
         let size = 800;
@@ -759,7 +753,15 @@ fn cmd_compare_faces(a: &Path, b: &Path, json: bool, picture: Option<&Path>) -> 
             None => println!("{label}: {}", d.missing.as_deref().unwrap_or("missing")),
         }
     }
-    for (name, r) in &o.regions.0 {
+    print_regions(&o.regions);
+    Ok(())
+}
+
+/// One line per facial region of `compare --regions` / `--landmarks`.
+fn print_regions(
+    regions: &facesim::landmarks::Ordered<facesim::landmarks::face_regions::RegionDistance>,
+) {
+    for (name, r) in &regions.0 {
         match &r.stats {
             Some(s) => println!(
                 "{name}: {} vertices, mean {:.3} mm, p90 {:.3} mm, within 2 mm {:.1}%",
@@ -768,7 +770,6 @@ fn cmd_compare_faces(a: &Path, b: &Path, json: bool, picture: Option<&Path>) -> 
             None => println!("{name}: {}", r.absent.as_deref().unwrap_or("absent")),
         }
     }
-    Ok(())
 }
 
 fn cmd_compare(a: &Path, b: &Path, json: bool, regions: Option<&Path>) -> Result<()> {
@@ -791,14 +792,8 @@ fn cmd_compare(a: &Path, b: &Path, json: bool, regions: Option<&Path>) -> Result
             serde_json::to_string_pretty(&v).map_err(|e| Error::output(a, e))?
         );
     } else {
-        for (name, r) in per_region.iter().flat_map(|r| r.0.iter()) {
-            match &r.stats {
-                Some(s) => println!(
-                    "{name}: {} vertices, mean {:.3} mm, p90 {:.3} mm, within 2 mm {:.1}%",
-                    r.vertices, s.mean, s.p90, s.pct_within_2mm
-                ),
-                None => println!("{name}: {}", r.absent.as_deref().unwrap_or("absent")),
-            }
+        if let Some(r) = &per_region {
+            print_regions(r);
         }
         println!(
             "mean {:.4} mm, rms {:.4} mm, max (Hausdorff) {:.4} mm, within 1 mm {:.1}%, within 2 mm {:.1}%",

@@ -16,27 +16,11 @@ fn headsq_face() -> &'static Mesh {
     FACE.get_or_init(|| {
         let ct = facesim::volume::read_volume(&common::real_mandible_ct()).unwrap();
         let dir = common::kept_dir("facesim-face-scan");
-        let raw = dir.join("ct.f32");
-        let bytes: Vec<u8> = ct.data.iter().flat_map(|v| v.to_le_bytes()).collect();
-        std::fs::write(&raw, bytes).unwrap();
-        let meta = serde_json::json!({
-            "dims": ct.dims, "spacing": ct.spacing, "origin": ct.origin, "direction": ct.direction,
-        });
-        let meta_path = dir.join("ct.json");
-        std::fs::write(&meta_path, meta.to_string()).unwrap();
         let out = dir.join("iso.obj");
         // −500 HU; headsq's voxels are HU + 1024 as vtk.js ships them.
         let lowest = ct.data.iter().copied().fold(f32::INFINITY, f32::min);
-        let level = if lowest >= -1.0 { "524" } else { "-500" };
-        common::run_python_script(
-            "isosurface.py",
-            &[
-                raw.as_os_str(),
-                meta_path.as_os_str(),
-                level.as_ref(),
-                out.as_os_str(),
-            ],
-        );
+        let level = if lowest >= -1.0 { 524.0 } else { -500.0 };
+        common::isosurface(&ct, level, &out);
         let iso = facesim::mesh::model_file::read_model(&out).unwrap();
         let (lo, hi) = iso.bounds();
         let axis = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
@@ -243,7 +227,13 @@ fn two_faces_of_one_person_are_registered_on_what_surgery_leaves_and_measured_pe
         .collect();
     let r = rotation([1.0, 0.0, 0.0], -90.0);
     let b = moved(&Mesh::new(post, a.triangles.clone()), &r, 0.001);
-    let o = facesim::landmarks::outcome::compare_faces(a, &b).unwrap();
+    let o = facesim::landmarks::outcome::compare_faces(
+        a,
+        std::path::Path::new("pre.ply"),
+        &b,
+        std::path::Path::new("post.ply"),
+    )
+    .unwrap();
     assert_eq!(o.b.unit.name, "m");
     // The recovered motion is the scanner turn (A in mm onto B in mm).
     for (i, row) in o.registration.motion.rotation.iter().enumerate() {

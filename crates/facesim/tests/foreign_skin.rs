@@ -9,30 +9,6 @@ mod common;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-/// The whole-CT iso-surface at `level` HU, written by scikit-image to `out` (.stl or .obj).
-fn isosurface(ct: &facesim::volume::Volume, level: f64, out: &Path) {
-    let dir = out.parent().unwrap();
-    let raw = dir.join("ct.f32");
-    let bytes: Vec<u8> = ct.data.iter().flat_map(|v| v.to_le_bytes()).collect();
-    std::fs::write(&raw, bytes).unwrap();
-    let meta = serde_json::json!({
-        "dims": ct.dims, "spacing": ct.spacing, "origin": ct.origin, "direction": ct.direction,
-    });
-    let meta_path = dir.join("ct.json");
-    std::fs::write(&meta_path, meta.to_string()).unwrap();
-    let level = level.to_string();
-    common::run_python_script(
-        "isosurface.py",
-        &[
-            raw.as_os_str(),
-            meta_path.as_os_str(),
-            level.as_ref(),
-            out.as_os_str(),
-        ],
-    );
-    std::fs::remove_file(raw).unwrap();
-}
-
 /// Whether the horizontal ray from `p` straight away from the vertical axis through `axis`
 /// leaves the CT without meeting tissue (HU above `level`), starting `skip` mm out.
 fn clear_outward(ct: &facesim::volume::Volume, p: [f64; 3], axis: [f64; 2], level: f32) -> bool {
@@ -56,7 +32,7 @@ fn foreign_case() -> &'static Path {
         let real = common::real_ct();
         let ct = facesim::volume::read_volume(&real).unwrap();
         let d = common::kept_dir("facesim-foreign");
-        isosurface(&ct, -500.0, &d.join("iso.stl"));
+        common::isosurface(&ct, -500.0, &d.join("iso.stl"));
         let case = std::fs::read_to_string(real.parent().unwrap().join("case.toml")).unwrap();
         let case = case.replace(
             "[ct]\npath = \"Cranium.inv3\"",

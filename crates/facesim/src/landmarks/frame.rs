@@ -22,22 +22,30 @@ pub struct HeadFrame {
     pub symmetry_residual_mm: f64,
 }
 
-fn unit(a: [f64; 3]) -> [f64; 3] {
+pub(super) fn unit(a: [f64; 3]) -> [f64; 3] {
     scale(a, 1.0 / norm(a).max(1e-300))
 }
 
 impl HeadFrame {
     /// The frame with midsagittal plane through `origin` with normal `lateral`.
     pub(crate) fn from_plane(origin: [f64; 3], lateral: [f64; 3], residual: f64) -> HeadFrame {
-        let lateral = unit(lateral);
-        let up = [0.0, 0.0, 1.0];
+        HeadFrame::with_up(origin, unit(lateral), [0.0, 0.0, 1.0], residual)
+    }
+
+    /// The frame with midsagittal plane through `origin` with unit normal `lateral`, its
+    /// vertical `up` made orthogonal to that normal.
+    pub(crate) fn with_up(
+        origin: [f64; 3],
+        lateral: [f64; 3],
+        up: [f64; 3],
+        residual: f64,
+    ) -> HeadFrame {
         let vertical = unit(sub(up, scale(lateral, dot(up, lateral))));
-        let anterior = cross(lateral, vertical);
         HeadFrame {
             origin,
             lateral,
             vertical,
-            anterior,
+            anterior: cross(lateral, vertical),
             symmetry_residual_mm: residual,
         }
     }

@@ -4,30 +4,22 @@
 //! on what surgery does not move, then compared per landmark and per facial region (mean, p90,
 //! % within 2 mm: the measures of Liebregts et al. 2015 and the studies of VALIDATION.md).
 
-use super::face_regions::{self, NAMES, RegionDistance};
+use super::face_regions::{self, RegionDistance};
 use super::scan::{FaceLandmarks, FrameFrom, landmarks_of};
 use super::{Landmark, Ordered, positions};
-use crate::compare::{SurfaceIndex, point_to_surface, stats};
+use crate::compare::{SurfaceIndex, point_to_surface};
+use crate::error::{Error, Result};
 use crate::mesh::Mesh;
-use crate::vec3::{add, dot, norm, scale, sub};
-use nalgebra::{Matrix3, Vector3};
+use crate::surface::register::{Transform, fit};
+use crate::vec3::{dot, norm, scale, sub};
 use serde::Serialize;
+use std::path::Path;
 
 /// A rigid motion p ↦ R p + t (mm).
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct Rigid {
     pub rotation: [[f64; 3]; 3],
     pub translation: [f64; 3],
-}
-
-impl Rigid {
-    fn apply(&self, p: [f64; 3]) -> [f64; 3] {
-        let r = &self.rotation;
-        add(
-            [0, 1, 2].map(|i| r[i][0] * p[0] + r[i][1] * p[1] + r[i][2] * p[2]),
-            self.translation,
-        )
-    }
 }
 
 /// How A was laid onto B.
@@ -68,48 +60,6 @@ pub struct Outcome {
     pub distances: Vec<f64>,
 }
 
-/// The rotation and translation that best map `from` onto `to` (least squares; Kabsch).
-fn kabsch(from: &[[f64; 3]], to: &[[f64; 3]]) -> Rigid {
-    let n = from.len().max(1) as f64;
-    let ca = scale(from.iter().fold([0.0; 3], |s, p| add(s, *p)), 1.0 / n);
-    let cb = scale(to.iter().fold([0.0; 3], |s, p| add(s, *p)), 1.0 / n);
-    let mut h = Matrix3::<f64>::zeros();
-    for (p, q) in from.iter().zip(to) {
-        let a = Vector3::from(sub(*p, ca));
-        let b = Vector3::from(sub(*q, cb));
-        h += a * b.transpose();
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u.unwrap_or_default(), svd.v_t.unwrap_or_default());
-    let mut d = Matrix3::identity();
-    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = vt.transpose() * d * u.transpose();
-    let rotation = [0, 1, 2].map(|i| [0, 1, 2].map(|j| r[(i, j)]));
-    let rc = Rigid {
-        rotation,
-        translation: [0.0; 3],
-    }
-    .apply(ca);
-    Rigid {
-        rotation,
-        translation: sub(cb, rc),
-    }
-}
-
-fn compose(second: &Rigid, first: &Rigid) -> Rigid {
-    let r = |i: usize, j: usize| {
-        (0..3)
-            .map(|k| second.rotation[i][k] * first.rotation[k][j])
-            .sum()
-    };
-    Rigid {
-        rotation: [0, 1, 2].map(|i| [0, 1, 2].map(|j| r(i, j))),
-        translation: second.apply(first.translation),
-    }
-}
-
 fn found(f: &FaceLandmarks, label: &str) -> Option<[f64; 3]> {
     f.landmarks
         .iter()
@@ -131,10 +81,10 @@ fn in_mm(m: &Mesh, f: &FaceLandmarks) -> Mesh {
 const STABLE_ABOVE_PRN_MM: f64 = 15.0;
 
 /// Compare face A with face B (any frames and units): A is laid onto B by its stable skin and
-/// both are measured in mm. Errors say which face is not a face.
-pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
-    let fa = landmarks_of(a, FrameFrom::Shape).map_err(|e| format!("A: {e}"))?;
-    let fb = landmarks_of(b, FrameFrom::Shape).map_err(|e| format!("B: {e}"))?;
+/// both are measured in mm. Errors are input errors naming the face they are about.
+pub fn compare_faces(a: &Mesh, a_path: &Path, b: &Mesh, b_path: &Path) -> Result<Outcome> {
+    let fa = landmarks_of(a, FrameFrom::Shape).map_err(|e| Error::input(a_path, e))?;
+    let fb = landmarks_of(b, FrameFrom::Shape).map_err(|e| Error::input(b_path, e))?;
     let (am, bm) = (in_mm(a, &fa), in_mm(b, &fb));
     // Start: A's head frame onto B's, A's soft nasion (else its nose tip) onto B's.
     let axes = |f: &FaceLandmarks| [f.frame.lateral, f.frame.vertical, f.frame.anterior];
@@ -143,17 +93,25 @@ pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
     let anchor = ["N'", "Prn"]
         .into_iter()
         .find_map(|l| Some((found(&fa, l)?, found(&fb, l)?)))
-        .ok_or("A and B share neither a soft nasion nor a pronasale to start the fit from")?;
-    let turn = Rigid {
+        .ok_or_else(|| {
+            Error::input(
+                a_path,
+                format!(
+                    "shares neither a soft nasion nor a pronasale with {} to start the fit from",
+                    b_path.display()
+                ),
+            )
+        })?;
+    let mut motion = Transform {
         rotation,
         translation: [0.0; 3],
+        scale: 1.0,
+        rms_residual: 0.0,
+        max_residual: 0.0,
     };
-    let mut motion = Rigid {
-        rotation,
-        translation: sub(anchor.1, turn.apply(anchor.0)),
-    };
+    motion.translation = sub(anchor.1, motion.apply(anchor.0));
     // The stable skin of A: above pronasale by STABLE_ABOVE_PRN_MM in A's frame.
-    let prn = found(&fa, "Prn").ok_or("A: no pronasale")?;
+    let prn = found(&fa, "Prn").ok_or_else(|| Error::input(a_path, "no pronasale"))?;
     let v_prn = dot(prn, fa.frame.vertical);
     let stable: Vec<[f64; 3]> = am
         .vertices
@@ -162,24 +120,27 @@ pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
         .copied()
         .collect();
     if stable.len() < 100 {
-        return Err(format!(
-            "A has {} vertices more than {STABLE_ABOVE_PRN_MM} mm above its nose tip: too little forehead and nasal bridge to register on",
-            stable.len()
+        return Err(Error::input(
+            a_path,
+            format!(
+                "{} vertices more than {STABLE_ABOVE_PRN_MM} mm above its nose tip: too little forehead and nasal bridge to register on",
+                stable.len()
+            ),
         ));
     }
     let step = (stable.len() / 3000).max(1);
     let stable: Vec<[f64; 3]> = stable.into_iter().step_by(step).collect();
     let index = SurfaceIndex::new(&bm);
-    // ICP: each stable point to its closest point on B, the better 90 % fitted (Kabsch).
+    // ICP: each stable point, moved, to its closest point on B; the better 90 % of the pairs
+    // give the next motion (the least-squares rigid fit of `register::fit`, from A's own points).
     let mut rms = f64::NAN;
     let mut iterations = 0;
     for it in 0..60 {
         iterations = it + 1;
-        let moved: Vec<[f64; 3]> = stable.iter().map(|p| motion.apply(*p)).collect();
-        let mut pairs: Vec<([f64; 3], [f64; 3], f64)> = moved
+        let mut pairs: Vec<([f64; 3], [f64; 3], f64)> = stable
             .iter()
             .map(|p| {
-                let (d, q) = index.closest(*p);
+                let (d, q) = index.closest(motion.apply(*p));
                 (*p, q, d)
             })
             .collect();
@@ -187,12 +148,12 @@ pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
         pairs.truncate((pairs.len() * 9).div_ceil(10));
         rms = (pairs.iter().map(|x| x.2 * x.2).sum::<f64>() / pairs.len() as f64).sqrt();
         let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|x| (x.0, x.1)).unzip();
-        let step = kabsch(&from, &to);
+        let next = fit(&from, &to, false)?;
         let shift = from
             .iter()
-            .map(|p| norm(sub(step.apply(*p), *p)))
+            .map(|p| norm(sub(next.apply(*p), motion.apply(*p))))
             .fold(0.0, f64::max);
-        motion = compose(&step, &motion);
+        motion = next;
         if shift < 1e-4 {
             break;
         }
@@ -236,29 +197,8 @@ pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
         symmetry_residual_mm: fb.frame.symmetry_residual_mm,
     };
     let r = face_regions::regions(&a_on_b, &frame_b, &lms_a);
-    let mut regions = Ordered::default();
-    for (k, name) in NAMES.iter().enumerate() {
-        let pts: Vec<[f64; 3]> = r.members[k]
-            .as_ref()
-            .map(|m| {
-                a_on_b
-                    .iter()
-                    .zip(m)
-                    .filter(|(_, b)| **b)
-                    .map(|(p, _)| *p)
-                    .collect()
-            })
-            .unwrap_or_default();
-        regions.0.push((
-            name.to_string(),
-            RegionDistance {
-                vertices: pts.len(),
-                stats: (!pts.is_empty()).then(|| stats(&point_to_surface(&pts, &bm))),
-                absent: r.absent[k].clone(),
-            },
-        ));
-    }
     let distances = point_to_surface(&a_on_b, &bm);
+    let regions = face_regions::distance_stats(&r, &distances);
     let a_in_frame = Mesh::new(
         a_on_b
             .iter()
@@ -279,37 +219,14 @@ pub fn compare_faces(a: &Mesh, b: &Mesh) -> Result<Outcome, String> {
             vertices: stable.len(),
             rms_mm: rms,
             iterations,
-            motion,
+            motion: Rigid {
+                rotation: motion.rotation,
+                translation: motion.translation,
+            },
         },
         a: fa,
         b: fb,
         landmarks,
         regions,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn kabsch_recovers_a_rigid_motion() {
-        let pts = [
-            [0.0, 0.0, 0.0],
-            [10.0, 0.0, 0.0],
-            [0.0, 20.0, 0.0],
-            [0.0, 0.0, 30.0],
-            [5.0, 7.0, -3.0],
-        ];
-        let (s, c) = 0.4f64.sin_cos();
-        let m = Rigid {
-            rotation: [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]],
-            translation: [1.0, -2.0, 3.0],
-        };
-        let to: Vec<[f64; 3]> = pts.iter().map(|p| m.apply(*p)).collect();
-        let k = kabsch(&pts, &to);
-        for p in &pts {
-            assert!(norm(sub(k.apply(*p), m.apply(*p))) < 1e-9);
-        }
-    }
 }

@@ -18,7 +18,7 @@
 //! Everything is computed in millimetres; positions are returned in the file's own unit and axes.
 
 use super::detect::{self, SOFT};
-use super::frame::{HeadFrame, head_frame, profile, section};
+use super::frame::{HeadFrame, head_frame, profile, section, unit};
 use super::measure::{self, Measure};
 use super::{Carried, Kind, Landmark, Ordered};
 use crate::mesh::Mesh;
@@ -105,10 +105,6 @@ pub struct FaceLandmarks {
     pub landmarks: Vec<Landmark>,
     /// Measurements (mm, degrees) of docs/landmarks.md, one value each (`before`).
     pub measurements: Ordered<Measure>,
-}
-
-fn unit_vec(a: [f64; 3]) -> [f64; 3] {
-    scale(a, 1.0 / norm(a).max(1e-300))
 }
 
 /// Reflect p across the plane through o with unit normal n.
@@ -225,6 +221,16 @@ fn mismatch(grid: &VertexGrid, pts: &[[f64; 3]], o: [f64; 3], n: [f64; 3]) -> f6
     )
 }
 
+/// Two unit vectors spanning the plane normal to the unit vector n.
+fn in_plane(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let t1 = unit(if n[0].abs() < 0.9 {
+        cross(n, [1.0, 0.0, 0.0])
+    } else {
+        cross(n, [0.0, 1.0, 0.0])
+    });
+    (t1, cross(n, t1))
+}
+
 /// The plane (o, n) improved by a pattern search: at each (tilt °, shift mm) step the 27
 /// planes tilted by -1, 0, 1 steps about two axes and shifted by -1, 0, 1 steps along the
 /// normal are scored and the best kept.
@@ -239,17 +245,12 @@ fn pattern_search(
     for &(tilt, shift) in steps {
         // Repeat a step while it improves (at most 10 times).
         for _ in 0..10 {
-            let t1 = unit_vec(if n[0].abs() < 0.9 {
-                cross(n, [1.0, 0.0, 0.0])
-            } else {
-                cross(n, [0.0, 1.0, 0.0])
-            });
-            let t2 = cross(n, t1);
+            let (t1, t2) = in_plane(n);
             let d = tilt.to_radians();
             let trials: Vec<([f64; 3], [f64; 3])> = (-1..=1)
                 .flat_map(|i| (-1..=1).flat_map(move |j| (-1..=1).map(move |k| (i, j, k))))
                 .map(|(i, j, k)| {
-                    let m = unit_vec(add(
+                    let m = unit(add(
                         n,
                         add(scale(t1, i as f64 * d), scale(t2, j as f64 * d)),
                     ));
@@ -290,18 +291,6 @@ fn symmetry_plane(mesh: &Mesh, grid: &VertexGrid) -> ([f64; 3], [f64; 3], f64) {
     )
 }
 
-/// A frame with midsagittal plane (o, lateral) and the given up direction (in the plane).
-fn frame_with(o: [f64; 3], lateral: [f64; 3], up: [f64; 3], residual: f64) -> HeadFrame {
-    let vertical = unit_vec(sub(up, scale(lateral, dot(up, lateral))));
-    HeadFrame {
-        origin: o,
-        lateral,
-        vertical,
-        anterior: cross(lateral, vertical),
-        symmetry_residual_mm: residual,
-    }
-}
-
 /// (v, a) of a found landmark in `frame`.
 fn va(lms: &[Landmark], label: &str, frame: &HeadFrame) -> Option<[f64; 2]> {
     let p = lms.iter().find(|l| l.label == label)?.position?;
@@ -327,15 +316,7 @@ fn face_score(mesh: &Mesh, border: &VertexGrid, lms: &[Landmark], frame: &HeadFr
     }
     // A nose is narrow: the skin within 8 mm behind its tip and 3 mm of its height spans at
     // most NOSE_WIDTH_MM from side to side (a bump on the back of a head or a chin is wider).
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for p in &mesh.vertices {
-        let c = frame.coords(*p);
-        if (c[1] - prn[0]).abs() < 3.0 && c[2] > prn[1] - 8.0 {
-            lo = lo.min(c[0]);
-            hi = hi.max(c[0]);
-        }
-    }
-    if hi - lo > NOSE_WIDTH_MM {
+    if width_at(mesh, frame, prn, 3.0, 8.0, f64::INFINITY).is_some_and(|w| w > NOSE_WIDTH_MM) {
         return 0;
     }
     // A nose tip, not where the scan stops: skin 10 mm above and below it, behind it.
@@ -413,10 +394,10 @@ fn front_frame(mesh: &Mesh, frame: &HeadFrame, lms: &[Landmark]) -> Option<HeadF
     } else {
         front
     };
-    Some(frame_with(
+    Some(HeadFrame::with_up(
         frame.origin,
         l,
-        cross(unit_vec(front), l),
+        cross(unit(front), l),
         frame.symmetry_residual_mm,
     ))
 }
@@ -432,15 +413,30 @@ fn tip_width(mesh: &Mesh, frame: &HeadFrame, lms: &[Landmark]) -> f64 {
         return f64::INFINITY;
     };
     let t = frame.coords(tip);
+    width_at(mesh, frame, [t[1], t[2]], 2.0, 5.0, 1.0)
+        .filter(|w| *w > 0.0)
+        .unwrap_or(f64::INFINITY)
+}
+
+/// The side-to-side extent (mm) of the mesh's vertices within `half_height` of the height of
+/// `tip` (v, a in `frame`), from `behind` behind it to `ahead` in front of it; None if none.
+fn width_at(
+    mesh: &Mesh,
+    frame: &HeadFrame,
+    tip: [f64; 2],
+    half_height: f64,
+    behind: f64,
+    ahead: f64,
+) -> Option<f64> {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for p in &mesh.vertices {
         let c = frame.coords(*p);
-        if (c[1] - t[1]).abs() < 2.0 && c[2] > t[2] - 5.0 && c[2] < t[2] + 1.0 {
+        if (c[1] - tip[0]).abs() < half_height && c[2] > tip[1] - behind && c[2] < tip[1] + ahead {
             lo = lo.min(c[0]);
             hi = hi.max(c[0]);
         }
     }
-    if hi > lo { hi - lo } else { f64::INFINITY }
+    (hi >= lo).then_some(hi - lo)
 }
 
 /// The best of 72 frames in the plane (o, n): both sides of the plane as the patient's left,
@@ -455,18 +451,13 @@ fn best_up(
     n: [f64; 3],
     residual: f64,
 ) -> (usize, HeadFrame, Vec<Landmark>) {
-    let e1 = unit_vec(if n[0].abs() < 0.9 {
-        cross(n, [1.0, 0.0, 0.0])
-    } else {
-        cross(n, [0.0, 1.0, 0.0])
-    });
-    let e2 = cross(n, e1);
+    let (e1, e2) = in_plane(n);
     let candidates: Vec<HeadFrame> = [1.0, -1.0]
         .iter()
         .flat_map(|side| {
             (0..36).map(move |k| {
                 let phi = (k as f64 * 10.0).to_radians();
-                frame_with(
+                HeadFrame::with_up(
                     o,
                     scale(n, *side),
                     add(scale(e1, phi.cos()), scale(e2, phi.sin())),
@@ -499,7 +490,7 @@ fn best_up(
         .into_iter()
         .max_by(|a, b| (a.0 >= 2).cmp(&(b.0 >= 2)).then(b.1.total_cmp(&a.1)))
         .map(|(s, _, f, l)| (s, f, l))
-        .unwrap_or_else(|| (0, frame_with(o, n, e1, residual), Vec::new()))
+        .unwrap_or_else(|| (0, HeadFrame::with_up(o, n, e1, residual), Vec::new()))
 }
 
 /// The head frame of a face mesh in mm found from its shape, its landmarks in it, and how the

@@ -150,3 +150,29 @@ pub fn grid_triangles(n: usize) -> Vec<[u32; 3]> {
     }
     t
 }
+
+/// The whole-CT iso-surface at `level` (in the volume's own values) by scikit-image's marching
+/// cubes (tests/python/isosurface.py, "a skin from another program"), written to `out` (.stl,
+/// or an indexed .obj).
+pub fn isosurface(ct: &facesim::volume::Volume, level: f64, out: &Path) {
+    let dir = out.parent().unwrap();
+    let raw = dir.join("ct.f32");
+    let bytes: Vec<u8> = ct.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+    std::fs::write(&raw, bytes).unwrap();
+    let meta = serde_json::json!({
+        "dims": ct.dims, "spacing": ct.spacing, "origin": ct.origin, "direction": ct.direction,
+    });
+    let meta_path = dir.join("ct.json");
+    std::fs::write(&meta_path, meta.to_string()).unwrap();
+    let level = level.to_string();
+    run_python_script(
+        "isosurface.py",
+        &[
+            raw.as_os_str(),
+            meta_path.as_os_str(),
+            level.as_ref(),
+            out.as_os_str(),
+        ],
+    );
+    std::fs::remove_file(raw).unwrap();
+}

@@ -189,19 +189,22 @@ fn p90(mut d: Vec<f64>) -> f64 {
     d[((0.9 * (d.len() - 1) as f64).round()) as usize]
 }
 
+/// The values of `dist` (one per vertex) at the vertices flagged in `member`.
+fn in_region(member: &[bool], dist: &[f64]) -> Vec<f64> {
+    dist.iter()
+        .zip(member)
+        .filter(|(_, b)| **b)
+        .map(|(d, _)| *d)
+        .collect()
+}
+
 /// Per region: count, mean, 90th percentile and max of `dist` (one value per vertex).
 pub(crate) fn displacement_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionStats> {
     let mut out = Ordered::default();
     for (k, name) in NAMES.iter().enumerate() {
-        let d: Vec<f64> = r.members[k]
+        let d = r.members[k]
             .as_ref()
-            .map(|m| {
-                m.iter()
-                    .zip(dist)
-                    .filter(|(b, _)| **b)
-                    .map(|(_, d)| *d)
-                    .collect()
-            })
+            .map(|m| in_region(m, dist))
             .unwrap_or_default();
         out.0.push((
             name.to_string(),
@@ -245,30 +248,28 @@ pub fn compare_regions(
         &a.vertices
     };
     let r = regions(on, &frame, &lms);
+    Ok(distance_stats(
+        &r,
+        &crate::compare::point_to_surface(&a.vertices, b),
+    ))
+}
+
+/// Per region of `r`: its vertices' distances `dist` (one per vertex, mm) summarised
+/// (`compare --regions`, `compare --landmarks`).
+pub(crate) fn distance_stats(r: &Regions, dist: &[f64]) -> Ordered<RegionDistance> {
     let mut out = Ordered::default();
     for (k, name) in NAMES.iter().enumerate() {
-        let stats = r.members[k].as_ref().map(|m| {
-            let pts: Vec<[f64; 3]> = a
-                .vertices
-                .iter()
-                .zip(m)
-                .filter(|(_, b)| **b)
-                .map(|(p, _)| *p)
-                .collect();
-            crate::compare::stats(&crate::compare::point_to_surface(&pts, b))
-        });
+        let d = r.members[k].as_ref().map(|m| in_region(m, dist));
         out.0.push((
             name.to_string(),
             RegionDistance {
-                vertices: r.members[k]
-                    .as_ref()
-                    .map_or(0, |m| m.iter().filter(|b| **b).count()),
-                stats,
+                vertices: d.as_ref().map_or(0, Vec::len),
+                stats: d.map(|d| crate::compare::stats(&d)),
                 absent: r.absent[k].clone(),
             },
         ));
     }
-    Ok(out)
+    out
 }
 
 /// One region of `compare --regions`: A's vertices there and their distances to B (mm).
