@@ -63,7 +63,8 @@ try {
     // Pages from before facesim.options drew every frame at full resolution.
     const opts = api.options || { dragPixelRatio: 1 };
     const dragRatio = opts.dragPixelRatio;
-    const skullBox = [...document.querySelectorAll("#side input[type=checkbox]")][0];
+    // "see the skull through the skin" (pages before it had the skull box first).
+    const skullBox = document.getElementById("skull") || [...document.querySelectorAll("#side input[type=checkbox]")][0];
     window.__bench = {
       info: () => ({ ...info, drag_pixel_ratio: dragRatio }),
       setup(full, skull, cache = true, lod = true) {

@@ -1,22 +1,30 @@
-// report.html's page logic (docs/report-page.md): the face and skull before and after, the
-// displacement colour map, report.json's figures and warnings, and per-segment sliders that re-plan
-// live from the plan basis. Data come from the <script id="facesim-data"> JSON that facesim writes
-// (arrays as base64 little-endian float32 / uint32 / uint8). Frame: LPS, millimetres.
+// report.html's page logic (docs/report-page.md): the face before and after, lit and opaque, in
+// the head's views (profile by default); the midsagittal profile tracing; landmark labels; the
+// displacement colour map with its legend in mm; per-segment sliders that re-plan live from the
+// plan basis; tables; PNG export and a one-page print layout. Data come from the
+// <script id="facesim-data"> JSON that facesim writes (arrays as base64 little-endian float32 /
+// uint32 / uint8). Frame: LPS, millimetres.
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { planMatrix, predictFace, moveRigid, interleaveColumns } from "./plan.js";
 import { viridis } from "./viridis.js";
-import { surfaceMaterial, setOpacity, viewUp } from "./shading.js";
+import { surfaceMaterial, setOpacity, viewUp, setHeadUp } from "./shading.js";
 import { vertexNormals, leadingVertexNormals } from "./normals.js";
 import { orderSkull, reorder } from "./skull_order.js";
 import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
+import { midsagittalCut, facialPart, pathData } from "./profile.js";
+import { STYLE } from "./style.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
 // facesim.options.dragPixelRatio = 1 draws every frame at full resolution (web/bench/rate.mjs).
 const DRAG_PIXEL_RATIO = 0.5;
 const DRAG_SETTLE_MS = 200;
+const BACKGROUND = 0xf4f4f4;
+const SKIN = 0xd9a98c;
+// The face's opacity with the skull seen through it.
+const SEE_THROUGH = 0.5;
 
 function decode(b64, Type) {
   const bin = atob(b64);
@@ -33,8 +41,37 @@ const el = (tag, attrs = {}, text) => {
   if (text !== undefined) e.textContent = text;
   return e;
 };
+const SVG_NS = "http://www.w3.org/2000/svg";
+const svgEl = (tag, attrs = {}, text) => {
+  const e = document.createElementNS(SVG_NS, tag);
+  for (const [k, v] of Object.entries(attrs)) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  return e;
+};
+
+// The views: where the camera stands, seen from the head's middle, in the head frame. The
+// profiles look at the patient's side; "profile" alone is the right one (face to the picture's
+// right, as a cephalometric tracing is drawn). Keys 1–4 on the picture choose them.
+const VIEWS = [
+  ["front", "front", (f) => f.front.clone()],
+  ["profile-right", "profile right", (f) => f.left.clone().negate()],
+  ["profile-left", "profile left", (f) => f.left.clone()],
+  ["three-quarter", "three-quarter", (f) => f.front.clone().sub(f.left).normalize()],
+];
+const VIEW_TEXT = {
+  front: "from the front",
+  "profile-right": "in profile from the patient's right",
+  "profile-left": "in profile from the patient's left",
+  "three-quarter": "in three-quarter view from the patient's front right",
+};
+const MODES = [
+  ["before", "before"],
+  ["after", "after"],
+  ["both", "both"],
+];
 
 function main() {
+  document.head.appendChild(el("style", {}, STYLE));
   const data = JSON.parse(document.getElementById("facesim-data").textContent);
   const facePre = f32(data.face_pre);
   const facePost = f32(data.face_post);
@@ -65,27 +102,39 @@ function main() {
   const skullPre = reorder(f32(data.skull_pre), skull.order, 3);
   const skullPost = reorder(f32(data.skull_post), skull.order, 3);
   const skullSegment = reorder(skullSegmentRaw, skull.order, 1);
+  // The head frame (report.json head_frame; the CT's axes when the run has none).
+  const hf = data.head_frame || { origin: [0, 0, 0], front: [0, -1, 0], up: [0, 0, 1], left: [1, 0, 0], source: "the CT's axes" };
+  const frame = {
+    origin: new THREE.Vector3(...hf.origin),
+    front: new THREE.Vector3(...hf.front).normalize(),
+    up: new THREE.Vector3(...hf.up).normalize(),
+    left: new THREE.Vector3(...hf.left).normalize(),
+  };
+  setHeadUp(frame.up);
 
-  // ---- layout ----
+  // ---- layout: controls and tables on the left; the picture, its toolbar, labels, legend and
+  // the profile tracing on the right ----
   const side = document.getElementById("side");
   const view = document.getElementById("view");
+  const mainBox = el("div", { id: "main" });
+  view.replaceWith(mainBox);
+  mainBox.appendChild(view);
+  side.setAttribute("aria-label", "controls and tables");
   side.appendChild(el("h1", {}, data.title));
-  const model = el("p", { class: "model" }, `model: ${data.model}`);
-  side.appendChild(model);
+  side.appendChild(el("p", { class: "model" }, `model: ${data.model}`));
 
   // ---- three.js scene ----
-  const BACKGROUND = 0xf4f4f4;
   const renderer = new THREE.WebGLRenderer({ antialias: false, preserveDrawingBuffer: true });
   renderer.setPixelRatio(1);
   renderer.setClearColor(BACKGROUND);
-  view.appendChild(renderer.domElement);
+  const canvas = renderer.domElement;
+  canvas.setAttribute("role", "img");
+  canvas.setAttribute("tabindex", "0");
+  canvas.setAttribute("aria-describedby", "keys-hint");
+  view.appendChild(canvas);
   const scene = new THREE.Scene();
-  const camera = new THREE.PerspectiveCamera(30, 1, 1, 5000);
+  const camera = new THREE.PerspectiveCamera(24, 1, 1, 5000);
   camera.layers.enable(STATIC_LAYER);
-  scene.add(new THREE.HemisphereLight(0xffffff, 0x666666, 1.6));
-  const sun = new THREE.DirectionalLight(0xffffff, 1.2);
-  camera.add(sun);
-  sun.position.set(0.3, 0.5, 1);
   scene.add(camera);
 
   const meshOf = (positions, tris, material) => {
@@ -101,18 +150,39 @@ function main() {
     return m;
   };
   const colours = new Float32Array(3 * n);
-  const faceMaterial = surfaceMaterial({ perVertex: true });
+  const faceMaterial = surfaceMaterial({ perVertex: true, shine: 0.6 });
   const faceAfter = meshOf(facePost, faceTris, faceMaterial);
   const faceIndexFull = new THREE.BufferAttribute(faceDraw, 1);
   const faceIndexLod = new THREE.BufferAttribute(faceLod, 1);
   faceAfter.geometry.setIndex(faceIndexFull);
   faceAfter.geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
-  const skinMaterial = surfaceMaterial({ colour: 0xd9b38c });
+  const skinMaterial = surfaceMaterial({ colour: SKIN });
   const faceBefore = meshOf(facePre, faceTris, skinMaterial);
-  const ghost = new THREE.MeshBasicMaterial({ color: 0x333333, wireframe: true, transparent: true, opacity: 0.25 });
-  const faceOverlay = new THREE.Mesh(faceBefore.geometry, ghost);
-  scene.add(faceOverlay);
-  const boneMaterial = surfaceMaterial({ colour: 0xeeeadd });
+  faceBefore.geometry.setIndex(faceIndexFull);
+  // "both": the face after, opaque, over a translucent ghost of the face before — brighter where
+  // the ghost is in front, fainter where it lies behind the face after (an advancement). Only the
+  // skin's outer side, and each pass nudged in depth so that where the two faces coincide the
+  // face after shows clean.
+  const outward = outerSide(facePre, faceBefore.geometry.getAttribute("normal").array, frame);
+  // The pass behind is weighted by how far the skin moved there (0 below 0.3 mm, full from 1 mm):
+  // a fold of the face hidden by another fold (an ear, a nostril) is not a change.
+  const ghostWeight = new Float32Array(n);
+  faceBefore.geometry.setAttribute("weight", new THREE.BufferAttribute(ghostWeight, 1));
+  const ghostMaterial = (opacity, depthFunc, offset) => {
+    const m = surfaceMaterial({ colour: 0x4a6fa5, shine: 0, weighted: depthFunc === THREE.GreaterDepth });
+    setOpacity(m, opacity);
+    m.side = outward;
+    m.depthFunc = depthFunc;
+    m.polygonOffset = true;
+    m.polygonOffsetFactor = offset;
+    m.polygonOffsetUnits = 4 * offset;
+    return m;
+  };
+  const ghostFront = new THREE.Mesh(faceBefore.geometry, ghostMaterial(0.5, THREE.LessEqualDepth, 1));
+  const ghostBehind = new THREE.Mesh(faceBefore.geometry, ghostMaterial(0.28, THREE.GreaterDepth, -1));
+  ghostFront.renderOrder = ghostBehind.renderOrder = 5;
+  scene.add(ghostFront, ghostBehind);
+  const boneMaterial = surfaceMaterial({ colour: 0xeeeadd, shine: 0.3 });
   const skullBefore = meshOf(skullPre, skullTris, boneMaterial);
   // The skull after: one set of vertex buffers, drawn as the triangles a plan moves or shades
   // differently and the static rest (cached while a slider is dragged: frame_cache.js).
@@ -132,37 +202,46 @@ function main() {
   const skullStatic = skullPart(skull.staticTris, STATIC_LAYER);
   const cache = new StaticCache(renderer, BACKGROUND);
 
-  // Landmarks: small spheres drawn over everything (they sit on the skin, often under the face
-  // seen through), soft tissue red, bone blue; moved with every plan.
+  // Landmarks: small spheres, soft tissue red on the skin (hidden where the face covers them),
+  // bone blue drawn over everything and shown only with the skull.
   const landmarks = data.landmarks || [];
   const landmarkPre = new Float64Array(3 * landmarks.length);
   landmarks.forEach((l, i) => landmarkPre.set(l.pre, 3 * i));
   const landmarkNow = new Float64Array(3 * landmarks.length);
-  const markers = new THREE.InstancedMesh(
-    new THREE.SphereGeometry(1.3, 12, 8),
-    new THREE.MeshBasicMaterial({ depthTest: false, transparent: true }),
-    Math.max(landmarks.length, 1),
-  );
-  markers.count = landmarks.length;
-  markers.renderOrder = 10;
-  landmarks.forEach((l, i) => markers.setColorAt(i, new THREE.Color(l.anchor ? 0xd62728 : 0x1f4eb4)));
-  scene.add(markers);
+  const markerSet = (colour, overAll) => {
+    const m = new THREE.InstancedMesh(
+      new THREE.SphereGeometry(1.4, 12, 8),
+      new THREE.MeshBasicMaterial({ color: colour, depthTest: !overAll, transparent: overAll }),
+      Math.max(landmarks.length, 1),
+    );
+    m.renderOrder = 10;
+    scene.add(m);
+    return m;
+  };
+  const softMarkers = markerSet(0xd62728, false);
+  const boneMarkers = markerSet(0x1f4eb4, true);
   const markerMatrix = new THREE.Matrix4();
   function showMarkers(points) {
+    let soft = 0;
+    let bone = 0;
     for (let i = 0; i < landmarks.length; i++) {
       markerMatrix.makeTranslation(points[3 * i], points[3 * i + 1], points[3 * i + 2]);
-      markers.setMatrixAt(i, markerMatrix);
+      if (landmarks[i].anchor) softMarkers.setMatrixAt(soft++, markerMatrix);
+      else boneMarkers.setMatrixAt(bone++, markerMatrix);
     }
-    markers.instanceMatrix.needsUpdate = true;
+    softMarkers.count = soft;
+    boneMarkers.count = bone;
+    softMarkers.instanceMatrix.needsUpdate = true;
+    boneMarkers.instanceMatrix.needsUpdate = true;
   }
 
-  // Look at the face from the front: LPS −y is anterior, +z superior.
+  // ---- camera: the head's views ----
   const box = new THREE.Box3().setFromBufferAttribute(faceBefore.geometry.getAttribute("position"));
   const centre = box.getCenter(new THREE.Vector3());
-  const size = box.getSize(new THREE.Vector3()).length();
-  camera.up.set(0, 0, 1);
-  camera.position.set(centre.x, centre.y - 2.2 * size, centre.z);
-  const controls = new OrbitControls(camera, renderer.domElement);
+  const radius = 0.5 * box.getSize(new THREE.Vector3()).length();
+  camera.up.copy(frame.up); // before OrbitControls, which orbits about camera.up
+  camera.position.copy(centre).addScaledVector(frame.front, 3 * radius);
+  const controls = new OrbitControls(camera, canvas);
   controls.target.copy(centre);
   controls.update();
 
@@ -171,17 +250,34 @@ function main() {
   const faceNormal = faceAfter.geometry.getAttribute("normal");
   const faceColour = faceAfter.geometry.getAttribute("color");
   const current = facePosition.array;
-  const state = { mode: "after", skull: true, colour: true, landmarks: true, colourBy: "displacement" };
-  const scaleTitle = el("span");
-  const scaleLabel = el("span", { class: "max" });
-  // Viridis sampled finely once (linear in the colour attribute as before: value / 255).
+  const state = { mode: "after", view: "profile-right", skull: false, colour: true, landmarks: true, tracing: true, colourBy: "displacement", max: 0 };
+  // Viridis sampled finely once, as linear RGB (the shader lights linear colours and writes sRGB,
+  // so an unshaded face would show the legend's sRGB colours).
   const LUT_STEPS = 1024;
   const lut = new Float32Array(3 * (LUT_STEPS + 1));
-  for (let i = 0; i <= LUT_STEPS; i++) viridis(i / LUT_STEPS).forEach((c, k) => (lut[3 * i + k] = c / 255));
-  const skin = [217 / 255, 179 / 255, 140 / 255];
+  const lin = new THREE.Color();
+  for (let i = 0; i <= LUT_STEPS; i++) {
+    const [r, g, b] = viridis(i / LUT_STEPS);
+    lin.setRGB(r / 255, g / 255, b / 255, THREE.SRGBColorSpace);
+    lut.set([lin.r, lin.g, lin.b], 3 * i);
+  }
+  const skin = new THREE.Color(SKIN);
   const dist = new Float32Array(n);
   // With [uncertainty] samples: the band's width p95 − p05 per vertex (the run's plan).
   const bandWidth = data.band_width ? f32(data.band_width) : null;
+
+  // ---- the colour legend (mm), over the picture ----
+  const legend = el("div", { id: "legend", role: "group", "aria-label": "colour legend" });
+  const legendTitle = el("div", { class: "title" });
+  const ramp = el("div", { class: "ramp", "aria-hidden": "true" });
+  const stops = [];
+  for (let i = 0; i <= 8; i++) stops.push(`rgb(${viridis(i / 8).join(",")}) ${(i / 8) * 100}%`);
+  ramp.style.background = `linear-gradient(to right, ${stops.join(",")})`;
+  const ticks = el("div", { class: "ticks" });
+  const tickLabels = [0, 1, 2].map(() => el("span"));
+  ticks.append(...tickLabels);
+  legend.append(legendTitle, ramp, ticks);
+  view.appendChild(legend);
 
   /** Colours, normals and the scale of the face in `current`; marks the buffers for upload. */
   function refreshFace() {
@@ -205,17 +301,26 @@ function main() {
         colours[p + 1] = lut[q + 1];
         colours[p + 2] = lut[q + 2];
       } else {
-        colours[p] = skin[0];
-        colours[p + 1] = skin[1];
-        colours[p + 2] = skin[2];
+        colours[p] = skin.r;
+        colours[p + 1] = skin.g;
+        colours[p + 2] = skin.b;
       }
     }
     vertexNormals(current, faceTris, faceNormal.array);
+    if (state.mode === "both") refreshGhost();
     facePosition.needsUpdate = true;
     faceNormal.needsUpdate = true;
     faceColour.needsUpdate = true;
-    scaleLabel.textContent = `${smax.toFixed(2)} mm`;
-    scaleTitle.textContent = shown === dist ? "displacement |x_post − x_pre|" : "uncertainty band width p95 − p05 (the run's plan)";
+    state.max = smax;
+    tickLabels[0].textContent = "0";
+    tickLabels[1].textContent = (smax / 2).toFixed(1);
+    tickLabels[2].textContent = `${smax.toFixed(1)} mm`;
+    legendTitle.textContent = shown === dist ? "how far the skin moves (mm)" : "uncertainty band width p95 − p05 (mm, the run's plan)";
+  }
+
+  function refreshGhost() {
+    for (let v = 0; v < n; v++) ghostWeight[v] = Math.min(Math.max((dist[v] - 0.3) / 0.7, 0), 1);
+    faceBefore.geometry.getAttribute("weight").needsUpdate = true;
   }
 
   // The skull after a plan: only the leading range of movable vertices is rewritten and uploaded
@@ -260,18 +365,95 @@ function main() {
     showMarkers(state.mode === "before" ? landmarkPre : landmarkNow);
   }
 
+  // ---- landmark labels: text next to each marker, placed at every draw ----
+  const labelLayer = el("div", { id: "labels", "aria-hidden": "true" });
+  view.appendChild(labelLayer);
+  const labels = landmarks.map((l) => {
+    const e = el("div", { class: l.anchor ? "lm" : "lm bone", "data-label": l.label }, l.label);
+    labelLayer.appendChild(e);
+    return e;
+  });
+  const widths = new Float64Array(labels.length);
+  const lp = new THREE.Vector3();
+  const offset = new THREE.Vector3();
+  const toCamera = new THREE.Vector3();
+  const triNormal = new THREE.Vector3();
+  const ab = new THREE.Vector3();
+  const ac = new THREE.Vector3();
+  /** Is landmark i on the side of the face the camera sees? Midline ones always are; a bilateral
+   *  soft one when its triangle faces the camera; a bony one when the skull is shown. */
+  function facing(i, points, face) {
+    const l = landmarks[i];
+    lp.fromArray(points, 3 * i);
+    if (!l.anchor) return state.skull;
+    if (Math.abs(offset.copy(lp).sub(frame.origin).dot(frame.left)) < 5) return true;
+    const t = 3 * l.anchor.triangle;
+    const [a, b, c] = [faceTris[t], faceTris[t + 1], faceTris[t + 2]];
+    ab.set(face[3 * b] - face[3 * a], face[3 * b + 1] - face[3 * a + 1], face[3 * b + 2] - face[3 * a + 2]);
+    ac.set(face[3 * c] - face[3 * a], face[3 * c + 1] - face[3 * a + 1], face[3 * c + 2] - face[3 * a + 2]);
+    triNormal.crossVectors(ab, ac).normalize();
+    if (outward === THREE.BackSide) triNormal.negate();
+    toCamera.copy(camera.position).sub(lp).normalize();
+    return triNormal.dot(toCamera) > 0.05;
+  }
+  /** Put each label beside its landmark's projection, pushed away from the face's middle. */
+  function placeLabels() {
+    const w = view.clientWidth;
+    const h = view.clientHeight;
+    const before = state.mode === "before";
+    const points = before ? landmarkPre : landmarkNow;
+    const face = before ? facePre : current;
+    const mid = centre.clone().project(camera);
+    for (let i = 0; i < labels.length; i++) {
+      const e = labels[i];
+      const shown = state.landmarks && facing(i, points, face);
+      e.hidden = !shown;
+      if (!shown) continue;
+      lp.fromArray(points, 3 * i).project(camera);
+      const x = ((lp.x + 1) / 2) * w;
+      const y = ((1 - lp.y) / 2) * h;
+      e.dataset.x = x.toFixed(1);
+      e.dataset.y = y.toFixed(1);
+      // Right of the marker when it is right of the middle, left of it otherwise; kept on the
+      // picture. Widths are measured once (the text does not change).
+      if (!widths[i]) widths[i] = e.offsetWidth;
+      let right = lp.x >= mid.x;
+      if (right && x + 6 + widths[i] > w) right = false;
+      else if (!right && x - 6 - widths[i] < 0) right = true;
+      e.style.transform = `translate(${right ? x + 6 : x - 6 - widths[i]}px, ${y - 7}px)`;
+    }
+  }
+
   function showState() {
     const after = state.mode !== "before";
     faceAfter.visible = after;
     faceBefore.visible = state.mode === "before";
-    faceOverlay.visible = state.mode === "overlay";
+    ghostFront.visible = ghostBehind.visible = state.mode === "both";
+    if (state.mode === "both") refreshGhost();
     skullBefore.visible = state.skull && !after;
     skullMoving.visible = skullStatic.visible = state.skull && after;
-    markers.visible = state.landmarks && landmarks.length > 0;
+    softMarkers.visible = state.landmarks && landmarks.length > 0;
+    boneMarkers.visible = softMarkers.visible && state.skull;
     showMarkers(after ? landmarkNow : landmarkPre);
-    // The skull shows through the face; the skull itself is always opaque.
-    for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? 0.55 : 1);
+    // The skin is opaque unless the skull is to be seen through it; the skull is always opaque.
+    for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? SEE_THROUGH : 1);
+    legend.hidden = !(after && state.colour);
+    profilePanel.hidden = !state.tracing;
+    for (const b of modeButtons) b.setAttribute("aria-pressed", String(b.dataset.mode === state.mode));
+    for (const b of viewButtons) b.setAttribute("aria-pressed", String(b.dataset.view === state.view));
+    describe();
     cache.invalidate();
+  }
+
+  /** The canvas' text alternative: what it shows now. */
+  function describe() {
+    const what = { before: "the face before surgery", after: "the predicted face after surgery", both: "the predicted face after surgery over a translucent blue ghost of the face before" }[state.mode];
+    const colour = state.mode !== "before" && state.colour
+      ? `, coloured by ${state.colourBy === "band" ? "the uncertainty band width" : "how far the skin moves"} from 0 (dark blue) to ${state.max.toFixed(1)} mm (yellow)`
+      : "";
+    const shown = labels.filter((e) => !e.hidden).map((e) => e.textContent);
+    const lms = state.landmarks && shown.length > 0 ? `; landmarks labelled: ${shown.join(", ")}` : "";
+    canvas.setAttribute("aria-label", `3-D picture of ${what}${colour}, seen ${VIEW_TEXT[state.view] || "from a turned viewpoint"}; skull ${state.skull ? "shown through the skin" : "hidden"}${lms}.`);
   }
 
   // ---- drawing: on demand, at most once an animation frame; coarser while dragging ----
@@ -289,23 +471,34 @@ function main() {
       renderer.setSize(w, h, false);
       camera.aspect = w / h;
       camera.updateProjectionMatrix();
+      // The print layout keeps the picture's screen size, scaled to fit beside the tracing.
+      document.body.style.setProperty("--view-w", `${w}px`);
+      document.body.style.setProperty("--view-h", `${h}px`);
+      document.body.style.setProperty("--print-zoom", String(Math.min(1, 440 / w, 470 / h)));
     }
-    faceAfter.geometry.setIndex(dragging && options.lod ? faceIndexLod : faceIndexFull);
+    const lod = dragging && options.lod ? faceIndexLod : faceIndexFull;
+    faceAfter.geometry.setIndex(lod);
+    faceBefore.geometry.setIndex(lod);
     viewUp(camera);
+    placeLabels();
     if (cached && options.cache && skullStatic.visible && cache.draw(scene, camera)) return;
     renderer.render(scene, camera);
   }
   const render = () => draw(false);
   let settle = 0;
   /** A frame drawn while dragging (`slider`: a slider, not the view); the full-resolution one
-   *  follows when the dragging stops. */
+   *  follows when the dragging stops, with the tables and the profile tracing. */
   function dragFrame(slider) {
     draw(true, slider);
     clearTimeout(settle);
-    settle = setTimeout(() => {
-      refreshTables();
-      render();
-    }, DRAG_SETTLE_MS);
+    settle = setTimeout(settleNow, DRAG_SETTLE_MS);
+  }
+  function settleNow() {
+    clearTimeout(settle);
+    refreshTables();
+    refreshProfile();
+    render();
+    describe();
   }
   let frameWanted = false;
   let sliderMoved = false;
@@ -323,27 +516,125 @@ function main() {
       dragFrame(slider);
     });
   }
-  controls.addEventListener("change", requestFrame);
+  let quietControls = false;
+  controls.addEventListener("change", () => {
+    if (quietControls) return;
+    // Turned by hand: no named view any more.
+    if (state.view) {
+      state.view = null;
+      for (const b of viewButtons) b.setAttribute("aria-pressed", "false");
+    }
+    requestFrame();
+  });
   window.addEventListener("resize", render);
+  window.addEventListener("beforeprint", settleNow);
 
-  // ---- controls panel ----
-  const modes = el("fieldset");
-  modes.appendChild(el("legend", {}, "face"));
-  for (const [value, label] of [["before", "before"], ["after", "after"], ["overlay", "after + before (wire)"]]) {
-    const l = el("label");
-    const r = el("input", { type: "radio", name: "mode", value });
-    if (value === state.mode) r.checked = true;
-    r.addEventListener("change", () => {
-      state.mode = value;
+  /** Move the camera (`change` edits position and target), then draw at full resolution. */
+  function moveCamera(change) {
+    change();
+    quietControls = true;
+    controls.update();
+    quietControls = false;
+    render();
+    describe();
+  }
+  /** One of VIEWS: the camera on that side of the face, far enough to see all of it. */
+  function setView(name) {
+    const v = VIEWS.find(([key]) => key === name);
+    if (!v) throw new Error(`report.html: no view '${name}' (${VIEWS.map(([k]) => k).join(", ")})`);
+    state.view = name;
+    const aspect = view.clientWidth / Math.max(view.clientHeight, 1);
+    const half = THREE.MathUtils.degToRad(camera.fov / 2);
+    const fit = Math.min(half, Math.atan(Math.tan(half) * aspect));
+    moveCamera(() => {
+      controls.target.copy(centre);
+      camera.position.copy(centre).addScaledVector(v[2](frame), (0.7 * radius) / Math.sin(fit));
+    });
+    showState();
+  }
+
+  // Keys on the picture: arrows turn (left/right about the head's vertical, up/down tilt), + and −
+  // zoom, 1–4 the views, 0 the default view.
+  const STEP = THREE.MathUtils.degToRad(15);
+  const axis = new THREE.Vector3();
+  canvas.addEventListener("keydown", (e) => {
+    const turn = (about, angle) =>
+      moveCamera(() => {
+        const off = camera.position.clone().sub(controls.target).applyAxisAngle(about, angle);
+        camera.position.copy(controls.target).add(off);
+      });
+    const zoom = (k) => moveCamera(() => camera.position.sub(controls.target).multiplyScalar(k).add(controls.target));
+    const right = () => axis.subVectors(controls.target, camera.position).cross(camera.up).normalize();
+    const keys = {
+      ArrowLeft: () => turn(frame.up, -STEP),
+      ArrowRight: () => turn(frame.up, STEP),
+      ArrowUp: () => turn(right(), -STEP),
+      ArrowDown: () => turn(right(), STEP),
+      "+": () => zoom(0.85),
+      "=": () => zoom(0.85),
+      "-": () => zoom(1 / 0.85),
+      1: () => setView("front"),
+      2: () => setView("profile-right"),
+      3: () => setView("profile-left"),
+      4: () => setView("three-quarter"),
+      0: () => setView("profile-right"),
+    };
+    const act = keys[e.key];
+    if (!act || e.altKey || e.ctrlKey || e.metaKey) return;
+    e.preventDefault();
+    if (e.key.startsWith("Arrow")) state.view = null;
+    act();
+    if (e.key.startsWith("Arrow")) showState();
+  });
+
+  // ---- toolbar over the picture: views, before/after/both, picture export ----
+  const toolbar = el("div", { id: "toolbar" });
+  const group = (label) => {
+    const g = el("div", { role: "group", "aria-label": label });
+    toolbar.appendChild(g);
+    return g;
+  };
+  const viewGroup = group("view");
+  const viewButtons = VIEWS.map(([key, label], i) => {
+    const b = el("button", { type: "button", "data-view": key, "aria-pressed": "false", "aria-keyshortcuts": String(i + 1), title: `${label} (key ${i + 1} on the picture)` }, label);
+    b.addEventListener("click", () => setView(key));
+    viewGroup.appendChild(b);
+    return b;
+  });
+  const modeGroup = group("face shown");
+  const modeButtons = MODES.map(([key, label]) => {
+    const b = el("button", { type: "button", "data-mode": key, "aria-pressed": "false" }, label);
+    b.title = { before: "the face before surgery", after: "the predicted face after surgery", both: "after, over a translucent ghost of before" }[key];
+    b.addEventListener("click", () => {
+      state.mode = key;
       showState();
       render();
     });
-    l.append(r, ` ${label}`);
-    modes.appendChild(l);
-  }
-  const toggle = (label, key) => {
+    modeGroup.appendChild(b);
+    return b;
+  });
+  const exportGroup = group("export");
+  const pngButton = el("button", { type: "button", id: "png" }, "save picture (PNG)");
+  pngButton.addEventListener("click", () => {
+    const a = el("a", { download: `${data.title || "facesim"} - ${state.view || "view"}.png` });
+    a.href = png();
+    a.click();
+  });
+  const printButton = el("button", { type: "button", id: "print" }, "print summary");
+  printButton.addEventListener("click", () => window.print());
+  exportGroup.append(pngButton, printButton);
+  view.appendChild(toolbar);
+
+  // ---- controls panel ----
+  side.appendChild(
+    el("p", { class: "hint", id: "keys-hint" }, "On the picture: drag to turn, wheel to zoom, right-drag to move. With the picture focused (Tab): ← → turn, ↑ ↓ tilt, + − zoom, 1 front, 2 profile right, 3 profile left, 4 three-quarter, 0 back to the profile."),
+  );
+  side.appendChild(el("p", { class: "frame-note" }, `Views and tracing use ${hf.source}.`));
+  const shownBox = el("fieldset");
+  shownBox.appendChild(el("legend", {}, "show"));
+  const toggle = (label, key, id) => {
     const l = el("label");
-    const c = el("input", { type: "checkbox" });
+    const c = el("input", { type: "checkbox", id });
     c.checked = state[key];
     c.addEventListener("change", () => {
       state[key] = c.checked;
@@ -354,16 +645,12 @@ function main() {
     l.append(c, ` ${label}`);
     return l;
   };
-  modes.append(toggle("skull", "skull"), toggle("displacement colours", "colour"), toggle("landmarks", "landmarks"));
-  side.appendChild(modes);
-
-  const bar = el("div", { class: "scale" });
-  const ramp = el("div", { class: "ramp" });
-  const stops = [];
-  for (let i = 0; i <= 8; i++) stops.push(`rgb(${viridis(i / 8).join(",")}) ${(i / 8) * 100}%`);
-  ramp.style.background = `linear-gradient(to right, ${stops.join(",")})`;
-  bar.append(scaleTitle, ramp, el("span", { class: "min" }, "0 mm"), scaleLabel);
-  side.appendChild(bar);
+  shownBox.append(
+    toggle("colour by how far the skin moves", "colour", "colour"),
+    toggle("landmarks", "landmarks", "landmarks"),
+    toggle("see the skull through the skin", "skull", "skull"),
+    toggle("profile tracing", "tracing", "tracing"),
+  );
   if (bandWidth) {
     const l = el("label");
     const c = el("input", { type: "checkbox", id: "band" });
@@ -374,8 +661,9 @@ function main() {
       render();
     });
     l.append(c, " colour by the uncertainty band (p95 − p05)");
-    side.appendChild(l);
+    shownBox.appendChild(l);
   }
+  side.appendChild(shownBox);
 
   // ---- sliders ----
   const planBox = el("fieldset", { id: "plan" });
@@ -394,9 +682,12 @@ function main() {
         const lim = Math.max(unit === "mm" ? 15 : 20, Math.ceil(Math.abs(value)));
         const r = el("input", { type: "range", min: -lim, max: lim, step: 0.1, value: String(value) });
         r.dataset.segment = s.name;
-        const out = el("output", {}, `${value.toFixed(1)} ${unit}`);
+        const text = (v) => `${Number(v).toFixed(1)} ${unit}`;
+        r.setAttribute("aria-valuetext", text(value));
+        const out = el("output", {}, text(value));
         r.addEventListener("input", () => {
-          out.textContent = `${Number(r.value).toFixed(1)} ${unit}`;
+          out.textContent = text(r.value);
+          r.setAttribute("aria-valuetext", out.textContent);
           sliderMoved = true;
           requestFrame();
         });
@@ -407,7 +698,7 @@ function main() {
       ["x", "y", "z"].forEach((a, i) => put("translate", i, `move ${a}`, "mm"));
       ["x", "y", "z"].forEach((a, i) => put("rotate_deg", i, `turn ${a}`, "°"));
     }
-    const reset = el("button", {}, "the run's plan");
+    const reset = el("button", { type: "button" }, "the run's plan");
     reset.addEventListener("click", () => {
       const p = {};
       for (const s of basis.segments) p[s.name] = s.runPlan;
@@ -417,8 +708,7 @@ function main() {
       current.set(facePost);
       refreshFace();
       refreshSkull(null);
-      refreshTables();
-      render();
+      settleNow();
     });
     planBox.appendChild(reset);
   }
@@ -446,6 +736,7 @@ function main() {
           }
           r.value = String(v);
           out.textContent = `${Number(v).toFixed(1)} ${unit}`;
+          r.setAttribute("aria-valuetext", out.textContent);
         }
     }
   }
@@ -456,54 +747,113 @@ function main() {
     refreshSkull(p);
   }
 
-  // ---- landmarks, regions and measurements ----
+  // ---- the profile tracing: the midsagittal cut before and after ----
+  const cutFrame = { origin: hf.origin, front: frame.front.toArray(), up: frame.up.toArray(), left: frame.left.toArray() };
+  const profileBefore = facialPart(midsagittalCut(facePre, faceTris, cutFrame));
+  const profilePanel = el("section", { id: "profile", "aria-labelledby": "profile-h" });
+  profilePanel.appendChild(el("h2", { id: "profile-h" }, "profile tracing (midsagittal)"));
+  const svg = svgEl("svg", { role: "img", "aria-labelledby": "profile-title profile-desc" });
+  const svgTitle = svgEl("title", { id: "profile-title" }, "Midsagittal profile before and after");
+  const svgDesc = svgEl("desc", { id: "profile-desc" });
+  const beforePath = svgEl("path", { class: "before", d: pathData(profileBefore) });
+  const afterPath = svgEl("path", { class: "after" });
+  const bar = svgEl("path", { class: "bar" });
+  const barText = svgEl("text", { "font-size": "3.5", fill: "#333" }, "10 mm");
+  svg.append(svgTitle, svgDesc, beforePath, afterPath, bar, barText);
+  const key = el("div", { class: "key" });
+  key.append(el("span", { class: "b" }, "before"), el("span", {}, "after"));
+  profilePanel.append(svg, key);
+  mainBox.appendChild(profilePanel);
+  /** The view box: the face before and the run's face after, with a margin, fixed so that plans
+   *  compare in one picture. */
+  const extent = (lines, ext) => {
+    for (const l of lines)
+      for (let i = 0; i < l.length; i += 2) {
+        ext[0] = Math.min(ext[0], l[i]);
+        ext[1] = Math.max(ext[1], l[i]);
+        ext[2] = Math.min(ext[2], -l[i + 1]);
+        ext[3] = Math.max(ext[3], -l[i + 1]);
+      }
+    return ext;
+  };
+  const ext = extent(facialPart(midsagittalCut(facePost, faceTris, cutFrame)), extent(profileBefore, [Infinity, -Infinity, Infinity, -Infinity]));
+  if (Number.isFinite(ext[0])) {
+    const m = 8;
+    const [x0, y0, w, h] = [ext[0] - m, ext[2] - m, ext[1] - ext[0] + 2 * m, ext[3] - ext[2] + 2 * m];
+    svg.setAttribute("viewBox", `${x0.toFixed(1)} ${y0.toFixed(1)} ${w.toFixed(1)} ${h.toFixed(1)}`);
+    bar.setAttribute("d", `M${(x0 + 3).toFixed(1)} ${(y0 + h - 3).toFixed(1)}h10`);
+    barText.setAttribute("x", (x0 + 3).toFixed(1));
+    barText.setAttribute("y", (y0 + h - 5).toFixed(1));
+  }
+  let profileAfter = [];
+  function refreshProfile() {
+    profileAfter = facialPart(midsagittalCut(current, faceTris, cutFrame));
+    afterPath.setAttribute("d", pathData(profileAfter));
+    // How far the most anterior points of the lower face moved, for the text alternative.
+    const lowFront = (lines) => {
+      let best = -Infinity;
+      for (const l of lines) for (let i = 0; i < l.length; i += 2) if (l[i + 1] < -30) best = Math.max(best, l[i]);
+      return best;
+    };
+    const chin = lowFront(profileAfter) - lowFront(profileBefore);
+    svgDesc.textContent =
+      `The face cut by the midsagittal plane, front to the right, up at the top: before surgery as a grey dashed line, after as a red line; a 10 mm bar for scale.` +
+      (Number.isFinite(chin) ? ` The most forward point more than 30 mm below the nose tip's level moves ${chin >= 0 ? "forward" : "back"} by ${Math.abs(chin).toFixed(1)} mm.` : "");
+  }
+
+  // ---- tables: landmarks, regions, measurements ----
+  const summary = el("section", { id: "summary", "aria-label": "summary tables" });
   const regionNames = data.region_names || [];
   const regionOf = data.region_of ? decode(data.region_of, Uint8Array) : new Uint8Array(0);
-  const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : Number(v).toFixed(d));
-  const table = (head) => {
-    const t = el("table", { class: "figures" });
+  const fmt = (v, d = 1) => (v === null || v === undefined ? "–" : Number(v).toFixed(d));
+  const table = (caption, head, cls = "") => {
+    const t = el("table", { class: `figures ${cls}`.trim() });
+    t.appendChild(el("caption", {}, caption));
+    const thead = el("thead");
     const tr = el("tr");
-    for (const h of head) tr.appendChild(el("th", {}, h));
-    t.appendChild(tr);
+    for (const h of head) tr.appendChild(el("th", { scope: "col" }, h));
+    thead.appendChild(tr);
+    t.append(thead, el("tbody"));
     return t;
   };
   const row = (t, cells, title) => {
     const tr = el("tr", title ? { title } : {});
-    cells.forEach((c, i) => tr.appendChild(el(i === 0 ? "th" : "td", {}, c)));
-    t.appendChild(tr);
+    cells.forEach((c, i) => tr.appendChild(i === 0 ? el("th", { scope: "row" }, c) : el("td", { class: /^[-–+\d.]/.test(c) ? "num" : "" }, c)));
+    t.tBodies[0].appendChild(tr);
+    return tr;
   };
-  const landmarkTable = table(["landmark", "moves (mm)"]);
-  const regionTable = table(["region", "vertices", "mean", "p90", "max (mm)"]);
+  const clear = (t) => t.tBodies[0].replaceChildren();
+  const regionTable = table("How far the skin moves, per region (mm; the plan shown)", ["region", "mean", "90 %", "max", "vertices"]);
+  const landmarkTable = table("How far each landmark moves (mm; the plan shown)", ["landmark", "moves"]);
   /** The live tables: each landmark's move and each region's displacement for the face shown. */
   function refreshTables() {
-    while (landmarkTable.rows.length > 1) landmarkTable.deleteRow(1);
+    clear(landmarkTable);
     landmarks.forEach((l, i) => {
       let d = 0;
       for (let k = 0; k < 3; k++) d += (landmarkNow[3 * i + k] - landmarkPre[3 * i + k]) ** 2;
       row(landmarkTable, [l.label, fmt(Math.sqrt(d))]);
     });
-    for (const [label, why] of data.missing_landmarks || []) row(landmarkTable, [label, "missing"], why);
-    while (regionTable.rows.length > 1) regionTable.deleteRow(1);
+    for (const [label, why] of data.missing_landmarks || []) row(landmarkTable, [label, "not found"], why);
+    clear(regionTable);
     const stats = regionStats(regionNames, regionOf, dist);
     for (const name of regionNames) {
       const r = stats[name];
-      row(regionTable, r ? [name, String(r.vertices), fmt(r.mean), fmt(r.p90), fmt(r.max)] : [name, "absent", "", "", ""]);
+      row(regionTable, r ? [name, fmt(r.mean), fmt(r.p90), fmt(r.max), String(r.vertices)] : [name, "absent", "", "", ""]);
     }
   }
-  side.appendChild(el("h2", {}, "landmarks (live)"));
-  side.appendChild(landmarkTable);
-  side.appendChild(el("h2", {}, "regions: displacement (live)"));
-  side.appendChild(regionTable);
+  summary.appendChild(regionTable);
   const measures = Object.entries(data.measurements || {});
   const ratios = Object.entries(data.ratios || {});
   if (measures.length + ratios.length > 0) {
-    side.appendChild(el("h2", {}, "measurements (the run's plan)"));
-    const mt = table(["", "before", "after", "change"]);
+    const mt = table("Measurements before and after (the run's plan)", ["", "before", "after", "change"]);
     for (const [name, m] of measures)
-      row(mt, [`${name} (${m.unit})`, fmt(m.before, 1), fmt(m.after, 1), fmt(m.change, 1)], m.missing || m.definition);
-    for (const [name, r] of ratios) row(mt, [`${name} soft/hard`, fmt(r.soft_mm), fmt(r.hard_mm), fmt(r.ratio)], r.missing || "soft-tissue move / bone move (mm, ratio)");
-    side.appendChild(mt);
+      row(mt, [`${name.replaceAll("_", " ")} (${m.unit})`, fmt(m.before), fmt(m.after), fmt(m.change)], m.missing || m.definition);
+    for (const [name, r] of ratios)
+      row(mt, [`${name.replaceAll("_", " ")}: soft / hard (mm, ratio)`, fmt(r.soft_mm), fmt(r.hard_mm), fmt(r.ratio, 2)], r.missing || "soft-tissue move / bone move (mm, ratio)");
+    summary.appendChild(mt);
   }
+  summary.appendChild(landmarkTable);
+  side.appendChild(summary);
 
   // ---- the plan held against the clinic: published soft/hard ratios of its surgery type ----
   const clinic = data.published;
@@ -513,13 +863,12 @@ function main() {
       ? `Soft/hard ratios published for this surgery type (the spread of study means; hover a row for its source). The plan: ${clinic.reading}.`
       : `No published ratios for this plan: ${clinic.reading}.`));
     if ((clinic.rows || []).length > 0) {
-      const ct = table(["", "predicted", "published", ""]);
-      ct.classList.add("clinic");
+      const ct = table("Soft/hard ratios: predicted against published", ["", "predicted", "published", ""], "clinic");
       for (const r of clinic.rows) {
         const verdict = r.inside === true ? "inside" : r.inside === false ? "outside" : "not measured";
         const notes = [r.missing, `hard: ${r.hard}${r.hard_at ? ` (taken at ${r.hard_at})` : ""}`, r.range_note, r.source].filter(Boolean);
-        row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted), `${fmt(r.low)}–${fmt(r.high)}`, verdict], notes.join("; "));
-        ct.lastChild.classList.add(r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
+        const tr = row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), `${fmt(r.low, 2)}–${fmt(r.high, 2)}`, verdict], notes.join("; "));
+        tr.classList.add(r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
       }
       side.appendChild(ct);
     }
@@ -528,26 +877,65 @@ function main() {
   const u = data.uncertainty;
   if (u && u.samples > 0) {
     side.appendChild(el("h2", {}, `uncertainty: ${u.samples} samples (the run's plan)`));
-    side.appendChild(el("p", {}, "displacement (mm): mean [5 %, 95 %] over tissue parameters drawn from their literature ranges"));
-    const ut = table(["", "mean", "5 %", "95 %"]);
-    for (const [k, b] of Object.entries(u.landmarks || {})) row(ut, [k, fmt(b.mean), fmt(b.p05), fmt(b.p95)]);
-    for (const [k, b] of Object.entries(u.regions || {})) if (b) row(ut, [k, fmt(b.mean), fmt(b.p05), fmt(b.p95)]);
+    const ut = table("Displacement (mm): mean [5 %, 95 %] over tissue parameters drawn from their literature ranges", ["", "mean", "5 %", "95 %"]);
+    for (const [k, b] of Object.entries(u.landmarks || {})) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
+    for (const [k, b] of Object.entries(u.regions || {})) if (b) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
     side.appendChild(ut);
   }
 
   // ---- figures and warnings of report.json ----
-  const figs = el("table", { class: "figures" });
-  for (const [k, v] of data.figures) {
-    const tr = el("tr");
-    tr.append(el("th", {}, k), el("td", {}, v));
-    figs.appendChild(tr);
-  }
+  const figs = table("Key figures of report.json", ["", ""]);
+  for (const [k, v] of data.figures) row(figs, [k, v]);
   side.appendChild(el("h2", {}, "figures"));
   side.appendChild(figs);
   side.appendChild(el("h2", {}, `warnings (${data.warnings.length})`));
   const ul = el("ul", { class: "warnings" });
   for (const w of data.warnings) ul.appendChild(el("li", {}, w));
   side.appendChild(ul);
+
+  /** The picture as a PNG data URL: the canvas at full resolution with the landmark labels and
+   *  the colour legend drawn in. */
+  function png() {
+    render();
+    const out = document.createElement("canvas");
+    out.width = canvas.width;
+    out.height = canvas.height;
+    const g = out.getContext("2d");
+    g.drawImage(canvas, 0, 0);
+    const k = canvas.width / Math.max(view.clientWidth, 1);
+    const origin = view.getBoundingClientRect();
+    const box = (e, fill) => {
+      const r = e.getBoundingClientRect();
+      const [x, y, w, h] = [(r.left - origin.left) * k, (r.top - origin.top) * k, r.width * k, r.height * k];
+      g.fillStyle = fill;
+      g.fillRect(x, y, w, h);
+      return [x, y, w, h];
+    };
+    g.textBaseline = "middle";
+    for (const e of labels) {
+      if (e.hidden) continue;
+      const [x, y, , h] = box(e, "rgba(255,255,255,0.82)");
+      g.font = `600 ${12 * k}px system-ui, sans-serif`;
+      g.fillStyle = e.classList.contains("bone") ? "#123b8c" : "#111";
+      g.fillText(e.textContent, x + 3 * k, y + h / 2);
+    }
+    if (!legend.hidden) {
+      const [x, y, w] = box(legend, "rgba(255,255,255,0.9)");
+      g.font = `${12 * k}px system-ui, sans-serif`;
+      g.fillStyle = "#111";
+      g.fillText(legendTitle.textContent, x + 8 * k, y + 12 * k);
+      const grad = g.createLinearGradient(x + 8 * k, 0, x + w - 8 * k, 0);
+      for (let i = 0; i <= 8; i++) grad.addColorStop(i / 8, `rgb(${viridis(i / 8).join(",")})`);
+      g.fillStyle = grad;
+      g.fillRect(x + 8 * k, y + 22 * k, w - 16 * k, 12 * k);
+      g.fillStyle = "#111";
+      g.textAlign = "left";
+      g.fillText(tickLabels[0].textContent, x + 8 * k, y + 44 * k);
+      g.textAlign = "right";
+      g.fillText(tickLabels[2].textContent, x + w - 8 * k, y + 44 * k);
+    }
+    return out.toDataURL("image/png");
+  }
 
   // ---- automation API (docs/report-page.md) ----
   window.facesim = {
@@ -580,6 +968,35 @@ function main() {
     },
     /** Draw the scene now at full resolution (benchmarks time it). */
     render,
+    /** What follows a drag 200 ms after it stops, now: tables, profile tracing, full frame. */
+    settle: settleNow,
+    /** One of "front", "profile-right", "profile-left", "three-quarter". */
+    setView,
+    /** "before", "after" or "both". */
+    setMode(mode) {
+      if (!MODES.some(([k]) => k === mode)) throw new Error(`report.html: no mode '${mode}'`);
+      state.mode = mode;
+      showState();
+      render();
+    },
+    /** The camera, for tests that project points themselves: LPS position, target and up, the
+     *  vertical field of view (degrees), and the picture's CSS size. */
+    camera() {
+      return {
+        position: camera.position.toArray(),
+        target: controls.target.toArray(),
+        up: camera.up.toArray(),
+        fov: camera.fov,
+        width: view.clientWidth,
+        height: view.clientHeight,
+      };
+    },
+    /** The head frame the views and the tracing use. */
+    frame() {
+      return { ...hf };
+    },
+    /** The picture (labels and legend drawn in) as a PNG data URL of the canvas' size. */
+    png,
     /** dragPixelRatio: the pixel ratio of frames drawn while dragging (1: always full). */
     options,
     /** How many segments and face vertices the page holds (for tests and benchmarks). */
@@ -590,16 +1007,36 @@ function main() {
         basis: basis ? basis.label : null,
         // Whether slider frames draw the static skull from the cache (frame_cache.js).
         frame_cache: cache.enabled,
+        view: state.view,
+        mode: state.mode,
       };
     },
   };
 
   refreshFace();
   refreshLandmarks(null);
-  showState();
   refreshTables();
-  render();
+  draw(false); // sizes the canvas, so that the view can fit the face
+  setView("profile-right");
+  refreshProfile();
+  describe();
   document.body.dataset.ready = "1";
+}
+
+/** Which side of the skin mesh faces out (three.js FrontSide or BackSide): the side the normal
+ *  points to at the most anterior vertex (the nose tip), which faces the front. */
+function outerSide(pos, normals, frame) {
+  let best = -Infinity;
+  let at = 0;
+  for (let v = 0; v < pos.length / 3; v++) {
+    const a = pos[3 * v] * frame.front.x + pos[3 * v + 1] * frame.front.y + pos[3 * v + 2] * frame.front.z;
+    if (a > best) {
+      best = a;
+      at = v;
+    }
+  }
+  const d = normals[3 * at] * frame.front.x + normals[3 * at + 1] * frame.front.y + normals[3 * at + 2] * frame.front.z;
+  return d >= 0 ? THREE.FrontSide : THREE.BackSide;
 }
 
 main();

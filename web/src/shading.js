@@ -1,81 +1,112 @@
-// The page's surface material: Lambert lighting (three.js' hemisphere + directional light model,
-// the same sky/ground/sun as before) evaluated per vertex, both sides, so a fragment only picks
-// one of two interpolated colours. With software WebGL (SwiftShader) the per-fragment lighting of
-// MeshStandardMaterial was most of the 140 ms a frame (docs/performance.md); with ≈ 20 k-vertex
-// meshes per-vertex lighting looks the same.
+// The page's surface material: lit per fragment, both sides. A soft studio set-up that reads as
+// skin: a hemisphere light along the head's vertical (sky over ground), a key light from the
+// camera's upper left and a fill from its right, both with wrapped diffuse (light reaching a
+// little past the terminator, as it does through skin), and a broad, weak, Fresnel-weighted
+// Blinn-Phong highlight (energy-normalised; F0 0.028, skin's). Hand-written rather than
+// MeshStandardMaterial: with software WebGL (SwiftShader) three.js' generic PBR shader cost most
+// of a frame (docs/performance.md); this one is a few dozen operations per fragment.
 import * as THREE from "three";
 
 const vertexShader = `
 #ifdef TINT
 attribute vec3 color;
 #endif
+#ifdef WEIGHTED
+attribute float weight;
+varying float vWeight;
+#endif
 uniform vec3 base;
-uniform vec3 sky;
-uniform vec3 ground;
-uniform vec3 sun;
-uniform vec3 sunDir;
-uniform vec3 up;
-varying vec3 vFront;
-varying vec3 vBack;
+varying vec3 vAlbedo;
+varying vec3 vNormal;
+varying vec3 vView;
 void main() {
 #ifdef TINT
-  vec3 albedo = color;
+  vAlbedo = color;
 #else
-  vec3 albedo = base;
+  vAlbedo = base;
 #endif
-  vec3 n = normalize(normalMatrix * normal);
-  // The back side's normal is −n: the same two dot products, negated.
-  float h = 0.5 * dot(n, up);
-  float s = dot(n, sunDir);
-  vFront = albedo * (mix(ground, sky, 0.5 + h) + sun * max(s, 0.0));
-  vBack = albedo * (mix(ground, sky, 0.5 - h) + sun * max(-s, 0.0));
-  gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+#ifdef WEIGHTED
+  vWeight = weight;
+#endif
+  vec4 mv = modelViewMatrix * vec4(position, 1.0);
+  vView = -mv.xyz;
+  vNormal = normalMatrix * normal;
+  gl_Position = projectionMatrix * mv;
 }`;
 
 const fragmentShader = `
+#ifdef WEIGHTED
+varying float vWeight;
+#endif
 uniform float opacity;
-varying vec3 vFront;
-varying vec3 vBack;
+uniform float shine;
+uniform vec3 up;
+varying vec3 vAlbedo;
+varying vec3 vNormal;
+varying vec3 vView;
+// Light directions in view space (the lights move with the camera).
+const vec3 KEY = vec3(-0.45, 0.55, 0.70);
+const vec3 FILL = vec3(0.75, -0.05, 0.66);
+const float WRAP = 0.35;
+float wrapped(float c) { return max((c + WRAP) / (1.0 + WRAP), 0.0); }
 void main() {
+  vec3 n = normalize(vNormal);
+  if (!gl_FrontFacing) n = -n;
+  vec3 v = normalize(vView);
+  vec3 key = normalize(KEY);
+  vec3 fill = normalize(FILL);
+  float h = 0.5 + 0.5 * dot(n, up);
+  vec3 light = mix(vec3(0.16, 0.15, 0.15), vec3(0.42, 0.43, 0.46), h);
+  light += vec3(0.78, 0.76, 0.72) * wrapped(dot(n, key)) + vec3(0.26, 0.27, 0.30) * wrapped(dot(n, fill));
+  vec3 c = vAlbedo * light;
+  vec3 hv = normalize(key + v);
+  float nh = max(dot(n, hv), 0.0);
+  float fresnel = 0.028 + 0.972 * pow(1.0 - max(dot(v, hv), 0.0), 5.0);
+  c += shine * fresnel * 3.6 * pow(nh, 28.0) * max(dot(n, key), 0.0);
   // sRGB written here, not by three.js' linearToOutputTexel, so that an offscreen buffer
   // (frame_cache.js) holds the same values as the canvas.
-  gl_FragColor = vec4(sRGBTransferOETF(vec4(gl_FrontFacing ? vFront : vBack, 1.0)).rgb, opacity);
+#ifdef WEIGHTED
+  gl_FragColor = vec4(sRGBTransferOETF(vec4(c, 1.0)).rgb, opacity * vWeight);
+#else
+  gl_FragColor = vec4(sRGBTransferOETF(vec4(c, 1.0)).rgb, opacity);
+#endif
 }`;
 
-// Lambert's BRDF is albedo / π; the light intensities of the former scene (hemisphere 1.6 from
-// white over grey 0x666666, sun 1.2 from the camera's upper right) are folded into the uniforms.
-const hemi = 1.6 / Math.PI;
-const sunI = 1.2 / Math.PI;
-
-// The hemisphere light's "up" in view coordinates, shared by every surface material and set once a
-// frame (viewUp) rather than per vertex. three.js' HemisphereLight shines down world +y unless
-// moved; kept as the page had it.
+// The head's vertical in view coordinates, shared by every surface material and set once a frame
+// (viewUp) rather than per fragment.
 const up = { value: new THREE.Vector3(0, 1, 0) };
+const headUp = new THREE.Vector3(0, 0, 1);
+
+/** The head's vertical (world, LPS) for the hemisphere light. */
+export function setHeadUp(v) {
+  headUp.copy(v).normalize();
+}
 
 /** Point the hemisphere light for `camera` (call before drawing). */
 export function viewUp(camera) {
   camera.updateMatrixWorld();
-  up.value.set(0, 1, 0).transformDirection(camera.matrixWorldInverse);
+  up.value.copy(headUp).transformDirection(camera.matrixWorldInverse);
 }
 
-/** A two-sided surface: `colour` (sRGB hex) or, with `perVertex`, the geometry's "color" attribute
- *  (linear RGB). */
-export function surfaceMaterial({ colour = 0xffffff, perVertex = false } = {}) {
+/** A two-sided surface: `colour` (sRGB hex) or, with `perVertex`, the geometry's "color"
+ *  attribute (linear RGB); `shine` scales the highlight (0: matte); `weighted`: the opacity is
+ *  scaled per vertex by the geometry's "weight" attribute. */
+export function surfaceMaterial({ colour = 0xffffff, perVertex = false, shine = 1, weighted = false } = {}) {
+  const defines = {};
+  if (perVertex) defines.TINT = 1;
+  if (weighted) defines.WEIGHTED = 1;
   return new THREE.ShaderMaterial({
     vertexShader,
     fragmentShader,
-    defines: perVertex ? { TINT: 1 } : {},
+    defines,
     side: THREE.DoubleSide,
     // Transparent (the skull seen through the face) in one pass, not three.js' back-then-front
     // two passes: with depthWrite off the order of the face's own layers does not matter.
     forceSinglePass: true,
     uniforms: {
       base: { value: new THREE.Color(colour) },
-      sky: { value: new THREE.Color(0xffffff).multiplyScalar(hemi) },
-      ground: { value: new THREE.Color(0x666666).multiplyScalar(hemi) },
-      sun: { value: new THREE.Color(0xffffff).multiplyScalar(sunI) },
-      sunDir: { value: new THREE.Vector3(0.3, 0.5, 1).normalize() },
       up,
+      shine: { value: shine },
       opacity: { value: 1 },
     },
   });

@@ -12,7 +12,7 @@ const [html, plansFile, outFile, shot] = process.argv.slice(2);
 const plans = JSON.parse(readFileSync(plansFile, "utf8"));
 const { browser, page, problems } = await openReport(html);
 try {
-  const result = { info: await page.evaluate(() => window.facesim.info()) };
+  const result = { info: await page.evaluate(() => window.facesim.info()), frame: await page.evaluate(() => window.facesim.frame()) };
   result.canvas_initial = await canvasStats(page);
   result.vertices_initial = await page.evaluate(() => window.facesim.faceVertices());
   result.vertices = [];
@@ -38,6 +38,9 @@ try {
       gl.readPixels(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight, gl.RGBA, gl.UNSIGNED_BYTE, px);
       return px;
     };
+    // The static skull is what the cache holds: show it (seen through the skin).
+    const skull = document.getElementById("skull");
+    if (!skull.checked) skull.click();
     const out = { frame_cache: api.info().frame_cache, frames: 0, differing: 0 };
     for (const p of plans) {
       try {
@@ -63,7 +66,7 @@ try {
     if (!box) return null;
     box.click();
     window.facesim.render();
-    const title = document.querySelector(".scale span").textContent;
+    const title = document.querySelector("#legend .title").textContent;
     box.click();
     return title;
   });

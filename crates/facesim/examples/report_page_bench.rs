@@ -91,6 +91,7 @@ fn main() -> facesim::Result<()> {
                 segment("maxilla_right", false),
             ],
         }),
+        head_frame: o.report.head_frame.as_ref().map(Into::into),
         ..Default::default()
     };
     write_report_html(&out, &data)?;

@@ -44,6 +44,29 @@ pub struct PageLandmark {
     pub segment: u8,
 }
 
+/// The head's axes (report.json `head_frame`, docs/landmarks.md "Frame"), for the page's views
+/// (front, profiles, three-quarter) and the midsagittal profile tracing. LPS mm, unit vectors.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PageFrame {
+    /// A point on the midsagittal plane.
+    pub origin: [f64; 3],
+    /// Anterior, superior and towards the patient's left (the midsagittal plane's normal).
+    pub front: [f64; 3],
+    pub up: [f64; 3],
+    pub left: [f64; 3],
+}
+
+impl From<&crate::landmarks::HeadFrame> for PageFrame {
+    fn from(f: &crate::landmarks::HeadFrame) -> PageFrame {
+        PageFrame {
+            origin: f.origin,
+            front: f.anterior,
+            up: f.vertical,
+            left: f.lateral,
+        }
+    }
+}
+
 /// Everything report.html shows (the default: nothing, no basis, no landmarks or regions).
 #[derive(Default)]
 pub struct PageData<'a> {
@@ -87,6 +110,8 @@ pub struct PageData<'a> {
     pub uncertainty: serde_json::Value,
     /// Shown instead of the sliders when there is no basis.
     pub no_basis_reason: String,
+    /// The head frame; None: the LPS axes (front −y, up +z) through the face's middle.
+    pub head_frame: Option<PageFrame>,
 }
 
 /// Write `dir/report.html` (temporary name, then renamed).
@@ -169,6 +194,10 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
             serde_json::json!({ "label": b.label, "segments": segs })
         }
     };
+    let (frame, frame_source) = match data.head_frame {
+        Some(f) => (f, "the head frame"),
+        None => (lps_frame(data.face_pre), "the CT's axes (no head frame)"),
+    };
     let json = serde_json::json!({
         "title": data.title,
         "model": data.model,
@@ -199,6 +228,13 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
         }),
         "uncertainty": data.uncertainty,
         "no_basis_reason": data.no_basis_reason,
+        "head_frame": {
+            "origin": frame.origin,
+            "front": frame.front,
+            "up": frame.up,
+            "left": frame.left,
+            "source": frame_source,
+        },
     });
     // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built
     // without "</script" (web/build.mjs checks).
@@ -214,19 +250,34 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
     ))
 }
 
-const STYLE: &str = "html,body{margin:0;height:100%;font:13px/1.4 system-ui,sans-serif;color:#222}\
-body{display:flex}#side{width:330px;overflow:auto;padding:10px 14px;box-sizing:border-box;\
-border-right:1px solid #ccc;background:#fff}#view{flex:1;position:relative;min-width:0}\
-#view canvas{display:block;width:100%;height:100%}h1{font-size:16px;margin:0 0 4px}\
-h2{font-size:14px;margin:14px 0 4px}h3{font-size:13px;margin:8px 0 2px}fieldset{margin:8px 0;\
-border:1px solid #ccc}fieldset label{display:block}label.slider{display:grid;\
-grid-template-columns:60px 1fr 60px;align-items:center}.scale{margin:8px 0;display:grid;\
-grid-template-columns:1fr 1fr}.scale>span:first-child{grid-column:1/3}.ramp{grid-column:1/3;\
-height:12px;border:1px solid #999}.scale .max{text-align:right}.label,.why{font-weight:bold;\
-color:#a40}table.figures{border-collapse:collapse}table.figures th{text-align:left;\
-font-weight:normal;color:#555;padding-right:8px}ul.warnings{padding-left:18px;color:#a40}\
-table.clinic tr.outside td{color:#b00;font-weight:bold}table.clinic tr.inside td:last-child{\
-color:#070}.clinic-reading{font-size:12px;color:#555}";
+/// What the page looks like before its script has run (the bundle injects the real style sheet,
+/// web/src/style.js).
+const STYLE: &str = "html,body{margin:0;height:100%;font:14px/1.45 system-ui,sans-serif;\
+color:#1d1d1d}body{display:flex}#side{width:330px}#view{flex:1}";
+
+/// The head frame when the run has none: LPS (front −y, up +z, left +x) through the middle of
+/// the face's bounding box.
+fn lps_frame(face: &[[f64; 3]]) -> PageFrame {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in face {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let origin = if face.is_empty() {
+        [0.0; 3]
+    } else {
+        [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]))
+    };
+    PageFrame {
+        origin,
+        front: [0.0, -1.0, 0.0],
+        up: [0.0, 0.0, 1.0],
+        left: [1.0, 0.0, 0.0],
+    }
+}
 
 fn escape_html(s: &str) -> String {
     s.replace('&', "&amp;")

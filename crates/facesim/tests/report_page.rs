@@ -53,7 +53,17 @@ fn assert_self_contained(html: &str) {
             "report.html contains url( at byte {i}"
         );
     }
-    let mut rest = lower.as_str();
+    // The data block's base64 may spell "http" by chance, never "http:" (no ':' in base64).
+    let start = lower
+        .find("<script id=\"facesim-data\"")
+        .expect("no data block");
+    let end = start + lower[start..].find("</script>").unwrap();
+    assert!(
+        !lower[start..end].contains("http:") && !lower[start..end].contains("https:"),
+        "the data block names an address"
+    );
+    let outside = format!("{}{}", &lower[..start], &lower[end..]);
+    let mut rest = outside.as_str();
     while let Some(i) = rest.find("http") {
         let tail = &rest[i..];
         assert!(
@@ -204,6 +214,15 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
     );
     // Before any plan: the run's face_post (float32 in the page).
     assert!(max_diff(&flat(&r["vertices_initial"]), &face_post) < 1e-4);
+    // No head frame: the views fall back to the CT's axes.
+    assert_eq!(flat(&r["frame"]["front"]), [0.0, -1.0, 0.0]);
+    assert_eq!(flat(&r["frame"]["up"]), [0.0, 0.0, 1.0]);
+    assert!(
+        r["frame"]["source"]
+            .as_str()
+            .unwrap()
+            .contains("no head frame")
+    );
     // After each plan: each vertex moved by its segment's rigid map, as osteotomy.rs moves bone.
     for (p, got) in plans.as_array().unwrap()[..2]
         .iter()
@@ -333,4 +352,613 @@ fn set_plan_equals_a_full_run_of_the_linear_volumetric_model() {
     );
     assert!(moved > 1.0, "the plan hardly moved the face: {moved} mm");
     assert!(d < 1e-3, "setPlan is {d} mm off the full run");
+}
+
+// ---- the page as a surgeon shows it: views, tracing, labels, export, keyboard, print ----
+
+/// The pinhole camera the page reports (`facesim.camera()`), projecting LPS points to CSS pixels
+/// of the picture on its own (no three.js).
+struct Camera {
+    pos: [f64; 3],
+    fwd: [f64; 3],
+    right: [f64; 3],
+    up: [f64; 3],
+    focal: f64,
+    size: [f64; 2],
+}
+
+fn v3(v: &serde_json::Value) -> [f64; 3] {
+    let a = flat(v);
+    [a[0], a[1], a[2]]
+}
+
+impl Camera {
+    fn new(c: &serde_json::Value) -> Camera {
+        use facesim::vec3::{cross, norm, scale, sub};
+        let unit = |a: [f64; 3]| scale(a, 1.0 / norm(a));
+        let pos = v3(&c["position"]);
+        let fwd = unit(sub(v3(&c["target"]), pos));
+        let right = unit(cross(fwd, v3(&c["up"])));
+        let size = [c["width"].as_f64().unwrap(), c["height"].as_f64().unwrap()];
+        let half = c["fov"].as_f64().unwrap().to_radians() / 2.0;
+        Camera {
+            pos,
+            fwd,
+            right,
+            up: cross(right, fwd),
+            focal: size[1] / 2.0 / half.tan(),
+            size,
+        }
+    }
+
+    fn project(&self, p: [f64; 3]) -> [f64; 2] {
+        use facesim::vec3::{dot, sub};
+        let d = sub(p, self.pos);
+        let z = dot(d, self.fwd);
+        [
+            self.size[0] / 2.0 + self.focal * dot(d, self.right) / z,
+            self.size[1] / 2.0 - self.focal * dot(d, self.up) / z,
+        ]
+    }
+}
+
+/// A picture's mask (1: drawn, 0: the background), from the page script's base64.
+struct Mask {
+    w: usize,
+    h: usize,
+    px: Vec<u8>,
+}
+
+impl Mask {
+    fn new(shot: &serde_json::Value) -> Mask {
+        let w = shot["width"].as_u64().unwrap() as usize;
+        let h = shot["height"].as_u64().unwrap() as usize;
+        let px = unbase64(shot["mask"].as_str().unwrap());
+        assert_eq!(px.len(), w * h);
+        Mask { w, h, px }
+    }
+
+    /// Drawn pixels in the 3 × 3 square around CSS pixel `p` (the canvas has the CSS size).
+    fn drawn_near(&self, p: [f64; 2]) -> usize {
+        let (x, y) = (p[0].round() as i64, p[1].round() as i64);
+        let mut k = 0;
+        for dy in -1..=1 {
+            for dx in -1..=1 {
+                let (i, j) = (x + dx, y + dy);
+                if i >= 0 && j >= 0 && (i as usize) < self.w && (j as usize) < self.h {
+                    k += self.px[j as usize * self.w + i as usize] as usize;
+                }
+            }
+        }
+        k
+    }
+}
+
+fn unbase64(s: &str) -> Vec<u8> {
+    let val = |c: u8| match c {
+        b'A'..=b'Z' => c - b'A',
+        b'a'..=b'z' => c - b'a' + 26,
+        b'0'..=b'9' => c - b'0' + 52,
+        b'+' => 62,
+        b'/' => 63,
+        _ => panic!("not base64: {c}"),
+    };
+    let b: Vec<u8> = s.bytes().filter(|c| *c != b'=').collect();
+    let mut out = Vec::with_capacity(b.len() * 3 / 4);
+    for c in b.chunks(4) {
+        let n = c
+            .iter()
+            .enumerate()
+            .fold(0u32, |n, (i, x)| n | u32::from(val(*x)) << (18 - 6 * i));
+        for k in 0..c.len() - 1 {
+            out.push((n >> (16 - 8 * k)) as u8);
+        }
+    }
+    out
+}
+
+/// The head frame of report.json: origin, front, up, left.
+struct Frame {
+    origin: [f64; 3],
+    front: [f64; 3],
+    up: [f64; 3],
+    left: [f64; 3],
+}
+
+/// The face cut by the midsagittal plane, computed here from the mesh: every edge crossing as
+/// (front, up) mm from the frame's origin, the segments as pairs, only the facial part (within
+/// 90 mm of the most anterior point, as the page draws it).
+fn midsagittal_cut(v: &[[f64; 3]], tris: &[[u32; 3]], f: &Frame) -> Vec<[[f64; 2]; 2]> {
+    use facesim::vec3::{add, dot, scale, sub};
+    let side: Vec<f64> = v.iter().map(|p| dot(sub(*p, f.origin), f.left)).collect();
+    let mut segs = Vec::new();
+    for t in tris {
+        let mut pts = Vec::new();
+        for e in 0..3 {
+            let (a, b) = (t[e] as usize, t[(e + 1) % 3] as usize);
+            if (side[a] >= 0.0) != (side[b] >= 0.0) {
+                let p = add(v[a], scale(sub(v[b], v[a]), side[a] / (side[a] - side[b])));
+                let d = sub(p, f.origin);
+                pts.push([dot(d, f.front), dot(d, f.up)]);
+            }
+        }
+        if pts.len() == 2 {
+            segs.push([pts[0], pts[1]]);
+        }
+    }
+    let front = segs
+        .iter()
+        .flatten()
+        .map(|p| p[0])
+        .fold(f64::NEG_INFINITY, f64::max);
+    segs.retain(|s| s.iter().all(|p| p[0] >= front - 90.0));
+    segs
+}
+
+/// (front, up) points of SVG path data "Mx yLx y…" (x = front, y = −up).
+fn path_points(d: &str) -> Vec<[f64; 2]> {
+    let nums: Vec<f64> = d
+        .split(['M', 'L', ' '])
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse().unwrap())
+        .collect();
+    nums.chunks(2).map(|c| [c[0], -c[1]]).collect()
+}
+
+fn dist_to_segment(p: [f64; 2], s: [[f64; 2]; 2]) -> f64 {
+    let d = [s[1][0] - s[0][0], s[1][1] - s[0][1]];
+    let l2 = d[0] * d[0] + d[1] * d[1];
+    let t = if l2 > 0.0 {
+        (((p[0] - s[0][0]) * d[0] + (p[1] - s[0][1]) * d[1]) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - s[0][0] - t * d[0]).hypot(p[1] - s[0][1] - t * d[1])
+}
+
+/// The tracing drawn (`d`) against the cut of the mesh: every drawn point on the cut, every
+/// point of the cut drawn (mm, both ways).
+fn assert_tracing(d: &str, cut: &[[[f64; 2]; 2]], what: &str) {
+    let drawn = path_points(d);
+    assert!(
+        drawn.len() > 30 && cut.len() > 30,
+        "{what}: {} points drawn, {} segments cut",
+        drawn.len(),
+        cut.len()
+    );
+    let off = drawn
+        .iter()
+        .map(|p| {
+            cut.iter()
+                .map(|s| dist_to_segment(*p, *s))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    let missed = cut
+        .iter()
+        .flatten()
+        .map(|q| {
+            drawn
+                .iter()
+                .map(|p| (p[0] - q[0]).hypot(p[1] - q[1]))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .fold(0.0, f64::max);
+    println!(
+        "tracing {what}: {} points, off the cut ≤ {off:.4} mm, cut points missed ≤ {missed:.4} mm",
+        drawn.len()
+    );
+    assert!(
+        off < 0.02,
+        "{what}: a drawn point is {off} mm off the mesh's cut"
+    );
+    assert!(
+        missed < 0.02,
+        "{what}: a point of the cut is {missed} mm from the drawing"
+    );
+}
+
+/// Run the node script views.test.mjs on `html`; its screenshots go to `shots`.
+fn drive_views(html: &Path, plan: &serde_json::Value, shots: &Path) -> serde_json::Value {
+    let dir = html.parent().unwrap();
+    let plan_file = dir.join("views-plan.json");
+    std::fs::write(&plan_file, plan.to_string()).unwrap();
+    let out = dir.join("views.json");
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .arg("test/views.test.mjs")
+        .args([html, &plan_file, &out, shots])
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    assert!(
+        run.status.success(),
+        "views.test.mjs failed: {}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap()
+}
+
+#[test]
+fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_print() {
+    use facesim::phantom::PhantomOptions;
+    use facesim::phantom_jaws::{JawsOptions, write_case};
+    use facesim::vec3::{add, dot, norm, scale, sub};
+    // The jaws phantom (a face with nose, lips and chin; the mandible advanced 5 mm), run by the
+    // pipeline, which writes report.html with the head frame and a plan basis.
+    let dir = common::kept_dir("facesim-page-views");
+    let opts = JawsOptions {
+        phantom: PhantomOptions {
+            spacing: [2.0; 3],
+            ..PhantomOptions::default()
+        },
+        solve_model: None,
+    };
+    write_case(&dir, &opts).unwrap();
+    let o = facesim::commands::run(&dir.join("case.toml"), Some(&dir.join("out")), &Quiet).unwrap();
+    let html_path = o.out_dir.join("report.html");
+    assert_self_contained(&std::fs::read_to_string(&html_path).unwrap());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(o.out_dir.join("report.json")).unwrap())
+            .unwrap();
+    let hf = &report["head_frame"];
+    let frame = Frame {
+        origin: v3(&hf["origin"]),
+        front: v3(&hf["anterior"]),
+        up: v3(&hf["vertical"]),
+        left: v3(&hf["lateral"]),
+    };
+    let segment = o.report.parameters.as_ref().unwrap().osteotomy[0]
+        .name
+        .clone();
+    let plan =
+        json!({ segment.clone(): {"translate": [0.0, -9.0, 2.0], "rotate_deg": [4.0, 0.0, 0.0]} });
+    let shots = Path::new(env!("CARGO_TARGET_TMPDIR")).join("../test-artefacts/views");
+    let r = drive_views(&html_path, &plan, &shots);
+    for k in ["console_errors", "page_errors", "outside_requests"] {
+        assert_eq!(r[k], json!([]), "{k}");
+    }
+    assert_eq!(r["plan_error"], json!(null));
+    // The page uses report.json's head frame, and opens in profile.
+    let pf = &r["frame"];
+    for (page, ours) in [
+        ("origin", frame.origin),
+        ("front", frame.front),
+        ("up", frame.up),
+        ("left", frame.left),
+    ] {
+        let d = norm(sub(v3(&pf[page]), ours));
+        assert!(d < 1e-9, "frame {page}: {} vs {ours:?}", pf[page]);
+    }
+    assert_eq!(r["default_view"], json!("profile-right"));
+
+    // ---- every view and face: drawn, silhouette where it belongs, labels at their landmarks ----
+    let lm_report = &report["landmarks"];
+    let pre = |label: &str| {
+        lm_report[label]["pre"]
+            .as_array()
+            .map(|_| v3(&lm_report[label]["pre"]))
+    };
+    let views = r["views"].as_array().unwrap();
+    assert_eq!(views.len(), 12);
+    let mut checked_labels = 0;
+    for s in views {
+        let (view, mode) = (s["view"].as_str().unwrap(), s["mode"].as_str().unwrap());
+        let what = format!("{view}/{mode} (target/test-artefacts/views/{view}-{mode}.png)");
+        assert_eq!(s["info"]["view"], json!(view), "{what}");
+        assert_eq!(s["info"]["mode"], json!(mode), "{what}");
+        let mask = Mask::new(s);
+        let drawn = mask.px.iter().filter(|x| **x == 1).count();
+        assert!(
+            drawn as f64 > 0.05 * (mask.w * mask.h) as f64 && s["colours"].as_u64().unwrap() > 100,
+            "{what}: blank? {drawn} of {} pixels drawn, {} colours",
+            mask.w * mask.h,
+            s["colours"]
+        );
+        let cam = Camera::new(&s["camera"]);
+        assert_eq!(
+            [mask.w as f64, mask.h as f64],
+            cam.size,
+            "{what}: canvas ≠ CSS size"
+        );
+        // Where the face is: the soft landmarks of the face shown.
+        let shown_at = |label: &str| -> Option<[f64; 3]> {
+            if mode == "before" {
+                pre(label)
+            } else {
+                s["landmarks"].get(label).map(v3)
+            }
+        };
+        let prn = shown_at("Prn").expect("no Prn on the jaws phantom");
+        let toward = sub(cam.pos, prn);
+        let side_on = dot(toward, frame.left).abs() / norm(toward) > 0.99;
+        if view.starts_with("profile") {
+            assert!(side_on, "{what}: the camera is not at the side");
+            // The nose tip is skin; a few mm in front of it (of the more anterior of before and
+            // after) is background.
+            assert!(
+                mask.drawn_near(cam.project(prn)) >= 5,
+                "{what}: no skin at the nose tip"
+            );
+            let tips = [pre("Prn").unwrap(), v3(&s["landmarks"]["Prn"])];
+            let tip = tips
+                .into_iter()
+                .max_by(|a, b| dot(*a, frame.front).total_cmp(&dot(*b, frame.front)))
+                .unwrap();
+            let ahead = cam.project(add(tip, scale(frame.front, 5.0)));
+            assert_eq!(
+                mask.drawn_near(ahead),
+                0,
+                "{what}: not background 5 mm before the nose tip"
+            );
+            // The chin: 2.5 mm in front of soft pogonion before is background before surgery and
+            // skin after it (the mandible comes 5 mm forward).
+            let pog = cam.project(add(pre("Pog'").unwrap(), scale(frame.front, 2.5)));
+            match mode {
+                "before" => assert_eq!(mask.drawn_near(pog), 0, "{what}: chin 2.5 mm ahead"),
+                "after" => assert_eq!(mask.drawn_near(pog), 9, "{what}: the advanced chin"),
+                _ => {}
+            }
+        }
+        if view == "front" {
+            // Left-right symmetric coverage about the projected midsagittal line.
+            let a = cam.project(add(frame.origin, scale(frame.up, 60.0)));
+            let b = cam.project(sub(frame.origin, scale(frame.up, 60.0)));
+            let (mut left, mut right) = (0usize, 0usize);
+            for y in 0..mask.h {
+                let xm = a[0] + (b[0] - a[0]) * (y as f64 - a[1]) / (b[1] - a[1]);
+                for x in 0..mask.w {
+                    if mask.px[y * mask.w + x] == 1 {
+                        if (x as f64) < xm {
+                            left += 1
+                        } else {
+                            right += 1
+                        }
+                    }
+                }
+            }
+            let ratio = left.min(right) as f64 / left.max(right) as f64;
+            println!("{what}: left/right coverage {left} / {right}");
+            assert!(
+                ratio > 0.9,
+                "{what}: asymmetric front view {left} vs {right}"
+            );
+        }
+        // Labels: every shown one next to its landmark's projection; the midline ones shown in
+        // the profiles and the front view.
+        let labels = s["labels"].as_array().unwrap();
+        for l in labels {
+            let label = l["label"].as_str().unwrap();
+            assert_eq!(l["text"], json!(label));
+            if l["shown"] != json!(true) {
+                continue;
+            }
+            let p = cam.project(shown_at(label).unwrap());
+            let b = flat(&l["box"]);
+            let dx = (b[0] - p[0]).max(p[0] - b[0] - b[2]).max(0.0);
+            let dy = (b[1] - p[1]).max(p[1] - b[1] - b[3]).max(0.0);
+            assert!(
+                dx.hypot(dy) < 10.0,
+                "{what}: label {label} at {b:?}, its landmark at {p:?}"
+            );
+            assert!(
+                b[0] > -b[2] && b[0] < cam.size[0] && b[1] > 0.0 && b[1] < cam.size[1],
+                "{what}: label {label} off the picture"
+            );
+            checked_labels += 1;
+        }
+        if view != "three-quarter" {
+            for label in ["Prn", "Sn", "Ls", "Li", "Pog'"] {
+                let l = labels.iter().find(|l| l["label"] == json!(label));
+                assert!(
+                    l.is_some_and(|l| l["shown"] == json!(true)),
+                    "{what}: label {label} not shown"
+                );
+            }
+        }
+        // Bony labels only with the skull, which is hidden by default.
+        assert!(
+            labels
+                .iter()
+                .filter(|l| l["label"] == json!("Pog") || l["label"] == json!("B"))
+                .all(|l| l["shown"] == json!(false)),
+            "{what}: bony labels over the opaque skin"
+        );
+        // The text alternative says what the picture shows.
+        let aria = s["aria"].as_str().unwrap();
+        let says = match view {
+            "front" => "from the front",
+            "profile-right" => "profile from the patient's right",
+            "profile-left" => "profile from the patient's left",
+            _ => "three-quarter",
+        };
+        assert!(aria.contains(says), "{what}: aria-label {aria}");
+        let face = match mode {
+            "before" => "the face before surgery",
+            "after" => "predicted face after surgery,",
+            _ => "ghost of the face before",
+        };
+        assert!(aria.contains(face), "{what}: aria-label {aria}");
+    }
+    println!("{checked_labels} shown labels checked against their landmarks");
+
+    // ---- the profile tracing against the mesh's own cut ----
+    let t = &r["tracing_run"];
+    assert_eq!(t["role"], json!("img"));
+    assert!(
+        t["title"].as_str().unwrap().contains("profile") && t["desc"].as_str().unwrap().len() > 40
+    );
+    assert_eq!(t["shown"], json!(true));
+    let cut_pre = midsagittal_cut(&o.skin.vertices, &o.skin.triangles, &frame);
+    assert_tracing(t["before"].as_str().unwrap(), &cut_pre, "before");
+    assert_tracing(
+        t["after"].as_str().unwrap(),
+        &midsagittal_cut(&o.face_post.vertices, &o.skin.triangles, &frame),
+        "after (the run's plan)",
+    );
+    // Re-planned: the after line follows the page's face, and has moved.
+    let page_face: Vec<[f64; 3]> = flat(&r["vertices_plan"])
+        .chunks(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let planned = &r["tracing_plan"];
+    assert_eq!(
+        planned["before"], t["before"],
+        "the before line changed with the plan"
+    );
+    assert_tracing(
+        planned["after"].as_str().unwrap(),
+        &midsagittal_cut(&page_face, &o.skin.triangles, &frame),
+        "after setPlan",
+    );
+    let moved = path_points(planned["after"].as_str().unwrap())
+        .iter()
+        .zip(path_points(t["after"].as_str().unwrap()))
+        .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+        .fold(0.0, f64::max);
+    assert!(
+        moved > 2.0,
+        "the after line hardly moved with the plan: {moved} mm"
+    );
+
+    // ---- PNG export: a PNG of the canvas' size ----
+    let png = &r["png"];
+    let url = png["url"].as_str().unwrap();
+    let bytes = unbase64(
+        url.strip_prefix("data:image/png;base64,")
+            .expect("not a PNG data URL"),
+    );
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    assert_eq!(&bytes[12..16], b"IHDR");
+    let wh = [
+        u32::from_be_bytes(bytes[16..20].try_into().unwrap()),
+        u32::from_be_bytes(bytes[20..24].try_into().unwrap()),
+    ];
+    assert_eq!(json!(wh), png["canvas"], "the PNG's size");
+    assert_eq!(
+        png["natural"], png["canvas"],
+        "the PNG as the browser decodes it"
+    );
+    std::fs::write(shots.join("export.png"), &bytes).unwrap();
+
+    // ---- keyboard: every control reachable by Tab and named; keys on the picture ----
+    for c in r["controls"].as_array().unwrap() {
+        assert!(
+            c["tab_index"].as_i64().unwrap() >= 0 && !c["name"].as_str().unwrap().is_empty(),
+            "a control without a name or out of the Tab order: {c}"
+        );
+    }
+    let tabbed: Vec<&str> = r["tab_order"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap())
+        .collect();
+    for want in [
+        "canvas",
+        "button:front",
+        "button:profile-right",
+        "button:profile-left",
+        "button:three-quarter",
+        "button:before",
+        "button:after",
+        "button:both",
+        "button#png",
+        "button#print",
+        "input#colour",
+        "input#landmarks",
+        "input#skull",
+        "input#tracing",
+        "input",
+    ] {
+        assert!(
+            tabbed.contains(&want),
+            "Tab never reaches {want}: {tabbed:?}"
+        );
+    }
+    let offset = |c: &serde_json::Value| sub(v3(&c["position"]), v3(&c["target"]));
+    let angle = |a: [f64; 3], b: [f64; 3]| {
+        (dot(a, b) / norm(a) / norm(b))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    };
+    let keys = r["keys"].as_array().unwrap();
+    let mut before = offset(&r["keys_start"]);
+    for k in keys {
+        let (key, now) = (k["key"].as_str().unwrap(), offset(&k["camera"]));
+        let dir = scale(now, 1.0 / norm(now));
+        match key {
+            "ArrowRight" | "ArrowUp" => {
+                let a = angle(before, now);
+                assert!((a - 15.0).abs() < 0.5, "{key} turned {a}°");
+                if key == "ArrowRight" {
+                    // About the head's vertical: the height above the target is kept.
+                    assert!((dot(before, frame.up) - dot(now, frame.up)).abs() < 1e-6);
+                }
+            }
+            "-" => {
+                let k = norm(now) / norm(before);
+                assert!((k - 1.0 / 0.85).abs() < 1e-6, "'-' zoomed by {k}");
+            }
+            _ => {
+                let (view, axis) = match key {
+                    "1" => ("front", frame.front),
+                    "2" => ("profile-right", scale(frame.left, -1.0)),
+                    "3" => ("profile-left", frame.left),
+                    _ => (
+                        "three-quarter",
+                        scale(sub(frame.front, frame.left), 1.0 / 2f64.sqrt()),
+                    ),
+                };
+                assert_eq!(k["view"], json!(view), "key {key}");
+                assert!(dot(dir, axis) > 0.999, "key {key}: camera towards {dir:?}");
+            }
+        }
+        before = now;
+    }
+    assert!(keys[4]["aria"].as_str().unwrap().contains("from the front"));
+
+    // ---- tables with captions; the region table and the measurements ----
+    let tables = r["tables"].as_array().unwrap();
+    assert!(
+        tables
+            .iter()
+            .all(|t| !t["caption"].as_str().unwrap().is_empty()),
+        "a table without caption"
+    );
+    let find = |w: &str| {
+        tables
+            .iter()
+            .find(|t| t["caption"].as_str().unwrap().contains(w))
+    };
+    assert_eq!(find("per region").unwrap()["rows"], json!(5));
+    assert!(find("Measurements").is_some_and(|t| t["rows"].as_u64().unwrap() >= 4));
+
+    // ---- print: one page, the picture, tracing and tables, no controls ----
+    assert_eq!(r["print"]["controls_shown"], json!([]));
+    assert_eq!(
+        r["print"]["parts_shown"],
+        json!(["#view canvas", "#profile svg", "#summary table"])
+    );
+    assert_eq!(
+        r["pdf_pages"],
+        json!(1),
+        "the print layout is not one page ({}/summary.pdf)",
+        shots.display()
+    );
+
+    // Screenshots for docs/report-page.md: FACESIM_DOC_SHOTS=1 copies them into docs/img.
+    if std::env::var_os("FACESIM_DOC_SHOTS").is_some() {
+        let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/img");
+        for (from, to) in [
+            ("profile-right-after.png", "report-profile.png"),
+            ("front-after.png", "report-front.png"),
+            ("three-quarter-both.png", "report-three-quarter-both.png"),
+            ("profile-left-before.png", "report-profile-left-before.png"),
+            ("export.png", "report-export.png"),
+        ] {
+            std::fs::copy(shots.join(from), docs.join(to)).unwrap();
+        }
+    }
 }

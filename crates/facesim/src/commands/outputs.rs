@@ -292,6 +292,7 @@ pub(crate) fn write_page(
         no_basis_reason: "No plan basis was stored with this run, so the page cannot re-plan: \
                           run `facesim replan` for other plans."
             .into(),
+        head_frame: analysis.frame.as_ref().map(Into::into),
     };
     crate::report_page::write_report_html(dir, &data)
 }
