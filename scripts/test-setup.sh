@@ -51,6 +51,12 @@ need_real_mandible() {
   "$root/data-samples/fetch-real-mandible.sh"
 }
 
+# A real 3D face scan with human-placed landmarks (menpo3d's "james", BSD-3, from PyPI; fetched,
+# never committed) for the face-mesh landmark test (docs/landmarks.md).
+need_face_scan() {
+  "$root/data-samples/fetch-face-scan.sh"
+}
+
 # Headless Chromium for report.html's browser test (Debian's chromium, never a downloaded
 # browser), and node/npm to drive it (docs/report-page.md).
 need_browser() {
@@ -123,6 +129,7 @@ need_dicom_tools
 need_real_ct
 need_browser
 need_real_mandible
+need_face_scan
 need_npm
 need_python_venv
 need_cohort_tools
