@@ -108,3 +108,39 @@ fn setback_rotation_and_le_fort_move_the_face_their_way() {
     assert!(d[0][1] < -2.0 && d[0][1] >= -4.0 - 1e-6, "{d:?}");
     assert!(d[1][1].abs() < 0.5, "{d:?}");
 }
+
+/// Issue 27 item 3: README's first command (`facesim run data-samples/jaws`) on a face: every
+/// soft-tissue landmark found, no warning, no inverted element; the upper face stays where
+/// it was, and the BSSO advance moves the lower face inside the published soft/hard ranges
+/// (docs/validation.md) with the defaults; the page is written.
+#[test]
+fn the_first_sample_shows_a_face_with_every_soft_landmark() {
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
+    let out = common::kept_dir("facesim-first-sample");
+    let report = cli::run_ok(&case, &out, &[]);
+    assert_eq!(
+        report["warnings"],
+        serde_json::json!([]),
+        "{}",
+        report["warnings"]
+    );
+    assert_eq!(report["tet"]["inverted_elements"], 0);
+    let lms = &report["landmarks"];
+    for l in [
+        "G'", "N'", "Prn", "Sn", "Ls", "Sto", "Li", "B'", "Pog'", "Me'",
+    ] {
+        assert!(lms[l]["pre"].is_array(), "{l}: {}", lms[l]);
+    }
+    for l in ["G'", "N'", "Prn"] {
+        let c = lms[l]["change_mm"].as_f64().unwrap();
+        assert!(c < 0.1, "{l} moved {c} mm under a mandibular move");
+    }
+    let published = &report["published_ratios"];
+    assert_eq!(published["surgery"], "bsso-advance", "{published}");
+    let rows = published["rows"].as_array().unwrap();
+    assert!(rows.len() >= 3, "{published}");
+    for r in rows {
+        assert_eq!(r["inside"], true, "{r}");
+    }
+    assert!(out.join("report.html").is_file());
+}

@@ -17,7 +17,8 @@
 //!
 //! | part | geometry |
 //! |---|---|
-//! | cranium | the capsule's bone cylinder ρ ∈ [60, 67] for z ≥ 4.5, closed by a skull-base plate z ∈ [4.5, 9.5]; brain (35 HU) above it |
+//! | cranium | the capsule's bone cylinder ρ ∈ [60, 67] for z ≥ 4.5, closed by a skull-base plate z ∈ [4.5, 9.5]; brain (35 HU) above it; in front a bony glabella (+4.5 at z = 64) and nasal bones (+7 at z = 32, 9 mm wide) |
+//! | forehead | a brow ridge (+7 mm at z = 66, σ 9 mm, σ_φ 0.45 rad) over eye hollows (−5 mm at z = 45, φ = ±24°): soft nasion at z ≈ 48, glabella at z ≈ 66 |
 //! | Le Fort I gap | z ∈ [1.5, 4.5], soft tissue, horizontal: maxilla below, cranium above |
 //! | maxilla | alveolar band n_u ∈ [−10, 0] (labial face dips 1.5 mm at A point, z = −4), z ∈ [−13, 1.5], \|t\| ≤ 95°, y ≤ −13.5; palate z ∈ [−6, −2] inside the arch |
 //! | upper teeth | crowns z ∈ [−23, −13] (incisal edge to CEJ), labial face on the arch line, labio-lingual 7 (incisors), 8 (canine), 9 (premolars), 10 (molars) at the CEJ tapering to 1.5 at the edge; widths along the arch 8.5, 6.5, 7.5, 7, 6.5, 10, 9 (central incisor to second molar); 2 mm embrasure notches; 1500 HU |
@@ -34,7 +35,7 @@
 //!
 //! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
 //! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
-//! z ∈ [−100, 40]: the capsule's cap is left out, and the head leaves the volume through the
+//! z ∈ [−100, 80]: the capsule's cap is left out, and the head leaves the volume through the
 //! neck and the top of the cranium, as a clinical CT does.
 
 use crate::error::{Error, Result};
@@ -114,7 +115,7 @@ const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
 
 /// Field of view of `ct`.
 pub(crate) const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
-pub const FOV_HI: [f64; 3] = [92.0, 90.0, 40.0];
+pub const FOV_HI: [f64; 3] = [92.0, 90.0, 80.0];
 
 /// One synthetic patient: how a jaws phantom differs from the standard head (docs/phantom.md,
 /// "Cohort parameters"). `Shape::default()` is the standard head. Lengths are mm of the
@@ -271,6 +272,16 @@ const VERMILION: (f64, f64, f64) = (1.6, -11.5, 3.5); // amp, z, σ_z (the upper
 const LOWER_LIP: (f64, f64, f64, f64) = (5.8, -31.0, 9.0, 0.25); // amp, z, half-width (power 4), σ_φ
 const CREASE: (f64, f64, f64, f64) = (2.5, -21.0, 1.5, 0.3); // depth, z, σ_z, σ_φ
 const CHIN: (f64, f64, f64, f64, f64) = (10.8, -56.0, 11.0, 7.5, 0.35); // amp, z, σ below, σ above, σ_φ
+/// The brow: a ridge across the forehead whose midline crest is the glabella; with the nose's
+/// dorsum below it, the soft nasion is the hollow between (45 mm above subnasale, 5 mm behind
+/// the glabella; docs/phantom.md compares adult proportions).
+const BROW: (f64, f64, f64, f64) = (7.0, 66.0, 9.0, 0.45); // amp, z, σ_z, σ_φ
+/// The eye hollows: radial depressions either side of the nose's root (φ = ±EYES.2).
+const EYES: (f64, f64, f64, f64, f64) = (5.0, 45.0, 7.0, 0.42, 0.13); // depth, z, σ_z, φ, σ_φ
+/// The frontal bone's glabella and the nasal bones: radial bumps on the cranium's outer surface
+/// under the brow and the dorsum, so the bony profile has a nasion too.
+const BONY_BROW: (f64, f64, f64, f64) = (4.5, 64.0, 8.0, 0.5); // amp, z, σ_z, σ_φ
+const NASAL_BONES: (f64, f64, f64, f64) = (7.0, 32.0, 6.0, 0.12); // amp, z, σ_z, σ_φ
 
 /// How much of the mandible's shift the skin at height z follows: 0 above the lip crease
 /// (stomion), 1 from the lower lip down.
@@ -308,7 +319,18 @@ fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     // Prognathism moves the lower face forward: radially by mandible_mm at the midline,
     // fading sideways (σ 0.9 rad, ~52°) where the mandible's move is tangential.
     let forward = sh.mandible_mm * lower_face_weight(z) * gauss(phi_l, 0.9);
-    envelope(phi, z) + sh.soft_mm + nose + upper + lower - crease + chin + forward
+    let (ab, zb, sz, sp) = BROW;
+    let brow = ab * gauss(z - zb, sz) * gauss(phi, sp);
+    let (de, ze, sze, pe, spe) = EYES;
+    let eyes = de * gauss(z - ze, sze) * (gauss(phi - pe, spe) + gauss(phi + pe, spe));
+    envelope(phi, z) + sh.soft_mm + nose + upper + lower - crease + chin + forward + brow - eyes
+}
+
+/// The cranium's outer radius at (φ, z): R_BONE plus the bony glabella and the nasal bones.
+pub fn cranium_outer(phi: f64, z: f64) -> f64 {
+    let (ab, zb, sz, sp) = BONY_BROW;
+    let (an, zn, szn, spn) = NASAL_BONES;
+    R_BONE + ab * gauss(z - zb, sz) * gauss(phi, sp) + an * gauss(z - zn, szn) * gauss(phi, spn)
 }
 
 /// The skin point at (φ, z).
@@ -385,7 +407,8 @@ fn bone(sh: &Shape, p: [f64; 3]) -> Option<(Piece, bool)> {
     let [x, y, z] = p;
     if z >= Z_SKULL_BASE {
         let rho = (x * x + y * y).sqrt();
-        return ((R_BRAIN..R_BONE).contains(&rho) || (rho < R_BRAIN && z < Z_BRAIN))
+        let outer = cranium_outer(x.atan2(-y), z);
+        return ((R_BRAIN..outer).contains(&rho) || (rho < R_BRAIN && z < Z_BRAIN))
             .then_some((Piece::Cranium, false));
     }
     if maxilla(x, y, z) {
@@ -674,6 +697,9 @@ fn standard_landmarks_with(
 ) -> Vec<(&'static str, [f64; 3])> {
     let r = &r;
     let prn = argmax(r, 0.0, 35.0);
+    let glabella = argmax(r, 50.0, 70.0);
+    let n_soft = argmax(|z| -r(z), prn, glabella);
+    let bony_nasion = argmax(|z| -cranium_outer(0.0, z), NASAL_BONES.1, BONY_BROW.1);
     let ls = argmax(r, -18.0, -2.0);
     let sn = argmax(|z| -r(z), ls, prn);
     let li = argmax(r, -38.0, -24.0);
@@ -720,6 +746,8 @@ fn standard_landmarks_with(
     };
     let (fixed, moved) = ([0.0, 0.0], [ma, -md]);
     vec![
+        ("glabella", midline_skin(glabella)),
+        ("soft tissue nasion", midline_skin(n_soft)),
         ("pronasale", midline_skin(prn)),
         ("subnasale", midline_skin(sn)),
         ("labrale superius", midline_skin(ls)),
@@ -727,6 +755,10 @@ fn standard_landmarks_with(
         ("labrale inferius", midline_skin(li)),
         ("soft tissue pogonion", midline_skin(pg_soft)),
         ("soft tissue menton", me_soft),
+        (
+            "nasion",
+            [0.0, -cranium_outer(0.0, bony_nasion), bony_nasion],
+        ),
         ("A point", [0.0, Y_ARCH - ARCH_UPPER[1] - a_n, a]),
         ("B point", [ma, yl(front(b)), b]),
         ("pogonion", [ma, yl(front(pog)), pog]),

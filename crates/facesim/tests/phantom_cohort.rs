@@ -188,7 +188,9 @@ fn face_scan_follows_the_shaped_skin() {
                 .map(|v| (0..3).map(|k| (v[k] - p[k]).powi(2)).sum::<f64>().sqrt())
                 .fold(f64::INFINITY, f64::min)
         };
-        // No skin point is in front of pronasale; the scan's front vertex is next to it.
+        // No skin point is in front of pronasale; the scan's front vertex is next to it: at most
+        // half a 1 mm grid step from the tip in height, where the nose's profile (curvature
+        // 23.5 / 5² below the tip) falls back by ½ · 0.94 · 0.5² = 0.12 mm.
         let prn = lm(&s, "pronasale");
         let front = scan
             .vertices
@@ -196,7 +198,7 @@ fn face_scan_follows_the_shaped_skin() {
             .map(|v| v[1])
             .fold(f64::INFINITY, f64::min);
         assert!(
-            front >= prn[1] - 1e-6 && front - prn[1] < 0.05,
+            front >= prn[1] - 1e-6 && front - prn[1] < 0.12,
             "{front} {prn:?}"
         );
         // The soft chin of this patient is on its scan (within half a grid step) and not on

@@ -163,7 +163,8 @@ fn bone_volumes_match_quadrature_within_the_partial_volume_bound() {
     // Voxels extend half a voxel beyond the first and last centres.
     let top = pj::FOV_HI[2] + 0.5 * h;
     let boxes = [
-        ([-68.0, -68.0, pj::Z_SKULL_BASE], [68.0, 68.0, top]),
+        // The cylinder, and in front the bony glabella and the nasal bones (to y = −74).
+        ([-68.0, -76.0, pj::Z_SKULL_BASE], [68.0, 68.0, top]),
         ([-36.0, -76.0, -24.0], [36.0, -12.0, 2.0]),
         ([-60.0, -78.0, -67.0], [60.0, 22.0, 2.0]),
     ];
@@ -192,11 +193,26 @@ fn bone_volumes_match_quadrature_within_the_partial_volume_bound() {
         );
         assert!((got - truth).abs() <= bound, "{piece:?}");
     }
-    // The cranium also has a closed form: the cylinder shell and the skull-base plate.
+    // The cranium also has a near-closed form: the cylinder shell, the skull-base plate and,
+    // in front, the bumps R_o(φ, z) > 67 of the glabella and nasal bones, ∫∫ (R_o² − 67²)/2 dφ dz
+    // (a 2-D midpoint rule: the bumps are smooth).
     let pi = std::f64::consts::PI;
+    let (nphi, nz) = (4000, 4000);
+    let (dphi, dz) = (2.0 * pi / nphi as f64, (top - pj::Z_SKULL_BASE) / nz as f64);
+    let mut bumps = 0.0;
+    for i in 0..nphi {
+        let phi = -pi + (i as f64 + 0.5) * dphi;
+        for k in 0..nz {
+            let z = pj::Z_SKULL_BASE + (k as f64 + 0.5) * dz;
+            bumps += 0.5 * (pj::cranium_outer(phi, z).powi(2) - 67f64.powi(2)) * dphi * dz;
+        }
+    }
     let closed = pi * (67f64.powi(2) - 60f64.powi(2)) * (top - pj::Z_SKULL_BASE)
-        + pi * 60f64.powi(2) * (pj::Z_BRAIN - pj::Z_SKULL_BASE);
-    println!("cranium: quadrature {cranium:.0} mm³, closed form {closed:.0} mm³");
+        + pi * 60f64.powi(2) * (pj::Z_BRAIN - pj::Z_SKULL_BASE)
+        + bumps;
+    println!(
+        "cranium: quadrature {cranium:.0} mm³, closed form {closed:.0} mm³ (bumps {bumps:.0})"
+    );
     assert!(
         (cranium / closed - 1.0).abs() < 2e-3,
         "{cranium} vs {closed}"
@@ -584,6 +600,26 @@ fn osteotomy_boxes_select_exactly_their_segment_and_the_plans_move_it_rigidly() 
         tet.iter()
             .all(|(_, t)| t.contains("[solve]\nmodel = \"tet\""))
     );
+}
+
+#[test]
+fn the_first_sample_is_the_jaws_phantom() {
+    // data-samples/jaws (README's first command): `facesim phantom DIR --anatomy jaws --spacing 2
+    // --slice 2`, regenerated; its case.toml is its own (a BSSO advancement).
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
+    let bundled = facesim::volume::read_volume(&dir.join("ct.nii.gz")).unwrap();
+    let opts = PhantomOptions {
+        spacing: [2.0; 3],
+        ..Default::default()
+    };
+    let now = pj::ct(&opts);
+    assert_eq!(bundled.dims, now.dims);
+    assert_eq!(bundled.origin, now.origin);
+    assert!(bundled.data == now.data, "jaws CT voxels changed");
+    let scan = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();
+    let again = pj::face_scan(3.0);
+    assert_eq!(scan.triangles, again.triangles);
+    assert_eq!(scan.vertices.len(), again.vertices.len());
 }
 
 #[test]

@@ -2,10 +2,11 @@
 //! tree) done once per sparsity pattern, numeric factors of any matrix on that pattern (in f64,
 //! or f32 for the preconditioner), each solved for many right-hand sides.
 //!
-//! Sequential on purpose: faer's own multithreading of the sparse factorisation and triangular
-//! solves costs more than it gains at these sizes on 2 cores (40k triangles: factor 0.48 s
-//! sequential vs 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s; docs/fem.md); rayon
-//! parallelises the element work instead.
+//! Sequential except for large factors: faer's own multithreading of the sparse factorisation
+//! and triangular solves costs more than it gains on the surface models on 2 cores (40k
+//! triangles: factor 0.48 s sequential vs 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s;
+//! docs/fem.md), where rayon parallelises the element work instead; a volumetric head's factor
+//! (tens of millions of nonzeros) is factored on all cores (`PARALLEL_FACTOR_NNZ`).
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::perm::PermRef;
@@ -68,6 +69,21 @@ impl Pattern {
     }
 }
 
+/// Factors with at least this many nonzeros are factored on all cores: their dense supernodes
+/// are large enough for faer's parallel kernels to pay (a volumetric head of 142 k unknowns,
+/// 98 M nonzeros: 9.9 s sequential, 8.2 s on 2 cores; one of 23 k unknowns, 7.4 M nonzeros:
+/// 0.27 s sequential, 0.39 s on 2 cores; the surface models' largest, 41 M at 80 k triangles,
+/// stays sequential as measured in docs/fem.md).
+const PARALLEL_FACTOR_NNZ: usize = 50_000_000;
+
+fn factor_par(nnz: usize) -> Par {
+    if nnz >= PARALLEL_FACTOR_NNZ {
+        Par::rayon(0)
+    } else {
+        Par::Seq
+    }
+}
+
 /// The numeric factor L Lᵀ of a symmetric positive definite matrix on a `Pattern`.
 pub struct Cholesky<T> {
     pattern: Pattern,
@@ -79,8 +95,9 @@ impl<T: ComplexField + Copy> Cholesky<T> {
     /// (numerically) positive definite.
     pub fn factor(pattern: &Pattern, m: SparseColMatRef<'_, usize, T>) -> Result<Self, LltError> {
         let symbolic = &pattern.0;
+        let par = factor_par(symbolic.len_val());
         let mut values = vec![T::zero_impl(); symbolic.len_val()];
-        let scratch = symbolic.factorize_numeric_llt_scratch::<T>(Par::Seq, Default::default());
+        let scratch = symbolic.factorize_numeric_llt_scratch::<T>(par, Default::default());
         let mut mem =
             MemBuffer::try_new(scratch).map_err(|_| LltError::Generic(FaerError::OutOfMemory))?;
         symbolic.factorize_numeric_llt(
@@ -88,7 +105,7 @@ impl<T: ComplexField + Copy> Cholesky<T> {
             m,
             Side::Lower,
             Default::default(),
-            Par::Seq,
+            par,
             MemStack::new(&mut mem),
             Default::default(),
         )?;

@@ -120,6 +120,18 @@ pub fn real_mandible_ct() -> PathBuf {
     p
 }
 
+/// A real 3D face scan with 68 landmarks placed by people (menpo3d's james.obj and
+/// james.ljson), fetched by data-samples/fetch-face-scan.sh (scripts/test-setup.sh runs it).
+pub fn face_scan() -> PathBuf {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/face-scan");
+    assert!(
+        p.join("james.obj").is_file() && p.join("james.ljson").is_file(),
+        "{} missing: run data-samples/fetch-face-scan.sh (the README's test command does)",
+        p.display()
+    );
+    p
+}
+
 /// Every file below `dir` with its bytes (to prove nothing changed).
 pub fn snapshot(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
     let mut v = Vec::new();
