@@ -418,7 +418,20 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
     let mut at = Some(prn);
     let mut prev_label = "Prn";
     let mut ls = None;
-    for (label, e, after) in chain {
+    if let Some((sto, ls_flat)) = flat_upper_lip(p, prn) {
+        // The first concavity under the nose is stomion: the chain goes on from it.
+        ls = ls_flat.as_ref().ok().copied();
+        f.put("Ls", Kind::Soft, ls_flat.map(va));
+        f.put("Sto", Kind::Soft, Ok(va(sto)));
+        at = Some(sto);
+        prev_label = "Sto";
+    }
+    let chain = if f.get("Sto").is_some() {
+        &chain[3..]
+    } else {
+        &chain[..]
+    };
+    for &(label, e, after) in chain {
         let next = at.and_then(|i| walk(p, i, e, true));
         if !label.is_empty() {
             f.put(
@@ -464,6 +477,34 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
         }),
     );
 }
+
+/// An upper lip with no convexity of its own (retruded, sloping back from the nose to the
+/// lips' crease, as on menpo3d's scanned face): the first concavity under the nose is then
+/// stomion, not a fold under the nose. It is read so when the columella–lip corner (the profile's
+/// point deepest behind the chord from Prn to that concavity, ≥ CORNER_MM) lies at least
+/// UPPER_LIP_MM above it: an upper lip's length (adults 19–24 mm, Farkas 1994), where a fold
+/// under the nose lies within a few millimetres of the corner. Ls is then the upper lip's point
+/// farthest in front of the chord from the corner to stomion. (stomion, Ls or why not), or None.
+fn flat_upper_lip(p: &Profile, prn: usize) -> Option<(usize, std::result::Result<usize, String>)> {
+    let va = |i: usize| [p.height(i), p.a[i]];
+    let fold = walk(p, prn, Ext::Concave, true)?;
+    let (corner, depth) = off_chord(p, va(prn), va(fold), Ext::Concave)?;
+    if depth < CORNER_MM || p.height(corner) - p.height(fold) < UPPER_LIP_MM {
+        return None;
+    }
+    let ls = match off_chord(p, va(corner), va(fold), Ext::Convex) {
+        Some((i, front)) if front >= PROMINENCE_MM => Ok(i),
+        _ => Err(format!(
+            "the upper lip, between the columella's corner and stomion, has no point {PROMINENCE_MM} mm in front of their chord"
+        )),
+    };
+    Some((fold, ls))
+}
+
+/// The columella–lip corner's least depth behind the chord Prn–stomion, and its least height
+/// above stomion, for a first concavity under the nose to be read as stomion (`flat_upper_lip`).
+const CORNER_MM: f64 = 2.0;
+const UPPER_LIP_MM: f64 = 15.0;
 
 fn bone_landmarks(p: &Profile, f: &mut Found) {
     let va = |i: usize| [p.height(i), p.a[i]];
