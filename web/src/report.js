@@ -182,7 +182,7 @@ function main() {
   const ghostBehind = new THREE.Mesh(faceBefore.geometry, ghostMaterial(0.28, THREE.GreaterDepth, -1));
   ghostFront.renderOrder = ghostBehind.renderOrder = 5;
   scene.add(ghostFront, ghostBehind);
-  const boneMaterial = surfaceMaterial({ colour: 0xeeeadd, shine: 0.3 });
+  const boneMaterial = surfaceMaterial({ colour: 0xeeeadd, shine: 0.3, vertexLit: true });
   const skullBefore = meshOf(skullPre, skullTris, boneMaterial);
   // The skull after: one set of vertex buffers, drawn as the triangles a plan moves or shades
   // differently and the static rest (cached while a slider is dragged: frame_cache.js).
@@ -312,10 +312,14 @@ function main() {
     faceNormal.needsUpdate = true;
     faceColour.needsUpdate = true;
     state.max = smax;
+  }
+  /** The legend's text: not per slider frame (a text change costs the page a layout and a
+   *  repaint over the canvas, measurable in software rendering); when a drag settles. */
+  function refreshLegend() {
     tickLabels[0].textContent = "0";
-    tickLabels[1].textContent = (smax / 2).toFixed(1);
-    tickLabels[2].textContent = `${smax.toFixed(1)} mm`;
-    legendTitle.textContent = shown === dist ? "how far the skin moves (mm)" : "uncertainty band width p95 − p05 (mm, the run's plan)";
+    tickLabels[1].textContent = (state.max / 2).toFixed(1);
+    tickLabels[2].textContent = `${state.max.toFixed(1)} mm`;
+    legendTitle.textContent = state.colourBy === "band" && bandWidth ? "uncertainty band width p95 − p05 (mm, the run's plan)" : "how far the skin moves (mm)";
   }
 
   function refreshGhost() {
@@ -438,6 +442,7 @@ function main() {
     // The skin is opaque unless the skull is to be seen through it; the skull is always opaque.
     for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? SEE_THROUGH : 1);
     legend.hidden = !(after && state.colour);
+    refreshLegend();
     profilePanel.hidden = !state.tracing;
     for (const b of modeButtons) b.setAttribute("aria-pressed", String(b.dataset.mode === state.mode));
     for (const b of viewButtons) b.setAttribute("aria-pressed", String(b.dataset.view === state.view));
@@ -495,6 +500,7 @@ function main() {
   }
   function settleNow() {
     clearTimeout(settle);
+    refreshLegend();
     refreshTables();
     refreshProfile();
     render();

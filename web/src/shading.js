@@ -7,6 +7,30 @@
 // of a frame (docs/performance.md); this one is a few dozen operations per fragment.
 import * as THREE from "three";
 
+// The lighting, in view space (the lights move with the camera): n the unit normal, v the unit
+// direction to the eye.
+const LIGHT = `
+uniform vec3 up;
+uniform float shine;
+const vec3 KEY = vec3(-0.45, 0.55, 0.70);
+const vec3 FILL = vec3(0.75, -0.05, 0.66);
+const float WRAP = 0.2;
+float wrapped(float c) { return max((c + WRAP) / (1.0 + WRAP), 0.0); }
+vec3 shade(vec3 n, vec3 v, vec3 albedo) {
+  vec3 key = normalize(KEY);
+  vec3 fill = normalize(FILL);
+  float h = 0.5 + 0.5 * dot(n, up);
+  vec3 light = mix(vec3(0.09, 0.085, 0.085), vec3(0.30, 0.31, 0.34), h);
+  light += vec3(0.92, 0.89, 0.84) * wrapped(dot(n, key)) + vec3(0.24, 0.25, 0.28) * wrapped(dot(n, fill));
+  vec3 c = albedo * light;
+  vec3 hv = normalize(key + v);
+  float nh = max(dot(n, hv), 0.0);
+  float fresnel = 0.028 + 0.972 * pow(1.0 - max(dot(v, hv), 0.0), 5.0);
+  return c + shine * fresnel * 3.6 * pow(nh, 28.0) * max(dot(n, key), 0.0);
+}`;
+
+// VERTEX_LIT (the skull): the same light per vertex, both sides, the fragment only picking one;
+// bone needs no per-pixel highlight, and the skull's many layers made it the costliest surface.
 const vertexShader = `
 #ifdef TINT
 attribute vec3 color;
@@ -16,21 +40,35 @@ attribute float weight;
 varying float vWeight;
 #endif
 uniform vec3 base;
+#ifdef VERTEX_LIT
+${LIGHT}
+varying vec3 vFront;
+varying vec3 vBack;
+#else
 varying vec3 vAlbedo;
 varying vec3 vNormal;
 varying vec3 vView;
+#endif
 void main() {
 #ifdef TINT
-  vAlbedo = color;
+  vec3 albedo = color;
 #else
-  vAlbedo = base;
+  vec3 albedo = base;
 #endif
 #ifdef WEIGHTED
   vWeight = weight;
 #endif
   vec4 mv = modelViewMatrix * vec4(position, 1.0);
+#ifdef VERTEX_LIT
+  vec3 n = normalize(normalMatrix * normal);
+  vec3 v = normalize(-mv.xyz);
+  vFront = shade(n, v, albedo);
+  vBack = shade(-n, v, albedo);
+#else
+  vAlbedo = albedo;
   vView = -mv.xyz;
   vNormal = normalMatrix * normal;
+#endif
   gl_Position = projectionMatrix * mv;
 }`;
 
@@ -39,30 +77,22 @@ const fragmentShader = `
 varying float vWeight;
 #endif
 uniform float opacity;
-uniform float shine;
-uniform vec3 up;
+#ifdef VERTEX_LIT
+varying vec3 vFront;
+varying vec3 vBack;
+#else
+${LIGHT}
 varying vec3 vAlbedo;
 varying vec3 vNormal;
 varying vec3 vView;
-// Light directions in view space (the lights move with the camera).
-const vec3 KEY = vec3(-0.45, 0.55, 0.70);
-const vec3 FILL = vec3(0.75, -0.05, 0.66);
-const float WRAP = 0.35;
-float wrapped(float c) { return max((c + WRAP) / (1.0 + WRAP), 0.0); }
+#endif
 void main() {
+#ifdef VERTEX_LIT
+  vec3 c = gl_FrontFacing ? vFront : vBack;
+#else
   vec3 n = normalize(vNormal);
-  if (!gl_FrontFacing) n = -n;
-  vec3 v = normalize(vView);
-  vec3 key = normalize(KEY);
-  vec3 fill = normalize(FILL);
-  float h = 0.5 + 0.5 * dot(n, up);
-  vec3 light = mix(vec3(0.16, 0.15, 0.15), vec3(0.42, 0.43, 0.46), h);
-  light += vec3(0.78, 0.76, 0.72) * wrapped(dot(n, key)) + vec3(0.26, 0.27, 0.30) * wrapped(dot(n, fill));
-  vec3 c = vAlbedo * light;
-  vec3 hv = normalize(key + v);
-  float nh = max(dot(n, hv), 0.0);
-  float fresnel = 0.028 + 0.972 * pow(1.0 - max(dot(v, hv), 0.0), 5.0);
-  c += shine * fresnel * 3.6 * pow(nh, 28.0) * max(dot(n, key), 0.0);
+  vec3 c = shade(gl_FrontFacing ? n : -n, normalize(vView), vAlbedo);
+#endif
   // sRGB written here, not by three.js' linearToOutputTexel, so that an offscreen buffer
   // (frame_cache.js) holds the same values as the canvas.
 #ifdef WEIGHTED
@@ -90,9 +120,10 @@ export function viewUp(camera) {
 
 /** A two-sided surface: `colour` (sRGB hex) or, with `perVertex`, the geometry's "color"
  *  attribute (linear RGB); `shine` scales the highlight (0: matte); `weighted`: the opacity is
- *  scaled per vertex by the geometry's "weight" attribute. */
-export function surfaceMaterial({ colour = 0xffffff, perVertex = false, shine = 1, weighted = false } = {}) {
+ *  scaled per vertex by the geometry's "weight" attribute; `vertexLit`: lit per vertex. */
+export function surfaceMaterial({ colour = 0xffffff, perVertex = false, shine = 1, weighted = false, vertexLit = false } = {}) {
   const defines = {};
+  if (vertexLit) defines.VERTEX_LIT = 1;
   if (perVertex) defines.TINT = 1;
   if (weighted) defines.WEIGHTED = 1;
   return new THREE.ShaderMaterial({

@@ -60,6 +60,7 @@ table.clinic tr.inside td:last-child{color:#070}
  h1{font-size:15px;order:0}
  .model{order:0}
  #main{order:1;display:flex;gap:4mm;align-items:flex-start;margin:2mm 0}
+ #view canvas{outline:none!important}
  #view{flex:none;width:var(--view-w);height:var(--view-h);zoom:var(--print-zoom);border:1px solid #bbb}
  #profile{width:64mm;border:1px solid #bbb}
  #profile svg{height:108mm;max-height:none}

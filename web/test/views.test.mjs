@@ -7,7 +7,7 @@
 // aria-label. Then: the profile tracing's SVG path data (before, after) for the run's plan and
 // after setPlan(PLAN) with the page's faceVertices(); the PNG export; keyboard use (Tab order,
 // arrow keys and digits on the picture); the accessible names of every control; and the print
-// layout (what print media hides, and page.pdf()'s page count).
+// layout (what print media hides, page.pdf()'s page count, and a picture of it: print.png).
 import { openReport } from "./browser.mjs";
 import { readFileSync, writeFileSync, mkdirSync } from "node:fs";
 import { join } from "node:path";
@@ -156,6 +156,9 @@ try {
     };
   });
   const pdf = await page.pdf({ format: "A4", printBackground: true });
+  // The print layout as a picture (A4's printable width at 96 dpi) for docs/report-page.md.
+  await page.setViewport({ width: 726, height: 1047 });
+  await page.screenshot({ path: join(shots, "print.png") });
   await page.emulateMediaType("screen");
   writeFileSync(join(shots, "summary.pdf"), pdf);
   const text = Buffer.from(pdf).toString("latin1");

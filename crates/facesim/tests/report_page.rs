@@ -951,12 +951,12 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
     // Screenshots for docs/report-page.md: FACESIM_DOC_SHOTS=1 copies them into docs/img.
     if std::env::var_os("FACESIM_DOC_SHOTS").is_some() {
         let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/img");
+        std::fs::create_dir_all(&docs).unwrap();
         for (from, to) in [
             ("profile-right-after.png", "report-profile.png"),
-            ("front-after.png", "report-front.png"),
             ("three-quarter-both.png", "report-three-quarter-both.png"),
-            ("profile-left-before.png", "report-profile-left-before.png"),
             ("export.png", "report-export.png"),
+            ("print.png", "report-print.png"),
         ] {
             std::fs::copy(shots.join(from), docs.join(to)).unwrap();
         }
