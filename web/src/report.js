@@ -151,12 +151,16 @@ function main() {
   };
   const colours = new Float32Array(3 * n);
   const faceMaterial = surfaceMaterial({ perVertex: true, shine: 0.6 });
+  // While dragging (half resolution, simplified face) the skin is lit per vertex: the same light,
+  // a fraction of the fragment work; the settled frame lights every pixel.
+  const faceMaterialDrag = surfaceMaterial({ perVertex: true, shine: 0.6, vertexLit: true });
   const faceAfter = meshOf(facePost, faceTris, faceMaterial);
   const faceIndexFull = new THREE.BufferAttribute(faceDraw, 1);
   const faceIndexLod = new THREE.BufferAttribute(faceLod, 1);
   faceAfter.geometry.setIndex(faceIndexFull);
   faceAfter.geometry.setAttribute("color", new THREE.BufferAttribute(colours, 3));
   const skinMaterial = surfaceMaterial({ colour: SKIN });
+  const skinMaterialDrag = surfaceMaterial({ colour: SKIN, vertexLit: true });
   const faceBefore = meshOf(facePre, faceTris, skinMaterial);
   faceBefore.geometry.setIndex(faceIndexFull);
   // "both": the face after, opaque, over a translucent ghost of the face before — brighter where
@@ -440,7 +444,7 @@ function main() {
     boneMarkers.visible = softMarkers.visible && state.skull;
     showMarkers(after ? landmarkNow : landmarkPre);
     // The skin is opaque unless the skull is to be seen through it; the skull is always opaque.
-    for (const m of [faceMaterial, skinMaterial]) setOpacity(m, state.skull ? SEE_THROUGH : 1);
+    for (const m of [faceMaterial, skinMaterial, faceMaterialDrag, skinMaterialDrag]) setOpacity(m, state.skull ? SEE_THROUGH : 1);
     legend.hidden = !(after && state.colour);
     refreshLegend();
     profilePanel.hidden = !state.tracing;
@@ -484,6 +488,8 @@ function main() {
     const lod = dragging && options.lod ? faceIndexLod : faceIndexFull;
     faceAfter.geometry.setIndex(lod);
     faceBefore.geometry.setIndex(lod);
+    faceAfter.material = dragging ? faceMaterialDrag : faceMaterial;
+    faceBefore.material = dragging ? skinMaterialDrag : skinMaterial;
     viewUp(camera);
     placeLabels();
     if (cached && options.cache && skullStatic.visible && cache.draw(scene, camera)) return;
