@@ -124,6 +124,20 @@ need_cohort_tools() {
   }
 }
 
+# A real Slurm for the cohort workflow's cluster test (crates/facesim-cli/tests/slurm.rs,
+# docs/cohort.md "A real Slurm on one machine"): Debian's slurm-wlm 22.05 controller, node
+# daemon and client commands, and munge. scripts/slurm-cluster.sh runs them from a temporary
+# directory; nothing here configures or starts a service (a container's policy-rc.d keeps apt
+# from starting them; elsewhere stop the packaged services: systemctl disable --now slurmctld
+# slurmd munge).
+need_slurm() {
+  local p missing=()
+  for p in slurmctld slurmd sbatch munged; do
+    command -v "$p" >/dev/null 2>&1 || missing+=("$p")
+  done
+  [ "${#missing[@]}" = 0 ] || apt_install slurmctld slurmd slurm-client munge
+}
+
 need_calculix
 need_dicom_tools
 need_real_ct
@@ -133,3 +147,4 @@ need_face_scan
 need_npm
 need_python_venv
 need_cohort_tools
+need_slurm

@@ -2,10 +2,15 @@
 """The cohort table (docs/cohort.md): one row per case, plan, variant and region of the
 result.json files given (run_case.py) and their runs' report.json — region "face" for the whole
 face, then report.json's facial regions. A failed run has one row, region "face", its status
-facesim's one-line error and the figures empty. Standard library only."""
+facesim's one-line error (or Slurm's reason, "slurm: job N OUT_OF_MEMORY (…)") and the figures
+empty; --failures writes those runs alone (the failure table). Every row carries its
+provenance: facesim's version and binary hash, the case's hash, the overrides and the hash of
+the run's full parameters (report.json "parameters", written once per hash under --parameters).
+Standard library only."""
 
 import argparse
 import csv
+import hashlib
 import json
 import os
 import sys
@@ -14,6 +19,11 @@ BASE = [
     "case", "plan", "variant", "region", "status", "vertices", "mean_mm", "p90_mm",
     "max_mm", "seconds", "facesim_seconds", "peak_mem_mb", "model",
 ]
+PROVENANCE = [
+    "facesim_version", "facesim_sha256", "case_sha256", "overrides", "parameters_sha256",
+    "slurm_job",
+]
+FAILURES = ["case", "plan", "variant", "status", "slurm_job", "log"]
 
 
 def p90(values):
@@ -33,17 +43,37 @@ def ratio_column(key):
     return "ratio_" + key.replace("'", "").replace("/", "_")
 
 
-def rows_of(result_path):
+def canonical_sha256(value):
+    """sha256 of a JSON value written canonically (sorted keys, no spaces)."""
+    text = json.dumps(value, sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(text.encode()).hexdigest(), text
+
+
+def rows_of(result_path, parameters_dir=None):
     with open(result_path) as f:
         res = json.load(f)
     base = {k: res.get(k) for k in ("case", "plan", "variant", "status")}
     base["seconds"] = f"{res['seconds']:.3f}"
     base["peak_mem_mb"] = f"{res['peak_mem_mb']:.1f}"
+    base["facesim_version"] = res.get("facesim_version", "")
+    base["facesim_sha256"] = res.get("facesim_sha256", "")
+    base["case_sha256"] = res.get("case_sha256", "")
+    base["overrides"] = "; ".join(res.get("overrides") or [])
+    base["slurm_job"] = res.get("slurm_job", "")
     if res["status"] != "ok":
         return [dict(base, region="face")], {}
     out_dir = os.path.join(os.path.dirname(result_path), res["out_dir"])
     with open(os.path.join(out_dir, "report.json")) as f:
         rep = json.load(f)
+    digest, text = canonical_sha256(rep.get("parameters"))
+    base["parameters_sha256"] = digest
+    if parameters_dir:
+        os.makedirs(parameters_dir, exist_ok=True)
+        target = os.path.join(parameters_dir, f"{digest}.json")
+        if not os.path.exists(target):
+            with open(target + ".tmp", "w") as f:
+                f.write(text + "\n")
+            os.replace(target + ".tmp", target)
     base["facesim_seconds"] = f"{rep['timings']['total']:.3f}"
     base["model"] = rep["parameters"]["solve"]["model"]
     extra = {}
@@ -66,23 +96,36 @@ def rows_of(result_path):
     return rows, extra
 
 
+def write_csv(path, columns, rows):
+    tmp = path + ".tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns, restval="", extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", required=True, help="cohort.csv to write")
+    ap.add_argument("--failures", help="failures.csv to write: the runs whose status is not ok")
+    ap.add_argument("--parameters", help="directory for each distinct parameters set, by hash")
     ap.add_argument("results", nargs="+", help="result.json files")
     a = ap.parse_args()
     rows, extra_cols = [], []
     for path in a.results:
-        r, extra = rows_of(path)
+        r, extra = rows_of(path, a.parameters)
         rows += r
         extra_cols += [c for c in extra if c not in extra_cols]
     rows.sort(key=lambda r: (r["case"], r["plan"], r["variant"], r["region"] != "face"))
-    tmp = a.out + ".tmp"
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=BASE + extra_cols, restval="")
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, a.out)
+    write_csv(a.out, BASE + extra_cols + PROVENANCE, rows)
+    if a.failures:
+        # The run's log, relative to OUT.
+        failed = [
+            dict(r, log=os.path.join("logs", r["case"], r["plan"], f"{r['variant']}.log"))
+            for r in rows if r["status"] != "ok"
+        ]
+        write_csv(a.failures, FAILURES, failed)
     failed = sum(1 for r in rows if r["status"] != "ok")
     print(f"{a.out}: {len(rows)} rows, {len(a.results)} runs, {failed} failed")
 

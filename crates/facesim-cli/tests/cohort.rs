@@ -196,14 +196,26 @@ fn cohort_workflow_runs_cases_variants_and_a_broken_case() {
     assert_eq!(count("run"), Some(6), "{plan}");
     assert_eq!(count("gather"), Some(1), "{plan}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
-    // The same workflow through the Slurm profile (dry run: no cluster here): its resources
-    // reach the jobs unchanged in the workflow.
+    // The same workflow through the Slurm profile (dry run; tests/slurm.rs runs it on a real
+    // cluster): each run asks for the memory and time workflow/scripts/case_size.py gives its
+    // case's size, the profile's partition reaches the jobs.
     let profile = root().join("workflow/profiles/slurm");
     let slurm = run_ok(snake(&["-n"]).arg("--workflow-profile").arg(&profile));
-    assert!(
-        slurm.contains("mem_mb=6000") && slurm.contains("slurm_partition=CHANGE-ME"),
-        "{slurm}"
+    let sized = run_ok(
+        Command::new("python3")
+            .arg(root().join("workflow/scripts/case_size.py"))
+            .arg(cases.join(&params[0]["case"]).join("case.toml")),
     );
+    let figures: Vec<&str> = sized.split_whitespace().collect();
+    let (mem, minutes) = (figures[3], figures[4]);
+    assert!(
+        slurm.contains(&format!("mem_mb={mem},"))
+            && slurm.contains(&format!("runtime={minutes},"))
+            && slurm.contains("slurm_partition=CHANGE-ME"),
+        "{sized}\n{slurm}"
+    );
+    // The broken case's CT cannot be sized: the fixed fallback.
+    assert!(slurm.contains("mem_mb=4000,"), "{slurm}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
     // The real run on two cores.
     let t = std::time::Instant::now();

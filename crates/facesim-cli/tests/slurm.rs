@@ -1,0 +1,530 @@
+//! The cohort workflow on a real Slurm (docs/cohort.md, "A real Slurm on one machine"; issue 29).
+//! scripts/slurm-cluster.sh starts a throw-away one-node cluster — munged, slurmctld, slurmd of
+//! Debian's slurm-wlm 22.05, run as root, configuration, munge key and state in a temporary
+//! directory — and workflow/Snakefile runs through snakemake-executor-plugin-slurm with the
+//! repository's profile (workflow/profiles/slurm) on a phantom cohort: four jaws phantoms × two
+//! plans, a broken case, and a fifth phantom whose jobs get 300 MB (`case_resources`).
+//!
+//! Checked, in order:
+//! - the Snakefile refuses a facesim binary outside `shared_storage` with one line, before any
+//!   job reaches Slurm;
+//! - a job cancelled with scancel while it runs is resubmitted by the profile's retry and its
+//!   run gives the same figures;
+//! - Snakemake interrupted (SIGINT, as Ctrl-C) once the retry is submitted and three runs are
+//!   done: the re-run redoes exactly the runs without a result (Snakemake's own bookkeeping),
+//!   leaving the finished ones untouched;
+//! - the fifth phantom's runs go over their memory (cgroup limit: slurmstepd's oom-kill, the
+//!   step OUT_OF_MEMORY) and its rows and failures.csv say so with Slurm's words; the broken
+//!   case is reported, not fatal;
+//! - every other row of cohort.csv equals the local (`--cores 2`) run's: same rows, same
+//!   figures to 1e-9, same provenance (facesim version and hash, case hash, parameters hash).
+//!
+//! Needs root and the packages scripts/test-setup.sh installs; without them it fails with one
+//! line saying what is missing. The cluster is stopped by PID and its directory removed when the
+//! test ends, and by a watchdog if the test process dies.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn exe() -> PathBuf {
+    PathBuf::from(env!("CARGO_BIN_EXE_facesim"))
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../..")
+        .canonicalize()
+        .unwrap()
+}
+
+fn snakemake() -> PathBuf {
+    root().join("target/slicer-venv/bin/snakemake")
+}
+
+/// What the test needs, or one line saying what is missing.
+fn preconditions() {
+    let uid = Command::new("id").arg("-u").output().unwrap();
+    assert!(
+        String::from_utf8_lossy(&uid.stdout).trim() == "0",
+        "the Slurm test needs root (it runs munged, slurmctld and slurmd): run cargo test as root"
+    );
+    for tool in [
+        "slurmctld",
+        "slurmd",
+        "munged",
+        "sbatch",
+        "squeue",
+        "scancel",
+        "scontrol",
+    ] {
+        let found = Command::new("sh")
+            .args(["-c", &format!("command -v {tool}")])
+            .output()
+            .unwrap()
+            .status
+            .success();
+        assert!(
+            found,
+            "the Slurm test needs {tool}: run scripts/test-setup.sh (apt: slurmctld slurmd slurm-client munge)"
+        );
+    }
+    assert!(
+        snakemake().is_file(),
+        "the Slurm test needs {}: run scripts/test-setup.sh",
+        snakemake().display()
+    );
+}
+
+/// The one-node cluster; stopped (daemons by PID, directory removed) when dropped.
+struct Cluster {
+    dir: PathBuf,
+    conf: PathBuf,
+}
+
+impl Cluster {
+    fn start() -> Cluster {
+        let dir = std::env::temp_dir().join(format!("facesim-slurm-{}", std::process::id()));
+        let o = Command::new(root().join("scripts/slurm-cluster.sh"))
+            .arg("start")
+            .arg(&dir)
+            .arg(std::process::id().to_string())
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "scripts/slurm-cluster.sh start failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let conf = dir.join("slurm.conf");
+        Cluster { dir, conf }
+    }
+
+    fn cmd(&self, program: &str) -> Command {
+        let mut c = Command::new(program);
+        c.env("SLURM_CONF", &self.conf);
+        c
+    }
+
+    fn out(&self, program: &str, args: &[&str]) -> String {
+        let o = self.cmd(program).args(args).output().unwrap();
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    }
+}
+
+impl Drop for Cluster {
+    fn drop(&mut self) {
+        let _ = Command::new(root().join("scripts/slurm-cluster.sh"))
+            .arg("stop")
+            .arg(&self.dir)
+            .status();
+    }
+}
+
+fn run_ok(cmd: &mut Command) -> String {
+    let o = cmd.output().unwrap();
+    let text =
+        String::from_utf8_lossy(&o.stdout).into_owned() + &String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{cmd:?} failed:\n{text}");
+    text
+}
+
+fn read_csv(path: &Path) -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header = split_csv(lines.next().unwrap());
+    lines
+        .map(|l| header.iter().cloned().zip(split_csv(l)).collect())
+        .collect()
+}
+
+fn split_csv(line: &str) -> Vec<String> {
+    let (mut out, mut cur, mut quoted) = (Vec::new(), String::new(), false);
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' if quoted && chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            '"' => quoted = !quoted,
+            ',' if !quoted => out.push(std::mem::take(&mut cur)),
+            _ => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+/// The count Snakemake's "Job stats" table gives a rule (None when the rule is not listed).
+fn job_count(log: &str, rule: &str) -> Option<usize> {
+    log.lines().find_map(|l| {
+        let mut w = l.split_whitespace();
+        if w.next() == Some(rule) {
+            w.next().and_then(|n| n.parse().ok())
+        } else {
+            None
+        }
+    })
+}
+
+fn wait_for(what: &str, limit: Duration, mut done: impl FnMut() -> bool) {
+    let t = Instant::now();
+    while !done() {
+        assert!(t.elapsed() < limit, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Rows keyed by (case, plan, variant, region).
+fn keyed(rows: &[BTreeMap<String, String>]) -> BTreeMap<String, &BTreeMap<String, String>> {
+    rows.iter()
+        .map(|r| {
+            (
+                format!(
+                    "{}/{}/{}/{}",
+                    r["case"], r["plan"], r["variant"], r["region"]
+                ),
+                r,
+            )
+        })
+        .collect()
+}
+
+/// Columns that differ between two runs of the same figures: timings, memory, the job.
+const VARYING: [&str; 4] = ["seconds", "facesim_seconds", "peak_mem_mb", "slurm_job"];
+
+#[test]
+fn cohort_on_a_real_slurm_with_faults() {
+    preconditions();
+    let t0 = Instant::now();
+    let work = root().join("target/tmp/slurm-cohort");
+    let _ = std::fs::remove_dir_all(&work);
+    std::fs::create_dir_all(&work).unwrap();
+    let cases = work.join("cases");
+    run_ok(Command::new(exe()).arg("phantom-cohort").arg(&cases).args([
+        "--cases",
+        "5",
+        "--seed",
+        "3",
+        "--spacing",
+        "2",
+        "--slice",
+        "2",
+    ]));
+    let broken = cases.join("broken");
+    std::fs::create_dir_all(&broken).unwrap();
+    std::fs::write(
+        broken.join("case.toml"),
+        "name = \"broken\"\n[ct]\npath = \"missing.nii.gz\"\n",
+    )
+    .unwrap();
+    // Two plans, the C1 model (a few seconds a run), one thread a job; case005's jobs get
+    // 300 MB, less than facesim and Snakemake's job step need together.
+    let config = work.join("config.yaml");
+    std::fs::write(
+        &config,
+        format!(
+            "plans: [\"case.toml\", \"case_setback.toml\"]\n\
+             variants:\n  c1: {{\"solve.model\": \"equilibrium\"}}\n\
+             threads: 1\n\
+             case_resources:\n  case005: {{mem_mb: 300}}\n\
+             shared_storage: [\"{}\"]\n",
+            root().display()
+        ),
+    )
+    .unwrap();
+    let runs_total = 5 * 2 + 1;
+    let snake = |out: &Path, extra: &[&str]| {
+        let mut c = Command::new(snakemake());
+        c.current_dir(&work)
+            .arg("-s")
+            .arg(root().join("workflow/Snakefile"))
+            .args(extra)
+            .arg("--configfile")
+            .arg(&config)
+            .arg("--config")
+            .arg(format!("cohort={}", cases.display()))
+            .arg(format!("out={}", out.display()))
+            .arg(format!("facesim={}", exe().display()));
+        c
+    };
+
+    // The local run, the reference.
+    let local = work.join("local");
+    run_ok(&mut snake(&local, &["--cores", "2"]));
+    let t_local = t0.elapsed();
+
+    let cluster = Cluster::start();
+    let slurm_args = [
+        "--workflow-profile",
+        root().join("workflow/profiles/slurm").to_str().unwrap(),
+        // This cluster's partition, no account (no accounting database); status from
+        // squeue — slurmctld keeps finished jobs for MinJobAge = 600 s — polled from 2 s on.
+        "--default-resources",
+        "slurm_partition=cohort",
+        "mem_mb=1000",
+        "runtime=10",
+        "--slurm-status-command",
+        "squeue",
+        "--slurm-init-seconds-before-status-checks",
+        "2",
+    ]
+    .map(String::from);
+    let slurm_args: Vec<&str> = slurm_args.iter().map(String::as_str).collect();
+    let out = work.join("slurm");
+    let slurm_snake = |extra: &[&str]| {
+        let mut c = snake(&out, &slurm_args);
+        c.args(extra).env("SLURM_CONF", &cluster.conf);
+        c
+    };
+    let our_jobs = || cluster.out("squeue", &["--states=all", "--noheader", "--format=%i"]);
+
+    // A binary outside shared_storage: one line, nothing submitted.
+    let elsewhere = work.join("elsewhere.yaml");
+    std::fs::write(&elsewhere, "shared_storage: [\"/nonexistent-share\"]\n").unwrap();
+    let o = slurm_snake(&[])
+        .arg("--configfile")
+        .arg(&elsewhere)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let last = err.trim().lines().last().unwrap_or("");
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        last.starts_with("workflow/Snakefile: facesim ") && last.contains("shared_storage"),
+        "{err}"
+    );
+    assert_eq!(our_jobs().trim(), "", "a job was submitted");
+    assert!(!out.join("runs").exists());
+
+    // The Slurm run, interrupted: case002's first plan is cancelled while it runs (the retry
+    // resubmits it), then Snakemake gets SIGINT once five runs have their result.
+    let result = |case: &str, plan: &str| {
+        out.join("runs")
+            .join(case)
+            .join(plan)
+            .join("c1/result.json")
+    };
+    let log1 = std::fs::File::create(work.join("slurm-1.log")).unwrap();
+    let mut first: Child = slurm_snake(&[])
+        .stdout(log1.try_clone().unwrap())
+        .stderr(log1)
+        .stdin(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut cancelled = String::new();
+    wait_for("case002's job running", Duration::from_secs(240), || {
+        // Job name is Snakemake's run id; the comment names the rule and wildcards.
+        let q = cluster.out(
+            "squeue",
+            &["--noheader", "--states=RUNNING", "--format=%i %k"],
+        );
+        if let Some(l) = q.lines().find(|l| l.contains("case002_case_c1")) {
+            cancelled = l.split_whitespace().next().unwrap().to_string();
+            true
+        } else {
+            false
+        }
+    });
+    // Let facesim start inside the job (the job step starts Snakemake first), then cancel.
+    std::thread::sleep(Duration::from_secs(3));
+    run_ok(cluster.cmd("scancel").arg(&cancelled));
+    let count_results = || {
+        std::fs::read_dir(out.join("runs"))
+            .map(|d| {
+                d.flatten()
+                    .map(|c| {
+                        std::fs::read_dir(c.path())
+                            .unwrap()
+                            .flatten()
+                            .filter(|p| p.path().join("c1/result.json").is_file())
+                            .count()
+                    })
+                    .sum::<usize>()
+            })
+            .unwrap_or(0)
+    };
+    // The retry is submitted (a second job for case002/case in the plugin's log) and three runs
+    // are done: interrupt.
+    let log1_path = work.join("slurm-1.log");
+    let case002_jobs = || {
+        std::fs::read_to_string(&log1_path)
+            .unwrap_or_default()
+            .lines()
+            .filter(|l| l.contains("submitted with SLURM jobid") && l.contains("/case002_case_c1/"))
+            .map(|l| {
+                l.split("SLURM jobid ")
+                    .nth(1)
+                    .unwrap()
+                    .split_whitespace()
+                    .next()
+                    .unwrap()
+                    .to_string()
+            })
+            .collect::<Vec<String>>()
+    };
+    wait_for(
+        "the cancelled run's retry and three results",
+        Duration::from_secs(300),
+        || case002_jobs().len() >= 2 && count_results() >= 3,
+    );
+    let submitted = case002_jobs();
+    assert_eq!(submitted[0], cancelled, "{submitted:?}");
+    assert_ne!(submitted[1], cancelled, "{submitted:?}");
+    let _ = Command::new("kill")
+        .args(["-INT", &first.id().to_string()])
+        .status();
+    let status = first.wait().unwrap();
+    assert!(!status.success(), "the interrupted Snakemake exited 0");
+    // Snakemake cancels its running jobs on SIGINT.
+    wait_for("no job pending or running", Duration::from_secs(60), || {
+        cluster
+            .out(
+                "squeue",
+                &["--noheader", "--states=PENDING,RUNNING", "--format=%i"],
+            )
+            .trim()
+            .is_empty()
+    });
+    let state = cluster.out(
+        "squeue",
+        &[
+            "--noheader",
+            "--states=all",
+            "-j",
+            &cancelled,
+            "--format=%T",
+        ],
+    );
+    assert_eq!(state.trim(), "CANCELLED");
+
+    // What was done before the interruption, and when.
+    let mut done = BTreeMap::new();
+    for case in [
+        "case001", "case002", "case003", "case004", "case005", "broken",
+    ] {
+        for plan in ["case", "case_setback"] {
+            let r = result(case, plan);
+            if r.is_file() {
+                done.insert(
+                    r.clone(),
+                    std::fs::metadata(&r).unwrap().modified().unwrap(),
+                );
+            }
+        }
+    }
+    assert!(done.len() >= 3 && done.len() < runs_total, "{done:?}");
+
+    // The re-run: exactly the missing runs, then the table.
+    let rerun = run_ok(&mut slurm_snake(&[]));
+    assert_eq!(
+        job_count(&rerun, "run"),
+        Some(runs_total - done.len()),
+        "re-run after the interruption:\n{rerun}"
+    );
+    for (r, t) in &done {
+        assert_eq!(
+            std::fs::metadata(r).unwrap().modified().unwrap(),
+            *t,
+            "{} redone",
+            r.display()
+        );
+    }
+
+    // case005: over its memory limit on both plans, Slurm's state in its rows and failures.csv.
+    let rows = read_csv(&out.join("cohort.csv"));
+    let failures = read_csv(&out.join("failures.csv"));
+    for plan in ["case", "case_setback"] {
+        let r: Vec<_> = rows
+            .iter()
+            .filter(|r| r["case"] == "case005" && r["plan"] == plan)
+            .collect();
+        assert_eq!(r.len(), 1, "{r:?}");
+        assert!(
+            r[0]["status"].starts_with("slurm: job ")
+                && r[0]["status"].contains("OUT_OF_MEMORY")
+                && (r[0]["status"].contains("oom-kill") || r[0]["status"].contains("OutOfMemory")),
+            "{:?}",
+            r[0]["status"]
+        );
+        assert!(r[0]["mean_mm"].is_empty());
+        let f = failures
+            .iter()
+            .find(|f| f["case"] == "case005" && f["plan"] == plan)
+            .unwrap();
+        assert_eq!(f["status"], r[0]["status"]);
+    }
+    // The broken case: facesim's one-line error, not fatal.
+    let b: Vec<_> = rows.iter().filter(|r| r["case"] == "broken").collect();
+    assert_eq!(b.len(), 1);
+    assert!(
+        b[0]["status"].starts_with("facesim: ") && b[0]["status"].contains("missing.nii.gz"),
+        "{:?}",
+        b[0]["status"]
+    );
+    assert!(failures.iter().any(|f| f["case"] == "broken"));
+    assert_eq!(failures.len(), 3, "{failures:?}");
+
+    // Everything else equals the local run: same rows, same figures, same provenance.
+    let local_rows = read_csv(&local.join("cohort.csv"));
+    let (lk, sk) = (keyed(&local_rows), keyed(&rows));
+    let lk: BTreeMap<_, _> = lk
+        .into_iter()
+        .filter(|(k, _)| !k.starts_with("case005/"))
+        .collect();
+    let sk: BTreeMap<_, _> = sk
+        .into_iter()
+        .filter(|(k, _)| !k.starts_with("case005/"))
+        .collect();
+    assert_eq!(
+        lk.keys().collect::<Vec<_>>(),
+        sk.keys().collect::<Vec<_>>(),
+        "rows differ"
+    );
+    assert!(lk.len() > 8 * 5, "{} rows", lk.len());
+    for (k, l) in &lk {
+        let s = sk[k];
+        assert_eq!(
+            l.keys().collect::<Vec<_>>(),
+            s.keys().collect::<Vec<_>>(),
+            "columns differ"
+        );
+        for (col, lv) in l.iter() {
+            if VARYING.contains(&col.as_str()) {
+                continue;
+            }
+            let sv = &s[col];
+            match (lv.parse::<f64>(), sv.parse::<f64>()) {
+                (Ok(a), Ok(b)) => assert!((a - b).abs() <= 1e-9, "{k} {col}: {lv} vs {sv}"),
+                _ => assert_eq!(lv, sv, "{k} {col}"),
+            }
+        }
+    }
+    // Provenance: every ok row names facesim's version, its build and the case.
+    for r in rows.iter().filter(|r| r["status"] == "ok") {
+        assert!(r["facesim_version"].starts_with("facesim "), "{r:?}");
+        assert_eq!(r["facesim_sha256"].len(), 64);
+        assert_eq!(r["case_sha256"].len(), 64);
+        assert_eq!(r["parameters_sha256"].len(), 64);
+        assert!(
+            out.join("parameters")
+                .join(format!("{}.json", r["parameters_sha256"]))
+                .is_file()
+        );
+        assert!(!r["slurm_job"].is_empty(), "{r:?}");
+    }
+    println!(
+        "slurm test: local run {:.0} s, whole test {:.0} s",
+        t_local.as_secs_f64(),
+        t0.elapsed().as_secs_f64()
+    );
+    drop(cluster);
+    assert!(
+        !std::env::temp_dir()
+            .join(format!("facesim-slurm-{}", std::process::id()))
+            .exists(),
+        "the cluster's directory is left"
+    );
+}

@@ -1,0 +1,182 @@
+#!/usr/bin/env bash
+# A throw-away one-node Slurm cluster on this machine (docs/cohort.md, "A real Slurm on one
+# machine"): munged, slurmctld and slurmd of Debian's slurm-wlm, run as root, every file —
+# configuration, munge key, state, spool, logs, sockets — under DIR, nothing in /etc.
+#
+#   scripts/slurm-cluster.sh start DIR [WATCH_PID]   # prints `export SLURM_CONF=DIR/slurm.conf`
+#   scripts/slurm-cluster.sh stop DIR                # stops the daemons by PID, removes DIR
+#
+# The node has this machine's CPUs and memory (less 1 GB), one partition `cohort`, memory as a
+# consumable resource (--mem enforced: a job step over it is killed and ends OUT_OF_MEMORY),
+# and no accounting database: slurmctld keeps finished jobs for MinJobAge = 600 s, which is what
+# squeue/scontrol and the executor plugin's `status_command: squeue` read. With WATCH_PID, a
+# watchdog stops the daemons and removes DIR when that process ends (a test that panics or is
+# killed leaves nothing running). Needs root and the packages slurmctld, slurmd, slurm-client,
+# munge (scripts/test-setup.sh).
+set -euo pipefail
+
+die() { echo "slurm-cluster: $*" >&2; exit 1; }
+
+stop() {
+  local dir="$1" pid f
+  [ -d "$dir" ] || return 0
+  dir="$(cd "$dir" && pwd)"
+  for f in watchdog slurmd slurmctld munged; do
+    [ -f "$dir/pids/$f" ] || continue
+    pid="$(cat "$dir/pids/$f")"
+    kill "$pid" 2>/dev/null || true
+  done
+  # slurmd and slurmctld exit within a second of SIGTERM; slurmstepd of a job still running
+  # is the daemon's child and goes with it. Wait by PID, then insist.
+  for f in watchdog slurmd slurmctld munged; do
+    [ -f "$dir/pids/$f" ] || continue
+    pid="$(cat "$dir/pids/$f")"
+    for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
+    kill -9 "$pid" 2>/dev/null || true
+  done
+  # slurmd's link to its configuration cache (configless mode), and its cgroups.
+  if [ -L /run/slurm/conf ]; then
+    case "$(readlink /run/slurm/conf)" in "$dir" | "$dir"/*) rm -f /run/slurm/conf ;; esac
+  fi
+  rmdir /run/slurm 2>/dev/null || true
+  local cg
+  for cg in /sys/fs/cgroup/*/slurm_"$(hostname -s)"; do
+    [ -d "$cg" ] && find "$cg" -depth -type d -exec rmdir {} + 2>/dev/null || true
+  done
+  rm -rf "$dir"
+}
+
+start() {
+  local dir="$1" watch="${2:-}"
+  [ "$(id -u)" = 0 ] || die "needs root (the daemons run as root; sudo or a root CI job)"
+  local p
+  for p in slurmctld slurmd munged sbatch squeue scontrol; do
+    command -v "$p" >/dev/null 2>&1 ||
+      die "$p missing: run scripts/test-setup.sh (apt: slurmctld slurmd slurm-client munge)"
+  done
+  [ ! -e "$dir" ] || [ -z "$(ls -A "$dir")" ] || die "$dir exists and is not empty"
+  [ ! -e /run/slurm/conf ] && [ ! -L /run/slurm/conf ] ||
+    die "/run/slurm/conf exists: another Slurm (or a test cluster left behind) runs here"
+  [ ! -e /etc/slurm/slurm.conf ] ||
+    die "/etc/slurm/slurm.conf exists: this machine has its own Slurm; use that, not a test cluster"
+  mkdir -p "$dir"/{munge,state,spool,log,pids}
+  dir="$(cd "$dir" && pwd)"
+  chmod 700 "$dir/munge"
+
+  # munge: its own key and socket, no system files.
+  dd if=/dev/urandom of="$dir/munge/munge.key" bs=1024 count=1 status=none
+  chmod 400 "$dir/munge/munge.key"
+  munged --foreground --force --key-file="$dir/munge/munge.key" \
+    --socket="$dir/munge/munge.socket" --pid-file="$dir/munge/munged.pid" \
+    --log-file="$dir/log/munged.log" --seed-file="$dir/munge/munged.seed" \
+    >"$dir/log/munged.out" 2>&1 &
+  echo $! >"$dir/pids/munged"
+
+  local host cpus mem port
+  host="$(hostname -s)"
+  cpus="$(nproc)"
+  mem=$(($(awk '/^MemTotal:/ { print int($2 / 1024) }' /proc/meminfo) - 1024))
+  # Two free ports next to each other for slurmctld and slurmd.
+  port="$(python3 -c 'import socket
+for p in range(16817, 17817, 2):
+    ok = True
+    for q in (p, p + 1):
+        s = socket.socket()
+        try:
+            s.bind(("127.0.0.1", q))
+        except OSError:
+            ok = False
+        s.close()
+    if ok:
+        print(p); break')"
+  [ -n "$port" ] || die "no two free ports between 16817 and 17817"
+
+  cat >"$dir/slurm.conf" <<EOF
+# Written by scripts/slurm-cluster.sh: a one-node test cluster, removed when it stops.
+ClusterName=facesimtest
+SlurmctldHost=$host(127.0.0.1)
+SlurmctldPort=$port
+SlurmdPort=$((port + 1))
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+CredType=cred/munge
+AuthInfo=socket=$dir/munge/munge.socket
+StateSaveLocation=$dir/state
+SlurmdSpoolDir=$dir/spool/%n
+SlurmctldPidFile=$dir/log/slurmctld.pid
+SlurmdPidFile=$dir/log/slurmd.pid
+SlurmctldLogFile=$dir/log/slurmctld.log
+SlurmdLogFile=$dir/log/slurmd.log
+SlurmctldDebug=info
+SlurmdDebug=info
+# Jobs: processes tracked by the kernel's process tree; memory read every second, a step over
+# its --mem killed (OverMemoryKill) and its job ending OUT_OF_MEMORY.
+ProctrackType=proctrack/cgroup
+TaskPlugin=task/cgroup
+JobAcctGatherType=jobacct_gather/cgroup
+JobAcctGatherFrequency=task=1
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core_Memory
+SchedulerType=sched/backfill
+MpiDefault=none
+# No accounting database: finished jobs stay in slurmctld (squeue --states=all, scontrol show
+# job) for MinJobAge seconds.
+AccountingStorageType=accounting_storage/none
+JobCompType=jobcomp/none
+MinJobAge=600
+ReturnToService=2
+KillWait=5
+InactiveLimit=0
+Waittime=0
+NodeName=$host NodeAddr=127.0.0.1 CPUs=$cpus RealMemory=$mem State=UNKNOWN
+PartitionName=cohort Nodes=$host Default=YES MaxTime=INFINITE State=UP
+EOF
+  cat >"$dir/cgroup.conf" <<EOF
+CgroupPlugin=cgroup/v1
+CgroupMountpoint=/sys/fs/cgroup
+ConstrainCores=no
+ConstrainRAMSpace=yes
+ConstrainSwapSpace=no
+EOF
+  export SLURM_CONF="$dir/slurm.conf"
+  # Slurm's clients look for SLURM_CONF, then /etc/slurm, then /run/slurm/conf (where a
+  # configless slurmd links its cached copy). The executor plugin's job step strips SLURM_CONF
+  # from the srun it starts inside a job, so that srun finds this file through the link, which
+  # stop removes.
+  mkdir -p /run/slurm
+  ln -s "$dir" /run/slurm/conf
+
+  # munged's socket first, then the controller, then the node daemon.
+  for _ in $(seq 50); do [ -S "$dir/munge/munge.socket" ] && break; sleep 0.1; done
+  [ -S "$dir/munge/munge.socket" ] || { cat "$dir/log/munged.out" >&2; stop "$dir"; die "munged did not start"; }
+  slurmctld -D -i -f "$SLURM_CONF" >"$dir/log/slurmctld.out" 2>&1 &
+  echo $! >"$dir/pids/slurmctld"
+  for _ in $(seq 100); do scontrol ping 2>/dev/null | grep -q UP && break; sleep 0.1; done
+  slurmd -D -f "$SLURM_CONF" >"$dir/log/slurmd.out" 2>&1 &
+  echo $! >"$dir/pids/slurmd"
+  local state=""
+  for _ in $(seq 150); do
+    state="$(sinfo -h -N -o %T 2>/dev/null || true)"
+    [ "$state" = idle ] && break
+    sleep 0.2
+  done
+  if [ "$state" != idle ]; then
+    tail -n 5 "$dir"/log/*.log "$dir"/log/*.out >&2 || true
+    stop "$dir"
+    die "the node did not come up (state '${state:-none}')"
+  fi
+  if [ -n "$watch" ]; then
+    # The watchdog: when WATCH_PID ends, the cluster goes with it.
+    nohup bash -c 'while kill -0 "$1" 2>/dev/null; do sleep 1; done; "$2" stop "$3"' \
+      slurm-watchdog "$watch" "$0" "$dir" >/dev/null 2>&1 &
+    echo $! >"$dir/pids/watchdog"
+  fi
+  echo "export SLURM_CONF=$SLURM_CONF"
+}
+
+case "${1:-}" in
+  start) [ $# -ge 2 ] || die "usage: $0 start DIR [WATCH_PID]"; start "$2" "${3:-}" ;;
+  stop) [ $# -eq 2 ] || die "usage: $0 stop DIR"; stop "$2" ;;
+  *) die "usage: $0 start DIR [WATCH_PID] | stop DIR" ;;
+esac
