@@ -334,15 +334,50 @@ fn a_real_scanners_face_has_its_landmarks_where_people_put_them() {
             "{label} {got:?}: {d:.2} mm from the people's {want:?}"
         );
     }
+    // The mouth's corners: the people's outer-lip corners.
+    for (label, want) in [("Ch-R", mean(&[mouth[0]])), ("Ch-L", mean(&[mouth[6]]))] {
+        let got =
+            position(&f, label).unwrap_or_else(|| panic!("{label} missing: {:?}", f.landmarks));
+        let d = facesim::vec3::norm(facesim::vec3::sub(got, want));
+        eprintln!("james {label}: {d:.2} mm from the people's");
+        assert!(
+            d < 4.0,
+            "{label} {got:?}: {d:.2} mm from the people's {want:?}"
+        );
+    }
+    // Alare: the people's iBUG points are the nostrils' outer ends at the base, not alare (the
+    // most lateral points of the alae, above and outside them): each alare lies outside its
+    // nostril point by 0–8 mm, the two mirror each other about the midsagittal plane within
+    // 3 mm, and the alar width is an adult's (31–42 mm; Farkas 1994: 35 ± 3 in men).
+    let lateral =
+        |p: [f64; 3]| facesim::vec3::dot(facesim::vec3::sub(p, f.frame.origin), f.frame.lateral);
+    let (al_r, al_l) = (position(&f, "Al-R").unwrap(), position(&f, "Al-L").unwrap());
+    let (nr, nl) = (lateral(mean(&[nose[4]])), lateral(mean(&[nose[8]])));
+    let (sr, sl) = (lateral(al_r), lateral(al_l));
+    eprintln!(
+        "james alare at {sr:.1} / {sl:.1} mm, nostril ends at {nr:.1} / {nl:.1} mm from the midline"
+    );
+    assert!((0.0..8.0).contains(&(nr - sr)) && (0.0..8.0).contains(&(sl - nl)));
+    assert!((sr + sl).abs() < 3.0);
+    let width = facesim::vec3::norm(facesim::vec3::sub(al_r, al_l));
+    assert!((31.0..42.0).contains(&width), "alar width {width:.1} mm");
     // The same scan turned obliquely and in metres: the same landmarks, turned and scaled.
     let r = rotation([0.6, 0.0, 0.8], 50.0);
     let turned = landmarks_of(&moved(&mesh, &r, 0.001), FrameFrom::Shape).unwrap();
     assert_eq!(turned.unit.name, "m");
-    for (label, _, _) in people {
+    let labels = people
+        .iter()
+        .map(|p| p.0)
+        .chain(["Ch-R", "Ch-L", "Al-R", "Al-L"]);
+    for label in labels {
         let want = apply(&r, 0.001, position(&f, label).unwrap());
         let got = position(&turned, label).unwrap_or_else(|| panic!("{label} missing (turned)"));
         let d = facesim::vec3::norm(facesim::vec3::sub(got, want)) / 0.001;
         eprintln!("james turned, in metres, {label}: {d:.2} mm off");
-        assert!(d < 0.5, "{label}: {d:.2} mm off the turned landmark");
+        // Alare is the most lateral of the sharpest turns of sections 0.5 mm apart in height: a
+        // turned mesh's facets cross them elsewhere, and the widest section may be another
+        // (measured 0.9 and 2.0 mm).
+        let tol = if label.starts_with("Al") { 2.5 } else { 0.5 };
+        assert!(d < tol, "{label}: {d:.2} mm off the turned landmark");
     }
 }

@@ -360,6 +360,13 @@ fn head_pitch_of_five_degrees_moves_landmarks_and_angles_within_the_stated_bound
         let (f, pitched) = landmarks::locate(&skin, Some(&skull), &[], Path::new("c")).unwrap();
         let mut worst = (String::new(), 0.0f64);
         for l in &lms {
+            // The phantom's lips and crease fade into the cheeks with no corner and its nose has
+            // no alar groove: whether a pitched crease still counts as one at 35 mm out decides
+            // cheilion (docs/landmarks.md); the paired points are checked on a real scan
+            // (face_scan.rs).
+            if landmarks::PAIRED.contains(&l.label.as_str()) {
+                continue;
+            }
             let p = pitched.iter().find(|x| x.label == l.label).unwrap();
             assert_eq!(
                 l.position.is_some(),

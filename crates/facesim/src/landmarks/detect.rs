@@ -24,7 +24,7 @@ const FACE_DEPTH_MM: f64 = 70.0;
 
 /// Convex: a local maximum of anteriority (a bump); concave: a local minimum (a fold).
 #[derive(Clone, Copy, PartialEq, Eq)]
-enum Ext {
+pub(super) enum Ext {
     Convex,
     Concave,
 }
@@ -45,7 +45,7 @@ impl Ext {
 }
 
 /// Does the profile at i stand out as `e` by PROMINENCE_MM on both sides within REACH_MM?
-fn is_extremum(p: &Profile, i: usize, e: Ext) -> bool {
+pub(super) fn is_extremum(p: &Profile, i: usize, e: Ext) -> bool {
     let s = e.sign();
     let v = s * p.a[i];
     if !v.is_finite() {
@@ -187,8 +187,21 @@ impl Found {
     }
 }
 
-/// Detect the soft-tissue landmarks on `skin` and the bony ones on `skull` (None: no skull).
+/// Detect the soft-tissue landmarks on `skin` and the bony ones on `skull` (None: no skull):
+/// those of the midsagittal profiles, then the paired ones beside them (alare, cheilion).
 pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
+    let mut lms = detect_midline(skin, skull, frame);
+    let paired = super::lateral::paired(skin, frame, &lms);
+    lms.extend(paired);
+    lms
+}
+
+/// The landmarks of the midsagittal profiles only.
+pub(super) fn detect_midline(
+    skin: &Mesh,
+    skull: Option<&Mesh>,
+    frame: &HeadFrame,
+) -> Vec<Landmark> {
     let mut f = Found { list: Vec::new() };
     let seg = section(skin, frame);
     // A face mesh alone may be a whole head: its profile is the face's, not the back of the head

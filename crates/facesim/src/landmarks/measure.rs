@@ -142,6 +142,45 @@ pub fn measure(c: &[Carried], frame: &HeadFrame) -> (Ordered<Measure>, Ordered<R
             },
         ));
     }
+    // Widths between paired landmarks: the whole 3-D distance (alar width widens after a Le Fort I
+    // impaction or advance, a measure the clinic follows).
+    let widths: [(&str, &str, [&str; 2]); 2] = [
+        (
+            "alar_width",
+            "distance Al-R–Al-L (the nose's width at the alae)",
+            ["Al-R", "Al-L"],
+        ),
+        (
+            "mouth_width",
+            "distance Ch-R–Ch-L (the mouth's corners)",
+            ["Ch-R", "Ch-L"],
+        ),
+    ];
+    for (name, definition, [r, l]) in widths {
+        let at = |post: bool| {
+            let p = |label: &str| {
+                let m = c.iter().find(|x| x.label == label)?;
+                if post { m.post } else { m.pre }
+            };
+            Some(crate::vec3::norm(crate::vec3::sub(p(r)?, p(l)?)))
+        };
+        let (before, after) = (at(false), at(true));
+        let miss: Vec<&str> = [r, l]
+            .into_iter()
+            .filter(|x| !c.iter().any(|m| m.label == *x && m.pre.is_some()))
+            .collect();
+        out.0.push((
+            name.to_string(),
+            Measure {
+                unit: "mm".into(),
+                definition: definition.into(),
+                before,
+                after,
+                change: before.zip(after).map(|(b, a)| a - b),
+                missing: (!miss.is_empty()).then(|| format!("needs {}, missing", miss.join(", "))),
+            },
+        ));
+    }
     let mut ratios = Ordered::default();
     for (s, h) in PAIRS {
         let forward = |l: &str| -> Option<f64> {
@@ -182,5 +221,32 @@ mod tests {
         // E-line vertical at a = 10 (from v = 0 to v = −50): a point at a = 7 is 3 mm behind.
         assert!((to_line([-20.0, 7.0], [0.0, 10.0], [-50.0, 10.0]) + 3.0).abs() < 1e-12);
         assert!((to_line([-20.0, 12.0], [-50.0, 10.0], [0.0, 10.0]) - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn widths_are_the_distances_between_the_paired_landmarks() {
+        let lm = |label: &str, pre: Option<[f64; 3]>, post: Option<[f64; 3]>| Carried {
+            label: label.into(),
+            kind: super::super::Kind::Soft,
+            source: super::super::Source::Detected,
+            pre,
+            post,
+            change_mm: None,
+            missing: pre.is_none().then(|| "not found".into()),
+        };
+        let c = [
+            lm("Al-R", Some([-17.0, 0.0, 0.0]), Some([-18.0, 0.0, 0.0])),
+            lm("Al-L", Some([17.0, 0.0, 0.0]), Some([18.0, 1.0, 0.0])),
+            lm("Ch-R", None, None),
+            lm("Ch-L", Some([25.0, 0.0, 0.0]), Some([25.0, 0.0, 0.0])),
+        ];
+        let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let (m, _) = measure(&c, &frame);
+        let get = |n: &str| &m.0.iter().find(|(k, _)| k == n).unwrap().1;
+        let alar = get("alar_width");
+        assert_eq!(alar.before, Some(34.0));
+        assert!((alar.after.unwrap() - 36f64.hypot(1.0)).abs() < 1e-12);
+        let mouth = get("mouth_width");
+        assert!(mouth.before.is_none() && mouth.missing.as_deref() == Some("needs Ch-R, missing"));
     }
 }

@@ -2,6 +2,7 @@
 //!
 //! - `frame`: the head frame (midsagittal plane by mirror symmetry) and midsagittal profiles;
 //! - `detect`: soft-tissue and bony landmarks on the profiles, or why each is missing;
+//! - `lateral`: the paired ones beside the midline (alare, cheilion);
 //! - `measure`: nasolabial and mentolabial angles, lips to the E-line, soft/hard ratios;
 //! - `markups`: 3D Slicer markups files (.mrk.json) in and out;
 //! - `face_regions`: nose, lips, chin and cheeks from the landmarks, and their statistics.
@@ -13,6 +14,7 @@ pub mod clinic;
 pub mod detect;
 pub mod face_regions;
 pub mod frame;
+mod lateral;
 pub mod markups;
 pub mod measure;
 pub mod outcome;
@@ -31,6 +33,7 @@ use std::path::Path;
 
 pub use detect::{BONE, SOFT};
 pub use frame::{HeadFrame, head_frame};
+pub use lateral::PAIRED;
 
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -96,6 +99,7 @@ pub fn locate(
         None => SOFT
             .iter()
             .chain(BONE.iter())
+            .chain(PAIRED.iter())
             .map(|l| Landmark::missing(l, kind_of(l), "the skin is empty".into()))
             .collect(),
     };

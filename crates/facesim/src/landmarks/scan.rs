@@ -19,6 +19,7 @@
 
 use super::detect::{self, SOFT};
 use super::frame::{HeadFrame, head_frame, profile, section, unit};
+use super::lateral::PAIRED;
 use super::measure::{self, Measure};
 use super::{Carried, Kind, Landmark, Ordered};
 use crate::mesh::Mesh;
@@ -362,9 +363,10 @@ fn face_score(mesh: &Mesh, border: &VertexGrid, lms: &[Landmark], frame: &HeadFr
     score
 }
 
-/// Soft landmarks only (a face mesh has no bone), in `frame`.
+/// The midline's soft landmarks (a face mesh has no bone), in `frame`: what the frame search
+/// judges; the paired ones are added once the frame is chosen (`landmarks_of`).
 fn soft(mesh: &Mesh, frame: &HeadFrame) -> Vec<Landmark> {
-    detect::detect(mesh, None, frame)
+    detect::detect_midline(mesh, None, frame)
         .into_iter()
         .filter(|l| l.kind == Kind::Soft)
         .collect()
@@ -594,6 +596,9 @@ pub fn landmarks_of(mesh: &Mesh, from: FrameFrom) -> Result<FaceLandmarks, Strin
             (f, lms, "the file's superior axis (z), as a CT's".into())
         }
     };
+    let mut lms = lms;
+    let paired = super::lateral::paired(&mm, &frame, &lms);
+    lms.extend(paired);
     let carried: Vec<Carried> = lms
         .iter()
         .map(|l| Carried {
@@ -614,6 +619,7 @@ pub fn landmarks_of(mesh: &Mesh, from: FrameFrom) -> Result<FaceLandmarks, Strin
     let back = |p: [f64; 3]| scale(p, 1.0 / k);
     let landmarks = SOFT
         .iter()
+        .chain(PAIRED.iter())
         .filter_map(|l| lms.iter().find(|x| x.label == *l).cloned())
         .map(|mut l| {
             l.position = l.position.map(back);
