@@ -10,74 +10,15 @@
 //! the soft ones. A landmark whose definition the scan does not satisfy is missing, with the
 //! reason.
 
+use super::extremum::{Ext, GAP_MM, PROMINENCE_MM, is_extremum};
 use super::frame::{HeadFrame, Profile, STEP_MM, profile, section};
 use super::{Kind, Landmark, Source};
 use crate::mesh::Mesh;
 
-const PROMINENCE_MM: f64 = 0.5;
-const REACH_MM: f64 = 15.0;
-const GAP_MM: f64 = 2.0;
 /// Bone farther behind the soft profile than this is not facial bone.
 const BONE_DEPTH_MM: f64 = 35.0;
 /// Without a skull, skin farther behind the most anterior point than this is not the face.
 const FACE_DEPTH_MM: f64 = 70.0;
-
-/// Convex: a local maximum of anteriority (a bump); concave: a local minimum (a fold).
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub(super) enum Ext {
-    Convex,
-    Concave,
-}
-
-impl Ext {
-    fn sign(self) -> f64 {
-        match self {
-            Ext::Convex => 1.0,
-            Ext::Concave => -1.0,
-        }
-    }
-    fn word(self) -> &'static str {
-        match self {
-            Ext::Convex => "convexity",
-            Ext::Concave => "concavity",
-        }
-    }
-}
-
-/// Does the profile at i stand out as `e` by PROMINENCE_MM on both sides within REACH_MM?
-pub(super) fn is_extremum(p: &Profile, i: usize, e: Ext) -> bool {
-    let s = e.sign();
-    let v = s * p.a[i];
-    if !v.is_finite() {
-        return false;
-    }
-    let reach = (REACH_MM / STEP_MM) as usize;
-    let gap = (GAP_MM / STEP_MM) as usize;
-    let side = |idx: &mut dyn Iterator<Item = usize>| {
-        let mut hole = 0;
-        for j in idx {
-            let w = s * p.a[j];
-            if !w.is_finite() {
-                hole += 1;
-                if hole > gap {
-                    return false;
-                }
-                continue;
-            }
-            hole = 0;
-            if w > v {
-                return false;
-            }
-            if v - w >= PROMINENCE_MM {
-                return true;
-            }
-        }
-        false
-    };
-    let lo = i.saturating_sub(reach);
-    let hi = (i + reach).min(p.a.len() - 1);
-    side(&mut (lo..i).rev()) && side(&mut (i + 1..=hi))
-}
 
 /// The first extremum `e` walking from `from` (exclusive) down (`down`) or up; on a flat
 /// extremum, its most extreme sample.
@@ -187,21 +128,9 @@ impl Found {
     }
 }
 
-/// Detect the soft-tissue landmarks on `skin` and the bony ones on `skull` (None: no skull):
-/// those of the midsagittal profiles, then the paired ones beside them (alare, cheilion).
+/// Detect the soft-tissue landmarks of the midsagittal profile of `skin` and the bony ones on
+/// `skull` (None: no skull); `lateral` adds the paired ones beside them (`super::locate`).
 pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
-    let mut lms = detect_midline(skin, skull, frame);
-    let paired = super::lateral::paired(skin, frame, &lms);
-    lms.extend(paired);
-    lms
-}
-
-/// The landmarks of the midsagittal profiles only.
-pub(super) fn detect_midline(
-    skin: &Mesh,
-    skull: Option<&Mesh>,
-    frame: &HeadFrame,
-) -> Vec<Landmark> {
     let mut f = Found { list: Vec::new() };
     let seg = section(skin, frame);
     // A face mesh alone may be a whole head: its profile is the face's, not the back of the head

@@ -4,9 +4,8 @@
 //! frame, starting from the midline landmarks (Sn, Prn; Sto), so they follow the face in any
 //! scanner frame as those do.
 
-use super::detect::{Ext, is_extremum};
+use super::extremum::{Ext, is_extremum};
 use super::frame::{HeadFrame, Profile, profile};
-use super::{Kind, Landmark, Source};
 use crate::mesh::Mesh;
 
 /// Patient's right (−lateral) and left, alare then cheilion.
@@ -35,46 +34,34 @@ const ALA_MAX_MM: f64 = 30.0;
 /// Skin more than this behind the nose tip (or stomion) is not the face's front.
 const FRONT_DEPTH_MM: f64 = 45.0;
 
-/// The paired landmarks of `skin`, from the midline ones in `found` (frame coordinates of a
-/// landmark: s lateral, v up, a forward).
-pub(super) fn paired(skin: &Mesh, frame: &HeadFrame, found: &[Landmark]) -> Vec<Landmark> {
+/// A paired landmark: its label and LPS position, or why it is missing.
+pub(super) type Spot = (&'static str, Result<[f64; 3], String>);
+
+/// The paired landmarks of `skin` from the midline ones (`at(label)`: a landmark's LPS position
+/// when found), in PAIRED order.
+pub(super) fn paired(
+    skin: &Mesh,
+    frame: &HeadFrame,
+    at: impl Fn(&str) -> Option<[f64; 3]>,
+) -> Vec<Spot> {
     let coords: Vec<[f64; 3]> = skin.vertices.iter().map(|p| frame.coords(*p)).collect();
-    let at = |label: &str| {
-        found
-            .iter()
-            .find(|l| l.label == label)
-            .and_then(|l| l.position)
-            .map(|p| frame.coords(p))
-    };
+    let at = |label: &str| at(label).map(|p| frame.coords(p));
     let mut out = Vec::with_capacity(4);
     for (label, side) in [("Al-R", -1.0), ("Al-L", 1.0)] {
         let spot = match (at("Sn"), at("Prn")) {
             (Some(sn), Some(prn)) => alare(&coords, &skin.triangles, sn, prn, side),
             _ => Err("searched between subnasale and pronasale, and one is missing".into()),
         };
-        out.push(landmark(label, frame, spot));
+        out.push((label, spot.map(|c| frame.point(c))));
     }
     for (label, side) in [("Ch-R", -1.0), ("Ch-L", 1.0)] {
         let spot = match at("Sto") {
             Some(sto) => cheilion(&coords, &skin.triangles, sto, side),
             None => Err("traced from stomion (Sto), which is missing".into()),
         };
-        out.push(landmark(label, frame, spot));
+        out.push((label, spot.map(|c| frame.point(c))));
     }
     out
-}
-
-fn landmark(label: &str, frame: &HeadFrame, spot: Result<[f64; 3], String>) -> Landmark {
-    match spot {
-        Ok(c) => Landmark {
-            label: label.into(),
-            kind: Kind::Soft,
-            position: Some(frame.point(c)),
-            source: Source::Detected,
-            missing: None,
-        },
-        Err(why) => Landmark::missing(label, Kind::Soft, why),
-    }
 }
 
 /// The section of the triangles by the plane coordinate `k` = x, as segments in the other two

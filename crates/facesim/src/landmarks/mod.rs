@@ -12,6 +12,7 @@
 
 pub mod clinic;
 pub mod detect;
+mod extremum;
 pub mod face_regions;
 pub mod frame;
 mod lateral;
@@ -75,6 +76,29 @@ impl Landmark {
 pub(crate) const USER_MAX_OFF_FACE_MM: f64 = 10.0;
 
 /// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
+/// The paired landmarks (alare, cheilion) of `skin` beside the midline ones in `found`.
+pub(crate) fn with_paired(skin: &Mesh, frame: &HeadFrame, found: &[Landmark]) -> Vec<Landmark> {
+    let at = |label: &str| {
+        found
+            .iter()
+            .find(|l| l.label == label)
+            .and_then(|l| l.position)
+    };
+    lateral::paired(skin, frame, at)
+        .into_iter()
+        .map(|(label, spot)| match spot {
+            Ok(p) => Landmark {
+                label: label.into(),
+                kind: Kind::Soft,
+                position: Some(p),
+                source: Source::Detected,
+                missing: None,
+            },
+            Err(why) => Landmark::missing(label, Kind::Soft, why),
+        })
+        .collect()
+}
+
 pub(crate) fn kind_of(label: &str) -> Kind {
     if BONE.contains(&label) {
         Kind::Bone
@@ -95,7 +119,12 @@ pub fn locate(
 ) -> Result<(Option<HeadFrame>, Vec<Landmark>)> {
     let frame = head_frame(skin);
     let mut lms = match &frame {
-        Some(f) => detect::detect(skin, skull, f),
+        Some(f) => {
+            let mut lms = detect::detect(skin, skull, f);
+            let paired = with_paired(skin, f, &lms);
+            lms.extend(paired);
+            lms
+        }
         None => SOFT
             .iter()
             .chain(BONE.iter())

@@ -366,7 +366,7 @@ fn face_score(mesh: &Mesh, border: &VertexGrid, lms: &[Landmark], frame: &HeadFr
 /// The midline's soft landmarks (a face mesh has no bone), in `frame`: what the frame search
 /// judges; the paired ones are added once the frame is chosen (`landmarks_of`).
 fn soft(mesh: &Mesh, frame: &HeadFrame) -> Vec<Landmark> {
-    detect::detect_midline(mesh, None, frame)
+    detect::detect(mesh, None, frame)
         .into_iter()
         .filter(|l| l.kind == Kind::Soft)
         .collect()
@@ -597,7 +597,7 @@ pub fn landmarks_of(mesh: &Mesh, from: FrameFrom) -> Result<FaceLandmarks, Strin
         }
     };
     let mut lms = lms;
-    let paired = super::lateral::paired(&mm, &frame, &lms);
+    let paired = super::with_paired(&mm, &frame, &lms);
     lms.extend(paired);
     let carried: Vec<Carried> = lms
         .iter()
