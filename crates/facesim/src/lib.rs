@@ -68,6 +68,7 @@ pub mod phantom_cohort;
 pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
+pub mod reduced;
 pub mod report;
 pub mod report_page;
 pub mod segment;

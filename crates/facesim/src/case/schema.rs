@@ -284,11 +284,24 @@ impl Tet {
     /// The material of a tissue label (`crate::labels`) (soft labels; anything else is
     /// muscle, the bulk of the face's soft tissue).
     pub fn elastic(&self, label: u8) -> TissueElastic {
+        self.tissues()[Tet::slot(label)]
+    }
+
+    /// The materials of the four tissues, in the order of [`Tet::TISSUES`].
+    pub fn tissues(&self) -> [TissueElastic; 4] {
+        [self.skin, self.muscle, self.fat_dark, self.fat_bright]
+    }
+
+    /// The tissues' case.toml keys (`[tet.skin]` …), the order of [`Tet::tissues`].
+    pub const TISSUES: [&'static str; 4] = ["skin", "muscle", "fat_dark", "fat_bright"];
+
+    /// A tissue label's place in [`Tet::tissues`].
+    pub fn slot(label: u8) -> usize {
         match label {
-            SKIN => self.skin,
-            FAT_DARK => self.fat_dark,
-            FAT_BRIGHT => self.fat_bright,
-            _ => self.muscle,
+            SKIN => 0,
+            FAT_DARK => 2,
+            FAT_BRIGHT => 3,
+            _ => 1,
         }
     }
 }

@@ -12,6 +12,7 @@
 pub mod c1;
 pub mod discretisation;
 pub mod predicted;
+pub mod reduced;
 pub mod volumetric;
 
 use crate::case::Case;

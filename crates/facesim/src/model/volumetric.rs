@@ -120,6 +120,102 @@ impl Volumetric {
         Ok(displaced(skin, &carried))
     }
 
+    /// The certified reduced model of this linear model for `case`'s sliding state
+    /// (docs/reduced.md): the stiffness split by tissue and Lamé parameter on the run's mesh,
+    /// node roles, mucosa and face embedding; a greedy over `train` (cases differing in tissue
+    /// parameters only) from the reference `case`. The linear element and material only: the
+    /// neo-Hookean tangent is not affine in the parameters, the 10-node element is not yet split.
+    pub fn reduced(
+        &self,
+        scene: &Scene,
+        case: &Case,
+        skin: &Mesh,
+        train: &[Case],
+        greedy: crate::reduced::Greedy,
+        progress: &dyn Fn(&str),
+    ) -> Result<super::reduced::ReducedTet> {
+        use super::reduced::{FaceMap, ReducedTet};
+        use crate::reduced::{Affine, Basis, affine::solve_columns, norm::largest_eigenvalue};
+        let start = std::time::Instant::now();
+        let r = &self.reuse;
+        if !r.linear_solve || self.quadratic.is_some() {
+            return Err(Error::config(
+                "the reduced model needs [tet] material = \"linear\" and element = \"linear\"",
+            ));
+        }
+        let c = case;
+        let sliding = c.tet.sliding;
+        let (Holds { hold, .. }, _, _) = hold_tissue(
+            &self.mesh,
+            None,
+            &r.kind,
+            &r.mucosa,
+            &bone(scene, c),
+            c,
+            true,
+        );
+        let slot: Vec<usize> = self
+            .mesh
+            .tissue
+            .iter()
+            .map(|l| crate::case::Tet::slot(*l))
+            .collect();
+        let split = crate::tet::lame_terms(&self.mesh.nodes, &self.mesh.tets, &slot)?;
+        let terms: Vec<(usize, bool)> = split.iter().map(|t| (t.slot, t.is_lambda)).collect();
+        let matrices: Vec<Vec<(usize, usize, f64)>> = split.into_iter().map(|t| t.lower).collect();
+        let affine = Affine::new(&matrices, &hold)?;
+        drop(matrices);
+        let theta = |t: &crate::case::Tet| -> Vec<f64> {
+            let m = t.tissues();
+            terms
+                .iter()
+                .map(|(s, l)| {
+                    let (lambda, mu) = m[*s].lame();
+                    if *l { lambda } else { mu }
+                })
+                .collect()
+        };
+        let train: Vec<Vec<f64>> = train.iter().map(|t| theta(&t.tet)).collect();
+        let (basis, x) = Basis::build(&affine, &theta(&c.tet), &train, greedy, progress)?;
+        let face_map = FaceMap {
+            tets: self.mesh.tets.clone(),
+            cell: r.embedding.tet.clone(),
+            weights: r.embedding.weights.clone(),
+            still: scene_still(&r.face_rigid, r.roi, &skin.vertices),
+        };
+        let zero = vec![0.0; affine.unknowns()];
+        let face_lift = face_map.carry(&affine.expand(&zero, true));
+        let face_columns = basis
+            .vectors
+            .iter()
+            .map(|v| face_map.carry(&affine.expand(v, false)))
+            .collect();
+        progress("reduced model: the face's gain");
+        let nodes = self.mesh.nodes.len();
+        let nv = face_map.cell.len();
+        let gain2 = largest_eigenvalue(3 * nv, 40, &|y: &[f64]| {
+            let y3: Vec<[f64; 3]> = y.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+            let b = affine.restrict(&face_map.carry_transpose(&y3, nodes));
+            let z = solve_columns(&x, &[b]).remove(0);
+            face_map
+                .carry(&affine.expand(&z, false))
+                .into_iter()
+                .flatten()
+                .collect()
+        });
+        Ok(ReducedTet {
+            sliding,
+            affine,
+            basis,
+            terms,
+            face_lift,
+            face_map,
+            face_columns,
+            face_gain: gain2.max(0.0).sqrt(),
+            offline_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
     /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell materials
     /// and tissue labels.
     pub(crate) fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
@@ -327,6 +423,15 @@ fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
         .iter()
         .zip(d)
         .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+        .collect()
+}
+
+/// Face vertices that stay (`carry_face`'s rule): rigid skin, or outside the region.
+fn scene_still(rigid: &[bool], roi: ([f64; 3], [f64; 3]), face: &[[f64; 3]]) -> Vec<bool> {
+    rigid
+        .iter()
+        .zip(face)
+        .map(|(r, p)| *r || (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]))
         .collect()
 }
 

@@ -84,8 +84,18 @@ pub fn gradients(x: [[f64; 3]; 4]) -> Option<(f64, [[f64; 3]; 4])> {
 
 /// The 12×12 element stiffness (row 3a + i, column 3b + j).
 pub(crate) fn element_stiffness(x: [[f64; 3]; 4], m: TissueElastic) -> Option<[[f64; 12]; 12]> {
-    let (v, g) = gradients(x)?;
     let (lambda, mu) = m.lame();
+    element_stiffness_lame(x, lambda, mu)
+}
+
+/// The same for Lamé's (λ, μ): linear in each, so K = λ K_λ + μ K_μ per element (the affine
+/// form the reduced model takes apart, `crate::reduced`).
+pub(crate) fn element_stiffness_lame(
+    x: [[f64; 3]; 4],
+    lambda: f64,
+    mu: f64,
+) -> Option<[[f64; 12]; 12]> {
+    let (v, g) = gradients(x)?;
     let mut k = [[0.0; 12]; 12];
     for a in 0..4 {
         for b in 0..4 {
@@ -168,6 +178,51 @@ impl TetMesh {
         })?;
         Ok(sys.solve(&[vec![0.0; n]], &[values.to_vec()]).remove(0))
     }
+}
+
+/// One affine part of the stiffness: K_λ or K_μ of one tissue slot, as lower-triangle triplets.
+pub(crate) struct LameTerm {
+    pub slot: usize,
+    pub is_lambda: bool,
+    pub lower: Vec<(usize, usize, f64)>,
+}
+
+/// The affine parts of the linear tetrahedral stiffness: for each tissue slot s present in
+/// `slot` (per tetrahedron, `case::Tet::slot`), K_λ,s and K_μ,s, so that K = Σ_s (λ_s K_λ,s +
+/// μ_s K_μ,s) (Rozza, Huynh & Patera 2008 §2: an affine parametric operator). Each is the lower
+/// triangle of [`TetMesh::assemble`]'s pattern, entry for entry in its order (elements of other
+/// tissues add zeros), so the parts can be summed triplet by triplet.
+pub(crate) fn lame_terms(
+    nodes: &[[f64; 3]],
+    tets: &[[u32; 4]],
+    slot: &[usize],
+) -> Result<Vec<LameTerm>> {
+    let mut present: Vec<usize> = slot.to_vec();
+    present.sort_unstable();
+    present.dedup();
+    let mut out = Vec::new();
+    for s in present {
+        for is_lambda in [true, false] {
+            let (l, m) = if is_lambda { (1.0, 0.0) } else { (0.0, 1.0) };
+            let k = blocks::lower_triplets(nodes.len(), tets, |t| {
+                if slot[t] != s {
+                    return Ok([[0.0; 12]; 12]);
+                }
+                element_stiffness_lame(tets[t].map(|n| nodes[n as usize]), l, m).ok_or_else(|| {
+                    Error::numerical(
+                        NumericalKind::DegenerateElement,
+                        format!("tetrahedron {t} (nodes {:?}) is flat or inverted", tets[t]),
+                    )
+                })
+            })?;
+            out.push(LameTerm {
+                slot: s,
+                is_lambda,
+                lower: k,
+            });
+        }
+    }
+    Ok(out)
 }
 
 /// The tetrahedra (corner indices into `nodes`) flat or inverted at `nodes + u`.

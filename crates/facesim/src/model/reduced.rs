@@ -1,0 +1,158 @@
+//! The volumetric model's certified reduced model (issue 28; docs/reduced.md): built on what a
+//! run's linear tetrahedral model holds (`Volumetric::reduced`), it gives the face for any
+//! tissue parameters in microseconds, each answer with a bound in mm on its difference from the
+//! full model's.
+
+use crate::case::{Case, Tet};
+use crate::error::{Error, Result};
+use crate::reduced::{Affine, Basis, GreedyStep};
+use serde::{Deserialize, Serialize};
+
+/// The reduced model of one sliding state (sliding changes the holds, not a coefficient).
+pub struct ReducedTet {
+    pub sliding: bool,
+    pub(super) affine: Affine,
+    pub(super) basis: Basis,
+    /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
+    pub(super) terms: Vec<(usize, bool)>,
+    /// The face displacement of the held values with every free unknown zero, and of each
+    /// basis vector (held values zero): the face is linear in the reduced coefficients.
+    pub(super) face_lift: Vec<[f64; 3]>,
+    pub(super) face_map: FaceMap,
+    pub(super) face_columns: Vec<Vec<[f64; 3]>>,
+    /// σ with ‖face error‖₂ ≤ σ ‖e‖_X (`reduced::norm`).
+    pub(super) face_gain: f64,
+    pub(super) offline_seconds: f64,
+}
+
+/// One answer of the reduced model and its certificate.
+#[derive(Clone, Debug)]
+pub struct ReducedFace {
+    /// Face displacement per vertex (mm, LPS).
+    pub displacement: Vec<[f64; 3]>,
+    /// Bound on the largest difference from the full model's face displacement (mm): it bounds
+    /// the Euclidean norm over all face vertices, so every vertex too.
+    pub bound_mm: f64,
+    /// The energy-norm bound relative to the reduced solution's energy norm.
+    pub relative_energy_bound: f64,
+}
+
+/// report.json `uncertainty.reduced`: how the reduced model was built.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ReducedReport {
+    pub sliding: bool,
+    pub basis_size: usize,
+    /// Factorisations of the full model (one per snapshot and the reference) and cheaper
+    /// solves with the reference's factor.
+    pub full_factorisations: usize,
+    pub reference_solves: usize,
+    pub offline_seconds: f64,
+    /// ‖face error‖₂ ≤ face_gain · ‖e‖_X.
+    pub face_gain: f64,
+    pub greedy: Vec<GreedyStep>,
+}
+
+impl ReducedTet {
+    /// The parameter vector θ of `tet`'s materials, in the terms' order.
+    pub fn theta(&self, tet: &Tet) -> Vec<f64> {
+        let m = tet.tissues();
+        self.terms
+            .iter()
+            .map(|(s, is_lambda)| {
+                let (l, mu) = m[*s].lame();
+                if *is_lambda { l } else { mu }
+            })
+            .collect()
+    }
+
+    /// The face displacement with `case`'s tissue parameters (its `[tet] sliding` must be this
+    /// model's) and the certified bound.
+    pub fn face(&self, case: &Case) -> Result<ReducedFace> {
+        if case.tet.sliding != self.sliding {
+            return Err(Error::config(
+                "reduced model: asked for the other sliding state than it was built for",
+            ));
+        }
+        let o = self.basis.solve(&self.theta(&case.tet))?;
+        let mut d = self.face_lift.clone();
+        for (col, c) in self.face_columns.iter().zip(o.coefficients.iter()) {
+            for (a, b) in d.iter_mut().zip(col) {
+                for k in 0..3 {
+                    a[k] += c * b[k];
+                }
+            }
+        }
+        Ok(ReducedFace {
+            displacement: d,
+            bound_mm: self.face_gain * o.energy_bound,
+            relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
+        })
+    }
+
+    /// The full model's face displacement at `case`'s parameters on the same system (the truth
+    /// the bound is about: one factorisation).
+    pub fn full_face(&self, case: &Case) -> Result<Vec<[f64; 3]>> {
+        let t = self.theta(&case.tet);
+        let k = self.affine.factor(&t)?;
+        let u = crate::reduced::affine::solve_columns(&k, &[self.affine.rhs(&t)]).remove(0);
+        Ok(self.face_map.carry(&self.affine.expand(&u, true)))
+    }
+
+    pub fn report(&self) -> ReducedReport {
+        ReducedReport {
+            sliding: self.sliding,
+            basis_size: self.basis.size(),
+            full_factorisations: self.basis.full_factorisations,
+            reference_solves: self.basis.riesz_solves,
+            offline_seconds: self.offline_seconds,
+            face_gain: self.face_gain,
+            greedy: self.basis.history.clone(),
+        }
+    }
+}
+
+/// The face carried by the linear mesh (as `tet::embed::SkinEmbedding::carry` with the run's
+/// still vertices: rigid skin and beyond the region), and its transpose.
+pub(super) struct FaceMap {
+    pub tets: Vec<[u32; 4]>,
+    pub cell: Vec<Option<u32>>,
+    pub weights: Vec<[f64; 4]>,
+    pub still: Vec<bool>,
+}
+
+impl FaceMap {
+    pub fn carry(&self, u: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.cell
+            .iter()
+            .zip(&self.weights)
+            .zip(&self.still)
+            .map(|((c, w), still)| match c {
+                Some(t) if !still => {
+                    let mut d = [0.0; 3];
+                    for (n, wa) in self.tets[*t as usize].iter().zip(w) {
+                        for k in 0..3 {
+                            d[k] += wa * u[*n as usize][k];
+                        }
+                    }
+                    d
+                }
+                _ => [0.0; 3],
+            })
+            .collect()
+    }
+
+    /// The transpose of `carry`: face vectors to node vectors on `nodes` nodes.
+    pub fn carry_transpose(&self, y: &[[f64; 3]], nodes: usize) -> Vec<[f64; 3]> {
+        let mut out = vec![[0.0; 3]; nodes];
+        for (((c, w), still), y) in self.cell.iter().zip(&self.weights).zip(&self.still).zip(y) {
+            if let (Some(t), false) = (c, still) {
+                for (n, wa) in self.tets[*t as usize].iter().zip(w) {
+                    for k in 0..3 {
+                        out[*n as usize][k] += wa * y[k];
+                    }
+                }
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,222 @@
+//! The certified reduced-basis model of the linear tetrahedral model (issue 28; docs/reduced.md):
+//! its stiffness is affine in the tissues' Lamé parameters, so a greedy over the parameter box
+//! picks a few full solves as a basis, and any parameter set is then solved in microseconds with
+//! a certified bound on its error.
+//!
+//! - [`affine`]: A(θ) = Σ θ_q A_q, f(θ) = Σ θ_q f_q on the free unknowns (holds in node frames);
+//! - [`basis`]: the greedy, the online solve and the bound (min-θ coercivity, residual dual norm);
+//! - [`norm`]: the largest gain from the energy norm to the face's displacement (mm), by Lanczos.
+
+pub mod affine;
+pub mod basis;
+pub mod norm;
+
+pub use affine::Affine;
+pub use basis::{Basis, Greedy, GreedyStep, Online};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
+
+    /// n³ sheared cubes of side 1 mm, 6 tetrahedra each (Kuhn), tissue slot by layer and column:
+    /// three tissues. The bottom held on a rigid move, one side sliding on its plane, the rest free.
+    fn block(n: usize) -> (TetMesh, Vec<usize>, Vec<Hold>) {
+        let id = |i: usize, j: usize, k: usize| (i + (n + 1) * (j + (n + 1) * k)) as u32;
+        let mut nodes = Vec::new();
+        for k in 0..=n {
+            for j in 0..=n {
+                for i in 0..=n {
+                    let (x, y, z) = (i as f64, j as f64, k as f64);
+                    nodes.push([x + 0.1 * y, y + 0.05 * z, z]);
+                }
+            }
+        }
+        let mut tets = Vec::new();
+        let mut slot = Vec::new();
+        const PATHS: [[usize; 3]; 6] = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    for p in PATHS {
+                        let mut c = [i, j, k];
+                        let mut t = [id(c[0], c[1], c[2]); 4];
+                        for (s, axis) in p.iter().enumerate() {
+                            c[*axis] += 1;
+                            t[s + 1] = id(c[0], c[1], c[2]);
+                        }
+                        let x = t.map(|v| nodes[v as usize]);
+                        if crate::tet::gradients(x).is_none() {
+                            t.swap(2, 3);
+                        }
+                        tets.push(t);
+                        slot.push(if k >= n / 2 {
+                            0
+                        } else if i < n / 2 {
+                            1
+                        } else {
+                            2
+                        });
+                    }
+                }
+            }
+        }
+        let holds = nodes
+            .iter()
+            .map(|p| {
+                if p[2] == 0.0 {
+                    // A small rigid rotation about z and a translation.
+                    let (c, s) = (0.05f64.cos(), 0.05f64.sin());
+                    Hold::Fixed([
+                        c * p[0] - s * p[1] - p[0] + 0.3,
+                        s * p[0] + c * p[1] - p[1],
+                        0.2,
+                    ])
+                } else if p[1] == 0.0 {
+                    Hold::Slide {
+                        normal: [0.0, 1.0, 0.0],
+                        value: 0.0,
+                    }
+                } else {
+                    Hold::Free
+                }
+            })
+            .collect();
+        let m = TetMesh {
+            nodes,
+            tets,
+            material: Vec::new(),
+        };
+        (m, slot, holds)
+    }
+
+    /// θ for materials per slot: (λ, μ) per slot present, the order of `lame_terms`.
+    fn theta(m: &[TissueElastic]) -> Vec<f64> {
+        m.iter()
+            .flat_map(|e| {
+                let (l, mu) = e.lame();
+                [l, mu]
+            })
+            .collect()
+    }
+
+    fn tissue(e: f64, nu: f64) -> TissueElastic {
+        TissueElastic {
+            youngs_kpa: e,
+            poisson: nu,
+        }
+    }
+
+    fn energy(sys: &Affine, theta: &[f64], e: &[f64]) -> f64 {
+        (0..sys.terms())
+            .map(|q| theta[q] * basis::dot(e, &sys.apply(q, e)))
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    #[test]
+    fn the_affine_sum_is_the_assembled_model_and_the_bound_holds() {
+        let (mut m, slot, holds) = block(5);
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        m.material = slot.iter().map(|s| mats[*s]).collect();
+        let terms = crate::tet::lame_terms(&m.nodes, &m.tets, &slot).unwrap();
+        let sys = Affine::new(
+            &terms.into_iter().map(|t| t.lower).collect::<Vec<_>>(),
+            &holds,
+        )
+        .unwrap();
+        // The truth of the affine form equals the model's own solve (an independent path:
+        // per-element materials, `Constrained`).
+        let th = theta(&mats);
+        let k = sys.factor(&th).unwrap();
+        let u = affine::solve_columns(&k, &[sys.rhs(&th)]).remove(0);
+        let direct = Constrained::new(&m.assemble().unwrap(), &holds, m.nodes.len())
+            .unwrap()
+            .solve(&[(&holds, &Loads::none().nodal_vector(m.nodes.len()).unwrap())])
+            .unwrap()
+            .remove(0);
+        let ours = sys.expand(&u, true);
+        let diff = ours
+            .iter()
+            .zip(&direct)
+            .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs()))
+            .fold(0.0, f64::max);
+        assert!(diff < 1e-10, "affine truth vs assembled solve: {diff}");
+        // The greedy on a training box: moduli ratios 3× either way, ν 0.45–0.49.
+        let point = |x: [f64; 4]| {
+            let nu = 0.45 + 0.04 * x[0];
+            theta(&[
+                tissue(30.0 * 3f64.powf(2.0 * x[1] - 1.0), nu),
+                tissue(10.0 * 3f64.powf(2.0 * x[2] - 1.0), nu),
+                tissue(2.0 * 3f64.powf(2.0 * x[3] - 1.0), nu),
+            ])
+        };
+        let halton = |i: usize, b: usize| {
+            let (mut f, mut r, mut i) = (1.0, 0.0, i + 1);
+            while i > 0 {
+                f /= b as f64;
+                r += f * (i % b) as f64;
+                i /= b;
+            }
+            r
+        };
+        let train: Vec<Vec<f64>> = (0..100)
+            .map(|i| point([2, 3, 5, 7].map(|b| halton(i, b))))
+            .collect();
+        let greedy = Greedy {
+            tolerance: 1e-6,
+            max_size: 40,
+        };
+        let (b, _) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
+        let h = &b.history;
+        assert!(
+            h.last().unwrap().max_relative_bound < 1e-3 * h[0].max_relative_bound,
+            "the greedy's bound falls with N: {:?}",
+            h.iter().map(|s| s.max_relative_bound).collect::<Vec<_>>()
+        );
+        // New points (not trained on): true error ≤ bound, and the bound is not vacuous.
+        let mut worst_ratio: f64 = 0.0;
+        for i in 0..12 {
+            let t = point([11, 13, 17, 19].map(|b| halton(i + 7, b)));
+            let truth = affine::solve_columns(&sys.factor(&t).unwrap(), &[sys.rhs(&t)]).remove(0);
+            // A basis of half the size, so the error is well above round-off.
+            let (small, _) = Basis::build(
+                &sys,
+                &th,
+                &train,
+                Greedy {
+                    tolerance: 0.0,
+                    max_size: 4,
+                },
+                &|_| {},
+            )
+            .unwrap();
+            for basis in [&b, &small] {
+                let o = basis.solve(&t).unwrap();
+                let e: Vec<f64> = truth
+                    .iter()
+                    .zip(basis.expand(&o.coefficients))
+                    .map(|(a, b)| a - b)
+                    .collect();
+                let true_error = energy(&sys, &th, &e);
+                assert!(
+                    true_error <= o.energy_bound,
+                    "N = {}: true {true_error:.3e} > bound {:.3e}",
+                    basis.size(),
+                    o.energy_bound
+                );
+                if basis.size() == 4 {
+                    worst_ratio = worst_ratio.max(o.energy_bound / true_error);
+                }
+            }
+        }
+        assert!(worst_ratio < 30.0, "effectivity {worst_ratio}");
+    }
+}
