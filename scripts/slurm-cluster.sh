@@ -24,13 +24,16 @@ stop() {
   for f in watchdog slurmd slurmctld munged; do
     [ -f "$dir/pids/$f" ] || continue
     pid="$(cat "$dir/pids/$f")"
-    kill "$pid" 2>/dev/null || true
+    # The watchdog runs this very function when its process ends (bash execs the last command
+    # of `bash -c`, so this script may have the watchdog's PID): never kill ourselves.
+    [ "$pid" = "$$" ] || [ "$pid" = "$PPID" ] || kill "$pid" 2>/dev/null || true
   done
   # slurmd and slurmctld exit within a second of SIGTERM; slurmstepd of a job still running
   # is the daemon's child and goes with it. Wait by PID, then insist.
   for f in watchdog slurmd slurmctld munged; do
     [ -f "$dir/pids/$f" ] || continue
     pid="$(cat "$dir/pids/$f")"
+    [ "$pid" != "$$" ] && [ "$pid" != "$PPID" ] || continue
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -9 "$pid" 2>/dev/null || true
   done

@@ -3,7 +3,8 @@
 //! Debian's slurm-wlm 22.05, run as root, configuration, munge key and state in a temporary
 //! directory — and workflow/Snakefile runs through snakemake-executor-plugin-slurm with the
 //! repository's profile (workflow/profiles/slurm) on a phantom cohort: four jaws phantoms × two
-//! plans, a broken case, and a fifth phantom whose jobs get 300 MB (`case_resources`).
+//! plans, a broken case, a fifth phantom whose jobs get 300 MB (`case_resources`), and a sixth
+//! (`slow`: 4096 uncertainty samples, minutes of work) whose job gets one minute.
 //!
 //! Checked, in order:
 //! - the Snakefile refuses a facesim binary outside `shared_storage` with one line, before any
@@ -16,8 +17,13 @@
 //! - the fifth phantom's runs go over their memory (cgroup limit: slurmstepd's oom-kill, the
 //!   step OUT_OF_MEMORY) and its rows and failures.csv say so with Slurm's words; the broken
 //!   case is reported, not fatal;
+//! - the slow case's job goes over its one-minute limit: Slurm ends it TIMEOUT and its row and
+//!   failures.csv carry Slurm's state and reason;
 //! - every other row of cohort.csv equals the local (`--cores 2`) run's: same rows, same
-//!   figures to 1e-9, same provenance (facesim version and hash, case hash, parameters hash).
+//!   figures to 1e-9, same provenance (facesim version and hash, case hash, parameters hash);
+//! - job groups (`--groups run=cases --group-components cases=3 --cores 1`, beside the re-run):
+//!   five runs go to Slurm as two jobs (the plugin's log, Slurm's job states and each result's
+//!   SLURM_JOB_ID), which ran them and gave the local run's rows.
 //!
 //! Needs root and the packages scripts/test-setup.sh installs; without them it fails with one
 //! line saying what is missing. The cluster is stopped by PID and its directory removed when the
@@ -41,6 +47,18 @@ fn root() -> PathBuf {
 
 fn snakemake() -> PathBuf {
     root().join("target/slicer-venv/bin/snakemake")
+}
+
+/// The Python environment running Snakemake, where it really is (target/slicer-venv may be a
+/// link to another checkout's): it must be on shared storage too.
+fn venv() -> PathBuf {
+    snakemake()
+        .canonicalize()
+        .unwrap()
+        .parent()
+        .and_then(Path::parent)
+        .unwrap()
+        .to_path_buf()
 }
 
 /// What the test needs, or one line saying what is missing.
@@ -122,6 +140,18 @@ impl Drop for Cluster {
     }
 }
 
+/// A child process killed (by its PID) and reaped if the test ends before it does.
+struct Reaped(Child);
+
+impl Drop for Reaped {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
 fn run_ok(cmd: &mut Command) -> String {
     let o = cmd.output().unwrap();
     let text =
@@ -195,6 +225,70 @@ fn keyed(rows: &[BTreeMap<String, String>]) -> BTreeMap<String, &BTreeMap<String
 /// Columns that differ between two runs of the same figures: timings, memory, the job.
 const VARYING: [&str; 4] = ["seconds", "facesim_seconds", "peak_mem_mb", "slurm_job"];
 
+/// The rows of `rows` whose case is in `cases` (and plan in `plans`) equal the local run's rows
+/// of those: same keys and columns, every figure within 1e-9, everything else (provenance)
+/// identical, save VARYING. Returns how many rows were compared.
+fn same_as_local(
+    local: &[BTreeMap<String, String>],
+    rows: &[BTreeMap<String, String>],
+    cases: &[&str],
+    plans: &[&str],
+) -> usize {
+    let pick = |rows| {
+        keyed(rows)
+            .into_iter()
+            .filter(|(_, r)| {
+                cases.contains(&r["case"].as_str()) && plans.contains(&r["plan"].as_str())
+            })
+            .collect::<BTreeMap<_, _>>()
+    };
+    let (lk, sk) = (pick(local), pick(rows));
+    assert_eq!(
+        lk.keys().collect::<Vec<_>>(),
+        sk.keys().collect::<Vec<_>>(),
+        "rows differ"
+    );
+    for (k, l) in &lk {
+        let s = sk[k];
+        assert_eq!(
+            l.keys().collect::<Vec<_>>(),
+            s.keys().collect::<Vec<_>>(),
+            "columns differ"
+        );
+        for (col, lv) in l.iter() {
+            if VARYING.contains(&col.as_str()) {
+                continue;
+            }
+            let sv = &s[col];
+            match (lv.parse::<f64>(), sv.parse::<f64>()) {
+                (Ok(a), Ok(b)) => assert!((a - b).abs() <= 1e-9, "{k} {col}: {lv} vs {sv}"),
+                _ => assert_eq!(lv, sv, "{k} {col}"),
+            }
+        }
+    }
+    lk.len()
+}
+
+/// The Slurm job ids the executor plugin's log says it submitted, in order, with the line.
+fn submitted_jobs(log: &Path) -> Vec<(String, String)> {
+    std::fs::read_to_string(log)
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("submitted with SLURM jobid"))
+        .map(|l| {
+            let id = l
+                .split("SLURM jobid ")
+                .nth(1)
+                .unwrap()
+                .split_whitespace()
+                .next()
+                .unwrap()
+                .to_string();
+            (id, l.to_string())
+        })
+        .collect()
+}
+
 #[test]
 fn cohort_on_a_real_slurm_with_faults() {
     preconditions();
@@ -229,14 +323,16 @@ fn cohort_on_a_real_slurm_with_faults() {
             "plans: [\"case.toml\", \"case_setback.toml\"]\n\
              variants:\n  c1: {{\"solve.model\": \"equilibrium\"}}\n\
              threads: 1\n\
-             case_resources:\n  case005: {{mem_mb: 300}}\n\
-             shared_storage: [\"{}\"]\n",
-            root().display()
+             case_resources:\n  case005: {{mem_mb: 300}}\n  slow: {{runtime_min: 1}}\n\
+             shared_storage: [\"{}\", \"{}\"]\n",
+            root().display(),
+            venv().display()
         ),
     )
     .unwrap();
-    let runs_total = 5 * 2 + 1;
-    let snake = |out: &Path, extra: &[&str]| {
+    // Slurm's runs: the local run's and the slow case's.
+    let runs_total = 5 * 2 + 1 + 1;
+    let snake = |cases: &Path, out: &Path, extra: &[&str]| {
         let mut c = Command::new(snakemake());
         c.current_dir(&work)
             .arg("-s")
@@ -253,7 +349,7 @@ fn cohort_on_a_real_slurm_with_faults() {
 
     // The local run, the reference.
     let local = work.join("local");
-    run_ok(&mut snake(&local, &["--cores", "2"]));
+    run_ok(&mut snake(&cases, &local, &["--cores", "2"]));
     let t_local = t0.elapsed();
 
     let cluster = Cluster::start();
@@ -275,7 +371,7 @@ fn cohort_on_a_real_slurm_with_faults() {
     let slurm_args: Vec<&str> = slurm_args.iter().map(String::as_str).collect();
     let out = work.join("slurm");
     let slurm_snake = |extra: &[&str]| {
-        let mut c = snake(&out, &slurm_args);
+        let mut c = snake(&cases, &out, &slurm_args);
         c.args(extra).env("SLURM_CONF", &cluster.conf);
         c
     };
@@ -350,19 +446,10 @@ fn cohort_on_a_real_slurm_with_faults() {
     // are done: interrupt.
     let log1_path = work.join("slurm-1.log");
     let case002_jobs = || {
-        std::fs::read_to_string(&log1_path)
-            .unwrap_or_default()
-            .lines()
-            .filter(|l| l.contains("submitted with SLURM jobid") && l.contains("/case002_case_c1/"))
-            .map(|l| {
-                l.split("SLURM jobid ")
-                    .nth(1)
-                    .unwrap()
-                    .split_whitespace()
-                    .next()
-                    .unwrap()
-                    .to_string()
-            })
+        submitted_jobs(&log1_path)
+            .into_iter()
+            .filter(|(_, l)| l.contains("/case002_case_c1/"))
+            .map(|(id, _)| id)
             .collect::<Vec<String>>()
     };
     wait_for(
@@ -400,10 +487,31 @@ fn cohort_on_a_real_slurm_with_faults() {
     );
     assert_eq!(state.trim(), "CANCELLED");
 
+    // The slow case, added now so that it runs once, in the re-run (not in the local run nor in
+    // the interrupted one, where it would only take a core): case001's CT and face with 4096
+    // uncertainty samples (each a re-solve; minutes of work) under a one-minute limit. Slurm's
+    // smallest limit is a minute and slurmctld checks limits every 30 s: its job ends TIMEOUT
+    // 60–90 s after it starts.
+    let slow = cases.join("slow");
+    std::fs::create_dir_all(&slow).unwrap();
+    for f in std::fs::read_dir(cases.join("case001")).unwrap().flatten() {
+        let name = f.file_name().into_string().unwrap();
+        if !name.ends_with(".toml") {
+            std::fs::copy(f.path(), slow.join(&name)).unwrap();
+        }
+    }
+    let plan = std::fs::read_to_string(cases.join("case001/case.toml")).unwrap();
+    assert!(!plan.contains("[uncertainty]"), "{plan}");
+    std::fs::write(
+        slow.join("case.toml"),
+        format!("{plan}\n[uncertainty]\nsamples = 4096\nseed = 1\n"),
+    )
+    .unwrap();
+
     // What was done before the interruption, and when.
     let mut done = BTreeMap::new();
     for case in [
-        "case001", "case002", "case003", "case004", "case005", "broken",
+        "case001", "case002", "case003", "case004", "case005", "broken", "slow",
     ] {
         for plan in ["case", "case_setback"] {
             let r = result(case, plan);
@@ -416,6 +524,38 @@ fn cohort_on_a_real_slurm_with_faults() {
         }
     }
     assert!(done.len() >= 3 && done.len() < runs_total, "{done:?}");
+
+    // Job groups, beside the re-run (the slow case's minute leaves a core free): case001–
+    // case004 and the broken case (config `cases`), plan `case`: 5 runs, with `--groups
+    // run=cases --group-components cases=3 --cores 1` go to Slurm as two jobs of one core each
+    // (`--cores` is a group job's width: its runs one after the other inside it, memory their
+    // peak, time their sum); its own working directory, so the two Snakemakes share no lock.
+    let same = ["case001", "case002", "case003", "case004", "broken"];
+    let t_grouped = Instant::now();
+    let grouped = work.join("slurm-grouped");
+    let grouped_wd = work.join("grouped-wd");
+    std::fs::create_dir_all(&grouped_wd).unwrap();
+    let grouped_log = std::fs::File::create(work.join("slurm-grouped.log")).unwrap();
+    let mut grouped_child = Reaped(
+        snake(&cases, &grouped, &slurm_args)
+            .current_dir(&grouped_wd)
+            .arg("plans=[\"case.toml\"]")
+            .arg(format!("cases=[{}]", same.join(", ")))
+            .args([
+                "--groups",
+                "run=cases",
+                "--group-components",
+                "cases=3",
+                "--cores",
+                "1",
+            ])
+            .env("SLURM_CONF", &cluster.conf)
+            .stdout(grouped_log.try_clone().unwrap())
+            .stderr(grouped_log)
+            .stdin(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
 
     // The re-run: exactly the missing runs, then the table.
     let rerun = run_ok(&mut slurm_snake(&[]));
@@ -465,43 +605,39 @@ fn cohort_on_a_real_slurm_with_faults() {
         b[0]["status"]
     );
     assert!(failures.iter().any(|f| f["case"] == "broken"));
-    assert_eq!(failures.len(), 3, "{failures:?}");
+    // The slow case: over its one-minute limit, Slurm's TIMEOUT and its reason (TimeLimit) in
+    // its row and failures.csv, from the job the retry looked up (the run's .jobs file).
+    let r: Vec<_> = rows.iter().filter(|r| r["case"] == "slow").collect();
+    assert_eq!(r.len(), 1, "{r:?}");
+    let jobs = std::fs::read_to_string(out.join("logs/slow/case/c1.jobs")).unwrap();
+    let first_job = jobs.split_whitespace().next().unwrap().to_string();
+    assert!(
+        r[0]["status"].starts_with(&format!("slurm: job {first_job} TIMEOUT ("))
+            && r[0]["status"].contains("TimeLimit")
+            && r[0]["status"].contains("of 00:01:00"),
+        "{:?} (jobs {jobs:?})",
+        r[0]["status"]
+    );
+    assert!(r[0]["mean_mm"].is_empty());
+    let slurm_state = cluster.out(
+        "squeue",
+        &[
+            "--noheader",
+            "--states=all",
+            "-j",
+            &first_job,
+            "--format=%T %l",
+        ],
+    );
+    assert_eq!(slurm_state.trim(), "TIMEOUT 1:00", "job {first_job}");
+    let f = failures.iter().find(|f| f["case"] == "slow").unwrap();
+    assert_eq!(f["status"], r[0]["status"]);
+    assert_eq!(f["slurm_job"], first_job);
+    assert_eq!(failures.len(), 4, "{failures:?}");
 
     // Everything else equals the local run: same rows, same figures, same provenance.
     let local_rows = read_csv(&local.join("cohort.csv"));
-    let (lk, sk) = (keyed(&local_rows), keyed(&rows));
-    let lk: BTreeMap<_, _> = lk
-        .into_iter()
-        .filter(|(k, _)| !k.starts_with("case005/"))
-        .collect();
-    let sk: BTreeMap<_, _> = sk
-        .into_iter()
-        .filter(|(k, _)| !k.starts_with("case005/"))
-        .collect();
-    assert_eq!(
-        lk.keys().collect::<Vec<_>>(),
-        sk.keys().collect::<Vec<_>>(),
-        "rows differ"
-    );
-    assert!(lk.len() > 8 * 5, "{} rows", lk.len());
-    for (k, l) in &lk {
-        let s = sk[k];
-        assert_eq!(
-            l.keys().collect::<Vec<_>>(),
-            s.keys().collect::<Vec<_>>(),
-            "columns differ"
-        );
-        for (col, lv) in l.iter() {
-            if VARYING.contains(&col.as_str()) {
-                continue;
-            }
-            let sv = &s[col];
-            match (lv.parse::<f64>(), sv.parse::<f64>()) {
-                (Ok(a), Ok(b)) => assert!((a - b).abs() <= 1e-9, "{k} {col}: {lv} vs {sv}"),
-                _ => assert_eq!(lv, sv, "{k} {col}"),
-            }
-        }
-    }
+    assert!(same_as_local(&local_rows, &rows, &same, &["case", "case_setback"]) > 8 * 5);
     // Provenance: every ok row names facesim's version, its build and the case.
     for r in rows.iter().filter(|r| r["status"] == "ok") {
         assert!(r["facesim_version"].starts_with("facesim "), "{r:?}");
@@ -515,9 +651,60 @@ fn cohort_on_a_real_slurm_with_faults() {
         );
         assert!(!r["slurm_job"].is_empty(), "{r:?}");
     }
+
+    // The grouped run (started beside the re-run): two jobs, both COMPLETED, for five runs.
+    let status = grouped_child.0.wait().unwrap();
+    let grouped_log = work.join("slurm-grouped.log");
+    let log = std::fs::read_to_string(&grouped_log).unwrap();
+    assert!(status.success(), "the grouped run failed:\n{log}");
+    let grouped_runs = 4 + 1;
+    assert_eq!(job_count(&log, "run"), Some(grouped_runs), "{log}");
+    let ids: Vec<String> = submitted_jobs(&grouped_log)
+        .into_iter()
+        .map(|(id, _)| id)
+        .collect();
+    assert_eq!(ids.len(), grouped_runs.div_ceil(3), "{log}");
+    for id in &ids {
+        let state = cluster.out(
+            "squeue",
+            &["--noheader", "--states=all", "-j", id, "--format=%T"],
+        );
+        assert_eq!(state.trim(), "COMPLETED", "job {id}");
+    }
+    // Each run ran inside one of those jobs, several to a job.
+    let mut per_job = BTreeMap::<String, usize>::new();
+    for case in same {
+        assert!(
+            !grouped
+                .join("runs")
+                .join(case)
+                .join("case_setback")
+                .exists()
+        );
+        let r = grouped.join("runs").join(case).join("case/c1/result.json");
+        let result: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&r).unwrap()).unwrap();
+        let job = result["slurm_job"].as_str().unwrap_or_default().to_string();
+        assert!(
+            ids.contains(&job),
+            "{}: job {job} not in {ids:?}",
+            r.display()
+        );
+        *per_job.entry(job).or_default() += 1;
+    }
+    assert_eq!(per_job.len(), ids.len(), "{per_job:?}");
+    assert_eq!(per_job.values().sum::<usize>(), grouped_runs);
+    let grouped_rows = read_csv(&grouped.join("cohort.csv"));
+    assert_eq!(
+        same_as_local(&local_rows, &grouped_rows, &same, &["case"]),
+        grouped_rows.len()
+    );
     println!(
-        "slurm test: local run {:.0} s, whole test {:.0} s",
+        "slurm test: local run {:.0} s, grouped Slurm run {:.0} s ({} jobs for {grouped_runs} \
+         runs), whole test {:.0} s",
         t_local.as_secs_f64(),
+        t_grouped.elapsed().as_secs_f64(),
+        ids.len(),
         t0.elapsed().as_secs_f64()
     );
     drop(cluster);
