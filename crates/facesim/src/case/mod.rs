@@ -68,6 +68,15 @@ pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
 }
 
 impl Case {
+    /// Whether the case's model has the certified reduced form (docs/reduced.md): the
+    /// volumetric model with the linear material and the 4-node element, whose stiffness is
+    /// affine in the tissues' Lamé parameters.
+    pub fn reduced_form(&self) -> bool {
+        !self.solve.model.on_springs()
+            && self.tet.material == TetMaterial::Linear
+            && self.tet.element == TetElement::Linear
+    }
+
     /// Parse case text (as if from `path`) over the defaults.
     pub fn parse(text: &str, path: &Path) -> Result<Case> {
         Case::parse_with(text, path, &toml::Table::new())

@@ -12,6 +12,27 @@ use std::path::Path;
 /// for the percentiles (docs/uncertainty.md): beyond it the band needs streaming quantiles.
 pub(crate) const MAX_SAMPLES: usize = 4096;
 
+/// The reduced model's samples are reduced in chunks of vertices (`uncertainty::reduced`), so
+/// memory does not grow with the face × samples; this bounds the time (~0.5 ms a sample).
+pub(crate) const MAX_REDUCED_SAMPLES: usize = 100_000;
+
+/// Below this many samples `method = "auto"` solves each in full: the reduced model's greedy
+/// costs about 12 factorisations per sliding state (docs/reduced.md).
+pub(crate) const AUTO_REDUCED_FROM: usize = 64;
+
+/// How the samples are solved (`[uncertainty] method`).
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// The reduced model when the case's model has one and samples >= 64, else full solves.
+    #[default]
+    Auto,
+    /// The certified reduced model (docs/reduced.md); refused for models without one.
+    Reduced,
+    /// A full solve per distinct sample.
+    Full,
+}
+
 /// A range: exactly one of `uniform = [min, max]` or `log_uniform = [min, max]` (uniform in the
 /// logarithm, for ratios). `min == max` is a point: no spread.
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq)]
@@ -94,6 +115,9 @@ pub struct Uncertainty {
     /// 0: off; N > 0: N samples of the tissue parameters.
     #[serde(default)]
     pub samples: usize,
+    /// Full solves or the certified reduced model.
+    #[serde(default)]
+    pub method: Method,
     #[serde(default = "one")]
     pub seed: u64,
     /// Model tet: the Poisson ratio of every soft tissue.
@@ -121,6 +145,7 @@ impl Default for Uncertainty {
     fn default() -> Uncertainty {
         Uncertainty {
             samples: 0,
+            method: Method::Auto,
             seed: 1,
             poisson: None,
             muscle_fat: None,
@@ -230,14 +255,49 @@ impl Uncertainty {
             .collect()
     }
 
+    /// The probability that a sample's mucosa slides (given, else the default).
+    pub fn sliding_probability(&self) -> f64 {
+        self.sliding.unwrap_or(defaults::SLIDING).probability
+    }
+
+    /// Whether the samples are solved by the reduced model, for a case whose model has
+    /// (`reduced_form`) or lacks one.
+    pub fn reduced(&self, reduced_form: bool) -> bool {
+        match self.method {
+            Method::Reduced => true,
+            Method::Full => false,
+            Method::Auto => reduced_form && self.samples >= AUTO_REDUCED_FROM,
+        }
+    }
+
     /// Refuse impossible ranges and parameters the model does not have; errors name `path`
-    /// (case.toml) and the key.
-    pub fn validate(&self, model: SolveModel, path: &Path) -> Result<()> {
+    /// (case.toml) and the key. `reduced_form`: the case's model has the reduced form.
+    pub fn validate(&self, model: SolveModel, reduced_form: bool, path: &Path) -> Result<()> {
         let bad = |msg: String| Err(Error::input(path, msg));
-        if self.samples > MAX_SAMPLES {
+        if self.method == Method::Reduced && !reduced_form {
+            return bad(
+                "[uncertainty] method = \"reduced\": the reduced model needs [solve] model = \"tet\" with [tet] material = \"linear\" and element = \"linear\" (docs/reduced.md)".into(),
+            );
+        }
+        let cap = if self.reduced(reduced_form) {
+            MAX_REDUCED_SAMPLES
+        } else {
+            MAX_SAMPLES
+        };
+        if self.samples > cap {
             return bad(format!(
-                "[uncertainty] samples = {}: at most {MAX_SAMPLES}",
-                self.samples
+                "[uncertainty] samples = {}: at most {cap} with {} solves{}",
+                self.samples,
+                if self.reduced(reduced_form) {
+                    "reduced"
+                } else {
+                    "full"
+                },
+                if cap == MAX_SAMPLES && reduced_form {
+                    " (method = \"reduced\" allows more)"
+                } else {
+                    ""
+                }
             ));
         }
         for p in Parameter::ALL {
@@ -304,7 +364,9 @@ mod tests {
     #[test]
     fn defaults_are_valid_and_hold_the_nominal_values() {
         let p = Path::new("case.toml");
-        Uncertainty::default().validate(SolveModel::Tet, p).unwrap();
+        Uncertainty::default()
+            .validate(SolveModel::Tet, true, p)
+            .unwrap();
         let inside = |r: Range, v: f64| {
             let [a, b] = r.uniform.or(r.log_uniform).unwrap();
             a <= v && v <= b

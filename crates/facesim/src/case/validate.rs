@@ -124,7 +124,8 @@ impl Case {
                 ));
             }
         }
-        self.uncertainty.validate(self.solve.model, path)?;
+        self.uncertainty
+            .validate(self.solve.model, self.reduced_form(), path)?;
         if let Some(r) = &self.registration {
             if r.scan.len() != r.ct.len() || r.scan.len() < 3 {
                 return bad(format!(

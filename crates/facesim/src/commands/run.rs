@@ -127,7 +127,38 @@ fn finish(
         let resolve = |c: &Case| prediction.resolve(&scene, c);
         Some(
             rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
-                crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs)
+                // The certified reduced model when the case asks for it (docs/reduced.md).
+                let progress = |m: &str| obs.started(m);
+                let outputs =
+                    crate::uncertainty::reduced::landmark_outputs(&analysis, &prediction.skin);
+                let reduced = if case.uncertainty.reduced(case.reduced_form()) {
+                    let train = crate::uncertainty::run::training(case);
+                    prediction
+                        .reduced(&scene, case, &train, &outputs, &progress)
+                        .transpose()?
+                } else {
+                    None
+                };
+                match &reduced {
+                    Some(m) => {
+                        let solve = |c: &Case| m.solve(c);
+                        let r = crate::uncertainty::reduced::Reduced {
+                            faces: m.models.iter().map(|x| &x.face).collect(),
+                            solve: &solve,
+                            face_gains: m.models.iter().map(|x| x.face_gain).collect(),
+                            landmark_gains: m
+                                .models
+                                .iter()
+                                .map(|x| x.output_gains.clone())
+                                .collect(),
+                            reports: m.models.iter().map(|x| x.report()).collect(),
+                        };
+                        crate::uncertainty::reduced::sample_reduced(
+                            &nominal, &r, &analysis, case, obs,
+                        )
+                    }
+                    None => crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs),
+                }
             })?,
         )
     };

@@ -44,6 +44,12 @@ pub struct ModelReport {
     pub tet: Option<TetReport>,
 }
 
+/// The greedy's stopping rule (docs/reduced.md "Measured"): a relative energy bound of 5e-3 over
+/// the training box, or 12 vectors (the face's error is then ~0.01 mm at its worst vertex on the
+/// first sample).
+const REDUCED_TOLERANCE: f64 = 5e-3;
+const REDUCED_MAX_SIZE: usize = 12;
+
 /// The predicted face and the model that predicted it.
 pub type Prediction = Predicted<Solved>;
 
@@ -74,6 +80,68 @@ impl Prediction {
             Solved::Tet(Some(v)) => v.resolve(scene, case, &self.skin),
             Solved::Tet(None) => Ok(self.face_post.vertices.clone()),
         }
+    }
+
+    /// The certified reduced models of this prediction for `case`'s tissue-parameter ranges
+    /// (docs/reduced.md): one per sliding state `[uncertainty]` draws (both when it samples
+    /// sliding and the mesh has nodes to slide), trained on `train` draws of its box, with a
+    /// bound for each of `outputs` (weights on face vertices: the landmarks). None when
+    /// the model has no reduced form (the C1 models, the neo-Hookean material, the 10-node
+    /// element) or nothing moves.
+    pub fn reduced(
+        &self,
+        scene: &Scene,
+        case: &Case,
+        train: &[Case],
+        outputs: &[Vec<(usize, f64)>],
+        progress: &dyn Fn(&str),
+    ) -> Option<Result<reduced::ReducedModels>> {
+        let Solved::Tet(Some(v)) = &self.solved else {
+            return None;
+        };
+        if !case.reduced_form() {
+            return None;
+        }
+        // The sliding states the samples can draw (one when sliding holds no node).
+        let states: Vec<bool> = if self.sliding_matters() {
+            let p = case.uncertainty.sliding_probability();
+            [true, false]
+                .into_iter()
+                .filter(|s| if *s { p > 0.0 } else { p < 1.0 })
+                .collect()
+        } else {
+            vec![case.tet.sliding]
+        };
+        let greedy = crate::reduced::Greedy {
+            tolerance: REDUCED_TOLERANCE,
+            max_size: REDUCED_MAX_SIZE,
+        };
+        let build = || -> Result<reduced::ReducedModels> {
+            let mut models = Vec::new();
+            for s in states {
+                let mut c = case.clone();
+                c.tet.sliding = s;
+                let t: Vec<Case> = train
+                    .iter()
+                    .map(|x| {
+                        let mut x = x.clone();
+                        x.tet.sliding = s;
+                        x
+                    })
+                    .collect();
+                let training = reduced::Training {
+                    cases: &t,
+                    greedy,
+                    outputs,
+                };
+                models.push(v.reduced(scene, &c, &self.skin, &training, progress)?);
+            }
+            Ok(reduced::ReducedModels {
+                models,
+                sliding_matters: self.sliding_matters(),
+            })
+        };
+        Some(build())
     }
 
     /// The face solved again at twice the element size, for the discretisation-error estimate

@@ -5,8 +5,7 @@
 
 use crate::case::{Case, Tet};
 use crate::error::{Error, Result};
-use crate::reduced::{Affine, Basis, GreedyStep};
-use serde::{Deserialize, Serialize};
+use crate::reduced::{Affine, Basis, LinearFace, ReducedReport};
 
 /// The reduced model of one sliding state (sliding changes the holds, not a coefficient).
 pub struct ReducedTet {
@@ -15,13 +14,15 @@ pub struct ReducedTet {
     pub(super) basis: Basis,
     /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
     pub(super) terms: Vec<(usize, bool)>,
-    /// The face displacement of the held values with every free unknown zero, and of each
-    /// basis vector (held values zero): the face is linear in the reduced coefficients.
-    pub(super) face_lift: Vec<[f64; 3]>,
+    /// The face displacement of the held values with every free unknown zero (the lift) and
+    /// of each basis vector (held values zero): the face is linear in the reduced coefficients.
+    pub face: LinearFace,
     pub(super) face_map: FaceMap,
-    pub(super) face_columns: Vec<Vec<[f64; 3]>>,
     /// σ with ‖face error‖₂ ≤ σ ‖e‖_X (`reduced::norm`).
-    pub(super) face_gain: f64,
+    pub face_gain: f64,
+    /// Per output of [`Training::outputs`]: ρ with |output error|₂ ≤ ρ ‖e‖_X (ρ² the largest
+    /// eigenvalue of the output's 3×3 block of L X⁻¹ Lᵀ, three solves with X's factor).
+    pub output_gains: Vec<f64>,
     pub(super) offline_seconds: f64,
 }
 
@@ -37,21 +38,6 @@ pub struct ReducedFace {
     pub relative_energy_bound: f64,
 }
 
-/// report.json `uncertainty.reduced`: how the reduced model was built.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ReducedReport {
-    pub sliding: bool,
-    pub basis_size: usize,
-    /// Factorisations of the full model (one per snapshot and the reference) and cheaper
-    /// solves with the reference's factor.
-    pub full_factorisations: usize,
-    pub reference_solves: usize,
-    pub offline_seconds: f64,
-    /// ‖face error‖₂ ≤ face_gain · ‖e‖_X.
-    pub face_gain: f64,
-    pub greedy: Vec<GreedyStep>,
-}
-
 impl ReducedTet {
     /// The parameter vector θ of `tet`'s materials, in the terms' order.
     pub fn theta(&self, tet: &Tet) -> Vec<f64> {
@@ -65,26 +51,27 @@ impl ReducedTet {
             .collect()
     }
 
-    /// The face displacement with `case`'s tissue parameters (its `[tet] sliding` must be this
-    /// model's) and the certified bound.
-    pub fn face(&self, case: &Case) -> Result<ReducedFace> {
+    /// The reduced coefficients with `case`'s tissue parameters (its `[tet] sliding` must be
+    /// this model's) and the certified bound Δ on the energy norm of the error: the face's
+    /// error is within `face_gain` Δ (mm, the Euclidean norm over all face vertices, so every
+    /// vertex too), an output's within its `output_gains` Δ.
+    pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, f64)> {
         if case.tet.sliding != self.sliding {
             return Err(Error::config(
                 "reduced model: asked for the other sliding state than it was built for",
             ));
         }
         let o = self.basis.solve(&self.theta(&case.tet))?;
-        let mut d = self.face_lift.clone();
-        for (col, c) in self.face_columns.iter().zip(o.coefficients.iter()) {
-            for (a, b) in d.iter_mut().zip(col) {
-                for k in 0..3 {
-                    a[k] += c * b[k];
-                }
-            }
-        }
+        Ok((o.coefficients.iter().copied().collect(), o.energy_bound))
+    }
+
+    /// The face displacement with `case`'s tissue parameters and its certified bound.
+    pub fn face(&self, case: &Case) -> Result<ReducedFace> {
+        let (c, energy) = self.coefficients(case)?;
+        let o = self.basis.solve(&self.theta(&case.tet))?;
         Ok(ReducedFace {
-            displacement: d,
-            bound_mm: self.face_gain * o.energy_bound,
+            displacement: self.face.all(&c),
+            bound_mm: self.face_gain * energy,
             relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
         })
     }
@@ -154,5 +141,46 @@ impl FaceMap {
             }
         }
         out
+    }
+}
+
+/// What the greedy trains on and what the bounds are wanted for.
+pub struct Training<'a> {
+    /// Cases differing from the run's in tissue parameters only.
+    pub cases: &'a [Case],
+    pub greedy: crate::reduced::Greedy,
+    /// Outputs with their own bound: weights on face vertices (a landmark's triangle), whose
+    /// weighted displacement is the output.
+    pub outputs: &'a [Vec<(usize, f64)>],
+}
+
+/// The reduced models a sampling needs: one per sliding state it draws.
+pub struct ReducedModels {
+    pub models: Vec<ReducedTet>,
+    /// Whether the mesh has nodes to slide (else one model serves both states).
+    pub sliding_matters: bool,
+}
+
+impl ReducedModels {
+    /// The model for `case`'s sliding state (the only one when sliding holds nothing) and its
+    /// coefficients and bound.
+    pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, f64)> {
+        let i = match self
+            .models
+            .iter()
+            .position(|m| m.sliding == case.tet.sliding)
+        {
+            Some(i) => i,
+            None if !self.sliding_matters && !self.models.is_empty() => 0,
+            None => {
+                return Err(Error::config(
+                    "reduced model: no model for this sliding state",
+                ));
+            }
+        };
+        let mut c = case.clone();
+        c.tet.sliding = self.models[i].sliding;
+        let (coefficients, bound) = self.models[i].coefficients(&c)?;
+        Ok((i, coefficients, bound))
     }
 }

@@ -130,11 +130,11 @@ impl Volumetric {
         scene: &Scene,
         case: &Case,
         skin: &Mesh,
-        train: &[Case],
-        greedy: crate::reduced::Greedy,
+        training: &super::reduced::Training,
         progress: &dyn Fn(&str),
     ) -> Result<super::reduced::ReducedTet> {
         use super::reduced::{FaceMap, ReducedTet};
+        let (train, greedy) = (training.cases, training.greedy);
         use crate::reduced::{Affine, Basis, affine::solve_columns, norm::largest_eigenvalue};
         let start = std::time::Instant::now();
         let r = &self.reuse;
@@ -184,16 +184,20 @@ impl Volumetric {
             still: scene_still(&r.face_rigid, r.roi, &skin.vertices),
         };
         let zero = vec![0.0; affine.unknowns()];
-        let face_lift = face_map.carry(&affine.expand(&zero, true));
-        let face_columns = basis
-            .vectors
-            .iter()
-            .map(|v| face_map.carry(&affine.expand(v, false)))
-            .collect();
+        let face = crate::reduced::LinearFace {
+            lift: face_map.carry(&affine.expand(&zero, true)),
+            columns: basis
+                .vectors
+                .iter()
+                .map(|v| face_map.carry(&affine.expand(v, false)))
+                .collect(),
+        };
         progress("reduced model: the face's gain");
         let nodes = self.mesh.nodes.len();
         let nv = face_map.cell.len();
+        let lanczos = std::cell::Cell::new(0usize);
         let gain2 = largest_eigenvalue(3 * nv, 40, &|y: &[f64]| {
+            lanczos.set(lanczos.get() + 1);
             let y3: Vec<[f64; 3]> = y.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
             let b = affine.restrict(&face_map.carry_transpose(&y3, nodes));
             let z = solve_columns(&x, &[b]).remove(0);
@@ -203,15 +207,38 @@ impl Volumetric {
                 .flatten()
                 .collect()
         });
+        // Each output's gain: its 3×3 block of L X⁻¹ Lᵀ.
+        let output_gains = training
+            .outputs
+            .iter()
+            .map(|w| {
+                let rhs: Vec<Vec<f64>> = (0..3)
+                    .map(|k| {
+                        let mut y = vec![[0.0; 3]; nv];
+                        for (v, a) in w {
+                            y[*v][k] += a;
+                        }
+                        affine.restrict(&face_map.carry_transpose(&y, nodes))
+                    })
+                    .collect();
+                let z = solve_columns(&x, &rhs);
+                let g =
+                    nalgebra::Matrix3::from_fn(|i, j| crate::reduced::basis::dot(&rhs[i], &z[j]));
+                let g = (g + g.transpose()) * 0.5;
+                g.symmetric_eigenvalues().max().max(0.0).sqrt()
+            })
+            .collect();
+        let mut basis = basis;
+        basis.riesz_solves += lanczos.get() + 3 * training.outputs.len();
         Ok(ReducedTet {
             sliding,
             affine,
             basis,
             terms,
-            face_lift,
+            face,
             face_map,
-            face_columns,
             face_gain: gain2.max(0.0).sqrt(),
+            output_gains,
             offline_seconds: start.elapsed().as_secs_f64(),
         })
     }

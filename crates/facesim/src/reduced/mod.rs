@@ -14,6 +14,49 @@ pub mod norm;
 pub use affine::Affine;
 pub use basis::{Basis, Greedy, GreedyStep, Online};
 
+use serde::{Deserialize, Serialize};
+
+/// A face displacement linear in reduced coefficients: lift + Σ_n c_n columns[n] (mm per
+/// vertex): what the sampling needs of a reduced model.
+pub struct LinearFace {
+    pub lift: Vec<[f64; 3]>,
+    pub columns: Vec<Vec<[f64; 3]>>,
+}
+
+impl LinearFace {
+    /// The displacement of vertex `v` for coefficients `c`.
+    pub fn at(&self, v: usize, c: &[f64]) -> [f64; 3] {
+        let mut d = self.lift[v];
+        for (col, w) in self.columns.iter().zip(c) {
+            for k in 0..3 {
+                d[k] += w * col[v][k];
+            }
+        }
+        d
+    }
+
+    /// Every vertex's displacement.
+    pub fn all(&self, c: &[f64]) -> Vec<[f64; 3]> {
+        (0..self.lift.len()).map(|v| self.at(v, c)).collect()
+    }
+}
+
+/// report.json `uncertainty.reduced[]`: how one reduced model was built (docs/reduced.md).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ReducedReport {
+    /// The sliding state it was built for.
+    pub sliding: bool,
+    pub basis_size: usize,
+    /// Factorisations of the full model (the reference and one per snapshot after the first),
+    /// and the cheaper solves with the reference's factor (Riesz representers, Lanczos).
+    pub full_factorisations: usize,
+    pub reference_solves: usize,
+    pub offline_seconds: f64,
+    /// σ: ‖face error‖₂ ≤ σ ‖e‖_X.
+    pub face_gain: f64,
+    pub greedy: Vec<GreedyStep>,
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -8,9 +8,12 @@
 //!   (`crate::case::uncertainty`);
 //! - `sample`: the scrambled Halton sequence;
 //! - `band`: mean and percentiles, face_band.ply;
-//! - `run`: drawing, solving and reducing the samples.
+//! - `run`: drawing, solving and reducing the samples;
+//! - `reduced`: the same with the certified reduced model (docs/reduced.md), the band reduced in
+//!   chunks of vertices.
 
 pub mod band;
+pub mod reduced;
 pub mod run;
 pub mod sample;
 

@@ -92,9 +92,21 @@ pub fn draws(case: &Case) -> Vec<Draw> {
         .collect()
 }
 
+/// Points the reduced model's greedy trains on: 128 draws of the case's `[uncertainty]` box
+/// from another seed than the samples' (so the samples test it; docs/reduced.md).
+pub fn training(case: &Case) -> Vec<Case> {
+    let mut c = case.clone();
+    c.uncertainty.samples = TRAINING_POINTS;
+    c.uncertainty.seed = case.uncertainty.seed.wrapping_add(TRAINING_SEED_OFFSET);
+    draws(&c).iter().map(|d| d.apply(case)).collect()
+}
+
+const TRAINING_POINTS: usize = 128;
+const TRAINING_SEED_OFFSET: u64 = 1_000_003;
+
 /// What decides a solve's answer among the sampled parameters, as bits: equal keys, equal
 /// displacement. Sliding is left out when the mesh has no mucosa node (it then holds nothing).
-fn solve_key(c: &Case, sliding_matters: bool) -> Vec<u64> {
+pub(super) fn solve_key(c: &Case, sliding_matters: bool) -> Vec<u64> {
     let t = &c.tet;
     let mut k: Vec<u64> = [t.skin, t.muscle, t.fat_dark, t.fat_bright]
         .iter()
@@ -112,6 +124,9 @@ pub struct UncertaintyReport {
     pub samples: usize,
     pub seed: u64,
     pub model: String,
+    /// "full" (a solve per distinct sample) or "reduced" (the certified reduced model).
+    #[serde(default = "full")]
+    pub method: String,
     pub sequence: String,
     /// Parameter → its distribution as used (given in case.toml or the default).
     pub parameters: Ordered<Distribution>,
@@ -129,6 +144,21 @@ pub struct UncertaintyReport {
     pub landmarks: Ordered<Band>,
     /// Region → band of the region's mean displacement magnitude (mm); only regions present.
     pub regions: Ordered<Band>,
+    /// The reduced method: the largest certified bound (mm) on any sample's face error (the
+    /// Euclidean norm over the face's vertices, so every vertex's too).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub largest_bound_mm: Option<f64>,
+    /// The reduced method: per soft landmark, the largest certified bound (mm) on its
+    /// displacement's error over the samples.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub landmark_bounds_mm: Option<Ordered<f64>>,
+    /// The reduced method: how each reduced model was built (one per sliding state).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reduced: Option<Vec<crate::reduced::ReducedReport>>,
+}
+
+fn full() -> String {
+    "full".into()
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -148,9 +178,37 @@ pub struct Sampled {
 /// A landmark on the samples' faces: a soft one as the same material point as report.json
 /// `landmarks` carries it (its anchor on face_pre and its position before), a bony one moves
 /// with its segment whatever the tissue (its move in the run).
-enum Tracker {
+pub(super) enum Tracker {
     Soft(SurfaceAnchor, [f64; 3]),
     Fixed(f64),
+}
+
+/// The run's landmarks (analysis of face_pre) as the samples measure them.
+pub(super) fn trackers(analysis: &Analysis) -> Vec<(String, Tracker)> {
+    analysis
+        .carried
+        .iter()
+        .zip(&analysis.anchors)
+        .filter_map(|(c, anchor)| {
+            let pre = c.pre?;
+            let t = match (c.kind, anchor) {
+                (Kind::Soft, Some(a)) => Tracker::Soft(*a, pre),
+                _ => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
+            };
+            Some((c.label.clone(), t))
+        })
+        .collect()
+}
+
+/// The run's facial regions on face_pre (None without a head frame).
+pub(super) fn regions(analysis: &Analysis, skin: &Mesh) -> Option<face_regions::Regions> {
+    analysis.frame.as_ref().map(|f| {
+        face_regions::regions(
+            &skin.vertices,
+            f,
+            &crate::landmarks::positions(&analysis.landmarks),
+        )
+    })
 }
 
 /// The run's prediction as the samples see it.
@@ -184,26 +242,8 @@ pub fn sample(
     let sliding_matters = run.sliding_matters;
     let nominal_key = solve_key(case, sliding_matters);
     // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
-    let trackers: Vec<(String, Tracker)> = analysis
-        .carried
-        .iter()
-        .zip(&analysis.anchors)
-        .filter_map(|(c, anchor)| {
-            let pre = c.pre?;
-            let t = match (c.kind, anchor) {
-                (Kind::Soft, Some(a)) => Tracker::Soft(*a, pre),
-                _ => Tracker::Fixed(c.change_mm.unwrap_or(0.0)),
-            };
-            Some((c.label.clone(), t))
-        })
-        .collect();
-    let regions = analysis.frame.as_ref().map(|f| {
-        face_regions::regions(
-            &skin.vertices,
-            f,
-            &crate::landmarks::positions(&analysis.landmarks),
-        )
-    });
+    let trackers = trackers(analysis);
+    let regions = regions(analysis, skin);
     let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
     let mut solve_s = 0.0;
     let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
@@ -254,12 +294,43 @@ pub fn sample(
         magnitudes.push(mag);
     }
     let bands = band::per_vertex(&magnitudes, skin.vertices.len());
-    let widths: Vec<f64> = bands.iter().map(Band::width).collect();
-    let seconds = start.elapsed().as_secs_f64();
-    let report = UncertaintyReport {
+    let report = assemble(Tallies {
+        case,
+        draws,
+        bands: &bands,
+        trackers: &trackers,
+        at_landmarks: &at_landmarks,
+        in_regions: &in_regions,
+        solves: solved.len(),
+        seconds: start.elapsed().as_secs_f64(),
+        solve_s,
+    });
+    Ok(Sampled { bands, report })
+}
+
+/// What a sampling measured, for the report.
+pub(super) struct Tallies<'a> {
+    pub case: &'a Case,
+    pub draws: Vec<Draw>,
+    pub bands: &'a [Band],
+    pub trackers: &'a [(String, Tracker)],
+    pub at_landmarks: &'a [Vec<f64>],
+    pub in_regions: &'a [Vec<f64>],
+    /// Model solves (full or reduced) and their time.
+    pub solves: usize,
+    pub seconds: f64,
+    pub solve_s: f64,
+}
+
+/// report.json `uncertainty` of a sampling (the full path's fields; the reduced path adds its).
+pub(super) fn assemble(t: Tallies) -> UncertaintyReport {
+    let (case, n) = (t.case, t.case.uncertainty.samples);
+    let widths: Vec<f64> = t.bands.iter().map(Band::width).collect();
+    UncertaintyReport {
         samples: n,
         seed: case.uncertainty.seed,
         model: case.solve.model.name().into(),
+        method: "full".into(),
         sequence: "scrambled Halton (bases 2, 3, 5, 7, 11; random digit permutations)".into(),
         parameters: Ordered(
             case.uncertainty
@@ -268,33 +339,35 @@ pub fn sample(
                 .map(|(p, d)| (p.key().to_string(), d))
                 .collect(),
         ),
-        solves: solved.len(),
-        reused: n - solved.len(),
-        seconds,
-        seconds_per_sample: seconds / n as f64,
-        seconds_per_solve: (!solved.is_empty()).then(|| solve_s / solved.len() as f64),
+        solves: t.solves,
+        reused: n - t.solves,
+        seconds: t.seconds,
+        seconds_per_sample: t.seconds / n as f64,
+        seconds_per_solve: (t.solves > 0).then(|| t.solve_s / t.solves as f64),
         face: FaceSummary {
-            vertices: bands.len(),
-            max_p95: bands.iter().map(|b| b.p95).fold(0.0, f64::max),
+            vertices: t.bands.len(),
+            max_p95: t.bands.iter().map(|b| b.p95).fold(0.0, f64::max),
             mean_width: band::mean(&widths),
             max_width: widths.iter().cloned().fold(0.0, f64::max),
         },
         landmarks: Ordered(
-            trackers
+            t.trackers
                 .iter()
-                .zip(&at_landmarks)
+                .zip(t.at_landmarks)
                 .map(|((l, _), v)| (l.clone(), Band::of(v)))
                 .collect(),
         ),
         regions: Ordered(
             face_regions::NAMES
                 .iter()
-                .zip(&in_regions)
+                .zip(t.in_regions)
                 .filter(|(_, v)| !v.is_empty())
                 .map(|(name, v)| (name.to_string(), Band::of(v)))
                 .collect(),
         ),
-        draws,
-    };
-    Ok(Sampled { bands, report })
+        draws: t.draws,
+        largest_bound_mm: None,
+        landmark_bounds_mm: None,
+        reduced: None,
+    }
 }

@@ -1,0 +1,199 @@
+//! Sampling with the certified reduced model (docs/reduced.md, docs/uncertainty.md): each
+//! sample is a reduced solve (coefficients and a bound, microseconds), the face linear in the
+//! coefficients; the band per vertex is reduced in chunks of vertices, so memory grows with the
+//! samples × a chunk, not × the face, and 10 000 samples of a real head's face fit.
+
+use super::band::Band;
+use super::run::{
+    Draw, Nominal, Sampled, Tallies, Tracker, assemble, draws, regions, solve_key, trackers,
+};
+use crate::case::Case;
+use crate::error::Result;
+use crate::landmarks::Analysis;
+use crate::observe::Observer;
+use crate::reduced::{LinearFace, ReducedReport};
+use crate::vec3::{norm, sub};
+use rayon::prelude::*;
+
+/// A case's reduced answer: which linear face, its coefficients, the energy-norm bound Δ.
+pub type SolveReduced<'a> = dyn Fn(&Case) -> Result<(usize, Vec<f64>, f64)> + Sync + 'a;
+
+/// A reduced model for the sampling: the linear faces (one per sliding state), the solve that
+/// picks one and gives its coefficients and energy-norm bound Δ for a case, and per face the
+/// gains from Δ to mm: the whole face's and each soft landmark's ([`landmark_outputs`] order).
+pub struct Reduced<'a> {
+    pub faces: Vec<&'a LinearFace>,
+    pub solve: &'a SolveReduced<'a>,
+    pub face_gains: Vec<f64>,
+    pub landmark_gains: Vec<Vec<f64>>,
+    pub reports: Vec<ReducedReport>,
+}
+
+/// The soft landmarks the samples measure, as weights on face vertices (their anchors'
+/// triangles), in the order of the run's landmarks: the outputs the reduced model bounds.
+pub fn landmark_outputs(analysis: &Analysis, skin: &crate::mesh::Mesh) -> Vec<Vec<(usize, f64)>> {
+    trackers(analysis)
+        .iter()
+        .filter_map(|(_, t)| match t {
+            Tracker::Soft(a, _) => Some(
+                skin.triangles[a.triangle as usize]
+                    .iter()
+                    .zip(a.weights)
+                    .map(|(v, w)| (*v as usize, w))
+                    .collect(),
+            ),
+            Tracker::Fixed(_) => None,
+        })
+        .collect()
+}
+
+/// One sample's face: the run's own (the nominal parameters) or a reduced answer.
+enum Face {
+    Nominal,
+    Reduced(usize, Vec<f64>),
+}
+
+/// Vertices per chunk of the band's reduction.
+const CHUNK: usize = 512;
+
+/// As `run::sample`, each sample solved by the reduced model (samples at the nominal
+/// parameters are the run's own face, bit for bit).
+pub fn sample_reduced(
+    run: &Nominal,
+    reduced: &Reduced,
+    analysis: &Analysis,
+    case: &Case,
+    obs: &dyn Observer,
+) -> Result<Sampled> {
+    let n = case.uncertainty.samples;
+    let start = std::time::Instant::now();
+    let skin = run.skin;
+    let draws: Vec<Draw> = draws(case);
+    let nominal = solve_key(case, run.sliding_matters);
+    obs.started(&format!("uncertainty: {n} reduced solves"));
+    let t = std::time::Instant::now();
+    // Per sample: its face and Δ (0 for the nominal face, which is the run's own).
+    let solved: Vec<Result<(Face, f64)>> = draws
+        .par_iter()
+        .map(|d| {
+            let c = d.apply(case);
+            if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
+                return Ok((Face::Nominal, 0.0));
+            }
+            let (m, coefficients, bound) = (reduced.solve)(&c)?;
+            Ok((Face::Reduced(m, coefficients), bound))
+        })
+        .collect();
+    let solve_s = t.elapsed().as_secs_f64();
+    let solved: Vec<(Face, f64)> = solved.into_iter().collect::<Result<_>>()?;
+    let bound = |s: usize, gains: &dyn Fn(usize) -> f64| match &solved[s].0 {
+        Face::Nominal => 0.0,
+        Face::Reduced(m, _) => gains(*m) * solved[s].1,
+    };
+    let largest = (0..n)
+        .map(|s| bound(s, &|m| reduced.face_gains[m]))
+        .fold(0.0, f64::max);
+    let solves = solved
+        .iter()
+        .filter(|s| matches!(s.0, Face::Reduced(..)))
+        .count();
+    let displacement = |s: usize, v: usize| -> [f64; 3] {
+        match &solved[s].0 {
+            Face::Nominal => sub(run.face_post[v], skin.vertices[v]),
+            Face::Reduced(m, c) => reduced.faces[*m].at(v, c),
+        }
+    };
+    let trackers = trackers(analysis);
+    let at_landmarks: Vec<Vec<f64>> = trackers
+        .iter()
+        .map(|(_, t)| {
+            (0..n)
+                .into_par_iter()
+                .map(|s| match t {
+                    Tracker::Soft(a, pre) => match &solved[s].0 {
+                        Face::Nominal => norm(sub(a.place(&skin.triangles, run.face_post), *pre)),
+                        Face::Reduced(..) => {
+                            // The anchor's triangle on this sample's face, placed as on any face.
+                            let tri = skin.triangles[a.triangle as usize];
+                            let corners = tri.map(|v| {
+                                let (p, d) =
+                                    (skin.vertices[v as usize], displacement(s, v as usize));
+                                [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+                            });
+                            let local = crate::landmarks::SurfaceAnchor { triangle: 0, ..*a };
+                            norm(sub(local.place(&[[0, 1, 2]], &corners), *pre))
+                        }
+                    },
+                    Tracker::Fixed(m) => *m,
+                })
+                .collect()
+        })
+        .collect();
+    obs.started("uncertainty: the band per vertex");
+    let regions = regions(analysis, skin);
+    let members: Vec<&[bool]> = regions
+        .as_ref()
+        .map(|r| r.members.iter().flatten().map(Vec::as_slice).collect())
+        .unwrap_or_default();
+    let mut sums = vec![vec![0.0; n]; members.len()];
+    let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
+    for lo in (0..skin.vertices.len()).step_by(CHUNK) {
+        let hi = (lo + CHUNK).min(skin.vertices.len());
+        let mags: Vec<Vec<f64>> = (lo..hi)
+            .into_par_iter()
+            .map(|v| (0..n).map(|s| norm(displacement(s, v))).collect())
+            .collect();
+        bands.par_extend(mags.par_iter().map(|m| Band::of(m)));
+        // Region sums in vertex order, as the full path's (the nominal gives its figures).
+        for (r, sum) in members.iter().zip(&mut sums) {
+            sum.par_iter_mut().enumerate().for_each(|(s, acc)| {
+                for v in lo..hi {
+                    if r[v] {
+                        *acc += mags[v - lo][s];
+                    }
+                }
+            });
+        }
+    }
+    let mut in_regions: Vec<Vec<f64>> =
+        vec![Vec::new(); crate::landmarks::face_regions::NAMES.len()];
+    if let Some(r) = &regions {
+        let mut k = 0;
+        for (i, m) in r.members.iter().enumerate() {
+            if let Some(m) = m {
+                let count = m.iter().filter(|b| **b).count() as f64;
+                in_regions[i] = sums[k].iter().map(|x| x / count).collect();
+                k += 1;
+            }
+        }
+    }
+    let mut report = assemble(Tallies {
+        case,
+        draws,
+        bands: &bands,
+        trackers: &trackers,
+        at_landmarks: &at_landmarks,
+        in_regions: &in_regions,
+        solves,
+        seconds: start.elapsed().as_secs_f64(),
+        solve_s,
+    });
+    report.method = "reduced".into();
+    report.largest_bound_mm = Some(largest);
+    // Per soft landmark, the largest bound over the samples.
+    let mut soft = 0;
+    let mut per_landmark = Vec::new();
+    for (label, t) in &trackers {
+        if let Tracker::Soft(..) = t {
+            let k = soft;
+            soft += 1;
+            let b = (0..n)
+                .map(|s| bound(s, &|m| reduced.landmark_gains[m][k]))
+                .fold(0.0, f64::max);
+            per_landmark.push((label.clone(), b));
+        }
+    }
+    report.landmark_bounds_mm = Some(crate::landmarks::Ordered(per_landmark));
+    report.reduced = Some(reduced.reports.clone());
+    Ok(Sampled { bands, report })
+}
