@@ -223,6 +223,30 @@ fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
         checked += 1;
     }
     assert!(checked >= 3, "{lb}");
+    // Issue 28 item 4: Sobol indices per landmark and region, each parameter's first-order
+    // index at most its total, the first-order ones summing to at most 1 (estimator noise
+    // allowed: 0.05), every landmark that moves has them.
+    let sens = &ub["sensitivity"];
+    assert_eq!(sens["evaluations"], 1024 * 6, "{sens}");
+    for group in ["landmarks", "regions"] {
+        let g = sens[group].as_object().unwrap();
+        assert!(!g.is_empty(), "{group}: {sens}");
+        for (name, params) in g {
+            let p = params.as_object().unwrap();
+            assert_eq!(p.len(), 4, "{name}: ν, muscle/fat, skin/fat, sliding");
+            let mut sum = 0.0;
+            for (k, i) in p {
+                let (s, t) = (i["first"].as_f64().unwrap(), i["total"].as_f64().unwrap());
+                assert!(s <= t + 0.05 && t >= 0.0 && t <= 1.05, "{name} {k}: {i}");
+                sum += s;
+            }
+            assert!(sum <= 1.05, "{name}: first-order sum {sum}");
+        }
+    }
+    for label in ["Sn", "Ls", "Li", "Pog'"] {
+        assert!(sens["landmarks"][label].is_object(), "{label}: {sens}");
+    }
+    eprintln!("Sobol: {}", sens["landmarks"]["Li"]);
     eprintln!(
         "reduced vs full: largest band difference {largest:.2e} mm, face bound {bound:.2e} mm, landmark bounds {lb}"
     );

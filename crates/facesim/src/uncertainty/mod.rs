@@ -9,6 +9,7 @@
 //! - `sample`: the scrambled Halton sequence;
 //! - `band`: mean and percentiles, face_band.ply;
 //! - `run`: drawing, solving and reducing the samples;
+//! - `sensitivity`: Sobol indices (Saltelli / Jansen estimators) on the reduced model;
 //! - `reduced`: the same with the certified reduced model (docs/reduced.md), the band reduced in
 //!   chunks of vertices.
 
@@ -16,6 +17,7 @@ pub mod band;
 pub mod reduced;
 pub mod run;
 pub mod sample;
+pub mod sensitivity;
 
 pub use band::Band;
 pub use run::{Nominal, Sampled, UncertaintyReport, sample};

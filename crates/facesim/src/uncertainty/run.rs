@@ -70,26 +70,29 @@ pub fn draws(case: &Case) -> Vec<Draw> {
     let params = u.parameters(case.solve.model);
     let seq = ScrambledHalton::new(Parameter::ALL.len(), u.seed);
     (0..u.samples as u64)
-        .map(|i| {
-            let mut d = Draw::default();
-            for (p, dist) in &params {
-                let x = seq.at(i, p.dimension());
-                match (p, dist) {
-                    (Parameter::Sliding, Distribution::Chance(c)) => {
-                        d.sliding = Some(x < c.probability)
-                    }
-                    (Parameter::Poisson, Distribution::Range(r)) => d.poisson = Some(r.at(x)),
-                    (Parameter::MuscleFat, Distribution::Range(r)) => d.muscle_fat = Some(r.at(x)),
-                    (Parameter::SkinFat, Distribution::Range(r)) => d.skin_fat = Some(r.at(x)),
-                    (Parameter::SpringScale, Distribution::Range(r)) => {
-                        d.spring_scale = Some(r.at(x))
-                    }
-                    _ => {}
-                }
-            }
-            d
-        })
+        .map(|i| draw_at(&params, &|_, p| seq.at(i, p.dimension())))
         .collect()
+}
+
+/// The draw whose parameter k of `params` (a parameter and its distribution) sits at
+/// `x(k, parameter)` ∈ [0, 1) of its distribution.
+pub(super) fn draw_at(
+    params: &[(Parameter, Distribution)],
+    x: &dyn Fn(usize, Parameter) -> f64,
+) -> Draw {
+    let mut d = Draw::default();
+    for (k, (p, dist)) in params.iter().enumerate() {
+        let x = x(k, *p);
+        match (p, dist) {
+            (Parameter::Sliding, Distribution::Chance(c)) => d.sliding = Some(x < c.probability),
+            (Parameter::Poisson, Distribution::Range(r)) => d.poisson = Some(r.at(x)),
+            (Parameter::MuscleFat, Distribution::Range(r)) => d.muscle_fat = Some(r.at(x)),
+            (Parameter::SkinFat, Distribution::Range(r)) => d.skin_fat = Some(r.at(x)),
+            (Parameter::SpringScale, Distribution::Range(r)) => d.spring_scale = Some(r.at(x)),
+            _ => {}
+        }
+    }
+    d
 }
 
 /// Points the reduced model's greedy trains on: 128 draws of the case's `[uncertainty]` box
@@ -152,6 +155,9 @@ pub struct UncertaintyReport {
     /// displacement's error over the samples.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub landmark_bounds_mm: Option<Ordered<f64>>,
+    /// The reduced method: Sobol indices per landmark and region for each parameter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<super::sensitivity::Sensitivity>,
     /// The reduced method: how each reduced model was built (one per sliding state).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub reduced: Option<Vec<crate::reduced::ReducedReport>>,
@@ -368,6 +374,7 @@ pub(super) fn assemble(t: Tallies) -> UncertaintyReport {
         draws: t.draws,
         largest_bound_mm: None,
         landmark_bounds_mm: None,
+        sensitivity: None,
         reduced: None,
     }
 }
