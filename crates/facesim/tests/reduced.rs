@@ -237,7 +237,10 @@ fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
             let mut sum = 0.0;
             for (k, i) in p {
                 let (s, t) = (i["first"].as_f64().unwrap(), i["total"].as_f64().unwrap());
-                assert!(s <= t + 0.05 && t >= 0.0 && t <= 1.05, "{name} {k}: {i}");
+                assert!(
+                    s <= t + 0.05 && (0.0..=1.05).contains(&t),
+                    "{name} {k}: {i}"
+                );
                 sum += s;
             }
             assert!(sum <= 1.05, "{name}: first-order sum {sum}");
