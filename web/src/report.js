@@ -893,6 +893,36 @@ function main() {
     for (const [k, b] of Object.entries(u.landmarks || {})) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
     for (const [k, b] of Object.entries(u.regions || {})) if (b) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
     side.appendChild(ut);
+    // The reduced model's certificate: each sample within these of the full model (docs/reduced.md).
+    if (u.method === "reduced" && u.largest_bound_mm !== undefined) {
+      const bounds = Object.entries(u.landmark_bounds_mm || {}).filter(([, b]) => b > 0);
+      const worst = bounds.reduce((m, [, b]) => Math.max(m, b), 0);
+      side.appendChild(
+        el("p", { class: "certified" },
+          `Solved by the certified reduced model: every sample within ${fmt(worst, 2)} mm of the full model at each landmark (certified bound; at most ${fmt(u.largest_bound_mm, 1)} mm anywhere on the face).`),
+      );
+    }
+    // Sobol indices: which tissue parameter each displacement depends on.
+    const sens = u.sensitivity;
+    if (sens) {
+      const names = [];
+      for (const g of [sens.landmarks, sens.regions]) for (const p of Object.values(g || {})) for (const k of Object.keys(p)) if (!names.includes(k)) names.push(k);
+      const label = { poisson: "ν", muscle_fat: "muscle/fat", skin_fat: "skin/fat", sliding: "sliding", spring_scale: "springs" };
+      const st = table(
+        "What each displacement depends on: the share of its variance due to each tissue parameter alone (Sobol first-order index), with its interactions in brackets (total index); the largest in bold",
+        ["", ...names.map((n) => label[n] || n)],
+        "sensitivity",
+      );
+      for (const g of [sens.landmarks, sens.regions]) {
+        for (const [k, p] of Object.entries(g || {})) {
+          const top = names.reduce((a, n) => (p[n] && (!p[a] || p[n].first > p[a].first) ? n : a), names[0]);
+          const tr = row(st, [k, ...names.map((n) => (p[n] ? `${fmt(p[n].first, 2)} (${fmt(p[n].total, 2)})` : "–"))]);
+          const cell = tr.children[1 + names.indexOf(top)];
+          if (cell) cell.classList.add("top");
+        }
+      }
+      side.appendChild(st);
+    }
   }
 
   // ---- figures and warnings of report.json ----

@@ -31,6 +31,8 @@ tbody tr:nth-child(even){background:#f3f3f3}
 ul.warnings{padding-left:18px;color:#a40}
 table.clinic tr.outside td{color:#b00;font-weight:bold}
 table.clinic tr.inside td:last-child{color:#070}
+table.sensitivity td.top{font-weight:bold}
+p.certified{font-size:12.5px;color:#174}
 .clinic-reading,.hint{font-size:12.5px;color:#444}
 #toolbar{position:absolute;top:6px;left:6px;right:6px;display:flex;flex-wrap:wrap;gap:6px;font-size:13px}
 #toolbar button{padding:2px 7px}

@@ -74,6 +74,15 @@ try {
   result.clinic = await page.evaluate(() =>
     Array.from(document.querySelectorAll("table.clinic tr")).map((tr) => [tr.className, tr.textContent]),
   );
+  // The Sobol table (rows: label, cells; the bold cell's column) and the certificate line.
+  result.sensitivity = await page.evaluate(() =>
+    Array.from(document.querySelectorAll("table.sensitivity tbody tr")).map((tr) => [
+      tr.children[0].textContent,
+      Array.from(tr.children).slice(1).map((c) => c.textContent),
+      Array.from(tr.children).findIndex((c) => c.classList.contains("top")),
+    ]),
+  );
+  result.certified = await page.evaluate(() => document.querySelector("p.certified")?.textContent ?? null);
   // The full-resolution frame that follows a drag, drawn now rather than after its delay.
   await page.evaluate(() => window.facesim.render());
   result.canvas_final = await canvasStats(page);

@@ -172,6 +172,21 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
                  "missing": "Prn not found"}
             ]
         }),
+        // The reduced method's report (issue 28 items 3-4): the certificate and the Sobol table.
+        uncertainty: json!({
+            "samples": 100, "method": "reduced", "largest_bound_mm": 7.24,
+            "landmark_bounds_mm": {"Prn": 0.0, "Sn": 1.25},
+            "landmarks": {"Sn": {"mean": 1.0, "p05": 0.9, "p95": 1.1}},
+            "regions": {"upper lip": {"mean": 2.0, "p05": 1.8, "p95": 2.2}},
+            "sensitivity": {
+                "landmarks": {"Sn": {"poisson": {"first": 0.1, "total": 0.12},
+                                     "muscle_fat": {"first": 0.6, "total": 0.65},
+                                     "skin_fat": {"first": 0.2, "total": 0.22}}},
+                "regions": {"upper lip": {"poisson": {"first": 0.05, "total": 0.06},
+                                          "muscle_fat": {"first": 0.3, "total": 0.31},
+                                          "skin_fat": {"first": 0.55, "total": 0.6}}}
+            }
+        }),
         ..Default::default()
     };
     let dir = common::kept_dir("facesim-page-analytic");
@@ -193,6 +208,23 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
             .is_some_and(|t| t.contains("band width")),
         "{}",
         r["band_shown"]
+    );
+    // The Sobol table: a row per landmark and region, "first (total)" per parameter, the
+    // largest first-order index in bold; the certificate names the largest landmark bound.
+    let sens = r["sensitivity"].as_array().unwrap();
+    assert_eq!(sens.len(), 2, "{sens:?}");
+    assert_eq!(sens[0][0], "Sn");
+    // Columns in the report's order of parameters (json! sorts keys: muscle_fat, poisson, skin_fat).
+    assert_eq!(
+        sens[0][1],
+        json!(["0.60 (0.65)", "0.10 (0.12)", "0.20 (0.22)"])
+    );
+    assert_eq!(sens[0][2], 1, "muscle/fat is the largest for Sn");
+    assert_eq!((&sens[1][0], &sens[1][2]), (&json!("upper lip"), &json!(3)));
+    let cert = r["certified"].as_str().unwrap();
+    assert!(
+        cert.contains("1.25 mm") && cert.contains("7.2 mm"),
+        "{cert}"
     );
     // The plan against the clinic: a row outside its range marked so, one not measured.
     let clinic: Vec<(String, String)> = r["clinic"]
