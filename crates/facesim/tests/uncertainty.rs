@@ -35,15 +35,7 @@ fn run(c: Case, name: &str) -> Outcome {
     commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
 }
 
-fn json(o: &Outcome) -> serde_json::Value {
-    serde_json::from_slice(&std::fs::read(o.out_dir.join("report.json")).unwrap()).unwrap()
-}
-
-/// face_band.ply's `mean`, `p05`, `p95` columns.
-fn band_columns(dir: &Path) -> [Vec<f64>; 3] {
-    let m = facesim::mesh::ply::read(&dir.join("face_band.ply")).unwrap();
-    ["mean", "p05", "p95"].map(|k| m.column(k).unwrap().to_vec())
-}
+use common::{band_columns, report_json as json};
 
 fn magnitudes(o: &Outcome) -> Vec<f64> {
     o.skin

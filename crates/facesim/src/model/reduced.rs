@@ -5,19 +5,17 @@
 
 use crate::case::{Case, Tet};
 use crate::error::{Error, Result};
-use crate::reduced::{Affine, Basis, LinearFace, ReducedReport};
+use crate::reduced::{Basis, LinearFace, ReducedReport};
 
 /// The reduced model of one sliding state (sliding changes the holds, not a coefficient).
 pub struct ReducedTet {
     pub sliding: bool,
-    pub(super) affine: Affine,
     pub(super) basis: Basis,
     /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
     pub(super) terms: Vec<(usize, bool)>,
     /// The face displacement of the held values with every free unknown zero (the lift) and
     /// of each basis vector (held values zero): the face is linear in the reduced coefficients.
     pub face: LinearFace,
-    pub(super) face_map: FaceMap,
     /// σ with ‖face error‖₂ ≤ σ ‖e‖_X (`reduced::norm`).
     pub face_gain: f64,
     /// Per output of [`Training::outputs`]: ρ with |output error|₂ ≤ ρ ‖e‖_X (ρ² the largest
@@ -56,33 +54,28 @@ impl ReducedTet {
     /// error is within `face_gain` Δ (mm, the Euclidean norm over all face vertices, so every
     /// vertex too), an output's within its `output_gains` Δ.
     pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, f64)> {
+        let o = self.solve(case)?;
+        Ok((o.coefficients.iter().copied().collect(), o.energy_bound))
+    }
+
+    fn solve(&self, case: &Case) -> Result<crate::reduced::Online> {
         if case.tet.sliding != self.sliding {
             return Err(Error::config(
                 "reduced model: asked for the other sliding state than it was built for",
             ));
         }
-        let o = self.basis.solve(&self.theta(&case.tet))?;
-        Ok((o.coefficients.iter().copied().collect(), o.energy_bound))
+        self.basis.solve(&self.theta(&case.tet))
     }
 
     /// The face displacement with `case`'s tissue parameters and its certified bound.
     pub fn face(&self, case: &Case) -> Result<ReducedFace> {
-        let (c, energy) = self.coefficients(case)?;
-        let o = self.basis.solve(&self.theta(&case.tet))?;
+        let o = self.solve(case)?;
+        let c: Vec<f64> = o.coefficients.iter().copied().collect();
         Ok(ReducedFace {
             displacement: self.face.all(&c),
-            bound_mm: self.face_gain * energy,
+            bound_mm: self.face_gain * o.energy_bound,
             relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
         })
-    }
-
-    /// The full model's face displacement at `case`'s parameters on the same system (the truth
-    /// the bound is about: one factorisation).
-    pub fn full_face(&self, case: &Case) -> Result<Vec<[f64; 3]>> {
-        let t = self.theta(&case.tet);
-        let k = self.affine.factor(&t)?;
-        let u = crate::reduced::affine::solve_columns(&k, &[self.affine.rhs(&t)]).remove(0);
-        Ok(self.face_map.carry(&self.affine.expand(&u, true)))
     }
 
     pub fn report(&self) -> ReducedReport {

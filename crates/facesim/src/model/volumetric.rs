@@ -181,7 +181,7 @@ impl Volumetric {
             tets: self.mesh.tets.clone(),
             cell: r.embedding.tet.clone(),
             weights: r.embedding.weights.clone(),
-            still: scene_still(&r.face_rigid, r.roi, &skin.vertices),
+            still: still(&r.face_rigid, r.roi, &skin.vertices),
         };
         let zero = vec![0.0; affine.unknowns()];
         let face = crate::reduced::LinearFace {
@@ -232,11 +232,9 @@ impl Volumetric {
         basis.riesz_solves += lanczos.get() + 3 * training.outputs.len();
         Ok(ReducedTet {
             sliding,
-            affine,
             basis,
             terms,
             face,
-            face_map,
             face_gain: gain2.max(0.0).sqrt(),
             output_gains,
             offline_seconds: start.elapsed().as_secs_f64(),
@@ -436,8 +434,11 @@ fn carry_face(
         Some(q) => e.carry_quadratic(&q.tets, u),
         None => e.carry(tets, u),
     };
-    for ((d, p), rigid) in carried.iter_mut().zip(&skin.vertices).zip(face_rigid) {
-        if *rigid || (0..3).any(|c| p[c] < roi.0[c] || p[c] > roi.1[c]) {
+    for (d, still) in carried
+        .iter_mut()
+        .zip(still(face_rigid, roi, &skin.vertices))
+    {
+        if still {
             *d = [0.0; 3];
         }
     }
@@ -454,7 +455,7 @@ fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
 }
 
 /// Face vertices that stay (`carry_face`'s rule): rigid skin, or outside the region.
-fn scene_still(rigid: &[bool], roi: ([f64; 3], [f64; 3]), face: &[[f64; 3]]) -> Vec<bool> {
+fn still(rigid: &[bool], roi: ([f64; 3], [f64; 3]), face: &[[f64; 3]]) -> Vec<bool> {
     rigid
         .iter()
         .zip(face)

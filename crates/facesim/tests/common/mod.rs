@@ -15,6 +15,17 @@ pub fn kept_dir(prefix: &str) -> PathBuf {
         .keep()
 }
 
+/// A run's report.json.
+pub fn report_json(o: &facesim::commands::Outcome) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(o.out_dir.join("report.json")).unwrap()).unwrap()
+}
+
+/// face_band.ply's `mean`, `p05`, `p95` columns.
+pub fn band_columns(dir: &Path) -> [Vec<f64>; 3] {
+    let m = facesim::mesh::ply::read(&dir.join("face_band.ply")).unwrap();
+    ["mean", "p05", "p95"].map(|k| m.column(k).unwrap().to_vec())
+}
+
 /// The Python of the tests' venv, target/slicer-venv (scripts/test-setup.sh makes it with the
 /// fixture makers and parsers the tests call: ctk-cli, scikit-image, highdicom, ...).
 pub fn venv_python() -> PathBuf {
