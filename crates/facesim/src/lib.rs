@@ -75,6 +75,7 @@ pub mod segment;
 pub mod slicer;
 pub mod solve;
 pub mod springs;
+mod stored;
 pub mod surface;
 pub mod tet;
 pub mod uncertainty;

@@ -198,6 +198,7 @@ pub(crate) fn write_page(
     basis: Option<crate::report_page::PageBasis>,
     analysis: &crate::landmarks::Analysis,
     band_width: Option<&[f64]>,
+    _reduced: Option<&crate::model::reduced::file::StoredReduced>,
 ) -> Result<()> {
     let case = &scene.case;
     let skull = &scene.face.skull;

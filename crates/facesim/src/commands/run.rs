@@ -115,8 +115,8 @@ fn finish(
         )
     })?;
     // The band before any file is written: a failed sample leaves no outputs half-written.
-    let band = if case.uncertainty.samples == 0 {
-        None
+    let (band, reduced) = if case.uncertainty.samples == 0 {
+        (None, None)
     } else {
         let nominal = crate::uncertainty::Nominal {
             skin: &prediction.skin,
@@ -125,43 +125,45 @@ fn finish(
             sliding_matters: prediction.sliding_matters(),
         };
         let resolve = |c: &Case| prediction.resolve(&scene, c);
-        Some(
-            rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
-                // The certified reduced model when the case asks for it (docs/reduced.md).
-                let progress = |m: &str| obs.started(m);
-                let outputs =
-                    crate::uncertainty::reduced::landmark_outputs(&analysis, &prediction.skin);
-                let reduced = if case.uncertainty.reduced(case.reduced_form()) {
-                    let train = crate::uncertainty::run::training(case);
-                    prediction
-                        .reduced(&scene, case, &train, &outputs, &progress)
-                        .transpose()?
-                } else {
-                    None
-                };
-                match &reduced {
-                    Some(m) => {
-                        let solve = |c: &Case| m.solve(c);
-                        let r = crate::uncertainty::reduced::Reduced {
-                            faces: m.models.iter().map(|x| &x.face).collect(),
-                            solve: &solve,
-                            face_gains: m.models.iter().map(|x| x.face_gain).collect(),
-                            landmark_gains: m
-                                .models
-                                .iter()
-                                .map(|x| x.output_gains.clone())
-                                .collect(),
-                            reports: m.models.iter().map(|x| x.report()).collect(),
-                        };
-                        crate::uncertainty::reduced::sample_reduced(
-                            &nominal, &r, &analysis, case, obs,
-                        )
-                    }
-                    None => crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs),
+        let (band, reduced) = rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+            // The certified reduced model when the case asks for it (docs/reduced.md).
+            let progress = |m: &str| obs.started(m);
+            let outputs =
+                crate::uncertainty::reduced::landmark_outputs(&analysis, &prediction.skin);
+            let reduced = if case.uncertainty.reduced(case.reduced_form()) {
+                let train = crate::uncertainty::run::training(case);
+                prediction
+                    .reduced(&scene, case, &train, &outputs, &progress)
+                    .transpose()?
+            } else {
+                None
+            };
+            let band = match &reduced {
+                Some(m) => {
+                    let solve = |c: &Case| m.solve(c);
+                    let r = crate::uncertainty::reduced::Reduced {
+                        faces: m.models.iter().map(|x| &x.face).collect(),
+                        solve: &solve,
+                        face_gains: m.models.iter().map(|x| x.face_gain).collect(),
+                        landmark_gains: m.models.iter().map(|x| x.output_gains.clone()).collect(),
+                        reports: m.models.iter().map(|x| x.report()).collect(),
+                    };
+                    crate::uncertainty::reduced::sample_reduced(&nominal, &r, &analysis, case, obs)
                 }
-            })?,
-        )
+                None => crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs),
+            }?;
+            Ok((band, reduced))
+        })?;
+        (Some(band), reduced)
     };
+    // Stored beside plan_basis.bin (docs/reduced.md "The stored model").
+    let reduced = reduced.map(|m| crate::model::reduced::file::StoredReduced {
+        face_checksum: crate::model::reduced::file::checksum(&prediction.skin.vertices),
+        tissues: case.tet.tissues(),
+        sliding: case.tet.sliding,
+        sliding_matters: m.sliding_matters,
+        models: m.models,
+    });
     // The discretisation error: the case again at twice the element size (Richardson).
     let discretisation = if case.tet.error_estimate {
         let started = std::time::Instant::now();
@@ -187,6 +189,9 @@ fn finish(
         None
     };
     outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
+    if let Some(r) = &reduced {
+        crate::model::reduced::file::write(&dir.join(crate::model::reduced::file::FILE_NAME), r)?;
+    }
     if let Some(b) = &band {
         crate::uncertainty::write_band(dir, &prediction.face_post, b)?;
     }
@@ -235,6 +240,7 @@ fn finish(
         page_basis,
         &analysis,
         band_width.as_deref(),
+        reduced.as_ref(),
     )?;
     outputs::write_report(dir, &report)?;
     let out_dir = unit.commit()?;

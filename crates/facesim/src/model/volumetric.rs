@@ -176,7 +176,15 @@ impl Volumetric {
                 .collect()
         };
         let train: Vec<Vec<f64>> = train.iter().map(|t| theta(&t.tet)).collect();
-        let (basis, x) = Basis::build(&affine, &theta(&c.tet), &train, greedy, progress)?;
+        let theta_bar = theta(&c.tet);
+        let mut theta_box = [theta_bar.clone(), theta_bar.clone()];
+        for t in &train {
+            for (q, v) in t.iter().enumerate() {
+                theta_box[0][q] = theta_box[0][q].min(*v);
+                theta_box[1][q] = theta_box[1][q].max(*v);
+            }
+        }
+        let (basis, x) = Basis::build(&affine, &theta_bar, &train, greedy, progress)?;
         let face_map = FaceMap {
             tets: self.mesh.tets.clone(),
             cell: r.embedding.tet.clone(),
@@ -228,16 +236,24 @@ impl Volumetric {
                 g.symmetric_eigenvalues().max().max(0.0).sqrt()
             })
             .collect();
-        let mut basis = basis;
-        basis.riesz_solves += lanczos.get() + 3 * training.outputs.len();
+        let face_gain = gain2.max(0.0).sqrt();
         Ok(ReducedTet {
             sliding,
-            basis,
+            build: crate::reduced::ReducedReport {
+                sliding,
+                basis_size: basis.size(),
+                full_factorisations: basis.full_factorisations,
+                reference_solves: basis.riesz_solves + lanczos.get() + 3 * training.outputs.len(),
+                offline_seconds: start.elapsed().as_secs_f64(),
+                face_gain,
+                greedy: basis.history,
+            },
+            form: basis.form,
             terms,
+            theta_box,
             face,
-            face_gain: gain2.max(0.0).sqrt(),
+            face_gain,
             output_gains,
-            offline_seconds: start.elapsed().as_secs_f64(),
         })
     }
 

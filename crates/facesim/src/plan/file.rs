@@ -21,6 +21,7 @@ use super::basis::{COLUMNS, PlanBasis, SegmentBasis};
 use crate::case::{Osteotomy, Region};
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
+use crate::stored;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -48,10 +49,6 @@ struct SegmentHeader {
     name: String,
     region: Region,
     pivot: [f64; 3],
-}
-
-fn pad8(len: usize) -> usize {
-    (8 - len % 8) % 8
 }
 
 /// Write `basis` to `path` (temporary name, then renamed).
@@ -89,30 +86,22 @@ pub fn write(path: &Path, basis: &PlanBasis) -> Result<()> {
         ));
     }
     let json = serde_json::to_vec(&header).map_err(|e| Error::output(path, e))?;
-    let version = basis.facesim_version.as_bytes();
     write_bytes_atomic(path, |w| {
-        let mut head = Vec::with_capacity(24 + version.len() + json.len());
-        head.extend_from_slice(MAGIC);
-        head.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        head.extend_from_slice(&(version.len() as u32).to_le_bytes());
-        head.extend_from_slice(version);
-        head.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        head.extend_from_slice(&json);
-        head.resize(head.len() + pad8(head.len()), 0);
-        w.write_all(&head)?;
+        w.write_all(&stored::head(
+            MAGIC,
+            FORMAT_VERSION,
+            &basis.facesim_version,
+            &json,
+        ))?;
         let f64s = |w: &mut dyn std::io::Write, v: &[[f64; 3]]| -> std::io::Result<()> {
-            let mut buf = Vec::with_capacity(24 * v.len());
-            for c in v.iter().flatten() {
-                buf.extend_from_slice(&c.to_le_bytes());
-            }
-            w.write_all(&buf)
+            w.write_all(&stored::point_bytes(v))
         };
         f64s(w, &basis.face_pre)?;
         let mut tri = Vec::with_capacity(12 * basis.triangles.len());
         for i in basis.triangles.iter().flatten() {
             tri.extend_from_slice(&i.to_le_bytes());
         }
-        tri.resize(tri.len() + pad8(tri.len()), 0);
+        tri.resize(tri.len() + stored::pad8(tri.len()), 0);
         w.write_all(&tri)?;
         if let Some(o) = &basis.offset {
             f64s(w, o)?;
@@ -126,96 +115,15 @@ pub fn write(path: &Path, basis: &PlanBasis) -> Result<()> {
     })
 }
 
-/// A cursor over the file's bytes whose every short read is an error naming the file.
-struct Reader<'a> {
-    path: &'a Path,
-    bytes: &'a [u8],
-    at: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, len: usize, what: &str) -> Result<&'a [u8]> {
-        let end = self.at.checked_add(len).filter(|e| *e <= self.bytes.len());
-        let Some(end) = end else {
-            return Err(Error::input(
-                self.path,
-                format!(
-                    "truncated plan basis: {what} is cut off at byte {}",
-                    self.bytes.len()
-                ),
-            ));
-        };
-        let b = &self.bytes[self.at..end];
-        self.at = end;
-        Ok(b)
-    }
-
-    fn u32(&mut self, what: &str) -> Result<u32> {
-        let b = self.take(4, what)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn points(&mut self, n: usize, what: &str) -> Result<Vec<[f64; 3]>> {
-        let len = n
-            .checked_mul(24)
-            .ok_or_else(|| Error::input(self.path, format!("plan basis: {what} too large")))?;
-        let b = self.take(len, what)?;
-        let f = |i: usize| {
-            let mut a = [0u8; 8];
-            a.copy_from_slice(&b[8 * i..8 * i + 8]);
-            f64::from_le_bytes(a)
-        };
-        Ok((0..n)
-            .map(|v| [f(3 * v), f(3 * v + 1), f(3 * v + 2)])
-            .collect())
-    }
-}
-
 /// Read a basis written by this facesim version.
 pub fn read(path: &Path) -> Result<PlanBasis> {
-    let bytes = std::fs::read(path).map_err(|e| {
-        Error::input(
-            path,
-            if e.kind() == std::io::ErrorKind::NotFound {
-                "no plan basis here (a run of this facesim version writes plan_basis.bin with its outputs)".to_string()
-            } else {
-                e.to_string()
-            },
-        )
-    })?;
-    let mut r = Reader {
+    let bytes = stored::read_bytes(
         path,
-        bytes: &bytes,
-        at: 0,
-    };
-    if r.take(8, "the magic bytes")? != MAGIC {
-        return Err(Error::input(
-            path,
-            "not a facesim plan basis (wrong magic bytes)",
-        ));
-    }
-    let format = r.u32("the format version")?;
-    if format != FORMAT_VERSION {
-        return Err(Error::input(
-            path,
-            format!(
-                "plan basis format version {format}, this facesim reads version {FORMAT_VERSION}"
-            ),
-        ));
-    }
-    let vlen = r.u32("the facesim version")? as usize;
-    let version = String::from_utf8_lossy(r.take(vlen, "the facesim version")?).to_string();
-    let ours = env!("CARGO_PKG_VERSION");
-    if version != ours {
-        return Err(Error::input(
-            path,
-            format!(
-                "plan basis written by facesim {version}, this is facesim {ours}: run the case again"
-            ),
-        ));
-    }
-    let hlen = r.u32("the header")? as usize;
-    let header: Header = serde_json::from_slice(r.take(hlen, "the header")?)
+        "no plan basis here (a run of this facesim version writes plan_basis.bin with its outputs)",
+    )?;
+    let (mut r, version, header) =
+        stored::Reader::open(path, "plan basis", &bytes, MAGIC, FORMAT_VERSION)?;
+    let header: Header = serde_json::from_slice(header)
         .map_err(|e| Error::input(path, format!("plan basis header: {e}")))?;
     if header.columns_per_segment != COLUMNS {
         return Err(Error::input(
@@ -226,8 +134,6 @@ pub fn read(path: &Path) -> Result<PlanBasis> {
             ),
         ));
     }
-    let pad = pad8(r.at);
-    r.take(pad, "the padding")?;
     let n = header.vertices;
     let face_pre = r.points(n, "face_pre")?;
     let tb = r.take(
@@ -248,7 +154,7 @@ pub fn read(path: &Path) -> Result<PlanBasis> {
             "plan basis: a triangle names a missing vertex",
         ));
     }
-    r.take(pad8(tb.len()), "the padding")?;
+    r.take(stored::pad8(tb.len()), "the padding")?;
     let offset = if header.offset {
         Some(r.points(n, "the offset")?)
     } else {
@@ -266,15 +172,7 @@ pub fn read(path: &Path) -> Result<PlanBasis> {
             columns,
         });
     }
-    if r.at != bytes.len() {
-        return Err(Error::input(
-            path,
-            format!(
-                "plan basis: {} bytes after the last column (corrupt or wrong sizes)",
-                bytes.len() - r.at
-            ),
-        ));
-    }
+    r.finish("the last column")?;
     if face_pre
         .iter()
         .chain(segments.iter().flat_map(|s| s.columns.iter().flatten()))

@@ -30,7 +30,7 @@ pub struct Greedy {
 
 /// One step of the greedy: the basis size and the largest relative bound over the training
 /// set with that basis (before the next snapshot).
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct GreedyStep {
     pub size: usize,
     pub max_relative_bound: f64,
@@ -40,21 +40,38 @@ pub struct GreedyStep {
 
 /// The reduced model on an [`Affine`] system.
 pub struct Basis {
-    pub theta_bar: Vec<f64>,
     /// X-orthonormal basis vectors (free values).
     pub vectors: Vec<Vec<f64>>,
-    an: Vec<DMatrix<f64>>,
-    fnq: Vec<DVector<f64>>,
-    /// The residual's Riesz representers in an X-orthonormal basis: column j of `t` holds the
-    /// coordinates of X⁻¹ f_q (j = q) or X⁻¹ A_q v_n (j = Q + n Q + q).
-    riesz: Riesz,
+    /// Everything the online solve and its bound need (and all a stored model keeps).
+    pub form: OnlineForm,
+    /// The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
+    /// grows: [`Basis::build`] drops it (two vectors per term and basis vector: most of the
+    /// model's memory).
+    space: Option<RieszSpace>,
     pub history: Vec<GreedyStep>,
     /// Factorisations of the full model the build took (X and one per snapshot).
     pub full_factorisations: usize,
     /// Solves with the factor of X (Riesz representers and snapshots), the cheaper work.
     pub riesz_solves: usize,
-    /// The free unknowns (for the round-off floor of the residual norm).
-    unknowns: usize,
+}
+
+/// The online data of a reduced model: N×N and N-sized arrays, independent of the mesh size
+/// (docs/reduced.md "The stored model"). Serialised into `reduced_model.bin` and the page.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OnlineForm {
+    /// θ̄: the reference parameters, X = A(θ̄).
+    pub theta_bar: Vec<f64>,
+    /// Per term q: Vᵀ A_q V (N×N, row-major) and Vᵀ f_q.
+    pub matrices: Vec<Vec<f64>>,
+    pub loads: Vec<Vec<f64>>,
+    /// The residual's Riesz representers in an X-orthonormal basis: column j holds the
+    /// coordinates of X⁻¹ f_q (j = q) or X⁻¹ A_q v_n (j = Q + n Q + q); shorter columns are
+    /// zero beyond their length.
+    pub riesz: Vec<Vec<f64>>,
+    /// ‖ρ_j‖_X (for the round-off floor).
+    pub riesz_norms: Vec<f64>,
+    /// The full model's free unknowns (for the round-off floor).
+    pub unknowns: usize,
 }
 
 /// The answer at one θ: the coefficients and the certified bound.
@@ -88,21 +105,24 @@ impl Basis {
         }
         let x = sys.factor(theta_bar)?;
         let loads: Vec<Vec<f64>> = (0..q).map(|k| sys.load(k).to_vec()).collect();
-        let mut riesz = Riesz::default();
-        for (r, g) in solve_columns(&x, &loads).into_iter().zip(&loads) {
-            riesz.push(r, g.clone());
-        }
         let mut basis = Basis {
-            theta_bar: theta_bar.to_vec(),
             vectors: Vec::new(),
-            an: vec![DMatrix::zeros(0, 0); q],
-            fnq: vec![DVector::zeros(0); q],
-            riesz,
+            form: OnlineForm {
+                theta_bar: theta_bar.to_vec(),
+                matrices: vec![Vec::new(); q],
+                loads: vec![Vec::new(); q],
+                riesz: Vec::new(),
+                riesz_norms: Vec::new(),
+                unknowns: sys.unknowns(),
+            },
+            space: Some(RieszSpace::default()),
             history: Vec::new(),
             full_factorisations: 1,
             riesz_solves: q,
-            unknowns: sys.unknowns(),
         };
+        for (r, g) in solve_columns(&x, &loads).into_iter().zip(&loads) {
+            basis.push_riesz(r, g.clone());
+        }
         // Riesz representers X⁻¹ A_q v_n, kept for the new vectors' inner products.
         let mut snapshot = solve_columns(&x, &[sys.rhs(theta_bar)]).remove(0);
         basis.riesz_solves += 1;
@@ -138,7 +158,18 @@ impl Basis {
             basis.full_factorisations += 1;
             snapshot = solve_columns(&k, &[sys.rhs(worst)]).remove(0);
         }
+        basis.space = None;
         Ok((basis, x))
+    }
+
+    fn push_riesz(&mut self, rho: Vec<f64>, g: Vec<f64>) {
+        let space = self
+            .space
+            .as_mut()
+            .expect("the Riesz space is kept while the basis grows");
+        let (coords, norm) = space.push(rho, g);
+        self.form.riesz.push(coords);
+        self.form.riesz_norms.push(norm);
     }
 
     /// Orthonormalise `u` against the basis in X (Gram–Schmidt twice) and add it with its
@@ -156,7 +187,7 @@ impl Basis {
             for k in 0..q {
                 let a = sys.apply(k, v);
                 for (o, a) in out.iter_mut().zip(a) {
-                    *o += self.theta_bar[k] * a;
+                    *o += self.form.theta_bar[k] * a;
                 }
             }
             out
@@ -182,22 +213,23 @@ impl Basis {
         self.riesz_solves += q;
         self.vectors.push(u);
         let m = n + 1;
-        for k in 0..q {
-            let mut a = DMatrix::zeros(m, m);
-            a.view_mut((0, 0), (n, n)).copy_from(&self.an[k]);
-            for (j, v) in self.vectors.iter().enumerate() {
-                let e = dot(v, &av[k]);
-                a[(n, j)] = e;
-                a[(j, n)] = e;
+        for (k, avk) in av.iter().enumerate() {
+            let old = &self.form.matrices[k];
+            let mut a = vec![0.0; m * m];
+            for i in 0..n {
+                a[i * m..i * m + n].copy_from_slice(&old[i * n..(i + 1) * n]);
             }
-            self.an[k] = a;
-            let mut f = DVector::zeros(m);
-            f.rows_mut(0, n).copy_from(&self.fnq[k]);
-            f[n] = dot(&self.vectors[n], &loads[k]);
-            self.fnq[k] = f;
+            for (j, v) in self.vectors.iter().enumerate() {
+                let e = dot(v, avk);
+                a[n * m + j] = e;
+                a[j * m + n] = e;
+            }
+            self.form.matrices[k] = a;
+            let f = dot(&self.vectors[n], &loads[k]);
+            self.form.loads[k].push(f);
         }
         for (r, g) in new_riesz.into_iter().zip(av) {
-            self.riesz.push(r, g);
+            self.push_riesz(r, g);
         }
         Ok(true)
     }
@@ -209,7 +241,35 @@ impl Basis {
 
     /// The reduced solution at θ and its bound (θ positive, one per term).
     pub fn solve(&self, theta: &[f64]) -> Result<Online> {
-        let q = self.theta_bar.len();
+        self.form.solve(theta)
+    }
+
+    /// The free values V c.
+    pub fn expand(&self, c: &DVector<f64>) -> Vec<f64> {
+        let mut u = vec![0.0; self.vectors.first().map_or(0, Vec::len)];
+        for (v, w) in self.vectors.iter().zip(c.iter()) {
+            for (a, b) in u.iter_mut().zip(v) {
+                *a += w * b;
+            }
+        }
+        u
+    }
+}
+
+impl OnlineForm {
+    /// N.
+    pub fn size(&self) -> usize {
+        self.loads.first().map_or(0, Vec::len)
+    }
+
+    /// Q.
+    pub fn terms(&self) -> usize {
+        self.theta_bar.len()
+    }
+
+    /// The reduced solution at θ and its bound (θ positive, one per term).
+    pub fn solve(&self, theta: &[f64]) -> Result<Online> {
+        let q = self.terms();
         let n = self.size();
         if theta.len() != q || theta.iter().any(|t| !(*t > 0.0 && t.is_finite())) {
             return Err(Error::config(format!(
@@ -219,8 +279,8 @@ impl Basis {
         let mut a = DMatrix::zeros(n, n);
         let mut f = DVector::zeros(n);
         for k in 0..q {
-            a += &self.an[k] * theta[k];
-            f += &self.fnq[k] * theta[k];
+            a += DMatrix::from_row_slice(n, n, &self.matrices[k]) * theta[k];
+            f += DVector::from_column_slice(&self.loads[k]) * theta[k];
         }
         let c = a
             .cholesky()
@@ -237,7 +297,7 @@ impl Basis {
             .copied()
             .chain((0..n * q).map(|i| -c[i / q] * theta[i % q]))
             .collect();
-        let residual = self.riesz.norm(&w, self.unknowns);
+        let residual = self.residual_norm(&w);
         let alpha = theta
             .iter()
             .zip(&self.theta_bar)
@@ -252,33 +312,50 @@ impl Basis {
         })
     }
 
-    /// The free values V c.
-    pub fn expand(&self, c: &DVector<f64>) -> Vec<f64> {
-        let mut u = vec![0.0; self.vectors.first().map_or(0, Vec::len)];
-        for (v, w) in self.vectors.iter().zip(c.iter()) {
-            for (a, b) in u.iter_mut().zip(v) {
-                *a += w * b;
+    /// ‖Σ_j w_j ρ_j‖_X plus its round-off: the coordinates carry ε ‖ρ_j‖ per unknown summed
+    /// (Higham 2002 §3.1, γ_n), so the floor is n ε Σ |w_j| ‖ρ_j‖_X.
+    fn residual_norm(&self, w: &[f64]) -> f64 {
+        let rows = self.riesz.iter().map(Vec::len).max().unwrap_or(0);
+        let mut y = vec![0.0; rows];
+        for (wj, col) in w.iter().zip(&self.riesz) {
+            for (a, b) in y.iter_mut().zip(col) {
+                *a += wj * b;
             }
         }
-        u
+        let floor: f64 = w
+            .iter()
+            .zip(&self.riesz_norms)
+            .map(|(a, b)| a.abs() * b)
+            .sum();
+        dot(&y, &y).sqrt() + self.unknowns as f64 * f64::EPSILON * floor
+    }
+
+    /// Whether the arrays have the sizes N and Q imply (a stored model is checked on read).
+    pub fn consistent(&self) -> bool {
+        let (n, q) = (self.size(), self.terms());
+        self.matrices.len() == q
+            && self.loads.len() == q
+            && self.matrices.iter().all(|m| m.len() == n * n)
+            && self.loads.iter().all(|f| f.len() == n)
+            && self.riesz.len() == q * (n + 1)
+            && self.riesz_norms.len() == q * (n + 1)
+            && self.riesz.iter().all(|c| c.len() <= q * (n + 1))
+            && self.theta_bar.iter().all(|t| *t > 0.0 && t.is_finite())
     }
 }
 
-/// Vectors ρ_j kept as coordinates in an X-orthonormal basis e_i (with X e_i, to take inner
-/// products of new vectors without applying X): ρ_j = Σ_i t_ij e_i.
+/// The X-orthonormal vectors e_i that Riesz representers ρ_j are kept in as coordinates
+/// (ρ_j = Σ_i t_ij e_i), with X e_i to take inner products of new vectors without applying X.
 #[derive(Default)]
-struct Riesz {
+struct RieszSpace {
     e: Vec<Vec<f64>>,
     xe: Vec<Vec<f64>>,
-    /// Column j: ρ_j's coordinates (rows beyond a column's length are zero).
-    t: Vec<Vec<f64>>,
-    /// ‖ρ_j‖_X.
-    norms: Vec<f64>,
 }
 
-impl Riesz {
-    /// Add ρ with X ρ = g (Gram–Schmidt twice; a direction already spanned adds no new e).
-    fn push(&mut self, mut rho: Vec<f64>, mut g: Vec<f64>) {
+impl RieszSpace {
+    /// Add ρ with X ρ = g (Gram–Schmidt twice; a direction already spanned adds no new e):
+    /// its coordinates and ‖ρ‖_X.
+    fn push(&mut self, mut rho: Vec<f64>, mut g: Vec<f64>) -> (Vec<f64>, f64) {
         let norm0 = dot(&rho, &g).max(0.0).sqrt();
         let mut coords = vec![0.0; self.e.len()];
         for _ in 0..2 {
@@ -297,21 +374,7 @@ impl Riesz {
             self.xe.push(g);
             coords.push(rest);
         }
-        self.t.push(coords);
-        self.norms.push(norm0);
-    }
-
-    /// ‖Σ_j w_j ρ_j‖_X plus its round-off: the coordinates carry ε ‖ρ_j‖ per unknown summed
-    /// (Higham 2002 §3.1, γ_n), so the floor is n ε Σ |w_j| ‖ρ_j‖_X.
-    fn norm(&self, w: &[f64], unknowns: usize) -> f64 {
-        let mut y = vec![0.0; self.e.len()];
-        for (wj, col) in w.iter().zip(&self.t) {
-            for (a, b) in y.iter_mut().zip(col) {
-                *a += wj * b;
-            }
-        }
-        let floor: f64 = w.iter().zip(&self.norms).map(|(a, b)| a.abs() * b).sum();
-        dot(&y, &y).sqrt() + unknowns as f64 * f64::EPSILON * floor
+        (coords, norm0)
     }
 }
 

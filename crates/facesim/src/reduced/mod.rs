@@ -12,12 +12,13 @@ pub mod basis;
 pub mod norm;
 
 pub use affine::Affine;
-pub use basis::{Basis, Greedy, GreedyStep, Online};
+pub use basis::{Basis, Greedy, GreedyStep, Online, OnlineForm};
 
 use serde::{Deserialize, Serialize};
 
 /// A face displacement linear in reduced coefficients: lift + Σ_n c_n columns[n] (mm per
 /// vertex): what the sampling needs of a reduced model.
+#[derive(Clone, Debug, PartialEq)]
 pub struct LinearFace {
     pub lift: Vec<[f64; 3]>,
     pub columns: Vec<Vec<[f64; 3]>>,
@@ -42,7 +43,7 @@ impl LinearFace {
 }
 
 /// report.json `uncertainty.reduced[]`: how one reduced model was built (docs/reduced.md).
-#[derive(Clone, Debug, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReducedReport {
     /// The sliding state it was built for.
     pub sliding: bool,

@@ -96,12 +96,21 @@ pub(super) fn draw_at(
 }
 
 /// Points the reduced model's greedy trains on: 128 draws of the case's `[uncertainty]` box
-/// from another seed than the samples' (so the samples test it; docs/reduced.md).
+/// from another seed than the samples' (so the samples test it; docs/reduced.md), and the box's
+/// corners. Every Lamé parameter is monotone in each sampled parameter, so the corners span the
+/// box's image in θ: the trained box the reduced model answers in.
 pub fn training(case: &Case) -> Vec<Case> {
     let mut c = case.clone();
     c.uncertainty.samples = TRAINING_POINTS;
     c.uncertainty.seed = case.uncertainty.seed.wrapping_add(TRAINING_SEED_OFFSET);
-    draws(&c).iter().map(|d| d.apply(case)).collect()
+    let params = case.uncertainty.parameters(case.solve.model);
+    let corners =
+        (0..1usize << params.len()).map(|i| draw_at(&params, &|k, _| ((i >> k) & 1) as f64));
+    draws(&c)
+        .into_iter()
+        .chain(corners)
+        .map(|d| d.apply(case))
+        .collect()
 }
 
 const TRAINING_POINTS: usize = 128;

@@ -3,16 +3,25 @@
 //! tissue parameters in microseconds, each answer with a bound in mm on its difference from the
 //! full model's.
 
+pub mod file;
+
 use crate::case::{Case, Tet};
 use crate::error::{Error, Result};
-use crate::reduced::{Basis, LinearFace, ReducedReport};
+use crate::reduced::{LinearFace, OnlineForm, ReducedReport};
 
-/// The reduced model of one sliding state (sliding changes the holds, not a coefficient).
+/// The reduced model of one sliding state (sliding changes the holds, not a coefficient): all
+/// it keeps is independent of the tissue mesh (N×N arrays and N + 1 face fields), so it is
+/// what `reduced_model.bin` stores ([`file`]).
+#[derive(Clone, Debug, PartialEq)]
 pub struct ReducedTet {
     pub sliding: bool,
-    pub(super) basis: Basis,
+    /// The online solve and its bound.
+    pub form: OnlineForm,
     /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
-    pub(super) terms: Vec<(usize, bool)>,
+    pub terms: Vec<(usize, bool)>,
+    /// The trained box of θ (lowest and highest per term, θ̄ included): a θ outside it is not
+    /// answered (no extrapolation; docs/reduced.md).
+    pub theta_box: [Vec<f64>; 2],
     /// The face displacement of the held values with every free unknown zero (the lift) and
     /// of each basis vector (held values zero): the face is linear in the reduced coefficients.
     pub face: LinearFace,
@@ -21,7 +30,8 @@ pub struct ReducedTet {
     /// Per output of [`Training::outputs`]: ρ with |output error|₂ ≤ ρ ‖e‖_X (ρ² the largest
     /// eigenvalue of the output's 3×3 block of L X⁻¹ Lᵀ, three solves with X's factor).
     pub output_gains: Vec<f64>,
-    pub(super) offline_seconds: f64,
+    /// How it was built (report.json `uncertainty.reduced[]`).
+    pub build: ReducedReport,
 }
 
 /// One answer of the reduced model and its certificate.
@@ -64,7 +74,27 @@ impl ReducedTet {
                 "reduced model: asked for the other sliding state than it was built for",
             ));
         }
-        self.basis.solve(&self.theta(&case.tet))
+        let theta = self.theta(&case.tet);
+        if let Some(msg) = self.outside(&theta) {
+            return Err(Error::config(format!("reduced model: {msg}")));
+        }
+        self.form.solve(&theta)
+    }
+
+    /// Why θ is outside the trained box (None: inside, to a relative 1e-9).
+    pub fn outside(&self, theta: &[f64]) -> Option<String> {
+        let [lo, hi] = &self.theta_box;
+        let slack = 1e-9;
+        theta.iter().enumerate().find_map(|(q, t)| {
+            let (s, l) = self.terms[q];
+            let name = format!("{} of [tet.{}]", if l { "λ" } else { "μ" }, Tet::TISSUES[s]);
+            (*t < lo[q] * (1.0 - slack) || *t > hi[q] * (1.0 + slack)).then(|| {
+                format!(
+                    "{name} = {t:.4} kPa is outside the trained range {:.4}–{:.4} kPa",
+                    lo[q], hi[q]
+                )
+            })
+        })
     }
 
     /// The face displacement with `case`'s tissue parameters and its certified bound.
@@ -79,15 +109,7 @@ impl ReducedTet {
     }
 
     pub fn report(&self) -> ReducedReport {
-        ReducedReport {
-            sliding: self.sliding,
-            basis_size: self.basis.size(),
-            full_factorisations: self.basis.full_factorisations,
-            reference_solves: self.basis.riesz_solves,
-            offline_seconds: self.offline_seconds,
-            face_gain: self.face_gain,
-            greedy: self.basis.history.clone(),
-        }
+        self.build.clone()
     }
 }
 
