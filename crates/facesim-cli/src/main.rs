@@ -463,6 +463,12 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 r.out_dir.display(),
                 r.report.displacement.max
             );
+            if let Some(t) = r.report.replan.as_ref().and_then(|p| p.tissue.as_ref()) {
+                eprintln!(
+                    "new tissues from the reduced model: within {:.3} mm of the full model (certified)",
+                    t.bound_mm
+                );
+            }
             Ok(())
         }
         Cmd::Sweep {

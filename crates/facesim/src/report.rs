@@ -142,6 +142,22 @@ pub struct ReplanReport {
     pub exact: bool,
     /// The plan predicted.
     pub osteotomy: Vec<Osteotomy>,
+    /// With `[tet]` in PLAN.toml: the tissues answered by the run's reduced model.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tissue: Option<TissueReplan>,
+}
+
+/// report.json `replan.tissue`: new tissue parameters answered by the stored reduced model at the
+/// run's plan (docs/reduced.md "Re-solving from the stored model").
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TissueReplan {
+    /// Per tissue (`[tet.skin]` …) the material used.
+    pub materials: Vec<(String, crate::case::TissueElastic)>,
+    pub sliding: bool,
+    /// The certified bound on the face's difference from the full model's (mm; the Euclidean
+    /// norm over all face vertices, so every vertex too).
+    pub bound_mm: f64,
+    pub relative_energy_bound: f64,
 }
 
 impl Displacement {

@@ -48,6 +48,21 @@ fn run(c: Case, name: &str) -> Outcome {
     commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
 }
 
+/// The coarse first sample with 10 samples by the reduced method: shared by the tests that
+/// check its band and its stored model.
+fn reduced_case() -> Case {
+    let mut c = case();
+    c.uncertainty.samples = 10;
+    c.uncertainty.method = facesim::case::uncertainty::Method::Reduced;
+    c
+}
+
+static REDUCED_RUN: std::sync::OnceLock<Outcome> = std::sync::OnceLock::new();
+
+fn reduced_run() -> &'static Outcome {
+    REDUCED_RUN.get_or_init(|| run(reduced_case(), "facesim-unc-reduced12"))
+}
+
 use common::{band_columns, report_json as json};
 
 #[test]
@@ -163,19 +178,16 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
 #[test]
 fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
     use facesim::case::uncertainty::Method;
-    let mut full = case();
-    full.uncertainty.samples = 10;
+    let mut full = reduced_case();
     full.uncertainty.method = Method::Full;
-    let mut reduced = full.clone();
-    reduced.uncertainty.method = Method::Reduced;
     let a = run(full, "facesim-unc-full12");
-    let b = run(reduced, "facesim-unc-reduced12");
-    let (ua, ub) = (&json(&a)["uncertainty"], &json(&b)["uncertainty"]);
+    let b = reduced_run();
+    let (ua, ub) = (&json(&a)["uncertainty"], &json(b)["uncertainty"]);
     assert_eq!(ua["method"], "full");
     assert_eq!(ub["method"], "reduced");
     assert_eq!(ua["draws"], ub["draws"], "the same draws");
     let models = ub["reduced"].as_array().unwrap();
-    let tet = &json(&b)["tet"];
+    let tet = &json(b)["tet"];
     let slides = tet["mucosa_nodes"].as_u64().unwrap() + tet["contact_nodes"].as_u64().unwrap() > 0;
     assert_eq!(
         models.len(),
@@ -245,4 +257,122 @@ fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
     eprintln!(
         "reduced vs full: largest band difference {largest:.2e} mm, face bound {bound:.2e} mm, landmark bounds {lb}"
     );
+}
+
+/// Issue 28 item 1: the run stores its reduced models beside plan_basis.bin, and `replan` with
+/// new tissue parameters answers from the stored file within its certified bound of a full run
+/// with those parameters; a θ outside the trained box, a new plan with new tissues, a file of
+/// another face, version or length are refused in one line naming the file.
+#[test]
+fn the_stored_model_re_solves_new_tissues_within_its_bound_of_a_full_run() {
+    use facesim::commands::replan;
+    use facesim::model::reduced::file;
+    let b = reduced_run();
+    let dir = &b.out_dir;
+    let path = dir.join(file::FILE_NAME);
+    let basis = facesim::plan::file::read(&dir.join(facesim::plan::file::FILE_NAME)).unwrap();
+    let stored = file::read(&path, &basis.face_pre).unwrap();
+    assert!(!stored.models.is_empty());
+    // Written and read again, the same models to the bit.
+    let copy = common::kept_dir("facesim-reduced-copy").join(file::FILE_NAME);
+    file::write(&copy, &stored).unwrap();
+    assert_eq!(file::read(&copy, &basis.face_pre).unwrap(), stored);
+
+    // Muscle 14× and skin 28× dark fat (default boxes 1.7–15, 5–30), ν 0.46: the reduced
+    // answer against a full run.
+    let case = reduced_case();
+    let (muscle, skin) = (
+        14.0 * case.tet.fat_dark.youngs_kpa,
+        28.0 * case.tet.fat_dark.youngs_kpa,
+    );
+    let plan_dir = common::kept_dir("facesim-reduced-plan");
+    let plan = plan_dir.join("tissue.toml");
+    let nu = 0.46;
+    std::fs::write(
+        &plan,
+        format!(
+            "[tet.muscle]\nyoungs_kpa = {muscle}\npoisson = {nu}\n[tet.skin]\nyoungs_kpa = {skin}\npoisson = {nu}\n[tet.fat_dark]\npoisson = {nu}\n[tet.fat_bright]\npoisson = {nu}\n"
+        ),
+    )
+    .unwrap();
+    let r = replan::replan(dir, &plan, Some(&plan_dir.join("out"))).unwrap();
+    let t = r.report.replan.as_ref().unwrap().tissue.clone().unwrap();
+    assert_eq!(t.materials[1].1.youngs_kpa, muscle);
+    let mut full = case.clone();
+    full.uncertainty.samples = 0;
+    full.tet.muscle.youngs_kpa = muscle;
+    full.tet.skin.youngs_kpa = skin;
+    for m in [
+        &mut full.tet.skin,
+        &mut full.tet.muscle,
+        &mut full.tet.fat_dark,
+        &mut full.tet.fat_bright,
+    ] {
+        m.poisson = nu;
+    }
+    let f = run(full, "facesim-reduced-full-muscle");
+    let err = f
+        .face_post
+        .vertices
+        .iter()
+        .zip(&r.face_post)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    let change = b
+        .face_post
+        .vertices
+        .iter()
+        .zip(&f.face_post.vertices)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    eprintln!(
+        "replan muscle {muscle}, skin {skin} kPa, ν {nu}: face moves {change:.3} mm from the run's, reduced vs full {err:.2e} mm, bound {:.3} mm",
+        t.bound_mm
+    );
+    assert!(err <= t.bound_mm, "error {err} > bound {}", t.bound_mm);
+    assert!(
+        change > 10.0 * err,
+        "the change ({change}) is resolved, not noise ({err})"
+    );
+
+    // Refused: outside the box (ν 0.3 under the default 0.45–0.49), nothing written.
+    let refuse = |text: &str, want: &str| {
+        std::fs::write(&plan, text).unwrap();
+        let dest = plan_dir.join("refused");
+        let Err(e) = replan::replan(dir, &plan, Some(&dest)) else {
+            panic!("{text} was answered")
+        };
+        let e = e.to_string();
+        assert!(e.contains(want) && e.contains("tissue.toml"), "{e}");
+        assert!(!dest.exists(), "{e}");
+    };
+    refuse("[tet.skin]\npoisson = 0.3\n", "outside the trained range");
+    refuse("[tet.skin]\nskin_size_mm = 3\n", "unknown field");
+    let mut moved = basis.run_plan.clone();
+    moved[0].translate[0] += 1.0;
+    #[derive(serde::Serialize)]
+    struct Plan {
+        osteotomy: Vec<facesim::case::Osteotomy>,
+    }
+    let mut text = toml::to_string(&Plan { osteotomy: moved }).unwrap();
+    text.push_str("[tet]\nsliding = false\n");
+    refuse(&text, "at the run's plan only");
+
+    // Another face, version, length: one line naming the file.
+    let mut other = basis.face_pre.clone();
+    other[0][0] += 1e-9;
+    let e = file::read(&path, &other).unwrap_err().to_string();
+    assert!(
+        e.contains("another face") && e.contains(file::FILE_NAME),
+        "{e}"
+    );
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&copy, &bytes[..bytes.len() - 8]).unwrap();
+    let e = file::read(&copy, &basis.face_pre).unwrap_err().to_string();
+    assert!(e.contains("truncated reduced model"), "{e}");
+    let mut versioned = bytes.clone();
+    versioned[16] ^= 0x20; // the version string's first byte
+    std::fs::write(&copy, &versioned).unwrap();
+    let e = file::read(&copy, &basis.face_pre).unwrap_err().to_string();
+    assert!(e.contains("written by facesim") && !e.contains('\n'), "{e}");
 }

@@ -190,6 +190,7 @@ pub(crate) fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_pa
 
 /// report.html (docs/report-page.md): the face and skull before and after, report.json's key
 /// figures and warnings; re-planning sliders once the run has a plan basis.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn write_page(
     dir: &Path,
     scene: &Scene,

@@ -1,35 +1,75 @@
 //! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/case.md): the face outputs of `run` for
-//! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving.
+//! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving; or, with `[tet]`
+//! tissue parameters in PLAN.toml, for new tissues at the run's plan from the reduced model it
+//! stored (docs/reduced.md "Re-solving from the stored model").
 
 use super::outputs;
-use crate::case::{Osteotomy, Region};
+use crate::case::{Osteotomy, Region, TissueElastic};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
 use crate::plan::{PlanBasis, file};
-use crate::report::{self, ReplanReport, Report};
+use crate::report::{self, ReplanReport, Report, TissueReplan};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
-#[derive(Deserialize)]
+/// A PLAN.toml: the `[[osteotomy]]` list (case.toml's form) and, optionally, new tissue
+/// parameters (`[tet]`: `sliding` and `[tet.skin]` … with `youngs_kpa` / `poisson`, any subset).
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct PlanFile {
+pub struct NewPlan {
     #[serde(default)]
-    osteotomy: Vec<Osteotomy>,
+    pub osteotomy: Vec<Osteotomy>,
+    pub tet: Option<TissueChange>,
 }
 
-/// The `[[osteotomy]]` list of a PLAN.toml (case.toml's form; nothing else in the file).
-pub fn read_plan(path: &Path) -> Result<Vec<Osteotomy>> {
+/// PLAN.toml's `[tet]`: what changes from the run's tissue parameters.
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TissueChange {
+    pub sliding: Option<bool>,
+    pub skin: Option<MaterialChange>,
+    pub muscle: Option<MaterialChange>,
+    pub fat_dark: Option<MaterialChange>,
+    pub fat_bright: Option<MaterialChange>,
+}
+
+#[derive(Clone, Copy, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialChange {
+    pub youngs_kpa: Option<f64>,
+    pub poisson: Option<f64>,
+}
+
+impl TissueChange {
+    /// `run`'s materials (`Tet::tissues` order) and sliding with these changes.
+    pub fn apply(&self, run: [TissueElastic; 4], sliding: bool) -> ([TissueElastic; 4], bool) {
+        let mut t = run;
+        for (m, c) in t
+            .iter_mut()
+            .zip([&self.skin, &self.muscle, &self.fat_dark, &self.fat_bright])
+        {
+            if let Some(c) = c {
+                m.youngs_kpa = c.youngs_kpa.unwrap_or(m.youngs_kpa);
+                m.poisson = c.poisson.unwrap_or(m.poisson);
+            }
+        }
+        (t, self.sliding.unwrap_or(sliding))
+    }
+}
+
+/// A PLAN.toml.
+pub fn read_plan(path: &Path) -> Result<NewPlan> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::input(path, e))?;
     plan_from_text(&text, path)
 }
 
-/// The `[[osteotomy]]` list of PLAN.toml text as if read from `path` (relative file names in it
-/// resolve against `path`'s directory; errors name `path`).
-pub fn plan_from_text(text: &str, path: &Path) -> Result<Vec<Osteotomy>> {
+/// PLAN.toml text as if read from `path` (relative file names in it resolve against `path`'s
+/// directory; errors name `path`).
+pub fn plan_from_text(text: &str, path: &Path) -> Result<NewPlan> {
     let mut table: toml::Table = toml::from_str(text).map_err(|e| Error::input(path, e))?;
     let dir = path.parent().unwrap_or(Path::new(""));
     crate::slicer::resolve_plan_files(&mut table, dir, path)?;
-    let mut plan: PlanFile = toml::Value::Table(table)
+    let mut plan: NewPlan = toml::Value::Table(table)
         .try_into()
         .map_err(|e: toml::de::Error| Error::input(path, e.message()))?;
     // Mask and surface files, like case.toml's, are relative to the file that names them.
@@ -43,7 +83,25 @@ pub fn plan_from_text(text: &str, path: &Path) -> Result<Vec<Osteotomy>> {
             *p = dir.join(&*p);
         }
     }
-    Ok(plan.osteotomy)
+    if let Some(t) = &plan.tet {
+        let bad = [&t.skin, &t.muscle, &t.fat_dark, &t.fat_bright]
+            .into_iter()
+            .zip(crate::case::Tet::TISSUES)
+            .find_map(|(m, name)| {
+                let m = (*m)?;
+                if m.youngs_kpa.is_some_and(|e| !(e > 0.0 && e.is_finite())) {
+                    Some(format!("[tet.{name}] youngs_kpa must be positive"))
+                } else if m.poisson.is_some_and(|nu| !(0.0..0.5).contains(&nu)) {
+                    Some(format!("[tet.{name}] poisson must be in [0, 0.5)"))
+                } else {
+                    None
+                }
+            });
+        if let Some(msg) = bad {
+            return Err(Error::input(path, msg));
+        }
+    }
+    Ok(plan)
 }
 
 /// The basis's prediction for `plan`, a bad plan named as `plan_file`'s error.
@@ -77,17 +135,77 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
     replan_with(run_dir, &basis, &plan, plan_file, dest)
 }
 
+/// The face for PLAN.toml's tissue change at the run's plan, from the run's reduced_model.bin,
+/// and what report.json says of it. A θ outside the trained box or another plan is refused: it
+/// needs a full run.
+fn tissue_face(
+    run_dir: &Path,
+    basis: &PlanBasis,
+    plan: &NewPlan,
+    change: &TissueChange,
+    plan_file: &Path,
+) -> Result<(Vec<[f64; 3]>, TissueReplan)> {
+    use crate::model::reduced::file as stored;
+    let same = |a: &[Osteotomy], b: &[Osteotomy]| {
+        serde_json::to_value(a)
+            .ok()
+            .is_some_and(|x| Some(x) == serde_json::to_value(b).ok())
+    };
+    if !plan.osteotomy.is_empty() && !same(&plan.osteotomy, &basis.run_plan) {
+        return Err(Error::input(
+            plan_file,
+            "[tet] changes are answered at the run's plan only (the reduced model was built for it): leave out [[osteotomy]] or give the run's plan unchanged; new tissues with a new plan need `facesim run`",
+        ));
+    }
+    let path = run_dir.join(stored::FILE_NAME);
+    let models = stored::read(&path, &basis.face_pre)?;
+    let (tissues, sliding) = change.apply(models.tissues, models.sliding);
+    let f = models.face(&tissues, sliding).map_err(|e| {
+        Error::input(
+            plan_file,
+            format!("{e}: not answered by the reduced model (no extrapolation); run the case with these values instead"),
+        )
+    })?;
+    let face = basis
+        .face_pre
+        .iter()
+        .zip(&f.displacement)
+        .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+        .collect();
+    let named = |i: usize| crate::case::Tet::TISSUES[i].to_string();
+    Ok((
+        face,
+        TissueReplan {
+            materials: (0..4).map(|i| (named(i), tissues[i])).collect(),
+            sliding,
+            bound_mm: f.bound_mm,
+            relative_energy_bound: f.relative_energy_bound,
+        },
+    ))
+}
+
 /// [`replan`] for a plan already read (`plan_file` names it in errors and the report) and the
 /// run's basis already read from `run_dir`. The run's report.json must be there (its name, case
 /// and landmarks carry over): missing or unreadable, it is an error naming it.
 pub fn replan_with(
     run_dir: &Path,
     basis: &PlanBasis,
-    plan: &[Osteotomy],
+    new: &NewPlan,
     plan_file: &Path,
     dest: Option<&Path>,
 ) -> Result<Replanned> {
-    let face_post = predict_plan(basis, plan, plan_file)?;
+    let (face_post, tissue, plan) = match &new.tet {
+        Some(change) => {
+            let (face, t) = tissue_face(run_dir, basis, new, change, plan_file)?;
+            (face, Some(t), basis.run_plan.clone())
+        }
+        None => (
+            predict_plan(basis, &new.osteotomy, plan_file)?,
+            None,
+            new.osteotomy.clone(),
+        ),
+    };
+    let plan = plan.as_slice();
     let out_dir = dest
         .map(Path::to_path_buf)
         .unwrap_or_else(|| run_dir.join("replan"));
@@ -139,6 +257,7 @@ pub fn replan_with(
         basis_model: basis.model.clone(),
         exact: basis.exact,
         osteotomy: plan.to_vec(),
+        tissue,
     };
     let report = report::assemble(
         run_report.name,

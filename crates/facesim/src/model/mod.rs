@@ -53,6 +53,15 @@ const REDUCED_MAX_SIZE: usize = 12;
 /// The predicted face and the model that predicted it.
 pub type Prediction = Predicted<Solved>;
 
+/// How [`Prediction::solve_at`] answered.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Answer {
+    /// By the reduced model, within this certified bound (mm) of the full model's face.
+    Reduced { bound_mm: f64 },
+    /// By a full solve, and why the reduced model did not answer.
+    Full { why: String },
+}
+
 /// Build the case's model on the scene, solve its plan and carry the answer to the face.
 pub fn predict(
     scene: &Scene,
@@ -80,6 +89,46 @@ impl Prediction {
             Solved::Tet(Some(v)) => v.resolve(scene, case, &self.skin),
             Solved::Tet(None) => Ok(self.face_post.vertices.clone()),
         }
+    }
+
+    /// The face with `case`'s tissue parameters (as [`Prediction::resolve`]; the plan and mesh
+    /// settings must be this run's): from `reduced` when its θ is inside the trained box and the
+    /// certified bound is within `tolerance_mm`, else by a full solve, with the reason
+    /// (docs/reduced.md "Solve at θ"). Never extrapolated.
+    pub fn solve_at(
+        &self,
+        scene: &Scene,
+        case: &Case,
+        reduced: Option<&reduced::ReducedModels>,
+        tolerance_mm: f64,
+    ) -> Result<(Vec<[f64; 3]>, Answer)> {
+        let why = match reduced.map(|r| {
+            r.model(case.tet.sliding)
+                .and_then(|m| m.face_of(&case.tet.tissues()))
+        }) {
+            None => "no reduced model".to_string(),
+            Some(Err(e)) => e.to_string(),
+            Some(Ok(f)) if f.bound_mm <= tolerance_mm => {
+                let face = self
+                    .skin
+                    .vertices
+                    .iter()
+                    .zip(&f.displacement)
+                    .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
+                    .collect();
+                return Ok((
+                    face,
+                    Answer::Reduced {
+                        bound_mm: f.bound_mm,
+                    },
+                ));
+            }
+            Some(Ok(f)) => format!(
+                "the certified bound {:.3} mm exceeds the tolerance {tolerance_mm} mm",
+                f.bound_mm
+            ),
+        };
+        Ok((self.resolve(scene, case)?, Answer::Full { why }))
     }
 
     /// The certified reduced models of this prediction for `case`'s tissue-parameter ranges
@@ -182,9 +231,14 @@ impl Prediction {
     }
 
     /// Whether `[tet] sliding` can change the answer: the mesh has mucosa or lip–tooth contact
-    /// nodes to slide.
+    /// nodes to slide, or bone nodes released at the saw lines (which slide with it and are
+    /// free without it; counting only the first two let one reduced model answer both states on
+    /// the large phantom, 12 mm off for sliding off: found by `facesim bench reduced`).
     pub(crate) fn sliding_matters(&self) -> bool {
-        matches!(&self.solved, Solved::Tet(Some(v)) if v.report.mucosa_nodes + v.report.contact_nodes > 0)
+        // Sliding holds the mucosa and contact nodes tangentially, and the bone nodes released
+        // at the saw lines (`tet::conditions::release_at_cuts`): free without it.
+        matches!(&self.solved, Solved::Tet(Some(v))
+            if v.report.mucosa_nodes + v.report.contact_nodes + v.report.released_at_cuts > 0)
     }
 
     /// The model's own files beside the face outputs: the springs (C1; springs.ply), the

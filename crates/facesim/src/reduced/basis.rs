@@ -44,10 +44,6 @@ pub struct Basis {
     pub vectors: Vec<Vec<f64>>,
     /// Everything the online solve and its bound need (and all a stored model keeps).
     pub form: OnlineForm,
-    /// The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
-    /// grows: [`Basis::build`] drops it (two vectors per term and basis vector: most of the
-    /// model's memory).
-    space: Option<RieszSpace>,
     pub history: Vec<GreedyStep>,
     /// Factorisations of the full model the build took (X and one per snapshot).
     pub full_factorisations: usize,
@@ -115,19 +111,21 @@ impl Basis {
                 riesz_norms: Vec::new(),
                 unknowns: sys.unknowns(),
             },
-            space: Some(RieszSpace::default()),
             history: Vec::new(),
             full_factorisations: 1,
             riesz_solves: q,
         };
+        // The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
+        // grows (two vectors per term and basis vector: most of the build's memory).
+        let mut space = RieszSpace::default();
         for (r, g) in solve_columns(&x, &loads).into_iter().zip(&loads) {
-            basis.push_riesz(r, g.clone());
+            basis.push_riesz(&mut space, r, g.clone());
         }
         // Riesz representers X⁻¹ A_q v_n, kept for the new vectors' inner products.
         let mut snapshot = solve_columns(&x, &[sys.rhs(theta_bar)]).remove(0);
         basis.riesz_solves += 1;
         loop {
-            if !basis.add(sys, &x, &loads, snapshot)? {
+            if !basis.add(sys, &x, &loads, &mut space, snapshot)? {
                 break;
             }
             progress(&format!(
@@ -158,15 +156,10 @@ impl Basis {
             basis.full_factorisations += 1;
             snapshot = solve_columns(&k, &[sys.rhs(worst)]).remove(0);
         }
-        basis.space = None;
         Ok((basis, x))
     }
 
-    fn push_riesz(&mut self, rho: Vec<f64>, g: Vec<f64>) {
-        let space = self
-            .space
-            .as_mut()
-            .expect("the Riesz space is kept while the basis grows");
+    fn push_riesz(&mut self, space: &mut RieszSpace, rho: Vec<f64>, g: Vec<f64>) {
         let (coords, norm) = space.push(rho, g);
         self.form.riesz.push(coords);
         self.form.riesz_norms.push(norm);
@@ -179,6 +172,7 @@ impl Basis {
         sys: &Affine,
         x: &Cholesky<f64>,
         loads: &[Vec<f64>],
+        space: &mut RieszSpace,
         mut u: Vec<f64>,
     ) -> Result<bool> {
         let q = sys.terms();
@@ -229,7 +223,7 @@ impl Basis {
             self.form.loads[k].push(f);
         }
         for (r, g) in new_riesz.into_iter().zip(av) {
-            self.push_riesz(r, g);
+            self.push_riesz(space, r, g);
         }
         Ok(true)
     }

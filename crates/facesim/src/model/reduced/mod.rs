@@ -5,7 +5,7 @@
 
 pub mod file;
 
-use crate::case::{Case, Tet};
+use crate::case::{Case, Tet, TissueElastic};
 use crate::error::{Error, Result};
 use crate::reduced::{LinearFace, OnlineForm, ReducedReport};
 
@@ -44,16 +44,23 @@ pub struct ReducedFace {
     pub bound_mm: f64,
     /// The energy-norm bound relative to the reduced solution's energy norm.
     pub relative_energy_bound: f64,
+    /// Per output the model was built with (the landmarks), the bound on its displacement's
+    /// error (mm).
+    pub landmark_bounds_mm: Vec<f64>,
 }
 
 impl ReducedTet {
     /// The parameter vector θ of `tet`'s materials, in the terms' order.
     pub fn theta(&self, tet: &Tet) -> Vec<f64> {
-        let m = tet.tissues();
+        self.theta_of(&tet.tissues())
+    }
+
+    /// θ of the tissues' materials (`Tet::tissues` order).
+    pub fn theta_of(&self, tissues: &[TissueElastic; 4]) -> Vec<f64> {
         self.terms
             .iter()
             .map(|(s, is_lambda)| {
-                let (l, mu) = m[*s].lame();
+                let (l, mu) = tissues[*s].lame();
                 if *is_lambda { l } else { mu }
             })
             .collect()
@@ -74,11 +81,15 @@ impl ReducedTet {
                 "reduced model: asked for the other sliding state than it was built for",
             ));
         }
-        let theta = self.theta(&case.tet);
-        if let Some(msg) = self.outside(&theta) {
+        self.solve_theta(&self.theta(&case.tet))
+    }
+
+    /// The online solve at θ, refused outside the trained box.
+    fn solve_theta(&self, theta: &[f64]) -> Result<crate::reduced::Online> {
+        if let Some(msg) = self.outside(theta) {
             return Err(Error::config(format!("reduced model: {msg}")));
         }
-        self.form.solve(&theta)
+        self.form.solve(theta)
     }
 
     /// Why θ is outside the trained box (None: inside, to a relative 1e-9).
@@ -99,12 +110,27 @@ impl ReducedTet {
 
     /// The face displacement with `case`'s tissue parameters and its certified bound.
     pub fn face(&self, case: &Case) -> Result<ReducedFace> {
-        let o = self.solve(case)?;
+        if case.tet.sliding != self.sliding {
+            return Err(Error::config(
+                "reduced model: asked for the other sliding state than it was built for",
+            ));
+        }
+        self.face_of(&case.tet.tissues())
+    }
+
+    /// The face displacement for the tissues' materials (`Tet::tissues` order) and its bound.
+    pub fn face_of(&self, tissues: &[TissueElastic; 4]) -> Result<ReducedFace> {
+        let o = self.solve_theta(&self.theta_of(tissues))?;
         let c: Vec<f64> = o.coefficients.iter().copied().collect();
         Ok(ReducedFace {
             displacement: self.face.all(&c),
             bound_mm: self.face_gain * o.energy_bound,
             relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
+            landmark_bounds_mm: self
+                .output_gains
+                .iter()
+                .map(|g| g * o.energy_bound)
+                .collect(),
         })
     }
 
@@ -177,25 +203,38 @@ pub struct ReducedModels {
 }
 
 impl ReducedModels {
-    /// The model for `case`'s sliding state (the only one when sliding holds nothing) and its
-    /// coefficients and bound.
+    /// The model for the sliding state `sliding` (the only one when sliding holds nothing).
+    pub fn model(&self, sliding: bool) -> Result<&ReducedTet> {
+        pick(&self.models, self.sliding_matters, sliding)
+    }
+
+    /// The model for `case`'s sliding state and its coefficients and bound.
     pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, f64)> {
-        let i = match self
+        let m = self.model(case.tet.sliding)?;
+        let i = self
             .models
             .iter()
-            .position(|m| m.sliding == case.tet.sliding)
-        {
-            Some(i) => i,
-            None if !self.sliding_matters && !self.models.is_empty() => 0,
-            None => {
-                return Err(Error::config(
-                    "reduced model: no model for this sliding state",
-                ));
-            }
-        };
+            .position(|x| std::ptr::eq(x, m))
+            .unwrap_or(0);
         let mut c = case.clone();
-        c.tet.sliding = self.models[i].sliding;
-        let (coefficients, bound) = self.models[i].coefficients(&c)?;
+        c.tet.sliding = m.sliding;
+        let (coefficients, bound) = m.coefficients(&c)?;
         Ok((i, coefficients, bound))
+    }
+}
+
+/// The model of `models` for the sliding state `sliding`: the one built for it, else the only
+/// one when sliding holds no node.
+pub(crate) fn pick(
+    models: &[ReducedTet],
+    sliding_matters: bool,
+    sliding: bool,
+) -> Result<&ReducedTet> {
+    match models.iter().find(|m| m.sliding == sliding) {
+        Some(m) => Ok(m),
+        None if !sliding_matters && !models.is_empty() => Ok(&models[0]),
+        None => Err(Error::config(format!(
+            "reduced model: none for sliding = {sliding} (the run sampled only the other state)"
+        ))),
     }
 }
