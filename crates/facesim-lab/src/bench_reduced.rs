@@ -606,10 +606,12 @@ fn errors(
 
 /// Issue 28 item 7's targets against what was measured.
 fn targets(b: &ReducedBench) -> Vec<Target> {
+    // Over the online θ, the error θ and the many-sample band's samples (its report.json).
     let largest_bound = b
         .errors
         .iter()
         .map(|e| e.bound_mm)
+        .chain(b.band.largest_bound_mm)
         .fold(b.online.largest_face_bound_mm, f64::max);
     let worst_vertex = b.errors.iter().map(|e| e.max_vertex_mm).fold(0.0, f64::max);
     vec![
@@ -656,8 +658,8 @@ fn targets(b: &ReducedBench) -> Vec<Target> {
         Target {
             target: "certified face error ≤ 0.01 mm over the default parameter box".into(),
             measured: format!(
-                "largest bound {largest_bound:.3} mm over {} θ (true worst vertex {worst_vertex:.2e} mm)",
-                b.online.samples + b.errors.len()
+                "largest bound {largest_bound:.3} mm over {} θ (the band's, the online and the error θ; true worst vertex {worst_vertex:.2e} mm at the error θ)",
+                b.band.samples + b.online.samples + b.errors.len()
             ),
             met: largest_bound <= 0.01,
         },
@@ -747,7 +749,7 @@ pub fn summary(b: &ReducedBench) -> String {
     }
     let on = &b.online;
     md += &format!(
-        "| online: coefficients + bound (`ReducedModels::solve`), median (p90) of {} θ | {:.1} µs ({:.1}) | {:.1}× the memory pass |\n",
+        "| online: coefficients + bound (`ReducedModels::solve`), median (p90) of {} θ | {:.1} µs ({:.1}) | {:.3}× the memory pass |\n",
         on.samples,
         on.solve_us,
         on.solve_p90_us,
