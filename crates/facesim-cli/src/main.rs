@@ -159,14 +159,18 @@ enum Cmd {
     /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
     /// run's output directory; --case: the case.toml, default data-samples/real/case.toml);
     /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md);
-    /// `linearisation` = the C1 models' plan basis against full solves, per move size (--case).
+    /// `linearisation` = the C1 models' plan basis against full solves, per move size (--case);
+    /// `reduced` = the certified reduced model's offline and online costs, the many-sample band
+    /// against the full one and its error against full solves (--case: the case directory,
+    /// default data-samples/real; --out: where bench_reduced.json and .md go; docs/performance.md).
     Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom", "linearisation"])]
+        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom", "linearisation", "reduced"])]
         what: String,
-        /// Output directory for `scaling`, `embed` and `dicom`.
+        /// Output directory for `scaling`, `embed`, `dicom` and `reduced`.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// `scaling`, `embed`: small sizes only; `dicom`: one read per syntax.
+        /// `scaling`, `embed`: small sizes only; `dicom`: one read per syntax; `reduced`: a
+        /// coarse mesh and fewer samples (< 3 min on data-samples/jaws).
         #[arg(long)]
         quick: bool,
         /// Triangles in the mesh.
@@ -175,7 +179,7 @@ enum Cmd {
         /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.sh).
         #[arg(long)]
         export: Option<PathBuf>,
-        /// `replan`: the case whose run builds the basis.
+        /// `replan`: the case whose run builds the basis; `reduced`: the case measured.
         #[arg(long)]
         case: Option<PathBuf>,
     },
@@ -494,6 +498,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             "linearisation" => cmd_bench_linearisation(case),
             "embed" => cmd_bench_embed(out, quick),
             "dicom" => cmd_bench_dicom(out, quick),
+            "reduced" => cmd_bench_reduced(case, out, quick),
             _ => cmd_bench_fem(triangles, export.as_deref()),
         },
         Cmd::Render {
@@ -642,6 +647,19 @@ fn cmd_bench_replan(case: Option<PathBuf>, out: Option<PathBuf>) -> Result<()> {
         b.run_s,
         b.basis_s,
         b.run_s * 1e3 / b.predict_ms
+    );
+    Ok(())
+}
+
+fn cmd_bench_reduced(case: Option<PathBuf>, out: Option<PathBuf>, quick: bool) -> Result<()> {
+    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/real"));
+    let out = out.ok_or_else(|| Error::config("bench reduced: --out DIR is required"))?;
+    let b = facesim_lab::bench_reduced::run(&case, &out, quick, &Progress::auto())?;
+    print!("{}", facesim_lab::bench_reduced::summary(&b));
+    println!(
+        "written: {}, {}",
+        out.join("bench_reduced.json").display(),
+        out.join("bench_reduced.md").display()
     );
     Ok(())
 }

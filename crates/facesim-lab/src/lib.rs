@@ -12,6 +12,7 @@ pub mod bench_dicom;
 pub mod bench_embed;
 pub mod bench_fem;
 pub mod bench_linearisation;
+pub mod bench_reduced;
 pub mod bench_replan;
 pub mod calculix;
 pub mod dynamics;

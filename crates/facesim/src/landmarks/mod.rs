@@ -318,7 +318,7 @@ pub struct Analysis {
 }
 
 /// Landmarks, measurements and region statistics of one prediction.
-pub(crate) fn analyse(
+pub fn analyse(
     face_pre: &Mesh,
     face_post: &Mesh,
     skull: Option<&Mesh>,
