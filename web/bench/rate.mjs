@@ -6,7 +6,8 @@
 // resolution (facesim.options.dragPixelRatio = 1), each with the skull shown (the face transparent
 // over it) and hidden; full resolution without the static-skull cache (options.cache = false);
 // dragging with every face triangle drawn (options.lod = false: no simplified dragging face);
-// then one full render alone. Per case: updates per second (wall clock) and
+// then one full render alone; with tissue sliders (a run with the reduced model), a tissue slider
+// drag with the skull hidden and shown. Per case: updates per second (wall clock) and
 // the CPU time of all Chromium processes per update (utime + stime from /proc), which a loaded
 // machine inflates far less than the wall clock.
 import { openReport } from "../test/browser.mjs";
@@ -82,6 +83,22 @@ try {
         }
         return { updates: i, wall_ms: performance.now() - t0, canvas: [gl.drawingBufferWidth, gl.drawingBufferHeight] };
       },
+      // A tissue slider drag (docs/report-page.md "Tissue sliders"): an input event on the
+      // muscle/fat slider, then what the page's animation frame does (setTissue({}) applies
+      // it and draws at the dragging resolution); pages without a reduced model: null.
+      tissueRate(ms) {
+        const r = document.querySelector("input[data-tissue=muscle_fat]");
+        if (!r || !api.setTissue) return null;
+        let i = 0;
+        const t0 = performance.now();
+        while (performance.now() - t0 < ms) {
+          r.value = String(Math.round(100 + 90 * Math.sin(0.1 * i++)));
+          r.dispatchEvent(new Event("input"));
+          api.setTissue({});
+          readBack();
+        }
+        return { updates: i, wall_ms: performance.now() - t0, canvas: [gl.drawingBufferWidth, gl.drawingBufferHeight] };
+      },
       render(k) {
         const t0 = performance.now();
         for (let i = 0; i < k; i++) {
@@ -110,6 +127,15 @@ try {
   ]) {
     await page.evaluate((...a) => window.__bench.setup(...a), full, skull, cache, lod ?? true);
     out[name] = await measure("rate", ms);
+  }
+  if (out.info.tissue) {
+    for (const [name, full, skull] of [
+      ["tissue_drag_face_only", false, false],
+      ["tissue_drag", false, true],
+    ]) {
+      await page.evaluate((...a) => window.__bench.setup(...a), full, skull);
+      out[name] = await measure("tissueRate", ms);
+    }
   }
   await page.evaluate(() => window.__bench.setup(false, true));
   out.render_only_full = await measure("render", 5);

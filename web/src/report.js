@@ -15,6 +15,7 @@ import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
 import { midsagittalCut, facialPart, pathData } from "./profile.js";
 import { STYLE } from "./style.js";
+import { materials, theta as thetaOf, outside, solveOnline, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -254,6 +255,8 @@ function main() {
   const faceNormal = faceAfter.geometry.getAttribute("normal");
   const faceColour = faceAfter.geometry.getAttribute("color");
   const current = facePosition.array;
+  // The tissue sliders' current answer (tissueAnswer; null: no reduced model).
+  let tissueResult = null;
   const state = { mode: "after", view: "profile-right", skull: false, colour: true, landmarks: true, tracing: true, colourBy: "displacement", max: 0 };
   // Viridis sampled finely once, as linear RGB (the shader lights linear colours and writes sRGB,
   // so an unshaded face would show the legend's sRGB colours).
@@ -369,7 +372,15 @@ function main() {
   // ones on the face shown, bony ones moved as the skull.
   function refreshLandmarks(plan) {
     if (plan) placeLandmarks(landmarks, faceTris, current, segmentMats, landmarkNow);
-    else landmarks.forEach((l, i) => landmarkNow.set(l.post, 3 * i));
+    else {
+      // The run's plan: bony landmarks as report.json has them, soft ones on the face shown when
+      // the tissue sliders changed it.
+      const changed = !!(tissueResult && tissueResult.delta);
+      if (changed) placeLandmarks(landmarks, faceTris, current, [], landmarkNow);
+      landmarks.forEach((l, i) => {
+        if (!changed || !l.anchor) landmarkNow.set(l.post, 3 * i);
+      });
+    }
     showMarkers(state.mode === "before" ? landmarkPre : landmarkNow);
   }
 
@@ -462,7 +473,11 @@ function main() {
       : "";
     const shown = labels.filter((e) => !e.hidden).map((e) => e.textContent);
     const lms = state.landmarks && shown.length > 0 ? `; landmarks labelled: ${shown.join(", ")}` : "";
-    canvas.setAttribute("aria-label", `3-D picture of ${what}${colour}, seen ${VIEW_TEXT[state.view] || "from a turned viewpoint"}; skull ${state.skull ? "shown through the skin" : "hidden"}${lms}.`);
+    const t = tissueResult && tissueResult.delta ? tissueResult.materials : null;
+    const tissues = t && state.mode !== "before"
+      ? `; tissues re-solved by the reduced model: ν ${t[2].poisson.toFixed(3)}, muscle/fat ${(t[1].youngs_kpa / t[2].youngs_kpa).toPrecision(3)}, skin/fat ${(t[0].youngs_kpa / t[2].youngs_kpa).toPrecision(3)}, mucosa ${tissueResult.sliding ? "sliding" : "attached"}`
+      : "";
+    canvas.setAttribute("aria-label", `3-D picture of ${what}${colour}, seen ${VIEW_TEXT[state.view] || "from a turned viewpoint"}; skull ${state.skull ? "shown through the skin" : "hidden"}${tissues}${lms}.`);
   }
 
   // ---- drawing: on demand, at most once an animation frame; coarser while dragging ----
@@ -514,14 +529,23 @@ function main() {
   }
   let frameWanted = false;
   let sliderMoved = false;
+  let tissueMoved = false;
   function requestFrame() {
     if (frameWanted) return;
     frameWanted = true;
     requestAnimationFrame(() => {
       frameWanted = false;
       // However many slider events came since the last frame, the face is re-planned once.
-      const slider = sliderMoved;
-      if (slider) {
+      const slider = sliderMoved || tissueMoved;
+      if (tissueMoved) {
+        tissueMoved = false;
+        updateTissue();
+        if (!sliderMoved) {
+          faceNow();
+          refreshLandmarks(plan);
+        }
+      }
+      if (sliderMoved) {
         sliderMoved = false;
         applyPlan(sliderPlan());
       }
@@ -717,9 +741,9 @@ function main() {
       setSliders(p);
       plan = null;
       sliderMoved = false;
-      current.set(facePost);
-      refreshFace();
+      faceNow();
       refreshSkull(null);
+      describeTissue();
       settleNow();
     });
     planBox.appendChild(reset);
@@ -754,9 +778,201 @@ function main() {
   }
   function applyPlan(p) {
     plan = p;
-    predictFace(facePre, basis.segments, p, current);
-    refreshFace();
+    faceNow();
     refreshSkull(p);
+    describeTissue();
+  }
+  /** The face shown: the plan's (the run's face_post without one), plus the tissue sliders'
+   *  change; then colours and normals. */
+  function faceNow() {
+    if (plan) predictFace(facePre, basis.segments, plan, current);
+    else current.set(facePost);
+    const d = tissueResult && tissueResult.delta;
+    if (d) {
+      const idx = tissue.vertices;
+      for (let i = 0, a = 0; i < idx.length; i++, a += 3) {
+        const p = 3 * idx[i];
+        current[p] += d[a];
+        current[p + 1] += d[a + 1];
+        current[p + 2] += d[a + 2];
+      }
+    }
+    refreshFace();
+  }
+
+  // ---- tissue sliders: the run's certified reduced model re-solved live (tissue.js) ----
+  // The reduced model is built at the run's plan, so the face shown is
+  // plan face + [reduced face(θ) − reduced face(θ̄)]: exact to the certified bound at the run's
+  // plan; for another plan the tissue change is the one computed at the run's plan.
+  const td = data.tissue;
+  const tissueBox = el("fieldset", { id: "tissue" });
+  tissueBox.appendChild(el("legend", {}, "tissues"));
+  const tissue = td ? tissueModels(td) : null;
+  const tissueValues = { poisson: null, muscle_fat: null, skin_fat: null, sliding: td ? td.sliding : false };
+  const tissueSliders = new Map();
+  const boundText = el("p", { class: "tissue-bound", id: "tissue-bound" });
+  const outsideText = el("p", { class: "why", id: "tissue-outside", role: "status" });
+  const planNote = el("p", { class: "hint", id: "tissue-plan" }, "The plan differs from the run's: the tissue change shown is the one computed at the run's plan (the reduced model's), not certified for this plan.");
+  outsideText.hidden = planNote.hidden = true;
+  if (!tissue) {
+    tissueBox.appendChild(
+      el("p", { class: "hint" }, data.model === "tet"
+        ? "Tissue sliders need the run's certified reduced model: run with [uncertainty] samples ≥ 64 (or method = \"reduced\") and the linear tet model (docs/reduced.md)."
+        : "Tissue sliders need the linear volumetric model (\"tet\") with its certified reduced model."),
+    );
+  } else {
+    tissueBox.appendChild(el("p", { class: "label" }, "certified reduced model"));
+    const nominal = td.tissues;
+    const runValue = { poisson: nominal[2].poisson, muscle_fat: nominal[1].youngs_kpa / nominal[2].youngs_kpa, skin_fat: nominal[0].youngs_kpa / nominal[2].youngs_kpa };
+    const LABELS = { poisson: ["ν", "Poisson's ratio of every soft tissue"], muscle_fat: ["muscle/fat", "Young's modulus of muscle over that of (dark) fat"], skin_fat: ["skin/fat", "Young's modulus of skin over that of (dark) fat"] };
+    const STEPS = 200;
+    const show = (key, v) => (key === "poisson" ? Number(v).toFixed(3) : Number(v).toPrecision(3));
+    for (const key of ["poisson", "muscle_fat", "skin_fat"]) {
+      const dist = td.parameters && td.parameters[key];
+      if (!dist || !(dist.uniform || dist.log_uniform)) continue;
+      const range = rangeWith(dist, runValue[key]);
+      const [lo, hi] = range.uniform || range.log_uniform;
+      const [label, title] = LABELS[key];
+      if (!(hi > lo)) {
+        tissueBox.appendChild(el("p", { class: "hint" }, `${label}: held at ${show(key, lo)} (a point range)`));
+        continue;
+      }
+      const l = el("label", { class: "slider tissue", title: `${title}: ${show(key, lo)}–${show(key, hi)}, the range the reduced model was trained on` });
+      // 200 steps (0.5 % of the range per arrow key; PageUp/PageDown 10 %).
+      const r = el("input", { type: "range", min: 0, max: STEPS, step: 1, value: String(Math.round(STEPS * rangeFraction(range, runValue[key]))) });
+      r.dataset.tissue = key;
+      const out = el("output", {}, show(key, runValue[key]));
+      r.setAttribute("aria-valuetext", out.textContent);
+      r.addEventListener("input", () => {
+        tissueValues[key] = rangeAt(range, Number(r.value) / STEPS);
+        out.textContent = show(key, tissueValues[key]);
+        r.setAttribute("aria-valuetext", out.textContent);
+        tissueMoved = true;
+        requestFrame();
+      });
+      l.append(`${label} `, r, out);
+      tissueBox.appendChild(l);
+      tissueSliders.set(key, { r, out, range, set: (v) => {
+        r.value = String(Math.round(STEPS * Math.min(Math.max(rangeFraction(range, v), 0), 1)));
+        out.textContent = show(key, v);
+        r.setAttribute("aria-valuetext", out.textContent);
+      } });
+    }
+    // Sliding on/off: only when the mesh has nodes that slide and both models were built.
+    if (td.sliding_matters && tissue.models.some((m) => m.sliding) && tissue.models.some((m) => !m.sliding)) {
+      const l = el("label");
+      const c = el("input", { type: "checkbox", id: "tissue-sliding" });
+      c.checked = td.sliding;
+      c.addEventListener("change", () => {
+        tissueValues.sliding = c.checked;
+        applyTissue();
+        settleNow();
+      });
+      l.append(c, " mucosa slides on the bone");
+      tissueBox.appendChild(l);
+      tissueSliders.set("sliding", { set: (v) => (c.checked = v) });
+    }
+    const reset = el("button", { type: "button", id: "tissue-reset" }, "the run's tissues");
+    reset.addEventListener("click", () => {
+      Object.assign(tissueValues, { poisson: null, muscle_fat: null, skin_fat: null, sliding: td.sliding });
+      for (const [key, s] of tissueSliders) s.set(key === "sliding" ? td.sliding : runValue[key]);
+      applyTissue();
+      settleNow();
+    });
+    tissueBox.append(boundText, outsideText, planNote, reset);
+  }
+  side.appendChild(tissueBox);
+
+  /** The models as the page uses them: face fields decoded, the run's model and its answer at
+   *  θ̄ (the reference the tissue change is taken from). */
+  function tissueModels(t) {
+    const models = t.models.map((m) => ({ ...m, liftF: f32(m.lift), columnsF: f32(m.columns) }));
+    const run = models.find((m) => m.sliding === t.sliding) || models[0];
+    const ref = solveOnline(run.form, run.form.theta_bar);
+    const refFace = reducedFace(run.liftF, run.columnsF, ref.coefficients);
+    return {
+      models,
+      run,
+      ref,
+      refFace,
+      vertices: u32(t.vertices),
+      work: new Float64Array(run.liftF.length),
+      modelFor: (sliding) => models.find((m) => m.sliding === sliding) || (t.sliding_matters ? null : models[0]),
+    };
+  }
+
+  /** The tissue sliders' answer for tissueValues: {nominal} (the run's own tissues: no change),
+   *  {outside: why} (outside the trained box: not answered, the face shows the run's tissues),
+   *  or the change of the face, its coefficients and certified bounds. */
+  function tissueAnswer() {
+    const mats = materials(td.tissues, tissueValues);
+    const same = mats.every((m, i) => m.youngs_kpa === td.tissues[i].youngs_kpa && m.poisson === td.tissues[i].poisson);
+    const model = tissue.modelFor(tissueValues.sliding);
+    if (same && (model === tissue.run || !td.sliding_matters)) return { nominal: true, materials: mats };
+    if (!model) return { outside: "no reduced model for this sliding state", materials: mats };
+    const th = thetaOf(model.terms, mats);
+    const why = outside(model.terms, model.theta_box, th);
+    if (why) return { outside: why, materials: mats, theta: th };
+    const o = solveOnline(model.form, th);
+    const face = reducedFace(model.liftF, model.columnsF, o.coefficients, tissue.work);
+    const delta = new Float32Array(face.length);
+    for (let a = 0; a < face.length; a++) delta[a] = face[a] - tissue.refFace[a];
+    // shown − full = [reduced(θ) − full(θ)] − [reduced(θ̄) − full(θ̄)] at the run's plan.
+    const refBound = tissue.ref.energyBound;
+    const landmarkBounds = {};
+    td.landmarks.forEach((label, i) => (landmarkBounds[label] = model.output_gains[i] * o.energyBound + tissue.run.output_gains[i] * refBound));
+    return {
+      materials: mats,
+      theta: th,
+      sliding: model.sliding,
+      coefficients: Array.from(o.coefficients),
+      energyBound: o.energyBound,
+      referenceEnergyBound: refBound,
+      faceBound: model.face_gain * o.energyBound + tissue.run.face_gain * refBound,
+      landmarkBounds,
+      delta,
+    };
+  }
+  function updateTissue() {
+    if (tissue) tissueResult = tissueAnswer();
+    describeTissue();
+  }
+  function applyTissue() {
+    updateTissue();
+    faceNow();
+    refreshLandmarks(plan);
+  }
+  const planDiffers = () =>
+    !!plan && !!basis && basis.segments.some((s) => {
+      const p = plan[s.name] || { translate: [0, 0, 0], rotate_deg: [0, 0, 0] };
+      return ["translate", "rotate_deg"].some((k) => [0, 1, 2].some((i) => (p[k] || [0, 0, 0])[i] !== s.runPlan[k][i]));
+    });
+  const setText = (e, text) => {
+    if (e.textContent !== text) e.textContent = text;
+  };
+  /** The bound line, the notice outside the trained box and the note for another plan; text is
+   *  rewritten only when it changes. */
+  function describeTissue() {
+    if (!tissue || !tissueResult) return;
+    const r = tissueResult;
+    const fmt2 = (v) => Number(v).toFixed(2);
+    if (r.outside) {
+      setText(outsideText, `Outside the range the reduced model was trained on (${r.outside}): not answered; the face shows the run's tissues.`);
+      setText(boundText, "");
+    } else if (r.nominal) {
+      setText(boundText, "The run's own tissues: the face is the full model's.");
+    } else {
+      const b = Object.values(r.landmarkBounds);
+      const prn = r.landmarkBounds.Prn;
+      setText(boundText,
+        `Re-solved by the certified reduced model: the face within ${fmt2(r.faceBound)} mm of the full model's for these tissues (certified, every vertex)` +
+        (prn !== undefined ? `; Prn within ${fmt2(prn)} mm` : "") +
+        (b.length ? `; every landmark within ${fmt2(Math.max(...b))} mm` : "") + ".");
+    }
+    const hideOutside = !r.outside;
+    if (outsideText.hidden !== hideOutside) outsideText.hidden = hideOutside;
+    const hideNote = !(planDiffers() && !r.nominal);
+    if (planNote.hidden !== hideNote) planNote.hidden = hideNote;
   }
 
   // ---- the profile tracing: the midsagittal cut before and after ----
@@ -993,6 +1209,45 @@ function main() {
       applyPlan(p);
       dragFrame(true);
     },
+    /** The tissue sliders: {poisson, muscle_fat, skin_fat, sliding} (a key left out keeps its
+     *  value; null: the run's). Applied and drawn before it returns, as a slider move is; returns
+     *  tissue(). A value outside the trained range is not answered: the page says so. */
+    setTissue(p) {
+      if (!tissue) throw new Error("report.html: no reduced model in this run, so no tissue sliders");
+      for (const k of Object.keys(p)) if (!(k in tissueValues)) throw new Error(`report.html: no tissue parameter '${k}' (poisson, muscle_fat, skin_fat, sliding)`);
+      Object.assign(tissueValues, p);
+      if (tissueValues.sliding === null) tissueValues.sliding = td.sliding;
+      for (const [key, s] of tissueSliders) {
+        if (key === "sliding") s.set(tissueValues.sliding);
+        else if (tissueValues[key] !== null) s.set(tissueValues[key]);
+      }
+      tissueMoved = false;
+      applyTissue();
+      dragFrame(true);
+      return window.facesim.tissue();
+    },
+    /** The tissue sliders' state: values, whether answered, the bounds (mm) and the reduced
+     *  coefficients; null without a reduced model. */
+    tissue() {
+      if (!tissue) return null;
+      const r = tissueResult || {};
+      return {
+        values: { ...tissueValues },
+        nominal: !!r.nominal,
+        outside: r.outside || null,
+        sliding: r.sliding ?? null,
+        theta: r.theta || null,
+        coefficients: r.coefficients || null,
+        energy_bound: r.energyBound ?? null,
+        reference_energy_bound: r.referenceEnergyBound ?? null,
+        face_bound_mm: r.faceBound ?? null,
+        landmark_bounds_mm: r.landmarkBounds || null,
+        plan_differs: planDiffers(),
+        text: boundText.textContent,
+        notice: outsideText.hidden ? null : outsideText.textContent,
+        plan_note: planNote.hidden ? null : planNote.textContent,
+      };
+    },
     /** The predicted face: LPS mm, flat [x0, y0, z0, x1, …], face_post order. */
     faceVertices() {
       return Array.from(current);
@@ -1049,12 +1304,14 @@ function main() {
         basis: basis ? basis.label : null,
         // Whether slider frames draw the static skull from the cache (frame_cache.js).
         frame_cache: cache.enabled,
+        tissue: !!tissue,
         view: state.view,
         mode: state.mode,
       };
     },
   };
 
+  updateTissue();
   refreshFace();
   refreshLandmarks(null);
   refreshTables();

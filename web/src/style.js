@@ -20,6 +20,8 @@ button{font:inherit;padding:3px 9px;border:1px solid #888;border-radius:4px;back
 button[aria-pressed=true]{background:#1a5fb4;border-color:#1a5fb4;color:#fff}
 button:focus-visible,input:focus-visible{outline:3px solid #e5a50a;outline-offset:1px}
 label.slider{display:grid;grid-template-columns:64px 1fr 64px;align-items:center}
+label.slider.tissue{grid-template-columns:82px 1fr 46px}
+p.tissue-bound{font-size:12.5px;color:#174;margin:4px 0}
 .label,.why{font-weight:bold;color:#a40}
 table{border-collapse:collapse;margin:2px 0 6px}
 caption{text-align:left;font-weight:600;padding:2px 0;font-size:14px}

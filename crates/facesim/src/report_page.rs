@@ -67,6 +67,38 @@ impl From<&crate::landmarks::HeadFrame> for PageFrame {
     }
 }
 
+/// The tissue sliders' data (issue 28 item 5; docs/report-page.md "Tissue sliders"): the run's
+/// certified reduced models, one per sliding state, re-solved live in the page.
+pub struct PageTissue<'a> {
+    /// The run's materials in `Tet::TISSUES` order (the reference θ̄ and the sliders' start).
+    pub tissues: [crate::case::TissueElastic; 4],
+    /// The run's `[tet] sliding`, and whether the mesh has nodes that slide at all.
+    pub sliding: bool,
+    pub sliding_matters: bool,
+    /// `[uncertainty]`'s distributions as the run used them: key ("poisson", "muscle_fat",
+    /// "skin_fat", "sliding") → `{"uniform": [a, b]}`, `{"log_uniform": [a, b]}` or
+    /// `{"probability": p}`: the sliders' ranges.
+    pub parameters: serde_json::Value,
+    /// The soft landmarks in the order of each model's `output_gains`.
+    pub landmarks: Vec<String>,
+    pub models: Vec<PageReduced<'a>>,
+}
+
+/// One reduced model as the page solves it (`model::reduced::ReducedTet`).
+pub struct PageReduced<'a> {
+    pub sliding: bool,
+    pub form: &'a crate::reduced::OnlineForm,
+    /// Per term: the tissue slot (`Tet::TISSUES`) and whether θ_q is λ (else μ).
+    pub terms: &'a [(usize, bool)],
+    /// The trained box of θ: lowest and highest per term; outside it the page answers nothing.
+    pub theta_box: &'a [Vec<f64>; 2],
+    /// Face error ≤ face_gain · Δ (mm); a soft landmark's ≤ output_gains\[i\] · Δ.
+    pub face_gain: f64,
+    pub output_gains: &'a [f64],
+    /// The face displacement: lift + Σ c_n columns\[n\] (mm per face vertex).
+    pub face: &'a crate::reduced::LinearFace,
+}
+
 /// Everything report.html shows (the default: nothing, no basis, no landmarks or regions).
 #[derive(Default)]
 pub struct PageData<'a> {
@@ -112,6 +144,8 @@ pub struct PageData<'a> {
     pub no_basis_reason: String,
     /// The head frame; None: the LPS axes (front −y, up +z) through the face's middle.
     pub head_frame: Option<PageFrame>,
+    /// The tissue sliders (None: the run has no reduced model; the page says how to get one).
+    pub tissue: Option<PageTissue<'a>>,
 }
 
 /// Write `dir/report.html` (temporary name, then renamed).
@@ -194,6 +228,10 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
             serde_json::json!({ "label": b.label, "segments": segs })
         }
     };
+    let tissue = match &data.tissue {
+        None => serde_json::Value::Null,
+        Some(t) => tissue_json(t, n)?,
+    };
     let (frame, frame_source) = match data.head_frame {
         Some(f) => (f, "the head frame"),
         None => (lps_frame(data.face_pre), "the CT's axes (no head frame)"),
@@ -235,6 +273,7 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
             "left": frame.left,
             "source": frame_source,
         },
+        "tissue": tissue,
     });
     // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built
     // without "</script" (web/build.mjs checks).
@@ -248,6 +287,76 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
          <script>{BUNDLE}</script>\n</body>\n</html>\n",
         title = escape_html(&data.title),
     ))
+}
+
+/// The tissue sliders' block: per model the online form as JSON numbers (f64, exact), the face
+/// fields as float32 on the vertices any model moves (`vertices`, uint32): the rest of the face
+/// (rigid skin, beyond the tissue region) is zero in every field and left out.
+fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Value, String> {
+    let mut moving = vec![false; n];
+    for m in &t.models {
+        let f = m.face;
+        if f.lift.len() != n || f.columns.iter().any(|c| c.len() != n) {
+            return Err(format!(
+                "reduced model face fields for other than {n} face vertices"
+            ));
+        }
+        let q = m.form.theta_bar.len();
+        if f.columns.len() != m.form.loads.first().map_or(0, Vec::len)
+            || m.terms.len() != q
+            || m.theta_box.iter().any(|b| b.len() != q)
+            || m.output_gains.len() != t.landmarks.len()
+        {
+            return Err(
+                "reduced model: terms, box, face columns or landmark gains do not match its form"
+                    .into(),
+            );
+        }
+        for field in std::iter::once(&f.lift).chain(&f.columns) {
+            for (v, p) in field.iter().enumerate() {
+                moving[v] |= p.iter().any(|x| *x != 0.0);
+            }
+        }
+    }
+    let vertices: Vec<u32> = (0..n as u32).filter(|v| moving[*v as usize]).collect();
+    let field = |f: &[[f64; 3]]| -> Vec<f32> {
+        vertices
+            .iter()
+            .flat_map(|v| f[*v as usize].map(|x| x as f32))
+            .collect()
+    };
+    let models: Vec<serde_json::Value> = t
+        .models
+        .iter()
+        .map(|m| {
+            let columns: Vec<f32> = m.face.columns.iter().flat_map(|c| field(c)).collect();
+            serde_json::json!({
+                "sliding": m.sliding,
+                "form": m.form,
+                "terms": m.terms,
+                "theta_box": m.theta_box,
+                "face_gain": m.face_gain,
+                "output_gains": m.output_gains,
+                "lift": base64(&f32_bytes(&field(&m.face.lift))),
+                "columns": base64(&f32_bytes(&columns)),
+            })
+        })
+        .collect();
+    Ok(serde_json::json!({
+        "tissues": crate::case::Tet::TISSUES
+            .iter()
+            .zip(&t.tissues)
+            .map(|(name, m)| serde_json::json!({
+                "name": name, "youngs_kpa": m.youngs_kpa, "poisson": m.poisson,
+            }))
+            .collect::<Vec<_>>(),
+        "sliding": t.sliding,
+        "sliding_matters": t.sliding_matters,
+        "parameters": t.parameters,
+        "landmarks": t.landmarks,
+        "vertices": index_base64(&vertices),
+        "models": models,
+    }))
 }
 
 /// What the page looks like before its script has run (the bundle injects the real style sheet,

@@ -994,3 +994,314 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
         }
     }
 }
+
+// ---- the tissue sliders (issue 28 item 5): the reduced model re-solved in the page ----
+
+/// The page's online solve (web/src/tissue.js) against Rust's `OnlineForm::solve` for the same
+/// forms and θ: synthetic forms (SPD and semi-definite terms, ragged Riesz columns, the
+/// round-off floor), through node's test runner with the analytic cases of tissue.test.mjs.
+#[test]
+fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
+    use facesim::reduced::OnlineForm;
+    // A small deterministic generator (SplitMix64), values in [-1, 1).
+    let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+    let mut rand = move || {
+        state = state.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    };
+    let mut cases = Vec::new();
+    for (n, q) in [(1_usize, 2_usize), (3, 4), (6, 8), (12, 8)] {
+        // M_q = B Bᵀ (rank n − 1 for odd q: semi-definite) + (q == 0) I.
+        let matrices: Vec<Vec<f64>> = (0..q)
+            .map(|k| {
+                let rank = if k % 2 == 1 {
+                    n.saturating_sub(1).max(1)
+                } else {
+                    n
+                };
+                let b: Vec<f64> = (0..n * rank).map(|_| rand()).collect();
+                let mut m = vec![0.0; n * n];
+                for i in 0..n {
+                    for j in 0..n {
+                        m[i * n + j] = (0..rank).map(|r| b[i * rank + r] * b[j * rank + r]).sum();
+                    }
+                    if k == 0 {
+                        m[i * n + i] += 1.0;
+                    }
+                }
+                m
+            })
+            .collect();
+        let loads: Vec<Vec<f64>> = (0..q).map(|_| (0..n).map(|_| rand()).collect()).collect();
+        let cols = q * (n + 1);
+        let riesz: Vec<Vec<f64>> = (0..cols)
+            .map(|j| (0..(j + 1).min(cols)).map(|_| rand()).collect())
+            .collect();
+        let riesz_norms = riesz
+            .iter()
+            .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt() * 1.5)
+            .collect();
+        let form = OnlineForm {
+            theta_bar: (0..q).map(|_| 1.0 + rand().abs() * 10.0).collect(),
+            matrices,
+            loads,
+            riesz,
+            riesz_norms,
+            unknowns: 50_000,
+        };
+        assert!(form.consistent());
+        for s in 0..4 {
+            let theta: Vec<f64> = if s == 0 {
+                form.theta_bar.clone()
+            } else {
+                form.theta_bar
+                    .iter()
+                    .map(|t| t * (1.0 + 0.9 * rand()).max(0.05))
+                    .collect()
+            };
+            let o = form.solve(&theta).unwrap();
+            cases.push(json!({
+                "form": form, "theta": theta,
+                "coefficients": o.coefficients.iter().collect::<Vec<_>>(),
+                "residual": o.residual, "alpha": o.alpha,
+                "energy_bound": o.energy_bound, "energy_norm": o.energy_norm,
+            }));
+        }
+    }
+    let dir = common::kept_dir("facesim-page-tissue-fixture");
+    let fixture = dir.join("online.json");
+    std::fs::write(&fixture, json!({ "cases": cases }).to_string()).unwrap();
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .args(["--test", "test/tissue.test.mjs"])
+        .env("FACESIM_TISSUE_FIXTURE", &fixture)
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    let out = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        run.status.success() && out.contains("# fail 0") && out.contains("# skipped 0"),
+        "tissue.test.mjs: {out}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
+/// The first sample (the jaws phantom, BSSO 5 mm) meshed coarse, sampled by the reduced method,
+/// so that its page carries the tissue sliders; the page against the run's reduced_model.bin
+/// solved in Rust.
+#[test]
+fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
+    use facesim::case::uncertainty::Method;
+    use facesim::model::reduced::file;
+    let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
+    let (mut case, _) = Case::load(&sample).unwrap();
+    // As tests/reduced.rs: coarser than the default, to keep the test short.
+    case.tet.skin_size_mm = 6.0;
+    case.tet.deep_size_mm = 12.0;
+    case.tet.error_estimate = false;
+    case.uncertainty.samples = 8;
+    case.uncertainty.method = Method::Reduced;
+    let dir = common::kept_dir("facesim-page-tissue");
+    let o = facesim::commands::run_case(case.clone(), &dir, &Quiet).unwrap();
+    let html = o.out_dir.join("report.html");
+    assert_self_contained(&std::fs::read_to_string(&html).unwrap());
+    let stored = file::read(&o.out_dir.join(file::FILE_NAME), &o.skin.vertices).unwrap();
+    let run_model = stored
+        .models
+        .iter()
+        .find(|m| m.sliding == stored.sliding)
+        .unwrap();
+    // Inside the default box (ν 0.45–0.49, muscle/fat 1.7–15, skin/fat 5–30), then outside it.
+    let inside = json!({"poisson": 0.455, "muscle_fat": 12.0, "skin_fat": 6.0});
+    let steps = json!({
+        "tissues": [inside, {"muscle_fat": 2.0}, {"poisson": 0.30}],
+        "plan": {case.osteotomy[0].name.clone(): {"translate": [0.0, -8.0, 1.0], "rotate_deg": [0.0, 0.0, 0.0]}},
+    });
+    let steps_file = dir.join("tissue-steps.json");
+    std::fs::write(&steps_file, steps.to_string()).unwrap();
+    let out = dir.join("tissue.json");
+    let shot = Path::new(env!("CARGO_TARGET_TMPDIR")).join("../test-artefacts/report-tissue.png");
+    let started = std::time::Instant::now();
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .arg("test/tissue_page.mjs")
+        .args([&html, &steps_file, &out, &shot])
+        .arg("3")
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    assert!(
+        run.status.success(),
+        "tissue_page.mjs failed: {}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    println!("browser part: {:.1} s", started.elapsed().as_secs_f64());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for k in ["console_errors", "page_errors", "outside_requests"] {
+        assert_eq!(r[k], json!([]), "{k}");
+    }
+    assert_eq!(r["info"]["tissue"], json!(true));
+    // At the start: the run's tissues, the run's face.
+    let t0 = &r["initial"]["tissue"];
+    assert_eq!(t0["nominal"], json!(true), "{t0}");
+    assert!(max_diff(&flat(&r["initial"]["vertices"]), &o.face_post.vertices) < 1e-4);
+
+    // The same materials in Rust: the run's case with the sampled parameters (Draw::apply).
+    let with = |nu: f64, muscle_fat: f64, skin_fat: f64| {
+        let mut c = case.clone();
+        let fat = c.tet.fat_dark.youngs_kpa;
+        for m in [
+            &mut c.tet.skin,
+            &mut c.tet.muscle,
+            &mut c.tet.fat_dark,
+            &mut c.tet.fat_bright,
+        ] {
+            m.poisson = nu;
+        }
+        c.tet.muscle.youngs_kpa = muscle_fat * fat;
+        c.tet.skin.youngs_kpa = skin_fat * fat;
+        c
+    };
+    let at_nominal = run_model.form.solve(&run_model.form.theta_bar).unwrap();
+    let nominal_face = run_model
+        .face
+        .all(&at_nominal.coefficients.iter().copied().collect::<Vec<_>>());
+    for (k, (nu, mf, sf)) in [(0.455, 12.0, 6.0), (0.455, 2.0, 6.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let step = &r["steps"][k];
+        assert_eq!(step["error"], json!(null));
+        let t = &step["tissue"];
+        assert_eq!(t["nominal"], json!(false), "{t}");
+        assert_eq!(t["outside"], json!(null), "{t}");
+        let c = with(nu, mf, sf);
+        let theta = run_model.theta(&c.tet);
+        let rust = run_model.form.solve(&theta).unwrap();
+        // θ, the coefficients and the bound as Rust's, to round-off.
+        let page_theta = flat(&t["theta"]);
+        for (a, b) in page_theta.iter().zip(&theta) {
+            assert!((a - b).abs() <= 1e-12 * b.abs(), "θ {a} vs {b}");
+        }
+        let coef = flat(&t["coefficients"]);
+        let scale = rust.coefficients.amax();
+        for (a, b) in coef.iter().zip(rust.coefficients.iter()) {
+            assert!((a - b).abs() <= 1e-9 * scale, "c {a} vs {b}");
+        }
+        let eb = t["energy_bound"].as_f64().unwrap();
+        assert!(
+            (eb - rust.energy_bound).abs() <= 1e-8 * rust.energy_bound,
+            "Δ {eb} vs {}",
+            rust.energy_bound
+        );
+        let face_bound = run_model.face_gain * (rust.energy_bound + at_nominal.energy_bound);
+        let fb = t["face_bound_mm"].as_f64().unwrap();
+        assert!(
+            (fb - face_bound).abs() <= 1e-8 * face_bound,
+            "face bound {fb} vs {face_bound}"
+        );
+        let text = t["text"].as_str().unwrap();
+        assert!(
+            text.contains(&format!("{face_bound:.2} mm")) && text.contains("Prn within"),
+            "{text}"
+        );
+        // The face: the run's face plus the reduced model's change from θ̄ to θ (float32 fields).
+        let reduced = run_model.face(&c).unwrap();
+        let expected: Vec<[f64; 3]> = o
+            .face_post
+            .vertices
+            .iter()
+            .zip(reduced.displacement.iter().zip(&nominal_face))
+            .map(|(p, (d, d0))| [0, 1, 2].map(|i| p[i] + d[i] - d0[i]))
+            .collect();
+        let got = flat(&step["vertices"]);
+        let d = max_diff(&got, &expected);
+        let moved = max_diff(&got, &o.face_post.vertices);
+        println!(
+            "tissue step {k}: face vs Rust {d:.2e} mm, moved {moved:.3} mm, bound {face_bound:.2} mm"
+        );
+        assert!(
+            d < 1e-4,
+            "step {k}: the page's face is {d} mm off Rust's reduced face"
+        );
+        assert!(
+            moved > 0.01,
+            "step {k}: the tissue change hardly moved the face ({moved} mm)"
+        );
+    }
+    // ν = 0.30 is outside the trained box: not answered, said so, the run's face shown.
+    let out_step = &r["steps"][2];
+    let t = &out_step["tissue"];
+    assert!(
+        t["outside"]
+            .as_str()
+            .is_some_and(|s| s.contains("outside the trained range")),
+        "{t}"
+    );
+    assert!(
+        t["notice"]
+            .as_str()
+            .is_some_and(|s| s.contains("not answered")),
+        "{t}"
+    );
+    assert_eq!(t["face_bound_mm"], json!(null));
+    assert!(max_diff(&flat(&out_step["vertices"]), &o.face_post.vertices) < 1e-4);
+
+    // The keyboard: the slider is a named, focusable range input; ArrowRight moves it and the
+    // face follows on the next frame.
+    let kb = &r["keyboard"];
+    let controls = kb["controls"].as_array().unwrap();
+    assert!(
+        controls
+            .iter()
+            .all(|c| c["tab"].as_i64().unwrap() >= 0 && !c["name"].as_str().unwrap().is_empty()),
+        "{controls:?}"
+    );
+    assert!(
+        controls.iter().filter(|c| c["type"] == "range").count() >= 3,
+        "{controls:?}"
+    );
+    assert_eq!(kb["focused"], json!(true));
+    assert_ne!(kb["before"], kb["after"], "{kb}");
+    assert_ne!(kb["text_before"], kb["text_after"]);
+    assert_eq!(kb["tissue"]["nominal"], json!(false));
+    assert!(max_diff(&flat(&kb["vertices"]), &o.face_post.vertices) > 0.01);
+    // Sliding off: the other model, when the mesh slides.
+    if stored.sliding_matters && stored.models.len() == 2 {
+        let s = &r["sliding"];
+        assert_eq!(s["sliding"], json!(!stored.sliding), "{s}");
+        assert!(s["face_bound_mm"].as_f64().unwrap() > 0.0);
+    }
+    // "the run's tissues" restores the run's face.
+    assert_eq!(r["reset"]["tissue"]["nominal"], json!(true));
+    assert!(max_diff(&flat(&r["reset"]["vertices"]), &o.face_post.vertices) < 1e-4);
+    // Another plan: the tissue change is said to be the run's plan's.
+    let op = &r["other_plan"];
+    assert_eq!(op["plan_differs"], json!(true));
+    assert!(
+        op["plan_note"]
+            .as_str()
+            .is_some_and(|s| s.contains("not certified")),
+        "{op}"
+    );
+    // The picture's text alternative names the tissues shown.
+    let aria = r["aria"].as_str().unwrap();
+    assert!(
+        aria.contains(
+            "tissues re-solved by the reduced model: ν 0.455, muscle/fat 12.0, skin/fat 6.00"
+        ),
+        "{aria}"
+    );
+    // The update rate of a tissue slider drag (docs/report-page.md): reported; a floor catches
+    // a page that re-solves or redraws far too much per update.
+    let rate = r["rate"]["per_s"].as_f64().unwrap();
+    println!(
+        "tissue slider: {rate:.1} updates/s ({} face vertices, canvas {})",
+        o.skin.vertices.len(),
+        r["rate"]["canvas"]
+    );
+    assert!(rate > 5.0, "tissue slider: {rate} updates/s");
+}

@@ -199,7 +199,7 @@ pub(crate) fn write_page(
     basis: Option<crate::report_page::PageBasis>,
     analysis: &crate::landmarks::Analysis,
     band_width: Option<&[f64]>,
-    _reduced: Option<&crate::model::reduced::file::StoredReduced>,
+    reduced: Option<&crate::model::reduced::file::StoredReduced>,
 ) -> Result<()> {
     let case = &scene.case;
     let skull = &scene.face.skull;
@@ -295,8 +295,64 @@ pub(crate) fn write_page(
                           run `facesim replan` for other plans."
             .into(),
         head_frame: analysis.frame.as_ref().map(Into::into),
+        tissue: reduced.map(|r| page_tissue(r, analysis, case)),
     };
     crate::report_page::write_report_html(dir, &data)
+}
+
+/// The tissue sliders' data from the run's reduced models (docs/report-page.md "Tissue
+/// sliders"): the models, the run's materials and the `[uncertainty]` ranges they were trained
+/// on (the sliders' ranges), and the soft landmarks their output gains belong to.
+fn page_tissue<'a>(
+    r: &'a crate::model::reduced::file::StoredReduced,
+    analysis: &crate::landmarks::Analysis,
+    case: &Case,
+) -> crate::report_page::PageTissue<'a> {
+    let parameters: serde_json::Map<String, serde_json::Value> = case
+        .uncertainty
+        .parameters(case.solve.model)
+        .into_iter()
+        .map(|(p, d)| {
+            (
+                p.key().to_string(),
+                serde_json::to_value(d).unwrap_or_default(),
+            )
+        })
+        .collect();
+    crate::report_page::PageTissue {
+        tissues: r.tissues,
+        sliding: r.sliding,
+        sliding_matters: r.sliding_matters,
+        parameters: parameters.into(),
+        landmarks: reduced_landmarks(analysis),
+        models: r
+            .models
+            .iter()
+            .map(|m| crate::report_page::PageReduced {
+                sliding: m.sliding,
+                form: &m.form,
+                terms: &m.terms,
+                theta_box: &m.theta_box,
+                face_gain: m.face_gain,
+                output_gains: &m.output_gains,
+                face: &m.face,
+            })
+            .collect(),
+    }
+}
+
+/// The soft landmarks a reduced model's `output_gains` are in order of: those the samples track
+/// on the face (found before surgery, anchored on face_pre), as
+/// `uncertainty::reduced::landmark_outputs` lists them.
+fn reduced_landmarks(a: &crate::landmarks::Analysis) -> Vec<String> {
+    a.carried
+        .iter()
+        .zip(&a.anchors)
+        .filter(|(c, anchor)| {
+            c.pre.is_some() && c.kind == crate::landmarks::Kind::Soft && anchor.is_some()
+        })
+        .map(|(c, _)| c.label.clone())
+        .collect()
 }
 
 /// The page's landmarks: soft ones with their anchor on face_pre, bony ones with the segment
