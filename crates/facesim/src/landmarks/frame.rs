@@ -163,17 +163,28 @@ pub fn head_frame(skin: &Mesh) -> Option<HeadFrame> {
 /// The midsagittal section of a mesh: segments (v, a) of the plane s = 0 through its triangles.
 pub fn section(mesh: &Mesh, frame: &HeadFrame) -> Vec<[[f64; 2]; 2]> {
     let c: Vec<[f64; 3]> = mesh.vertices.iter().map(|p| frame.coords(*p)).collect();
+    plane_cut(&c, &mesh.triangles, 0, 0.0)
+}
+
+/// The section of triangles (vertices `c`) by the plane where coordinate `k` equals `x`, as
+/// segments in the other two coordinates (in order).
+pub(crate) fn plane_cut(c: &[[f64; 3]], tris: &[[u32; 3]], k: usize, x: f64) -> Vec<[[f64; 2]; 2]> {
+    let (i0, i1) = match k {
+        0 => (1, 2),
+        1 => (0, 2),
+        _ => (0, 1),
+    };
     let mut out = Vec::new();
-    for t in &mesh.triangles {
+    for t in tris {
         let q = t.map(|i| c[i as usize]);
         let mut hits: Vec<[f64; 2]> = Vec::with_capacity(2);
         for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-            let (si, sj) = (q[i][0], q[j][0]);
-            if (si < 0.0) != (sj < 0.0) {
-                let f = si / (si - sj);
+            let (di, dj) = (q[i][k] - x, q[j][k] - x);
+            if (di < 0.0) != (dj < 0.0) {
+                let f = di / (di - dj);
                 hits.push([
-                    q[i][1] + f * (q[j][1] - q[i][1]),
-                    q[i][2] + f * (q[j][2] - q[i][2]),
+                    q[i][i0] + f * (q[j][i0] - q[i][i0]),
+                    q[i][i1] + f * (q[j][i1] - q[i][i1]),
                 ]);
             }
         }

@@ -5,7 +5,7 @@
 //! scanner frame as those do.
 
 use super::extremum::{Ext, is_extremum};
-use super::frame::{HeadFrame, Profile, profile};
+use super::frame::{HeadFrame, Profile, plane_cut as cut, profile};
 use crate::mesh::Mesh;
 
 /// Patient's right (−lateral) and left, alare then cheilion.
@@ -60,35 +60,6 @@ pub(super) fn paired(
             None => Err("traced from stomion (Sto), which is missing".into()),
         };
         out.push((label, spot.map(|c| frame.point(c))));
-    }
-    out
-}
-
-/// The section of the triangles by the plane coordinate `k` = x, as segments in the other two
-/// coordinates (in order).
-fn cut(c: &[[f64; 3]], tris: &[[u32; 3]], k: usize, x: f64) -> Vec<[[f64; 2]; 2]> {
-    let (i0, i1) = match k {
-        0 => (1, 2),
-        1 => (0, 2),
-        _ => (0, 1),
-    };
-    let mut out = Vec::new();
-    for t in tris {
-        let q = t.map(|i| c[i as usize]);
-        let mut hits: Vec<[f64; 2]> = Vec::with_capacity(2);
-        for (i, j) in [(0, 1), (1, 2), (2, 0)] {
-            let (di, dj) = (q[i][k] - x, q[j][k] - x);
-            if (di < 0.0) != (dj < 0.0) {
-                let f = di / (di - dj);
-                hits.push([
-                    q[i][i0] + f * (q[j][i0] - q[i][i0]),
-                    q[i][i1] + f * (q[j][i1] - q[i][i1]),
-                ]);
-            }
-        }
-        if hits.len() == 2 {
-            out.push([hits[0], hits[1]]);
-        }
     }
     out
 }
