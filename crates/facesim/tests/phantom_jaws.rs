@@ -602,41 +602,40 @@ fn osteotomy_boxes_select_exactly_their_segment_and_the_plans_move_it_rigidly() 
     );
 }
 
+/// The bundled sample in `data-samples/NAME` (2 mm voxels, 3 mm scan) is what `ct` and `scan`
+/// make now.
+fn regenerates(
+    name: &str,
+    ct: impl Fn(&PhantomOptions) -> facesim::volume::Volume,
+    scan: impl Fn(f64) -> facesim::mesh::Mesh,
+) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../data-samples")
+        .join(name);
+    let bundled = facesim::volume::read_volume(&dir.join("ct.nii.gz")).unwrap();
+    let opts = PhantomOptions {
+        spacing: [2.0; 3],
+        ..Default::default()
+    };
+    let now = ct(&opts);
+    assert_eq!(bundled.dims, now.dims, "{name}");
+    assert_eq!(bundled.origin, now.origin, "{name}");
+    assert!(bundled.data == now.data, "{name}: CT voxels changed");
+    let bundled = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();
+    let again = scan(3.0);
+    assert_eq!(bundled.triangles, again.triangles, "{name}");
+    assert_eq!(bundled.vertices.len(), again.vertices.len(), "{name}");
+}
+
 #[test]
 fn the_first_sample_is_the_jaws_phantom() {
     // data-samples/jaws (README's first command): `facesim phantom DIR --anatomy jaws --spacing 2
     // --slice 2`, regenerated; its case.toml is its own (a BSSO advancement).
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
-    let bundled = facesim::volume::read_volume(&dir.join("ct.nii.gz")).unwrap();
-    let opts = PhantomOptions {
-        spacing: [2.0; 3],
-        ..Default::default()
-    };
-    let now = pj::ct(&opts);
-    assert_eq!(bundled.dims, now.dims);
-    assert_eq!(bundled.origin, now.origin);
-    assert!(bundled.data == now.data, "jaws CT voxels changed");
-    let scan = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();
-    let again = pj::face_scan(3.0);
-    assert_eq!(scan.triangles, again.triangles);
-    assert_eq!(scan.vertices.len(), again.vertices.len());
+    regenerates("jaws", pj::ct, pj::face_scan);
 }
 
 #[test]
 fn the_capsule_phantom_is_unchanged() {
-    // The bundled sample (data-samples/phantom: 2 mm voxels, 3 mm scan) regenerated.
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom");
-    let bundled = facesim::volume::read_volume(&dir.join("ct.nii.gz")).unwrap();
-    let opts = PhantomOptions {
-        spacing: [2.0; 3],
-        ..Default::default()
-    };
-    let now = facesim::phantom::ct(&opts);
-    assert_eq!(bundled.dims, now.dims);
-    assert_eq!(bundled.origin, now.origin);
-    assert!(bundled.data == now.data, "capsule CT voxels changed");
-    let scan = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();
-    let again = facesim::phantom::face_scan(3.0);
-    assert_eq!(scan.triangles, again.triangles);
-    assert_eq!(scan.vertices.len(), again.vertices.len());
+    // The previous bundled sample (data-samples/phantom) regenerated.
+    regenerates("phantom", facesim::phantom::ct, facesim::phantom::face_scan);
 }
