@@ -169,6 +169,48 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
     }
     let worst = ratios.iter().cloned().fold(0.0, f64::max);
     eprintln!("bound / true l2 error: worst {worst:.1}");
+
+    // Solve at θ (issue 28 item 1): the reduced model answers within its bound when the bound
+    // allows; a tolerance it cannot meet, or θ outside the trained box, gets the full solve and
+    // says why.
+    use facesim::model::Answer;
+    let models = facesim::model::reduced::ReducedModels {
+        models: vec![r],
+        sliding_matters: true,
+    };
+    let c = &draws(&case, 1, 1, true)[0];
+    let full = p.resolve(&scene, c).unwrap();
+    let (face, how) = p.solve_at(&scene, c, Some(&models), 100.0).unwrap();
+    let Answer::Reduced { bound_mm } = how else {
+        panic!("not answered by the reduced model: {how:?}")
+    };
+    let err = face
+        .iter()
+        .zip(&full)
+        .map(|(a, b)| norm(sub(*a, *b)))
+        .fold(0.0, f64::max);
+    assert!(err <= bound_mm, "{err} > {bound_mm}");
+    let (face, how) = p.solve_at(&scene, c, Some(&models), 1e-6).unwrap();
+    assert!(
+        matches!(&how, Answer::Full { why } if why.contains("exceeds the tolerance")),
+        "{how:?}"
+    );
+    assert_eq!(face, full, "the full solve's own face");
+    let mut outside = c.clone();
+    for m in [
+        &mut outside.tet.skin,
+        &mut outside.tet.muscle,
+        &mut outside.tet.fat_dark,
+        &mut outside.tet.fat_bright,
+    ] {
+        m.poisson = 0.3;
+    }
+    let (face, how) = p.solve_at(&scene, &outside, Some(&models), 100.0).unwrap();
+    assert!(
+        matches!(&how, Answer::Full { why } if why.contains("outside the trained range")),
+        "{how:?}"
+    );
+    assert_eq!(face, p.resolve(&scene, &outside).unwrap());
 }
 
 /// Issue 28 item 3: the same draws solved by the certified reduced model agree with full
