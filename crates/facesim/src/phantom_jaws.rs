@@ -30,8 +30,9 @@
 //! | rami | \|x\| ∈ [38, 47], y ∈ [−8, 18], z ∈ [−56, −10]; condylar necks \|x\| ∈ [40, 48], y ∈ [2, 12], z ∈ [−10, −4] |
 //! | condyles | ellipsoids centred (±48, 7, −3), semi-axes 10 × 5 × 4 (top z = 1): 3.5 mm joint space below the skull base; intercondylar distance 96 |
 //! | vestibule | air 2 mm thick in front of the arch lines (n ∈ (0, 2]), from the upper sulcus z = −3 to the lower sulcus z = −45, \|t\| ≤ 70°; closed at both sulci and at its ends; between the incisal edges it bridges the overjet |
-//! | lips | in contact at stomion; a 2.5 mm skin crease marks the lip line |
-//! | skin, fat | 2 mm and 4 mm radially under R_s(φ, z) = envelope + nose + lips − crease + chin (see `skin_radius`) |
+//! | lips | in contact at stomion; a 2.5 mm skin crease marks the lip line; lips and crease end at the mouth's corners, 26 mm either side |
+//! | alae | wings at the nose's base (+6 at z = 4.5) ending in the alar groove 17 mm either side; zero on the midline |
+//! | skin, fat | 2 mm and 4 mm radially under R_s(φ, z) = envelope + nose + alae + lips − crease + chin (see `skin_radius`) |
 //!
 //! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
 //! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
@@ -267,11 +268,19 @@ fn envelope(phi: f64, z: f64) -> f64 {
 
 /// Midline heights of the features (z, mm) and their amplitudes (radial mm).
 const NOSE: (f64, f64, f64, f64, f64) = (23.5, 13.0, 5.0, 14.0, 0.14); // amp, z, σ below, σ above, σ_φ
-const UPPER_LIP: (f64, f64, f64, f64) = (5.2, -9.5, 11.0, 0.25); // amp, z, half-width (power 8), σ_φ
+const UPPER_LIP: (f64, f64, f64) = (5.2, -9.5, 11.0); // amp, z, half-width (power 8)
 const VERMILION: (f64, f64, f64) = (1.6, -11.5, 3.5); // amp, z, σ_z (the upper lip's most anterior part)
-const LOWER_LIP: (f64, f64, f64, f64) = (5.8, -31.0, 9.0, 0.25); // amp, z, half-width (power 4), σ_φ
-const CREASE: (f64, f64, f64, f64) = (2.5, -21.0, 1.5, 0.3); // depth, z, σ_z, σ_φ
+const LOWER_LIP: (f64, f64, f64) = (5.8, -31.0, 9.0); // amp, z, half-width (power 4)
+const CREASE: (f64, f64, f64) = (2.5, -21.0, 1.5); // depth, z, σ_z
 const CHIN: (f64, f64, f64, f64, f64) = (10.8, -56.0, 11.0, 7.5, 0.35); // amp, z, σ below, σ above, σ_φ
+/// The lips and their crease end at the mouth's corners: their sideways profile is
+/// exp(−(φ/w)¹²), flat across the mouth and falling within a few millimetres at its corners,
+/// where a Gaussian would fade on past them (adult mouth width 45–55 mm, Farkas 1994).
+const MOUTH_HALF_ANGLE: (f64, f64) = (0.31, 0.29); // w of the lips, of the crease (rad)
+/// The alae: a wing each side of the nose's base, flat out to w and falling steeply to the
+/// cheek there (the alar-facial groove; alar width 31–38 mm, Farkas 1994), zero on the midline
+/// (the columella), so the midline profile and its landmarks are unchanged.
+const ALAE: (f64, f64, f64, f64, f64) = (6.0, 4.5, 3.5, 0.19, 0.07); // amp, z, σ_z, w (power 12), midline gap σ_φ
 /// The brow: a ridge across the forehead whose midline crest is the glabella; with the nose's
 /// dorsum below it, the soft nasion is the hollow between (45 mm above subnasale, 5 mm behind
 /// the glabella; docs/phantom.md compares adult proportions).
@@ -305,14 +314,19 @@ pub fn skin_radius(phi: f64, z: f64) -> f64 {
 fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let (an, zn, sb, sa, sp) = NOSE;
     let nose = an * gauss(z - zn, if z < zn { sb } else { sa }) * gauss(phi, sp);
-    let (au, zu, wu, spu) = UPPER_LIP;
+    let (au, zu, wu) = UPPER_LIP;
     let (av, zv, sv) = VERMILION;
-    let upper = (au * (-((z - zu) / wu).powi(8)).exp() + av * gauss(z - zv, sv)) * gauss(phi, spu);
-    let (al, zl, wl, spl) = LOWER_LIP;
+    let (lips_w, crease_w) = MOUTH_HALF_ANGLE;
+    let across = |phi: f64, w: f64| (-(phi / w).powi(12)).exp();
+    let upper =
+        (au * (-((z - zu) / wu).powi(8)).exp() + av * gauss(z - zv, sv)) * across(phi, lips_w);
+    let (al, zl, wl) = LOWER_LIP;
     let phi_l = phi - lower_face_turn(sh, z);
-    let lower = al * (-((z - zl) / wl).powi(4)).exp() * gauss(phi_l, spl);
-    let (dc, zc, sc, spc) = CREASE;
-    let crease = dc * gauss(z - zc, sc) * gauss(phi, spc);
+    let lower = al * (-((z - zl) / wl).powi(4)).exp() * across(phi_l, lips_w);
+    let (dc, zc, sc) = CREASE;
+    let crease = dc * gauss(z - zc, sc) * across(phi, crease_w);
+    let (aa, za, sza, wa, gap) = ALAE;
+    let alae = aa * gauss(z - za, sza) * (-(phi / wa).powi(12)).exp() * (1.0 - gauss(phi, gap));
     let (ach, zch, sbc, sac, spch) = CHIN;
     let chin =
         (ach + sh.chin_mm) * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi_l, spch);
@@ -323,7 +337,8 @@ fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let brow = ab * gauss(z - zb, sz) * gauss(phi, sp);
     let (de, ze, sze, pe, spe) = EYES;
     let eyes = de * gauss(z - ze, sze) * (gauss(phi - pe, spe) + gauss(phi + pe, spe));
-    envelope(phi, z) + sh.soft_mm + nose + upper + lower - crease + chin + forward + brow - eyes
+    envelope(phi, z) + sh.soft_mm + nose + alae + upper + lower - crease + chin + forward + brow
+        - eyes
 }
 
 /// The cranium's outer radius at (φ, z): R_BONE plus the bony glabella and the nasal bones.

@@ -639,3 +639,42 @@ fn the_capsule_phantom_is_unchanged() {
     // The previous bundled sample (data-samples/phantom) regenerated.
     regenerates("phantom", facesim::phantom::ct, facesim::phantom::face_scan);
 }
+
+#[test]
+fn the_first_samples_face_has_all_fourteen_soft_landmarks_its_corners_where_built() {
+    // Issue 27 item 3: the bundled face scan, read as any 3D photo (frame from its shape). The
+    // mouth's corners where the lips and crease end (26 mm either side of stomion by
+    // construction, docs/phantom.md) and the alae where the wings meet the cheek (17 mm).
+    use facesim::landmarks::scan::{FrameFrom, landmarks_of};
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
+    let face = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();
+    let f = landmarks_of(&face, FrameFrom::Shape).unwrap();
+    let missing: Vec<_> = f
+        .landmarks
+        .iter()
+        .filter(|l| l.position.is_none())
+        .map(|l| format!("{}: {:?}", l.label, l.missing))
+        .collect();
+    assert!(missing.is_empty(), "{missing:?}");
+    assert_eq!(f.landmarks.len(), 14, "{:?}", f.landmarks);
+    let at = |l: &str| {
+        f.landmarks
+            .iter()
+            .find(|x| x.label == l)
+            .and_then(|x| x.position)
+            .unwrap()
+    };
+    let sto = lm("stomion");
+    for (label, side) in [("Ch-R", -1.0), ("Ch-L", 1.0), ("Al-R", -1.0), ("Al-L", 1.0)] {
+        let p = at(label);
+        let half = if label.starts_with("Ch") { 26.0 } else { 17.3 };
+        assert!(
+            (side * p[0] - half).abs() < 1.5,
+            "{label} at x = {:.1}, built at ±{half}",
+            p[0]
+        );
+        if label.starts_with("Ch") {
+            assert!((p[2] - sto[2]).abs() < 2.0, "{label} {p:?} vs Sto {sto:?}");
+        }
+    }
+}
