@@ -12,6 +12,11 @@ pub fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
+/// Each point moved by its displacement (`points` and `d` in the same order).
+pub fn displaced(points: &[[f64; 3]], d: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    points.iter().zip(d).map(|(p, d)| add(*p, *d)).collect()
+}
+
 /// a·s.
 pub fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
     [a[0] * s, a[1] * s, a[2] * s]

@@ -324,7 +324,7 @@ fn page_tissue<'a>(
         sliding: r.sliding,
         sliding_matters: r.sliding_matters,
         parameters: parameters.into(),
-        landmarks: reduced_landmarks(analysis),
+        landmarks: crate::uncertainty::reduced::landmark_output_labels(analysis),
         models: r
             .models
             .iter()
@@ -339,20 +339,6 @@ fn page_tissue<'a>(
             })
             .collect(),
     }
-}
-
-/// The soft landmarks a reduced model's `output_gains` are in order of: those the samples track
-/// on the face (found before surgery, anchored on face_pre), as
-/// `uncertainty::reduced::landmark_outputs` lists them.
-fn reduced_landmarks(a: &crate::landmarks::Analysis) -> Vec<String> {
-    a.carried
-        .iter()
-        .zip(&a.anchors)
-        .filter(|(c, anchor)| {
-            c.pre.is_some() && c.kind == crate::landmarks::Kind::Soft && anchor.is_some()
-        })
-        .map(|(c, _)| c.label.clone())
-        .collect()
 }
 
 /// The page's landmarks: soft ones with their anchor on face_pre, bony ones with the segment

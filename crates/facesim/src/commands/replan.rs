@@ -166,12 +166,7 @@ fn tissue_face(
             format!("{e}: not answered by the reduced model (no extrapolation); run the case with these values instead"),
         )
     })?;
-    let face = basis
-        .face_pre
-        .iter()
-        .zip(&f.displacement)
-        .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-        .collect();
+    let face = crate::vec3::displaced(&basis.face_pre, &f.displacement);
     let named = |i: usize| crate::case::Tet::TISSUES[i].to_string();
     Ok((
         face,

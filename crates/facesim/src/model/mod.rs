@@ -109,15 +109,8 @@ impl Prediction {
             None => "no reduced model".to_string(),
             Some(Err(e)) => e.to_string(),
             Some(Ok(f)) if f.bound_mm <= tolerance_mm => {
-                let face = self
-                    .skin
-                    .vertices
-                    .iter()
-                    .zip(&f.displacement)
-                    .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-                    .collect();
                 return Ok((
-                    face,
+                    crate::vec3::displaced(&self.skin.vertices, &f.displacement),
                     Answer::Reduced {
                         bound_mm: f.bound_mm,
                     },
@@ -235,8 +228,6 @@ impl Prediction {
     /// free without it; counting only the first two let one reduced model answer both states on
     /// the large phantom, 12 mm off for sliding off: found by `facesim bench reduced`).
     pub(crate) fn sliding_matters(&self) -> bool {
-        // Sliding holds the mucosa and contact nodes tangentially, and the bone nodes released
-        // at the saw lines (`tet::conditions::release_at_cuts`): free without it.
         matches!(&self.solved, Solved::Tet(Some(v))
             if v.report.mucosa_nodes + v.report.contact_nodes + v.report.released_at_cuts > 0)
     }

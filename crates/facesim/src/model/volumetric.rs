@@ -165,16 +165,7 @@ impl Volumetric {
         let matrices: Vec<Vec<(usize, usize, f64)>> = split.into_iter().map(|t| t.lower).collect();
         let affine = Affine::new(&matrices, &hold)?;
         drop(matrices);
-        let theta = |t: &crate::case::Tet| -> Vec<f64> {
-            let m = t.tissues();
-            terms
-                .iter()
-                .map(|(s, l)| {
-                    let (lambda, mu) = m[*s].lame();
-                    if *l { lambda } else { mu }
-                })
-                .collect()
-        };
+        let theta = |t: &crate::case::Tet| super::reduced::theta_of(&terms, &t.tissues());
         let train: Vec<Vec<f64>> = train.iter().map(|t| theta(&t.tet)).collect();
         let theta_bar = theta(&c.tet);
         let mut theta_box = [theta_bar.clone(), theta_bar.clone()];
@@ -463,11 +454,7 @@ fn carry_face(
 
 /// The face's positions moved by the carried displacement `d`, as face_post is written.
 fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    skin.vertices
-        .iter()
-        .zip(d)
-        .map(|(p, d)| [p[0] + d[0], p[1] + d[1], p[2] + d[2]])
-        .collect()
+    crate::vec3::displaced(&skin.vertices, d)
 }
 
 /// Face vertices that stay (`carry_face`'s rule): rigid skin, or outside the region.

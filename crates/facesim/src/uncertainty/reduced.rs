@@ -50,6 +50,14 @@ pub fn landmark_outputs(analysis: &Analysis, skin: &crate::mesh::Mesh) -> Vec<Ve
         .collect()
 }
 
+/// The labels of [`landmark_outputs`], in its order.
+pub fn landmark_output_labels(analysis: &Analysis) -> Vec<String> {
+    trackers(analysis)
+        .into_iter()
+        .filter_map(|(label, t)| matches!(t, Tracker::Soft(..)).then_some(label))
+        .collect()
+}
+
 /// One sample's face: the run's own (the nominal parameters) or a reduced answer.
 enum Face {
     Nominal,

@@ -44,7 +44,7 @@ impl StoredReduced {
     /// The face displacement for `tissues` (`Tet::tissues` order) and sliding state, and its
     /// certified bound; refused (an error saying why) outside the trained box.
     pub fn face(&self, tissues: &[TissueElastic; 4], sliding: bool) -> Result<super::ReducedFace> {
-        super::pick(&self.models, self.sliding_matters, sliding)?.face_of(tissues)
+        self.models[super::pick(&self.models, self.sliding_matters, sliding)?].face_of(tissues)
     }
 }
 

@@ -57,13 +57,7 @@ impl ReducedTet {
 
     /// θ of the tissues' materials (`Tet::tissues` order).
     pub fn theta_of(&self, tissues: &[TissueElastic; 4]) -> Vec<f64> {
-        self.terms
-            .iter()
-            .map(|(s, is_lambda)| {
-                let (l, mu) = tissues[*s].lame();
-                if *is_lambda { l } else { mu }
-            })
-            .collect()
+        theta_of(&self.terms, tissues)
     }
 
     /// The reduced coefficients with `case`'s tissue parameters (its `[tet] sliding` must be
@@ -76,12 +70,17 @@ impl ReducedTet {
     }
 
     fn solve(&self, case: &Case) -> Result<crate::reduced::Online> {
+        self.check_sliding(case)?;
+        self.solve_theta(&self.theta(&case.tet))
+    }
+
+    fn check_sliding(&self, case: &Case) -> Result<()> {
         if case.tet.sliding != self.sliding {
             return Err(Error::config(
                 "reduced model: asked for the other sliding state than it was built for",
             ));
         }
-        self.solve_theta(&self.theta(&case.tet))
+        Ok(())
     }
 
     /// The online solve at θ, refused outside the trained box.
@@ -110,11 +109,7 @@ impl ReducedTet {
 
     /// The face displacement with `case`'s tissue parameters and its certified bound.
     pub fn face(&self, case: &Case) -> Result<ReducedFace> {
-        if case.tet.sliding != self.sliding {
-            return Err(Error::config(
-                "reduced model: asked for the other sliding state than it was built for",
-            ));
-        }
+        self.check_sliding(case)?;
         self.face_of(&case.tet.tissues())
     }
 
@@ -205,17 +200,13 @@ pub struct ReducedModels {
 impl ReducedModels {
     /// The model for the sliding state `sliding` (the only one when sliding holds nothing).
     pub fn model(&self, sliding: bool) -> Result<&ReducedTet> {
-        pick(&self.models, self.sliding_matters, sliding)
+        Ok(&self.models[pick(&self.models, self.sliding_matters, sliding)?])
     }
 
-    /// The model for `case`'s sliding state and its coefficients and bound.
+    /// The model for `case`'s sliding state (its index) and its coefficients and bound.
     pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, f64)> {
-        let m = self.model(case.tet.sliding)?;
-        let i = self
-            .models
-            .iter()
-            .position(|x| std::ptr::eq(x, m))
-            .unwrap_or(0);
+        let i = pick(&self.models, self.sliding_matters, case.tet.sliding)?;
+        let m = &self.models[i];
         let mut c = case.clone();
         c.tet.sliding = m.sliding;
         let (coefficients, bound) = m.coefficients(&c)?;
@@ -223,16 +214,23 @@ impl ReducedModels {
     }
 }
 
-/// The model of `models` for the sliding state `sliding`: the one built for it, else the only
-/// one when sliding holds no node.
-pub(crate) fn pick(
-    models: &[ReducedTet],
-    sliding_matters: bool,
-    sliding: bool,
-) -> Result<&ReducedTet> {
-    match models.iter().find(|m| m.sliding == sliding) {
-        Some(m) => Ok(m),
-        None if !sliding_matters && !models.is_empty() => Ok(&models[0]),
+/// θ for `terms` (tissue slot, λ or μ) of the tissues' materials (`Tet::tissues` order).
+pub(crate) fn theta_of(terms: &[(usize, bool)], tissues: &[TissueElastic; 4]) -> Vec<f64> {
+    terms
+        .iter()
+        .map(|(s, is_lambda)| {
+            let (l, mu) = tissues[*s].lame();
+            if *is_lambda { l } else { mu }
+        })
+        .collect()
+}
+
+/// The index in `models` of the model for the sliding state `sliding`: the one built for it,
+/// else the only one when sliding holds no node.
+pub(crate) fn pick(models: &[ReducedTet], sliding_matters: bool, sliding: bool) -> Result<usize> {
+    match models.iter().position(|m| m.sliding == sliding) {
+        Some(i) => Ok(i),
+        None if !sliding_matters && !models.is_empty() => Ok(0),
         None => Err(Error::config(format!(
             "reduced model: none for sliding = {sliding} (the run sampled only the other state)"
         ))),
