@@ -210,6 +210,52 @@ fn real_ct_soft_landmarks_are_plausible_and_the_mandibular_ones_missing() {
     if let (Some(a), Some(ans)) = (c("A"), c("ANS")) {
         assert!(a[2] < ls[2] - 5.0 && ans[1] > a[1], "A {a:?} ANS {ans:?}");
     }
+
+    // The same skin as a face mesh alone (`facesim landmarks`, docs/landmarks.md "A face mesh
+    // alone"). It ends 36 mm below the nose tip, and this nose's columella lies ahead of its
+    // dorsum 10 mm from the tip: read upside down it once passed as a face, with the soft
+    // nasion as "subnasale" and the glabella as "labrale superius". Every landmark found from
+    // the shape must lie where the CT path puts it, the right way up: within 5 mm, as the
+    // face's own front is a few degrees from the CT's and a landmark on a flat curve (the
+    // brow's glabella) moves along it; read upside down they were 30 mm and more away.
+    use facesim::landmarks::scan::{FrameFrom, landmarks_of};
+    for from in [FrameFrom::Shape, FrameFrom::Lps] {
+        let alone = landmarks_of(skin, from).unwrap();
+        let found: Vec<&landmarks::Landmark> = alone
+            .landmarks
+            .iter()
+            .filter(|l| l.position.is_some())
+            .collect();
+        println!(
+            "{from:?}: {:?}",
+            found.iter().map(|l| l.label.as_str()).collect::<Vec<_>>()
+        );
+        for l in &found {
+            if let Some(ct) = position(&lms, &l.label) {
+                let d = norm(sub(l.position.unwrap(), ct));
+                assert!(
+                    d < 5.0,
+                    "{from:?} {}: {d:.2} mm from the CT path's",
+                    l.label
+                );
+            }
+        }
+        for want in ["Prn", "N'"] {
+            assert!(
+                found.iter().any(|l| l.label == want),
+                "{from:?}: {want} missing"
+            );
+        }
+        // The file's own axes are the CT's: the upper lip is found there too.
+        if from == FrameFrom::Lps {
+            for want in ["Sn", "Ls"] {
+                assert!(
+                    found.iter().any(|l| l.label == want),
+                    "{from:?}: {want} missing"
+                );
+            }
+        }
+    }
 }
 
 #[test]

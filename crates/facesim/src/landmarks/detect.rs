@@ -373,16 +373,24 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
     } else {
         &chain[..]
     };
+    // Why the unlabelled step (the fold under the nose) failed, said at the landmark after it.
+    let mut unlabelled_miss = None;
     for &(label, e, after) in chain {
         let next = at.and_then(|i| walk(p, i, e, true));
-        if !label.is_empty() {
+        if label.is_empty() {
+            if at.is_some() && next.is_none() {
+                unlabelled_miss = Some(miss(e, after, true));
+            }
+        } else {
             f.put(
                 label,
                 Kind::Soft,
                 match (at, next) {
                     (_, Some(i)) => Ok(va(i)),
                     (Some(_), None) => Err(miss(e, after, true)),
-                    (None, None) => Err(format!("defined below {prev_label}, which is missing")),
+                    (None, None) => Err(unlabelled_miss.take().unwrap_or_else(|| {
+                        format!("defined below {prev_label}, which is missing")
+                    })),
                 },
             );
             prev_label = label;

@@ -157,6 +157,13 @@ const FRONT_MM: f64 = 60.0;
 /// The widest a nose is 8 mm behind its tip (mm; adult noses are 25–40 mm wide at the alae).
 const NOSE_WIDTH_MM: f64 = 40.0;
 
+/// Subnasale lies at most this far from pronasale (mm, in the midsagittal plane). Adult nasal tip
+/// protrusion sn–prn is about 20 ± 2 mm (Farkas 1994); facesim's concavity-based subnasale sits
+/// 23–24 mm from the tip on the jaws phantom and on a real scanner's face, so 30 mm leaves room
+/// for a large nose. Read upside down, a face cut below the nose (the real CT's, 36 mm below the
+/// tip) passes every other rule with its soft nasion as "subnasale", 37 mm from the tip.
+const SN_PRN_MAX_MM: f64 = 30.0;
+
 /// A nose tip is at least this far from the mesh's open border (mm).
 const BORDER_MM: f64 = 5.0;
 
@@ -320,13 +327,25 @@ fn face_score(mesh: &Mesh, border: &VertexGrid, lms: &[Landmark], frame: &HeadFr
     if width_at(mesh, frame, prn, 3.0, 8.0, f64::INFINITY).is_some_and(|w| w > NOSE_WIDTH_MM) {
         return 0;
     }
+    // A nose has a root: a soft nasion above the tip and behind it.
+    let root = g("N'").is_some_and(|n| {
+        (15.0..=75.0).contains(&(n[0] - prn[0])) && (8.0..=45.0).contains(&(prn[1] - n[1]))
+    });
+    // Subnasale, where found, no farther from the tip than a nose's (an upside-down lower lip's
+    // "subnasale" is a chin or a nose above it).
+    let near_sn = g("Sn").is_none_or(|p| (prn[0] - p[0]).hypot(prn[1] - p[1]) <= SN_PRN_MAX_MM);
     // A nose tip, not where the scan stops: skin 10 mm above and below it, behind it.
     // And a nose the right way up: 10 mm below the tip (the columella, towards subnasale) the
-    // profile lies farther behind it than 10 mm above (the dorsum). Read upside down, a lower
-    // lip or a chin would pass every other rule.
+    // profile lies farther behind it than 10 mm above (the dorsum), or the nose has its root
+    // above it and no subnasale too far below. Read upside down, a lower lip or a chin would
+    // pass every other rule. A drooping tip or a head bowed in the scanner (the real CT's: the
+    // columella 3 mm ahead of the dorsum) fails the first test and passes the second.
     let tip = profile(&section(mesh, frame), |_, _| true).is_some_and(|p| {
         let (below, above) = (p.at(prn[0] - 10.0), p.at(prn[0] + 10.0));
-        below.is_finite() && above.is_finite() && above < prn[1] - 1.0 && below < above
+        below.is_finite()
+            && above.is_finite()
+            && above < prn[1] - 1.0
+            && (below < above || (root && near_sn))
     });
     if !tip {
         return 0;
@@ -346,17 +365,15 @@ fn face_score(mesh: &Mesh, border: &VertexGrid, lms: &[Landmark], frame: &HeadFr
         match (g(l), g(above)) {
             (Some(p), Some(q))
                 if (drop.0..=drop.1).contains(&(q[0] - p[0]))
-                    && (depth.0..=depth.1).contains(&(prn[1] - p[1])) =>
+                    && (depth.0..=depth.1).contains(&(prn[1] - p[1]))
+                    && (l != "Sn" || near_sn) =>
             {
                 score += 1
             }
             _ => break,
         }
     }
-    if let Some(n) = g("N'")
-        && (15.0..=75.0).contains(&(n[0] - prn[0]))
-        && (8.0..=45.0).contains(&(prn[1] - n[1]))
-    {
+    if root {
         // A nose has a root: worth more than one more lip landmark below.
         score += 2;
     }
