@@ -215,9 +215,11 @@ fn real_ct_soft_landmarks_are_plausible_and_the_mandibular_ones_missing() {
     // alone"). It ends 36 mm below the nose tip, and this nose's columella lies ahead of its
     // dorsum 10 mm from the tip: read upside down it once passed as a face, with the soft
     // nasion as "subnasale" and the glabella as "labrale superius". Every landmark found from
-    // the shape must lie where the CT path puts it, the right way up: within 5 mm, as the
-    // face's own front is a few degrees from the CT's and a landmark on a flat curve (the
-    // brow's glabella) moves along it; read upside down they were 30 mm and more away.
+    // the shape must lie where the CT path puts it, the right way up: within 3 mm, as the
+    // face's own front is a few degrees from the CT's (measured 0.4–2.2 mm); read upside down
+    // they were 30 mm and more away. In the face's front frame the profile under the nose shows
+    // no fold; the frame search turns it by a few degrees until it does
+    // (`scan::PITCH_TRIES_DEG`).
     use facesim::landmarks::scan::{FrameFrom, landmarks_of};
     for from in [FrameFrom::Shape, FrameFrom::Lps] {
         let alone = landmarks_of(skin, from).unwrap();
@@ -233,27 +235,20 @@ fn real_ct_soft_landmarks_are_plausible_and_the_mandibular_ones_missing() {
         for l in &found {
             if let Some(ct) = position(&lms, &l.label) {
                 let d = norm(sub(l.position.unwrap(), ct));
+                println!("{from:?} {}: {d:.2} mm from the CT path's", l.label);
                 assert!(
-                    d < 5.0,
+                    d < 3.0,
                     "{from:?} {}: {d:.2} mm from the CT path's",
                     l.label
                 );
             }
         }
-        for want in ["Prn", "N'"] {
+        // Everything the CT path finds on this skin's midline and beside the nose.
+        for want in ["G'", "N'", "Prn", "Sn", "Ls", "Al-R", "Al-L"] {
             assert!(
                 found.iter().any(|l| l.label == want),
                 "{from:?}: {want} missing"
             );
-        }
-        // The file's own axes are the CT's: the upper lip is found there too.
-        if from == FrameFrom::Lps {
-            for want in ["Sn", "Ls"] {
-                assert!(
-                    found.iter().any(|l| l.label == want),
-                    "{from:?}: {want} missing"
-                );
-            }
         }
     }
 }

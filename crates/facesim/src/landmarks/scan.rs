@@ -578,7 +578,53 @@ fn frame_from_shape(mesh: &Mesh) -> Result<(HeadFrame, Vec<Landmark>, String), S
         frame = next;
         lms = next_lms;
     }
+    // The landmarks under the nose are extrema of the profile along the front, so a few degrees
+    // of pitch decide whether a lip cut off near the scan's edge still shows its fold and
+    // convexity (the real CT's face ends 36 mm below the tip: its front finds no fold under the
+    // nose, a frame 5° away finds subnasale and labrale superius). When some of them are
+    // missing, the frame turned by up to PITCH_TRIES_DEG about the lateral axis that finds more
+    // of them (and still reads as a face) is taken, the smallest turn first; the measurements
+    // say so.
+    let under_nose = |l: &[Landmark]| {
+        ["Sn", "Ls", "Sto", "Li"]
+            .iter()
+            .filter(|x| l.iter().any(|y| y.label == **x && y.position.is_some()))
+            .count()
+    };
+    let found = under_nose(&lms);
+    if found < 4 {
+        let mut best: Option<(usize, f64, HeadFrame, Vec<Landmark>)> = None;
+        for deg in PITCH_TRIES_DEG {
+            let turned = pitched(&frame, deg);
+            let l = soft(mesh, &turned);
+            let n = under_nose(&l);
+            if n > best.as_ref().map_or(found, |b| b.0)
+                && face_score(mesh, border, &l, &turned) >= 2
+            {
+                best = Some((n, deg, turned, l));
+            }
+        }
+        if let Some((_, deg, turned, l)) = best {
+            how = format!(
+                "{how}, turned {deg:+}° about the lateral axis (there the profile below the nose has more of its landmarks)"
+            );
+            frame = turned;
+            lms = l;
+        }
+    }
     Ok((frame, lms, how))
+}
+
+/// Pitches (degrees, the smallest first) tried when the profile below the nose lacks landmarks
+/// in the face's front frame: the face's front is not the Frankfort horizontal, and a 3D photo's
+/// vertical is a convention within about this much.
+const PITCH_TRIES_DEG: [f64; 6] = [-3.0, 3.0, -6.0, 6.0, -10.0, 10.0];
+
+/// `frame` turned by `deg` about its lateral axis (positive: its vertical leans back).
+fn pitched(frame: &HeadFrame, deg: f64) -> HeadFrame {
+    let (s, c) = deg.to_radians().sin_cos();
+    let up = add(scale(frame.vertical, c), scale(frame.anterior, -s));
+    HeadFrame::with_up(frame.origin, frame.lateral, up, frame.symmetry_residual_mm)
 }
 
 /// Why the best orientation found no face: the first landmark of the nose-to-lip chain missing.
