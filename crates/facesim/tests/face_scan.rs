@@ -381,3 +381,49 @@ fn a_real_scanners_face_has_its_landmarks_where_people_put_them() {
         assert!(d < tol, "{label}: {d:.2} mm off the turned landmark");
     }
 }
+
+/// The real CT's (data-samples/real) whole iso-surface at −500 HU by scikit-image, cut to its
+/// outer face as a range scan sees it, handed over as a scanner would: turned into a y-up,
+/// z-forward frame and in metres. The face ends at the upper lip, its nose droops (the columella
+/// lies ahead of the dorsum 10 mm from the tip), and read upside down it passed as a face until
+/// session 40. The nose and upper lip must come back the right way up, and move with the mesh.
+#[test]
+fn the_real_cts_face_by_another_program_is_read_the_right_way_up_in_any_frame() {
+    let ct = facesim::volume::read_volume(&common::real_ct()).unwrap();
+    let dir = common::kept_dir("facesim-face-scan-real");
+    let out = dir.join("iso.obj");
+    common::isosurface(&ct, -500.0, &out);
+    let iso = facesim::mesh::model_file::read_model(&out).unwrap();
+    let (lo, hi) = iso.bounds();
+    let axis = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+    let face = facesim::surface::outer::outer_face(&iso, axis, &out)
+        .unwrap()
+        .0;
+    let base = landmarks_of(&face, FrameFrom::Shape).unwrap();
+    // Right way up in the CT's own axes (LPS: z up, −y the face's front): the nose tip in front,
+    // subnasale and labrale superius below it and behind it, the soft nasion above it.
+    let c = |f: &FaceLandmarks, l: &str| {
+        position(f, l).unwrap_or_else(|| panic!("{l} missing: {:?}", f.landmarks))
+    };
+    let (prn, sn, ls, n) = (
+        c(&base, "Prn"),
+        c(&base, "Sn"),
+        c(&base, "Ls"),
+        c(&base, "N'"),
+    );
+    eprintln!("real CT face: Prn {prn:?} Sn {sn:?} Ls {ls:?} N' {n:?}");
+    assert!(sn[2] < prn[2] - 8.0 && sn[1] > prn[1] + 6.0, "Sn {sn:?}");
+    assert!(ls[2] < sn[2] - 5.0, "Ls {ls:?}");
+    assert!(n[2] > prn[2] + 15.0 && n[1] > prn[1] + 8.0, "N' {n:?}");
+    // A scanner's y-up frame, and the same in metres: the same landmarks, moved.
+    let r = rotation([1.0, 0.0, 0.0], -90.0);
+    for k in [1.0, 0.001] {
+        let f = landmarks_of(&moved(&face, &r, k), FrameFrom::Shape).unwrap();
+        for label in ["N'", "Prn", "Sn", "Ls"] {
+            let want = apply(&r, k, c(&base, label));
+            let d = facesim::vec3::norm(facesim::vec3::sub(c(&f, label), want)) / k;
+            eprintln!("real CT face, y-up ×{k}: {label} {d:.2} mm off the moved landmark");
+            assert!(d < 1.0, "{label}: {d:.2} mm off the moved landmark (×{k})");
+        }
+    }
+}
