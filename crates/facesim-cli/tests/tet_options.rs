@@ -290,7 +290,9 @@ fn neo_hookean_converges_on_the_real_ct_near_the_linear_face() {
 /// bone. The real CT's maxilla advanced 15 mm (three times the sample's plan): when only sliding
 /// nodes lifted off, 26 of 207 475 elements turned inside out, most at the back of the maxilla,
 /// where its attached tissue was pulled forward through the tissue behind it; with every bone
-/// node of such an element freed, 3 (measured; docs/pipeline.md "Large moves"). The run still
+/// node of such an element freed, 3; with the airway's wall no longer held where it lies outside
+/// `[surface] movable` (the third was pinned there, 4 mm behind the moved maxilla), 2, both free
+/// tissue in the osteotomy gap (measured; docs/pipeline.md "Large moves"). The run still
 /// reports them and exits 1 unless accepted; the face's upper lip keeps the 5 mm plan's ratio.
 #[test]
 fn a_large_advance_lifts_tissue_off_the_bone_it_would_be_dragged_through() {
@@ -324,7 +326,7 @@ fn a_large_advance_lifts_tissue_off_the_bone_it_would_be_dragged_through() {
         "15 mm advance: {inverted} inverted, {} nodes lifted off",
         tet["lifted_off"]
     );
-    assert!(inverted <= 3, "{inverted} inverted");
+    assert!(inverted <= 2, "{inverted} inverted");
     assert!(tet["lifted_off"].as_u64().unwrap() > 0);
     // Without accept_inverted, any inverted element fails the run, naming the count.
     let r = cli::facesim(&[

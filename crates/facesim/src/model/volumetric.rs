@@ -14,7 +14,7 @@ use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
 use crate::tet::conditions::{
     Bone, Holds, Mucosa, contact, follow_bone, hold_floating_pieces, holds, materials,
-    midpoint_kinds, mucosa, release_at_cuts,
+    midpoint_kinds, mucosa, on_face, release_at_cuts,
 };
 use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{MeshParams, NodeKind, SoftTissueMesh};
@@ -55,6 +55,8 @@ pub struct Reuse {
     mucosa: Vec<Option<Mucosa>>,
     embedding: SkinEmbedding,
     face_rigid: Vec<bool>,
+    /// Per solved node: a skin node on the face (`tet::conditions::on_face`).
+    on_face: Vec<bool>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
 }
@@ -77,8 +79,11 @@ impl Volumetric {
         let (Holds { hold, .. }, _, _) = hold_tissue(
             &self.mesh,
             self.quadratic.as_ref(),
-            &r.kind,
-            &r.mucosa,
+            Roles {
+                kind: &r.kind,
+                mucosa: &r.mucosa,
+                on_face: &r.on_face,
+            },
             &bone(scene, case),
             case,
             r.linear_solve,
@@ -148,8 +153,11 @@ impl Volumetric {
         let (Holds { hold, .. }, _, _) = hold_tissue(
             &self.mesh,
             None,
-            &r.kind,
-            &r.mucosa,
+            Roles {
+                kind: &r.kind,
+                mucosa: &r.mucosa,
+                on_face: &r.on_face,
+            },
             &bone(scene, c),
             c,
             true,
@@ -344,20 +352,37 @@ fn bone<'a>(scene: &'a Scene, case: &'a Case) -> Bone<'a> {
     }
 }
 
+/// Per solved node: its kind, the mucosa or contact it slides on, whether it is the face's skin.
+#[derive(Clone, Copy)]
+struct Roles<'a> {
+    kind: &'a [NodeKind],
+    mucosa: &'a [Option<Mucosa>],
+    on_face: &'a [bool],
+}
+
 /// Every solved node's hold (`tet::conditions::holds`; the nodes are the corners, then the
 /// midpoints when `quadratic`), then the pieces of the mesh too loosely held to solve held still;
 /// with how many pieces and nodes were so held. The run and its re-solves hold the tissue alike.
 fn hold_tissue(
     mesh: &SoftTissueMesh,
     quadratic: Option<&Tet10Mesh>,
-    kind: &[NodeKind],
-    mucosa: &[Option<Mucosa>],
+    roles: Roles,
     bone: &Bone,
     case: &Case,
     rest_normals: bool,
 ) -> (Holds, usize, (usize, usize)) {
+    let Roles {
+        kind,
+        mucosa,
+        on_face,
+    } = roles;
     let nodes = quadratic.map_or(&mesh.nodes, |q| &q.nodes);
-    let rigid = crate::pipeline::model::rigid_mask(case, nodes);
+    // `[surface] movable` holds the face outside it, not the walls of cavities.
+    let rigid: Vec<bool> = crate::pipeline::model::rigid_mask(case, nodes)
+        .into_iter()
+        .zip(on_face)
+        .map(|(r, f)| r && *f)
+        .collect();
     let mut h = holds(
         nodes,
         kind,
@@ -571,6 +596,7 @@ pub fn predict(
         .zip(contact)
         .map(|(m, c)| m.or(c))
         .collect();
+    let on_face = on_face(nodes, &kind, &scene.vol, &scene.seg.outside);
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
     let (
@@ -586,8 +612,11 @@ pub fn predict(
     ) = hold_tissue(
         &mesh,
         quadratic.as_ref(),
-        &kind,
-        &mucosa,
+        Roles {
+            kind: &kind,
+            mucosa: &mucosa,
+            on_face: &on_face,
+        },
         &bone,
         case,
         linear_solve,
@@ -827,6 +856,7 @@ pub fn predict(
                 mucosa,
                 embedding,
                 face_rigid,
+                on_face,
                 roi,
                 linear_solve,
             },

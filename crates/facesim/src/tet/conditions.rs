@@ -134,6 +134,38 @@ pub(crate) struct Mucosa {
     segment: Option<usize>,
 }
 
+/// Whether the air outside the head lies within a voxel of `p` (a skin node on the face, not on
+/// a cavity's wall: the airway, the mouth, the nose's passages).
+fn touches_outside(vol: &Volume, outside: &Runs, p: [f64; 3]) -> bool {
+    let c = vol.to_voxel(p).map(|v| v.round() as i64);
+    (-1..=1).any(|dk| {
+        (-1..=1).any(|dj| {
+            (-1..=1).any(|di| {
+                let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
+                i >= 0 && j >= 0 && k >= 0 && outside.contains(i as usize, j as usize, k as usize)
+            })
+        })
+    })
+}
+
+/// Per node: a skin-kind node on the face (the outside air within a voxel). `[surface]
+/// movable` holds only these: it says where the face may move, and a cavity's wall outside it
+/// (the pharynx behind an advanced maxilla) is tissue like any other, free. Held, it pinned
+/// the airway's wall 4 mm from a 15 mm advanced maxilla and turned an element inside out.
+pub(crate) fn on_face(
+    nodes: &[[f64; 3]],
+    kind: &[NodeKind],
+    vol: &Volume,
+    outside: &Runs,
+) -> Vec<bool> {
+    use rayon::prelude::*;
+    nodes
+        .par_iter()
+        .zip(kind)
+        .map(|(p, k)| *k == NodeKind::Skin && touches_outside(vol, outside, *p))
+        .collect()
+}
+
 /// Skin-kind nodes that face a cavity (no outside air within a voxel of them) and lie within
 /// `[tet] mucosa_gap_mm` of the skull surface: the inner lips and cheeks across the vestibule,
 /// the nasal floor.
@@ -148,20 +180,7 @@ pub(crate) fn mucosa(
     use rayon::prelude::*;
     let skull = bone.skull;
     let index = crate::compare::SurfaceIndex::new(skull);
-    let faces_cavity = |p: [f64; 3]| {
-        let c = vol.to_voxel(p).map(|v| v.round() as i64);
-        !(-1..=1).any(|dk| {
-            (-1..=1).any(|dj| {
-                (-1..=1).any(|di| {
-                    let (i, j, k) = (c[0] + di, c[1] + dj, c[2] + dk);
-                    i >= 0
-                        && j >= 0
-                        && k >= 0
-                        && outside.contains(i as usize, j as usize, k as usize)
-                })
-            })
-        })
-    };
+    let faces_cavity = |p: [f64; 3]| !touches_outside(vol, outside, p);
     let plan = bone.plan;
     nodes
         .par_iter()
