@@ -581,7 +581,7 @@ fn frame_from_shape(mesh: &Mesh) -> Result<(HeadFrame, Vec<Landmark>, String), S
     // The landmarks under the nose are extrema of the profile along the front, so a few degrees
     // of pitch decide whether a lip cut off near the scan's edge still shows its fold and
     // convexity (the real CT's face ends 36 mm below the tip: its front finds no fold under the
-    // nose, a frame 5° away finds subnasale and labrale superius). When some of them are
+    // nose, a frame 6° away finds subnasale and labrale superius). When some of them are
     // missing, the frame turned by up to PITCH_TRIES_DEG about the lateral axis that finds more
     // of them (and still reads as a face) is taken, the smallest turn first; the measurements
     // say so.
