@@ -274,6 +274,10 @@ pub struct Tet {
     /// The modelled region: the box around the moved bone grown by this much (mm); its cut
     /// faces are held fixed.
     pub margin_mm: f64,
+    /// Young's modulus (kPa) of the external nose as one framework (cartilage with its skin and
+    /// fat, an effective modulus): 0, the default, leaves the nose to its tissues. The region is
+    /// found from the pre-operative landmarks (`tet::nose`; docs/validation.md).
+    pub nose_youngs_kpa: f64,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,

@@ -92,6 +92,12 @@ impl Case {
                 "[tet] needs 0 < skin_size_mm <= deep_size_mm (finite) and margin_mm >= 0".into(),
             );
         }
+        if !(t.nose_youngs_kpa >= 0.0 && t.nose_youngs_kpa.is_finite()) {
+            return bad(format!(
+                "[tet] nose_youngs_kpa must be 0 (the nose is its tissues) or a modulus in kPa, got {}",
+                t.nose_youngs_kpa
+            ));
+        }
         if t.material == TetMaterial::NeoHookean && t.element == TetElement::Quadratic {
             return bad(
                 "[tet] material \"neo-hookean\" runs on element \"linear\" (no nonlinear 10-node tetrahedron yet)"

@@ -11,6 +11,7 @@
 
 pub mod c1;
 pub mod discretisation;
+mod nose;
 pub mod predicted;
 pub mod reduced;
 pub mod volumetric;

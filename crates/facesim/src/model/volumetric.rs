@@ -57,6 +57,8 @@ pub struct Reuse {
     face_rigid: Vec<bool>,
     /// Per solved node: a skin node on the face (`tet::conditions::on_face`).
     on_face: Vec<bool>,
+    /// Per tetrahedron: in the external nose (`[tet] nose_youngs_kpa`; `model::nose`).
+    nose: Option<Vec<bool>>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
 }
@@ -91,7 +93,11 @@ impl Volumetric {
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
-            material: materials(&self.mesh.tissue, &case.tet),
+            material: with_nose(
+                materials(&self.mesh.tissue, &case.tet),
+                r.nose.as_deref(),
+                case.tet.nose_youngs_kpa,
+            ),
         };
         let quadratic = self
             .quadratic
@@ -332,6 +338,9 @@ pub struct TetReport {
     /// off the bone there) before solving again.
     #[serde(default)]
     pub lifted_off: usize,
+    /// Tetrahedra of the external nose given `[tet] nose_youngs_kpa` (0 without it).
+    #[serde(default)]
+    pub nose_elements: usize,
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
@@ -491,6 +500,21 @@ fn still(rigid: &[bool], roi: ([f64; 3], [f64; 3]), face: &[[f64; 3]]) -> Vec<bo
         .collect()
 }
 
+/// The tissues' materials with the nose's tetrahedra (`nose`) at `youngs_kpa`, each keeping its
+/// tissue's Poisson's ratio.
+fn with_nose(
+    mut material: Vec<TissueElastic>,
+    nose: Option<&[bool]>,
+    youngs_kpa: f64,
+) -> Vec<TissueElastic> {
+    if let Some(nose) = nose {
+        for (m, _) in material.iter_mut().zip(nose).filter(|(_, n)| **n) {
+            m.youngs_kpa = youngs_kpa;
+        }
+    }
+    material
+}
+
 /// Rounds of freeing the bone and sliding nodes of inverted elements and solving again.
 const RELEASE_ROUNDS: usize = 6;
 
@@ -554,7 +578,26 @@ pub fn predict(
     let mesh = rec.time(Stage::TetMesh, "meshing the soft tissue", || {
         crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)
     })?;
-    let material = materials(&mesh.tissue, &case.tet);
+    // The external nose as one framework, found from the pre-operative landmarks.
+    let nose = if t.nose_youngs_kpa > 0.0 {
+        Some(super::nose::nose_tets(
+            skin,
+            &scene.face.skull,
+            &crate::pipeline::inputs::user_landmarks(case)?,
+            &mesh.nodes,
+            &mesh.tets,
+        )?)
+    } else {
+        None
+    };
+    let nose_elements = nose
+        .as_ref()
+        .map_or(0, |n| n.iter().filter(|b| **b).count());
+    let material = with_nose(
+        materials(&mesh.tissue, &case.tet),
+        nose.as_deref(),
+        t.nose_youngs_kpa,
+    );
     let linear = TetMesh {
         nodes: mesh.nodes.clone(),
         tets: mesh.tets.clone(),
@@ -834,6 +877,7 @@ pub fn predict(
         inverted_between_moved_and_held_bone: at_cuts,
         released_at_cuts,
         lifted_off,
+        nose_elements,
         floating_pieces: pieces,
         newton,
         face_vertices_unreached: embedding.unreached(),
@@ -857,6 +901,7 @@ pub fn predict(
                 embedding,
                 face_rigid,
                 on_face,
+                nose,
                 roi,
                 linear_solve,
             },

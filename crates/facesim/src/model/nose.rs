@@ -1,0 +1,76 @@
+//! The external nose as one framework (`[tet] nose_youngs_kpa`, docs/validation.md "A structural
+//! candidate: the nasal framework"). The nose keeps its shape by cartilage (septal cartilage
+//! 2–6 MPa) hinged on the nasal bones; meshed as soft tissue (10–30 kPa) it follows the maxilla
+//! wholesale. With the option, the tetrahedra of the external nose take one effective modulus.
+//!
+//! The region, in the head frame of the pre-operative landmarks: between the alae (half the alar
+//! width either side of pronasale, 17 mm without alare), from [`ABOVE_SN_MM`] above subnasale to
+//! [`BELOW_N_MM`] below soft nasion, in front of the piriform aperture (the anterior nasal
+//! spine's depth, else the alar creases').
+
+use crate::error::{Error, Result};
+use crate::landmarks::{self, Landmark};
+use crate::mesh::Mesh;
+
+/// The nose's base starts this far above subnasale (mm): the columella's base and the lip below
+/// stay tissue.
+const ABOVE_SN_MM: f64 = 2.5;
+/// The nose's root ends this far below soft nasion (mm): the nasal bones hold the framework
+/// there.
+const BELOW_N_MM: f64 = 7.0;
+/// Half the nose's width without alare (mm; adult alar width 31–38 mm, Farkas 1994).
+const HALF_WIDTH_MM: f64 = 17.0;
+
+/// Per tetrahedron: whether its centroid lies in the external nose of `skin` (with `skull` for
+/// the anterior nasal spine and `user` landmarks over the detected ones). Missing landmarks are
+/// an error naming them: the option asks for a nose the landmarks must find.
+pub(crate) fn nose_tets(
+    skin: &Mesh,
+    skull: &Mesh,
+    user: &[(String, [f64; 3])],
+    nodes: &[[f64; 3]],
+    tets: &[[u32; 4]],
+) -> Result<Vec<bool>> {
+    let (frame, lms) =
+        landmarks::locate(skin, Some(skull), user, std::path::Path::new("case.toml"))?;
+    let missing = |why: String| {
+        Error::config(format!(
+            "[tet] nose_youngs_kpa: the nose's region needs {why}; give it as a [[landmark]] in case.toml"
+        ))
+    };
+    let frame = frame.ok_or_else(|| missing("a head frame (the skin is empty)".into()))?;
+    let at = |label: &str| -> Result<[f64; 3]> {
+        let l: Option<&Landmark> = lms.iter().find(|l| l.label == label);
+        l.and_then(|l| l.position)
+            .map(|p| frame.coords(p))
+            .ok_or_else(|| {
+                missing(format!(
+                    "{label}, which was not found ({})",
+                    l.and_then(|l| l.missing.clone()).unwrap_or_default()
+                ))
+            })
+    };
+    let (prn, sn, n) = (at("Prn")?, at("Sn")?, at("N'")?);
+    let alae = match (at("Al-R"), at("Al-L")) {
+        (Ok(r), Ok(l)) => Some((r, l)),
+        _ => None,
+    };
+    let half = alae.map_or(HALF_WIDTH_MM, |(r, l)| 0.5 * (l[0] - r[0]).abs());
+    // The piriform aperture's depth: the anterior nasal spine's, else the alar creases' (on the
+    // real CT within 1 mm of it; a coarse CT's spine is often not found).
+    let back = match (at("ANS"), alae) {
+        (Ok(ans), _) => ans[2],
+        (Err(_), Some((r, l))) => 0.5 * (r[2] + l[2]),
+        (Err(e), None) => return Err(e),
+    };
+    let (bottom, top) = (sn[1] + ABOVE_SN_MM, n[1] - BELOW_N_MM);
+    Ok(tets
+        .iter()
+        .map(|t| {
+            let c: [f64; 3] =
+                std::array::from_fn(|k| t.iter().map(|i| nodes[*i as usize][k]).sum::<f64>() / 4.0);
+            let [s, v, a] = frame.coords(c);
+            (s - prn[0]).abs() <= half && v >= bottom && v <= top && a >= back
+        })
+        .collect())
+}
