@@ -197,12 +197,7 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
     );
     assert_eq!(face, full, "the full solve's own face");
     let mut outside = c.clone();
-    for m in [
-        &mut outside.tet.skin,
-        &mut outside.tet.muscle,
-        &mut outside.tet.fat_dark,
-        &mut outside.tet.fat_bright,
-    ] {
+    for m in outside.tet.tissues_mut() {
         m.poisson = 0.3;
     }
     let (face, how) = p.solve_at(&scene, &outside, Some(&models), 100.0).unwrap();
@@ -344,12 +339,7 @@ fn the_stored_model_re_solves_new_tissues_within_its_bound_of_a_full_run() {
     full.uncertainty.samples = 0;
     full.tet.muscle.youngs_kpa = muscle;
     full.tet.skin.youngs_kpa = skin;
-    for m in [
-        &mut full.tet.skin,
-        &mut full.tet.muscle,
-        &mut full.tet.fat_dark,
-        &mut full.tet.fat_bright,
-    ] {
+    for m in full.tet.tissues_mut() {
         m.poisson = nu;
     }
     let f = run(full, "facesim-reduced-full-muscle");

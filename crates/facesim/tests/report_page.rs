@@ -1153,12 +1153,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     let with = |nu: f64, muscle_fat: f64, skin_fat: f64| {
         let mut c = case.clone();
         let fat = c.tet.fat_dark.youngs_kpa;
-        for m in [
-            &mut c.tet.skin,
-            &mut c.tet.muscle,
-            &mut c.tet.fat_dark,
-            &mut c.tet.fat_bright,
-        ] {
+        for m in c.tet.tissues_mut() {
             m.poisson = nu;
         }
         c.tet.muscle.youngs_kpa = muscle_fat * fat;

@@ -131,12 +131,7 @@ fn a_point_away_from_the_nominal_equals_a_run_with_those_parameters() {
     // The resampled solve (the run's mesh, mucosa and face embedding reused) against a full run
     // of the same parameters: ν 0.47 everywhere, muscle 4 × fat, skin 10 × fat, attached mucosa.
     let mut direct = case();
-    for m in [
-        &mut direct.tet.skin,
-        &mut direct.tet.muscle,
-        &mut direct.tet.fat_dark,
-        &mut direct.tet.fat_bright,
-    ] {
+    for m in direct.tet.tissues_mut() {
         m.poisson = 0.47;
     }
     direct.tet.muscle.youngs_kpa = 8.0;
@@ -304,12 +299,7 @@ fn a_uniform_scale_of_every_modulus_leaves_the_face() {
     // and the free nodes' displacement −K_ff⁻¹ K_fp u_p does not change.
     let plain = run(case(), "facesim-unc-scale1");
     let mut c = case();
-    for m in [
-        &mut c.tet.skin,
-        &mut c.tet.muscle,
-        &mut c.tet.fat_dark,
-        &mut c.tet.fat_bright,
-    ] {
+    for m in c.tet.tissues_mut() {
         m.youngs_kpa *= 7.0;
     }
     let scaled = run(c, "facesim-unc-scale7");

@@ -296,6 +296,16 @@ impl Tet {
         [self.skin, self.muscle, self.fat_dark, self.fat_bright]
     }
 
+    /// The four tissues' materials to change, in the order of [`Tet::tissues`].
+    pub fn tissues_mut(&mut self) -> [&mut TissueElastic; 4] {
+        [
+            &mut self.skin,
+            &mut self.muscle,
+            &mut self.fat_dark,
+            &mut self.fat_bright,
+        ]
+    }
+
     /// The tissues' case.toml keys (`[tet.skin]` …), the order of [`Tet::tissues`].
     pub const TISSUES: [&'static str; 4] = ["skin", "muscle", "fat_dark", "fat_bright"];
 

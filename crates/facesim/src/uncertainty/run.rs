@@ -37,12 +37,7 @@ impl Draw {
         let mut c = nominal.clone();
         let t = &mut c.tet;
         if let Some(nu) = self.poisson {
-            for m in [
-                &mut t.skin,
-                &mut t.muscle,
-                &mut t.fat_dark,
-                &mut t.fat_bright,
-            ] {
+            for m in t.tissues_mut() {
                 m.poisson = nu;
             }
         }
