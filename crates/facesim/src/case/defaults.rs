@@ -93,6 +93,7 @@ impl Default for Tet {
             mucosa_gap_mm: 3.0,
             cut_release_mm: 8.0,
             release_cuts: true,
+            tear_gap: true,
             accept_inverted: false,
             error_estimate: true,
             skin_size_mm: 4.0,

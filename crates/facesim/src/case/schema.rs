@@ -261,6 +261,10 @@ pub struct Tet {
     /// Release the tissue at the saw lines (`cut_release_mm`) and free sliding nodes of inverted
     /// elements (issue 25; default true).
     pub release_cuts: bool,
+    /// Tissue off the face that a move still turns inside out after lift-off (the osteotomy
+    /// gap, stretched or squeezed by a large move) tears: its stiffness falls to a trace and the
+    /// model is solved again (issue 25; default true; linear element).
+    pub tear_gap: bool,
     /// A solved displacement that turns elements inside out is a numerical failure (outputs
     /// written, non-zero exit) unless this is true.
     pub accept_inverted: bool,

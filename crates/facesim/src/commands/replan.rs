@@ -246,6 +246,17 @@ pub fn replan_with(
             "the run lifted {lifted} tissue nodes off the bone at the saw lines: the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`"
         ));
     }
+    // Torn gap tissue likewise: the run's move chose it.
+    if let Some(torn) = run_report
+        .tet
+        .as_ref()
+        .map(|t| t.torn_elements)
+        .filter(|n| *n > 0)
+    {
+        warnings.push(format!(
+            "the run's move tore {torn} tetrahedra of gap tissue ([tet] tear_gap): the basis is exact for plans that tear the same tissue; a plan that would invert other tissue needs a full `facesim run`"
+        ));
+    }
     let replanned = ReplanReport {
         from: run_dir.display().to_string(),
         plan: plan_file.display().to_string(),

@@ -59,6 +59,8 @@ pub struct Reuse {
     on_face: Vec<bool>,
     /// Per tetrahedron: in the external nose (`[tet] nose_youngs_kpa`; `model::nose`).
     nose: Option<Vec<bool>>,
+    /// Per tetrahedron: torn by the run's move (`[tet] tear_gap`); a re-solve keeps it torn.
+    torn: Vec<bool>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
 }
@@ -93,10 +95,13 @@ impl Volumetric {
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
-            material: with_nose(
-                materials(&self.mesh.tissue, &case.tet),
-                r.nose.as_deref(),
-                case.tet.nose_youngs_kpa,
+            material: torn_trace(
+                with_nose(
+                    materials(&self.mesh.tissue, &case.tet),
+                    r.nose.as_deref(),
+                    case.tet.nose_youngs_kpa,
+                ),
+                &r.torn,
             ),
         };
         let quadratic = self
@@ -174,7 +179,12 @@ impl Volumetric {
             .iter()
             .map(|l| crate::case::Tet::slot(*l))
             .collect();
-        let split = crate::tet::lame_terms(&self.mesh.nodes, &self.mesh.tets, &slot)?;
+        let scale: Vec<f64> = r
+            .torn
+            .iter()
+            .map(|t| if *t { TORN_STIFFNESS } else { 1.0 })
+            .collect();
+        let split = crate::tet::lame_terms(&self.mesh.nodes, &self.mesh.tets, &slot, &scale)?;
         let terms: Vec<(usize, bool)> = split.iter().map(|t| (t.slot, t.is_lambda)).collect();
         let matrices: Vec<Vec<(usize, usize, f64)>> = split.into_iter().map(|t| t.lower).collect();
         let affine = Affine::new(&matrices, &hold)?;
@@ -338,6 +348,12 @@ pub struct TetReport {
     /// off the bone there) before solving again.
     #[serde(default)]
     pub lifted_off: usize,
+    /// Tetrahedra off the face torn because the move still turned them inside out after lift-off
+    /// (`[tet] tear_gap`), and their volume at rest (mm³).
+    #[serde(default)]
+    pub torn_elements: usize,
+    #[serde(default)]
+    pub torn_volume_mm3: f64,
     /// Tetrahedra of the external nose given `[tet] nose_youngs_kpa` (0 without it).
     #[serde(default)]
     pub nose_elements: usize,
@@ -515,8 +531,23 @@ fn with_nose(
     material
 }
 
+/// `material` with the torn tetrahedra's stiffness a trace ([`TORN_STIFFNESS`]).
+fn torn_trace(mut material: Vec<TissueElastic>, torn: &[bool]) -> Vec<TissueElastic> {
+    for (m, _) in material.iter_mut().zip(torn).filter(|(_, t)| **t) {
+        m.youngs_kpa *= TORN_STIFFNESS;
+    }
+    material
+}
+
 /// Rounds of freeing the bone and sliding nodes of inverted elements and solving again.
 const RELEASE_ROUNDS: usize = 6;
+
+/// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
+const TEAR_ROUNDS: usize = 8;
+
+/// A torn element's stiffness, as a fraction of its tissue's: a trace, so that a node left only
+/// in torn elements still has a definite (if meaningless) displacement.
+const TORN_STIFFNESS: f64 = 1e-4;
 
 /// Bone moves beyond this (mm) are warned about: orthognathic advancements and setbacks stay
 /// within about 15 mm, distraction of the maxilla reaches ~20.
@@ -598,7 +629,7 @@ pub fn predict(
         nose.as_deref(),
         t.nose_youngs_kpa,
     );
-    let linear = TetMesh {
+    let mut linear = TetMesh {
         nodes: mesh.nodes.clone(),
         tets: mesh.tets.clone(),
         material: material.clone(),
@@ -700,18 +731,36 @@ pub fn predict(
             )));
         }
     }
-    let stiffness = || match &quadratic {
+    let stiffness = |linear: &TetMesh| match &quadratic {
         Some(q) => q.assemble(),
         None => linear.assemble(),
     };
+    let embedding = rec.time(Stage::Embed, "embedding the face in the mesh", || {
+        let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
+        let reach = (1.5 * t.skin_size_mm).max(3.0);
+        Ok(SkinEmbedding::new(
+            &mesh.nodes,
+            &mesh.tets,
+            on_skin,
+            &skin.vertices,
+            reach,
+            roi,
+        ))
+    })?;
+    // The tetrahedra that carry a face vertex: the face itself, which never tears.
+    let mut carries_face = vec![false; mesh.tets.len()];
+    for e in embedding.tet.iter().flatten() {
+        carries_face[*e as usize] = true;
+    }
     // The linear models keep their factor for the plan basis (no second factorisation).
     let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
     let mut lifted_off = 0;
+    let mut torn = vec![false; mesh.tets.len()];
     let mut fallback = None;
     let (displacement, newton, factor, linear_start) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
             {
-                let k = stiffness()?;
+                let k = stiffness(&linear)?;
                 let f = Loads::none().nodal_vector(nodes.len())?;
                 let mut c = Constrained::new(&k, &hold, nodes.len())?;
                 let mut u = c.solve(&[(&hold, &f)])?.remove(0);
@@ -760,6 +809,29 @@ pub fn predict(
                     c.free_nodes(&freed)?;
                     u = c.solve(&[(&hold, &f)])?.remove(0);
                 }
+                // What lift-off leaves inverted is tissue in the osteotomy gap that the move
+                // stretches or squeezes beyond what a continuum can follow: the mobilisation
+                // tears it (docs/pipeline.md "Large moves"). It is released: its stiffness falls
+                // to a trace, the model is factored and solved again, a few rounds at most. Tissue
+                // on the face never tears: an inverted element there stays a failure.
+                let tears = t.tear_gap && quadratic.is_none();
+                for _ in 0..if tears { TEAR_ROUNDS } else { 0 } {
+                    let inverted: Vec<usize> = linear
+                        .inverted_after(&u)
+                        .into_iter()
+                        .filter(|e| !torn[*e])
+                        .collect();
+                    let on_the_face = |e: &usize| carries_face[*e];
+                    if inverted.is_empty() || inverted.iter().any(on_the_face) {
+                        break;
+                    }
+                    for e in inverted {
+                        torn[e] = true;
+                    }
+                    linear.material = torn_trace(material.clone(), &torn);
+                    c = Constrained::new(&stiffness(&linear)?, &hold, nodes.len())?;
+                    u = c.solve(&[(&hold, &f)])?.remove(0);
+                }
                 if linear_solve {
                     return Ok((u, None, Some(c), None));
                 }
@@ -806,6 +878,18 @@ pub fn predict(
         Some(q) => q.inverted_after(&displacement),
         None => linear.inverted_after(&displacement),
     };
+    let inverted_tets: Vec<usize> = inverted_tets.into_iter().filter(|e| !torn[*e]).collect();
+    let torn_elements = torn.iter().filter(|b| **b).count();
+    let torn_volume_mm3: f64 = (0..mesh.tets.len())
+        .filter(|e| torn[*e])
+        .filter_map(|e| crate::tet::gradients(mesh.tets[e].map(|n| mesh.nodes[n as usize])))
+        .map(|(v, _)| v)
+        .sum();
+    if torn_elements > 0 {
+        rec.warn(format!(
+            "the move tears {torn_elements} tetrahedra ({torn_volume_mm3:.0} mm³) of tissue off the face that it would turn inside out (the osteotomy gap): their stiffness is a trace of their tissue's ([tet] tear_gap; docs/pipeline.md \"Large moves\")"
+        ));
+    }
     // Tetrahedra spanning moved and held bone (the osteotomy's gap, where the plan shears the
     // tissue between bone pieces) are told apart from those a large move inverts elsewhere.
     let at_cuts = inverted_tets
@@ -826,11 +910,8 @@ pub fn predict(
     let carry = |e: &SkinEmbedding, u: &[[f64; 3]]| {
         carry_face(e, quadratic.as_ref(), &mesh.tets, u, skin, &face_rigid, roi)
     };
-    let (carried, embedding) = rec.time(Stage::Embed, "carrying the face", || {
-        let on_skin = |f: [u32; 3]| f.iter().all(|n| mesh.kind[*n as usize] == NodeKind::Skin);
-        let reach = (1.5 * t.skin_size_mm).max(3.0);
-        let e = SkinEmbedding::new(&mesh.nodes, &mesh.tets, on_skin, &skin.vertices, reach, roi);
-        Ok((carry(&e, &displacement), e))
+    let carried = rec.time(Stage::Embed, "carrying the face", || {
+        Ok(carry(&embedding, &displacement))
     })?;
     let basis = rec.time(Stage::PlanBasis, "building the plan basis", || {
         // The nonlinear material slides on the moved bone's normals: where a rotation turned
@@ -838,7 +919,7 @@ pub fn predict(
         let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
         let factor = match factor {
             Some(c) if c.takes(&rest) => c,
-            _ => Constrained::new(&stiffness()?, &rest, nodes.len())?,
+            _ => Constrained::new(&stiffness(&linear)?, &rest, nodes.len())?,
         };
         let inputs = BasisInputs {
             factor: &factor,
@@ -877,6 +958,8 @@ pub fn predict(
         inverted_between_moved_and_held_bone: at_cuts,
         released_at_cuts,
         lifted_off,
+        torn_elements,
+        torn_volume_mm3,
         nose_elements,
         floating_pieces: pieces,
         newton,
@@ -891,7 +974,7 @@ pub fn predict(
             mesh,
             quadratic,
             constraint,
-            material,
+            material: linear.material,
             displacement,
             report,
             basis: Some(basis),
@@ -902,6 +985,7 @@ pub fn predict(
                 face_rigid,
                 on_face,
                 nose,
+                torn,
                 roi,
                 linear_solve,
             },

@@ -191,11 +191,13 @@ pub(crate) struct LameTerm {
 /// `slot` (per tetrahedron, `case::Tet::slot`), K_λ,s and K_μ,s, so that K = Σ_s (λ_s K_λ,s +
 /// μ_s K_μ,s) (Rozza, Huynh & Patera 2008 §2: an affine parametric operator). Each is the lower
 /// triangle of [`TetMesh::assemble`]'s pattern, entry for entry in its order (elements of other
-/// tissues add zeros), so the parts can be summed triplet by triplet.
+/// tissues add zeros), so the parts can be summed triplet by triplet. `scale` multiplies each
+/// tetrahedron's part (1, or a torn element's trace).
 pub(crate) fn lame_terms(
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
     slot: &[usize],
+    scale: &[f64],
 ) -> Result<Vec<LameTerm>> {
     let mut present: Vec<usize> = slot.to_vec();
     present.sort_unstable();
@@ -208,7 +210,12 @@ pub(crate) fn lame_terms(
                 if slot[t] != s {
                     return Ok([[0.0; 12]; 12]);
                 }
-                element_stiffness_lame(tets[t].map(|n| nodes[n as usize]), l, m).ok_or_else(|| {
+                element_stiffness_lame(
+                    tets[t].map(|n| nodes[n as usize]),
+                    l * scale[t],
+                    m * scale[t],
+                )
+                .ok_or_else(|| {
                     Error::numerical(
                         NumericalKind::DegenerateElement,
                         format!("tetrahedron {t} (nodes {:?}) is flat or inverted", tets[t]),
