@@ -814,7 +814,10 @@ pub fn predict(
                 // tears it (docs/pipeline.md "Large moves"). It is released: its stiffness falls
                 // to a trace, the model is factored and solved again, a few rounds at most. Tissue
                 // on the face never tears: an inverted element there stays a failure.
+                // A round that inverts more than the first spreads instead of settling (tissue
+                // sheared against a held face, or lips the scan fused): it stops there.
                 let tears = t.tear_gap && quadratic.is_none();
+                let mut first = usize::MAX;
                 for _ in 0..if tears { TEAR_ROUNDS } else { 0 } {
                     let inverted: Vec<usize> = linear
                         .inverted_after(&u)
@@ -822,8 +825,14 @@ pub fn predict(
                         .filter(|e| !torn[*e])
                         .collect();
                     let on_the_face = |e: &usize| carries_face[*e];
-                    if inverted.is_empty() || inverted.iter().any(on_the_face) {
+                    if inverted.is_empty()
+                        || inverted.len() > first
+                        || inverted.iter().any(on_the_face)
+                    {
                         break;
+                    }
+                    if first == usize::MAX {
+                        first = inverted.len();
                     }
                     for e in inverted {
                         torn[e] = true;
@@ -901,8 +910,18 @@ pub fn predict(
         .count();
     let inverted = inverted_tets.len();
     if inverted > 0 {
+        let on_the_face = inverted_tets.iter().filter(|e| carries_face[**e]).count();
+        let why = if !t.tear_gap {
+            "[tet] tear_gap = true tears such tissue off the face".to_string()
+        } else if on_the_face > 0 {
+            format!(
+                "{on_the_face} of them carry the face, which does not tear: the bone moves further than the face can follow (bone of two segments colliding, or tissue squeezed against the CT's edge?)"
+            )
+        } else {
+            "the tearing stopped without leaving every element valid".to_string()
+        };
         rec.warn(format!(
-            "the predicted move turns {inverted} of {} tetrahedra inside out ({at_cuts} of them span moved and held bone, where the osteotomy shears the tissue between bone pieces): [tet] material = \"neo-hookean\" keeps elements valid for large moves",
+            "the predicted move turns {inverted} of {} tetrahedra inside out ({at_cuts} of them span moved and held bone, where the osteotomy shears the tissue between bone pieces); {why}",
             mesh.tets.len()
         ));
     }
