@@ -107,6 +107,12 @@ fn bench_reduced_quick_writes_a_consistent_report() {
         f(&on["face_over_memory_pass"]),
         f(&on["face_us"]) / f(&on["memory_pass_us"])
     ));
+    // Some of the face moves, not more than all of it.
+    let moving = on["moving_vertices"].as_u64().unwrap();
+    assert!(
+        moving > 0 && moving <= b["model"]["face_vertices"].as_u64().unwrap(),
+        "{on}"
+    );
     assert!(f(&on["largest_face_bound_mm"]) >= f(&on["median_face_bound_mm"]));
     assert!(f(&on["median_face_bound_mm"]) > 0.0, "{on}");
 

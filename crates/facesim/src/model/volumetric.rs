@@ -207,14 +207,14 @@ impl Volumetric {
             still: still(&r.face_rigid, r.roi, &skin.vertices),
         };
         let zero = vec![0.0; affine.unknowns()];
-        let face = crate::reduced::LinearFace {
-            lift: face_map.carry(&affine.expand(&zero, true)),
-            columns: basis
+        let face = crate::reduced::LinearFace::new(
+            face_map.carry(&affine.expand(&zero, true)),
+            basis
                 .vectors
                 .iter()
                 .map(|v| face_map.carry(&affine.expand(v, false)))
                 .collect(),
-        };
+        );
         progress("reduced model: the face's gain");
         let nodes = self.mesh.nodes.len();
         let nv = face_map.cell.len();

@@ -22,9 +22,38 @@ use serde::{Deserialize, Serialize};
 pub struct LinearFace {
     pub lift: Vec<[f64; 3]>,
     pub columns: Vec<Vec<[f64; 3]>>,
+    /// The vertices some field moves, and their fields side by side per vertex (lift, then each
+    /// column: 3 (N + 1) values). Most of a face is still (held skin, beyond the modelled
+    /// region) and its fields are exactly zero, so the whole face is one contiguous pass over
+    /// what moves instead of N + 1 passes over everything.
+    moving: Vec<u32>,
+    rows: Vec<f64>,
 }
 
 impl LinearFace {
+    pub fn new(lift: Vec<[f64; 3]>, columns: Vec<Vec<[f64; 3]>>) -> Self {
+        let fields = || std::iter::once(&lift).chain(&columns);
+        let moving: Vec<u32> = (0..lift.len())
+            .filter(|v| fields().any(|f| f[*v] != [0.0; 3]))
+            .map(|v| v as u32)
+            .collect();
+        let rows = moving
+            .iter()
+            .flat_map(|v| fields().flat_map(move |f| f[*v as usize]))
+            .collect();
+        LinearFace {
+            lift,
+            columns,
+            moving,
+            rows,
+        }
+    }
+
+    /// How many vertices some field moves.
+    pub fn moving(&self) -> usize {
+        self.moving.len()
+    }
+
     /// The displacement of vertex `v` for coefficients `c`.
     pub fn at(&self, v: usize, c: &[f64]) -> [f64; 3] {
         let mut d = self.lift[v];
@@ -36,9 +65,23 @@ impl LinearFace {
         d
     }
 
-    /// Every vertex's displacement.
+    /// Every vertex's displacement (the still ones exactly zero, as [`Self::at`] gives them).
     pub fn all(&self, c: &[f64]) -> Vec<[f64; 3]> {
-        (0..self.lift.len()).map(|v| self.at(v, c)).collect()
+        let mut out = vec![[0.0; 3]; self.lift.len()];
+        let width = 3 * (self.columns.len() + 1);
+        if width == 0 || c.len() != self.columns.len() {
+            return (0..self.lift.len()).map(|v| self.at(v, c)).collect();
+        }
+        for (v, r) in self.moving.iter().zip(self.rows.chunks_exact(width)) {
+            let mut d = [r[0], r[1], r[2]];
+            for (w, col) in c.iter().zip(r[3..].chunks_exact(3)) {
+                d[0] += w * col[0];
+                d[1] += w * col[1];
+                d[2] += w * col[2];
+            }
+            out[*v as usize] = d;
+        }
+        out
     }
 }
 
@@ -273,5 +316,54 @@ mod tests {
             }
         }
         assert!(worst_ratio < 30.0, "effectivity {worst_ratio}");
+    }
+
+    #[test]
+    fn the_packed_face_is_the_sum_of_its_fields_and_skips_only_still_vertices() {
+        // 7 vertices, 3 columns; vertices 1 and 4 still in every field, vertex 5 moved by a
+        // column alone, vertex 6 by the lift alone.
+        let v = |s: f64| [s, -2.0 * s, 0.5 * s];
+        let still = |i: usize| i == 1 || i == 4;
+        let lift: Vec<[f64; 3]> = (0..7)
+            .map(|i| {
+                if still(i) || i == 5 {
+                    [0.0; 3]
+                } else {
+                    v(i as f64 + 1.0)
+                }
+            })
+            .collect();
+        let columns: Vec<Vec<[f64; 3]>> = (0..3)
+            .map(|n| {
+                (0..7)
+                    .map(|i| {
+                        if still(i) || i == 6 {
+                            [0.0; 3]
+                        } else {
+                            v(0.3 * (n as f64 + 1.0) - 0.1 * i as f64)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let face = LinearFace::new(lift, columns);
+        assert_eq!(face.moving(), 5);
+        let c = [0.7, -1.3, 2.1];
+        let all = face.all(&c);
+        for (i, d) in all.iter().enumerate() {
+            // Written out: lift + Σ c_n column_n, independently of `at`.
+            let want: [f64; 3] = std::array::from_fn(|k| {
+                face.lift[i][k] + (0..3).map(|n| c[n] * face.columns[n][i][k]).sum::<f64>()
+            });
+            for k in 0..3 {
+                assert!(
+                    (d[k] - want[k]).abs() < 1e-14,
+                    "vertex {i}: {d:?} vs {want:?}"
+                );
+            }
+            assert_eq!(*d, face.at(i, &c));
+        }
+        assert_eq!(all[1], [0.0; 3]);
+        assert_eq!(all[4], [0.0; 3]);
     }
 }

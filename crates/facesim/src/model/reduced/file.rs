@@ -182,7 +182,7 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             form: m.form,
             terms: m.terms,
             theta_box: m.theta_box,
-            face: LinearFace { lift, columns },
+            face: LinearFace::new(lift, columns),
             face_gain: m.face_gain,
             output_gains: m.output_gains,
             build: m.build,
