@@ -44,6 +44,9 @@ fn jaws_case() -> Case {
     // The re-plans turn the maxilla 4° into the phantom's 3 mm nasal floor, which 6 mm elements
     // cannot follow without a few turning inside out; these tests are of the basis, not the mesh.
     case.tet.accept_inverted = true;
+    // Tearing the tissue such a plan inverts is a state the plan chooses too (docs/pipeline.md
+    // "Large moves"): kept off, so that every plan is in the run's state.
+    case.tet.tear_gap = false;
     case
 }
 

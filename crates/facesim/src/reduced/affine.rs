@@ -145,8 +145,24 @@ impl Affine {
 
     /// A_q x.
     pub fn apply(&self, q: usize, x: &[f64]) -> Vec<f64> {
+        self.apply_values(&self.vals[q], x)
+    }
+
+    /// The values of A(θ) = Σ θ_q A_q on the pattern of [`Self::apply`]: one pass applies it
+    /// (with [`Self::apply_values`]) where Q passes would apply the terms one by one.
+    pub fn values_at(&self, theta: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; self.cols.len()];
+        for (t, v) in theta.iter().zip(&self.vals) {
+            for (o, v) in out.iter_mut().zip(v) {
+                *o += t * v;
+            }
+        }
+        out
+    }
+
+    /// The matrix with values `v` (from [`Self::values_at`]) times x.
+    pub fn apply_values(&self, v: &[f64], x: &[f64]) -> Vec<f64> {
         use rayon::prelude::*;
-        let v = &self.vals[q];
         (0..self.free.len())
             .into_par_iter()
             .with_min_len(4096)

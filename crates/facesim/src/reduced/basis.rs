@@ -100,6 +100,8 @@ impl Basis {
             ));
         }
         let x = sys.factor(theta_bar)?;
+        // X's values, so that X v is one pass over the pattern (Gram–Schmidt needs four).
+        let x_values = sys.values_at(theta_bar);
         let loads: Vec<Vec<f64>> = (0..q).map(|k| sys.load(k).to_vec()).collect();
         let mut basis = Basis {
             vectors: Vec::new(),
@@ -125,7 +127,7 @@ impl Basis {
         let mut snapshot = solve_columns(&x, &[sys.rhs(theta_bar)]).remove(0);
         basis.riesz_solves += 1;
         loop {
-            if !basis.add(sys, &x, &loads, &mut space, snapshot)? {
+            if !basis.add(sys, (&x, &x_values), &loads, &mut space, snapshot)? {
                 break;
             }
             progress(&format!(
@@ -170,22 +172,13 @@ impl Basis {
     fn add(
         &mut self,
         sys: &Affine,
-        x: &Cholesky<f64>,
+        (x, x_values): (&Cholesky<f64>, &[f64]),
         loads: &[Vec<f64>],
         space: &mut RieszSpace,
         mut u: Vec<f64>,
     ) -> Result<bool> {
         let q = sys.terms();
-        let xu = |v: &[f64]| -> Vec<f64> {
-            let mut out = vec![0.0; v.len()];
-            for k in 0..q {
-                let a = sys.apply(k, v);
-                for (o, a) in out.iter_mut().zip(a) {
-                    *o += self.form.theta_bar[k] * a;
-                }
-            }
-            out
-        };
+        let xu = |v: &[f64]| sys.apply_values(x_values, v);
         let norm0 = dot(&u, &xu(&u)).sqrt();
         for _ in 0..2 {
             let xv = xu(&u);
