@@ -44,10 +44,16 @@ fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
     if file == "case_rotation.toml" {
         // Turning the mandible 5° about the condyles without moving the maxilla drives the lower
         // incisors about 6 mm up into the upper ones: the lip tissue caught between the teeth is
-        // crushed and a few elements turn inside out. A reported numerical result: exit 1, the
-        // count, and the outputs written for inspection.
-        assert_eq!(r.code, 1, "{file}: {}", r.stderr);
-        assert!(r.stderr.contains("tetrahedra inside out"), "{}", r.stderr);
+        // crushed. Until session 41 a few elements turned inside out and the run was refused;
+        // now that tissue tears (`[tet] tear_gap`; 3 tetrahedra between the incisors, 2 at the
+        // volume's bottom) and the run says so: facesim has no check that teeth collide.
+        assert_eq!(r.code, 0, "{file}: {}", r.stderr);
+        assert!(r.stderr.contains("the move tears"), "{}", r.stderr);
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
+                .unwrap();
+        assert!(report["tet"]["torn_elements"].as_u64().unwrap() > 0);
+        assert_eq!(report["tet"]["inverted_elements"], 0);
     } else {
         assert_eq!(r.code, 0, "{file}: {}", r.stderr);
     }

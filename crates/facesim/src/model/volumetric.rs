@@ -915,7 +915,7 @@ pub fn predict(
             "[tet] tear_gap = true tears such tissue off the face".to_string()
         } else if on_the_face > 0 {
             format!(
-                "{on_the_face} of them carry the face, which does not tear: the bone moves further than the face can follow (bone of two segments colliding, or tissue squeezed against the CT's edge?)"
+                "{on_the_face} of them carry the face, which does not tear: the bone moves further than the face can follow (teeth or bone of two segments colliding, skin held outside [surface] movable, or tissue squeezed against the CT's edge?)"
             )
         } else {
             "the tearing stopped without leaving every element valid".to_string()
