@@ -816,7 +816,9 @@ pub fn predict(
                 // on the face never tears: an inverted element there stays a failure.
                 // A round that inverts more than the first spreads instead of settling (tissue
                 // sheared against a held face, or lips the scan fused): it stops there.
-                let tears = t.tear_gap && quadratic.is_none();
+                // Beyond orthognathic size (centimetres typed as millimetres?) nothing tears: the
+                // inverted elements then refuse the plan.
+                let tears = t.tear_gap && quadratic.is_none() && largest <= LARGE_MOVE_MM;
                 let mut first = usize::MAX;
                 for _ in 0..if tears { TEAR_ROUNDS } else { 0 } {
                     let inverted: Vec<usize> = linear
@@ -913,6 +915,8 @@ pub fn predict(
         let on_the_face = inverted_tets.iter().filter(|e| carries_face[**e]).count();
         let why = if !t.tear_gap {
             "[tet] tear_gap = true tears such tissue off the face".to_string()
+        } else if largest > LARGE_MOVE_MM {
+            format!("nothing tears for a move beyond {LARGE_MOVE_MM:.0} mm")
         } else if on_the_face > 0 {
             format!(
                 "{on_the_face} of them carry the face, which does not tear: the bone moves further than the face can follow (teeth or bone of two segments colliding, skin held outside [surface] movable, or tissue squeezed against the CT's edge?)"
