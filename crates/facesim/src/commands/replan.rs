@@ -234,28 +234,21 @@ pub fn replan_with(
     if skull_post.is_none() {
         warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
     }
-    // Tissue lifted off the bone is a contact state the run's plan chose: the basis is exact
-    // for plans in that state, and one that lifts off other tissue needs a full run.
-    if let Some(lifted) = run_report
-        .tet
-        .as_ref()
-        .map(|t| t.lifted_off)
-        .filter(|n| *n > 0)
-    {
-        warnings.push(format!(
-            "the run lifted {lifted} tissue nodes off the bone at the saw lines: the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`"
-        ));
-    }
-    // Torn gap tissue likewise: the run's move chose it.
-    if let Some(torn) = run_report
-        .tet
-        .as_ref()
-        .map(|t| t.torn_elements)
-        .filter(|n| *n > 0)
-    {
-        warnings.push(format!(
-            "the run's move tore {torn} tetrahedra of gap tissue ([tet] tear_gap): the basis is exact for plans that tear the same tissue; a plan that would invert other tissue needs a full `facesim run`"
-        ));
+    // Tissue lifted off the bone, or torn in the gap, is a state the run's plan chose: the
+    // basis is exact for plans in that state, and one that changes it needs a full run.
+    if let Some(t) = &run_report.tet {
+        if t.lifted_off > 0 {
+            warnings.push(format!(
+                "the run lifted {} tissue nodes off the bone at the saw lines: the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`",
+                t.lifted_off
+            ));
+        }
+        if t.torn_elements > 0 {
+            warnings.push(format!(
+                "the run's move tore {} tetrahedra of gap tissue ([tet] tear_gap): the basis is exact for plans that tear the same tissue; a plan that would invert other tissue needs a full `facesim run`",
+                t.torn_elements
+            ));
+        }
     }
     let replanned = ReplanReport {
         from: run_dir.display().to_string(),

@@ -819,7 +819,7 @@ pub fn predict(
                 // Beyond orthognathic size (centimetres typed as millimetres?) nothing tears: the
                 // inverted elements then refuse the plan.
                 let tears = t.tear_gap && quadratic.is_none() && largest <= LARGE_MOVE_MM;
-                let mut first = usize::MAX;
+                let mut first: Option<usize> = None;
                 for _ in 0..if tears { TEAR_ROUNDS } else { 0 } {
                     let inverted: Vec<usize> = linear
                         .inverted_after(&u)
@@ -828,14 +828,12 @@ pub fn predict(
                         .collect();
                     let on_the_face = |e: &usize| carries_face[*e];
                     if inverted.is_empty()
-                        || inverted.len() > first
+                        || first.is_some_and(|n| inverted.len() > n)
                         || inverted.iter().any(on_the_face)
                     {
                         break;
                     }
-                    if first == usize::MAX {
-                        first = inverted.len();
-                    }
+                    first.get_or_insert(inverted.len());
                     for e in inverted {
                         torn[e] = true;
                     }

@@ -69,7 +69,7 @@ impl LinearFace {
     pub fn all(&self, c: &[f64]) -> Vec<[f64; 3]> {
         let mut out = vec![[0.0; 3]; self.lift.len()];
         let width = 3 * (self.columns.len() + 1);
-        if width == 0 || c.len() != self.columns.len() {
+        if c.len() != self.columns.len() {
             return (0..self.lift.len()).map(|v| self.at(v, c)).collect();
         }
         for (v, r) in self.moving.iter().zip(self.rows.chunks_exact(width)) {
