@@ -104,6 +104,44 @@ enum Cmd {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },
+    /// The tissue parameters fitted to the published ratios on one half of the table and
+    /// checked on the other (docs/validation.md "Calibration on the reduced model"): every
+    /// validation run at the defaults storing its reduced model, a grid over the
+    /// `[uncertainty]` box answered by the reduced models, the optimum confirmed by full runs.
+    /// calibration.md, calibration.csv, calibration_grid.csv, defaults/ and optimum/ in --out.
+    Calibrate {
+        /// Output directory.
+        #[arg(long, default_value = "calibration")]
+        out: PathBuf,
+        /// The samples directory (each sub-directory with a validation.toml is a case).
+        #[arg(long, default_value = "data-samples")]
+        samples: PathBuf,
+        /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
+        #[arg(long, default_value_t = 0)]
+        phantoms: usize,
+        /// The cohort's seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The phantoms' voxel size (mm).
+        #[arg(long, default_value_t = 2.0)]
+        phantom_spacing: f64,
+        /// Only this surgery (repeatable), as for `validate`.
+        #[arg(long)]
+        surgery: Vec<String>,
+        /// Only this case (repeatable), as for `validate`.
+        #[arg(long = "case")]
+        cases: Vec<String>,
+        /// The half fitted: `maxillary` (Le Fort I moves) or `mandibular` (BSSO, genioplasty,
+        /// bimaxillary); the other is held out.
+        #[arg(long, value_parser = ["maxillary", "mandibular"], default_value = "maxillary")]
+        fit: String,
+        /// Grid points per continuous parameter of the box (ν, muscle/fat, skin/fat).
+        #[arg(long, default_value_t = 9)]
+        grid: usize,
+        /// Lay KEY=VALUE over every run's case (repeatable), under the calibrated parameters.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
         dir: PathBuf,
@@ -318,6 +356,7 @@ fn main() -> ExitCode {
         Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
         Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
         Cmd::Validate { out, .. } => Some(format!("the validation into {}", out.display())),
+        Cmd::Calibrate { out, .. } => Some(format!("the calibration into {}", out.display())),
         Cmd::Landmarks { mesh, .. } => Some(mesh.display().to_string()),
     };
     if let Some(s) = subject {
@@ -420,16 +459,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             set,
         } => {
             let overrides = facesim::case::overrides_table(&set)?;
-            let surgeries = surgery
-                .iter()
-                .map(|s| {
-                    facesim::landmarks::published::Surgery::from_key(s).ok_or_else(|| {
-                        Error::config(format!(
-                            "validate: unknown surgery '{s}' (lefort-advance, lefort-impaction, lefort-setback, bsso-advance, bsso-setback, genioplasty, bimax)"
-                        ))
-                    })
-                })
-                .collect::<Result<Vec<_>>>()?;
+            let surgeries = surgeries_of("validate", &surgery)?;
             let opts = facesim::commands::validate::Options {
                 out,
                 samples,
@@ -456,6 +486,65 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 "{inside} landmarks inside their published range, {outside} outside, {} not measured: {}",
                 v.rows.len() - inside - outside,
                 v.out_dir.join("validation.md").display()
+            );
+            Ok(())
+        }
+        Cmd::Calibrate {
+            out,
+            samples,
+            phantoms,
+            seed,
+            phantom_spacing,
+            surgery,
+            cases,
+            fit,
+            grid,
+            set,
+        } => {
+            use facesim::commands::validate::calibrate::{self, CalibrateOptions, Half};
+            let validate = facesim::commands::validate::Options {
+                out,
+                samples,
+                phantoms,
+                seed,
+                phantom_spacing_mm: phantom_spacing,
+                surgeries: surgeries_of("calibrate", &surgery)?,
+                cases,
+                overrides: facesim::case::overrides_table(&set)?,
+                command: std::env::args().collect::<Vec<_>>().join(" "),
+            };
+            let opts = CalibrateOptions {
+                validate,
+                fit: Half::from_key(&fit).unwrap_or(Half::Maxillary),
+                grid,
+            };
+            let c = calibrate::calibrate(&opts, &Progress::auto())?;
+            for v in [&c.defaults, &c.optimum_validation] {
+                facesim_lab::validation_chart::write(&v.out_dir.join("validation.svg"), v)?;
+            }
+            let fitted = c.full(opts.fit, true);
+            let (worst, held) = c.confirmation();
+            println!(
+                "optimum ν {:.3}, muscle/fat {:.2}, skin/fat {:.2}, sliding {}: fitted {} / {} inside (distance {:.3}); reduced vs full within {:.1e}{}; held-out half {}: {}",
+                c.optimum.poisson,
+                c.optimum.muscle_fat,
+                c.optimum.skin_fat,
+                c.optimum.sliding,
+                fitted.inside,
+                fitted.measured,
+                fitted.distance,
+                worst,
+                if held {
+                    ", inside every bound"
+                } else {
+                    ", OUTSIDE a bound"
+                },
+                if c.held_out_improves() {
+                    "improves"
+                } else {
+                    "does not improve, defaults stay"
+                },
+                c.out_dir.join("calibration.md").display()
             );
             Ok(())
         }
@@ -828,4 +917,20 @@ fn cmd_compare(a: &Path, b: &Path, json: bool, regions: Option<&Path>) -> Result
         }
     }
     Ok(())
+}
+
+/// `--surgery` keys as surgeries; an unknown one is an error naming `command`.
+fn surgeries_of(
+    command: &str,
+    keys: &[String],
+) -> Result<Vec<facesim::landmarks::published::Surgery>> {
+    keys.iter()
+        .map(|s| {
+            facesim::landmarks::published::Surgery::from_key(s).ok_or_else(|| {
+                Error::config(format!(
+                    "{command}: unknown surgery '{s}' (lefort-advance, lefort-impaction, lefort-setback, bsso-advance, bsso-setback, genioplasty, bimax)"
+                ))
+            })
+        })
+        .collect()
 }

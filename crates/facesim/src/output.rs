@@ -51,13 +51,14 @@ where
 }
 
 /// Files one of which a directory that facesim wrote as a unit holds (report.json of `run` and
-/// `replan`, sweep.csv of `sweep`, validation.csv of `validate`, measurements.json of
-/// `landmarks`): a non-empty directory without any is not replaced, since the swap removes
-/// everything in it.
-const UNIT_FILES: [&str; 4] = [
+/// `replan`, sweep.csv of `sweep`, validation.csv of `validate`, calibration.csv of
+/// `calibrate`, measurements.json of `landmarks`): a non-empty directory without any is not
+/// replaced, since the swap removes everything in it.
+const UNIT_FILES: [&str; 5] = [
     "report.json",
     "sweep.csv",
     "validation.csv",
+    "calibration.csv",
     "measurements.json",
 ];
 

@@ -18,6 +18,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// What to validate and where.
+#[derive(Clone)]
 pub struct Options {
     /// The output directory (validation.csv, validation.md, runs/, phantoms/).
     pub out: PathBuf,
@@ -176,8 +177,19 @@ impl Observer for Prefixed<'_> {
     }
 }
 
+pub mod calibrate;
+
+/// Called with each run's outcome before its files are pruned ([`calibrate`] reads the reduced
+/// model the run stored); its error is the run's.
+type OnRun<'a> = dyn FnMut(&CaseInfo, Surgery, &super::Outcome) -> Result<()> + 'a;
+
 /// `facesim validate`.
 pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
+    validate_with(opts, obs, &mut |_, _, _| Ok(()))
+}
+
+/// [`validate`], calling `on_run` with each run's outcome.
+fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Result<Validation> {
     if opts.phantoms > 0 && !(opts.phantom_spacing_mm >= 0.5 && opts.phantom_spacing_mm <= 4.0) {
         return Err(Error::config(format!(
             "validate: --phantom-spacing {} mm must be in [0.5, 4]",
@@ -282,6 +294,7 @@ pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
                 &run_dir,
                 &opts.overrides,
                 &Prefixed { inner: obs, prefix },
+                on_run,
             );
             rows.extend(rows_of_run(&case.info, s, result));
         }
@@ -551,6 +564,7 @@ fn run_one(
     run_dir: &Path,
     overrides: &toml::Table,
     obs: &dyn Observer,
+    on_run: &mut OnRun,
 ) -> Result<RunLandmarks> {
     let mut osteotomies = Vec::new();
     for (seg, toward, mm) in moves(s) {
@@ -580,6 +594,7 @@ fn run_one(
     over.insert("tet".into(), toml::Value::Table(tet));
     crate::case::merge(&mut over, overrides.clone());
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
+    on_run(&case.info, s, &outcome)?;
     prune(&outcome.out_dir);
     let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
     Ok(RunLandmarks {

@@ -1,0 +1,211 @@
+//! `facesim calibrate` through the real binary (issue 26 item 3, issue 28 item 6): one coarse
+//! phantom, the Le Fort I advance fitted and the BSSO advance held out. The reduced models'
+//! ratios are held against the full runs — the defaults' (the first pass) and the optimum's
+//! (the confirming pass, an independent full solve at other tissue parameters) — within their
+//! certified bounds; the optimum is the grid's least distance; the verdict follows the numbers.
+
+mod cli;
+#[path = "../../facesim/tests/common/mod.rs"]
+mod common;
+
+use cli::{assert_clean_failure, facesim};
+use serde_json::Value;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// A CSV as maps column → value (quoted fields may hold commas).
+fn read_csv(path: &Path) -> Vec<HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let split = |line: &str| -> Vec<String> {
+        let (mut out, mut cur, mut quoted, mut chars) =
+            (Vec::new(), String::new(), false, line.chars().peekable());
+        while let Some(c) = chars.next() {
+            match (c, quoted) {
+                ('"', true) if chars.peek() == Some(&'"') => {
+                    cur.push('"');
+                    chars.next();
+                }
+                ('"', _) => quoted = !quoted,
+                (',', false) => out.push(std::mem::take(&mut cur)),
+                _ => cur.push(c),
+            }
+        }
+        out.push(cur);
+        out
+    };
+    let mut lines = text.lines();
+    let head = split(lines.next().unwrap());
+    lines
+        .map(|l| {
+            let f = split(l);
+            assert_eq!(f.len(), head.len(), "{l}");
+            head.iter().cloned().zip(f).collect()
+        })
+        .collect()
+}
+
+fn num(s: &str) -> Option<f64> {
+    s.parse().ok()
+}
+
+/// Distance outside [lo, hi] as the product reads a range (its ends ± 5e-3 inside).
+fn outside(lo: f64, hi: f64, r: f64) -> f64 {
+    if r >= lo - 5e-3 && r <= hi + 5e-3 {
+        0.0
+    } else {
+        (lo - r).max(r - hi)
+    }
+}
+
+#[test]
+fn the_reduced_search_agrees_with_the_full_runs_within_its_bounds() {
+    let out = common::kept_dir("facesim-calibrate-phantom").join("c");
+    let r = facesim(&[
+        "calibrate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        root().join("data-samples").to_str().unwrap(),
+        "--case",
+        "phantom",
+        "--phantoms",
+        "1",
+        "--phantom-spacing",
+        "3",
+        "--surgery",
+        "lefort-advance",
+        "--surgery",
+        "bsso-advance",
+        "--grid",
+        "3",
+    ]);
+    assert_eq!(r.code, 0, "facesim calibrate failed: {}", r.stderr);
+    for f in [
+        "calibration.md",
+        "calibration.csv",
+        "calibration_grid.csv",
+        "defaults/validation.csv",
+        "optimum/validation.csv",
+        "defaults/validation.svg",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let rows = read_csv(&out.join("calibration.csv"));
+    let first = read_csv(&out.join("defaults/validation.csv"));
+    let (mut at_defaults, mut at_optimum) = (0, 0);
+    let mut held = [0.0f64; 2];
+    for row in &rows {
+        let what = format!("{} {} {}", row["case"], row["surgery"], row["landmark"]);
+        // calibration.csv's defaults are the first pass's own ratios.
+        let v = first
+            .iter()
+            .find(|v| {
+                v["case"] == row["case"]
+                    && v["surgery"] == row["surgery"]
+                    && v["landmark"] == row["landmark"]
+            })
+            .unwrap();
+        assert_eq!(v["predicted_ratio"], row["defaults_full"], "{what}");
+        // At the defaults the reduced model holds the run's own solution (its first snapshot).
+        if let (Some(full), Some(red)) = (num(&row["defaults_full"]), num(&row["defaults_reduced"]))
+        {
+            at_defaults += 1;
+            assert!(
+                (full - red).abs() <= 2e-3,
+                "{what}: full {full}, reduced {red}"
+            );
+        }
+        // At the optimum the full run is the truth: the reduced ratio within its bound (plus
+        // the CSV's rounding), and the bound not vacuous.
+        if let (Some(full), Some(red), Some(bound)) = (
+            num(&row["optimum_full"]),
+            num(&row["optimum_reduced"]),
+            num(&row["optimum_bound"]),
+        ) {
+            at_optimum += 1;
+            assert!(
+                (full - red).abs() <= bound + 1.5e-3,
+                "{what}: full {full}, reduced {red} ± {bound}"
+            );
+            assert!(bound < 0.1, "{what}: a ratio bound of {bound} says nothing");
+        }
+        if row["half"] == "held out" {
+            let (lo, hi) = (
+                num(&row["published_low"]).unwrap(),
+                num(&row["published_high"]).unwrap(),
+            );
+            if let (Some(a), Some(b)) = (num(&row["defaults_full"]), num(&row["optimum_full"])) {
+                held[0] += outside(lo, hi, a);
+                held[1] += outside(lo, hi, b);
+            }
+        }
+    }
+    assert!(at_defaults >= 4 && at_optimum >= 4, "{rows:?}");
+    // The optimum is the grid point of least fitted distance: the confirming runs' tissues.
+    let grid = read_csv(&out.join("calibration_grid.csv"));
+    assert_eq!(
+        grid.len(),
+        2 * 27,
+        "3 values of ν, muscle/fat, skin/fat; sliding on and off"
+    );
+    let run: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("optimum/runs/phantom01/lefort-advance/report.json"))
+            .unwrap(),
+    )
+    .unwrap();
+    let tet = &run["parameters"]["tet"];
+    let e = |t: &str| tet[t]["youngs_kpa"].as_f64().unwrap();
+    let (nu, mf, sf) = (
+        tet["skin"]["poisson"].as_f64().unwrap(),
+        e("muscle") / e("fat_dark"),
+        e("skin") / e("fat_dark"),
+    );
+    let sliding = tet["sliding"].as_bool().unwrap().to_string();
+    let close = |a: &str, b: f64| (num(a).unwrap() - b).abs() <= 1e-3 * b.abs();
+    let chosen = grid
+        .iter()
+        .find(|g| {
+            close(&g["poisson"], nu)
+                && close(&g["muscle_fat"], mf)
+                && close(&g["skin_fat"], sf)
+                && g["sliding"] == sliding
+        })
+        .unwrap_or_else(|| panic!("the optimum's runs ({nu}, {mf}, {sf}) are no grid point"));
+    let least = grid
+        .iter()
+        .map(|g| num(&g["fitted_distance"]).unwrap())
+        .fold(f64::INFINITY, f64::min);
+    assert_eq!(num(&chosen["fitted_distance"]).unwrap(), least);
+    // The verdict follows the held-out half's full runs.
+    let md = std::fs::read_to_string(out.join("calibration.md")).unwrap();
+    let improves = held[1] < held[0] - 1e-3;
+    assert_eq!(
+        md.contains("The held-out half improves"),
+        improves,
+        "held-out distance {held:?}: {md}"
+    );
+    assert!(
+        md.contains("every row is within its certified bound"),
+        "{md}"
+    );
+}
+
+#[test]
+fn bad_input_is_one_line() {
+    let out = common::kept_dir("facesim-calibrate-bad").join("c");
+    let r = facesim(&["calibrate", "--out", out.to_str().unwrap(), "--grid", "1"]);
+    assert_clean_failure(&r, "--grid", "at least 2");
+    let r = facesim(&[
+        "calibrate",
+        "--out",
+        out.to_str().unwrap(),
+        "--surgery",
+        "le-fort-ii",
+    ]);
+    assert_clean_failure(&r, "le-fort-ii", "unknown surgery");
+    assert!(!out.exists(), "a failed calibration left {}", out.display());
+}
