@@ -110,25 +110,28 @@ fn the_reduced_search_agrees_with_the_full_runs_within_its_bounds() {
             })
             .unwrap();
         assert_eq!(v["predicted_ratio"], row["defaults_full"], "{what}");
-        // At the defaults the reduced model holds the run's own solution (its first snapshot).
+        // At the defaults the reduced model holds the run's own solution (its first snapshot,
+        // in the run's tissue state: lift-off and tearing kept).
         if let (Some(full), Some(red)) = (num(&row["defaults_full"]), num(&row["defaults_reduced"]))
         {
             at_defaults += 1;
             assert!(
-                (full - red).abs() <= 2e-3,
+                (full - red).abs() <= 2e-5,
                 "{what}: full {full}, reduced {red}"
             );
         }
         // At the optimum the full run is the truth: the reduced ratio within its bound (plus
-        // the CSV's rounding), and the bound not vacuous.
+        // the CSV's rounding to 5 decimals), and the bound not vacuous.
         if let (Some(full), Some(red), Some(bound)) = (
             num(&row["optimum_full"]),
             num(&row["optimum_reduced"]),
             num(&row["optimum_bound"]),
         ) {
             at_optimum += 1;
+            // Beyond it only where the full run chose another tissue state (tearing, lift-off)
+            // than the defaults' run whose state the reduced model keeps, and says so.
             assert!(
-                (full - red).abs() <= bound + 1.5e-3,
+                (full - red).abs() <= bound + 1e-5 || row["note"].contains("tore"),
                 "{what}: full {full}, reduced {red} ± {bound}"
             );
             assert!(bound < 0.1, "{what}: a ratio bound of {bound} says nothing");
@@ -189,7 +192,7 @@ fn the_reduced_search_agrees_with_the_full_runs_within_its_bounds() {
         "held-out distance {held:?}: {md}"
     );
     assert!(
-        md.contains("every row is within its certified bound"),
+        md.contains("**Confirmation.**") && !md.contains("with the same tissue state"),
         "{md}"
     );
 }

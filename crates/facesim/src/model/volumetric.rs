@@ -61,8 +61,25 @@ pub struct Reuse {
     nose: Option<Vec<bool>>,
     /// Per tetrahedron: torn by the run's move (`[tet] tear_gap`); a re-solve keeps it torn.
     torn: Vec<bool>,
+    /// The solved nodes the run's move lifted off the bone (freed): a re-solve with sliding keeps
+    /// them free, so that at the run's own parameters it is the run's face (with sliding off
+    /// the tissue stays bonded and nothing lifts off, as in a run).
+    lifted: Vec<usize>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
+}
+
+impl Reuse {
+    /// `hold` with the run's lifted-off nodes freed when `case` slides (the state they lifted
+    /// off in; `Volumetric::predict`'s lift-off rounds).
+    fn lift_off(&self, mut hold: Vec<Hold>, case: &Case) -> Vec<Hold> {
+        if case.tet.sliding && case.tet.release_cuts {
+            for &n in &self.lifted {
+                hold[n] = Hold::Free;
+            }
+        }
+        hold
+    }
 }
 
 impl Volumetric {
@@ -92,6 +109,7 @@ impl Volumetric {
             case,
             r.linear_solve,
         );
+        let hold = r.lift_off(hold, case);
         let linear = TetMesh {
             nodes: self.mesh.nodes.clone(),
             tets: self.mesh.tets.clone(),
@@ -173,6 +191,7 @@ impl Volumetric {
             c,
             true,
         );
+        let hold = r.lift_off(hold, c);
         let slot: Vec<usize> = self
             .mesh
             .tissue
@@ -755,6 +774,7 @@ pub fn predict(
     // The linear models keep their factor for the plan basis (no second factorisation).
     let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
     let mut lifted_off = 0;
+    let mut lifted: Vec<usize> = Vec::new();
     let mut torn = vec![false; mesh.tets.len()];
     let mut fallback = None;
     let (displacement, newton, factor, linear_start) =
@@ -805,6 +825,7 @@ pub fn predict(
                         break;
                     }
                     lifted_off += freed.len();
+                    lifted.extend(&freed);
                     // The factor bordered by the freed components: no second factorisation.
                     c.free_nodes(&freed)?;
                     u = c.solve(&[(&hold, &f)])?.remove(0);
@@ -1007,6 +1028,7 @@ pub fn predict(
                 on_face,
                 nose,
                 torn,
+                lifted,
                 roi,
                 linear_solve,
             },
