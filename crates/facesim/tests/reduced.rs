@@ -432,7 +432,10 @@ fn a_re_solve_at_the_runs_own_parameters_is_the_runs_face() {
         .zip(&p.face_post.vertices)
         .map(|(a, b)| norm(sub(*a, *b)))
         .fold(0.0, f64::max);
-    assert!(worst < 1e-9, "the re-solve is {worst} mm from the run's face");
+    assert!(
+        worst < 1e-9,
+        "the re-solve is {worst} mm from the run's face"
+    );
     // With sliding off nothing lifts off, in a run as in a re-solve.
     let mut bonded = case.clone();
     bonded.tet.sliding = false;
