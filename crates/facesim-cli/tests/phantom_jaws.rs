@@ -46,9 +46,23 @@ fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
         // incisors about 6 mm up into the upper ones: the lip tissue caught between the teeth is
         // crushed. Until session 41 a few elements turned inside out and the run was refused;
         // now that tissue tears (`[tet] tear_gap`; 3 tetrahedra between the incisors, 2 at the
-        // volume's bottom) and the run says so: facesim has no check that teeth collide.
+        // volume's bottom) and the run says so. Since session 42 it also says that the plan
+        // drives the mandible's teeth into the maxilla's (`pipeline::bone_overlap`: 2 mm deep
+        // along the move, in the incisors' region, y < -55).
         assert_eq!(r.code, 0, "{file}: {}", r.stderr);
         assert!(r.stderr.contains("the move tears"), "{}", r.stderr);
+        let overlap = r
+            .stderr
+            .lines()
+            .find(|l| l.contains("the plan drives segment 'mandible' into bone that stays"))
+            .unwrap_or_else(|| panic!("no overlap warning: {}", r.stderr));
+        let deep: f64 = overlap
+            .split("up to ")
+            .nth(1)
+            .and_then(|t| t.split(" mm deep").next())
+            .and_then(|t| t.parse().ok())
+            .unwrap();
+        assert!((1.0..=6.0).contains(&deep), "{overlap}");
         let report: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap())
                 .unwrap();
@@ -56,6 +70,10 @@ fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
         assert_eq!(report["tet"]["inverted_elements"], 0);
     } else {
         assert_eq!(r.code, 0, "{file}: {}", r.stderr);
+    }
+    if file == "case.toml" {
+        // An advance moves the teeth away from bone: nothing overlaps.
+        assert!(!r.stderr.contains("into bone that stays"), "{}", r.stderr);
     }
     let pre = facesim::mesh::read_mesh(&out.join("face_pre.ply")).unwrap();
     let post = facesim::mesh::read_mesh(&out.join("face_post.ply")).unwrap();

@@ -71,10 +71,25 @@ impl Plan {
         anchors: &[[f64; 3]],
         scale: f64,
     ) -> (Vec<[f64; 3]>, Vec<bool>) {
+        let (out, step) = self.carry_by(points, anchors, scale);
+        (out, step.iter().map(Option::is_some).collect())
+    }
+
+    /// [`Plan::apply`] with, per point, the last step (segment index) that moved it.
+    pub(crate) fn carry_steps(&self, points: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<Option<usize>>) {
+        self.carry_by(points, points, 1.0)
+    }
+
+    fn carry_by(
+        &self,
+        points: &[[f64; 3]],
+        anchors: &[[f64; 3]],
+        scale: f64,
+    ) -> (Vec<[f64; 3]>, Vec<Option<usize>>) {
         let mut out = points.to_vec();
         let mut anchor = anchors.to_vec();
-        let mut moved = vec![false; points.len()];
-        for o in &self.steps {
+        let mut moved = vec![None; points.len()];
+        for (k, o) in self.steps.iter().enumerate() {
             let r = rotation(o.rotate_deg.map(|d| d * scale));
             let turn = |p: &mut [f64; 3]| {
                 let d = [p[0] - o.pivot[0], p[1] - o.pivot[1], p[2] - o.pivot[2]];
@@ -88,7 +103,7 @@ impl Plan {
                 if o.region.contains(*q) {
                     turn(p);
                     turn(q);
-                    *m = true;
+                    *m = Some(k);
                 }
             }
         }

@@ -15,6 +15,7 @@
 //! `stage`), and report.json is assembled once at the end (`report`).
 //! `facesim run`, the study (crates/facesim-lab) and the tests call these same functions.
 
+pub mod bone_overlap;
 pub mod face;
 pub mod inputs;
 pub mod model;

@@ -71,6 +71,11 @@ pub fn build(
             skin.vertices.len()
         )));
     }
+    // Bone driven into bone that stays: said for either model (docs/pipeline.md "Large moves").
+    let plan = Plan::new(&case.osteotomy);
+    for o in super::bone_overlap::bone_overlap(&plan, &face.skull, ct, &seg.labels) {
+        rec.warn(super::bone_overlap::warning(&o));
+    }
     if !case.solve.model.on_springs() {
         return volumetric_model(face, rigid, case);
     }
