@@ -82,6 +82,12 @@ fn the_reduced_search_agrees_with_the_full_runs_within_its_bounds() {
         "bsso-advance",
         "--grid",
         "3",
+        // A coarser mesh than the default keeps the test short (every run builds two
+        // reduced models).
+        "--set",
+        "tet.skin_size_mm=6",
+        "--set",
+        "tet.deep_size_mm=12",
     ]);
     assert_eq!(r.code, 0, "facesim calibrate failed: {}", r.stderr);
     for f in [
@@ -109,7 +115,11 @@ fn the_reduced_search_agrees_with_the_full_runs_within_its_bounds() {
                     && v["landmark"] == row["landmark"]
             })
             .unwrap();
-        assert_eq!(v["predicted_ratio"], row["defaults_full"], "{what}");
+        // (validation.csv has 3 decimals, calibration.csv 5.)
+        match (num(&v["predicted_ratio"]), num(&row["defaults_full"])) {
+            (Some(a), Some(b)) => assert!((a - b).abs() <= 5.1e-4, "{what}: {a} against {b}"),
+            (a, b) => assert_eq!(a.is_some(), b.is_some(), "{what}"),
+        }
         // At the defaults the reduced model holds the run's own solution (its first snapshot,
         // in the run's tissue state: lift-off and tearing kept).
         if let (Some(full), Some(red)) = (num(&row["defaults_full"]), num(&row["defaults_reduced"]))
