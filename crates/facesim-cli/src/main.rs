@@ -2,7 +2,7 @@
 
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
-use clap::{Parser, Subcommand};
+use clap::{Args, Parser, Subcommand};
 use facesim::error::{Error, Result};
 use progress::Progress;
 use std::path::{Path, PathBuf};
@@ -80,29 +80,11 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "validation")]
         out: PathBuf,
-        /// The samples directory (each sub-directory with a validation.toml is a case).
-        #[arg(long, default_value = "data-samples")]
-        samples: PathBuf,
         /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
         #[arg(long, default_value_t = 4)]
         phantoms: usize,
-        /// The cohort's seed (the other shape parameters are drawn from it).
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// The phantoms' voxel size (mm).
-        #[arg(long, default_value_t = 2.0)]
-        phantom_spacing: f64,
-        /// Only this surgery (repeatable): lefort-advance, lefort-impaction, lefort-setback,
-        /// bsso-advance, bsso-setback, genioplasty, bimax.
-        #[arg(long)]
-        surgery: Vec<String>,
-        /// Only this case (repeatable): a samples sub-directory's name, or `phantom`.
-        #[arg(long = "case")]
-        cases: Vec<String>,
-        /// Lay KEY=VALUE over every run's case, as `run --set` does (repeatable; e.g.
-        /// `--set tet.fat_dark.youngs_kpa=3`): the same table under other tissue parameters.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        set: Vec<String>,
+        #[command(flatten)]
+        table: TableArgs,
     },
     /// The tissue parameters fitted to the published ratios on one half of the table and
     /// checked on the other (docs/validation.md "Calibration on the reduced model"): every
@@ -113,24 +95,11 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "calibration")]
         out: PathBuf,
-        /// The samples directory (each sub-directory with a validation.toml is a case).
-        #[arg(long, default_value = "data-samples")]
-        samples: PathBuf,
         /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
         #[arg(long, default_value_t = 0)]
         phantoms: usize,
-        /// The cohort's seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// The phantoms' voxel size (mm).
-        #[arg(long, default_value_t = 2.0)]
-        phantom_spacing: f64,
-        /// Only this surgery (repeatable), as for `validate`.
-        #[arg(long)]
-        surgery: Vec<String>,
-        /// Only this case (repeatable), as for `validate`.
-        #[arg(long = "case")]
-        cases: Vec<String>,
+        #[command(flatten)]
+        table: TableArgs,
         /// The half fitted: `maxillary` (Le Fort I moves) or `mandibular` (BSSO, genioplasty,
         /// bimaxillary); the other is held out.
         #[arg(long, value_parser = ["maxillary", "mandibular"], default_value = "maxillary")]
@@ -138,9 +107,6 @@ enum Cmd {
         /// Grid points per continuous parameter of the box (ν, muscle/fat, skin/fat).
         #[arg(long, default_value_t = 9)]
         grid: usize,
-        /// Lay KEY=VALUE over every run's case (repeatable), under the calibrated parameters.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        set: Vec<String>,
     },
     /// Write a synthetic head case whose geometry is known exactly.
     Phantom {
@@ -377,6 +343,56 @@ fn main() -> ExitCode {
     }
 }
 
+/// What `validate` and `calibrate` run the published table on, besides their output directory
+/// and cohort size.
+#[derive(Args)]
+struct TableArgs {
+    /// The samples directory (each sub-directory with a validation.toml is a case).
+    #[arg(long, default_value = "data-samples")]
+    samples: PathBuf,
+    /// The cohort's seed (the other shape parameters are drawn from it).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The phantoms' voxel size (mm).
+    #[arg(long, default_value_t = 2.0)]
+    phantom_spacing: f64,
+    /// Only this surgery (repeatable): lefort-advance, lefort-impaction, lefort-setback,
+    /// bsso-advance, bsso-setback, genioplasty, bimax.
+    #[arg(long)]
+    surgery: Vec<String>,
+    /// Only this case (repeatable): a samples sub-directory's name, or `phantom`.
+    #[arg(long = "case")]
+    cases: Vec<String>,
+    /// Lay KEY=VALUE over every run's case, as `run --set` does (repeatable; e.g.
+    /// `--set tet.fat_dark.youngs_kpa=3`): the same table under other tissue parameters.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    set: Vec<String>,
+}
+
+impl TableArgs {
+    /// The validation's options into `out` with `phantoms` phantoms; `command` names a bad
+    /// `--surgery` key's command.
+    fn options(
+        self,
+        command: &str,
+        out: PathBuf,
+        phantoms: usize,
+    ) -> Result<facesim::commands::validate::Options> {
+        let overrides = facesim::case::overrides_table(&self.set)?;
+        Ok(facesim::commands::validate::Options {
+            out,
+            samples: self.samples,
+            phantoms,
+            seed: self.seed,
+            phantom_spacing_mm: self.phantom_spacing,
+            surgeries: surgeries_of(command, &self.surgery)?,
+            cases: self.cases,
+            overrides,
+            command: std::env::args().collect::<Vec<_>>().join(" "),
+        })
+    }
+}
+
 /// One line per subcommand: the work is in the `cmd_*` functions below.
 fn dispatch(cmd: Cmd) -> Result<()> {
     match cmd {
@@ -450,27 +466,10 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         }
         Cmd::Validate {
             out,
-            samples,
             phantoms,
-            seed,
-            phantom_spacing,
-            surgery,
-            cases,
-            set,
+            table,
         } => {
-            let overrides = facesim::case::overrides_table(&set)?;
-            let surgeries = surgeries_of("validate", &surgery)?;
-            let opts = facesim::commands::validate::Options {
-                out,
-                samples,
-                phantoms,
-                seed,
-                phantom_spacing_mm: phantom_spacing,
-                surgeries,
-                cases,
-                overrides,
-                command: std::env::args().collect::<Vec<_>>().join(" "),
-            };
+            let opts = table.options("validate", out, phantoms)?;
             let v = facesim::commands::validate::validate(&opts, &Progress::auto())?;
             facesim_lab::validation_chart::write(&v.out_dir.join("validation.svg"), &v)?;
             let outside = v.rows.iter().filter(|r| r.inside() == Some(false)).count();
@@ -491,30 +490,14 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         }
         Cmd::Calibrate {
             out,
-            samples,
             phantoms,
-            seed,
-            phantom_spacing,
-            surgery,
-            cases,
+            table,
             fit,
             grid,
-            set,
         } => {
             use facesim::commands::validate::calibrate::{self, CalibrateOptions, Half};
-            let validate = facesim::commands::validate::Options {
-                out,
-                samples,
-                phantoms,
-                seed,
-                phantom_spacing_mm: phantom_spacing,
-                surgeries: surgeries_of("calibrate", &surgery)?,
-                cases,
-                overrides: facesim::case::overrides_table(&set)?,
-                command: std::env::args().collect::<Vec<_>>().join(" "),
-            };
             let opts = CalibrateOptions {
-                validate,
+                validate: table.options("calibrate", out, phantoms)?,
                 fit: Half::from_key(&fit).unwrap_or(Half::Maxillary),
                 grid,
             };

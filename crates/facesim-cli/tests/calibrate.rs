@@ -8,44 +8,12 @@ mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use cli::{assert_clean_failure, facesim};
+use cli::{assert_clean_failure, facesim, read_csv};
 use serde_json::Value;
-use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
-/// A CSV as maps column → value (quoted fields may hold commas).
-fn read_csv(path: &Path) -> Vec<HashMap<String, String>> {
-    let text = std::fs::read_to_string(path).unwrap();
-    let split = |line: &str| -> Vec<String> {
-        let (mut out, mut cur, mut quoted, mut chars) =
-            (Vec::new(), String::new(), false, line.chars().peekable());
-        while let Some(c) = chars.next() {
-            match (c, quoted) {
-                ('"', true) if chars.peek() == Some(&'"') => {
-                    cur.push('"');
-                    chars.next();
-                }
-                ('"', _) => quoted = !quoted,
-                (',', false) => out.push(std::mem::take(&mut cur)),
-                _ => cur.push(c),
-            }
-        }
-        out.push(cur);
-        out
-    };
-    let mut lines = text.lines();
-    let head = split(lines.next().unwrap());
-    lines
-        .map(|l| {
-            let f = split(l);
-            assert_eq!(f.len(), head.len(), "{l}");
-            head.iter().cloned().zip(f).collect()
-        })
-        .collect()
 }
 
 fn num(s: &str) -> Option<f64> {

@@ -74,3 +74,34 @@ pub fn face_positions(out: &Path) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
         })
         .unzip()
 }
+
+/// A CSV file as maps column → value (a small quoted-CSV reader: fields may hold commas).
+pub fn read_csv(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let split = |line: &str| -> Vec<String> {
+        let (mut out, mut cur, mut quoted, mut chars) =
+            (Vec::new(), String::new(), false, line.chars().peekable());
+        while let Some(c) = chars.next() {
+            match (c, quoted) {
+                ('"', true) if chars.peek() == Some(&'"') => {
+                    cur.push('"');
+                    chars.next();
+                }
+                ('"', _) => quoted = !quoted,
+                (',', false) => out.push(std::mem::take(&mut cur)),
+                _ => cur.push(c),
+            }
+        }
+        out.push(cur);
+        out
+    };
+    let mut lines = text.lines();
+    let head = split(lines.next().unwrap());
+    lines
+        .map(|l| {
+            let f = split(l);
+            assert_eq!(f.len(), head.len(), "{l}");
+            head.iter().cloned().zip(f).collect()
+        })
+        .collect()
+}

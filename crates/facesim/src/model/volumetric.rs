@@ -773,7 +773,6 @@ pub fn predict(
     }
     // The linear models keep their factor for the plan basis (no second factorisation).
     let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
-    let mut lifted_off = 0;
     let mut lifted: Vec<usize> = Vec::new();
     let mut torn = vec![false; mesh.tets.len()];
     let mut fallback = None;
@@ -824,7 +823,6 @@ pub fn predict(
                     if freed.is_empty() {
                         break;
                     }
-                    lifted_off += freed.len();
                     lifted.extend(&freed);
                     // The factor bordered by the freed components: no second factorisation.
                     c.free_nodes(&freed)?;
@@ -999,7 +997,7 @@ pub fn predict(
         inverted_elements: inverted,
         inverted_between_moved_and_held_bone: at_cuts,
         released_at_cuts,
-        lifted_off,
+        lifted_off: lifted.len(),
         torn_elements,
         torn_volume_mm3,
         nose_elements,

@@ -12,7 +12,7 @@
 //!    (each within its bound) and give the held-out half's verdict: the defaults should change
 //!    only if the held-out half improves.
 
-use super::{CaseInfo, OnRun, Options, Row, RunLandmarks, Validation, rows_of_run, validate_with};
+use super::{CaseInfo, Options, Row, RunLandmarks, Validation, rows_of_run, validate_with};
 use crate::case::uncertainty::{Distribution, Parameter};
 use crate::case::{Case, Tet, TissueElastic};
 use crate::error::{Error, Result};
@@ -359,6 +359,15 @@ impl Calibrand {
     }
 }
 
+/// Every run's rows at `p` by the reduced models, each with its ratio's bound.
+fn rows_at(calibrands: &[Calibrand], p: &Point) -> Result<Vec<(Row, Option<f64>)>> {
+    let mut rows = Vec::new();
+    for c in calibrands {
+        rows.extend(c.rows_at(p)?);
+    }
+    Ok(rows)
+}
+
 /// The nominal case at point `p` of the box (as `[uncertainty]` applies a draw).
 fn apply(base: &Case, p: &Point) -> Case {
     crate::uncertainty::run::Draw {
@@ -478,22 +487,18 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
             .map_err(|e| Error::config(e.to_string()))?;
     crate::case::merge(&mut first, reduced);
     let mut calibrands: Vec<Calibrand> = Vec::new();
-    let mut collect: Box<OnRun> =
-        Box::new(|info: &CaseInfo, s: Surgery, o: &super::super::Outcome| {
-            calibrands.push(Calibrand::of(info, s, o)?);
-            Ok(())
-        });
     let defaults = validate_with(
         &Options {
             out: dir.join("defaults"),
             overrides: first,
-            command: opts.validate.command.clone(),
             ..opts.validate.clone()
         },
         obs,
-        &mut *collect,
+        &mut |info, s, o| {
+            calibrands.push(Calibrand::of(info, s, o)?);
+            Ok(())
+        },
     )?;
-    drop(collect);
     let t1 = std::time::Instant::now();
     let Some(base) = calibrands.first().map(|c| c.base.clone()) else {
         return Err(Error::config(
@@ -518,10 +523,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
     let evaluated: Vec<Result<GridPoint>> = points
         .par_iter()
         .map(|p| {
-            let mut rows = Vec::new();
-            for c in &calibrands {
-                rows.extend(c.rows_at(p)?);
-            }
+            let rows = rows_at(&calibrands, p)?;
             let of = |h: Half| {
                 standing(
                     rows.iter()
@@ -574,7 +576,6 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
         &Options {
             out: dir.join("optimum"),
             overrides: over,
-            command: opts.validate.command.clone(),
             ..opts.validate.clone()
         },
         obs,
@@ -585,14 +586,10 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
     )?;
     let t3 = std::time::Instant::now();
     // The rows side by side.
-    let at = |p: &Point| -> Result<Vec<(Row, Option<f64>)>> {
-        let mut v = Vec::new();
-        for c in &calibrands {
-            v.extend(c.rows_at(p)?);
-        }
-        Ok(v)
-    };
-    let (at_nominal, at_best) = (at(&nominal)?, at(&best)?);
+    let (at_nominal, at_best) = (
+        rows_at(&calibrands, &nominal)?,
+        rows_at(&calibrands, &best)?,
+    );
     let find = |v: &[(Row, Option<f64>)], r: &Row| {
         v.iter()
             .find(|(x, _)| key(x) == key(r))
@@ -673,10 +670,6 @@ fn e(x: Option<f64>) -> String {
     x.map(|v| format!("{v:.2e}")).unwrap_or_default()
 }
 
-fn n(x: Option<f64>, d: usize) -> String {
-    super::num(x, d)
-}
-
 fn point_text(p: &Point) -> String {
     format!(
         "ν {:.3}, muscle/fat {:.2}, skin/fat {:.2}, sliding {}",
@@ -712,12 +705,12 @@ fn rows_csv(c: &Calibration) -> String {
             .into(),
             format!("{}", p.low),
             format!("{}", p.high),
-            n(r.defaults.ratio, 5),
-            n(r.defaults_reduced.map(|x| x.0), 5),
+            super::num(r.defaults.ratio, 5),
+            super::num(r.defaults_reduced.map(|x| x.0), 5),
             e(r.defaults_reduced.map(|x| x.1)),
-            n(r.optimum_reduced.map(|x| x.0), 5),
+            super::num(r.optimum_reduced.map(|x| x.0), 5),
             e(r.optimum_reduced.map(|x| x.1)),
-            n(r.optimum.as_ref().and_then(|o| o.ratio), 5),
+            super::num(r.optimum.as_ref().and_then(|o| o.ratio), 5),
             yes(r.defaults.inside()).into(),
             yes(r.optimum.as_ref().and_then(|o| o.inside())).into(),
             [r.defaults.why.clone(), r.state_change.clone()]
