@@ -18,7 +18,7 @@ pub mod volumetric;
 
 use crate::case::Case;
 use crate::embed::EmbeddingReport;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::pipeline::inputs::CaseFiles;
 use crate::pipeline::{Recorder, Scene};
 use std::path::Path;
@@ -49,7 +49,10 @@ pub struct ModelReport {
 /// the training box, or 12 vectors (the face's error is then ~0.01 mm at its worst vertex on the
 /// first sample).
 const REDUCED_TOLERANCE: f64 = 5e-3;
-const REDUCED_MAX_SIZE: usize = 12;
+const REDUCED_MAX_SIZE: usize = 16;
+/// Snapshots per greedy step: their conjugate-gradient solves share the preconditioner's
+/// solves, which cost about a quarter per column in a block of four (docs/reduced.md).
+const REDUCED_BATCH: usize = 4;
 
 /// The predicted face and the model that predicted it.
 pub type Prediction = Predicted<Solved>;
@@ -158,27 +161,47 @@ impl Prediction {
         let greedy = crate::reduced::Greedy {
             tolerance: REDUCED_TOLERANCE,
             max_size: REDUCED_MAX_SIZE,
+            batch: REDUCED_BATCH,
         };
+        let one = |s: bool, progress: &dyn Fn(&str)| {
+            let mut c = case.clone();
+            c.tet.sliding = s;
+            let t: Vec<Case> = train
+                .iter()
+                .map(|x| {
+                    let mut x = x.clone();
+                    x.tet.sliding = s;
+                    x
+                })
+                .collect();
+            let training = reduced::Training {
+                cases: &t,
+                greedy,
+                outputs,
+            };
+            v.reduced(scene, &c, &self.skin, &training, progress)
+        };
+        // The sliding states are independent builds, each mostly sequential work (the
+        // factorisation, the snapshots' preconditioner solves): the second one runs beside the
+        // first, reporting no progress of its own.
         let build = || -> Result<reduced::ReducedModels> {
-            let mut models = Vec::new();
-            for s in states {
-                let mut c = case.clone();
-                c.tet.sliding = s;
-                let t: Vec<Case> = train
+            let Some((first, others)) = states.split_first() else {
+                return Err(Error::config(
+                    "the reduced model: no sliding state to build",
+                ));
+            };
+            let models = std::thread::scope(|scope| {
+                let rest: Vec<_> = others
                     .iter()
-                    .map(|x| {
-                        let mut x = x.clone();
-                        x.tet.sliding = s;
-                        x
-                    })
+                    .map(|s| scope.spawn(move || one(*s, &|_: &str| {})))
                     .collect();
-                let training = reduced::Training {
-                    cases: &t,
-                    greedy,
-                    outputs,
-                };
-                models.push(v.reduced(scene, &c, &self.skin, &training, progress)?);
-            }
+                let mut models = vec![one(*first, progress)];
+                models.extend(
+                    rest.into_iter()
+                        .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e))),
+                );
+                models.into_iter().collect::<Result<Vec<_>>>()
+            })?;
             Ok(reduced::ReducedModels {
                 models,
                 sliding_matters: self.sliding_matters(),

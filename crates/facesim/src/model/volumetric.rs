@@ -278,6 +278,7 @@ impl Volumetric {
                 basis_size: basis.size(),
                 full_factorisations: basis.full_factorisations,
                 reference_solves: basis.riesz_solves + lanczos.get() + 3 * training.outputs.len(),
+                cg_iterations: basis.cg_iterations,
                 offline_seconds: start.elapsed().as_secs_f64(),
                 face_gain,
                 greedy: basis.history,

@@ -26,6 +26,9 @@ use serde::{Deserialize, Serialize};
 pub struct Greedy {
     pub tolerance: f64,
     pub max_size: usize,
+    /// Snapshots added per step (the training points of the largest bounds, spread over the
+    /// box): their conjugate-gradient solves share each solve with X's factor.
+    pub batch: usize,
 }
 
 /// One step of the greedy: the basis size and the largest relative bound over the training
@@ -45,10 +48,15 @@ pub struct Basis {
     /// Everything the online solve and its bound need (and all a stored model keeps).
     pub form: OnlineForm,
     pub history: Vec<GreedyStep>,
-    /// Factorisations of the full model the build took (X and one per snapshot).
+    /// Factorisations of the full model the build took: X, and one per snapshot whose
+    /// conjugate gradients did not converge (none so far).
     pub full_factorisations: usize,
-    /// Solves with the factor of X (Riesz representers and snapshots), the cheaper work.
+    /// Solves with the factor of X (Riesz representers and the snapshots' preconditioner; a
+    /// solve of several columns at once counts each column), the cheaper work.
     pub riesz_solves: usize,
+    /// Conjugate-gradient iterations over the snapshots after the first (each a product with
+    /// A(θ) and a preconditioner solve of its column).
+    pub cg_iterations: usize,
 }
 
 /// The online data of a reduced model: N×N and N-sized arrays, independent of the mesh size
@@ -116,36 +124,38 @@ impl Basis {
             history: Vec::new(),
             full_factorisations: 1,
             riesz_solves: q,
+            cg_iterations: 0,
         };
         // The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
         // grows (two vectors per term and basis vector: most of the build's memory).
         let mut space = RieszSpace::default();
-        for (r, g) in solve_columns(&x, &loads).into_iter().zip(&loads) {
-            basis.push_riesz(&mut space, r, g.clone());
-        }
-        // Riesz representers X⁻¹ A_q v_n, kept for the new vectors' inner products.
-        let mut snapshot = solve_columns(&x, &[sys.rhs(theta_bar)]).remove(0);
+        basis.push_riesz(&mut space, solve_columns(&x, &loads), loads.clone());
+        // The first snapshot: the solution at θ̄ itself.
+        let mut snapshots = solve_columns(&x, &[sys.rhs(theta_bar)]);
         basis.riesz_solves += 1;
         loop {
-            if !basis.add(sys, (&x, &x_values), &loads, &mut space, snapshot)? {
+            let grew = basis.add(sys, (&x, &x_values), &loads, &mut space, snapshots)?;
+            if grew == 0 {
                 break;
             }
             progress(&format!(
                 "reduced model: basis of {} vectors",
                 basis.vectors.len()
             ));
-            let (worst, rel) = train
+            let bounds: Vec<(usize, f64)> = train
                 .iter()
-                .map(|t| {
-                    let o = basis.solve(t);
-                    let rel = o.as_ref().map_or(f64::INFINITY, |o| {
+                .enumerate()
+                .map(|(i, t)| {
+                    let rel = basis.solve(t).as_ref().map_or(f64::INFINITY, |o| {
                         o.energy_bound / o.energy_norm.max(1e-300)
                     });
-                    (t.as_slice(), rel)
+                    (i, rel)
                 })
-                .fold((theta_bar, f64::NEG_INFINITY), |a, b| {
-                    if b.1 > a.1 { b } else { a }
-                });
+                .collect();
+            let (worst, rel) = bounds.iter().fold((None, f64::NEG_INFINITY), |a, b| {
+                if b.1 > a.1 { (Some(b.0), b.1) } else { a }
+            });
+            let worst = worst.map_or(theta_bar, |i| train[i].as_slice());
             basis.history.push(GreedyStep {
                 size: basis.vectors.len(),
                 max_relative_bound: rel,
@@ -154,71 +164,177 @@ impl Basis {
             if rel <= greedy.tolerance || basis.vectors.len() >= greedy.max_size {
                 break;
             }
-            let k = sys.factor(worst)?;
-            basis.full_factorisations += 1;
-            snapshot = solve_columns(&k, &[sys.rhs(worst)]).remove(0);
+            let room = greedy.max_size - basis.vectors.len();
+            let picked = pick(train, &bounds, greedy.batch.clamp(1, room));
+            snapshots = basis.snapshots(sys, &x, &picked)?;
         }
         Ok((basis, x))
     }
 
-    fn push_riesz(&mut self, space: &mut RieszSpace, rho: Vec<f64>, g: Vec<f64>) {
-        let (coords, norm) = space.push(rho, g);
-        self.form.riesz.push(coords);
-        self.form.riesz_norms.push(norm);
+    fn push_riesz(&mut self, space: &mut RieszSpace, rho: Vec<Vec<f64>>, g: Vec<Vec<f64>>) {
+        for (coords, norm) in space.push(rho, g) {
+            self.form.riesz.push(coords);
+            self.form.riesz_norms.push(norm);
+        }
     }
 
-    /// Orthonormalise `u` against the basis in X (Gram–Schmidt twice) and add it with its
-    /// reduced matrices and Riesz inner products; false when it adds nothing new.
+    /// Orthonormalise each of `snapshots` against the basis in X (Gram–Schmidt twice) and add
+    /// it with its reduced matrices and Riesz inner products; how many added something new.
     fn add(
         &mut self,
         sys: &Affine,
         (x, x_values): (&Cholesky<f64>, &[f64]),
         loads: &[Vec<f64>],
         space: &mut RieszSpace,
-        mut u: Vec<f64>,
-    ) -> Result<bool> {
+        snapshots: Vec<Vec<f64>>,
+    ) -> Result<usize> {
         let q = sys.terms();
         let xu = |v: &[f64]| sys.apply_values(x_values, v);
-        let norm0 = dot(&u, &xu(&u)).sqrt();
-        for _ in 0..2 {
-            let xv = xu(&u);
-            for v in &self.vectors {
-                let p = dot(v, &xv);
-                for (a, b) in u.iter_mut().zip(v) {
-                    *a -= p * b;
+        let mut av_all: Vec<Vec<f64>> = Vec::new();
+        for mut u in snapshots {
+            let norm0 = dot(&u, &xu(&u)).sqrt();
+            for _ in 0..2 {
+                let xv = xu(&u);
+                for v in &self.vectors {
+                    let p = dot(v, &xv);
+                    for (a, b) in u.iter_mut().zip(v) {
+                        *a -= p * b;
+                    }
                 }
             }
-        }
-        let norm = dot(&u, &xu(&u)).sqrt();
-        if !(norm > 1e-10 * norm0) || !norm.is_finite() {
-            return Ok(false);
-        }
-        u.iter_mut().for_each(|a| *a /= norm);
-        let n = self.vectors.len();
-        let av: Vec<Vec<f64>> = (0..q).map(|k| sys.apply(k, &u)).collect();
-        let new_riesz = solve_columns(x, &av);
-        self.riesz_solves += q;
-        self.vectors.push(u);
-        let m = n + 1;
-        for (k, avk) in av.iter().enumerate() {
-            let old = &self.form.matrices[k];
-            let mut a = vec![0.0; m * m];
-            for i in 0..n {
-                a[i * m..i * m + n].copy_from_slice(&old[i * n..(i + 1) * n]);
+            let norm = dot(&u, &xu(&u)).sqrt();
+            if !(norm > 1e-10 * norm0) || !norm.is_finite() {
+                continue;
             }
-            for (j, v) in self.vectors.iter().enumerate() {
-                let e = dot(v, avk);
-                a[n * m + j] = e;
-                a[j * m + n] = e;
+            u.iter_mut().for_each(|a| *a /= norm);
+            let n = self.vectors.len();
+            let av: Vec<Vec<f64>> = (0..q).map(|k| sys.apply(k, &u)).collect();
+            self.vectors.push(u);
+            let m = n + 1;
+            for (k, avk) in av.iter().enumerate() {
+                let old = &self.form.matrices[k];
+                let mut a = vec![0.0; m * m];
+                for i in 0..n {
+                    a[i * m..i * m + n].copy_from_slice(&old[i * n..(i + 1) * n]);
+                }
+                for (j, v) in self.vectors.iter().enumerate() {
+                    let e = dot(v, avk);
+                    a[n * m + j] = e;
+                    a[j * m + n] = e;
+                }
+                self.form.matrices[k] = a;
+                let f = dot(&self.vectors[n], &loads[k]);
+                self.form.loads[k].push(f);
             }
-            self.form.matrices[k] = a;
-            let f = dot(&self.vectors[n], &loads[k]);
-            self.form.loads[k].push(f);
+            av_all.extend(av);
         }
-        for (r, g) in new_riesz.into_iter().zip(av) {
-            self.push_riesz(space, r, g);
+        // One solve of all the new vectors' columns, one block Gram–Schmidt of them.
+        let added = av_all.len() / q.max(1);
+        let new_riesz = solve_columns(x, &av_all);
+        self.riesz_solves += av_all.len();
+        self.push_riesz(space, new_riesz, av_all);
+        Ok(added)
+    }
+
+    /// The full solutions at `points`, by conjugate gradients preconditioned with X's factor
+    /// from the reduced solution, all points' preconditioner solves done at once. Each stops
+    /// when its certified error ‖r‖_X' / α_LB(θ) is below [`SNAPSHOT_ACCURACY`] × the reduced
+    /// model's own bound there: the snapshot is then accurate far beyond what the basis lacks
+    /// at that point, and the bound of the basis it builds stays exact whatever the snapshot
+    /// (it is computed from the full residual). A point that has not converged after
+    /// [`CG_ITERATIONS`] is solved with its own factorisation.
+    fn snapshots(
+        &mut self,
+        sys: &Affine,
+        x: &Cholesky<f64>,
+        points: &[&[f64]],
+    ) -> Result<Vec<Vec<f64>>> {
+        struct Column {
+            values: Vec<f64>,
+            u: Vec<f64>,
+            r: Vec<f64>,
+            p: Vec<f64>,
+            rz: f64,
+            alpha: f64,
+            tol: f64,
+            done: bool,
         }
-        Ok(true)
+        let mut cols = Vec::with_capacity(points.len());
+        for t in points {
+            // A point the reduced system cannot answer (not positive definite in round-off)
+            // starts from zero, its accuracy relative to the right-hand side.
+            let o = self.solve(t).unwrap_or_else(|_| Online {
+                coefficients: DVector::zeros(self.size()),
+                energy_bound: f64::INFINITY,
+                energy_norm: 0.0,
+                residual: 0.0,
+                alpha: t
+                    .iter()
+                    .zip(&self.form.theta_bar)
+                    .map(|(a, b)| a / b)
+                    .fold(f64::INFINITY, f64::min),
+            });
+            let values = sys.values_at(t);
+            let u = self.expand(&o.coefficients);
+            let au = sys.apply_values(&values, &u);
+            let r: Vec<f64> = sys.rhs(t).iter().zip(&au).map(|(b, a)| b - a).collect();
+            cols.push(Column {
+                values,
+                u,
+                r,
+                p: Vec::new(),
+                rz: 0.0,
+                alpha: o.alpha,
+                tol: SNAPSHOT_ACCURACY * o.energy_bound.min(o.energy_norm.max(1e-300) * 1e3),
+                done: false,
+            });
+        }
+        let precondition = |cols: &mut [Column], basis: &mut Basis| {
+            let active: Vec<usize> = (0..cols.len()).filter(|i| !cols[*i].done).collect();
+            let rs: Vec<Vec<f64>> = active.iter().map(|i| cols[*i].r.clone()).collect();
+            basis.riesz_solves += rs.len();
+            active.into_iter().zip(solve_columns(x, &rs))
+        };
+        for (i, z) in precondition(&mut cols, self).collect::<Vec<_>>() {
+            let c = &mut cols[i];
+            c.rz = dot(&c.r, &z);
+            c.p = z;
+        }
+        for _ in 0..CG_ITERATIONS {
+            for c in cols.iter_mut().filter(|c| !c.done) {
+                // ‖r‖_X' = √(rᵀ X⁻¹ r), and ‖u − u_k‖_X ≤ ‖r‖_X' / α_LB (as the online bound).
+                if c.rz.max(0.0).sqrt() / c.alpha <= c.tol {
+                    c.done = true;
+                    continue;
+                }
+                let ap = sys.apply_values(&c.values, &c.p);
+                let a = c.rz / dot(&c.p, &ap);
+                c.u.iter_mut().zip(&c.p).for_each(|(x, y)| *x += a * y);
+                c.r.iter_mut().zip(&ap).for_each(|(x, y)| *x -= a * y);
+                self.cg_iterations += 1;
+            }
+            if cols.iter().all(|c| c.done) {
+                break;
+            }
+            for (i, z) in precondition(&mut cols, self).collect::<Vec<_>>() {
+                let c = &mut cols[i];
+                let rz = dot(&c.r, &z);
+                let beta = rz / c.rz;
+                c.rz = rz;
+                c.p.iter_mut().zip(&z).for_each(|(x, y)| *x = y + beta * *x);
+            }
+        }
+        let mut out = Vec::with_capacity(cols.len());
+        for (c, t) in cols.into_iter().zip(points) {
+            if c.done || c.rz.max(0.0).sqrt() / c.alpha <= c.tol {
+                out.push(c.u);
+            } else {
+                let k = sys.factor(t)?;
+                self.full_factorisations += 1;
+                out.push(solve_columns(&k, &[sys.rhs(t)]).remove(0));
+            }
+        }
+        Ok(out)
     }
 
     /// N.
@@ -340,31 +456,173 @@ struct RieszSpace {
 }
 
 impl RieszSpace {
-    /// Add ρ with X ρ = g (Gram–Schmidt twice; a direction already spanned adds no new e):
-    /// its coordinates and ‖ρ‖_X.
-    fn push(&mut self, mut rho: Vec<f64>, mut g: Vec<f64>) -> (Vec<f64>, f64) {
-        let norm0 = dot(&rho, &g).max(0.0).sqrt();
-        let mut coords = vec![0.0; self.e.len()];
+    /// Add each ρ with X ρ = g, in order: its coordinates and ‖ρ‖_X. Block classical
+    /// Gram–Schmidt twice against the vectors already there (one pass over them per sweep for
+    /// the whole block, on all cores), then twice against the block's own earlier vectors; a
+    /// direction already spanned adds no new e.
+    fn push(&mut self, mut rho: Vec<Vec<f64>>, mut g: Vec<Vec<f64>>) -> Vec<(Vec<f64>, f64)> {
+        use rayon::prelude::*;
+        let norm0: Vec<f64> = rho
+            .iter()
+            .zip(&g)
+            .map(|(r, g)| dot(r, g).max(0.0).sqrt())
+            .collect();
+        let old = self.e.len();
+        let mut coords = vec![vec![0.0; old]; rho.len()];
         for _ in 0..2 {
-            for (i, (e, xe)) in self.e.iter().zip(&self.xe).enumerate() {
-                let p = dot(e, &g);
-                coords[i] += p;
-                rho.iter_mut().zip(e).for_each(|(a, b)| *a -= p * b);
-                g.iter_mut().zip(xe).for_each(|(a, b)| *a -= p * b);
+            // p[i][j] = e_iᵀ g_j = (ρ_j, e_i)_X.
+            let p: Vec<Vec<f64>> = self
+                .e
+                .par_iter()
+                .map(|e| g.iter().map(|g| dot(e, g)).collect())
+                .collect();
+            for (i, row) in p.iter().enumerate() {
+                for (j, v) in row.iter().enumerate() {
+                    coords[j][i] += v;
+                }
             }
+            subtract(&mut rho, &self.e, &p);
+            subtract(&mut g, &self.xe, &p);
         }
-        let rest = dot(&rho, &g).max(0.0).sqrt();
-        if rest > 1e-12 * norm0 {
-            rho.iter_mut().for_each(|a| *a /= rest);
-            g.iter_mut().for_each(|a| *a /= rest);
-            self.e.push(rho);
-            self.xe.push(g);
-            coords.push(rest);
+        let mut out = Vec::with_capacity(rho.len());
+        for ((mut rho, mut g), (mut c, norm0)) in
+            rho.into_iter().zip(g).zip(coords.into_iter().zip(norm0))
+        {
+            for _ in 0..2 {
+                for (i, (e, xe)) in self.e.iter().zip(&self.xe).enumerate().skip(old) {
+                    let p = dot(e, &g);
+                    if c.len() <= i {
+                        c.resize(i + 1, 0.0);
+                    }
+                    c[i] += p;
+                    rho.iter_mut().zip(e).for_each(|(a, b)| *a -= p * b);
+                    g.iter_mut().zip(xe).for_each(|(a, b)| *a -= p * b);
+                }
+            }
+            c.resize(self.e.len(), 0.0);
+            let rest = dot(&rho, &g).max(0.0).sqrt();
+            if rest > 1e-12 * norm0 {
+                rho.iter_mut().for_each(|a| *a /= rest);
+                g.iter_mut().for_each(|a| *a /= rest);
+                self.e.push(rho);
+                self.xe.push(g);
+                c.push(rest);
+            }
+            out.push((c, norm0));
         }
-        (coords, norm0)
+        out
     }
+}
+
+/// targets_j −= Σ_i p[i][j] vectors_i, reading each vector once for all targets (row blocks
+/// on all cores).
+fn subtract(targets: &mut [Vec<f64>], vectors: &[Vec<f64>], p: &[Vec<f64>]) {
+    use rayon::prelude::*;
+    const ROWS: usize = 2048;
+    let Some(n) = targets.first().map(Vec::len) else {
+        return;
+    };
+    let mut blocks: Vec<Vec<&mut [f64]>> = (0..n.div_ceil(ROWS)).map(|_| Vec::new()).collect();
+    for t in targets.iter_mut() {
+        for (b, chunk) in t.chunks_mut(ROWS).enumerate() {
+            blocks[b].push(chunk);
+        }
+    }
+    blocks
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(b, mut chunks)| {
+            let start = b * ROWS;
+            for (v, row) in vectors.iter().zip(p) {
+                for (chunk, w) in chunks.iter_mut().zip(row) {
+                    let v = &v[start..start + chunk.len()];
+                    chunk.iter_mut().zip(v).for_each(|(a, b)| *a -= w * b);
+                }
+            }
+        });
+}
+
+/// A snapshot's certified error, relative to the reduced model's bound at its point, at which
+/// its conjugate gradients stop. The bound overestimates the basis's true error 10–50×
+/// (docs/reduced.md), so this keeps the snapshot's error well below it.
+const SNAPSHOT_ACCURACY: f64 = 1e-3;
+
+/// Conjugate-gradient iterations before a snapshot falls back to its own factorisation. The
+/// preconditioned iteration divides the error by about 2 each (the parameter box's moduli
+/// span a condition number of X⁻¹ A(θ) of order 10); 30 iterations is twice what the real CT needs.
+const CG_ITERATIONS: usize = 30;
+
+/// Up to `count` training points to add as snapshots: the largest bound first, then the next
+/// largest that lie apart from those picked (a quarter of the box's diagonal in log θ), so one
+/// step does not spend its snapshots on one corner of the box.
+fn pick<'a>(train: &'a [Vec<f64>], bounds: &[(usize, f64)], count: usize) -> Vec<&'a [f64]> {
+    let q = train.first().map_or(0, Vec::len);
+    let (lo, hi) = train.iter().fold(
+        (vec![f64::INFINITY; q], vec![f64::NEG_INFINITY; q]),
+        |(mut lo, mut hi), t| {
+            for (k, v) in t.iter().enumerate() {
+                lo[k] = lo[k].min(v.ln());
+                hi[k] = hi[k].max(v.ln());
+            }
+            (lo, hi)
+        },
+    );
+    let at = |t: &[f64]| -> Vec<f64> {
+        t.iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let w = hi[k] - lo[k];
+                if w > 0.0 { (v.ln() - lo[k]) / w } else { 0.0 }
+            })
+            .collect()
+    };
+    let spread = (q as f64).sqrt() * 0.25;
+    let mut order: Vec<&(usize, f64)> = bounds.iter().collect();
+    order.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut picked: Vec<(&'a [f64], Vec<f64>)> = Vec::new();
+    for (i, _) in order {
+        if picked.len() == count {
+            break;
+        }
+        let y = at(&train[*i]);
+        let apart = picked.iter().all(|(_, z)| {
+            y.iter()
+                .zip(z)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt()
+                >= spread
+        });
+        if apart {
+            picked.push((&train[*i], y));
+        }
+    }
+    picked.into_iter().map(|(t, _)| t).collect()
 }
 
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pick;
+
+    #[test]
+    fn a_batch_takes_the_largest_bounds_that_lie_apart() {
+        // Three points in one corner of the box (bounds 10, 9, 8) and one far (bound 1).
+        let train = vec![
+            vec![1.0, 1.0],
+            vec![1.05, 1.0],
+            vec![1.0, 1.05],
+            vec![10.0, 10.0],
+            vec![1.0, 10.0],
+        ];
+        let bounds = [(0, 10.0), (1, 9.0), (2, 8.0), (3, 1.0), (4, 0.5)];
+        let got = pick(&train, &bounds, 2);
+        assert_eq!(got, [&train[0][..], &train[3][..]]);
+        let got = pick(&train, &bounds, 3);
+        assert_eq!(got, [&train[0][..], &train[3][..], &train[4][..]]);
+        assert_eq!(pick(&train, &bounds, 1), [&train[0][..]]);
+    }
 }
