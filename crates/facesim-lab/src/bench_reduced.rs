@@ -523,11 +523,11 @@ fn online(models: &ReducedModels, case: &Case, n: usize) -> Result<Online> {
     let mut checksum = 0.0;
     for (_, c) in draws(case, n, ONLINE_SEED) {
         let t = Instant::now();
-        let (i, coefficients, energy) = models.solve(&c)?;
+        let (i, coefficients, b) = models.solve(&c)?;
         solve_us.push(t.elapsed().as_secs_f64() * 1e6);
         checksum += coefficients.iter().sum::<f64>();
         let m = &models.models[i];
-        bounds.push(m.face_gain * energy);
+        bounds.push(b.face_mm);
         let mut c = c;
         c.tet.sliding = m.sliding;
         let t = Instant::now();

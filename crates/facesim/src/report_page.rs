@@ -94,7 +94,7 @@ pub struct PageReduced<'a> {
     pub theta_box: &'a [Vec<f64>; 2],
     /// Face error ≤ face_gain · Δ (mm); a soft landmark's ≤ output_gains\[i\] · Δ.
     pub face_gain: f64,
-    pub output_gains: &'a [f64],
+    pub output_gains: Vec<f64>,
     /// The face displacement: lift + Σ c_n columns\[n\] (mm per face vertex).
     pub face: &'a crate::reduced::LinearFace,
 }

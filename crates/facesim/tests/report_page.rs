@@ -1192,7 +1192,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
             "Δ {eb} vs {}",
             rust.energy_bound
         );
-        let face_bound = run_model.face_gain * (rust.energy_bound + at_nominal.energy_bound);
+        let face_bound = run_model.face_gain() * (rust.energy_bound + at_nominal.energy_bound);
         let fb = t["face_bound_mm"].as_f64().unwrap();
         assert!(
             (fb - face_bound).abs() <= 1e-8 * face_bound,

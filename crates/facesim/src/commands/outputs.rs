@@ -333,8 +333,8 @@ fn page_tissue<'a>(
                 form: &m.form,
                 terms: &m.terms,
                 theta_box: &m.theta_box,
-                face_gain: m.face_gain,
-                output_gains: &m.output_gains,
+                face_gain: m.face_gain(),
+                output_gains: m.output_gains(),
                 face: &m.face,
             })
             .collect(),

@@ -144,8 +144,6 @@ fn finish(
                     let r = crate::uncertainty::reduced::Reduced {
                         faces: m.models.iter().map(|x| &x.face).collect(),
                         solve: &solve,
-                        face_gains: m.models.iter().map(|x| x.face_gain).collect(),
-                        landmark_gains: m.models.iter().map(|x| x.output_gains.clone()).collect(),
                         reports: m.models.iter().map(|x| x.report()).collect(),
                     };
                     crate::uncertainty::reduced::sample_reduced(&nominal, &r, &analysis, case, obs)

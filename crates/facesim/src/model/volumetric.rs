@@ -218,7 +218,7 @@ impl Volumetric {
                 theta_box[1][q] = theta_box[1][q].max(*v);
             }
         }
-        let (basis, x) = Basis::build(&affine, &theta_bar, &train, greedy, progress)?;
+        let (mut basis, x) = Basis::build(&affine, &theta_bar, &train, greedy, progress)?;
         let face_map = FaceMap {
             tets: self.mesh.tets.clone(),
             cell: r.embedding.tet.clone(),
@@ -250,7 +250,7 @@ impl Volumetric {
                 .collect()
         });
         // Each output's gain: its 3×3 block of L X⁻¹ Lᵀ.
-        let output_gains = training
+        let output_gains: Vec<f64> = training
             .outputs
             .iter()
             .map(|w| {
@@ -271,6 +271,40 @@ impl Volumetric {
             })
             .collect();
         let face_gain = gain2.max(0.0).sqrt();
+        // The face's and each output's images of the Riesz space's vectors, for the bounds
+        // through the Riesz representer (`reduced::OutputBound`); then the space is dropped.
+        progress("reduced model: the bounds' images");
+        let faces: Vec<Vec<[f64; 3]>> = std::mem::take(&mut basis.riesz_space)
+            .into_iter()
+            .map(|e| face_map.carry(&affine.expand(&e, false)))
+            .collect();
+        let output_bounds = training
+            .outputs
+            .iter()
+            .zip(output_gains)
+            .map(|(w, g)| {
+                let images: Vec<Vec<f64>> = faces
+                    .iter()
+                    .map(|f| {
+                        let mut y = vec![0.0; 3];
+                        for (v, a) in w {
+                            for k in 0..3 {
+                                y[k] += a * f[*v][k];
+                            }
+                        }
+                        y
+                    })
+                    .collect();
+                crate::reduced::OutputBound::new(g, &images)
+            })
+            .collect();
+        let face_bound = crate::reduced::OutputBound::new(
+            face_gain,
+            &faces
+                .into_iter()
+                .map(|f| f.into_iter().flatten().collect())
+                .collect::<Vec<Vec<f64>>>(),
+        );
         Ok(ReducedTet {
             sliding,
             build: crate::reduced::ReducedReport {
@@ -287,8 +321,8 @@ impl Volumetric {
             terms,
             theta_box,
             face,
-            face_gain,
-            output_gains,
+            face_bound,
+            output_bounds,
         })
     }
 

@@ -57,6 +57,10 @@ pub struct Basis {
     /// Conjugate-gradient iterations over the snapshots after the first (each a product with
     /// A(θ) and a preconditioner solve of its column).
     pub cg_iterations: usize,
+    /// The X-orthonormal vectors (free values) the Riesz coordinates refer to: an output's
+    /// images of them make its bound through the Riesz representer ([`super::OutputBound`]).
+    /// Taken by the caller; node-sized, so dropped once those images are made.
+    pub riesz_space: Vec<Vec<f64>>,
 }
 
 /// The online data of a reduced model: N×N and N-sized arrays, independent of the mesh size
@@ -86,9 +90,17 @@ pub struct Online {
     pub energy_bound: f64,
     /// ‖u_N‖_X.
     pub energy_norm: f64,
-    /// ‖r(θ)‖_X'.
+    /// ‖r(θ)‖_X', with its round-off floor.
     pub residual: f64,
+    /// α_LB(θ) = min_q θ_q/θ̄_q and γ_UB(θ) = max_q θ_q/θ̄_q: the spectrum of X⁻¹A(θ) lies
+    /// between them.
     pub alpha: f64,
+    pub gamma: f64,
+    /// X⁻¹ r(θ) in the X-orthonormal Riesz space's coordinates (its norm is the residual's
+    /// without the floor), and the floor: what an output bound through the Riesz representer
+    /// needs ([`super::OutputBound`]).
+    pub coordinates: Vec<f64>,
+    pub floor: f64,
 }
 
 impl Basis {
@@ -125,6 +137,7 @@ impl Basis {
             full_factorisations: 1,
             riesz_solves: q,
             cg_iterations: 0,
+            riesz_space: Vec::new(),
         };
         // The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
         // grows (two vectors per term and basis vector: most of the build's memory).
@@ -168,6 +181,7 @@ impl Basis {
             let picked = pick(train, &bounds, greedy.batch.clamp(1, room));
             snapshots = basis.snapshots(sys, &x, &picked)?;
         }
+        basis.riesz_space = space.e;
         Ok((basis, x))
     }
 
@@ -268,6 +282,9 @@ impl Basis {
                 energy_bound: f64::INFINITY,
                 energy_norm: 0.0,
                 residual: 0.0,
+                gamma: f64::INFINITY,
+                coordinates: Vec::new(),
+                floor: 0.0,
                 alpha: t
                     .iter()
                     .zip(&self.form.theta_bar)
@@ -400,24 +417,26 @@ impl OnlineForm {
             .copied()
             .chain((0..n * q).map(|i| -c[i / q] * theta[i % q]))
             .collect();
-        let residual = self.residual_norm(&w);
-        let alpha = theta
-            .iter()
-            .zip(&self.theta_bar)
-            .map(|(t, b)| t / b)
-            .fold(f64::INFINITY, f64::min);
+        let (coordinates, floor) = self.residual_coordinates(&w);
+        let residual = dot(&coordinates, &coordinates).sqrt() + floor;
+        let ratios = theta.iter().zip(&self.theta_bar).map(|(t, b)| t / b);
+        let alpha = ratios.clone().fold(f64::INFINITY, f64::min);
+        let gamma = ratios.fold(0.0, f64::max);
         Ok(Online {
             energy_norm: c.norm(),
             coefficients: c,
             residual,
             energy_bound: residual / alpha,
             alpha,
+            gamma,
+            coordinates,
+            floor,
         })
     }
 
-    /// ‖Σ_j w_j ρ_j‖_X plus its round-off: the coordinates carry ε ‖ρ_j‖ per unknown summed
-    /// (Higham 2002 §3.1, γ_n), so the floor is n ε Σ |w_j| ‖ρ_j‖_X.
-    fn residual_norm(&self, w: &[f64]) -> f64 {
+    /// The coordinates of Σ_j w_j ρ_j and their round-off in the X-norm: the coordinates carry
+    /// ε ‖ρ_j‖ per unknown summed (Higham 2002 §3.1, γ_n), so the floor is n ε Σ |w_j| ‖ρ_j‖_X.
+    fn residual_coordinates(&self, w: &[f64]) -> (Vec<f64>, f64) {
         let rows = self.riesz.iter().map(Vec::len).max().unwrap_or(0);
         let mut y = vec![0.0; rows];
         for (wj, col) in w.iter().zip(&self.riesz) {
@@ -430,7 +449,7 @@ impl OnlineForm {
             .zip(&self.riesz_norms)
             .map(|(a, b)| a.abs() * b)
             .sum();
-        dot(&y, &y).sqrt() + self.unknowns as f64 * f64::EPSILON * floor
+        (y, self.unknowns as f64 * f64::EPSILON * floor)
     }
 
     /// Whether the arrays have the sizes N and Q imply (a stored model is checked on read).

@@ -85,6 +85,95 @@ impl LinearFace {
     }
 }
 
+/// The certified bound (mm) on a linear output's error y = C e, through the residual's Riesz
+/// representer ρ = X⁻¹ r (docs/reduced.md "The face, in mm"): e = T⁻¹ ρ with T = X⁻¹ A(θ),
+/// whose spectrum lies in [α_LB, γ_UB] (every A_q positive semi-definite), so with
+/// c = (1/α_LB + 1/γ_UB)/2
+///
+///     ‖C e‖ ≤ c ‖C ρ‖ + g (1/α_LB − 1/γ_UB)/2 ‖ρ‖_X,
+///
+/// g the output's gain (‖C v‖ ≤ g ‖v‖_X). Never above g Δ, which it falls back to.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OutputBound {
+    pub gain: f64,
+    /// F with ‖C ρ‖ = ‖F y‖ for ρ of Riesz coordinates y: `rows` × k, row-major (empty: the
+    /// plain g Δ).
+    pub factor: Vec<f64>,
+    pub rows: usize,
+}
+
+impl OutputBound {
+    /// From the gain and the output's images C e_i of the Riesz space's vectors: F is their
+    /// matrix when it has at most k rows (a landmark: 3), else Λ^½ Uᵀ of their Gram matrix
+    /// U Λ Uᵀ (the face: k × k instead of 3 × vertices).
+    pub fn new(gain: f64, images: &[Vec<f64>]) -> OutputBound {
+        let k = images.len();
+        let m = images.first().map_or(0, Vec::len);
+        if k == 0 {
+            return OutputBound {
+                gain,
+                factor: Vec::new(),
+                rows: 0,
+            };
+        }
+        if m <= k {
+            let factor = (0..m)
+                .flat_map(|r| images.iter().map(move |col| col[r]))
+                .collect();
+            return OutputBound {
+                gain,
+                factor,
+                rows: m,
+            };
+        }
+        let gram = nalgebra::DMatrix::from_fn(k, k, |i, j| basis::dot(&images[i], &images[j]));
+        let e = nalgebra::SymmetricEigen::new(gram);
+        let mut factor = vec![0.0; k * k];
+        for r in 0..k {
+            let s = e.eigenvalues[r].max(0.0).sqrt();
+            for j in 0..k {
+                factor[r * k + j] = s * e.eigenvectors[(j, r)];
+            }
+        }
+        OutputBound {
+            gain,
+            factor,
+            rows: k,
+        }
+    }
+
+    /// Whether the gain is finite and not negative and the factor has whole rows of finite
+    /// values (a stored model is checked on read).
+    pub fn consistent(&self) -> bool {
+        self.gain.is_finite()
+            && self.gain >= 0.0
+            && (self.rows == 0 || self.factor.len().is_multiple_of(self.rows))
+            && (self.rows > 0 || self.factor.is_empty())
+            && self.factor.iter().all(|x| x.is_finite())
+    }
+
+    /// The bound (mm) for the online answer `o`.
+    pub fn bound(&self, o: &Online) -> f64 {
+        let plain = self.gain * o.energy_bound;
+        if self.rows == 0 || !(o.gamma.is_finite() && o.alpha > 0.0) {
+            return plain;
+        }
+        let cols = self.factor.len() / self.rows;
+        let y = &o.coordinates[..cols.min(o.coordinates.len())];
+        let fy = self
+            .factor
+            .chunks_exact(cols)
+            .map(|row| basis::dot(&row[..y.len()], y).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let (a, g) = (1.0 / o.alpha, 1.0 / o.gamma);
+        // The coordinates' round-off (floor, in the X-norm) reaches the output through g.
+        let split =
+            0.5 * (a + g) * (fy + self.gain * o.floor) + self.gain * 0.5 * (a - g) * o.residual;
+        split.min(plain)
+    }
+}
+
 /// report.json `uncertainty.reduced[]`: how one reduced model was built (docs/reduced.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReducedReport {
@@ -353,8 +442,26 @@ mod tests {
             max_size: 9,
             batch: 4,
         };
-        let (b, x) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
+        let (mut b, x) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
         assert_eq!(b.size(), 9);
+        // An output: every third free unknown. Its gain σ² = λ_max(C X⁻¹ Cᵀ) and its images of
+        // the Riesz space make its bound through the Riesz representer.
+        let picked: Vec<usize> = (0..sys.unknowns()).step_by(3).collect();
+        let out = |v: &[f64]| -> Vec<f64> { picked.iter().map(|i| v[*i]).collect() };
+        let gain = norm::largest_eigenvalue(picked.len(), 200, &|y: &[f64]| {
+            let mut full = vec![0.0; sys.unknowns()];
+            for (i, a) in picked.iter().zip(y) {
+                full[*i] = *a;
+            }
+            out(&affine::solve_columns(&x, &[full]).remove(0))
+        })
+        .sqrt();
+        let images: Vec<Vec<f64>> = std::mem::take(&mut b.riesz_space)
+            .iter()
+            .map(|e| out(e))
+            .collect();
+        let face = OutputBound::new(gain, &images);
+        assert_eq!(face.rows, images.len());
         // Every snapshot converged without a factorisation of its own: X's is the only one.
         assert_eq!(b.full_factorisations, 1);
         assert!(b.cg_iterations >= 8, "{} iterations", b.cg_iterations);
@@ -384,10 +491,22 @@ mod tests {
                 "θ {i}: online {} vs full {direct} (‖f‖ {scale})",
                 o.residual
             );
-            // And the bound holds against the factorised truth.
+            // And the bounds hold against the factorised truth: the energy's, and the output's
+            // through the Riesz representer, which is at most its gain × Δ.
             let truth = affine::solve_columns(&sys.factor(&t).unwrap(), &[sys.rhs(&t)]).remove(0);
             let e: Vec<f64> = truth.iter().zip(&u).map(|(a, b)| a - b).collect();
             assert!(energy(&sys, &th, &e) <= o.energy_bound);
+            let ce = out(&e).iter().map(|a| a * a).sum::<f64>().sqrt();
+            let split = face.bound(&o);
+            assert!(
+                ce <= split,
+                "θ {i}: output error {ce:.3e} > its bound {split:.3e}"
+            );
+            assert!(
+                split <= gain * o.energy_bound,
+                "{split} > {}",
+                gain * o.energy_bound
+            );
         }
     }
 

@@ -13,22 +13,21 @@ use crate::case::Case;
 use crate::error::Result;
 use crate::landmarks::Analysis;
 use crate::landmarks::Ordered;
+use crate::model::reduced::Bounds;
 use crate::observe::Observer;
 use crate::reduced::{LinearFace, ReducedReport};
 use crate::vec3::{norm, sub};
 use rayon::prelude::*;
 
-/// A case's reduced answer: which linear face, its coefficients, the energy-norm bound Δ.
-pub type SolveReduced<'a> = dyn Fn(&Case) -> Result<(usize, Vec<f64>, f64)> + Sync + 'a;
+/// A case's reduced answer: which linear face, its coefficients, and the certified bounds (mm)
+/// on the face's and each soft landmark's error ([`landmark_outputs`] order).
+pub type SolveReduced<'a> = dyn Fn(&Case) -> Result<(usize, Vec<f64>, Bounds)> + Sync + 'a;
 
-/// A reduced model for the sampling: the linear faces (one per sliding state), the solve that
-/// picks one and gives its coefficients and energy-norm bound Δ for a case, and per face the
-/// gains from Δ to mm: the whole face's and each soft landmark's ([`landmark_outputs`] order).
+/// A reduced model for the sampling: the linear faces (one per sliding state) and the solve
+/// that picks one and gives its coefficients and bounds for a case.
 pub struct Reduced<'a> {
     pub faces: Vec<&'a LinearFace>,
     pub solve: &'a SolveReduced<'a>,
-    pub face_gains: Vec<f64>,
-    pub landmark_gains: Vec<Vec<f64>>,
     pub reports: Vec<ReducedReport>,
 }
 
@@ -83,27 +82,22 @@ pub fn sample_reduced(
     let nominal = solve_key(case, run.sliding_matters);
     obs.started(&format!("uncertainty: {n} reduced solves"));
     let t = std::time::Instant::now();
-    // Per sample: its face and Δ (0 for the nominal face, which is the run's own).
-    let solved: Vec<Result<(Face, f64)>> = draws
+    // Per sample: its face and bounds (none for the nominal face, which is the run's own).
+    let solved: Vec<Result<(Face, Option<Bounds>)>> = draws
         .par_iter()
         .map(|d| {
             let c = d.apply(case);
             if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
-                return Ok((Face::Nominal, 0.0));
+                return Ok((Face::Nominal, None));
             }
-            let (m, coefficients, bound) = (reduced.solve)(&c)?;
-            Ok((Face::Reduced(m, coefficients), bound))
+            let (m, coefficients, bounds) = (reduced.solve)(&c)?;
+            Ok((Face::Reduced(m, coefficients), Some(bounds)))
         })
         .collect();
     let solve_s = t.elapsed().as_secs_f64();
-    let solved: Vec<(Face, f64)> = solved.into_iter().collect::<Result<_>>()?;
-    let bound = |s: usize, gains: &dyn Fn(usize) -> f64| match &solved[s].0 {
-        Face::Nominal => 0.0,
-        Face::Reduced(m, _) => gains(*m) * solved[s].1,
-    };
-    let largest = (0..n)
-        .map(|s| bound(s, &|m| reduced.face_gains[m]))
-        .fold(0.0, f64::max);
+    let solved: Vec<(Face, Option<Bounds>)> = solved.into_iter().collect::<Result<_>>()?;
+    let bound = |s: usize, of: &dyn Fn(&Bounds) -> f64| solved[s].1.as_ref().map_or(0.0, of);
+    let largest = (0..n).map(|s| bound(s, &|b| b.face_mm)).fold(0.0, f64::max);
     let solves = solved
         .iter()
         .filter(|s| matches!(s.0, Face::Reduced(..)))
@@ -199,7 +193,7 @@ pub fn sample_reduced(
             let k = soft;
             soft += 1;
             let b = (0..n)
-                .map(|s| bound(s, &|m| reduced.landmark_gains[m][k]))
+                .map(|s| bound(s, &|b| b.landmarks_mm[k]))
                 .fold(0.0, f64::max);
             per_landmark.push((label.clone(), b));
         }

@@ -4,7 +4,7 @@
 //! ```text
 //! magic   "FSREDUC\0", format FORMAT_VERSION, facesim version, JSON header:
 //!         vertices, face_checksum, tissues (the run's [tet.*]), sliding (the run's), models
-//!         [{sliding, terms, form, theta_box, face_gain, output_gains, build}]
+//!         [{sliding, terms, form, theta_box, face_bound, output_bounds, build}]
 //! arrays  per model: the lift, then each of its N face columns: vertices × 3 f64 (LPS mm)
 //! ```
 //!
@@ -16,13 +16,14 @@ use super::ReducedTet;
 use crate::case::TissueElastic;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
-use crate::reduced::{LinearFace, OnlineForm, ReducedReport};
+use crate::reduced::{LinearFace, OnlineForm, OutputBound, ReducedReport};
 use crate::stored;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"FSREDUC\0";
-const FORMAT_VERSION: u32 = 1;
+/// 2: the bounds through the Riesz representer (`face_bound`, `output_bounds`).
+const FORMAT_VERSION: u32 = 2;
 /// The file's name in a run's output directory.
 pub const FILE_NAME: &str = "reduced_model.bin";
 const KIND: &str = "reduced model";
@@ -64,8 +65,8 @@ struct ModelHeader {
     terms: Vec<(usize, bool)>,
     form: OnlineForm,
     theta_box: [Vec<f64>; 2],
-    face_gain: f64,
-    output_gains: Vec<f64>,
+    face_bound: OutputBound,
+    output_bounds: Vec<OutputBound>,
     build: ReducedReport,
 }
 
@@ -110,8 +111,8 @@ pub fn write(path: &Path, stored: &StoredReduced) -> Result<()> {
                 terms: m.terms.clone(),
                 form: m.form.clone(),
                 theta_box: m.theta_box.clone(),
-                face_gain: m.face_gain,
-                output_gains: m.output_gains.clone(),
+                face_bound: m.face_bound.clone(),
+                output_bounds: m.output_bounds.clone(),
                 build: m.build.clone(),
             })
             .collect(),
@@ -164,7 +165,9 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             || m.terms.len() != q
             || m.terms.iter().any(|(s, _)| *s >= 4)
             || m.theta_box.iter().any(|b| b.len() != q)
-            || m.output_gains.iter().any(|g| !g.is_finite())
+            || std::iter::once(&m.face_bound)
+                .chain(&m.output_bounds)
+                .any(|b| !b.consistent())
         {
             return Err(Error::input(
                 path,
@@ -183,8 +186,8 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             terms: m.terms,
             theta_box: m.theta_box,
             face: LinearFace::new(lift, columns),
-            face_gain: m.face_gain,
-            output_gains: m.output_gains,
+            face_bound: m.face_bound,
+            output_bounds: m.output_bounds,
             build: m.build,
         });
     }

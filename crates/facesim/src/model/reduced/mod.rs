@@ -7,7 +7,7 @@ pub mod file;
 
 use crate::case::{Case, Tet, TissueElastic};
 use crate::error::{Error, Result};
-use crate::reduced::{LinearFace, OnlineForm, ReducedReport};
+use crate::reduced::{LinearFace, OnlineForm, OutputBound, ReducedReport};
 
 /// The reduced model of one sliding state (sliding changes the holds, not a coefficient): all
 /// it keeps is independent of the tissue mesh (N×N arrays and N + 1 face fields), so it is
@@ -25,13 +25,23 @@ pub struct ReducedTet {
     /// The face displacement of the held values with every free unknown zero (the lift) and
     /// of each basis vector (held values zero): the face is linear in the reduced coefficients.
     pub face: LinearFace,
-    /// σ with ‖face error‖₂ ≤ σ ‖e‖_X (`reduced::norm`).
-    pub face_gain: f64,
-    /// Per output of [`Training::outputs`]: ρ with |output error|₂ ≤ ρ ‖e‖_X (ρ² the largest
-    /// eigenvalue of the output's 3×3 block of L X⁻¹ Lᵀ, three solves with X's factor).
-    pub output_gains: Vec<f64>,
+    /// The face error's bound (mm): its gain σ with ‖face error‖₂ ≤ σ ‖e‖_X (`reduced::norm`)
+    /// and its images of the Riesz space ([`OutputBound`]).
+    pub face_bound: OutputBound,
+    /// Per output of [`Training::outputs`], the same: the gain ρ with |output error|₂ ≤
+    /// ρ ‖e‖_X (ρ² the largest eigenvalue of the output's 3×3 block of L X⁻¹ Lᵀ, three solves
+    /// with X's factor) and the output's images.
+    pub output_bounds: Vec<OutputBound>,
     /// How it was built (report.json `uncertainty.reduced[]`).
     pub build: ReducedReport,
+}
+
+/// The certified bounds of one reduced answer (mm): on the Euclidean norm of the face's error
+/// over all vertices (so every vertex too), and per output (landmark) on its error.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Bounds {
+    pub face_mm: f64,
+    pub landmarks_mm: Vec<f64>,
 }
 
 /// One answer of the reduced model and its certificate.
@@ -61,12 +71,28 @@ impl ReducedTet {
     }
 
     /// The reduced coefficients with `case`'s tissue parameters (its `[tet] sliding` must be
-    /// this model's) and the certified bound Δ on the energy norm of the error: the face's
-    /// error is within `face_gain` Δ (mm, the Euclidean norm over all face vertices, so every
-    /// vertex too), an output's within its `output_gains` Δ.
-    pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, f64)> {
+    /// this model's) and the certified bounds on their face's error.
+    pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, Bounds)> {
         let o = self.solve(case)?;
-        Ok((o.coefficients.iter().copied().collect(), o.energy_bound))
+        Ok((o.coefficients.iter().copied().collect(), self.bounds(&o)))
+    }
+
+    /// The certified bounds of an online answer (mm).
+    fn bounds(&self, o: &crate::reduced::Online) -> Bounds {
+        Bounds {
+            face_mm: self.face_bound.bound(o),
+            landmarks_mm: self.output_bounds.iter().map(|b| b.bound(o)).collect(),
+        }
+    }
+
+    /// σ: the face error's Euclidean norm (mm) per unit of the energy-norm error.
+    pub fn face_gain(&self) -> f64 {
+        self.face_bound.gain
+    }
+
+    /// Per output, its gain (mm per unit of the energy-norm error).
+    pub fn output_gains(&self) -> Vec<f64> {
+        self.output_bounds.iter().map(|b| b.gain).collect()
     }
 
     fn solve(&self, case: &Case) -> Result<crate::reduced::Online> {
@@ -117,15 +143,12 @@ impl ReducedTet {
     pub fn face_of(&self, tissues: &[TissueElastic; 4]) -> Result<ReducedFace> {
         let o = self.solve_theta(&self.theta_of(tissues))?;
         let c: Vec<f64> = o.coefficients.iter().copied().collect();
+        let b = self.bounds(&o);
         Ok(ReducedFace {
             displacement: self.face.all(&c),
-            bound_mm: self.face_gain * o.energy_bound,
+            bound_mm: b.face_mm,
             relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
-            landmark_bounds_mm: self
-                .output_gains
-                .iter()
-                .map(|g| g * o.energy_bound)
-                .collect(),
+            landmark_bounds_mm: b.landmarks_mm,
         })
     }
 
@@ -203,8 +226,8 @@ impl ReducedModels {
         Ok(&self.models[pick(&self.models, self.sliding_matters, sliding)?])
     }
 
-    /// The model for `case`'s sliding state (its index) and its coefficients and bound.
-    pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, f64)> {
+    /// The model for `case`'s sliding state (its index) and its coefficients and bounds.
+    pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, Bounds)> {
         let i = pick(&self.models, self.sliding_matters, case.tet.sliding)?;
         let m = &self.models[i];
         let mut c = case.clone();
