@@ -15,7 +15,7 @@ import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
 import { midsagittalCut, facialPart, pathData } from "./profile.js";
 import { STYLE } from "./style.js";
-import { materials, theta as thetaOf, outside, solveOnline, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
+import { materials, theta as thetaOf, outside, solveOnline, outputBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -920,7 +920,7 @@ function main() {
     // shown − full = [reduced(θ) − full(θ)] − [reduced(θ̄) − full(θ̄)] at the run's plan.
     const refBound = tissue.ref.energyBound;
     const landmarkBounds = {};
-    td.landmarks.forEach((label, i) => (landmarkBounds[label] = model.output_gains[i] * o.energyBound + tissue.run.output_gains[i] * refBound));
+    td.landmarks.forEach((label, i) => (landmarkBounds[label] = outputBound(model.output_bounds[i], o) + outputBound(tissue.run.output_bounds[i], tissue.ref)));
     return {
       materials: mats,
       theta: th,
@@ -928,7 +928,7 @@ function main() {
       coefficients: Array.from(o.coefficients),
       energyBound: o.energyBound,
       referenceEnergyBound: refBound,
-      faceBound: model.face_gain * o.energyBound + tissue.run.face_gain * refBound,
+      faceBound: outputBound(model.face_bound, o) + outputBound(tissue.run.face_bound, tissue.ref),
       landmarkBounds,
       delta,
     };

@@ -85,8 +85,9 @@ export function choleskySolve(l, n, b) {
  *  A_N = Σ θ_q M_q, f_N = Σ θ_q F_q, A_N c = f_N; the residual's Riesz representer
  *  Σ_j w_j ρ_j with w = (θ, −c_n θ_q), its norm plus the round-off floor
  *  unknowns · ε · Σ|w_j| ‖ρ_j‖; α = min_q θ_q / θ̄_q; Δ = residual / α bounds ‖u − u_N‖_X.
- *  Returns {coefficients, residual, alpha, energyBound, energyNorm}; throws when θ is not Q
- *  positive values or A_N is not positive definite. */
+ *  Returns {coefficients, residual, alpha, gamma, energyBound, energyNorm, coordinates, floor}
+ *  (γ = max_q θ_q / θ̄_q; the residual's coordinates and its floor, for `outputBound`); throws
+ *  when θ is not Q positive values or A_N is not positive definite. */
 export function solveOnline(form, th) {
   const q = form.theta_bar.length;
   const n = form.loads.length ? form.loads[0].length : 0;
@@ -117,12 +118,37 @@ export function solveOnline(form, th) {
   }
   let yy = 0;
   for (let i = 0; i < rows; i++) yy += y[i] * y[i];
-  const residual = Math.sqrt(yy) + form.unknowns * Number.EPSILON * floor;
+  const roundoff = form.unknowns * Number.EPSILON * floor;
+  const residual = Math.sqrt(yy) + roundoff;
   let alpha = Infinity;
-  for (let k = 0; k < q; k++) alpha = Math.min(alpha, th[k] / form.theta_bar[k]);
+  let gamma = 0;
+  for (let k = 0; k < q; k++) {
+    alpha = Math.min(alpha, th[k] / form.theta_bar[k]);
+    gamma = Math.max(gamma, th[k] / form.theta_bar[k]);
+  }
   let cc = 0;
   for (let i = 0; i < n; i++) cc += c[i] * c[i];
-  return { coefficients: c, residual, alpha, energyBound: residual / alpha, energyNorm: Math.sqrt(cc) };
+  return { coefficients: c, residual, alpha, gamma, energyBound: residual / alpha, energyNorm: Math.sqrt(cc), coordinates: y, floor: roundoff };
+}
+
+/** An output's certified bound (mm) for the answer `o` of `solveOnline`, as
+ *  `reduced::OutputBound::bound`: with c = (1/α + 1/γ)/2, c (‖F y‖ + g · floor) +
+ *  g (1/α − 1/γ)/2 · residual, never above g Δ. `b` = {gain, factor (rows × k, row-major), rows}. */
+export function outputBound(b, o) {
+  const plain = b.gain * o.energyBound;
+  if (!b.rows || !(Number.isFinite(o.gamma) && o.alpha > 0)) return plain;
+  const cols = b.factor.length / b.rows;
+  const len = Math.min(cols, o.coordinates.length);
+  let ss = 0;
+  for (let r = 0; r < b.rows; r++) {
+    let s = 0;
+    for (let j = 0; j < len; j++) s += b.factor[r * cols + j] * o.coordinates[j];
+    ss += s * s;
+  }
+  const a = 1 / o.alpha;
+  const g = 1 / o.gamma;
+  const split = 0.5 * (a + g) * (Math.sqrt(ss) + b.gain * o.floor) + b.gain * 0.5 * (a - g) * o.residual;
+  return Math.min(split, plain);
 }
 
 /** out = lift + Σ_n c_n columns_n (float64), the face fields each `len` values long, the

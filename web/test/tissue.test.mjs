@@ -6,7 +6,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
-import { lame, materials, theta, outside, cholesky, choleskySolve, solveOnline, reducedFace, rangeAt, rangeFraction, rangeWith } from "../src/tissue.js";
+import { lame, materials, theta, outside, cholesky, choleskySolve, solveOnline, outputBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "../src/tissue.js";
 
 const close = (a, b, rel, what) => assert.ok(Math.abs(a - b) <= rel * Math.max(Math.abs(a), Math.abs(b), 1e-300), `${what}: ${a} vs ${b}`);
 
@@ -130,5 +130,9 @@ test("the online solve equals Rust's OnlineForm::solve for the same θ", { skip:
     close(o.alpha, k.alpha, 1e-15, `${what} α`);
     close(o.energyBound, k.energy_bound, 1e-8, `${what} Δ`);
     close(o.energyNorm, k.energy_norm, 1e-12, `${what} ‖c‖`);
+    close(o.gamma, k.gamma, 1e-15, `${what} γ`);
+    // The output's bound through the Riesz representer, as reduced::OutputBound::bound.
+    close(outputBound(k.output, o), k.output_bound, 1e-8, `${what} output bound`);
+    assert.ok(outputBound(k.output, o) <= k.output_plain * (1 + 1e-12), `${what}: above g Δ`);
   }
 });

@@ -92,9 +92,10 @@ pub struct PageReduced<'a> {
     pub terms: &'a [(usize, bool)],
     /// The trained box of θ: lowest and highest per term; outside it the page answers nothing.
     pub theta_box: &'a [Vec<f64>; 2],
-    /// Face error ≤ face_gain · Δ (mm); a soft landmark's ≤ output_gains\[i\] · Δ.
-    pub face_gain: f64,
-    pub output_gains: Vec<f64>,
+    /// The certified bound on the face's error (mm) and on each soft landmark's
+    /// (`reduced::OutputBound`: the gain and the images' factor).
+    pub face_bound: &'a crate::reduced::OutputBound,
+    pub output_bounds: &'a [crate::reduced::OutputBound],
     /// The face displacement: lift + Σ c_n columns\[n\] (mm per face vertex).
     pub face: &'a crate::reduced::LinearFace,
 }
@@ -305,7 +306,7 @@ fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Valu
         if f.columns.len() != m.form.loads.first().map_or(0, Vec::len)
             || m.terms.len() != q
             || m.theta_box.iter().any(|b| b.len() != q)
-            || m.output_gains.len() != t.landmarks.len()
+            || m.output_bounds.len() != t.landmarks.len()
         {
             return Err(
                 "reduced model: terms, box, face columns or landmark gains do not match its form"
@@ -335,8 +336,8 @@ fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Valu
                 "form": m.form,
                 "terms": m.terms,
                 "theta_box": m.theta_box,
-                "face_gain": m.face_gain,
-                "output_gains": m.output_gains,
+                "face_bound": m.face_bound,
+                "output_bounds": m.output_bounds,
                 "lift": base64(&f32_bytes(&field(&m.face.lift))),
                 "columns": base64(&f32_bytes(&columns)),
             })

@@ -1002,7 +1002,7 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
 /// round-off floor), through node's test runner with the analytic cases of tissue.test.mjs.
 #[test]
 fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
-    use facesim::reduced::OnlineForm;
+    use facesim::reduced::{OnlineForm, OutputBound};
     // A small deterministic generator (SplitMix64), values in [-1, 1).
     let mut state = 0x9e37_79b9_7f4a_7c15_u64;
     let mut rand = move || {
@@ -1063,11 +1063,20 @@ fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
                     .collect()
             };
             let o = form.solve(&theta).unwrap();
+            // An output of 3 rows over the Riesz coordinates, small enough that the split
+            // (not g Δ) is the bound.
+            let output = OutputBound {
+                gain: 1.0 + rand().abs(),
+                factor: (0..3 * o.coordinates.len()).map(|_| 0.1 * rand()).collect(),
+                rows: 3,
+            };
             cases.push(json!({
                 "form": form, "theta": theta,
                 "coefficients": o.coefficients.iter().collect::<Vec<_>>(),
-                "residual": o.residual, "alpha": o.alpha,
+                "residual": o.residual, "alpha": o.alpha, "gamma": o.gamma,
                 "energy_bound": o.energy_bound, "energy_norm": o.energy_norm,
+                "output": output, "output_bound": output.bound(&o),
+                "output_plain": output.gain * o.energy_bound,
             }));
         }
     }
@@ -1192,7 +1201,8 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
             "Δ {eb} vs {}",
             rust.energy_bound
         );
-        let face_bound = run_model.face_gain() * (rust.energy_bound + at_nominal.energy_bound);
+        let face_bound =
+            run_model.face_bound.bound(&rust) + run_model.face_bound.bound(&at_nominal);
         let fb = t["face_bound_mm"].as_f64().unwrap();
         assert!(
             (fb - face_bound).abs() <= 1e-8 * face_bound,

@@ -333,8 +333,8 @@ fn page_tissue<'a>(
                 form: &m.form,
                 terms: &m.terms,
                 theta_box: &m.theta_box,
-                face_gain: m.face_gain(),
-                output_gains: m.output_gains(),
+                face_bound: &m.face_bound,
+                output_bounds: &m.output_bounds,
                 face: &m.face,
             })
             .collect(),
