@@ -226,13 +226,11 @@ impl Volumetric {
             still: still(&r.face_rigid, r.roi, &skin.vertices),
         };
         let zero = vec![0.0; affine.unknowns()];
+        // The face of free values (held values zero): a basis vector, a Riesz vector, an error.
+        let carry = |v: &[f64]| face_map.carry(&affine.expand(v, false));
         let face = crate::reduced::LinearFace::new(
             face_map.carry(&affine.expand(&zero, true)),
-            basis
-                .vectors
-                .iter()
-                .map(|v| face_map.carry(&affine.expand(v, false)))
-                .collect(),
+            basis.vectors.iter().map(|v| carry(v)).collect(),
         );
         progress("reduced model: the face's gain");
         let nodes = self.mesh.nodes.len();
@@ -243,11 +241,7 @@ impl Volumetric {
             let y3: Vec<[f64; 3]> = y.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
             let b = affine.restrict(&face_map.carry_transpose(&y3, nodes));
             let z = solve_columns(&x, &[b]).remove(0);
-            face_map
-                .carry(&affine.expand(&z, false))
-                .into_iter()
-                .flatten()
-                .collect()
+            carry(&z).into_iter().flatten().collect()
         });
         // Each output's gain: its 3×3 block of L X⁻¹ Lᵀ.
         let output_gains: Vec<f64> = training
@@ -276,7 +270,7 @@ impl Volumetric {
         progress("reduced model: the bounds' images");
         let faces: Vec<Vec<[f64; 3]>> = std::mem::take(&mut basis.riesz_space)
             .into_iter()
-            .map(|e| face_map.carry(&affine.expand(&e, false)))
+            .map(|e| carry(&e))
             .collect();
         let output_bounds = training
             .outputs

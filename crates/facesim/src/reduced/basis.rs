@@ -264,6 +264,8 @@ impl Basis {
         points: &[&[f64]],
     ) -> Result<Vec<Vec<f64>>> {
         struct Column {
+            /// Index in `points`.
+            at: usize,
             values: Vec<f64>,
             u: Vec<f64>,
             r: Vec<f64>,
@@ -271,87 +273,84 @@ impl Basis {
             rz: f64,
             alpha: f64,
             tol: f64,
-            done: bool,
         }
+        impl Column {
+            /// ‖r‖_X' = √(rᵀ X⁻¹ r), and ‖u − u_k‖_X ≤ ‖r‖_X' / α_LB (as the online bound).
+            fn converged(&self) -> bool {
+                self.rz.max(0.0).sqrt() / self.alpha <= self.tol
+            }
+        }
+        let mut out: Vec<Option<Vec<f64>>> = vec![None; points.len()];
         let mut cols = Vec::with_capacity(points.len());
-        for t in points {
+        for (at, t) in points.iter().enumerate() {
             // A point the reduced system cannot answer (not positive definite in round-off)
-            // starts from zero, its accuracy relative to the right-hand side.
-            let o = self.solve(t).unwrap_or_else(|_| Online {
-                coefficients: DVector::zeros(self.size()),
-                energy_bound: f64::INFINITY,
-                energy_norm: 0.0,
-                residual: 0.0,
-                gamma: f64::INFINITY,
-                coordinates: Vec::new(),
-                floor: 0.0,
-                alpha: t
-                    .iter()
-                    .zip(&self.form.theta_bar)
-                    .map(|(a, b)| a / b)
-                    .fold(f64::INFINITY, f64::min),
-            });
+            // has no start and no bound to stop at: it is factorised below.
+            let Ok(o) = self.solve(t) else { continue };
             let values = sys.values_at(t);
             let u = self.expand(&o.coefficients);
             let au = sys.apply_values(&values, &u);
             let r: Vec<f64> = sys.rhs(t).iter().zip(&au).map(|(b, a)| b - a).collect();
             cols.push(Column {
+                at,
                 values,
                 u,
                 r,
                 p: Vec::new(),
                 rz: 0.0,
                 alpha: o.alpha,
-                tol: SNAPSHOT_ACCURACY * o.energy_bound.min(o.energy_norm.max(1e-300) * 1e3),
-                done: false,
+                tol: SNAPSHOT_ACCURACY * o.energy_bound,
             });
         }
-        let precondition = |cols: &mut [Column], basis: &mut Basis| {
-            let active: Vec<usize> = (0..cols.len()).filter(|i| !cols[*i].done).collect();
-            let rs: Vec<Vec<f64>> = active.iter().map(|i| cols[*i].r.clone()).collect();
+        // z = X⁻¹ r for every column still iterating, in one solve.
+        let precondition = |cols: &[Column], basis: &mut Basis| {
+            let rs: Vec<Vec<f64>> = cols.iter().map(|c| c.r.clone()).collect();
             basis.riesz_solves += rs.len();
-            active.into_iter().zip(solve_columns(x, &rs))
+            solve_columns(x, &rs)
         };
-        for (i, z) in precondition(&mut cols, self).collect::<Vec<_>>() {
-            let c = &mut cols[i];
+        let zs = precondition(&cols, self);
+        for (c, z) in cols.iter_mut().zip(zs) {
             c.rz = dot(&c.r, &z);
             c.p = z;
         }
         for _ in 0..CG_ITERATIONS {
-            for c in cols.iter_mut().filter(|c| !c.done) {
-                // ‖r‖_X' = √(rᵀ X⁻¹ r), and ‖u − u_k‖_X ≤ ‖r‖_X' / α_LB (as the online bound).
-                if c.rz.max(0.0).sqrt() / c.alpha <= c.tol {
-                    c.done = true;
-                    continue;
-                }
+            let (done, going): (Vec<Column>, Vec<Column>) =
+                cols.into_iter().partition(Column::converged);
+            for c in done {
+                out[c.at] = Some(c.u);
+            }
+            cols = going;
+            if cols.is_empty() {
+                break;
+            }
+            for c in cols.iter_mut() {
                 let ap = sys.apply_values(&c.values, &c.p);
                 let a = c.rz / dot(&c.p, &ap);
                 c.u.iter_mut().zip(&c.p).for_each(|(x, y)| *x += a * y);
                 c.r.iter_mut().zip(&ap).for_each(|(x, y)| *x -= a * y);
                 self.cg_iterations += 1;
             }
-            if cols.iter().all(|c| c.done) {
-                break;
-            }
-            for (i, z) in precondition(&mut cols, self).collect::<Vec<_>>() {
-                let c = &mut cols[i];
+            let zs = precondition(&cols, self);
+            for (c, z) in cols.iter_mut().zip(zs) {
                 let rz = dot(&c.r, &z);
                 let beta = rz / c.rz;
                 c.rz = rz;
                 c.p.iter_mut().zip(&z).for_each(|(x, y)| *x = y + beta * *x);
             }
         }
-        let mut out = Vec::with_capacity(cols.len());
-        for (c, t) in cols.into_iter().zip(points) {
-            if c.done || c.rz.max(0.0).sqrt() / c.alpha <= c.tol {
-                out.push(c.u);
-            } else {
-                let k = sys.factor(t)?;
-                self.full_factorisations += 1;
-                out.push(solve_columns(&k, &[sys.rhs(t)]).remove(0));
-            }
+        for c in cols.into_iter().filter(Column::converged) {
+            out[c.at] = Some(c.u);
         }
-        Ok(out)
+        out.into_iter()
+            .zip(points)
+            .map(|(u, t)| match u {
+                Some(u) => Ok(u),
+                None => {
+                    let k = sys.factor(t)?;
+                    self.full_factorisations += 1;
+                    Ok(solve_columns(&k, &[sys.rhs(t)]).remove(0))
+                }
+            })
+            .collect()
     }
 
     /// N.

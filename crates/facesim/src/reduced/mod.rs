@@ -295,6 +295,16 @@ mod tests {
         }
     }
 
+    /// The block's affine system: its Lamé terms by tissue slot, each element scaled.
+    fn affine_of(m: &TetMesh, slot: &[usize], scale: &[f64], holds: &[Hold]) -> Affine {
+        let terms = crate::tet::lame_terms(&m.nodes, &m.tets, slot, scale).unwrap();
+        Affine::new(
+            &terms.into_iter().map(|t| t.lower).collect::<Vec<_>>(),
+            holds,
+        )
+        .unwrap()
+    }
+
     fn energy(sys: &Affine, theta: &[f64], e: &[f64]) -> f64 {
         (0..sys.terms())
             .map(|q| theta[q] * basis::dot(e, &sys.apply(q, e)))
@@ -318,12 +328,7 @@ mod tests {
                 ..mats[*s]
             })
             .collect();
-        let terms = crate::tet::lame_terms(&m.nodes, &m.tets, &slot, &scale).unwrap();
-        let sys = Affine::new(
-            &terms.into_iter().map(|t| t.lower).collect::<Vec<_>>(),
-            &holds,
-        )
-        .unwrap();
+        let sys = affine_of(&m, &slot, &scale, &holds);
         // The truth of the affine form equals the model's own solve (an independent path:
         // per-element materials, `Constrained`).
         let th = theta(&mats);
@@ -418,13 +423,7 @@ mod tests {
     fn snapshots_by_conjugate_gradients_build_a_basis_whose_residual_is_the_full_ones() {
         let (m, slot, holds) = block(4);
         let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
-        let ones = vec![1.0; slot.len()];
-        let terms = crate::tet::lame_terms(&m.nodes, &m.tets, &slot, &ones).unwrap();
-        let sys = Affine::new(
-            &terms.into_iter().map(|t| t.lower).collect::<Vec<_>>(),
-            &holds,
-        )
-        .unwrap();
+        let sys = affine_of(&m, &slot, &vec![1.0; slot.len()], &holds);
         let th = theta(&mats);
         // Moduli 4× either way, ν 0.45–0.49: a wide box for the preconditioner X = A(θ̄).
         let point = |i: usize| {
