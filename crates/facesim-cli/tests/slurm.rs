@@ -30,6 +30,7 @@
 //! test ends, and by a watchdog if the test process dies.
 
 use std::collections::BTreeMap;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -396,7 +397,10 @@ fn cohort_on_a_real_slurm_with_faults() {
     assert!(!out.join("runs").exists());
 
     // The Slurm run, interrupted: case002's first plan is cancelled while it runs (the retry
-    // resubmits it), then Snakemake gets SIGINT once five runs have their result.
+    // resubmits it), then Snakemake gets SIGINT once three runs have their result. One other
+    // job is held in the queue (`scontrol hold`) as soon as it is pending, so the run cannot
+    // finish before the SIGINT however fast the others are (the node has the machine's CPUs:
+    // with 2, 11 one-core jobs leave most pending for tens of seconds).
     let result = |case: &str, plan: &str| {
         out.join("runs")
             .join(case)
@@ -404,26 +408,63 @@ fn cohort_on_a_real_slurm_with_faults() {
             .join("c1/result.json")
     };
     let log1 = std::fs::File::create(work.join("slurm-1.log")).unwrap();
-    let mut first: Child = slurm_snake(&[])
+    let mut interrupted = slurm_snake(&[]);
+    // A job started in the background (`cmd &`, nohup, some CI runners) has SIGINT ignored,
+    // the child inherits that, and Python then installs no KeyboardInterrupt handler: the
+    // SIGINT below would be lost and Snakemake run to the end. Its default is restored here.
+    // SAFETY: signal() is async-signal-safe, as a pre_exec closure must be.
+    unsafe {
+        interrupted.pre_exec(|| {
+            libc::signal(libc::SIGINT, libc::SIG_DFL);
+            Ok(())
+        });
+    }
+    let mut first: Child = interrupted
         .stdout(log1.try_clone().unwrap())
         .stderr(log1)
         .stdin(Stdio::null())
         .spawn()
         .unwrap();
     let mut cancelled = String::new();
-    wait_for("case002's job running", Duration::from_secs(240), || {
-        // Job name is Snakemake's run id; the comment names the rule and wildcards.
-        let q = cluster.out(
-            "squeue",
-            &["--noheader", "--states=RUNNING", "--format=%i %k"],
-        );
-        if let Some(l) = q.lines().find(|l| l.contains("case002_case_c1")) {
-            cancelled = l.split_whitespace().next().unwrap().to_string();
-            true
-        } else {
-            false
-        }
-    });
+    let mut held = String::new();
+    wait_for(
+        "case002's job running and another job held pending (a node with more CPUs than jobs holds none)",
+        Duration::from_secs(240),
+        || {
+            // Job name is Snakemake's run id; the comment names the rule and wildcards.
+            let q = cluster.out(
+                "squeue",
+                &[
+                    "--noheader",
+                    "--states=PENDING,RUNNING",
+                    "--format=%i %T %k",
+                ],
+            );
+            for l in q.lines() {
+                let mut f = l.split_whitespace();
+                let (id, state) = (f.next().unwrap(), f.next().unwrap());
+                let case002 = l.contains("case002_case_c1");
+                if case002 && state == "RUNNING" && cancelled.is_empty() {
+                    cancelled = id.to_string();
+                }
+                // A hold fails on a job that has just started: the next pending one is tried.
+                if !case002
+                    && state == "PENDING"
+                    && held.is_empty()
+                    && cluster
+                        .cmd("scontrol")
+                        .args(["hold", id])
+                        .output()
+                        .unwrap()
+                        .status
+                        .success()
+                {
+                    held = id.to_string();
+                }
+            }
+            !cancelled.is_empty() && !held.is_empty()
+        },
+    );
     // Let facesim start inside the job (the job step starts Snakemake first), then cancel.
     std::thread::sleep(Duration::from_secs(3));
     run_ok(cluster.cmd("scancel").arg(&cancelled));
@@ -460,6 +501,14 @@ fn cohort_on_a_real_slurm_with_faults() {
     let submitted = case002_jobs();
     assert_eq!(submitted[0], cancelled, "{submitted:?}");
     assert_ne!(submitted[1], cancelled, "{submitted:?}");
+    let held_state = cluster.out(
+        "squeue",
+        &["--noheader", "--states=all", "-j", &held, "--format=%T %r"],
+    );
+    assert!(
+        held_state.trim().starts_with("PENDING") && held_state.contains("Held"),
+        "job {held}: {held_state}"
+    );
     let _ = Command::new("kill")
         .args(["-INT", &first.id().to_string()])
         .status();
