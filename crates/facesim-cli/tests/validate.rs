@@ -1,7 +1,7 @@
 //! `facesim validate` through the real binary (issue 26 item 2): one coarse phantom and one
 //! surgery, its ratios recomputed from the run's own report.json and its ranges held against
-//! docs/validation.md's table; the real headsq's BSSO advance against the published chin ratio;
-//! bad input as one line.
+//! docs/validation.md's table; a Le Fort I's region holding the whole nose; the real headsq's
+//! BSSO advance against the published chin ratio; bad input as one line.
 
 mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
@@ -153,9 +153,67 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
         }
     }
     assert!(measured >= 3, "only {measured} rows measured: {rows:?}");
+    // A mandibular move leaves the region alone: the nose rests on the maxilla, which stays.
+    assert!(run["tet"].get("region_grown_for_nose_tip").is_none());
     // The chart names the case and each measured row (SVG escapes the prime as &apos;).
     let svg = std::fs::read_to_string(out.join("validation.svg")).unwrap();
     assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog&apos; (horizontal)"));
+}
+
+/// The region's held faces must not cut through the nose over a moving maxilla: on this
+/// phantom the box of a Le Fort I grown by `[tet] margin_mm` ends 2.3 mm short of pronasale,
+/// which was held still ("Prn did not move"). Grown to hold the tip with 10 mm about it, the
+/// tip follows the advance by the published fraction.
+#[test]
+fn a_le_fort_advance_takes_in_the_whole_nose() {
+    let out = common::kept_dir("facesim-validate-nose").join("v");
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        root().join("data-samples").to_str().unwrap(),
+        "--case",
+        "phantom",
+        "--phantoms",
+        "1",
+        "--phantom-spacing",
+        "3",
+        "--surgery",
+        "lefort-advance",
+    ]);
+    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    let run: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("runs/phantom01/lefort-advance/report.json")).unwrap(),
+    )
+    .unwrap();
+    let tet = &run["tet"];
+    let tip = vec3(&tet["region_grown_for_nose_tip"]).expect("the region did not grow");
+    let prn = vec3(&run["landmarks"]["Prn"]["pre"]).unwrap();
+    assert!(
+        (0..3).all(|k| (tip[k] - prn[k]).abs() < 1e-9),
+        "{tip:?} is not pronasale {prn:?}"
+    );
+    let (lo, hi) = (
+        vec3(&tet["region"][0]).unwrap(),
+        vec3(&tet["region"][1]).unwrap(),
+    );
+    for k in 0..3 {
+        assert!(
+            prn[k] - lo[k] >= 10.0 - 1e-9 && hi[k] - prn[k] >= 10.0 - 1e-9,
+            "pronasale {prn:?} nearer than 10 mm to the region {lo:?}..{hi:?}"
+        );
+    }
+    let rows = read_csv(&out.join("validation.csv"));
+    let row = rows.iter().find(|r| r["landmark"] == "Prn").unwrap();
+    assert!(row["note"].is_empty(), "{row:?}");
+    let ratio = num(&row["predicted_ratio"]).expect("Prn not measured");
+    assert!((ratio - recompute(&run, row)).abs() < 1.5e-3, "{row:?}");
+    let (lo, hi) = documented_ranges()[&("lefort-advance".to_string(), "Prn".to_string())];
+    assert!(
+        (lo..=hi).contains(&ratio),
+        "Prn follows the Le Fort I advance by {ratio}, published {lo}-{hi}"
+    );
 }
 
 #[test]

@@ -28,9 +28,10 @@ pub use volumetric::{NewtonStep, TetReport, Volumetric};
 
 /// A solved model, kept for its files, its report sections and re-solves.
 pub enum Solved {
-    C1(c1::C1Solved),
+    // Both boxed: each is a kilobyte and more, and their sizes differ by a few fields.
+    C1(Box<c1::C1Solved>),
     /// None when the plan moves no bone (no tissue is meshed).
-    Tet(Option<Volumetric>),
+    Tet(Option<Box<Volumetric>>),
 }
 
 /// What report.json says of the model: `counts.unknowns` and `counts.solved_vertices`,
@@ -74,8 +75,10 @@ pub fn predict(
     rec: &mut Recorder,
 ) -> Result<Prediction> {
     match crate::solve::Method::of(case.solve.model) {
-        Some(_) => Ok(c1::predict(scene, case, files, rec)?.map(Solved::C1)),
-        None => Ok(volumetric::predict_face(scene, case, rec)?.map(Solved::Tet)),
+        Some(_) => Ok(c1::predict(scene, case, files, rec)?.map(|c| Solved::C1(Box::new(c)))),
+        None => {
+            Ok(volumetric::predict_face(scene, case, rec)?.map(|v| Solved::Tet(v.map(Box::new))))
+        }
     }
 }
 

@@ -366,8 +366,12 @@ pub struct NewtonStep {
 pub struct TetReport {
     pub material: TetMaterial,
     pub element: TetElement,
-    /// The modelled region (LPS mm): the box around the moved bone grown by `[tet] margin_mm`.
+    /// The modelled region (LPS mm): the box around the moved bone grown by `[tet] margin_mm`,
+    /// and grown further to hold the nose tip when the nose's base is inside.
     pub region: ([f64; 3], [f64; 3]),
+    /// Pronasale (LPS mm) when the region was grown to hold it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub region_grown_for_nose_tip: Option<[f64; 3]>,
     pub nodes: usize,
     pub tets: usize,
     pub dofs: usize,
@@ -523,6 +527,57 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
     (lo[0] <= hi[0]).then_some((lo, hi))
 }
 
+/// An axis-aligned box (LPS mm): lowest and highest corner.
+type Box3 = ([f64; 3], [f64; 3]);
+
+/// Room kept about the nose tip when the region is grown to take in the nose (mm): as near as
+/// `facesim validate` lets a landmark come to a held face before it says the hold may set its move.
+const NOSE_ROOM_MM: f64 = 10.0;
+
+/// `roi` grown to hold pronasale with [`NOSE_ROOM_MM`] about it when the nose's base (subnasale)
+/// is inside it and its nearest bone moves, within the CT; the nose tip's position when it grew. The region's cut faces are
+/// held, and the nose is a cantilever whose tip follows its base: a face cutting through it holds
+/// the tip still (the jaws phantoms with 2–4 mm more tissue: pronasale 4.6 mm outside the box of
+/// a 5 mm Le Fort I at `margin_mm` 30, not moving at all). The landmarks are the pre-operative
+/// skin's (`landmarks::locate`); without them, or with the tip already inside, `roi` is kept.
+fn take_in_nose(roi: Box3, scene: &Scene, case: &Case, skin: &Mesh) -> (Box3, Option<[f64; 3]>) {
+    let user = crate::pipeline::inputs::user_landmarks(case).unwrap_or_default();
+    let Ok((_, lms)) = crate::landmarks::locate(
+        skin,
+        Some(&scene.face.skull),
+        &user,
+        std::path::Path::new("case.toml"),
+    ) else {
+        return (roi, None);
+    };
+    let at = |label: &str| {
+        lms.iter()
+            .find(|l| l.label == label)
+            .and_then(|l| l.position)
+    };
+    let inside =
+        |p: [f64; 3], room: f64| (0..3).all(|c| p[c] >= roi.0[c] + room && p[c] <= roi.1[c] - room);
+    let (Some(sn), Some(prn)) = (at("Sn"), at("Prn")) else {
+        return (roi, None);
+    };
+    // The nose rests on the bone nearest its base: grown only when that bone moves (a Le Fort
+    // I, not a mandibular move, whose region may hold subnasale while the nose stays).
+    let skull = &scene.face.skull.vertices;
+    let (_, moved) = scene.model.plan.apply(skull, 1.0);
+    let d2 = |p: &[f64; 3]| (0..3).map(|c| (p[c] - sn[c]).powi(2)).sum::<f64>();
+    let nearest = (0..skull.len()).min_by(|a, b| d2(&skull[*a]).total_cmp(&d2(&skull[*b])));
+    let on_moved_bone = nearest.is_some_and(|i| moved[i]);
+    if !on_moved_bone || !inside(sn, 0.0) || inside(prn, NOSE_ROOM_MM) {
+        return (roi, None);
+    }
+    let (vlo, vhi) = scene.vol.bounds();
+    let grown = (
+        std::array::from_fn(|c| roi.0[c].min(prn[c] - NOSE_ROOM_MM).max(vlo[c])),
+        std::array::from_fn(|c| roi.1[c].max(prn[c] + NOSE_ROOM_MM).min(vhi[c])),
+    );
+    (grown, (grown != roi).then_some(prn))
+}
+
 fn counted(a: &[u8], c: u8) -> usize {
     a.iter().filter(|k| **k == c).count()
 }
@@ -654,6 +709,7 @@ pub fn predict(
     let Some(roi) = region(scene, t.margin_mm) else {
         return Ok(None);
     };
+    let (roi, nose_tip) = take_in_nose(roi, scene, case, skin);
     let params = MeshParams {
         skin_size_mm: t.skin_size_mm,
         deep_size_mm: t.deep_size_mm,
@@ -1013,6 +1069,7 @@ pub fn predict(
         material: t.material,
         element: t.element,
         region: roi,
+        region_grown_for_nose_tip: nose_tip,
         nodes: nodes.len(),
         tets: mesh.tets.len(),
         dofs: 3 * nodes.len(),
