@@ -203,11 +203,12 @@ impl Volumetric {
             .iter()
             .map(|t| if *t { TORN_STIFFNESS } else { 1.0 })
             .collect();
-        let split = crate::tet::lame_terms(&self.mesh.nodes, &self.mesh.tets, &slot, &scale)?;
-        let terms: Vec<(usize, bool)> = split.iter().map(|t| (t.slot, t.is_lambda)).collect();
-        let matrices: Vec<Vec<(usize, usize, f64)>> = split.into_iter().map(|t| t.lower).collect();
-        let affine = Affine::new(&matrices, &hold)?;
-        drop(matrices);
+        let terms = crate::tet::lame_term_list(&slot);
+        let affine = Affine::new(
+            terms.len(),
+            |q| crate::tet::lame_term(&self.mesh.nodes, &self.mesh.tets, &slot, &scale, terms[q]),
+            &hold,
+        )?;
         let theta = |t: &crate::case::Tet| super::reduced::theta_of(&terms, &t.tissues());
         let train: Vec<Vec<f64>> = train.iter().map(|t| theta(&t.tet)).collect();
         let theta_bar = theta(&c.tet);

@@ -16,22 +16,42 @@ pub struct Affine {
     frames: Vec<Frame>,
     /// Free index → DOF (3 node + local component).
     free: Vec<usize>,
-    /// The free–free matrices by rows, both triangles, on one pattern: row r's entries are
-    /// `cols[start[r]..start[r + 1]]`, term q's values `vals[q][…]`.
+    /// The free–free pattern by rows, both triangles: row r's columns are
+    /// `cols[start[r]..start[r + 1]]`.
     start: Vec<usize>,
     cols: Vec<u32>,
-    vals: Vec<Vec<f64>>,
-    /// The lower triangle's entries (row, column, slot in `vals`), for the factor.
+    /// Each term's nonzero entries only: a tissue's terms touch its own elements' rows, so the
+    /// Q terms together hold about twice the pattern, not Q times it.
+    terms: Vec<Term>,
+    /// The lower triangle's entries (row, column, slot in the pattern), for the factor.
     lower: Vec<(u32, u32, usize)>,
     f: Vec<Vec<f64>>,
     pattern: Pattern,
 }
 
+/// One term's nonzero entries by rows: row r's are `entries[start[r]..start[r + 1]]`.
+struct Term {
+    start: Vec<usize>,
+    entries: Vec<Entry>,
+}
+
+struct Entry {
+    col: u32,
+    /// Its place in the shared pattern.
+    slot: u32,
+    value: f64,
+}
+
 impl Affine {
-    /// From the terms' lower triangles (3 DOFs per node, global frame, one triplet per entry in
-    /// the same order for every term: `tet::lame_terms`) and the nodes' holds (their values give
-    /// g). Nothing held, or a hold that is not finite, is an error.
-    pub fn new(terms: &[Vec<(usize, usize, f64)>], holds: &[Hold]) -> Result<Affine> {
+    /// From `count` terms, `term(q)` giving term q's lower triangle (3 DOFs per node, global
+    /// frame, one triplet per entry in the same order for every term: `tet::lame_term`; called
+    /// once per term, so only one is in memory at a time), and the nodes' holds (their values
+    /// give g). Nothing held, or a hold that is not finite, is an error.
+    pub fn new(
+        count: usize,
+        term: impl Fn(usize) -> Result<Vec<(usize, usize, f64)>>,
+        holds: &[Hold],
+    ) -> Result<Affine> {
         let nodes = holds.len();
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
@@ -41,12 +61,12 @@ impl Affine {
         let g: Vec<f64> = frames.iter().flat_map(|f| f.values).collect();
         let (free_index, free) = free_dofs(&fixed);
         let nf = free.len();
-        let Some(first) = terms.first() else {
+        if count == 0 {
             return Err(Error::config("reduced model: no stiffness term"));
-        };
+        }
         // The pattern from the first term; every term's rotated triplets follow it entry for
         // entry (rotation depends on the frames only).
-        let rotated0 = rotate_lower(first, &frames);
+        let rotated0 = rotate_lower(&term(0)?, &frames);
         let mut entries: Vec<(u32, u32, u32)> = Vec::new();
         let mut coupling: Vec<(u32, usize, u32)> = Vec::new();
         for (i, &(r, c, _)) in rotated0.iter().enumerate() {
@@ -88,19 +108,24 @@ impl Affine {
                 }
             }
         }
-        let mut vals = Vec::with_capacity(terms.len());
-        let mut f = Vec::with_capacity(terms.len());
-        for (q, term) in terms.iter().enumerate() {
-            let rotated = if q == 0 {
-                rotated0.clone()
-            } else {
-                rotate_lower(term, &frames)
+        // The first term's (row, column) order, to hold the others to it.
+        let order: Vec<(u32, u32)> = rotated0
+            .iter()
+            .map(|&(r, c, _)| (r as u32, c as u32))
+            .collect();
+        let mut terms = Vec::with_capacity(count);
+        let mut f = Vec::with_capacity(count);
+        let mut rotated0 = Some(rotated0);
+        for q in 0..count {
+            let rotated = match rotated0.take() {
+                Some(r) => r,
+                None => rotate_lower(&term(q)?, &frames),
             };
-            if rotated.len() != rotated0.len()
+            if rotated.len() != order.len()
                 || rotated
                     .iter()
-                    .zip(&rotated0)
-                    .any(|(a, b)| (a.0, a.1) != (b.0, b.1))
+                    .zip(&order)
+                    .any(|(a, b)| (a.0 as u32, a.1 as u32) != *b)
             {
                 return Err(Error::config(format!(
                     "reduced model: stiffness term {q} is not on the first term's pattern"
@@ -114,11 +139,28 @@ impl Affine {
             for &(fr, held, i) in &coupling {
                 fq[fr as usize] -= rotated[i as usize].2 * g[held];
             }
-            vals.push(v);
+            drop(rotated);
+            let mut t = Term {
+                start: vec![0; nf + 1],
+                entries: Vec::new(),
+            };
+            for r in 0..nf {
+                for s in start[r]..start[r + 1] {
+                    if v[s] != 0.0 {
+                        t.entries.push(Entry {
+                            col: cols[s],
+                            slot: s as u32,
+                            value: v[s],
+                        });
+                    }
+                }
+                t.start[r + 1] = t.entries.len();
+            }
+            terms.push(t);
             f.push(fq);
         }
-        let ones = vec![1.0; vals.len()];
-        let m = lower_matrix(&lower, &vals, nf, &ones)?;
+        let ones = values_of(&terms, cols.len(), &vec![1.0; count]);
+        let m = lower_matrix(&lower, &ones, nf)?;
         let pattern = Pattern::analyse_with(m.symbolic(), Ordering::NestedDissection)
             .map_err(|e| Error::numerical(NumericalKind::Singular, format!("{e:?}")))?;
         Ok(Affine {
@@ -126,7 +168,7 @@ impl Affine {
             free,
             start,
             cols,
-            vals,
+            terms,
             lower,
             f,
             pattern,
@@ -135,7 +177,7 @@ impl Affine {
 
     /// Q, the number of terms.
     pub fn terms(&self) -> usize {
-        self.vals.len()
+        self.terms.len()
     }
 
     /// The free unknowns.
@@ -143,21 +185,26 @@ impl Affine {
         self.free.len()
     }
 
-    /// A_q x.
+    /// A_q x: term q's own entries only.
     pub fn apply(&self, q: usize, x: &[f64]) -> Vec<f64> {
-        self.apply_values(&self.vals[q], x)
+        use rayon::prelude::*;
+        let t = &self.terms[q];
+        (0..self.free.len())
+            .into_par_iter()
+            .with_min_len(4096)
+            .map(|r| {
+                t.entries[t.start[r]..t.start[r + 1]]
+                    .iter()
+                    .map(|e| e.value * x[e.col as usize])
+                    .sum()
+            })
+            .collect()
     }
 
-    /// The values of A(θ) = Σ θ_q A_q on the pattern of [`Self::apply`]: one pass applies it
-    /// (with [`Self::apply_values`]) where Q passes would apply the terms one by one.
+    /// The values of A(θ) = Σ θ_q A_q on the pattern of [`Self::apply_values`]: one pass applies
+    /// it where Q passes would apply the terms one by one.
     pub fn values_at(&self, theta: &[f64]) -> Vec<f64> {
-        let mut out = vec![0.0; self.cols.len()];
-        for (t, v) in theta.iter().zip(&self.vals) {
-            for (o, v) in out.iter_mut().zip(v) {
-                *o += t * v;
-            }
-        }
-        out
+        values_of(&self.terms, self.cols.len(), theta)
     }
 
     /// The matrix with values `v` (from [`Self::values_at`]) times x.
@@ -192,7 +239,7 @@ impl Affine {
 
     /// The factor of A(θ) (the symbolic analysis is shared by every θ).
     pub fn factor(&self, theta: &[f64]) -> Result<Cholesky<f64>> {
-        let m = lower_matrix(&self.lower, &self.vals, self.free.len(), theta)?;
+        let m = lower_matrix(&self.lower, &self.values_at(theta), self.free.len())?;
         Cholesky::factor(&self.pattern, m.as_ref()).map_err(|e| {
             Error::numerical(
                 NumericalKind::Singular,
@@ -232,19 +279,26 @@ impl Affine {
     }
 }
 
-/// The lower triangle of Σ_q θ_q A_q.
+/// Σ_q θ_q A_q's values on a pattern of `len` entries.
+fn values_of(terms: &[Term], len: usize, theta: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; len];
+    for (t, term) in theta.iter().zip(terms) {
+        for e in &term.entries {
+            out[e.slot as usize] += t * e.value;
+        }
+    }
+    out
+}
+
+/// The lower triangle of the matrix with `values` on the pattern.
 fn lower_matrix(
     lower: &[(u32, u32, usize)],
-    vals: &[Vec<f64>],
+    values: &[f64],
     n: usize,
-    theta: &[f64],
 ) -> Result<SparseColMat<usize, f64>> {
     let t: Vec<Triplet<usize, usize, f64>> = lower
         .iter()
-        .map(|&(r, c, s)| {
-            let v = theta.iter().zip(vals).map(|(t, v)| t * v[s]).sum();
-            Triplet::new(r as usize, c as usize, v)
-        })
+        .map(|&(r, c, s)| Triplet::new(r as usize, c as usize, values[s]))
         .collect();
     SparseColMat::try_new_from_triplets(n, n, &t)
         .map_err(|e| Error::numerical(NumericalKind::Singular, format!("sparse matrix: {e:?}")))

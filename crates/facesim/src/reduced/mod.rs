@@ -278,7 +278,7 @@ mod tests {
         (m, slot, holds)
     }
 
-    /// θ for materials per slot: (λ, μ) per slot present, the order of `lame_terms`.
+    /// θ for materials per slot: (λ, μ) per slot present, the order of `lame_term_list`.
     fn theta(m: &[TissueElastic]) -> Vec<f64> {
         m.iter()
             .flat_map(|e| {
@@ -297,9 +297,10 @@ mod tests {
 
     /// The block's affine system: its Lamé terms by tissue slot, each element scaled.
     fn affine_of(m: &TetMesh, slot: &[usize], scale: &[f64], holds: &[Hold]) -> Affine {
-        let terms = crate::tet::lame_terms(&m.nodes, &m.tets, slot, scale).unwrap();
+        let list = crate::tet::lame_term_list(slot);
         Affine::new(
-            &terms.into_iter().map(|t| t.lower).collect::<Vec<_>>(),
+            list.len(),
+            |q| crate::tet::lame_term(&m.nodes, &m.tets, slot, scale, list[q]),
             holds,
         )
         .unwrap()

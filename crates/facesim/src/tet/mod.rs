@@ -180,56 +180,49 @@ impl TetMesh {
     }
 }
 
-/// One affine part of the stiffness: K_λ or K_μ of one tissue slot, as lower-triangle triplets.
-pub(crate) struct LameTerm {
-    pub slot: usize,
-    pub is_lambda: bool,
-    pub lower: Vec<(usize, usize, f64)>,
-}
-
 /// The affine parts of the linear tetrahedral stiffness: for each tissue slot s present in
 /// `slot` (per tetrahedron, `case::Tet::slot`), K_λ,s and K_μ,s, so that K = Σ_s (λ_s K_λ,s +
-/// μ_s K_μ,s) (Rozza, Huynh & Patera 2008 §2: an affine parametric operator). Each is the lower
-/// triangle of [`TetMesh::assemble`]'s pattern, entry for entry in its order (elements of other
-/// tissues add zeros), so the parts can be summed triplet by triplet. `scale` multiplies each
-/// tetrahedron's part (1, or a torn element's trace).
-pub(crate) fn lame_terms(
+/// μ_s K_μ,s) (Rozza, Huynh & Patera 2008 §2: an affine parametric operator). This lists them,
+/// (slot, λ or not) in slot order; [`lame_term`] assembles one, so that only one is in memory at
+/// a time (eight on the real CT, 130 MB each as triplets).
+pub(crate) fn lame_term_list(slot: &[usize]) -> Vec<(usize, bool)> {
+    let mut present: Vec<usize> = slot.to_vec();
+    present.sort_unstable();
+    present.dedup();
+    present
+        .into_iter()
+        .flat_map(|s| [(s, true), (s, false)])
+        .collect()
+}
+
+/// One affine part (see [`lame_term_list`]): the lower triangle of [`TetMesh::assemble`]'s
+/// pattern, entry for entry in its order (elements of other tissues add zeros), so the parts can
+/// be summed triplet by triplet. `scale` multiplies each tetrahedron's part (1, or a torn
+/// element's trace).
+pub(crate) fn lame_term(
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
     slot: &[usize],
     scale: &[f64],
-) -> Result<Vec<LameTerm>> {
-    let mut present: Vec<usize> = slot.to_vec();
-    present.sort_unstable();
-    present.dedup();
-    let mut out = Vec::new();
-    for s in present {
-        for is_lambda in [true, false] {
-            let (l, m) = if is_lambda { (1.0, 0.0) } else { (0.0, 1.0) };
-            let k = blocks::lower_triplets(nodes.len(), tets, |t| {
-                if slot[t] != s {
-                    return Ok([[0.0; 12]; 12]);
-                }
-                element_stiffness_lame(
-                    tets[t].map(|n| nodes[n as usize]),
-                    l * scale[t],
-                    m * scale[t],
-                )
-                .ok_or_else(|| {
-                    Error::numerical(
-                        NumericalKind::DegenerateElement,
-                        format!("tetrahedron {t} (nodes {:?}) is flat or inverted", tets[t]),
-                    )
-                })
-            })?;
-            out.push(LameTerm {
-                slot: s,
-                is_lambda,
-                lower: k,
-            });
+    (s, is_lambda): (usize, bool),
+) -> Result<Vec<(usize, usize, f64)>> {
+    let (l, m) = if is_lambda { (1.0, 0.0) } else { (0.0, 1.0) };
+    blocks::lower_triplets(nodes.len(), tets, |t| {
+        if slot[t] != s {
+            return Ok([[0.0; 12]; 12]);
         }
-    }
-    Ok(out)
+        element_stiffness_lame(
+            tets[t].map(|n| nodes[n as usize]),
+            l * scale[t],
+            m * scale[t],
+        )
+        .ok_or_else(|| {
+            Error::numerical(
+                NumericalKind::DegenerateElement,
+                format!("tetrahedron {t} (nodes {:?}) is flat or inverted", tets[t]),
+            )
+        })
+    })
 }
 
 /// The tetrahedra (corner indices into `nodes`) flat or inverted at `nodes + u`.
