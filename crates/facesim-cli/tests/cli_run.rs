@@ -239,6 +239,11 @@ fn bad_case_files_fail_before_anything_is_written() {
         case_with("[registration]\nscan = [[0, 0, 0], [1, 0, 0]]\nct = [[0, 0, 0], [1, 0, 0]]\n");
     fails_writing_nothing(&c, "case.toml", "landmark");
 
+    // A landmark typed in metres for millimetres, 9 m off: one line, not a hang (the closest
+    // point search walked every empty shell of cells between it and the face).
+    let c = case_with("[[landmark]]\nlabel = \"Prn\"\nposition = [9000.0, 0.0, 0.0]\n");
+    fails_writing_nothing(&c, "case.toml", "from the face");
+
     let d = tempfile::tempdir().unwrap();
     std::fs::write(
         d.path().join("case.toml"),

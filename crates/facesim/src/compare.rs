@@ -62,7 +62,13 @@ pub struct SurfaceIndex<'a> {
     origin: [f64; 3],
     cells: HashMap<[i64; 3], Vec<u32>>,
     span: i64,
+    /// The highest cell index per axis (the lowest is 0).
+    last: [i64; 3],
 }
+
+/// A point more cells than this outside the index's grid is answered by every triangle once:
+/// the shells between it and the grid hold nothing, and there are (distance / cell)³ of them.
+const FAR_CELLS: i64 = 8;
 
 impl<'a> SurfaceIndex<'a> {
     pub fn new(mesh: &'a Mesh) -> Self {
@@ -116,6 +122,7 @@ impl<'a> SurfaceIndex<'a> {
             origin: lo,
             cells,
             span,
+            last: [0, 1, 2].map(|a| ((hi[a] - lo[a]) / cell).floor().max(0.0) as i64),
         }
     }
 
@@ -129,12 +136,31 @@ impl<'a> SurfaceIndex<'a> {
     pub fn closest_triangle(&self, p: [f64; 3]) -> (f64, [f64; 3], usize) {
         let c = [0, 1, 2].map(|a| ((p[a] - self.origin[a]) / self.cell).floor() as i64);
         let mut best = (f64::INFINITY, p, 0);
-        // Search shells of cells; once a hit is closer than the shell's inner distance, stop.
+        let try_triangle = |t: usize, best: &mut (f64, [f64; 3], usize)| {
+            let tri = self.mesh.triangles[t].map(|i| self.mesh.vertices[i as usize]);
+            let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
+            let d = norm(sub(p, q));
+            if d < best.0 {
+                *best = (d, q, t);
+            }
+        };
+        // How many cells p lies outside the grid: the shells nearer than that are empty.
+        let gap = (0..3)
+            .map(|a| (-c[a]).max(c[a] - self.last[a]).max(0))
+            .max()
+            .unwrap_or(0);
+        if gap > FAR_CELLS {
+            (0..self.mesh.triangles.len()).for_each(|t| try_triangle(t, &mut best));
+            return best;
+        }
+        // Search shells of cells within the grid; once a hit is closer than the shell's inner
+        // distance, stop.
         let far = [0, 1, 2].map(|a| c[a].abs()).into_iter().max().unwrap_or(0) + self.span;
-        for r in 0..=far {
-            for x in c[0] - r..=c[0] + r {
-                for y in c[1] - r..=c[1] + r {
-                    for z in c[2] - r..=c[2] + r {
+        let within = |a: usize, r: i64| (c[a] - r).max(0)..=(c[a] + r).min(self.last[a]);
+        for r in gap..=far {
+            for x in within(0, r) {
+                for y in within(1, r) {
+                    for z in within(2, r) {
                         let on_shell =
                             (x - c[0]).abs() == r || (y - c[1]).abs() == r || (z - c[2]).abs() == r;
                         if !on_shell {
@@ -142,13 +168,7 @@ impl<'a> SurfaceIndex<'a> {
                         }
                         if let Some(list) = self.cells.get(&[x, y, z]) {
                             for &t in list {
-                                let tri = self.mesh.triangles[t as usize]
-                                    .map(|i| self.mesh.vertices[i as usize]);
-                                let q = closest_on_triangle(p, tri[0], tri[1], tri[2]);
-                                let d = norm(sub(p, q));
-                                if d < best.0 {
-                                    best = (d, q, t as usize);
-                                }
+                                try_triangle(t as usize, &mut best);
                             }
                         }
                     }
@@ -290,5 +310,60 @@ mod tests {
         assert_eq!(c.pct_within_1mm, 0.0);
         assert_eq!(c.pct_within_2mm, 100.0);
         assert!((c.vertex_mean.unwrap() - 1.5).abs() < 1e-12);
+    }
+
+    /// The index against every triangle, for points inside its grid, just outside it and far
+    /// away (a user landmark typed in metres, 9 000 mm off: the shell search used to walk every
+    /// empty shell between, (distance / cell)³ cells, and a run hung).
+    #[test]
+    fn the_index_finds_what_every_triangle_finds_near_and_far() {
+        // A bumpy 12 × 12 sheet, 1 mm spacing.
+        let n = 12;
+        let v: Vec<[f64; 3]> = (0..n * n)
+            .map(|k| {
+                let (i, j) = ((k % n) as f64, (k / n) as f64);
+                [i, j, 0.3 * (0.7 * i).sin() * (0.5 * j).cos()]
+            })
+            .collect();
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = (j * n + i) as u32;
+                t.push([a, a + 1, a + n as u32]);
+                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
+            }
+        }
+        let mesh = Mesh::new(v, t);
+        let index = SurfaceIndex::new(&mesh);
+        let every = |p: [f64; 3]| {
+            mesh.triangles
+                .iter()
+                .map(|tri| {
+                    let [a, b, c] = tri.map(|i| mesh.vertices[i as usize]);
+                    norm(sub(p, closest_on_triangle(p, a, b, c)))
+                })
+                .fold(f64::INFINITY, f64::min)
+        };
+        let points = [
+            [5.3, 4.1, 0.7],
+            [-0.5, 11.5, -0.2],
+            [13.0, -2.0, 3.0],
+            [30.0, 5.0, 1.0],
+            [9000.0, 0.0, 0.0],
+            [-4.0e4, 2.0e4, -7.0e3],
+        ];
+        for p in points {
+            let (d, q, tri) = index.closest_triangle(p);
+            let want = every(p);
+            assert!(
+                (d - want).abs() <= 1e-9 * want.max(1.0),
+                "{p:?}: {d} against {want}"
+            );
+            let [a, b, c] = mesh.triangles[tri].map(|i| mesh.vertices[i as usize]);
+            assert!(
+                norm(sub(closest_on_triangle(p, a, b, c), q)) < 1e-12,
+                "{p:?}"
+            );
+        }
     }
 }
