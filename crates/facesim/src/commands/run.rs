@@ -104,15 +104,26 @@ fn finish(
     let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
     let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
     // Landmarks before any file is written: a user landmark off the face is bad input.
+    // Located once: the tet model's region may have needed them already.
     let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
-        crate::landmarks::analyse(
-            &prediction.skin,
-            &prediction.face_post,
-            Some(&scene.face.skull),
-            &scene.model.plan,
-            &inputs::user_landmarks(case)?,
-            &files.case_file,
-        )
+        match scene.landmarks_pre(&prediction.skin) {
+            Some((frame, lms)) => Ok(crate::landmarks::analyse_located(
+                &prediction.skin,
+                &prediction.face_post,
+                frame,
+                lms,
+                &scene.model.plan,
+            )),
+            // Not located: again, for the error naming the case file.
+            None => crate::landmarks::analyse(
+                &prediction.skin,
+                &prediction.face_post,
+                Some(&scene.face.skull),
+                &scene.model.plan,
+                &inputs::user_landmarks(case)?,
+                &files.case_file,
+            ),
+        }
     })?;
     // The band before any file is written: a failed sample leaves no outputs half-written.
     let (band, reduced) = if case.uncertainty.samples == 0 {

@@ -536,19 +536,14 @@ type Box3 = ([f64; 3], [f64; 3]);
 const NOSE_ROOM_MM: f64 = 10.0;
 
 /// `roi` grown to hold pronasale with [`NOSE_ROOM_MM`] about it when the nose's base (subnasale)
-/// is inside it and its nearest bone moves, within the CT; the nose tip's position when it grew. The region's cut faces are
-/// held, and the nose is a cantilever whose tip follows its base: a face cutting through it holds
-/// the tip still (the jaws phantoms with 2–4 mm more tissue: pronasale 4.6 mm outside the box of
-/// a 5 mm Le Fort I at `margin_mm` 30, not moving at all). The landmarks are the pre-operative
-/// skin's (`landmarks::locate`); without them, or with the tip already inside, `roi` is kept.
-fn take_in_nose(roi: Box3, scene: &Scene, case: &Case, skin: &Mesh) -> (Box3, Option<[f64; 3]>) {
-    let user = crate::pipeline::inputs::user_landmarks(case).unwrap_or_default();
-    let Ok((_, lms)) = crate::landmarks::locate(
-        skin,
-        Some(&scene.face.skull),
-        &user,
-        std::path::Path::new("case.toml"),
-    ) else {
+/// is inside it and its nearest bone moves, within the CT; the nose tip's position when it grew.
+/// The region's cut faces are held, and the nose is a cantilever whose tip follows its base: a
+/// face cutting through it holds the tip still (the jaws phantoms with 2–4 mm more tissue:
+/// pronasale 4.6 mm outside the box of a 5 mm Le Fort I at `margin_mm` 30, not moving at all).
+/// The landmarks are the pre-operative skin's (`Scene::landmarks_pre`, kept for the landmark
+/// stage); without them, or with the tip already inside, `roi` is kept.
+fn take_in_nose(roi: Box3, scene: &Scene, skin: &Mesh) -> (Box3, Option<[f64; 3]>) {
+    let Some((_, lms)) = scene.landmarks_pre(skin) else {
         return (roi, None);
     };
     let at = |label: &str| {
@@ -710,7 +705,7 @@ pub fn predict(
     let Some(roi) = region(scene, t.margin_mm) else {
         return Ok(None);
     };
-    let (roi, nose_tip) = take_in_nose(roi, scene, case, skin);
+    let (roi, nose_tip) = take_in_nose(roi, scene, skin);
     let params = MeshParams {
         skin_size_mm: t.skin_size_mm,
         deep_size_mm: t.deep_size_mm,

@@ -24,10 +24,13 @@ pub mod surfaces;
 
 use crate::case::Case;
 use crate::error::Result;
+use crate::landmarks::{HeadFrame, Landmark};
+use crate::mesh::Mesh;
 use crate::observe::Observer;
 use crate::segment::Segmentation;
 use crate::volume::Volume;
 pub use stage::{Recorder, Stage};
+use std::path::Path;
 
 /// Tissues from the CT (Koch §2.3; docs/pipeline.md §1).
 pub fn tissues(ct: &Volume, case: &Case, rec: &mut Recorder) -> Result<Segmentation> {
@@ -46,6 +49,58 @@ pub struct Scene {
     pub seg: Segmentation,
     pub face: face::Face,
     pub model: model::Model,
+    /// The pre-operative landmarks, located once ([`Scene::landmarks_pre`]).
+    located: std::sync::OnceLock<Option<Located>>,
+}
+
+/// Landmarks located on one skin, with that skin's key.
+struct Located {
+    key: u64,
+    frame: Option<HeadFrame>,
+    landmarks: Vec<Landmark>,
+}
+
+impl Scene {
+    /// The head frame and landmarks of `skin` (the pre-operative face a prediction moves) with the
+    /// case's own landmarks over the detected ones, located on the first call and kept: the tet
+    /// model's region and the landmark stage both need them (0.13 s on the real CT). A later call
+    /// with another skin locates again. None when they cannot be located (a user landmark that is
+    /// not valid: the landmark stage reports it).
+    pub(crate) fn landmarks_pre(&self, skin: &Mesh) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
+        let locate = || {
+            let user = inputs::user_landmarks(&self.case).ok()?;
+            crate::landmarks::locate(skin, Some(&self.face.skull), &user, Path::new("case.toml"))
+                .ok()
+        };
+        let key = skin_key(skin);
+        let kept = self.located.get_or_init(|| {
+            locate().map(|(frame, landmarks)| Located {
+                key,
+                frame,
+                landmarks,
+            })
+        });
+        match kept {
+            Some(k) if k.key == key => Some((k.frame, k.landmarks.clone())),
+            _ => locate(),
+        }
+    }
+}
+
+/// FNV-1a over a mesh's vertex coordinates and triangles: which skin the landmarks were
+/// located on.
+fn skin_key(m: &Mesh) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |x: u64| {
+        h ^= x;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    };
+    m.vertices.iter().flatten().for_each(|c| eat(c.to_bits()));
+    m.triangles
+        .iter()
+        .flatten()
+        .for_each(|i| eat(u64::from(*i)));
+    h
 }
 
 /// Stages 1–4 on a case whose files are read: tissues, surfaces, face, model.
@@ -65,6 +120,7 @@ pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scen
         seg,
         face,
         model,
+        located: std::sync::OnceLock::new(),
     })
 }
 
