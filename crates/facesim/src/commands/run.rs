@@ -106,24 +106,14 @@ fn finish(
     // Landmarks before any file is written: a user landmark off the face is bad input.
     // Located once: the tet model's region may have needed them already.
     let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
-        match scene.landmarks_pre(&prediction.skin) {
-            Some((frame, lms)) => Ok(crate::landmarks::analyse_located(
-                &prediction.skin,
-                &prediction.face_post,
-                frame,
-                lms,
-                &scene.model.plan,
-            )),
-            // Not located: again, for the error naming the case file.
-            None => crate::landmarks::analyse(
-                &prediction.skin,
-                &prediction.face_post,
-                Some(&scene.face.skull),
-                &scene.model.plan,
-                &inputs::user_landmarks(case)?,
-                &files.case_file,
-            ),
-        }
+        let (frame, lms) = scene.landmarks_pre(&prediction.skin, &files.case_file)?;
+        Ok(crate::landmarks::analyse_located(
+            &prediction.skin,
+            &prediction.face_post,
+            frame,
+            lms,
+            &scene.model.plan,
+        ))
     })?;
     // The band before any file is written: a failed sample leaves no outputs half-written.
     let (band, reduced) = if case.uncertainty.samples == 0 {
@@ -167,7 +157,7 @@ fn finish(
     };
     // Stored beside plan_basis.bin (docs/reduced.md "The stored model").
     let reduced = reduced.map(|m| crate::model::reduced::file::StoredReduced {
-        face_checksum: crate::model::reduced::file::checksum(&prediction.skin.vertices),
+        face_checksum: crate::mesh::checksum(&prediction.skin.vertices),
         tissues: case.tet.tissues(),
         sliding: case.tet.sliding,
         sliding_matters: m.sliding_matters,

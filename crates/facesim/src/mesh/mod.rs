@@ -325,6 +325,21 @@ pub(crate) fn one_rings(n: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
 /// the read-backs; `facesim run`'s inputs use its first half, [`model_file::read_model`], and
 /// check what each needs. A run's .vtp and .stl say SPACE=LPS, so they read back to face_post's
 /// coordinates (the STL's rounded to f32, its vertices welded in the order triangles use them).
+/// FNV-1a (64 bit) over vertex coordinates' bits: which face a stored reduced model belongs to,
+/// which skin landmarks were located on.
+pub fn checksum(vertices: &[[f64; 3]]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in vertices
+        .iter()
+        .flatten()
+        .flat_map(|x| x.to_bits().to_le_bytes())
+    {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    h
+}
+
 pub fn read_mesh(path: &Path) -> Result<Mesh> {
     let mesh = model_file::read_model(path)?;
     mesh.check(path)?;

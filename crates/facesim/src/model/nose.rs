@@ -9,8 +9,7 @@
 //! spine's depth, else the alar creases').
 
 use crate::error::{Error, Result};
-use crate::landmarks::{self, Landmark};
-use crate::mesh::Mesh;
+use crate::landmarks::{HeadFrame, Landmark};
 
 /// The nose's base starts this far above subnasale (mm): the columella's base and the lip below
 /// stay tissue.
@@ -21,18 +20,15 @@ const BELOW_N_MM: f64 = 7.0;
 /// Half the nose's width without alare (mm; adult alar width 31–38 mm, Farkas 1994).
 const HALF_WIDTH_MM: f64 = 17.0;
 
-/// Per tetrahedron: whether its centroid lies in the external nose of `skin` (with `skull` for
-/// the anterior nasal spine and `user` landmarks over the detected ones). Missing landmarks are
-/// an error naming them: the option asks for a nose the landmarks must find.
+/// Per tetrahedron: whether its centroid lies in the external nose the pre-operative head frame
+/// and landmarks locate (`Scene::landmarks_pre`: the skin's, the skull's for the anterior nasal
+/// spine, and the case's own over the detected ones). Missing landmarks are an error naming
+/// them: the option asks for a nose the landmarks must find.
 pub(crate) fn nose_tets(
-    skin: &Mesh,
-    skull: &Mesh,
-    user: &[(String, [f64; 3])],
+    (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
 ) -> Result<Vec<bool>> {
-    let (frame, lms) =
-        landmarks::locate(skin, Some(skull), user, std::path::Path::new("case.toml"))?;
     let missing = |why: String| {
         Error::config(format!(
             "[tet] nose_youngs_kpa: the nose's region needs {why}; give it as a [[landmark]] in case.toml"

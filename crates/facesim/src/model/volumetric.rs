@@ -26,6 +26,7 @@ use crate::tet::quality::Quality;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
 use crate::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 
 /// The solved volumetric model, kept for the outputs (tets.vtu) and the report.
 pub struct Volumetric {
@@ -508,8 +509,9 @@ fn hold_tissue(
 
 /// The box (LPS mm) around the skull points the plan moves, grown by `margin` and kept inside
 /// the CT's voxel centres (where the scan ends, the tissue is cut and held like the region's other
-/// cut faces, not left as a free surface); None when the plan moves none.
-fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
+/// cut faces, not left as a free surface), then grown to take in the nose ([`take_in_nose`]), with
+/// the nose tip when it grew; None when the plan moves no bone.
+fn region(scene: &Scene, skin: &Mesh, margin: f64) -> Option<(Box3, Option<[f64; 3]>)> {
     let skull = &scene.face.skull.vertices;
     let (_, moved) = scene.model.plan.apply(skull, 1.0);
     let mut lo = [f64::INFINITY; 3];
@@ -525,7 +527,7 @@ fn region(scene: &Scene, margin: f64) -> Option<([f64; 3], [f64; 3])> {
         lo[c] = lo[c].max(vlo[c]);
         hi[c] = hi[c].min(vhi[c]);
     }
-    (lo[0] <= hi[0]).then_some((lo, hi))
+    (lo[0] <= hi[0]).then(|| take_in_nose((lo, hi), scene, skin, &moved))
 }
 
 /// An axis-aligned box (LPS mm): lowest and highest corner.
@@ -542,8 +544,8 @@ const NOSE_ROOM_MM: f64 = 10.0;
 /// pronasale 4.6 mm outside the box of a 5 mm Le Fort I at `margin_mm` 30, not moving at all).
 /// The landmarks are the pre-operative skin's (`Scene::landmarks_pre`, kept for the landmark
 /// stage); without them, or with the tip already inside, `roi` is kept.
-fn take_in_nose(roi: Box3, scene: &Scene, skin: &Mesh) -> (Box3, Option<[f64; 3]>) {
-    let Some((_, lms)) = scene.landmarks_pre(skin) else {
+fn take_in_nose(roi: Box3, scene: &Scene, skin: &Mesh, moved: &[bool]) -> (Box3, Option<[f64; 3]>) {
+    let Ok((_, lms)) = scene.landmarks_pre(skin, Path::new("case.toml")) else {
         return (roi, None);
     };
     let at = |label: &str| {
@@ -559,7 +561,6 @@ fn take_in_nose(roi: Box3, scene: &Scene, skin: &Mesh) -> (Box3, Option<[f64; 3]
     // The nose rests on the bone nearest its base: grown only when that bone moves (a Le Fort
     // I, not a mandibular move, whose region may hold subnasale while the nose stays).
     let skull = &scene.face.skull.vertices;
-    let (_, moved) = scene.model.plan.apply(skull, 1.0);
     let d2 = |p: &[f64; 3]| (0..3).map(|c| (p[c] - sn[c]).powi(2)).sum::<f64>();
     let nearest = (0..skull.len()).min_by(|a, b| d2(&skull[*a]).total_cmp(&d2(&skull[*b])));
     let on_moved_bone = nearest.is_some_and(|i| moved[i]);
@@ -702,10 +703,9 @@ pub fn predict(
     rec: &mut Recorder,
 ) -> Result<Option<(Volumetric, Vec<[f64; 3]>)>> {
     let t = &case.tet;
-    let Some(roi) = region(scene, t.margin_mm) else {
+    let Some((roi, nose_tip)) = region(scene, skin, t.margin_mm) else {
         return Ok(None);
     };
-    let (roi, nose_tip) = take_in_nose(roi, scene, skin);
     let params = MeshParams {
         skin_size_mm: t.skin_size_mm,
         deep_size_mm: t.deep_size_mm,
@@ -717,9 +717,7 @@ pub fn predict(
     // The external nose as one framework, found from the pre-operative landmarks.
     let nose = if t.nose_youngs_kpa > 0.0 {
         Some(super::nose::nose_tets(
-            skin,
-            &scene.face.skull,
-            &crate::pipeline::inputs::user_landmarks(case)?,
+            scene.landmarks_pre(skin, Path::new("case.toml"))?,
             &mesh.nodes,
             &mesh.tets,
         )?)

@@ -53,7 +53,7 @@ pub struct Scene {
     located: std::sync::OnceLock<Option<Located>>,
 }
 
-/// Landmarks located on one skin, with that skin's key.
+/// Landmarks located on one skin, with the checksum of its vertices.
 struct Located {
     key: u64,
     frame: Option<HeadFrame>,
@@ -63,44 +63,31 @@ struct Located {
 impl Scene {
     /// The head frame and landmarks of `skin` (the pre-operative face a prediction moves) with the
     /// case's own landmarks over the detected ones, located on the first call and kept: the tet
-    /// model's region and the landmark stage both need them (0.13 s on the real CT). A later call
-    /// with another skin locates again. None when they cannot be located (a user landmark that is
-    /// not valid: the landmark stage reports it).
-    pub(crate) fn landmarks_pre(&self, skin: &Mesh) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
+    /// model's region, its nose option and the landmark stage all need them (0.13 s on the real
+    /// CT). A call with another skin, or after the first failed, locates again, so that a user
+    /// landmark that is not valid is an error naming `case_file`.
+    pub(crate) fn landmarks_pre(
+        &self,
+        skin: &Mesh,
+        case_file: &Path,
+    ) -> Result<(Option<HeadFrame>, Vec<Landmark>)> {
         let locate = || {
-            let user = inputs::user_landmarks(&self.case).ok()?;
-            crate::landmarks::locate(skin, Some(&self.face.skull), &user, Path::new("case.toml"))
-                .ok()
+            let user = inputs::user_landmarks(&self.case)?;
+            crate::landmarks::locate(skin, Some(&self.face.skull), &user, case_file)
         };
-        let key = skin_key(skin);
+        let key = crate::mesh::checksum(&skin.vertices);
         let kept = self.located.get_or_init(|| {
-            locate().map(|(frame, landmarks)| Located {
+            locate().ok().map(|(frame, landmarks)| Located {
                 key,
                 frame,
                 landmarks,
             })
         });
         match kept {
-            Some(k) if k.key == key => Some((k.frame, k.landmarks.clone())),
+            Some(k) if k.key == key => Ok((k.frame, k.landmarks.clone())),
             _ => locate(),
         }
     }
-}
-
-/// FNV-1a over a mesh's vertex coordinates and triangles: which skin the landmarks were
-/// located on.
-fn skin_key(m: &Mesh) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |x: u64| {
-        h ^= x;
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    };
-    m.vertices.iter().flatten().for_each(|c| eat(c.to_bits()));
-    m.triangles
-        .iter()
-        .flatten()
-        .for_each(|i| eat(u64::from(*i)));
-    h
 }
 
 /// Stages 1–4 on a case whose files are read: tissues, surfaces, face, model.

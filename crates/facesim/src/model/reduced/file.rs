@@ -70,20 +70,6 @@ struct ModelHeader {
     build: ReducedReport,
 }
 
-/// FNV-1a (64 bit) over the coordinates' bits: the face a stored model belongs to.
-pub fn checksum(face: &[[f64; 3]]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in face
-        .iter()
-        .flatten()
-        .flat_map(|x| x.to_bits().to_le_bytes())
-    {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    h
-}
-
 /// Write `stored` to `path` (temporary name, then renamed).
 pub fn write(path: &Path, stored: &StoredReduced) -> Result<()> {
     let vertices = stored.models.first().map_or(0, |m| m.face.lift.len());
@@ -148,13 +134,13 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
     let n = header.vertices;
     let sum = u64::from_str_radix(&header.face_checksum, 16)
         .map_err(|_| Error::input(path, "reduced model: the face checksum is not hexadecimal"))?;
-    if n != face_pre.len() || sum != checksum(face_pre) {
+    if n != face_pre.len() || sum != crate::mesh::checksum(face_pre) {
         return Err(Error::input(
             path,
             format!(
                 "reduced model of another face ({n} vertices, checksum {sum:016x}; this run's face has {} vertices, checksum {:016x}): run the case again",
                 face_pre.len(),
-                checksum(face_pre)
+                crate::mesh::checksum(face_pre)
             ),
         ));
     }
