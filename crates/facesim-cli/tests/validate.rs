@@ -71,15 +71,17 @@ fn recompute(run: &Value, row: &HashMap<String, String>) -> f64 {
     (0..3).map(|k| (b[k] - a[k]) * t[k]).sum::<f64>() / t2
 }
 
-#[test]
-fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_ranges() {
-    let out = common::kept_dir("facesim-validate-phantom").join("v");
-    let r = facesim(&[
+/// `facesim validate` of one coarse phantom (3 mm voxels) and one surgery, with `extra`
+/// arguments, into a kept directory named `dir`; the output directory, after a successful run.
+fn validate_one_phantom(dir: &str, surgery: &str, extra: &[&str]) -> PathBuf {
+    let out = common::kept_dir(dir).join("v");
+    let samples = root().join("data-samples");
+    let mut args = vec![
         "validate",
         "--out",
         out.to_str().unwrap(),
         "--samples",
-        root().join("data-samples").to_str().unwrap(),
+        samples.to_str().unwrap(),
         "--case",
         "phantom",
         "--phantoms",
@@ -87,11 +89,21 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
         "--phantom-spacing",
         "3",
         "--surgery",
-        "bsso-advance",
-        "--set",
-        "tet.fat_dark.youngs_kpa=2.5",
-    ]);
+        surgery,
+    ];
+    args.extend_from_slice(extra);
+    let r = facesim(&args);
     assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    out
+}
+
+#[test]
+fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_ranges() {
+    let out = validate_one_phantom(
+        "facesim-validate-phantom",
+        "bsso-advance",
+        &["--set", "tet.fat_dark.youngs_kpa=2.5"],
+    );
     for f in ["validation.md", "validation.csv", "validation.svg"] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
@@ -166,23 +178,7 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
 /// tip follows the advance by the published fraction.
 #[test]
 fn a_le_fort_advance_takes_in_the_whole_nose() {
-    let out = common::kept_dir("facesim-validate-nose").join("v");
-    let r = facesim(&[
-        "validate",
-        "--out",
-        out.to_str().unwrap(),
-        "--samples",
-        root().join("data-samples").to_str().unwrap(),
-        "--case",
-        "phantom",
-        "--phantoms",
-        "1",
-        "--phantom-spacing",
-        "3",
-        "--surgery",
-        "lefort-advance",
-    ]);
-    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    let out = validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]);
     let run: Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("runs/phantom01/lefort-advance/report.json")).unwrap(),
     )

@@ -286,26 +286,28 @@ mod tests {
         assert!((q[0] - 0.5).abs() < 1e-15 && (q[1] - 0.5).abs() < 1e-15);
     }
 
+    /// An n × n sheet of unit spacing at height z(i, j), two triangles per square.
+    fn sheet(n: usize, z: impl Fn(f64, f64) -> f64) -> Mesh {
+        let mut v = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                v.push([i as f64, j as f64, z(i as f64, j as f64)]);
+            }
+        }
+        let mut t = Vec::new();
+        for j in 0..n - 1 {
+            for i in 0..n - 1 {
+                let a = (j * n + i) as u32;
+                t.push([a, a + 1, a + n as u32]);
+                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
+            }
+        }
+        Mesh::new(v, t)
+    }
+
     #[test]
     fn parallel_planes_are_their_gap_apart() {
-        let plane = |z: f64, n: usize| {
-            let mut v = Vec::new();
-            for j in 0..n {
-                for i in 0..n {
-                    v.push([i as f64, j as f64, z]);
-                }
-            }
-            let mut t = Vec::new();
-            for j in 0..n - 1 {
-                for i in 0..n - 1 {
-                    let a = (j * n + i) as u32;
-                    t.push([a, a + 1, a + n as u32]);
-                    t.push([a + 1, a + n as u32 + 1, a + n as u32]);
-                }
-            }
-            Mesh::new(v, t)
-        };
-        let c = compare(&plane(0.0, 10), &plane(1.5, 10));
+        let c = compare(&sheet(10, |_, _| 0.0), &sheet(10, |_, _| 1.5));
         assert!((c.mean - 1.5).abs() < 1e-12 && (c.max - 1.5).abs() < 1e-12);
         assert_eq!(c.pct_within_1mm, 0.0);
         assert_eq!(c.pct_within_2mm, 100.0);
@@ -318,22 +320,7 @@ mod tests {
     #[test]
     fn the_index_finds_what_every_triangle_finds_near_and_far() {
         // A bumpy 12 × 12 sheet, 1 mm spacing.
-        let n = 12;
-        let v: Vec<[f64; 3]> = (0..n * n)
-            .map(|k| {
-                let (i, j) = ((k % n) as f64, (k / n) as f64);
-                [i, j, 0.3 * (0.7 * i).sin() * (0.5 * j).cos()]
-            })
-            .collect();
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                t.push([a, a + 1, a + n as u32]);
-                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
-            }
-        }
-        let mesh = Mesh::new(v, t);
+        let mesh = sheet(12, |i, j| 0.3 * (0.7 * i).sin() * (0.5 * j).cos());
         let index = SurfaceIndex::new(&mesh);
         let every = |p: [f64; 3]| {
             mesh.triangles
