@@ -99,6 +99,25 @@ def test_band_equals_face_band_ply(case_dir, tmp_path):
     assert r.report["uncertainty"]["samples"] == 3
 
 
+def test_replan_band_from_the_stored_reduced_model(case_dir, tmp_path):
+    """PLAN.toml's [uncertainty] samples the run's reduced_model.bin: the run's own band."""
+    import tomllib
+
+    case = tomllib.loads((case_dir / "case.toml").read_text())
+    case.setdefault("tet", {}).update({"skin_size_mm": 6.0, "deep_size_mm": 12.0, "error_estimate": False})
+    u = {"samples": 5, "seed": 3, "method": "reduced"}
+    case["uncertainty"] = u
+    r = facesim.run(case, out=tmp_path / "out", base_dir=case_dir)
+    assert (tmp_path / "out" / "reduced_model.bin").is_file()
+    p = facesim.replan(r.out_dir, {"uncertainty": u}, out=tmp_path / "band")
+    assert p.band is not None and set(p.band) == {"mean", "p05", "p95"}
+    for k in ("mean", "p05", "p95"):
+        assert np.array_equal(p.band[k], r.band[k]), k
+    assert p.report["uncertainty"]["largest_bound_mm"] == r.report["uncertainty"]["largest_bound_mm"]
+    plain = facesim.replan(r.out_dir, {"osteotomy": []}, out=tmp_path / "plain")
+    assert plain.band is None
+
+
 def read_displacement_csv(path: Path):
     rows = np.loadtxt(path, delimiter=",", skiprows=1)
     return rows[:, 1:4], rows[:, 4:7], rows[:, 7]

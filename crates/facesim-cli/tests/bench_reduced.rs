@@ -151,6 +151,34 @@ fn bench_reduced_quick_writes_a_consistent_report() {
         f(&b["band_run_over_full_run"]),
         f(&band["wall_s"]) / f(&plain["wall_s"])
     ));
+    // The same band from the band run's stored models (`facesim replan` with [uncertainty]):
+    // the same samples and bound, no build, and less memory than the run that built them.
+    let stored = &b["stored_band"];
+    assert_eq!(stored["samples"], band["samples"], "{stored}");
+    assert_eq!(stored["method"], "reduced", "{stored}");
+    assert_eq!(
+        stored["largest_bound_mm"], band["largest_bound_mm"],
+        "{stored}"
+    );
+    assert_eq!(stored["reduced_build_s"], 0.0, "{stored}");
+    assert!(
+        f(&stored["uncertainty_s"]) > 0.0 && f(&stored["uncertainty_s"]) <= f(&stored["wall_s"]),
+        "{stored}"
+    );
+    assert!(
+        f(&stored["max_rss_mb"]) > 1.0 && f(&stored["max_rss_mb"]) < f(&band["max_rss_mb"]),
+        "{stored} {band}"
+    );
+    assert!(close(
+        f(&b["stored_band_over_full_run"]),
+        f(&stored["wall_s"]) / f(&plain["wall_s"])
+    ));
+    let band_target = &b["targets"][3];
+    assert_eq!(
+        band_target["met"],
+        f(&stored["wall_s"]) < f(&plain["wall_s"]),
+        "{band_target}"
+    );
 
     // The error: at every θ the bound holds the Euclidean error, which holds the worst vertex.
     let errors = b["errors"].as_array().unwrap();

@@ -164,7 +164,8 @@ pub fn from_run(
     })
 }
 
-/// A replan's outputs: the basis's face_pre and the predicted face.
+/// A replan's outputs: the basis's face_pre, the predicted face and its band when PLAN.toml
+/// asked for one.
 pub fn from_replan(
     py: Python<'_>,
     basis: &facesim::plan::PlanBasis,
@@ -180,6 +181,8 @@ pub fn from_replan(
             .unbind(),
         landmarks: landmarks(py, &r.report)?.into_any().unbind(),
         report: json(py, &r.report)?.unbind(),
-        band: py.None(),
+        // A replan's output directory is written whole: a face_band.ply in it is its own
+        // (PLAN.toml's [uncertainty], from the run's stored reduced model).
+        band: band(py, &r.out_dir, SystemTime::UNIX_EPOCH)?.unbind(),
     })
 }

@@ -426,6 +426,77 @@ fn the_stored_model_re_solves_new_tissues_within_its_bound_of_a_full_run() {
     assert!(e.contains("written by facesim") && !e.contains('\n'), "{e}");
 }
 
+/// Issue 28 item 3: `replan` with `[uncertainty]` samples the run's stored reduced model (no
+/// mesh, no factorisation): with the run's own `[uncertainty]` it gives the run's band, every
+/// landmark's, region's and vertex's figure and the Sobol indices equal to the bit; a box
+/// wider than the one the model was trained on, full solves and a new plan are refused in one
+/// line naming PLAN.toml, with nothing written.
+#[test]
+fn the_stored_model_gives_the_runs_band_without_the_mesh() {
+    use facesim::commands::replan;
+    let b = reduced_run();
+    let plan_dir = common::kept_dir("facesim-reduced-band");
+    let plan = plan_dir.join("band.toml");
+    std::fs::write(&plan, "[uncertainty]\nsamples = 10\nmethod = \"reduced\"\n").unwrap();
+    let r = replan::replan(&b.out_dir, &plan, Some(&plan_dir.join("out"))).unwrap();
+    let (ua, ub) = (&json(b)["uncertainty"], &json_of(&r.out_dir)["uncertainty"]);
+    assert_eq!(ub["method"], "reduced", "{ub}");
+    assert_eq!(ua["draws"], ub["draws"]);
+    for k in [
+        "landmarks",
+        "regions",
+        "sensitivity",
+        "largest_bound_mm",
+        "landmark_bounds_mm",
+    ] {
+        assert!(!ua[k].is_null(), "{k}: {ua}");
+        assert_eq!(ua[k], ub[k], "{k}");
+    }
+    let (run_band, stored_band) = (band_columns(&b.out_dir), band_columns(&r.out_dir));
+    assert_eq!(run_band, stored_band, "face_band.ply's mean, p05, p95");
+    assert!(
+        run_band[2].iter().any(|x| *x > 0.0),
+        "the band is not empty"
+    );
+
+    let refuse = |text: &str, want: &str| {
+        std::fs::write(&plan, text).unwrap();
+        let dest = plan_dir.join("refused");
+        let Err(e) = replan::replan(&b.out_dir, &plan, Some(&dest)) else {
+            panic!("{text} was answered")
+        };
+        let e = e.to_string();
+        assert!(
+            e.contains(want) && e.contains("band.toml") && !e.contains('\n'),
+            "{e}"
+        );
+        assert!(!dest.exists(), "{e}");
+    };
+    // ν 0.30–0.49 reaches below the trained 0.45–0.49.
+    refuse(
+        "[uncertainty]\nsamples = 10\n[uncertainty.poisson]\nuniform = [0.30, 0.49]\n",
+        "outside the trained range",
+    );
+    refuse(
+        "[uncertainty]\nsamples = 10\nmethod = \"full\"\n",
+        "full solves need `facesim run`",
+    );
+    let basis = facesim::plan::file::read(&b.out_dir.join(facesim::plan::file::FILE_NAME)).unwrap();
+    let mut moved = basis.run_plan.clone();
+    moved[0].translate[0] += 1.0;
+    #[derive(serde::Serialize)]
+    struct Plan {
+        osteotomy: Vec<facesim::case::Osteotomy>,
+    }
+    let mut text = toml::to_string(&Plan { osteotomy: moved }).unwrap();
+    text.push_str("[uncertainty]\nsamples = 10\n");
+    refuse(&text, "at the run's plan only");
+}
+
+fn json_of(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap()
+}
+
 /// A re-solve (the uncertainty samples', the reduced model's truth) keeps the tissue state the
 /// run's move chose — the nodes it lifted off the bone and the tetrahedra it tore — so at the
 /// run's own parameters it is the run's face. Before, it re-attached the lifted-off tissue, and

@@ -4,22 +4,26 @@
 //! stored (docs/reduced.md "Re-solving from the stored model").
 
 use super::outputs;
-use crate::case::{Osteotomy, Region, TissueElastic};
+use crate::case::uncertainty::Method;
+use crate::case::{Case, Osteotomy, Region, SolveModel, TissueElastic, Uncertainty};
 use crate::error::{Error, Result};
 use crate::mesh::{self, Mesh};
+use crate::model::reduced::file::{self as stored, StoredReduced};
 use crate::plan::{PlanBasis, file};
 use crate::report::{self, ReplanReport, Report, TissueReplan};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 /// A PLAN.toml: the `[[osteotomy]]` list (case.toml's form) and, optionally, new tissue
-/// parameters (`[tet]`: `sliding` and `[tet.skin]` … with `youngs_kpa` / `poisson`, any subset).
+/// parameters (`[tet]`: `sliding` and `[tet.skin]` … with `youngs_kpa` / `poisson`, any subset)
+/// and a band (`[uncertainty]`, case.toml's form) from the run's stored reduced model.
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NewPlan {
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
     pub tet: Option<TissueChange>,
+    pub uncertainty: Option<Uncertainty>,
 }
 
 /// PLAN.toml's `[tet]`: what changes from the run's tissue parameters.
@@ -101,6 +105,15 @@ pub fn plan_from_text(text: &str, path: &Path) -> Result<NewPlan> {
             return Err(Error::input(path, msg));
         }
     }
+    if let Some(u) = &plan.uncertainty {
+        if u.method == Method::Full {
+            return Err(Error::input(
+                path,
+                "[uncertainty] method = \"full\": replan samples the run's stored reduced model; full solves need `facesim run`",
+            ));
+        }
+        u.validate(SolveModel::Tet, true, path)?;
+    }
     Ok(plan)
 }
 
@@ -139,26 +152,11 @@ pub fn replan(run_dir: &Path, plan_file: &Path, dest: Option<&Path>) -> Result<R
 /// and what report.json says of it. A θ outside the trained box or another plan is refused: it
 /// needs a full run.
 fn tissue_face(
-    run_dir: &Path,
+    models: &StoredReduced,
     basis: &PlanBasis,
-    plan: &NewPlan,
     change: &TissueChange,
     plan_file: &Path,
 ) -> Result<(Vec<[f64; 3]>, TissueReplan)> {
-    use crate::model::reduced::file as stored;
-    let same = |a: &[Osteotomy], b: &[Osteotomy]| {
-        serde_json::to_value(a)
-            .ok()
-            .is_some_and(|x| Some(x) == serde_json::to_value(b).ok())
-    };
-    if !plan.osteotomy.is_empty() && !same(&plan.osteotomy, &basis.run_plan) {
-        return Err(Error::input(
-            plan_file,
-            "[tet] changes are answered at the run's plan only (the reduced model was built for it): leave out [[osteotomy]] or give the run's plan unchanged; new tissues with a new plan need `facesim run`",
-        ));
-    }
-    let path = run_dir.join(stored::FILE_NAME);
-    let models = stored::read(&path, &basis.face_pre)?;
     let (tissues, sliding) = change.apply(models.tissues, models.sliding);
     let f = models.face(&tissues, sliding).map_err(|e| {
         Error::input(
@@ -179,6 +177,79 @@ fn tissue_face(
     ))
 }
 
+/// The run's stored reduced models, for PLAN.toml's `[tet]` or `[uncertainty]` (`what`): they
+/// are the run's plan's, so another plan is refused.
+fn stored_at_run_plan(
+    run_dir: &Path,
+    basis: &PlanBasis,
+    plan: &NewPlan,
+    plan_file: &Path,
+    what: &str,
+) -> Result<StoredReduced> {
+    let same = |a: &[Osteotomy], b: &[Osteotomy]| {
+        serde_json::to_value(a)
+            .ok()
+            .is_some_and(|x| Some(x) == serde_json::to_value(b).ok())
+    };
+    if !plan.osteotomy.is_empty() && !same(&plan.osteotomy, &basis.run_plan) {
+        return Err(Error::input(
+            plan_file,
+            format!(
+                "{what} is answered at the run's plan only (the reduced model was built for it): leave out [[osteotomy]] or give the run's plan unchanged; with a new plan it needs `facesim run`"
+            ),
+        ));
+    }
+    stored::read(&run_dir.join(stored::FILE_NAME), &basis.face_pre)
+}
+
+/// The band of PLAN.toml's `[uncertainty]` about the tissues `models` is asked at (the run's,
+/// or `[tet]`'s), sampled on the stored reduced models with the run's landmarks; a sample
+/// outside the trained box is refused naming `plan_file`.
+fn stored_band(
+    models: &StoredReduced,
+    (tissues, sliding): ([TissueElastic; 4], bool),
+    uncertainty: &Uncertainty,
+    run_report: &Report,
+    nominal: &crate::uncertainty::Nominal,
+    plan: &crate::osteotomy::Plan,
+    plan_file: &Path,
+) -> Result<crate::uncertainty::Sampled> {
+    let mut case: Case = run_report.parameters.clone().ok_or_else(|| {
+        Error::input(
+            plan_file,
+            "[uncertainty]: the run's report.json has no parameters (written by an older facesim); run the case again",
+        )
+    })?;
+    for (m, t) in case.tet.tissues_mut().into_iter().zip(tissues) {
+        *m = t;
+    }
+    case.tet.sliding = sliding;
+    case.uncertainty = uncertainty.clone();
+    // The run's order: the stored models bound the soft landmarks in it.
+    let (frame, lms) = run_report.located_in_run_order().ok_or_else(|| {
+        Error::input(
+            plan_file,
+            "[uncertainty]: the run found no landmarks, which the band is measured at",
+        )
+    })?;
+    let analysis =
+        crate::landmarks::analyse_located(nominal.skin, &nominal_mesh(nominal), frame, lms, plan);
+    crate::uncertainty::reduced::sample_stored(nominal, models, &analysis, &case, &crate::observe::Quiet)
+        .map_err(|e| match e {
+            Error::Config(msg) => Error::input(
+                plan_file,
+                format!("[uncertainty]: {msg} (the stored model answers inside the box the run trained it on, its own [uncertainty] box; a wider box needs `facesim run`)"),
+            ),
+            other => other,
+        })
+}
+
+fn nominal_mesh(n: &crate::uncertainty::Nominal) -> Mesh {
+    let mut m = n.skin.clone();
+    m.vertices = n.face_post.to_vec();
+    m
+}
+
 /// [`replan`] for a plan already read (`plan_file` names it in errors and the report) and the
 /// run's basis already read from `run_dir`. The run's report.json must be there (its name, case
 /// and landmarks carry over): missing or unreadable, it is an error naming it.
@@ -189,12 +260,26 @@ pub fn replan_with(
     plan_file: &Path,
     dest: Option<&Path>,
 ) -> Result<Replanned> {
-    let (face_post, tissue, plan) = match &new.tet {
-        Some(change) => {
-            let (face, t) = tissue_face(run_dir, basis, new, change, plan_file)?;
+    let wants_band = new.uncertainty.as_ref().is_some_and(|u| u.samples > 0);
+    let what = if new.tet.is_some() {
+        "[tet]"
+    } else {
+        "[uncertainty]"
+    };
+    let models = (new.tet.is_some() || wants_band)
+        .then(|| stored_at_run_plan(run_dir, basis, new, plan_file, what))
+        .transpose()?;
+    let (face_post, tissue, plan) = match (&new.tet, &models) {
+        (Some(change), Some(models)) => {
+            let (face, t) = tissue_face(models, basis, change, plan_file)?;
             (face, Some(t), basis.run_plan.clone())
         }
-        None => (
+        (None, Some(_)) => (
+            predict_plan(basis, &basis.run_plan, plan_file)?,
+            None,
+            basis.run_plan.clone(),
+        ),
+        (_, None) => (
             predict_plan(basis, &new.osteotomy, plan_file)?,
             None,
             new.osteotomy.clone(),
@@ -250,6 +335,31 @@ pub fn replan_with(
             ));
         }
     }
+    // The band before any file is written (a sample outside the trained box is refused).
+    let band = match (&new.uncertainty, &models) {
+        (Some(u), Some(m)) if wants_band => {
+            let tissues = new
+                .tet
+                .as_ref()
+                .map_or((m.tissues, m.sliding), |c| c.apply(m.tissues, m.sliding));
+            let nominal = crate::uncertainty::Nominal {
+                skin: &skin,
+                face_post: &face_post,
+                moves: face_post != basis.face_pre,
+                sliding_matters: m.sliding_matters,
+            };
+            Some(stored_band(
+                m,
+                tissues,
+                u,
+                &run_report,
+                &nominal,
+                &crate::osteotomy::Plan::new(plan),
+                plan_file,
+            )?)
+        }
+        _ => None,
+    };
     let replanned = ReplanReport {
         from: run_dir.display().to_string(),
         plan: plan_file.display().to_string(),
@@ -258,7 +368,7 @@ pub fn replan_with(
         osteotomy: plan.to_vec(),
         tissue,
     };
-    let report = report::assemble(
+    let mut report = report::assemble(
         run_report.name,
         run_report.case,
         None,
@@ -267,6 +377,7 @@ pub fn replan_with(
         Some(replanned),
         warnings,
     );
+    report.uncertainty = band.as_ref().map(|b| b.report.clone());
     // The writes, as one unit swapped in for `out_dir` (`output::RunDir`).
     let unit = crate::output::RunDir::create(&out_dir)?;
     let o = unit.path();
@@ -282,6 +393,9 @@ pub fn replan_with(
     }
     if let Some(a) = &analysis {
         crate::landmarks::markups::write_pre_post(o, &a.carried)?;
+    }
+    if let Some(b) = &band {
+        crate::uncertainty::write_band(o, &post, b)?;
     }
     outputs::write_report(o, &report)?;
     Ok(Replanned {

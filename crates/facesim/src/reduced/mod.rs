@@ -54,6 +54,11 @@ impl LinearFace {
         self.moving.len()
     }
 
+    /// Whether some field moves vertex `v` (else every answer leaves it exactly still).
+    pub fn moves(&self, v: usize) -> bool {
+        self.moving.binary_search(&(v as u32)).is_ok()
+    }
+
     /// The displacement of vertex `v` for coefficients `c`.
     pub fn at(&self, v: usize, c: &[f64]) -> [f64; 3] {
         let mut d = self.lift[v];

@@ -142,19 +142,30 @@ pub fn sample_reduced(
         .unwrap_or_default();
     let mut sums = vec![vec![0.0; n]; members.len()];
     let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
+    // A vertex no face field moves and the nominal face leaves in place is exactly still in
+    // every sample: its band is zero and it adds zero to its regions (most of a face: the held
+    // skin and what lies beyond the modelled region).
+    let still = |v: usize| {
+        run.face_post[v] == skin.vertices[v] && reduced.faces.iter().all(|f| !f.moves(v))
+    };
+    const ZERO: Band = Band {
+        mean: 0.0,
+        p05: 0.0,
+        p95: 0.0,
+    };
     for lo in (0..skin.vertices.len()).step_by(CHUNK) {
         let hi = (lo + CHUNK).min(skin.vertices.len());
-        let mags: Vec<Vec<f64>> = (lo..hi)
+        let mags: Vec<Option<Vec<f64>>> = (lo..hi)
             .into_par_iter()
-            .map(|v| (0..n).map(|s| norm(displacement(s, v))).collect())
+            .map(|v| (!still(v)).then(|| (0..n).map(|s| norm(displacement(s, v))).collect()))
             .collect();
-        bands.par_extend(mags.par_iter().map(|m| Band::of(m)));
+        bands.par_extend(mags.par_iter().map(|m| m.as_deref().map_or(ZERO, Band::of)));
         // Region sums in vertex order, as the full path's (the nominal gives its figures).
         for (r, sum) in members.iter().zip(&mut sums) {
             sum.par_iter_mut().enumerate().for_each(|(s, acc)| {
                 for v in lo..hi {
-                    if r[v] {
-                        *acc += mags[v - lo][s];
+                    if let (true, Some(m)) = (r[v], &mags[v - lo]) {
+                        *acc += m[s];
                     }
                 }
             });
@@ -203,6 +214,36 @@ pub fn sample_reduced(
     obs.started("uncertainty: Sobol indices");
     report.sensitivity = Some(sensitivity(run, reduced, analysis, case, &trackers));
     Ok(Sampled { bands, report })
+}
+
+/// As [`sample_reduced`], from the reduced models a run stored (`reduced_model.bin`; `facesim
+/// replan` with `[uncertainty]`): no mesh, no factorisation. `analysis` must hold the run's
+/// landmarks in the run's order (the order of the models' landmark bounds).
+pub fn sample_stored(
+    run: &Nominal,
+    stored: &crate::model::reduced::file::StoredReduced,
+    analysis: &Analysis,
+    case: &Case,
+    obs: &dyn Observer,
+) -> Result<Sampled> {
+    let outputs = landmark_outputs(analysis, run.skin).len();
+    if let Some(m) = stored
+        .models
+        .iter()
+        .find(|m| m.output_bounds.len() != outputs)
+    {
+        return Err(crate::error::Error::config(format!(
+            "the stored reduced model bounds {} landmarks, the run's report.json has {outputs} soft landmarks",
+            m.output_bounds.len()
+        )));
+    }
+    let solve = |c: &Case| stored.solve(c);
+    let reduced = Reduced {
+        faces: stored.models.iter().map(|m| &m.face).collect(),
+        solve: &solve,
+        reports: stored.models.iter().map(|m| m.report()).collect(),
+    };
+    sample_reduced(run, &reduced, analysis, case, obs)
 }
 
 /// Rows of the Sobol matrices A and B: N (d + 2) reduced solves (d ≤ 4 parameters: ≤ 6144).

@@ -262,14 +262,11 @@ impl Calibrand {
             o.report.parameters.clone().ok_or_else(|| {
                 Error::config("calibrate: the run's report.json has no parameters")
             })?;
-        let (frame, mut lms) = o
+        // In the run's order, which the carried landmarks and the reduced model's outputs have.
+        let (frame, lms) = o
             .report
-            .located_landmarks()
+            .located_in_run_order()
             .ok_or_else(|| Error::config("calibrate: the run found no landmarks"))?;
-        // In the run's order (report.json's), which the carried landmarks and the reduced
-        // model's outputs have; `located_landmarks` sorts by label.
-        let order: Vec<&String> = o.report.landmarks.0.iter().map(|(l, _)| l).collect();
-        lms.sort_by_key(|l| order.iter().position(|x| **x == l.label));
         let anchors = crate::landmarks::anchors(&lms, &o.skin);
         let analysis = crate::landmarks::analyse_located(
             &o.skin,

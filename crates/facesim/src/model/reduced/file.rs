@@ -47,6 +47,12 @@ impl StoredReduced {
     pub fn face(&self, tissues: &[TissueElastic; 4], sliding: bool) -> Result<super::ReducedFace> {
         self.models[super::pick(&self.models, self.sliding_matters, sliding)?].face_of(tissues)
     }
+
+    /// As [`super::ReducedModels::solve`]: the model for `case`'s sliding state (its index),
+    /// its coefficients and bounds for `case`'s tissues.
+    pub fn solve(&self, case: &crate::case::Case) -> Result<(usize, Vec<f64>, super::Bounds)> {
+        super::solve_in(&self.models, self.sliding_matters, case)
+    }
 }
 
 #[derive(Serialize, Deserialize)]

@@ -228,13 +228,23 @@ impl ReducedModels {
 
     /// The model for `case`'s sliding state (its index) and its coefficients and bounds.
     pub fn solve(&self, case: &Case) -> Result<(usize, Vec<f64>, Bounds)> {
-        let i = pick(&self.models, self.sliding_matters, case.tet.sliding)?;
-        let m = &self.models[i];
-        let mut c = case.clone();
-        c.tet.sliding = m.sliding;
-        let (coefficients, bound) = m.coefficients(&c)?;
-        Ok((i, coefficients, bound))
+        solve_in(&self.models, self.sliding_matters, case)
     }
+}
+
+/// The model of `models` for `case`'s sliding state (its index) and its coefficients and
+/// bounds: the run's models ([`ReducedModels::solve`]) or the stored ones (`file`).
+pub(crate) fn solve_in(
+    models: &[ReducedTet],
+    sliding_matters: bool,
+    case: &Case,
+) -> Result<(usize, Vec<f64>, Bounds)> {
+    let i = pick(models, sliding_matters, case.tet.sliding)?;
+    let m = &models[i];
+    let mut c = case.clone();
+    c.tet.sliding = m.sliding;
+    let (coefficients, bound) = m.coefficients(&c)?;
+    Ok((i, coefficients, bound))
 }
 
 /// θ for `terms` (tissue slot, λ or μ) of the tissues' materials (`Tet::tissues` order).
