@@ -910,7 +910,7 @@ function main() {
     const model = tissue.modelFor(tissueValues.sliding);
     if (same && (model === tissue.run || !td.sliding_matters)) return { nominal: true, materials: mats };
     if (!model) return { outside: "no reduced model for this sliding state", materials: mats };
-    const th = thetaOf(model.terms, mats);
+    const th = thetaOf(model.terms, mats, model.nose_youngs_kpa || 0);
     const why = outside(model.terms, model.theta_box, th);
     if (why) return { outside: why, materials: mats, theta: th };
     const o = solveOnline(model.form, th);

@@ -22,15 +22,23 @@ export function materials(nominal, p) {
   return m;
 }
 
-/** θ in a model's term order: terms[q] = [slot, isLambda]. */
-export function theta(terms, mats) {
+/** The first slot of the external nose's terms (slot 4 + s: tissue s in the nose, at the
+ *  nose's modulus and that tissue's ν), as `model::reduced::NOSE_SLOTS`. */
+const NOSE_SLOTS = 4;
+
+/** θ in a model's term order: terms[q] = [slot, isLambda]; the nose's slots at `noseKpa`. */
+export function theta(terms, mats, noseKpa = 0) {
   return terms.map(([slot, isLambda]) => {
-    const [l, mu] = lame(mats[slot].youngs_kpa, mats[slot].poisson);
+    const m = slot < NOSE_SLOTS ? mats[slot] : { youngs_kpa: noseKpa, poisson: mats[slot - NOSE_SLOTS].poisson };
+    const [l, mu] = lame(m.youngs_kpa, m.poisson);
     return isLambda ? l : mu;
   });
 }
 
 const TISSUE_NAMES = ["skin", "muscle", "fat_dark", "fat_bright"];
+/** A slot's case key, as `model::reduced::slot_name`. */
+const slotName = (slot) =>
+  slot < NOSE_SLOTS ? `[tet.${TISSUE_NAMES[slot]}]` : `[tet.${TISSUE_NAMES[slot - NOSE_SLOTS]}] in the nose ([tet] nose_youngs_kpa)`;
 /** Relative slack of the trained box, as `ReducedTet::outside`. */
 const SLACK = 1e-9;
 
@@ -40,7 +48,7 @@ export function outside(terms, box, th) {
   for (let q = 0; q < th.length; q++) {
     if (th[q] < lo[q] * (1 - SLACK) || th[q] > hi[q] * (1 + SLACK)) {
       const [slot, isLambda] = terms[q];
-      return `${isLambda ? "λ" : "μ"} of [tet.${TISSUE_NAMES[slot]}] = ${th[q].toFixed(4)} kPa is outside the trained range ${lo[q].toFixed(4)}–${hi[q].toFixed(4)} kPa`;
+      return `${isLambda ? "λ" : "μ"} of ${slotName(slot)} = ${th[q].toFixed(4)} kPa is outside the trained range ${lo[q].toFixed(4)}–${hi[q].toFixed(4)} kPa`;
     }
   }
   return null;

@@ -70,13 +70,12 @@ pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
 impl Case {
     /// Whether the case's model has the certified reduced form (docs/reduced.md): the
     /// volumetric model with the linear material and the 4-node element, whose stiffness is
-    /// affine in the tissues' Lamé parameters (and no nose framework: its modulus is not one of
-    /// the reduced model's terms yet).
+    /// affine in the tissues' Lamé parameters (the nose framework's tetrahedra, under
+    /// `[tet] nose_youngs_kpa`, are terms of their own).
     pub fn reduced_form(&self) -> bool {
         !self.solve.model.on_springs()
             && self.tet.material == TetMaterial::Linear
             && self.tet.element == TetElement::Linear
-            && self.tet.nose_youngs_kpa == 0.0
     }
 
     /// Parse case text (as if from `path`) over the defaults.

@@ -276,7 +276,7 @@ impl Uncertainty {
         let bad = |msg: String| Err(Error::input(path, msg));
         if self.method == Method::Reduced && !reduced_form {
             return bad(
-                "[uncertainty] method = \"reduced\": the reduced model needs [solve] model = \"tet\" with [tet] material = \"linear\" and element = \"linear\", and no [tet] nose_youngs_kpa (docs/reduced.md)".into(),
+                "[uncertainty] method = \"reduced\": the reduced model needs [solve] model = \"tet\" with [tet] material = \"linear\" and element = \"linear\" (docs/reduced.md)".into(),
             );
         }
         let cap = if self.reduced(reduced_form) {

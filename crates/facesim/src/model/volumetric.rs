@@ -193,11 +193,20 @@ impl Volumetric {
             true,
         );
         let hold = r.lift_off(hold, c);
+        // The external nose's tetrahedra are their own terms (`[tet] nose_youngs_kpa`): the
+        // stiffness stays affine, the nose's θ fixed by its modulus and its tissue's ν.
         let slot: Vec<usize> = self
             .mesh
             .tissue
             .iter()
-            .map(|l| crate::case::Tet::slot(*l))
+            .enumerate()
+            .map(|(t, l)| {
+                let s = crate::case::Tet::slot(*l);
+                match &r.nose {
+                    Some(nose) if nose[t] => super::reduced::NOSE_SLOTS + s,
+                    _ => s,
+                }
+            })
             .collect();
         let scale: Vec<f64> = r
             .torn
@@ -210,7 +219,9 @@ impl Volumetric {
             |q| crate::tet::lame_term(&self.mesh.nodes, &self.mesh.tets, &slot, &scale, terms[q]),
             &hold,
         )?;
-        let theta = |t: &crate::case::Tet| super::reduced::theta_of(&terms, &t.tissues());
+        let theta = |t: &crate::case::Tet| {
+            super::reduced::theta_of(&terms, &t.tissues(), t.nose_youngs_kpa)
+        };
         let train: Vec<Vec<f64>> = train.iter().map(|t| theta(&t.tet)).collect();
         let theta_bar = theta(&c.tet);
         let mut theta_box = [theta_bar.clone(), theta_bar.clone()];
@@ -320,6 +331,11 @@ impl Volumetric {
             },
             form: basis.form,
             terms,
+            nose_youngs_kpa: if r.nose.is_some() {
+                c.tet.nose_youngs_kpa
+            } else {
+                0.0
+            },
             theta_box,
             face,
             face_bound,
