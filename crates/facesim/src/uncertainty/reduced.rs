@@ -142,12 +142,7 @@ pub fn sample_reduced(
         .unwrap_or_default();
     let mut sums = vec![vec![0.0; n]; members.len()];
     let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
-    // A vertex no face field moves and the nominal face leaves in place is exactly still in
-    // every sample: its band is zero and it adds zero to its regions (most of a face: the held
-    // skin and what lies beyond the modelled region).
-    let still = |v: usize| {
-        run.face_post[v] == skin.vertices[v] && reduced.faces.iter().all(|f| !f.moves(v))
-    };
+    let still = still(run, reduced);
     const ZERO: Band = Band {
         mean: 0.0,
         p05: 0.0,
@@ -157,7 +152,7 @@ pub fn sample_reduced(
         let hi = (lo + CHUNK).min(skin.vertices.len());
         let mags: Vec<Option<Vec<f64>>> = (lo..hi)
             .into_par_iter()
-            .map(|v| (!still(v)).then(|| (0..n).map(|s| norm(displacement(s, v))).collect()))
+            .map(|v| (!still[v]).then(|| (0..n).map(|s| norm(displacement(s, v))).collect()))
             .collect();
         bands.par_extend(mags.par_iter().map(|m| m.as_deref().map_or(ZERO, Band::of)));
         // Region sums in vertex order, as the full path's (the nominal gives its figures).
@@ -214,6 +209,18 @@ pub fn sample_reduced(
     obs.started("uncertainty: Sobol indices");
     report.sensitivity = Some(sensitivity(run, reduced, analysis, case, &trackers));
     Ok(Sampled { bands, report })
+}
+
+/// Per face vertex: exactly still in every sample — no face field moves it and the nominal face
+/// leaves it in place — so its displacement is zero, its band is zero and it adds zero to its
+/// regions' sums (most of a face: the held skin and what lies beyond the modelled region).
+fn still(run: &Nominal, reduced: &Reduced) -> Vec<bool> {
+    (0..run.skin.vertices.len())
+        .into_par_iter()
+        .map(|v| {
+            run.face_post[v] == run.skin.vertices[v] && reduced.faces.iter().all(|f| !f.moves(v))
+        })
+        .collect()
 }
 
 /// As [`sample_reduced`], from the reduced models a run stored (`reduced_model.bin`; `facesim
