@@ -44,9 +44,13 @@ enum Cmd {
     },
     /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
     /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
-    /// re-solving (docs/plan-basis.md).
+    /// re-solving (docs/plan-basis.md); or, from the run's reduced_model.bin at its plan, for new
+    /// tissues (`[tet]`) and/or with a band over tissue parameters (`[uncertainty]`:
+    /// face_band.ply; docs/reduced.md).
     Replan {
+        /// A `facesim run` output directory (plan_basis.bin, report.json).
         out_dir: PathBuf,
+        /// PLAN.toml: `[[osteotomy]]`, `[tet]`, `[uncertainty]` (case.toml's forms).
         plan: PathBuf,
         /// Output directory (default OUT_DIR/replan).
         #[arg(long)]
