@@ -210,6 +210,25 @@ fn a_le_fort_advance_takes_in_the_whole_nose() {
         (lo..=hi).contains(&ratio),
         "Prn follows the Le Fort I advance by {ratio}, published {lo}-{hi}"
     );
+    // The alar width (Al-R to Al-L) is measured, as the widening along the head frame's lateral
+    // axis over the advance, recomputed here from report.json's alare and frame alone.
+    let alar = rows
+        .iter()
+        .find(|r| r["landmark"] == "alar base width")
+        .unwrap();
+    let l = vec3(&run["head_frame"]["lateral"]).unwrap();
+    let moved = |label: &str| {
+        let lm = &run["landmarks"][label];
+        let (a, b) = (vec3(&lm["pre"]).unwrap(), vec3(&lm["post"]).unwrap());
+        (0..3).map(|k| (b[k] - a[k]) * l[k]).sum::<f64>()
+    };
+    let widening = moved("Al-L") - moved("Al-R");
+    let mm = num(&alar["move_mm"]).unwrap();
+    let ratio = num(&alar["predicted_ratio"]).expect("the alar width not measured");
+    assert!(
+        (ratio - widening / mm).abs() < 1.5e-3 && alar["axis"] == "lateral",
+        "{alar:?}: widening {widening} mm over {mm} mm"
+    );
 }
 
 #[test]

@@ -714,7 +714,15 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
             if !near.is_empty() {
                 row.why = Some(near.join("; "));
             }
-            match along(carried, p.terms, unit_of(info, toward)) {
+            // A width (lateral row) across the face, over the move; else along the move.
+            let soft_dir = match p.axis {
+                crate::landmarks::published::Axis::Lateral => {
+                    let l = crate::vec3::cross(info.up, info.forward);
+                    scale(l, 1.0 / crate::vec3::norm(l))
+                }
+                _ => unit_of(info, toward),
+            };
+            match along(carried, p.terms, soft_dir) {
                 Ok(d) => {
                     row.along_mm = Some(d);
                     row.ratio = Some(d / mm);

@@ -203,9 +203,12 @@ fn pre_of(carried: &[Carried], label: &str) -> Option<[f64; 3]> {
 const LEAST_HARD_MM: f64 = 0.1;
 
 fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) -> ClinicRow {
-    let dir = match p.axis {
-        Axis::Horizontal => frame.anterior,
-        Axis::Vertical => frame.vertical,
+    // The soft terms along the row's axis; the hard move along it too, except that a width
+    // (lateral) is over the forward move.
+    let (dir, hard_dir) = match p.axis {
+        Axis::Horizontal => (frame.anterior, frame.anterior),
+        Axis::Vertical => (frame.vertical, frame.vertical),
+        Axis::Lateral => (frame.lateral, frame.anterior),
     };
     let mut row = ClinicRow {
         soft: p.soft.into(),
@@ -243,7 +246,7 @@ fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) 
         return row;
     };
     row.hard_at = at;
-    let hard = dot(displacement(o, x), dir);
+    let hard = dot(displacement(o, x), hard_dir);
     row.hard_mm = Some(hard);
     match along(carried, p.terms, dir) {
         Ok(soft) => {

@@ -61,11 +61,15 @@ impl Surgery {
     }
 }
 
-/// The axis a published ratio is measured along (the bone's move is along it).
+/// The axis a published ratio is measured along (the bone's move is along it; for `Lateral`,
+/// a width's change across the face over the bone's forward move).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Axis {
     Horizontal,
     Vertical,
+    /// Across the face (the head frame's lateral axis): the soft terms' widening, over the
+    /// segment's move along the horizontal (anterior) axis.
+    Lateral,
 }
 
 impl Axis {
@@ -73,6 +77,7 @@ impl Axis {
         match self {
             Axis::Horizontal => "horizontal",
             Axis::Vertical => "vertical",
+            Axis::Lateral => "lateral",
         }
     }
 }
@@ -173,22 +178,17 @@ pub const PUBLISHED: [Published; 23] = [
         "the 2D range; 3D studies report lower ratios (0.21–0.52)",
         "Rosen 1988 (0.82 ± 0.13); Gupta & Schendel 2022; Jung 2018; 3D meta-analysis (4 studies, 105 pts)",
     ),
-    Published {
-        unmeasured: Some(
-            "facesim finds no alar points (its soft landmarks are G', N', Prn, Sn, Ls, Sto, Li, B', Pog', Me')",
-        ),
-        ..row(
-            LeFortAdvance,
-            "alar base width",
-            &[],
-            "advance",
-            "maxilla",
-            H,
-            (0.6, 1.33),
-            "widening ÷ advance, from 3–4 mm for a 3–5 mm advance",
-            "prospective and 3D studies (Jung 2018)",
-        )
-    },
+    row(
+        LeFortAdvance,
+        "alar base width",
+        &[("Al-L", 1.0), ("Al-R", -1.0)],
+        "advance",
+        "maxilla",
+        Axis::Lateral,
+        (0.6, 1.33),
+        "widening ÷ advance, from 3–4 mm for a 3–5 mm advance; measured at alare (Al-R, Al-L: the alae's widest points), the published figure is the alar base's",
+        "prospective and 3D studies (Jung 2018)",
+    ),
     row(
         LeFortImpaction,
         "upper lip Sn–Sto shortening",
