@@ -451,9 +451,30 @@ fn run_child(
         args.extend(["--set".into(), s.clone()]);
     }
     let (wall_s, maxrss_kb, r) = measured(exe, &args, out)?;
+    Ok(band_run(label, args, wall_s, maxrss_kb, &r, true))
+}
+
+/// A child's figures from its report.json. `built`: a run, whose `timings` hold its stages
+/// and whose reduced models it built; else a replan from stored models (no stages but its
+/// sampling, `uncertainty.seconds`; no build, its whole wall time its total).
+fn band_run(
+    label: &str,
+    args: Vec<String>,
+    wall_s: f64,
+    maxrss_kb: i64,
+    r: &serde_json::Value,
+    built: bool,
+) -> BandRun {
     let u = &r["uncertainty"];
     let f = |v: &serde_json::Value| v.as_f64().unwrap_or(0.0);
-    let run = BandRun {
+    let build = || {
+        u["reduced"].as_array().map_or(0.0, |m| {
+            m.iter()
+                .map(|x| f(&x["offline_seconds"]))
+                .fold(0.0, f64::max)
+        })
+    };
+    BandRun {
         label: label.into(),
         args,
         wall_s,
@@ -461,17 +482,24 @@ fn run_child(
         samples: u["samples"].as_u64().unwrap_or(0) as usize,
         method: u["method"].as_str().map(str::to_string),
         solves: u["solves"].as_u64().unwrap_or(0) as usize,
-        uncertainty_s: f(&r["timings"]["uncertainty"]),
-        solve_stage_s: f(&r["timings"]["solve"]),
-        total_s: f(&r["timings"]["total"]),
-        reduced_build_s: u["reduced"].as_array().map_or(0.0, |m| {
-            m.iter()
-                .map(|x| f(&x["offline_seconds"]))
-                .fold(0.0, f64::max)
+        uncertainty_s: f(if built {
+            &r["timings"]["uncertainty"]
+        } else {
+            &u["seconds"]
         }),
+        solve_stage_s: if built {
+            f(&r["timings"]["solve"])
+        } else {
+            0.0
+        },
+        total_s: if built {
+            f(&r["timings"]["total"])
+        } else {
+            wall_s
+        },
+        reduced_build_s: if built { build() } else { 0.0 },
         largest_bound_mm: u["largest_bound_mm"].as_f64(),
-    };
-    Ok(run)
+    }
 }
 
 /// `exe replan RUN PLAN.toml --out …` with `[uncertainty] samples` (the run's box and seed):
@@ -490,23 +518,8 @@ fn replan_child(exe: &Path, run: &Path, dir: &Path, samples: usize) -> Result<Ba
         out.display().to_string(),
     ];
     let (wall_s, maxrss_kb, r) = measured(exe, &args, &out)?;
-    let u = &r["uncertainty"];
-    let f = |v: &serde_json::Value| v.as_f64().unwrap_or(0.0);
     let _ = std::fs::remove_dir_all(&out);
-    Ok(BandRun {
-        label: "stored_band".into(),
-        args,
-        wall_s,
-        max_rss_mb: maxrss_kb as f64 / 1024.0,
-        samples: u["samples"].as_u64().unwrap_or(0) as usize,
-        method: u["method"].as_str().map(str::to_string),
-        solves: u["solves"].as_u64().unwrap_or(0) as usize,
-        uncertainty_s: f(&u["seconds"]),
-        solve_stage_s: 0.0,
-        total_s: wall_s,
-        reduced_build_s: 0.0,
-        largest_bound_mm: u["largest_bound_mm"].as_f64(),
-    })
+    Ok(band_run("stored_band", args, wall_s, maxrss_kb, &r, false))
 }
 
 /// Run `exe args` (its outputs in `out`): its wall time, peak resident set (KB) and report.json.

@@ -286,24 +286,7 @@ mod tests {
         assert!((q[0] - 0.5).abs() < 1e-15 && (q[1] - 0.5).abs() < 1e-15);
     }
 
-    /// An n × n sheet of unit spacing at height z(i, j), two triangles per square.
-    fn sheet(n: usize, z: impl Fn(f64, f64) -> f64) -> Mesh {
-        let mut v = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                v.push([i as f64, j as f64, z(i as f64, j as f64)]);
-            }
-        }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                t.push([a, a + 1, a + n as u32]);
-                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
-            }
-        }
-        Mesh::new(v, t)
-    }
+    use crate::mesh::sheet;
 
     #[test]
     fn parallel_planes_are_their_gap_apart() {

@@ -397,15 +397,10 @@ fn the_stored_model_re_solves_new_tissues_within_its_bound_of_a_full_run() {
     };
     refuse("[tet.skin]\npoisson = 0.3\n", "outside the trained range");
     refuse("[tet.skin]\nskin_size_mm = 3\n", "unknown field");
-    let mut moved = basis.run_plan.clone();
-    moved[0].translate[0] += 1.0;
-    #[derive(serde::Serialize)]
-    struct Plan {
-        osteotomy: Vec<facesim::case::Osteotomy>,
-    }
-    let mut text = toml::to_string(&Plan { osteotomy: moved }).unwrap();
-    text.push_str("[tet]\nsliding = false\n");
-    refuse(&text, "at the run's plan only");
+    refuse(
+        &another_plan(&basis, "[tet]\nsliding = false\n"),
+        "at the run's plan only",
+    );
 
     // Another face, version, length: one line naming the file.
     let mut other = basis.face_pre.clone();
@@ -482,15 +477,21 @@ fn the_stored_model_gives_the_runs_band_without_the_mesh() {
         "full solves need `facesim run`",
     );
     let basis = facesim::plan::file::read(&b.out_dir.join(facesim::plan::file::FILE_NAME)).unwrap();
+    refuse(
+        &another_plan(&basis, "[uncertainty]\nsamples = 10\n"),
+        "at the run's plan only",
+    );
+}
+
+/// A PLAN.toml with the run's plan moved 1 mm (the first segment along x), then `table`.
+fn another_plan(basis: &facesim::plan::PlanBasis, table: &str) -> String {
     let mut moved = basis.run_plan.clone();
     moved[0].translate[0] += 1.0;
     #[derive(serde::Serialize)]
     struct Plan {
         osteotomy: Vec<facesim::case::Osteotomy>,
     }
-    let mut text = toml::to_string(&Plan { osteotomy: moved }).unwrap();
-    text.push_str("[uncertainty]\nsamples = 10\n");
-    refuse(&text, "at the run's plan only");
+    toml::to_string(&Plan { osteotomy: moved }).unwrap() + table
 }
 
 fn json_of(dir: &Path) -> serde_json::Value {

@@ -202,18 +202,26 @@ fn stored_at_run_plan(
     stored::read(&run_dir.join(stored::FILE_NAME), &basis.face_pre)
 }
 
-/// The band of PLAN.toml's `[uncertainty]` about the tissues `models` is asked at (the run's,
-/// or `[tet]`'s), sampled on the stored reduced models with the run's landmarks; a sample
+/// The band of `uncertainty` (PLAN.toml's) about the tissues the face `post` is at (the run's,
+/// or `change`'s), sampled on the stored reduced models with the run's landmarks; a sample
 /// outside the trained box is refused naming `plan_file`.
 fn stored_band(
     models: &StoredReduced,
-    (tissues, sliding): ([TissueElastic; 4], bool),
-    uncertainty: &Uncertainty,
+    (change, uncertainty): (Option<&TissueChange>, &Uncertainty),
     run_report: &Report,
-    nominal: &crate::uncertainty::Nominal,
+    (skin, post): (&Mesh, &Mesh),
     plan: &crate::osteotomy::Plan,
     plan_file: &Path,
 ) -> Result<crate::uncertainty::Sampled> {
+    let (tissues, sliding) = change.map_or((models.tissues, models.sliding), |c| {
+        c.apply(models.tissues, models.sliding)
+    });
+    let nominal = crate::uncertainty::Nominal {
+        skin,
+        face_post: &post.vertices,
+        moves: post.vertices != skin.vertices,
+        sliding_matters: models.sliding_matters,
+    };
     let mut case: Case = run_report.parameters.clone().ok_or_else(|| {
         Error::input(
             plan_file,
@@ -232,9 +240,8 @@ fn stored_band(
             "[uncertainty]: the run found no landmarks, which the band is measured at",
         )
     })?;
-    let analysis =
-        crate::landmarks::analyse_located(nominal.skin, &nominal_mesh(nominal), frame, lms, plan);
-    crate::uncertainty::reduced::sample_stored(nominal, models, &analysis, &case, &crate::observe::Quiet)
+    let analysis = crate::landmarks::analyse_located(skin, post, frame, lms, plan);
+    crate::uncertainty::reduced::sample_stored(&nominal, models, &analysis, &case, &crate::observe::Quiet)
         .map_err(|e| match e {
             Error::Config(msg) => Error::input(
                 plan_file,
@@ -242,12 +249,6 @@ fn stored_band(
             ),
             other => other,
         })
-}
-
-fn nominal_mesh(n: &crate::uncertainty::Nominal) -> Mesh {
-    let mut m = n.skin.clone();
-    m.vertices = n.face_post.to_vec();
-    m
 }
 
 /// [`replan`] for a plan already read (`plan_file` names it in errors and the report) and the
@@ -337,27 +338,14 @@ pub fn replan_with(
     }
     // The band before any file is written (a sample outside the trained box is refused).
     let band = match (&new.uncertainty, &models) {
-        (Some(u), Some(m)) if wants_band => {
-            let tissues = new
-                .tet
-                .as_ref()
-                .map_or((m.tissues, m.sliding), |c| c.apply(m.tissues, m.sliding));
-            let nominal = crate::uncertainty::Nominal {
-                skin: &skin,
-                face_post: &face_post,
-                moves: face_post != basis.face_pre,
-                sliding_matters: m.sliding_matters,
-            };
-            Some(stored_band(
-                m,
-                tissues,
-                u,
-                &run_report,
-                &nominal,
-                &crate::osteotomy::Plan::new(plan),
-                plan_file,
-            )?)
-        }
+        (Some(u), Some(m)) if wants_band => Some(stored_band(
+            m,
+            (new.tet.as_ref(), u),
+            &run_report,
+            (&skin, &post),
+            &crate::osteotomy::Plan::new(plan),
+            plan_file,
+        )?),
         _ => None,
     };
     let replanned = ReplanReport {

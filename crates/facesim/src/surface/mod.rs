@@ -417,28 +417,16 @@ pub fn planar_uv(mesh: &mut Mesh) {
 mod tests {
     use super::*;
 
+    /// A sheet whose inner vertices zig-zag ±bump/2 (a checkerboard), its border flat.
     fn grid(n: usize, bump: f64) -> Mesh {
-        let mut v = Vec::new();
-        for j in 0..n {
-            for i in 0..n {
-                let (x, y) = (i as f64, j as f64);
-                let z = if i > 0 && j > 0 && i < n - 1 && j < n - 1 {
-                    bump * (((i + j) % 2) as f64 - 0.5)
-                } else {
-                    0.0
-                };
-                v.push([x, y, z]);
+        let last = (n - 1) as f64;
+        crate::mesh::sheet(n, |x, y| {
+            if x > 0.0 && y > 0.0 && x < last && y < last {
+                bump * (((x + y) as usize % 2) as f64 - 0.5)
+            } else {
+                0.0
             }
-        }
-        let mut t = Vec::new();
-        for j in 0..n - 1 {
-            for i in 0..n - 1 {
-                let a = (j * n + i) as u32;
-                t.push([a, a + 1, a + n as u32]);
-                t.push([a + 1, a + n as u32 + 1, a + n as u32]);
-            }
-        }
-        Mesh::new(v, t)
+        })
     }
 
     #[test]
