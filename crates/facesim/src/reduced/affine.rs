@@ -8,7 +8,8 @@ use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::free_dofs;
 use crate::fem::cholesky::{Cholesky, Ordering, Pattern};
 use crate::tet::Hold;
-use crate::tet::holds::{Frame, frames, rotate_lower, to_global};
+use crate::tet::LameTerms;
+use crate::tet::holds::{Frame, frames, rotate_entry, to_global};
 use faer::sparse::{SparseColMat, Triplet};
 
 /// A(θ), f(θ) on the free unknowns, and the held values.
@@ -43,15 +44,12 @@ struct Entry {
 }
 
 impl Affine {
-    /// From `count` terms, `term(q)` giving term q's lower triangle (3 DOFs per node, global
-    /// frame, one triplet per entry in the same order for every term: `tet::lame_term`; called
-    /// once per term, so only one is in memory at a time), and the nodes' holds (their values
-    /// give g). Nothing held, or a hold that is not finite, is an error.
-    pub fn new(
-        count: usize,
-        term: impl Fn(usize) -> Result<Vec<(usize, usize, f64)>>,
-        holds: &[Hold],
-    ) -> Result<Affine> {
+    /// From the Lamé parts `list` of `lame` (3 DOFs per node, global frame) and the nodes'
+    /// holds (their values give g). Where each part's entries go (rotation into the nodes'
+    /// frames, free or held) depends on the frames only, so it is worked out once and each part
+    /// is then one pass over its values, made one at a time. Nothing held, or a hold that is
+    /// not finite, is an error.
+    pub(crate) fn new(lame: &LameTerms, list: &[(usize, bool)], holds: &[Hold]) -> Result<Affine> {
         let nodes = holds.len();
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
@@ -61,45 +59,46 @@ impl Affine {
         let g: Vec<f64> = frames.iter().flat_map(|f| f.values).collect();
         let (free_index, free) = free_dofs(&fixed);
         let nf = free.len();
-        if count == 0 {
+        if list.is_empty() {
             return Err(Error::config("reduced model: no stiffness term"));
         }
-        // The pattern from the first term; every term's rotated triplets follow it entry for
-        // entry (rotation depends on the frames only).
-        let rotated0 = rotate_lower(&term(0)?, &frames);
-        let mut entries: Vec<(u32, u32, u32)> = Vec::new();
-        let mut coupling: Vec<(u32, usize, u32)> = Vec::new();
-        for (i, &(r, c, _)) in rotated0.iter().enumerate() {
-            let (fr, fc) = (free_index[r], free_index[c]);
-            match (fr != usize::MAX, fc != usize::MAX) {
-                (true, true) => {
-                    entries.push((fr as u32, fc as u32, i as u32));
-                    if fr != fc {
-                        entries.push((fc as u32, fr as u32, i as u32));
+        // Each lower entry's share (value index, weight) of the free–free entries, both
+        // triangles, and of the coupling to held components.
+        let mut shares: Vec<(u32, u32, u32, f64)> = Vec::new();
+        let mut coupling: Vec<(u32, u32, u32, f64)> = Vec::new();
+        lame.for_each_lower(|r, c, i| {
+            rotate_entry(r, c, &frames, |li, lj, w| {
+                let (fr, fc) = (free_index[li], free_index[lj]);
+                match (fr != usize::MAX, fc != usize::MAX) {
+                    (true, true) => {
+                        shares.push((fr as u32, fc as u32, i as u32, w));
+                        if fr != fc {
+                            shares.push((fc as u32, fr as u32, i as u32, w));
+                        }
                     }
+                    (true, false) => coupling.push((fr as u32, lj as u32, i as u32, w)),
+                    (false, true) => coupling.push((fc as u32, li as u32, i as u32, w)),
+                    (false, false) => {}
                 }
-                (true, false) => coupling.push((fr as u32, c, i as u32)),
-                (false, true) => coupling.push((fc as u32, r, i as u32)),
-                (false, false) => {}
-            }
-        }
-        entries.sort_unstable_by_key(|e| (e.0, e.1));
+            })
+        });
+        shares.sort_unstable_by_key(|e| (e.0, e.1));
         let mut start = vec![0usize; nf + 1];
         let mut cols: Vec<u32> = Vec::new();
-        let mut slot_of: Vec<(usize, u32)> = Vec::with_capacity(entries.len());
+        let mut gather: Vec<(u32, u32, f64)> = Vec::with_capacity(shares.len());
         let mut last = None;
-        for &(r, c, i) in &entries {
+        for &(r, c, i, w) in &shares {
             if last != Some((r, c)) {
                 cols.push(c);
                 start[r as usize + 1] = cols.len();
                 last = Some((r, c));
             }
-            slot_of.push((cols.len() - 1, i));
+            gather.push(((cols.len() - 1) as u32, i, w));
         }
+        drop(shares);
         for r in 1..=nf {
             start[r] = start[r].max(start[r - 1]);
         }
-        drop(entries);
         let mut lower = Vec::new();
         for r in 0..nf {
             for s in start[r]..start[r + 1] {
@@ -108,38 +107,20 @@ impl Affine {
                 }
             }
         }
-        // The first term's (row, column) order, to hold the others to it.
-        let order: Vec<(u32, u32)> = rotated0
-            .iter()
-            .map(|&(r, c, _)| (r as u32, c as u32))
-            .collect();
-        let mut terms = Vec::with_capacity(count);
-        let mut f = Vec::with_capacity(count);
-        let mut rotated0 = Some(rotated0);
-        for q in 0..count {
-            let rotated = match rotated0.take() {
-                Some(r) => r,
-                None => rotate_lower(&term(q)?, &frames),
-            };
-            if rotated.len() != order.len()
-                || rotated
-                    .iter()
-                    .zip(&order)
-                    .any(|(a, b)| (a.0 as u32, a.1 as u32) != *b)
-            {
-                return Err(Error::config(format!(
-                    "reduced model: stiffness term {q} is not on the first term's pattern"
-                )));
-            }
+        let mut terms = Vec::with_capacity(list.len());
+        let mut f = Vec::with_capacity(list.len());
+        for part in list {
+            let blocks = lame.term(*part)?;
+            let values = blocks.as_flattened();
             let mut v = vec![0.0; cols.len()];
-            for &(s, i) in &slot_of {
-                v[s] += rotated[i as usize].2;
+            for &(s, i, w) in &gather {
+                v[s as usize] += w * values[i as usize];
             }
             let mut fq = vec![0.0; nf];
-            for &(fr, held, i) in &coupling {
-                fq[fr as usize] -= rotated[i as usize].2 * g[held];
+            for &(fr, held, i, w) in &coupling {
+                fq[fr as usize] -= w * values[i as usize] * g[held as usize];
             }
-            drop(rotated);
+            drop(blocks);
             let mut t = Term {
                 start: vec![0; nf + 1],
                 entries: Vec::new(),
@@ -159,7 +140,7 @@ impl Affine {
             terms.push(t);
             f.push(fq);
         }
-        let ones = values_of(&terms, cols.len(), &vec![1.0; count]);
+        let ones = values_of(&terms, cols.len(), &vec![1.0; list.len()]);
         let m = lower_matrix(&lower, &ones, nf)?;
         let pattern = Pattern::analyse_with(m.symbolic(), Ordering::NestedDissection)
             .map_err(|e| Error::numerical(NumericalKind::Singular, format!("{e:?}")))?;

@@ -303,12 +303,8 @@ mod tests {
     /// The block's affine system: its Lamé terms by tissue slot, each element scaled.
     fn affine_of(m: &TetMesh, slot: &[usize], scale: &[f64], holds: &[Hold]) -> Affine {
         let list = crate::tet::lame_term_list(slot);
-        Affine::new(
-            list.len(),
-            |q| crate::tet::lame_term(&m.nodes, &m.tets, slot, scale, list[q]),
-            holds,
-        )
-        .unwrap()
+        let lame = crate::tet::LameTerms::new(&m.nodes, &m.tets, slot, scale);
+        Affine::new(&lame, &list, holds).unwrap()
     }
 
     fn energy(sys: &Affine, theta: &[f64], e: &[f64]) -> f64 {

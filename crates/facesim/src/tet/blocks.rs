@@ -25,14 +25,15 @@ impl<M: ElementMatrix> ElementMatrix for &M {
     }
 }
 
-/// Per node, the sorted nodes j ≤ it that share an element with it (itself included).
-struct Pattern {
+/// Per node, the sorted nodes j ≤ it that share an element with it (itself included): the
+/// 3×3 blocks of the lower triangle.
+pub(crate) struct BlockPattern {
     ptr: Vec<usize>,
     col: Vec<u32>,
 }
 
-impl Pattern {
-    fn new<const K: usize>(nodes: usize, elements: &[[u32; K]]) -> Pattern {
+impl BlockPattern {
+    pub(crate) fn new<const K: usize>(nodes: usize, elements: &[[u32; K]]) -> BlockPattern {
         // Elements of each node (counting sort), then each row's neighbours with a marker.
         let mut start = vec![0usize; nodes + 1];
         for e in elements {
@@ -68,13 +69,61 @@ impl Pattern {
             col[row..].sort_unstable();
             ptr.push(col.len());
         }
-        Pattern { ptr, col }
+        BlockPattern { ptr, col }
     }
 
     fn block(&self, i: usize, j: u32) -> usize {
         let row = &self.col[self.ptr[i]..self.ptr[i + 1]];
         // Present by construction: i and j share an element.
         self.ptr[i] + row.binary_search(&j).unwrap_or_else(|p| p)
+    }
+
+    /// Σ Kₑ over the elements `which` (indices into `elements`, the elements the pattern was
+    /// made from), as 3×3 blocks row by row: block p's entry (r, c) is at 9 p + 3 r + c.
+    pub(crate) fn sum<const K: usize, M: ElementMatrix>(
+        &self,
+        elements: &[[u32; K]],
+        which: impl IntoIterator<Item = usize>,
+        element: impl Fn(usize) -> Result<M>,
+    ) -> Result<Vec<[f64; 9]>> {
+        let mut blocks = vec![[0.0f64; 9]; self.col.len()];
+        for e in which {
+            let ke = element(e)?;
+            let nodes_of = &elements[e];
+            for a in 0..K {
+                for b in 0..K {
+                    let (i, j) = (nodes_of[a], nodes_of[b]);
+                    // Each unordered node pair once (from the row node's side), the diagonal too.
+                    if j > i {
+                        continue;
+                    }
+                    let blk = &mut blocks[self.block(i as usize, j)];
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            blk[3 * r + c] += ke.entry(3 * a + r, 3 * b + c);
+                        }
+                    }
+                }
+            }
+        }
+        Ok(blocks)
+    }
+
+    /// Each lower-triangle entry (row ≥ column) in row order: (row DOF, column DOF, its place
+    /// in [`Self::sum`]'s blocks), DOF 3n + c for component c of node n.
+    pub(crate) fn for_each_lower(&self, mut f: impl FnMut(usize, usize, usize)) {
+        for i in 0..self.ptr.len() - 1 {
+            for p in self.ptr[i]..self.ptr[i + 1] {
+                let j = self.col[p] as usize;
+                for r in 0..3 {
+                    for c in 0..3 {
+                        if i != j || c <= r {
+                            f(3 * i + r, 3 * j + c, 9 * p + 3 * r + c);
+                        }
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -86,39 +135,11 @@ pub(crate) fn lower_triplets<const K: usize, M: ElementMatrix>(
     elements: &[[u32; K]],
     element: impl Fn(usize) -> Result<M>,
 ) -> Result<Vec<(usize, usize, f64)>> {
-    let pattern = Pattern::new(nodes, elements);
-    let mut blocks = vec![[0.0f64; 9]; pattern.col.len()];
-    for (e, nodes_of) in elements.iter().enumerate() {
-        let ke = element(e)?;
-        for a in 0..K {
-            for b in 0..K {
-                let (i, j) = (nodes_of[a], nodes_of[b]);
-                // Each unordered node pair once (from the row node's side), the diagonal too.
-                if j > i {
-                    continue;
-                }
-                let blk = &mut blocks[pattern.block(i as usize, j)];
-                for r in 0..3 {
-                    for c in 0..3 {
-                        blk[3 * r + c] += ke.entry(3 * a + r, 3 * b + c);
-                    }
-                }
-            }
-        }
-    }
-    let mut out = Vec::with_capacity(9 * blocks.len());
-    for i in 0..nodes {
-        for p in pattern.ptr[i]..pattern.ptr[i + 1] {
-            let j = pattern.col[p] as usize;
-            for r in 0..3 {
-                for c in 0..3 {
-                    if i != j || c <= r {
-                        out.push((3 * i + r, 3 * j + c, blocks[p][3 * r + c]));
-                    }
-                }
-            }
-        }
-    }
+    let pattern = BlockPattern::new(nodes, elements);
+    let blocks = pattern.sum(elements, 0..elements.len(), element)?;
+    let values = blocks.as_flattened();
+    let mut out = Vec::with_capacity(values.len());
+    pattern.for_each_lower(|r, c, i| out.push((r, c, values[i])));
     Ok(out)
 }
 

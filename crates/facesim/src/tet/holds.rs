@@ -192,29 +192,41 @@ pub(crate) fn rotate_lower(
 ) -> Vec<(usize, usize, f64)> {
     let mut out = Vec::with_capacity(k.len() + k.len() / 4);
     for &(r, c, v) in k {
-        let (fr, fc) = (&frames[r / 3].axes, &frames[c / 3].axes);
-        if fr.is_none() && fc.is_none() {
-            out.push((r, c, v));
-            continue;
-        }
-        // Expand the stored entry to (r, c) and its mirror, rotate each, keep the lower half.
-        let mirrored: &[(usize, usize)] = if r == c { &[(r, c)] } else { &[(r, c), (c, r)] };
-        for &(a, b) in mirrored {
-            // Entry (a, b) contributes v R_a[k_a][i] R_b[k_b][j] to local (i, j).
-            let ra = row_weights(&frames[a / 3].axes, a % 3);
-            let rb = row_weights(&frames[b / 3].axes, b % 3);
-            for (i, wa) in ra.iter().enumerate() {
-                for (j, wb) in rb.iter().enumerate() {
-                    let w = wa * wb;
-                    let (li, lj) = (3 * (a / 3) + i, 3 * (b / 3) + j);
-                    if w != 0.0 && li >= lj {
-                        out.push((li, lj, v * w));
-                    }
+        rotate_entry(r, c, frames, |li, lj, w| out.push((li, lj, v * w)));
+    }
+    out
+}
+
+/// Where one lower-triangle entry (r, c) of a global-frame matrix goes in Rᵀ K R: `emit(li, lj,
+/// w)` for each local lower entry it adds w times its value to (one, with weight 1, when
+/// neither node has a frame of its own).
+pub(crate) fn rotate_entry(
+    r: usize,
+    c: usize,
+    frames: &[Frame],
+    mut emit: impl FnMut(usize, usize, f64),
+) {
+    let (fr, fc) = (&frames[r / 3].axes, &frames[c / 3].axes);
+    if fr.is_none() && fc.is_none() {
+        emit(r, c, 1.0);
+        return;
+    }
+    // Expand the stored entry to (r, c) and its mirror, rotate each, keep the lower half.
+    let mirrored: &[(usize, usize)] = if r == c { &[(r, c)] } else { &[(r, c), (c, r)] };
+    for &(a, b) in mirrored {
+        // Entry (a, b) contributes v R_a[k_a][i] R_b[k_b][j] to local (i, j).
+        let ra = row_weights(&frames[a / 3].axes, a % 3);
+        let rb = row_weights(&frames[b / 3].axes, b % 3);
+        for (i, wa) in ra.iter().enumerate() {
+            for (j, wb) in rb.iter().enumerate() {
+                let w = wa * wb;
+                let (li, lj) = (3 * (a / 3) + i, 3 * (b / 3) + j);
+                if w != 0.0 && li >= lj {
+                    emit(li, lj, w);
                 }
             }
         }
     }
-    out
 }
 
 /// Row `c` of R (how much of global component c each local component carries).

@@ -183,8 +183,8 @@ impl TetMesh {
 /// The affine parts of the linear tetrahedral stiffness: for each tissue slot s present in
 /// `slot` (per tetrahedron, `case::Tet::slot`), K_λ,s and K_μ,s, so that K = Σ_s (λ_s K_λ,s +
 /// μ_s K_μ,s) (Rozza, Huynh & Patera 2008 §2: an affine parametric operator). This lists them,
-/// (slot, λ or not) in slot order; [`lame_term`] assembles one, so that only one is in memory at
-/// a time (eight on the real CT, 130 MB each as triplets).
+/// (slot, λ or not) in slot order; [`LameTerms::term`] assembles one, so that only one is in
+/// memory at a time.
 pub(crate) fn lame_term_list(slot: &[usize]) -> Vec<(usize, bool)> {
     let mut present: Vec<usize> = slot.to_vec();
     present.sort_unstable();
@@ -195,34 +195,64 @@ pub(crate) fn lame_term_list(slot: &[usize]) -> Vec<(usize, bool)> {
         .collect()
 }
 
-/// One affine part (see [`lame_term_list`]): the lower triangle of [`TetMesh::assemble`]'s
-/// pattern, entry for entry in its order (elements of other tissues add zeros), so the parts can
-/// be summed triplet by triplet. `scale` multiplies each tetrahedron's part (1, or a torn
-/// element's trace).
-pub(crate) fn lame_term(
-    nodes: &[[f64; 3]],
-    tets: &[[u32; 4]],
-    slot: &[usize],
-    scale: &[f64],
-    (s, is_lambda): (usize, bool),
-) -> Result<Vec<(usize, usize, f64)>> {
-    let (l, m) = if is_lambda { (1.0, 0.0) } else { (0.0, 1.0) };
-    blocks::lower_triplets(nodes.len(), tets, |t| {
-        if slot[t] != s {
-            return Ok([[0.0; 12]; 12]);
+/// The affine parts (see [`lame_term_list`]) on one pattern: each part sums only its own
+/// tissue's elements, so all Q parts cost about one assembly, and every part's blocks share the
+/// pattern's layout (elements of other tissues add nothing). `scale` multiplies each
+/// tetrahedron's part (1, or a torn element's trace).
+pub(crate) struct LameTerms<'a> {
+    nodes: &'a [[f64; 3]],
+    tets: &'a [[u32; 4]],
+    scale: &'a [f64],
+    pattern: blocks::BlockPattern,
+    /// Per tissue slot, its tetrahedra.
+    of_slot: Vec<Vec<usize>>,
+}
+
+impl<'a> LameTerms<'a> {
+    pub(crate) fn new(
+        nodes: &'a [[f64; 3]],
+        tets: &'a [[u32; 4]],
+        slot: &[usize],
+        scale: &'a [f64],
+    ) -> LameTerms<'a> {
+        let mut of_slot = vec![Vec::new(); slot.iter().max().map_or(0, |s| s + 1)];
+        for (t, s) in slot.iter().enumerate() {
+            of_slot[*s].push(t);
         }
-        element_stiffness_lame(
-            tets[t].map(|n| nodes[n as usize]),
-            l * scale[t],
-            m * scale[t],
-        )
-        .ok_or_else(|| {
-            Error::numerical(
-                NumericalKind::DegenerateElement,
-                format!("tetrahedron {t} (nodes {:?}) is flat or inverted", tets[t]),
+        LameTerms {
+            nodes,
+            tets,
+            scale,
+            pattern: blocks::BlockPattern::new(nodes.len(), tets),
+            of_slot,
+        }
+    }
+
+    /// Each lower-triangle entry (row DOF, column DOF, its place in [`Self::term`]'s values),
+    /// the same for every part.
+    pub(crate) fn for_each_lower(&self, f: impl FnMut(usize, usize, usize)) {
+        self.pattern.for_each_lower(f)
+    }
+
+    /// One part's values, 9 per node block ([`blocks::BlockPattern::sum`]).
+    pub(crate) fn term(&self, (s, is_lambda): (usize, bool)) -> Result<Vec<[f64; 9]>> {
+        let (l, m) = if is_lambda { (1.0, 0.0) } else { (0.0, 1.0) };
+        let own = self.of_slot.get(s).map_or(&[][..], |v| v.as_slice());
+        self.pattern.sum(self.tets, own.iter().copied(), |t| {
+            let tet = self.tets[t];
+            element_stiffness_lame(
+                tet.map(|n| self.nodes[n as usize]),
+                l * self.scale[t],
+                m * self.scale[t],
             )
+            .ok_or_else(|| {
+                Error::numerical(
+                    NumericalKind::DegenerateElement,
+                    format!("tetrahedron {t} (nodes {tet:?}) is flat or inverted"),
+                )
+            })
         })
-    })
+    }
 }
 
 /// The tetrahedra (corner indices into `nodes`) flat or inverted at `nodes + u`.
