@@ -493,10 +493,8 @@ impl RieszSpace {
     /// Add each ρ with X ρ = g, in order: its coordinates and ‖ρ‖_X. Block classical
     /// Gram–Schmidt twice against the vectors already there (P = Eᵀ G, then R −= E P and
     /// G −= (X E) P, as matrix products), then twice against the block's own earlier vectors
-    /// (as matrix–vector products); a direction already spanned adds no new e. Sequential
-    /// products: the sliding states are built side by side on the cores, and rayon's waiting
-    /// workers slowed the other build more than the parallel products gained (real CT,
-    /// 10 000 samples: the band stage 9.0 s with them, 8.3 s without).
+    /// (as matrix–vector products); a direction already spanned adds no new e. The products
+    /// use the current thread pool (`Prediction::reduced` gives each of several builds its own).
     fn push(&mut self, rho: Vec<Vec<f64>>, g: Vec<Vec<f64>>) -> Vec<(Vec<f64>, f64)> {
         use faer::{Accum, Mat, MatRef, Par, linalg::matmul::matmul};
         let Some(n) = rho.first().map(Vec::len) else {
@@ -519,6 +517,7 @@ impl RieszSpace {
             a
         };
         let (mut r, mut gm) = (pack(rho), pack(g));
+        let par = Par::rayon(0);
         let mut coords = Mat::<f64>::zeros(old, m);
         if old > 0 {
             let e = MatRef::from_column_major_slice(&self.e, n, old);
@@ -532,11 +531,11 @@ impl RieszSpace {
                     e.transpose(),
                     gm.as_ref(),
                     1.0,
-                    Par::Seq,
+                    par,
                 );
                 coords += &p;
-                matmul(r.as_mut(), Accum::Add, e, p.as_ref(), -1.0, Par::Seq);
-                matmul(gm.as_mut(), Accum::Add, xe, p.as_ref(), -1.0, Par::Seq);
+                matmul(r.as_mut(), Accum::Add, e, p.as_ref(), -1.0, par);
+                matmul(gm.as_mut(), Accum::Add, xe, p.as_ref(), -1.0, par);
             }
         }
         // The block's own Gram–Schmidt, in place in its columns; the accepted ones are then
@@ -559,7 +558,7 @@ impl RieszSpace {
                         rl.as_ref().transpose(),
                         gr.as_ref().subcols(0, 1),
                         1.0,
-                        Par::Seq,
+                        par,
                     );
                     matmul(
                         rr.as_mut().subcols_mut(0, 1),
@@ -567,7 +566,7 @@ impl RieszSpace {
                         rl.as_ref(),
                         p.as_ref(),
                         -1.0,
-                        Par::Seq,
+                        par,
                     );
                     matmul(
                         gr.as_mut().subcols_mut(0, 1),
@@ -575,7 +574,7 @@ impl RieszSpace {
                         gl.as_ref(),
                         p.as_ref(),
                         -1.0,
-                        Par::Seq,
+                        par,
                     );
                     p_sum += &p;
                 }
