@@ -254,8 +254,8 @@ impl Volumetric {
             let z = solve_columns(&x, &[b]).remove(0);
             carry(&z).into_iter().flatten().collect()
         });
-        // Each output's gain: its 3×3 block of L X⁻¹ Lᵀ, every output's three columns in one
-        // solve (a block of columns costs a fraction of as many single solves).
+        // Each output's gain: its 3×3 block of L X⁻¹ Lᵀ, the outputs' columns solved in blocks
+        // (a block of columns costs a fraction of as many single solves).
         let mut rhs: Vec<Vec<f64>> = Vec::with_capacity(3 * training.outputs.len());
         for w in training.outputs {
             for k in 0..3 {
@@ -266,7 +266,9 @@ impl Volumetric {
                 rhs.push(affine.restrict(&face_map.carry_transpose(&y, nodes)));
             }
         }
-        let z = solve_columns(&x, &rhs);
+        // Four outputs' columns a solve: the blocks' cost, with no 3 × outputs columns held
+        // three times over at once (the two states build side by side).
+        let z: Vec<Vec<f64>> = rhs.chunks(12).flat_map(|b| solve_columns(&x, b)).collect();
         let output_gains: Vec<f64> = rhs
             .chunks(3)
             .zip(z.chunks(3))

@@ -62,43 +62,73 @@ impl Affine {
         if list.is_empty() {
             return Err(Error::config("reduced model: no stiffness term"));
         }
-        // Each lower entry's share (value index, weight) of the free–free entries, both
-        // triangles, and of the coupling to held components.
-        let mut shares: Vec<(u32, u32, u32, f64)> = Vec::new();
+        // Each lower entry's shares of the free–free entries (both triangles) and of the
+        // coupling to held components. The free–free shares are bucketed by row in two passes
+        // (count, then fill), 12 bytes each: a weight other than 1 (a rotated node's) is an
+        // index into `weights`.
+        let free_pair = |li: usize, lj: usize| {
+            let (fr, fc) = (free_index[li], free_index[lj]);
+            (fr != usize::MAX, fc != usize::MAX, fr, fc)
+        };
+        let mut row_start = vec![0usize; nf + 1];
         let mut coupling: Vec<(u32, u32, u32, f64)> = Vec::new();
         lame.for_each_lower(|r, c, i| {
-            rotate_entry(r, c, &frames, |li, lj, w| {
-                let (fr, fc) = (free_index[li], free_index[lj]);
-                match (fr != usize::MAX, fc != usize::MAX) {
-                    (true, true) => {
-                        shares.push((fr as u32, fc as u32, i as u32, w));
-                        if fr != fc {
-                            shares.push((fc as u32, fr as u32, i as u32, w));
-                        }
+            rotate_entry(r, c, &frames, |li, lj, w| match free_pair(li, lj) {
+                (true, true, fr, fc) => {
+                    row_start[fr + 1] += 1;
+                    if fr != fc {
+                        row_start[fc + 1] += 1;
                     }
-                    (true, false) => coupling.push((fr as u32, lj as u32, i as u32, w)),
-                    (false, true) => coupling.push((fc as u32, li as u32, i as u32, w)),
-                    (false, false) => {}
+                }
+                (true, false, fr, _) => coupling.push((fr as u32, lj as u32, i as u32, w)),
+                (false, true, _, fc) => coupling.push((fc as u32, li as u32, i as u32, w)),
+                (false, false, _, _) => {}
+            })
+        });
+        for r in 0..nf {
+            row_start[r + 1] += row_start[r];
+        }
+        // (column, value index, weight index) per share, by row.
+        let mut shares = vec![(0u32, 0u32, 0u32); row_start[nf]];
+        let mut weights = vec![1.0];
+        let mut next = row_start.clone();
+        lame.for_each_lower(|r, c, i| {
+            rotate_entry(r, c, &frames, |li, lj, w| {
+                if let (true, true, fr, fc) = free_pair(li, lj) {
+                    let k = if w == 1.0 {
+                        0
+                    } else {
+                        weights.push(w);
+                        weights.len() as u32 - 1
+                    };
+                    shares[next[fr]] = (fc as u32, i as u32, k);
+                    next[fr] += 1;
+                    if fr != fc {
+                        shares[next[fc]] = (fr as u32, i as u32, k);
+                        next[fc] += 1;
+                    }
                 }
             })
         });
-        shares.sort_unstable_by_key(|e| (e.0, e.1));
+        drop(next);
+        // Per row, the shares by column: the pattern, and where each share goes in it.
         let mut start = vec![0usize; nf + 1];
         let mut cols: Vec<u32> = Vec::new();
-        let mut gather: Vec<(u32, u32, f64)> = Vec::with_capacity(shares.len());
-        let mut last = None;
-        for &(r, c, i, w) in &shares {
-            if last != Some((r, c)) {
-                cols.push(c);
-                start[r as usize + 1] = cols.len();
-                last = Some((r, c));
+        let mut gather: Vec<(u32, u32, u32)> = Vec::with_capacity(shares.len());
+        for r in 0..nf {
+            let row = &mut shares[row_start[r]..row_start[r + 1]];
+            row.sort_unstable_by_key(|e| e.0);
+            let mut last = None;
+            for &(c, i, k) in row.iter() {
+                if last != Some(c) {
+                    cols.push(c);
+                    last = Some(c);
+                }
+                gather.push(((cols.len() - 1) as u32, i, k));
             }
-            gather.push(((cols.len() - 1) as u32, i, w));
+            start[r + 1] = cols.len();
         }
-        drop(shares);
-        for r in 1..=nf {
-            start[r] = start[r].max(start[r - 1]);
-        }
+        drop((shares, row_start));
         let mut lower = Vec::new();
         for r in 0..nf {
             for s in start[r]..start[r + 1] {
@@ -113,8 +143,8 @@ impl Affine {
             let blocks = lame.term(*part)?;
             let values = blocks.as_flattened();
             let mut v = vec![0.0; cols.len()];
-            for &(s, i, w) in &gather {
-                v[s as usize] += w * values[i as usize];
+            for &(s, i, k) in &gather {
+                v[s as usize] += weights[k as usize] * values[i as usize];
             }
             let mut fq = vec![0.0; nf];
             for &(fr, held, i, w) in &coupling {

@@ -141,8 +141,15 @@ impl Basis {
         };
         // The X-orthonormal basis the Riesz coordinates refer to, needed only while the basis
         // grows (two vectors per term and basis vector: most of the build's memory).
-        let mut space = RieszSpace::default();
-        basis.push_riesz(&mut space, solve_columns(&x, &loads), loads.clone());
+        // Room for every vector the greedy can add (Q per basis vector and the Q loads): a
+        // space grown block by block would be copied at each growth, twice its size at once.
+        let columns = q * (greedy.max_size + greedy.batch.max(1) + 1);
+        let mut space = RieszSpace {
+            n: sys.unknowns(),
+            e: Vec::with_capacity(columns * sys.unknowns()),
+            xe: Vec::with_capacity(columns * sys.unknowns()),
+        };
+        basis.push_riesz(&mut space, &x, &loads);
         // The first snapshot: the solution at θ̄ itself.
         let mut snapshots = solve_columns(&x, &[sys.rhs(theta_bar)]);
         basis.riesz_solves += 1;
@@ -185,8 +192,20 @@ impl Basis {
         Ok((basis, x))
     }
 
-    fn push_riesz(&mut self, space: &mut RieszSpace, rho: Vec<Vec<f64>>, g: Vec<Vec<f64>>) {
-        for (coords, norm) in space.push(rho, g) {
+    /// Add the Riesz representers X⁻¹ g of `g` to the space, and their coordinates and norms to
+    /// the online form. The columns are solved in place in one matrix beside a copy of `g`:
+    /// two blocks alive, not four.
+    fn push_riesz(&mut self, space: &mut RieszSpace, x: &Cholesky<f64>, g: &[Vec<f64>]) {
+        let Some(n) = g.first().map(Vec::len) else {
+            return;
+        };
+        let mut gm = faer::Mat::<f64>::zeros(n, g.len());
+        for (j, c) in g.iter().enumerate() {
+            gm.col_as_slice_mut(j).copy_from_slice(c);
+        }
+        let mut rho = gm.clone();
+        x.solve_in_place(rho.as_mut());
+        for (coords, norm) in space.push(rho, gm) {
             self.form.riesz.push(coords);
             self.form.riesz_norms.push(norm);
         }
@@ -244,9 +263,8 @@ impl Basis {
         }
         // One solve of all the new vectors' columns, one block Gram–Schmidt of them.
         let added = av_all.len() / q.max(1);
-        let new_riesz = solve_columns(x, &av_all);
         self.riesz_solves += av_all.len();
-        self.push_riesz(space, new_riesz, av_all);
+        self.push_riesz(space, x, &av_all);
         Ok(added)
     }
 
@@ -470,7 +488,6 @@ impl OnlineForm {
 /// The X-orthonormal vectors e_i spanning the Riesz representers so far, and X e_i, each
 /// stored column after column in one array (n × k, column-major), so that a block of new
 /// vectors meets all of them in two matrix products.
-#[derive(Default)]
 struct RieszSpace {
     n: usize,
     e: Vec<f64>,
@@ -490,33 +507,19 @@ impl RieszSpace {
         self.e.chunks(self.n).map(<[f64]>::to_vec).collect()
     }
 
-    /// Add each ρ with X ρ = g, in order: its coordinates and ‖ρ‖_X. Block classical
+    /// Add each ρ (a column of `r`) with X ρ = g (that column of `gm`), in order: its coordinates and ‖ρ‖_X. Block classical
     /// Gram–Schmidt twice against the vectors already there (P = Eᵀ G, then R −= E P and
     /// G −= (X E) P, as matrix products), then twice against the block's own earlier vectors
     /// (as matrix–vector products); a direction already spanned adds no new e. The products
     /// use the current thread pool (`Prediction::reduced` gives each of several builds its own).
-    fn push(&mut self, rho: Vec<Vec<f64>>, g: Vec<Vec<f64>>) -> Vec<(Vec<f64>, f64)> {
+    fn push(&mut self, mut r: faer::Mat<f64>, mut gm: faer::Mat<f64>) -> Vec<(Vec<f64>, f64)> {
         use faer::{Accum, Mat, MatRef, Par, linalg::matmul::matmul};
-        let Some(n) = rho.first().map(Vec::len) else {
-            return Vec::new();
-        };
-        if self.n == 0 {
-            self.n = n;
-        }
-        let norm0: Vec<f64> = rho
-            .iter()
-            .zip(&g)
-            .map(|(r, g)| dot(r, g).max(0.0).sqrt())
+        let (n, m) = (r.nrows(), r.ncols());
+        self.n = n;
+        let norm0: Vec<f64> = (0..m)
+            .map(|j| dot(r.col_as_slice(j), gm.col_as_slice(j)).max(0.0).sqrt())
             .collect();
-        let (old, m) = (self.len(), rho.len());
-        let pack = |v: Vec<Vec<f64>>| {
-            let mut a = Mat::<f64>::zeros(n, m);
-            for (j, c) in v.into_iter().enumerate() {
-                a.col_as_slice_mut(j).copy_from_slice(&c);
-            }
-            a
-        };
-        let (mut r, mut gm) = (pack(rho), pack(g));
+        let old = self.len();
         let par = Par::rayon(0);
         let mut coords = Mat::<f64>::zeros(old, m);
         if old > 0 {
