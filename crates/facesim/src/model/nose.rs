@@ -8,6 +8,7 @@
 //! [`BELOW_N_MM`] below soft nasion, in front of the piriform aperture (the anterior nasal
 //! spine's depth, else the alar creases').
 
+use crate::case::TissueElastic;
 use crate::error::{Error, Result};
 use crate::landmarks::{HeadFrame, Landmark};
 
@@ -19,6 +20,15 @@ const ABOVE_SN_MM: f64 = 2.5;
 const BELOW_N_MM: f64 = 7.0;
 /// Half the nose's width without alare (mm; adult alar width 31–38 mm, Farkas 1994).
 const HALF_WIDTH_MM: f64 = 17.0;
+
+/// The material of a nose tetrahedron of `tissue`: the nose's modulus with its tissue's Poisson's
+/// ratio (the solve's materials and the reduced model's nose terms alike).
+pub(crate) fn material(tissue: TissueElastic, youngs_kpa: f64) -> TissueElastic {
+    TissueElastic {
+        youngs_kpa,
+        ..tissue
+    }
+}
 
 /// Per tetrahedron: whether its centroid lies in the external nose the pre-operative head frame
 /// and landmarks locate (`Scene::landmarks_pre`: the skin's, the skull's for the anterior nasal

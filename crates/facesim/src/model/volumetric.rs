@@ -640,8 +640,8 @@ fn still(rigid: &[bool], roi: ([f64; 3], [f64; 3]), face: &[[f64; 3]]) -> Vec<bo
         .collect()
 }
 
-/// The tissues' materials with the nose's tetrahedra (`nose`) at `youngs_kpa`, each keeping its
-/// tissue's Poisson's ratio.
+/// The tissues' materials with the nose's tetrahedra (`nose`) at `youngs_kpa`
+/// ([`super::nose::material`]).
 fn with_nose(
     mut material: Vec<TissueElastic>,
     nose: Option<&[bool]>,
@@ -649,7 +649,7 @@ fn with_nose(
 ) -> Vec<TissueElastic> {
     if let Some(nose) = nose {
         for (m, _) in material.iter_mut().zip(nose).filter(|(_, n)| **n) {
-            m.youngs_kpa = youngs_kpa;
+            *m = super::nose::material(*m, youngs_kpa);
         }
     }
     material

@@ -267,10 +267,7 @@ pub(crate) fn theta_of(
         .map(|(s, is_lambda)| {
             let m = match s.checked_sub(NOSE_SLOTS) {
                 None => tissues[*s],
-                Some(t) => TissueElastic {
-                    youngs_kpa: nose_kpa,
-                    ..tissues[t]
-                },
+                Some(t) => super::nose::material(tissues[t], nose_kpa),
             };
             let (l, mu) = m.lame();
             if *is_lambda { l } else { mu }
