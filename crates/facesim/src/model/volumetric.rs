@@ -722,6 +722,11 @@ pub fn predict(
     rec: &mut Recorder,
 ) -> Result<Option<(Volumetric, Vec<[f64; 3]>)>> {
     let t = &case.tet;
+    // The landmarks the region needs (the nose tip), located in the landmark stage's time;
+    // the run's landmark stage reads them back from the scene.
+    rec.time(Stage::Landmarks, "locating landmarks", || {
+        Ok(scene.landmarks_pre(skin, Path::new("case.toml")).ok())
+    })?;
     let Some((roi, nose_tip)) = region(scene, skin, t.margin_mm) else {
         return Ok(None);
     };
