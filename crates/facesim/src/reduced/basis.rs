@@ -484,10 +484,9 @@ impl OnlineForm {
 }
 
 /// The X-orthonormal vectors e_i that Riesz representers ρ_j are kept in as coordinates
-/// (ρ_j = Σ_i t_ij e_i), with X e_i to take inner products of new vectors without applying X.
-/// The X-orthonormal vectors e_i spanning the Riesz representers so far, and X e_i, each
-/// stored column after column in one array (n × k, column-major), so that a block of new
-/// vectors meets all of them in two matrix products.
+/// (ρ_j = Σ_i t_ij e_i), with X e_i to take inner products of new vectors without applying X;
+/// each stored column after column in one array (n × k, column-major), so that a block of new
+/// vectors meets all of them in matrix products.
 struct RieszSpace {
     n: usize,
     e: Vec<f64>,
@@ -507,106 +506,84 @@ impl RieszSpace {
         self.e.chunks(self.n).map(<[f64]>::to_vec).collect()
     }
 
-    /// Add each ρ (a column of `r`) with X ρ = g (that column of `gm`), in order: its coordinates and ‖ρ‖_X. Block classical
-    /// Gram–Schmidt twice against the vectors already there (P = Eᵀ G, then R −= E P and
-    /// G −= (X E) P, as matrix products), then twice against the block's own earlier vectors
-    /// (as matrix–vector products); a direction already spanned adds no new e. The products
-    /// use the current thread pool (`Prediction::reduced` gives each of several builds its own).
+    /// Add each ρ (a column of `r`) with X ρ = g (that column of `gm`), in order: its
+    /// coordinates and ‖ρ‖_X. Classical Gram–Schmidt twice against the vectors already there,
+    /// as matrix products, then twice against the block's own earlier columns; a direction
+    /// already spanned adds no new e. The products use the current thread pool
+    /// (`Prediction::reduced` gives each of several builds its own).
     fn push(&mut self, mut r: faer::Mat<f64>, mut gm: faer::Mat<f64>) -> Vec<(Vec<f64>, f64)> {
-        use faer::{Accum, Mat, MatRef, Par, linalg::matmul::matmul};
-        let (n, m) = (r.nrows(), r.ncols());
-        self.n = n;
+        use faer::{Mat, MatRef};
+        let (n, m) = (self.n, r.ncols());
         let norm0: Vec<f64> = (0..m)
             .map(|j| dot(r.col_as_slice(j), gm.col_as_slice(j)).max(0.0).sqrt())
             .collect();
         let old = self.len();
-        let par = Par::rayon(0);
         let mut coords = Mat::<f64>::zeros(old, m);
         if old > 0 {
             let e = MatRef::from_column_major_slice(&self.e, n, old);
             let xe = MatRef::from_column_major_slice(&self.xe, n, old);
             for _ in 0..2 {
-                // p[i][j] = e_iᵀ g_j = (ρ_j, e_i)_X.
-                let mut p = Mat::<f64>::zeros(old, m);
-                matmul(
-                    p.as_mut(),
-                    Accum::Replace,
-                    e.transpose(),
-                    gm.as_ref(),
-                    1.0,
-                    par,
-                );
-                coords += &p;
-                matmul(r.as_mut(), Accum::Add, e, p.as_ref(), -1.0, par);
-                matmul(gm.as_mut(), Accum::Add, xe, p.as_ref(), -1.0, par);
+                coords += sweep((e, xe), (r.as_mut(), gm.as_mut()));
             }
         }
-        // The block's own Gram–Schmidt, in place in its columns; the accepted ones are then
-        // appended to the space at once.
+        // The block's own Gram–Schmidt, in place in its columns (a rejected one zeroed); the
+        // accepted ones are then appended to the space at once.
         let mut accepted: Vec<usize> = Vec::new();
         let mut out = Vec::with_capacity(m);
         for (j, norm0) in norm0.into_iter().enumerate() {
             let mut c: Vec<f64> = (0..old).map(|i| coords[(i, j)]).collect();
-            // Against the block's columns before j, a rejected one being zero: classical
-            // Gram–Schmidt twice, as matrix–vector products.
-            let mut p_sum = Mat::<f64>::zeros(j, 1);
-            if j > 0 {
-                for _ in 0..2 {
-                    let mut p = Mat::<f64>::zeros(j, 1);
-                    let (rl, mut rr) = r.as_mut().split_at_col_mut(j);
-                    let (gl, mut gr) = gm.as_mut().split_at_col_mut(j);
-                    matmul(
-                        p.as_mut(),
-                        Accum::Replace,
-                        rl.as_ref().transpose(),
-                        gr.as_ref().subcols(0, 1),
-                        1.0,
-                        par,
-                    );
-                    matmul(
-                        rr.as_mut().subcols_mut(0, 1),
-                        Accum::Add,
-                        rl.as_ref(),
-                        p.as_ref(),
-                        -1.0,
-                        par,
-                    );
-                    matmul(
-                        gr.as_mut().subcols_mut(0, 1),
-                        Accum::Add,
-                        gl.as_ref(),
-                        p.as_ref(),
-                        -1.0,
-                        par,
-                    );
-                    p_sum += &p;
-                }
+            let mut p = Mat::<f64>::zeros(j, 1);
+            for _ in 0..2 {
+                let (rl, mut rr) = r.as_mut().split_at_col_mut(j);
+                let (gl, mut gr) = gm.as_mut().split_at_col_mut(j);
+                p += sweep(
+                    (rl.as_ref(), gl.as_ref()),
+                    (rr.as_mut().subcols_mut(0, 1), gr.as_mut().subcols_mut(0, 1)),
+                );
             }
-            c.extend(accepted.iter().map(|a| p_sum[(*a, 0)]));
+            c.extend(accepted.iter().map(|a| p[(*a, 0)]));
             let rho = r.col_as_slice_mut(j);
-            let rest = {
-                let g = gm.col_as_slice(j);
-                dot(rho, g).max(0.0).sqrt()
-            };
+            let rest = dot(rho, gm.col_as_slice(j)).max(0.0).sqrt();
             if rest > 1e-12 * norm0 {
                 rho.iter_mut().for_each(|a| *a /= rest);
                 gm.col_as_slice_mut(j).iter_mut().for_each(|a| *a /= rest);
                 accepted.push(j);
                 c.push(rest);
             } else {
-                rho.iter_mut().for_each(|a| *a = 0.0);
-                gm.col_as_slice_mut(j).iter_mut().for_each(|a| *a = 0.0);
+                rho.fill(0.0);
+                gm.col_as_slice_mut(j).fill(0.0);
             }
             out.push((c, norm0));
         }
-        self.e.reserve(accepted.len() * n);
-        self.xe.reserve(accepted.len() * n);
         for &a in &accepted {
             self.e.extend_from_slice(r.col_as_slice(a));
             self.xe.extend_from_slice(gm.col_as_slice(a));
         }
         out
     }
+}
+
+/// One classical Gram–Schmidt sweep of the columns of `r` (X images `g`) against the
+/// X-orthonormal columns of `e` (X images `xe`): P = eᵀ g = (r, e)_X, r −= e P, g −= xe P;
+/// returns P.
+fn sweep(
+    (e, xe): (faer::MatRef<'_, f64>, faer::MatRef<'_, f64>),
+    (mut r, mut g): (faer::MatMut<'_, f64>, faer::MatMut<'_, f64>),
+) -> faer::Mat<f64> {
+    use faer::{Accum, Mat, Par, linalg::matmul::matmul};
+    let par = Par::rayon(0);
+    let mut p = Mat::<f64>::zeros(e.ncols(), r.ncols());
+    matmul(
+        p.as_mut(),
+        Accum::Replace,
+        e.transpose(),
+        g.as_ref(),
+        1.0,
+        par,
+    );
+    matmul(r.as_mut(), Accum::Add, e, p.as_ref(), -1.0, par);
+    matmul(g.as_mut(), Accum::Add, xe, p.as_ref(), -1.0, par);
+    p
 }
 
 /// A snapshot's certified error, relative to the reduced model's bound at its point, at which
