@@ -221,6 +221,8 @@ fn stored_band(
         face_post: &post.vertices,
         moves: post.vertices != skin.vertices,
         sliding_matters: models.sliding_matters,
+        // The stored models answer every sample: no full solve.
+        solves_at_once: 1,
     };
     let mut case: Case = run_report.parameters.clone().ok_or_else(|| {
         Error::input(

@@ -124,6 +124,7 @@ fn finish(
             face_post: &prediction.face_post.vertices,
             moves: prediction.moves(),
             sliding_matters: prediction.sliding_matters(),
+            solves_at_once: prediction.solves_at_once(),
         };
         let resolve = |c: &Case| prediction.resolve(&scene, c);
         let (band, reduced) = rec.time(Stage::Uncertainty, "sampling tissue parameters", || {

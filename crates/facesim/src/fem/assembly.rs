@@ -356,14 +356,14 @@ impl System {
         n: usize,
         k: Vec<(usize, usize, f64)>,
         fixed: &[bool],
-        ordering: Ordering,
+        ordering: Ordering<'_>,
     ) -> Result<System> {
         let (free_index, free) = free_dofs(&fixed[..n]);
         // faer runs sequentially (fem/cholesky.rs says why), its dense kernels too.
         faer::set_global_parallelism(faer::Par::Seq);
         let (mat, coupling) = split(&k, &free_index, free.len())?;
         let nnz_lower = mat.compute_nnz();
-        let symbolic = Pattern::analyse_with(mat.symbolic(), ordering).map_err(|e| {
+        let symbolic = Pattern::analyse_with(mat.symbolic(), ordering, &free).map_err(|e| {
             Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
         })?;
         let bytes = symbolic

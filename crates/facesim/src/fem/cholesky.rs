@@ -8,6 +8,7 @@
 //! docs/fem.md), where rayon parallelises the element work instead; a volumetric head's factor
 //! (tens of millions of nonzeros) is factored on all cores (`PARALLEL_FACTOR_NNZ`).
 
+use super::ordering::NodeOrder;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::perm::PermRef;
 use faer::sparse::linalg::LltError;
@@ -27,26 +28,36 @@ pub use faer::sparse::FaerError;
 pub struct Pattern(Arc<SymbolicCholesky<usize>>);
 
 /// The fill-reducing ordering of a factorisation (fem/ordering.rs says when each wins).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Ordering {
+#[derive(Clone, Copy)]
+pub enum Ordering<'a> {
     /// Approximate minimum degree (faer): the surface models.
     Amd,
     /// Nested dissection (METIS) on the DOF groups: the volumetric meshes; AMD if METIS fails.
     NestedDissection,
+    /// A mesh's node ordering, computed once, expanded to the free DOFs (3 per node); nested
+    /// dissection on the DOF groups if it does not cover them.
+    Nodes(&'a NodeOrder),
 }
 
 impl Pattern {
     pub(crate) fn analyse(lower: SymbolicSparseColMatRef<'_, usize>) -> Result<Pattern, FaerError> {
-        Self::analyse_with(lower, Ordering::Amd)
+        Self::analyse_with(lower, Ordering::Amd, &[])
     }
 
+    /// The analysis of `lower` in `ordering`; `dofs` gives each column's global DOF (3 node +
+    /// component), which only `Ordering::Nodes` reads.
     pub(crate) fn analyse_with(
         lower: SymbolicSparseColMatRef<'_, usize>,
-        ordering: Ordering,
+        ordering: Ordering<'_>,
+        dofs: &[usize],
     ) -> Result<Pattern, FaerError> {
         let nd = match ordering {
             Ordering::Amd => None,
             Ordering::NestedDissection => super::ordering::nested_dissection(lower),
+            Ordering::Nodes(order) => match order.dofs(dofs) {
+                Some(o) if dofs.len() == lower.ncols() => Some(o),
+                _ => super::ordering::nested_dissection(lower),
+            },
         };
         let order = match &nd {
             Some((fwd, inv)) => {
@@ -74,7 +85,7 @@ impl Pattern {
 /// 98 M nonzeros: 9.9 s sequential, 8.2 s on 2 cores; one of 23 k unknowns, 7.4 M nonzeros:
 /// 0.27 s sequential, 0.39 s on 2 cores; the surface models' largest, 41 M at 80 k triangles,
 /// stays sequential as measured in docs/fem.md).
-const PARALLEL_FACTOR_NNZ: usize = 50_000_000;
+pub(crate) const PARALLEL_FACTOR_NNZ: usize = 50_000_000;
 
 fn factor_par(nnz: usize) -> Par {
     if nnz >= PARALLEL_FACTOR_NNZ {

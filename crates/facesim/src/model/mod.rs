@@ -271,6 +271,16 @@ impl Prediction {
         }
     }
 
+    /// How many full re-solves (`resolve`) to run side by side (the uncertainty samples): the
+    /// tet model's says `Volumetric::solves_at_once`; the C1 models' sparse factors are
+    /// sequential, one per core.
+    pub(crate) fn solves_at_once(&self) -> usize {
+        match &self.solved {
+            Solved::Tet(Some(v)) => v.solves_at_once(),
+            _ => rayon::current_num_threads().clamp(1, 4),
+        }
+    }
+
     /// Whether `[tet] sliding` can change the answer: the mesh has mucosa or lip–tooth contact
     /// nodes to slide, or bone nodes released at the saw lines (which slide with it and are
     /// free without it; counting only the first two let one reduced model answer both states on

@@ -8,6 +8,8 @@ use super::predicted::Predicted;
 use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
+use crate::fem::cholesky::Ordering;
+use crate::fem::ordering::NodeOrder;
 use crate::mesh::Mesh;
 use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
@@ -68,9 +70,19 @@ pub struct Reuse {
     lifted: Vec<usize>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
+    /// The linear mesh's node ordering for its factors (`fem::ordering::NodeOrder`), made once
+    /// by the run; None for the 10-node element (its own nodes) or a mesh METIS could not order.
+    order: Option<NodeOrder>,
+    /// Nonzeros of the run's factor (0 when it kept none): whether a re-solve's factorisation
+    /// runs on one core (`Volumetric::solves_at_once`).
+    factor_nonzeros: usize,
 }
 
 impl Reuse {
+    fn ordering(&self) -> Ordering<'_> {
+        ordering(&self.order)
+    }
+
     /// `hold` with the run's lifted-off nodes freed when `case` slides (the state they lifted
     /// off in; `Volumetric::predict`'s lift-off rounds).
     fn lift_off(&self, mut hold: Vec<Hold>, case: &Case) -> Vec<Hold> {
@@ -84,6 +96,18 @@ impl Reuse {
 }
 
 impl Volumetric {
+    /// How many re-solves (`resolve`) to run side by side: a factorisation below
+    /// `fem::cholesky`'s parallel size runs on one core (the real CT's: 8 samples in 6.4 s
+    /// two at a time, 12.0 s one at a time), so up to one per core (at most 4, each holding
+    /// its factor); a larger one already uses every core.
+    pub(crate) fn solves_at_once(&self) -> usize {
+        if self.reuse.factor_nonzeros >= crate::fem::cholesky::PARALLEL_FACTOR_NNZ {
+            1
+        } else {
+            rayon::current_num_threads().clamp(1, 4)
+        }
+    }
+
     /// The solved nodes (corners, then midpoints when quadratic).
     pub fn nodes(&self) -> &[[f64; 3]] {
         self.quadratic
@@ -132,12 +156,12 @@ impl Volumetric {
                 Some(q) => q.assemble()?,
                 None => linear.assemble()?,
             };
-            let c = Constrained::new(&k, &hold, nodes.len())?;
+            let c = Constrained::ordered(&k, &hold, nodes.len(), r.ordering())?;
             let f = Loads::none().nodal_vector(nodes.len())?;
             c.solve(&[(&hold, &f)])?.remove(0)
         } else {
             // As the run: Newton from the linear answer, preconditioned by its factor.
-            let c = Constrained::new(&linear.assemble()?, &hold, nodes.len())?;
+            let c = Constrained::ordered(&linear.assemble()?, &hold, nodes.len(), r.ordering())?;
             let f = Loads::none().nodal_vector(nodes.len())?;
             let start = c.solve(&[(&hold, &f)])?.remove(0);
             newton_krylov::solve(&linear, &c, &start, &newton_krylov::Options::default())?
@@ -215,7 +239,7 @@ impl Volumetric {
             .collect();
         let terms = crate::tet::lame_term_list(&slot);
         let lame = crate::tet::LameTerms::new(&self.mesh.nodes, &self.mesh.tets, &slot, &scale);
-        let affine = Affine::new(&lame, &terms, &hold)?;
+        let affine = Affine::new(&lame, &terms, &hold, r.ordering())?;
         drop(lame);
         let theta = |t: &crate::case::Tet| {
             super::reduced::theta_of(&terms, &t.tissues(), t.nose_youngs_kpa)
@@ -884,12 +908,22 @@ pub fn predict(
     let mut lifted: Vec<usize> = Vec::new();
     let mut torn = vec![false; mesh.tets.len()];
     let mut fallback = None;
-    let (displacement, newton, factor, linear_start) =
+    let (displacement, newton, factor, linear_start, order) =
         rec.time(Stage::Solve, "solving the volumetric model", || {
+            // The linear mesh's node ordering, once for every factor of this run and its
+            // re-solves (the 10-node element orders its own DOFs).
+            let order = match quadratic {
+                None => {
+                    let solved: Vec<bool> =
+                        hold.iter().map(|h| !matches!(h, Hold::Fixed(_))).collect();
+                    NodeOrder::of_tets(&solved, &mesh.tets)
+                }
+                Some(_) => None,
+            };
             {
                 let k = stiffness(&linear)?;
                 let f = Loads::none().nodal_vector(nodes.len())?;
-                let mut c = Constrained::new(&k, &hold, nodes.len())?;
+                let mut c = Constrained::ordered(&k, &hold, nodes.len(), ordering(&order))?;
                 let mut u = c.solve(&[(&hold, &f)])?.remove(0);
                 // Where the solution turns an element next to bone inside out, the bone would
                 // drag that tissue through itself or through the bone of another piece (the
@@ -965,11 +999,16 @@ pub fn predict(
                         torn[e] = true;
                     }
                     linear.material = torn_trace(material.clone(), &torn);
-                    c = Constrained::new(&stiffness(&linear)?, &hold, nodes.len())?;
+                    c = Constrained::ordered(
+                        &stiffness(&linear)?,
+                        &hold,
+                        nodes.len(),
+                        ordering(&order),
+                    )?;
                     u = c.solve(&[(&hold, &f)])?.remove(0);
                 }
                 if linear_solve {
-                    return Ok((u, None, Some(c), None));
+                    return Ok((u, None, Some(c), None, order));
                 }
                 // The hyperelastic model: Newton from the linear answer, the linear factor
                 // preconditioning each Newton system (tet::newton_krylov).
@@ -1004,7 +1043,7 @@ pub fn predict(
                         krylov_iterations: s.krylov_iterations,
                     })
                     .collect();
-                Ok((s.displacements, Some(steps), Some(c), Some(u)))
+                Ok((s.displacements, Some(steps), Some(c), Some(u), order))
             }
         })?;
     if let Some(w) = fallback {
@@ -1061,13 +1100,14 @@ pub fn predict(
     let carried = rec.time(Stage::Embed, "carrying the face", || {
         Ok(carry(&embedding, &displacement))
     })?;
+    let factor_nonzeros = factor.as_ref().map_or(0, Constrained::factor_nnz);
     let basis = rec.time(Stage::PlanBasis, "building the plan basis", || {
         // The nonlinear material slides on the moved bone's normals: where a rotation turned
         // them, the basis (the linear model at rest) needs its own factor.
         let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
         let factor = match factor {
             Some(c) if c.takes(&rest) => c,
-            _ => Constrained::new(&stiffness(&linear)?, &rest, nodes.len())?,
+            _ => Constrained::ordered(&stiffness(&linear)?, &rest, nodes.len(), ordering(&order))?,
         };
         let inputs = BasisInputs {
             factor: &factor,
@@ -1138,10 +1178,20 @@ pub fn predict(
                 lifted,
                 roi,
                 linear_solve,
+                order,
+                factor_nonzeros,
             },
         },
         face_post,
     )))
+}
+
+/// The ordering of a factor of the linear mesh: its node ordering when made, else its free
+/// DOFs' own.
+fn ordering(order: &Option<NodeOrder>) -> Ordering<'_> {
+    order
+        .as_ref()
+        .map_or(Ordering::NestedDissection, Ordering::Nodes)
 }
 
 /// What the plan basis is built from.

@@ -47,9 +47,15 @@ impl Affine {
     /// From the Lamé parts `list` of `lame` (3 DOFs per node, global frame) and the nodes'
     /// holds (their values give g). Where each part's entries go (rotation into the nodes'
     /// frames, free or held) depends on the frames only, so it is worked out once and each part
-    /// is then one pass over its values, made one at a time. Nothing held, or a hold that is
+    /// is then one pass over its values, made one at a time. X's factor is analysed in
+    /// `ordering` (the run's node ordering, when it has one). Nothing held, or a hold that is
     /// not finite, is an error.
-    pub(crate) fn new(lame: &LameTerms, list: &[(usize, bool)], holds: &[Hold]) -> Result<Affine> {
+    pub(crate) fn new(
+        lame: &LameTerms,
+        list: &[(usize, bool)],
+        holds: &[Hold],
+        ordering: Ordering<'_>,
+    ) -> Result<Affine> {
         let nodes = holds.len();
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
@@ -172,7 +178,7 @@ impl Affine {
         }
         let ones = values_of(&terms, cols.len(), &vec![1.0; list.len()]);
         let m = lower_matrix(&lower, &ones, nf)?;
-        let pattern = Pattern::analyse_with(m.symbolic(), Ordering::NestedDissection)
+        let pattern = Pattern::analyse_with(m.symbolic(), ordering, &free)
             .map_err(|e| Error::numerical(NumericalKind::Singular, format!("{e:?}")))?;
         Ok(Affine {
             frames,

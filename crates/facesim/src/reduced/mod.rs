@@ -304,7 +304,13 @@ mod tests {
     fn affine_of(m: &TetMesh, slot: &[usize], scale: &[f64], holds: &[Hold]) -> Affine {
         let list = crate::tet::lame_term_list(slot);
         let lame = crate::tet::LameTerms::new(&m.nodes, &m.tets, slot, scale);
-        Affine::new(&lame, &list, holds).unwrap()
+        Affine::new(
+            &lame,
+            &list,
+            holds,
+            crate::fem::cholesky::Ordering::NestedDissection,
+        )
+        .unwrap()
     }
 
     fn energy(sys: &Affine, theta: &[f64], e: &[f64]) -> f64 {

@@ -267,12 +267,22 @@ pub struct Constrained {
 impl Constrained {
     /// Factor K (lower triangle, 3 DOFs per node) with the components `holds` constrain held.
     pub fn new(k: &[(usize, usize, f64)], holds: &[Hold], nodes: usize) -> Result<Constrained> {
+        Self::ordered(k, holds, nodes, Ordering::NestedDissection)
+    }
+
+    /// As `new`, in `ordering` (a mesh's node ordering, shared by its solves).
+    pub(crate) fn ordered(
+        k: &[(usize, usize, f64)],
+        holds: &[Hold],
+        nodes: usize,
+        ordering: Ordering<'_>,
+    ) -> Result<Constrained> {
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
             .iter()
             .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
-        let sys = System::with_ordering(3 * nodes, rotate_lower(k, &frames), &fixed, Ordering::NestedDissection).map_err(|e| match e {
+        let sys = System::with_ordering(3 * nodes, rotate_lower(k, &frames), &fixed, ordering).map_err(|e| match e {
             Error::Numerical {
                 kind: NumericalKind::Singular,
                 ..
@@ -283,6 +293,11 @@ impl Constrained {
             other => other,
         })?;
         Ok(Constrained { frames, sys })
+    }
+
+    /// Nonzeros of the factor.
+    pub(crate) fn factor_nnz(&self) -> usize {
+        self.sys.factor_nnz().unwrap_or(0)
     }
 
     /// Free `nodes` (held or sliding when factored) without refactoring: the factor is bordered

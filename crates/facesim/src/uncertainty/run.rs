@@ -230,6 +230,8 @@ pub struct Nominal<'a> {
     pub moves: bool,
     /// Whether `[tet] sliding` can change the answer (the mesh has mucosa nodes).
     pub sliding_matters: bool,
+    /// How many full solves to run side by side (`crate::model::Prediction::solves_at_once`).
+    pub solves_at_once: usize,
 }
 
 /// Sample the tissue parameters `case.uncertainty.samples` times (at least one): `resolve`
@@ -237,7 +239,7 @@ pub struct Nominal<'a> {
 /// what the run built, `crate::model::Prediction::resolve`).
 pub fn sample(
     run: &Nominal,
-    resolve: &dyn Fn(&Case) -> Result<Vec<[f64; 3]>>,
+    resolve: &(dyn Fn(&Case) -> Result<Vec<[f64; 3]>> + Sync),
     analysis: &Analysis,
     case: &Case,
     obs: &dyn Observer,
@@ -254,25 +256,25 @@ pub fn sample(
     // Landmarks and regions of the run (analysis of face_pre), measured on every sample.
     let trackers = trackers(analysis);
     let regions = regions(analysis, skin);
-    let mut solved: Vec<(Vec<u64>, Vec<[f64; 3]>)> = Vec::new();
-    let mut solve_s = 0.0;
+    // The distinct solves the draws need (a draw that changes nothing the model reads reuses
+    // the nominal face or an earlier draw's), in draw order.
+    let mut wanted: Vec<(Vec<u64>, Case)> = Vec::new();
+    for d in &draws {
+        let c = d.apply(case);
+        let key = solve_key(&c, sliding_matters);
+        if run.moves && key != nominal_key && !wanted.iter().any(|(k, _)| *k == key) {
+            wanted.push((key, c));
+        }
+    }
+    let (solved, solve_s) = solve_side_by_side(&wanted, run.solves_at_once, resolve, obs)?;
     let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
     let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
     let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
-    for (i, d) in draws.iter().enumerate() {
-        obs.started(&format!("uncertainty: sample {} of {n}", i + 1));
-        let c = d.apply(case);
-        let key = solve_key(&c, sliding_matters);
-        let post: &[[f64; 3]] = if key == nominal_key || !run.moves {
-            nominal
-        } else if let Some(k) = solved.iter().position(|(k, _)| *k == key) {
-            &solved[k].1
-        } else {
-            let t = std::time::Instant::now();
-            let u = resolve(&c)?;
-            solve_s += t.elapsed().as_secs_f64();
-            solved.push((key, u));
-            &solved[solved.len() - 1].1
+    for d in &draws {
+        let key = solve_key(&d.apply(case), sliding_matters);
+        let post: &[[f64; 3]] = match wanted.iter().position(|(k, _)| *k == key) {
+            Some(k) if run.moves => &solved[k],
+            _ => nominal,
         };
         // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
         let mag: Vec<f64> = skin
@@ -316,6 +318,38 @@ pub fn sample(
         solve_s,
     });
     Ok(Sampled { bands, report })
+}
+
+/// Solve `wanted` (in order) `at_once` at a time on the thread pool: the faces, and the
+/// solves' summed time (s).
+fn solve_side_by_side(
+    wanted: &[(Vec<u64>, Case)],
+    at_once: usize,
+    resolve: &(dyn Fn(&Case) -> Result<Vec<[f64; 3]>> + Sync),
+    obs: &dyn Observer,
+) -> Result<(Vec<Vec<[f64; 3]>>, f64)> {
+    use rayon::prelude::*;
+    let mut solved = Vec::with_capacity(wanted.len());
+    let mut seconds = 0.0;
+    for chunk in wanted.chunks(at_once.max(1)) {
+        obs.started(&format!(
+            "uncertainty: solve {} of {}",
+            solved.len() + chunk.len(),
+            wanted.len()
+        ));
+        let faces: Vec<(Vec<[f64; 3]>, f64)> = chunk
+            .par_iter()
+            .map(|(_, c)| {
+                let t = std::time::Instant::now();
+                resolve(c).map(|u| (u, t.elapsed().as_secs_f64()))
+            })
+            .collect::<Result<_>>()?;
+        for (u, s) in faces {
+            solved.push(u);
+            seconds += s;
+        }
+    }
+    Ok((solved, seconds))
 }
 
 /// What a sampling measured, for the report.
