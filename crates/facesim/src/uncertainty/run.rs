@@ -416,3 +416,56 @@ pub(super) fn assemble(t: Tallies) -> UncertaintyReport {
         reduced: None,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::error::Error;
+
+    /// A stand-in for a model's re-solve: a face that says which case it was solved for.
+    fn face_of(c: &Case) -> Result<Vec<[f64; 3]>> {
+        let e = c.tet.skin.youngs_kpa;
+        if e < 0.0 {
+            return Err(Error::config(format!("no solve at {e} kPa")));
+        }
+        Ok(vec![[e, 2.0 * e, 3.0 * e]; 5])
+    }
+
+    fn wanted(moduli: &[f64]) -> Vec<(Vec<u64>, Case)> {
+        moduli
+            .iter()
+            .map(|e| {
+                let mut c = Case::default();
+                c.tet.skin.youngs_kpa = *e;
+                (vec![e.to_bits()], c)
+            })
+            .collect()
+    }
+
+    /// Side by side or one at a time, each face is the one of its own case, in the draws' order,
+    /// and a failed solve fails the sampling.
+    #[test]
+    fn solves_side_by_side_keep_each_face_with_its_case() {
+        let w = wanted(&[31.0, 12.0, 47.0, 5.0, 18.0]);
+        for at_once in [1, 2, 3, 8] {
+            let (faces, _) = solve_side_by_side(&w, at_once, &face_of, &crate::observe::Quiet)
+                .unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(faces.len(), w.len());
+            for (f, (_, c)) in faces.iter().zip(&w) {
+                assert_eq!(
+                    f[0],
+                    [
+                        c.tet.skin.youngs_kpa,
+                        2.0 * c.tet.skin.youngs_kpa,
+                        3.0 * c.tet.skin.youngs_kpa
+                    ]
+                );
+            }
+        }
+        let bad = wanted(&[31.0, 12.0, -1.0, 5.0]);
+        for at_once in [1, 2, 4] {
+            let r = solve_side_by_side(&bad, at_once, &face_of, &crate::observe::Quiet);
+            assert!(matches!(r, Err(Error::Config(ref m)) if m.contains("-1 kPa")));
+        }
+    }
+}
