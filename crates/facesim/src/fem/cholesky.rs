@@ -54,10 +54,10 @@ impl Pattern {
         let nd = match ordering {
             Ordering::Amd => None,
             Ordering::NestedDissection => super::ordering::nested_dissection(lower),
-            Ordering::Nodes(order) => match order.dofs(dofs) {
-                Some(o) if dofs.len() == lower.ncols() => Some(o),
-                _ => super::ordering::nested_dissection(lower),
-            },
+            Ordering::Nodes(order) if dofs.len() == lower.ncols() => order
+                .dofs(dofs)
+                .or_else(|| super::ordering::nested_dissection(lower)),
+            Ordering::Nodes(_) => super::ordering::nested_dissection(lower),
         };
         let order = match &nd {
             Some((fwd, inv)) => {

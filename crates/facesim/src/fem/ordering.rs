@@ -181,10 +181,10 @@ fn metis_node_nd(
 ///
 /// The graph is the nodes with a free DOF in the run's holds (`solved`): nodes held whole
 /// (the bone) would count in METIS's balance and separators and then drop out of every factor
-/// (with them the real CT's factor grew and its solve took longer). A sample's holds differ
-/// little: a node held there but not here drops out (a nested-dissection ordering stays one
-/// when vertices are removed), and one freed there (tissue lifted off the bone) goes last, as
-/// a separator would.
+/// (with them the real CT's factor grew and its solve took longer). Other holds on the mesh
+/// differ little: a node they hold whole drops out (a nested-dissection ordering stays one
+/// when vertices are removed), and one they free that the run held (tissue lifted off the
+/// bone) goes last, as a separator would.
 pub struct NodeOrder {
     /// Per node, its place in the ordering; u32::MAX for a node outside the graph.
     rank: Vec<u32>,
