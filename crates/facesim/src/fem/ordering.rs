@@ -287,7 +287,7 @@ impl NodeOrder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::fem::cholesky::{Ordering, Pattern};
+    use crate::fem::cholesky::{MeshAnalyses, Ordering, Pattern};
     use faer::sparse::{SparseColMat, Triplet};
 
     /// The lower pattern of a 3-DOF-per-node matrix on an m³ grid of nodes coupled to their 26
@@ -387,7 +387,8 @@ mod tests {
 
     /// The mesh's node ordering serves holds other than the ones it was made for: the DOFs of
     /// a node held there drop out, those of a node freed since come last, every free DOF once;
-    /// and its factor fills about as little as the free DOFs' own nested dissection.
+    /// its factor fills about as little as the free DOFs' own nested dissection; and a pattern
+    /// analysed in it once is not analysed again.
     #[test]
     fn a_node_ordering_serves_other_holds_and_fills_as_little() {
         let m = 14;
@@ -431,7 +432,29 @@ mod tests {
         }
         let a = SparseColMat::try_new_from_triplets(free.len(), free.len(), &t).unwrap();
         let own = Pattern::analyse_with(a.symbolic(), Ordering::NestedDissection, &[]).unwrap();
-        let shared = Pattern::analyse_with(a.symbolic(), Ordering::Nodes(&order), &free).unwrap();
+        let mesh = MeshAnalyses::new(order);
+        let shared = Pattern::analyse_with(a.symbolic(), Ordering::Nodes(&mesh), &free).unwrap();
+        // The same pattern again is the same analysis, not a new one; another pattern (one DOF
+        // fewer) is its own.
+        let again = Pattern::analyse_with(a.symbolic(), Ordering::Nodes(&mesh), &free).unwrap();
+        assert!(again.is(&shared));
+        let fewer = SparseColMat::try_new_from_triplets(
+            free.len() - 1,
+            free.len() - 1,
+            &t.iter()
+                .filter(|e| e.row < free.len() - 1)
+                .copied()
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+        let other = Pattern::analyse_with(
+            fewer.symbolic(),
+            Ordering::Nodes(&mesh),
+            &free[..free.len() - 1],
+        )
+        .unwrap();
+        assert!(!other.is(&shared));
+        assert!(other.factor_nnz() < shared.factor_nnz());
         let amd = Pattern::analyse_with(a.symbolic(), Ordering::Amd, &[]).unwrap();
         let (own, shared, amd) = (own.factor_nnz(), shared.factor_nnz(), amd.factor_nnz());
         assert!(

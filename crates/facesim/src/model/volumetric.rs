@@ -8,7 +8,7 @@ use super::predicted::Predicted;
 use crate::case::{Case, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
-use crate::fem::cholesky::Ordering;
+use crate::fem::cholesky::{MeshAnalyses, Ordering};
 use crate::fem::ordering::NodeOrder;
 use crate::mesh::Mesh;
 use crate::pipeline::stage::Stage;
@@ -70,9 +70,10 @@ pub struct Reuse {
     lifted: Vec<usize>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
-    /// The linear mesh's node ordering for its factors (`fem::ordering::NodeOrder`), made once
-    /// by the run; None for the 10-node element (its own nodes) or a mesh METIS could not order.
-    order: Option<NodeOrder>,
+    /// The linear mesh's node ordering and symbolic analyses for its factors
+    /// (`fem::cholesky::MeshAnalyses`), made by the run; None for the 10-node element (its own
+    /// nodes) or a mesh METIS could not order.
+    order: Option<MeshAnalyses>,
     /// Nonzeros of the run's factor (0 when it kept none): whether a re-solve's factorisation
     /// runs on one core (`Volumetric::solves_at_once`).
     factor_nonzeros: usize,
@@ -916,7 +917,7 @@ pub fn predict(
                 None => {
                     let solved: Vec<bool> =
                         hold.iter().map(|h| !matches!(h, Hold::Fixed(_))).collect();
-                    NodeOrder::of_tets(&solved, &mesh.tets)
+                    NodeOrder::of_tets(&solved, &mesh.tets).map(MeshAnalyses::new)
                 }
                 Some(_) => None,
             };
@@ -1186,9 +1187,9 @@ pub fn predict(
     )))
 }
 
-/// The ordering of a factor of the linear mesh: its node ordering when made, else its free
-/// DOFs' own.
-fn ordering(order: &Option<NodeOrder>) -> Ordering<'_> {
+/// The ordering of a factor of the linear mesh: its node ordering (and the analyses made in
+/// it) when made, else its free DOFs' own.
+fn ordering(order: &Option<MeshAnalyses>) -> Ordering<'_> {
     order
         .as_ref()
         .map_or(Ordering::NestedDissection, Ordering::Nodes)
