@@ -362,23 +362,7 @@ mod tests {
         for x in 0..m - 1 {
             for y in 0..m - 1 {
                 for z in 0..m - 1 {
-                    let c = |d: [usize; 3]| id(x + d[0], y + d[1], z + d[2]);
-                    for path in [
-                        [0, 1, 2],
-                        [0, 2, 1],
-                        [1, 0, 2],
-                        [1, 2, 0],
-                        [2, 0, 1],
-                        [2, 1, 0],
-                    ] {
-                        let mut d = [0usize; 3];
-                        let mut tet = [c(d); 4];
-                        for (k, axis) in path.iter().enumerate() {
-                            d[*axis] = 1;
-                            tet[k + 1] = c(d);
-                        }
-                        t.push(tet);
-                    }
+                    t.extend(crate::mesh::kuhn_cell([x, y, z], id));
                 }
             }
         }

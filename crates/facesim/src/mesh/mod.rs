@@ -70,6 +70,31 @@ pub(crate) fn sheet(n: usize, z: impl Fn(f64, f64) -> f64) -> Mesh {
     Mesh::new(v, t)
 }
 
+/// The six Kuhn tetrahedra of the grid cube whose lowest corner has indices `c`: the paths
+/// from that corner to the opposite one along the three axes in each order (`id` numbers the
+/// grid's nodes). Neighbouring cubes share their face diagonals, so the mesh conforms; the
+/// orientation is the caller's to fix where volumes must be positive. The tests' tetrahedra.
+#[cfg(test)]
+pub(crate) fn kuhn_cell(c: [usize; 3], id: impl Fn(usize, usize, usize) -> u32) -> [[u32; 4]; 6] {
+    const PATHS: [[usize; 3]; 6] = [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+    ];
+    PATHS.map(|p| {
+        let mut at = c;
+        let mut t = [id(c[0], c[1], c[2]); 4];
+        for (s, axis) in p.iter().enumerate() {
+            at[*axis] += 1;
+            t[s + 1] = id(at[0], at[1], at[2]);
+        }
+        t
+    })
+}
+
 /// Two triangles over four points with fractional coordinates: the file-format tests' mesh.
 #[cfg(test)]
 pub(crate) fn two_triangles() -> Mesh {

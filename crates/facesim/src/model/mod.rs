@@ -83,6 +83,12 @@ pub fn predict(
     }
 }
 
+/// Full solves side by side when each factorisation runs on one core: one per core, at most 4
+/// (each holds its own factor).
+fn one_per_core() -> usize {
+    rayon::current_num_threads().clamp(1, 4)
+}
+
 impl Prediction {
     /// The face (face_post's vertex order) predicted with `case`'s tissue parameters (moduli,
     /// Poisson ratios, sliding; the C1 spring constants) on what this prediction built: the
@@ -277,7 +283,7 @@ impl Prediction {
     pub(crate) fn solves_at_once(&self) -> usize {
         match &self.solved {
             Solved::Tet(Some(v)) => v.solves_at_once(),
-            _ => rayon::current_num_threads().clamp(1, 4),
+            _ => one_per_core(),
         }
     }
 

@@ -105,7 +105,7 @@ impl Volumetric {
         if self.reuse.factor_nonzeros >= crate::fem::cholesky::PARALLEL_FACTOR_NNZ {
             1
         } else {
-            rayon::current_num_threads().clamp(1, 4)
+            super::one_per_core()
         }
     }
 

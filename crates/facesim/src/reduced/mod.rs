@@ -220,24 +220,10 @@ mod tests {
         }
         let mut tets = Vec::new();
         let mut slot = Vec::new();
-        const PATHS: [[usize; 3]; 6] = [
-            [0, 1, 2],
-            [0, 2, 1],
-            [1, 0, 2],
-            [1, 2, 0],
-            [2, 0, 1],
-            [2, 1, 0],
-        ];
         for k in 0..n {
             for j in 0..n {
                 for i in 0..n {
-                    for p in PATHS {
-                        let mut c = [i, j, k];
-                        let mut t = [id(c[0], c[1], c[2]); 4];
-                        for (s, axis) in p.iter().enumerate() {
-                            c[*axis] += 1;
-                            t[s + 1] = id(c[0], c[1], c[2]);
-                        }
+                    for mut t in crate::mesh::kuhn_cell([i, j, k], id) {
                         let x = t.map(|v| nodes[v as usize]);
                         if crate::tet::gradients(x).is_none() {
                             t.swap(2, 3);

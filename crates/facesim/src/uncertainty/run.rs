@@ -258,24 +258,27 @@ pub fn sample(
     let regions = regions(analysis, skin);
     // The distinct solves the draws need (a draw that changes nothing the model reads reuses
     // the nominal face or an earlier draw's), in draw order.
+    // Per draw, which of them answers it (None: the nominal face).
     let mut wanted: Vec<(Vec<u64>, Case)> = Vec::new();
+    let mut answer: Vec<Option<usize>> = Vec::with_capacity(draws.len());
     for d in &draws {
         let c = d.apply(case);
         let key = solve_key(&c, sliding_matters);
-        if run.moves && key != nominal_key && !wanted.iter().any(|(k, _)| *k == key) {
+        answer.push(if !run.moves || key == nominal_key {
+            None
+        } else if let Some(k) = wanted.iter().position(|(w, _)| *w == key) {
+            Some(k)
+        } else {
             wanted.push((key, c));
-        }
+            Some(wanted.len() - 1)
+        });
     }
     let (solved, solve_s) = solve_side_by_side(&wanted, run.solves_at_once, resolve, obs)?;
     let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
     let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
     let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
-    for d in &draws {
-        let key = solve_key(&d.apply(case), sliding_matters);
-        let post: &[[f64; 3]] = match wanted.iter().position(|(k, _)| *k == key) {
-            Some(k) if run.moves => &solved[k],
-            _ => nominal,
-        };
+    for a in &answer {
+        let post: &[[f64; 3]] = a.map_or(nominal, |k| &solved[k]);
         // As outputs::displacement and report.json: |face_pre − face_post| per vertex.
         let mag: Vec<f64> = skin
             .vertices
