@@ -193,6 +193,17 @@ impl Pattern {
 /// stays sequential as measured in docs/fem.md).
 pub(crate) const PARALLEL_FACTOR_NNZ: usize = 50_000_000;
 
+/// How many factorisations of `nnz` nonzeros to run side by side (full re-solves, the
+/// uncertainty samples): a factor below `PARALLEL_FACTOR_NNZ` is factored on one core, so one
+/// per core, at most 4 (each holds its own factor); a larger one already uses every core.
+pub(crate) fn factorisations_at_once(nnz: usize) -> usize {
+    if nnz >= PARALLEL_FACTOR_NNZ {
+        1
+    } else {
+        rayon::current_num_threads().clamp(1, 4)
+    }
+}
+
 fn factor_par(nnz: usize) -> Par {
     if nnz >= PARALLEL_FACTOR_NNZ {
         Par::rayon(0)

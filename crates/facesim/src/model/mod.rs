@@ -83,12 +83,6 @@ pub fn predict(
     }
 }
 
-/// Full solves side by side when each factorisation runs on one core: one per core, at most 4
-/// (each holds its own factor).
-fn one_per_core() -> usize {
-    rayon::current_num_threads().clamp(1, 4)
-}
-
 impl Prediction {
     /// The face (face_post's vertex order) predicted with `case`'s tissue parameters (moduli,
     /// Poisson ratios, sliding; the C1 spring constants) on what this prediction built: the
@@ -278,12 +272,12 @@ impl Prediction {
     }
 
     /// How many full re-solves (`resolve`) to run side by side (the uncertainty samples): the
-    /// tet model's says `Volumetric::solves_at_once`; the C1 models' sparse factors are
-    /// sequential, one per core.
+    /// tet model's says `Volumetric::solves_at_once`; the C1 models' sparse factors are below
+    /// the parallel size, so one per core.
     pub(crate) fn solves_at_once(&self) -> usize {
         match &self.solved {
             Solved::Tet(Some(v)) => v.solves_at_once(),
-            _ => one_per_core(),
+            _ => crate::fem::cholesky::factorisations_at_once(0),
         }
     }
 

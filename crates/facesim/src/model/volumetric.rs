@@ -97,16 +97,11 @@ impl Reuse {
 }
 
 impl Volumetric {
-    /// How many re-solves (`resolve`) to run side by side: a factorisation below
-    /// `fem::cholesky`'s parallel size runs on one core (the real CT's: 8 samples in 6.4 s
-    /// two at a time, 12.0 s one at a time), so up to one per core (at most 4, each holding
-    /// its factor); a larger one already uses every core.
+    /// How many re-solves (`resolve`) to run side by side (`fem::cholesky::
+    /// factorisations_at_once` of the run's factor; the real CT's: 8 samples in 6.4 s two at a
+    /// time, 12.0 s one at a time).
     pub(crate) fn solves_at_once(&self) -> usize {
-        if self.reuse.factor_nonzeros >= crate::fem::cholesky::PARALLEL_FACTOR_NNZ {
-            1
-        } else {
-            super::one_per_core()
-        }
+        crate::fem::cholesky::factorisations_at_once(self.reuse.factor_nonzeros)
     }
 
     /// The solved nodes (corners, then midpoints when quadratic).
