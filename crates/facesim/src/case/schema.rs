@@ -282,6 +282,11 @@ pub struct Tet {
     /// fat, an effective modulus): 0, the default, leaves the nose to its tissues. The region is
     /// found from the pre-operative landmarks (`tet::nose`; docs/validation.md).
     pub nose_youngs_kpa: f64,
+    /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
+    /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
+    /// docs/validation.md). Default false; needs `sliding` and `release_cuts`.
+    #[serde(default)]
+    pub degloved_maxilla: bool,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,

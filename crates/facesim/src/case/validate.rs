@@ -98,6 +98,12 @@ impl Case {
                 t.nose_youngs_kpa
             ));
         }
+        if t.degloved_maxilla && !(t.sliding && t.release_cuts) {
+            return bad(
+                "[tet] degloved_maxilla rests the raised tissue on its bone, which needs sliding = true and release_cuts = true"
+                    .into(),
+            );
+        }
         if t.material == TetMaterial::NeoHookean && t.element == TetElement::Quadratic {
             return bad(
                 "[tet] material \"neo-hookean\" runs on element \"linear\" (no nonlinear 10-node tetrahedron yet)"

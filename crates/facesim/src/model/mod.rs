@@ -10,6 +10,7 @@
 //! this module branches on the model.
 
 pub mod c1;
+mod degloved;
 pub mod discretisation;
 mod nose;
 pub mod predicted;

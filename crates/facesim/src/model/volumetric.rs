@@ -15,7 +15,7 @@ use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
 use crate::tet::conditions::{
-    Bone, Holds, Mucosa, contact, follow_bone, hold_floating_pieces, holds, materials,
+    Bone, Holds, Mucosa, covered_bone, follow_bone, hold_floating_pieces, holds, materials,
     midpoint_kinds, mucosa, on_face, release_at_cuts,
 };
 use crate::tet::embed::SkinEmbedding;
@@ -455,6 +455,19 @@ pub struct TetReport {
     /// Tetrahedra of the external nose given `[tet] nose_youngs_kpa` (0 without it).
     #[serde(default)]
     pub nose_elements: usize,
+    /// `[tet] degloved_maxilla`: bone nodes of the raised region (sliding, one-sided), those
+    /// lifted off where the bone pulled them, and the deepest a lifted node lies inside its bone's
+    /// move when the rounds end (mm; 0 when every lifted node is clear of it).
+    #[serde(default)]
+    pub degloved_nodes: usize,
+    #[serde(default)]
+    pub lifted_in_tension: usize,
+    #[serde(default)]
+    pub lifted_penetration_mm: f64,
+    /// Whether the one-sided rounds settled: every raised node still on its bone pushed by it,
+    /// every lifted one clear of it (false: a warning says how far from it they ended).
+    #[serde(default)]
+    pub degloved_settled: bool,
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
@@ -685,6 +698,14 @@ fn torn_trace(mut material: Vec<TissueElastic>, torn: &[bool]) -> Vec<TissueElas
 
 /// Rounds of freeing the bone and sliding nodes of inverted elements and solving again.
 const RELEASE_ROUNDS: usize = 6;
+/// Rounds of the degloved maxilla's one-sided contact (`model::degloved`), and how far (mm) a
+/// lifted node may lie inside its bone's move before it rests on the bone again (the solve's
+/// round-off is far below; a tenth of a voxel is far above it).
+const ONE_SIDED_ROUNDS: usize = 8;
+/// The most components a one-sided round frees on the factor's border (`Constrained::
+/// free_nodes`) rather than by factoring again.
+const BORDER_MAX_DOFS: usize = 150;
+const PENETRATION_MM: f64 = 0.01;
 
 /// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
 const TEAR_ROUNDS: usize = 8;
@@ -801,7 +822,7 @@ pub fn predict(
         t.mucosa_gap_mm,
     );
     // Lip and cheek on the teeth (bone-kind nodes; the mucosa above is skin-kind): one list.
-    let contact = contact(
+    let covered = covered_bone(
         &mesh.nodes,
         &mesh.tets,
         &mesh.kind,
@@ -810,7 +831,24 @@ pub fn predict(
         &scene.seg,
         &|p| !crate::pipeline::model::rigid_mask(case, &[p])[0],
     );
-    let contact_nodes = contact.iter().filter(|m| m.is_some()).count();
+    // With `[tet] degloved_maxilla`, the bone a Le Fort I approach raises slides too, and (with
+    // the teeth it covers) rests on its bone one-sidedly: the one-sided rounds below.
+    let raised = if t.degloved_maxilla && t.sliding && t.release_cuts {
+        super::degloved::raised(
+            scene.landmarks_pre(skin, Path::new("case.toml"))?,
+            &mesh.nodes,
+            &covered,
+        )?
+    } else {
+        vec![false; mesh.nodes.len()]
+    };
+    let contact: Vec<Option<Mucosa>> = covered
+        .iter()
+        .zip(&raised)
+        .map(|(c, r)| c.filter(|c| c.tooth || *r).map(|c| c.mucosa))
+        .collect();
+    let contact_nodes = covered.iter().flatten().filter(|c| c.tooth).count();
+    let degloved_nodes = raised.iter().filter(|r| **r).count();
     let mucosa_nodes = mucosa.iter().filter(|m| m.is_some()).count();
     let mucosa: Vec<Option<Mucosa>> = mucosa
         .into_iter()
@@ -902,6 +940,8 @@ pub fn predict(
     // The linear models keep their factor for the plan basis (no second factorisation).
     let (mut constraint, mut hold, mut linear_hold) = (constraint, hold, linear_hold);
     let mut lifted: Vec<usize> = Vec::new();
+    let (mut lifted_in_tension, mut lifted_penetration_mm) = (0, 0.0);
+    let mut degloved_settled = true;
     let mut torn = vec![false; mesh.tets.len()];
     let mut fallback = None;
     let (displacement, newton, factor, linear_start, order) =
@@ -921,6 +961,81 @@ pub fn predict(
                 let f = Loads::none().nodal_vector(nodes.len())?;
                 let mut c = Constrained::ordered(&k, &hold, nodes.len(), ordering(&order))?;
                 let mut u = c.solve(&[(&hold, &f)])?.remove(0);
+                // The degloved maxilla (`model::degloved`): its sliding nodes rest on the bone one
+                // way only. Where the hold's force n · (K u) points into the bone (the bone pulls
+                // the tissue after it) the node lifts off; a lifted node the bone would pass into
+                // (n · u below the bone's normal move) rests on it again. Rounds until the set
+                // settles: freeing borders the factor, resting again factors anew.
+                let one_sided: Vec<(usize, Hold, LinearHold)> = (0..mesh.nodes.len())
+                    .filter(|n| raised[*n] && constraint[*n] == SLIDING)
+                    .map(|n| (n, hold[n], linear_hold[n]))
+                    .collect();
+                degloved_settled = one_sided.is_empty();
+                let rounds = if one_sided.is_empty() { 0 } else { ONE_SIDED_ROUNDS + 1 };
+                for round in 0..rounds {
+                    let ku = crate::fem::sparse::multiply(&k, u.as_flattened());
+                    let mut freed = Vec::new();
+                    let mut rests = Vec::new();
+                    for &(n, rest, _) in &one_sided {
+                        let Hold::Slide { normal, value } = rest else {
+                            continue;
+                        };
+                        let nn = crate::vec3::scale(normal, 1.0 / crate::vec3::norm(normal));
+                        match hold[n] {
+                            Hold::Slide { .. } => {
+                                let force = crate::vec3::dot(nn, [0, 1, 2].map(|c| ku[3 * n + c]));
+                                if force < 0.0 {
+                                    freed.push(n);
+                                }
+                            }
+                            _ => {
+                                if crate::vec3::dot(nn, u[n]) - value < -PENETRATION_MM {
+                                    rests.push(n);
+                                }
+                            }
+                        }
+                    }
+                    if freed.is_empty() && rests.is_empty() {
+                        degloved_settled = true;
+                        break;
+                    }
+                    if round == ONE_SIDED_ROUNDS {
+                        break;
+                    }
+                    for &n in &freed {
+                        constraint[n] = FREE;
+                        hold[n] = Hold::Free;
+                        linear_hold[n] = LinearHold::Free;
+                    }
+                    lifted.extend(&freed);
+                    // Bordering costs a solve per freed component; past a few hundred a new
+                    // factorisation is cheaper (the real CT's first round frees ~300 nodes).
+                    if rests.is_empty() && 3 * freed.len() <= BORDER_MAX_DOFS {
+                        c.free_nodes(&freed)?;
+                    } else {
+                        for &(n, rest, linear_rest) in &one_sided {
+                            if rests.contains(&n) {
+                                constraint[n] = SLIDING;
+                                hold[n] = rest;
+                                linear_hold[n] = linear_rest;
+                            }
+                        }
+                        lifted.retain(|n| !rests.contains(n));
+                        c = Constrained::ordered(&k, &hold, nodes.len(), ordering(&order))?;
+                    }
+                    u = c.solve(&[(&hold, &f)])?.remove(0);
+                }
+                lifted_in_tension = lifted.len();
+                lifted_penetration_mm = one_sided
+                    .iter()
+                    .filter(|(n, _, _)| hold[*n] == Hold::Free)
+                    .filter_map(|&(n, rest, _)| match rest {
+                        Hold::Slide { normal, value } => Some(
+                            value - crate::vec3::dot(normal, u[n]) / crate::vec3::norm(normal),
+                        ),
+                        _ => None,
+                    })
+                    .fold(0.0, f64::max);
                 // Where the solution turns an element next to bone inside out, the bone would
                 // drag that tissue through itself or through the bone of another piece (the
                 // tissue behind an advanced segment, or between it and the skull it slides
@@ -1045,6 +1160,11 @@ pub fn predict(
     if let Some(w) = fallback {
         rec.warn(w);
     }
+    if !degloved_settled {
+        rec.warn(format!(
+            "[tet] degloved_maxilla: the raised tissue's one-sided contact did not settle in {ONE_SIDED_ROUNDS} rounds ({lifted_in_tension} nodes lifted off, the deepest {lifted_penetration_mm:.3} mm inside its bone's move)"
+        ));
+    }
     let inverted_tets = match &quadratic {
         Some(q) => q.inverted_after(&displacement),
         None => linear.inverted_after(&displacement),
@@ -1133,7 +1253,7 @@ pub fn predict(
         sliding_nodes: counted(&constraint, SLIDING),
         contact_nodes,
         contact_sliding_nodes: (0..mesh.nodes.len())
-            .filter(|n| mesh.kind[*n] == NodeKind::Bone && mucosa[*n].is_some())
+            .filter(|n| covered[*n].is_some_and(|c| c.tooth))
             .filter(|n| constraint[*n] == SLIDING)
             .count(),
         moved_nodes: counted(&constraint, MOVED),
@@ -1146,6 +1266,10 @@ pub fn predict(
         torn_elements,
         torn_volume_mm3,
         nose_elements,
+        degloved_nodes,
+        lifted_in_tension,
+        lifted_penetration_mm,
+        degloved_settled,
         floating_pieces: pieces,
         newton,
         face_vertices_unreached: embedding.unreached(),

@@ -251,7 +251,11 @@ pub(crate) const LIP_REACH_MM: f64 = 35.0;
 /// occlusal ones (tongue, the other jaw). Everything here is the anatomy at rest, not
 /// the plan, so the set keeps the model linear in the plan. The rest of the bone (gingiva and
 /// periosteum on the alveolar process and elsewhere) stays attached.
-pub(crate) fn contact(
+///
+/// Returns every bone node that lip or cheek covers (criterion (2)), each with whether it lies on
+/// a tooth (criterion (1)): the contact nodes are those on a tooth; `[tet] degloved_maxilla`
+/// takes the others over the anterior maxilla too (`model::degloved`).
+pub(crate) fn covered_bone(
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
     kind: &[NodeKind],
@@ -259,7 +263,7 @@ pub(crate) fn contact(
     vol: &Volume,
     seg: &crate::segment::Segmentation,
     face: &(dyn Fn([f64; 3]) -> bool + Sync),
-) -> Vec<Option<Mucosa>> {
+) -> Vec<Option<Covered>> {
     use rayon::prelude::*;
     let mut inward = vec![[0.0; 3]; nodes.len()];
     for q in tets {
@@ -322,7 +326,7 @@ pub(crate) fn contact(
         .zip(&inward)
         .map(|((p, r), w)| {
             let (hu, out) = (*r)?;
-            if !(hu >= TOOTH_HU && out) {
+            if !out {
                 return None;
             }
             let n = w.map(|c| c / crate::vec3::norm(*w));
@@ -337,15 +341,33 @@ pub(crate) fn contact(
             } else {
                 n
             };
-            Some(Mucosa {
-                normal,
-                node_move,
-                rest_normal: n,
-                at: *p,
-                segment: segment_at(bone.osteotomy, *p).0,
+            Some(Covered {
+                mucosa: Mucosa {
+                    normal,
+                    node_move,
+                    rest_normal: n,
+                    at: *p,
+                    segment: segment_at(bone.osteotomy, *p).0,
+                },
+                tooth: hu >= TOOTH_HU,
             })
         })
         .collect()
+}
+
+/// A bone node that lip or cheek covers ([`covered_bone`]): how it slides, and whether it lies
+/// on a tooth (a contact node).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Covered {
+    pub mucosa: Mucosa,
+    pub tooth: bool,
+}
+
+impl Covered {
+    /// The node's segment (None: bone left in place).
+    pub(crate) fn segment(&self) -> Option<usize> {
+        self.mucosa.segment
+    }
 }
 
 /// The role of each midpoint of a 10-node mesh: a midpoint on a boundary face whose corners
