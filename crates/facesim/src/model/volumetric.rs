@@ -702,10 +702,10 @@ const RELEASE_ROUNDS: usize = 6;
 /// lifted node may lie inside its bone's move before it rests on the bone again (the solve's
 /// round-off is far below; a tenth of a voxel is far above it).
 const ONE_SIDED_ROUNDS: usize = 8;
+const PENETRATION_MM: f64 = 0.01;
 /// The most components a one-sided round frees on the factor's border (`Constrained::
 /// free_nodes`) rather than by factoring again.
 const BORDER_MAX_DOFS: usize = 150;
-const PENETRATION_MM: f64 = 0.01;
 
 /// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
 const TEAR_ROUNDS: usize = 8;
@@ -965,7 +965,8 @@ pub fn predict(
                 // way only. Where the hold's force n · (K u) points into the bone (the bone pulls
                 // the tissue after it) the node lifts off; a lifted node the bone would pass into
                 // (n · u below the bone's normal move) rests on it again. Rounds until the set
-                // settles: freeing borders the factor, resting again factors anew.
+                // settles: freeing a few borders the factor, freeing many or resting again
+                // factors anew.
                 let one_sided: Vec<(usize, Hold, LinearHold)> = (0..mesh.nodes.len())
                     .filter(|n| raised[*n] && constraint[*n] == SLIDING)
                     .map(|n| (n, hold[n], linear_hold[n]))
