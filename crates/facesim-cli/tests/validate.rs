@@ -289,7 +289,7 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
 /// no longer odd in the move (bonded, a setback's ratios are the advance's to round-off): the
 /// setback leaves subnasale and the upper lip behind, subnasale inside the range the clinic
 /// measures for a setback (docs/validation.md's table). A BSSO moves no maxilla: nothing is
-/// raised, nothing lifts off.
+/// raised, nothing lifts off. Without sliding or on the 10-node element the option is refused.
 #[test]
 fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_behind() {
     common::real_ct();
@@ -375,6 +375,26 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     .unwrap();
     assert_eq!(run["tet"]["degloved_nodes"], 0, "{}", run["tet"]);
     assert_eq!(run["tet"]["lifted_in_tension"], 0, "{}", run["tet"]);
+
+    // Without sliding, or on the 10-node element, the option is refused in one line.
+    let jaws = root().join("data-samples/jaws");
+    for (set, problem) in [
+        ("tet.sliding=false", "needs sliding = true"),
+        ("tet.element=\"quadratic\"", "runs on element \"linear\""),
+    ] {
+        let out = common::kept_dir("facesim-degloved-refused");
+        let r = facesim(&[
+            "run",
+            jaws.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            "tet.degloved_maxilla=true",
+            "--set",
+            set,
+        ]);
+        assert_clean_failure(&r, "case.toml", problem);
+    }
 }
 
 #[test]

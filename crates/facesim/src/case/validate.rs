@@ -104,6 +104,14 @@ impl Case {
                     .into(),
             );
         }
+        if t.degloved_maxilla && t.element == TetElement::Quadratic {
+            // The one-sided rounds free corner nodes; the 10-node element's midpoints on the bone
+            // would stay bonded between them.
+            return bad(
+                "[tet] degloved_maxilla runs on element \"linear\" (the 10-node element's midpoints on the bone would stay bonded)"
+                    .into(),
+            );
+        }
         if t.material == TetMaterial::NeoHookean && t.element == TetElement::Quadratic {
             return bad(
                 "[tet] material \"neo-hookean\" runs on element \"linear\" (no nonlinear 10-node tetrahedron yet)"
