@@ -7,7 +7,7 @@ mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use cli::{assert_clean_failure, facesim, read_csv};
+use cli::{CliResult, assert_clean_failure, facesim, read_csv};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -71,17 +71,28 @@ fn recompute(run: &Value, row: &HashMap<String, String>) -> f64 {
     (0..3).map(|k| (b[k] - a[k]) * t[k]).sum::<f64>() / t2
 }
 
-/// `facesim validate` of one coarse phantom (3 mm voxels) and one surgery, with `extra`
-/// arguments, into a kept directory named `dir`; the output directory, after a successful run.
-fn validate_one_phantom(dir: &str, surgery: &str, extra: &[&str]) -> PathBuf {
+/// `facesim validate --out DIR/v --samples data-samples ARGS` into a kept directory named `dir`;
+/// the output directory and what the command printed, after a successful run.
+fn validate_into(dir: &str, args: &[&str]) -> (PathBuf, CliResult) {
     let out = common::kept_dir(dir).join("v");
     let samples = root().join("data-samples");
-    let mut args = vec![
+    let mut all = vec![
         "validate",
         "--out",
         out.to_str().unwrap(),
         "--samples",
         samples.to_str().unwrap(),
+    ];
+    all.extend_from_slice(args);
+    let r = facesim(&all);
+    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    (out, r)
+}
+
+/// `facesim validate` of one coarse phantom (3 mm voxels) and one surgery, with `extra`
+/// arguments, into a kept directory named `dir`; the output directory, after a successful run.
+fn validate_one_phantom(dir: &str, surgery: &str, extra: &[&str]) -> PathBuf {
+    let mut args = vec![
         "--case",
         "phantom",
         "--phantoms",
@@ -92,9 +103,13 @@ fn validate_one_phantom(dir: &str, surgery: &str, extra: &[&str]) -> PathBuf {
         surgery,
     ];
     args.extend_from_slice(extra);
-    let r = facesim(&args);
-    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
-    out
+    validate_into(dir, &args).0
+}
+
+/// The report.json of one run of a validation in `out`.
+fn run_report(out: &Path, case: &str, surgery: &str) -> Value {
+    let path = out.join(format!("runs/{case}/{surgery}/report.json"));
+    serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
 }
 
 #[test]
@@ -109,10 +124,7 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
     }
     let rows = read_csv(&out.join("validation.csv"));
     let ranges = documented_ranges();
-    let run: Value = serde_json::from_str(
-        &std::fs::read_to_string(out.join("runs/phantom01/bsso-advance/report.json")).unwrap(),
-    )
-    .unwrap();
+    let run = run_report(&out, "phantom01", "bsso-advance");
     // The published BSSO advance rows: Li, B', Pog', Me'.
     assert_eq!(rows.len(), 4, "{rows:?}");
     let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
@@ -179,10 +191,7 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
 #[test]
 fn a_le_fort_advance_takes_in_the_whole_nose() {
     let out = validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]);
-    let run: Value = serde_json::from_str(
-        &std::fs::read_to_string(out.join("runs/phantom01/lefort-advance/report.json")).unwrap(),
-    )
-    .unwrap();
+    let run = run_report(&out, "phantom01", "lefort-advance");
     let tet = &run["tet"];
     let tip = vec3(&tet["region_grown_for_nose_tip"]).expect("the region did not grow");
     let prn = vec3(&run["landmarks"]["Prn"]["pre"]).unwrap();
@@ -235,23 +244,19 @@ fn a_le_fort_advance_takes_in_the_whole_nose() {
 fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range() {
     common::real_mandible_ct();
     common::real_ct();
-    let out = common::kept_dir("facesim-validate-headsq").join("v");
-    let r = facesim(&[
-        "validate",
-        "--out",
-        out.to_str().unwrap(),
-        "--samples",
-        root().join("data-samples").to_str().unwrap(),
-        "--case",
-        "real-mandible",
-        "--case",
-        "real",
-        "--phantoms",
-        "0",
-        "--surgery",
-        "bsso-advance",
-    ]);
-    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    let (out, r) = validate_into(
+        "facesim-validate-headsq",
+        &[
+            "--case",
+            "real-mandible",
+            "--case",
+            "real",
+            "--phantoms",
+            "0",
+            "--surgery",
+            "bsso-advance",
+        ],
+    );
     // ProMED 0051 has no mandible: the BSSO is skipped, and says why.
     assert!(
         r.stderr.contains("not run: real bsso-advance") && r.stderr.contains("no mandible"),
@@ -273,10 +278,7 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
     );
     assert_eq!(pog["inside"], "yes");
     // The move is the head's forward, not the scanner's: headsq's pitch turns it down.
-    let run: Value = serde_json::from_str(
-        &std::fs::read_to_string(out.join("runs/real-mandible/bsso-advance/report.json")).unwrap(),
-    )
-    .unwrap();
+    let run = run_report(&out, "real-mandible", "bsso-advance");
     let t = vec3(&run["parameters"]["osteotomy"][0]["translate"]).unwrap();
     assert!(t[2] < -1.0 && t[1] < -4.5, "{t:?}");
 }
@@ -293,30 +295,23 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
 #[test]
 fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_behind() {
     common::real_ct();
-    let out = common::kept_dir("facesim-validate-degloved").join("v");
-    let r = facesim(&[
-        "validate",
-        "--out",
-        out.to_str().unwrap(),
-        "--samples",
-        root().join("data-samples").to_str().unwrap(),
-        "--case",
-        "real",
-        "--phantoms",
-        "0",
-        "--surgery",
-        "lefort-advance",
-        "--surgery",
-        "lefort-setback",
-        "--set",
-        "tet.degloved_maxilla=true",
-    ]);
-    assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
+    let (out, _) = validate_into(
+        "facesim-validate-degloved",
+        &[
+            "--case",
+            "real",
+            "--phantoms",
+            "0",
+            "--surgery",
+            "lefort-advance",
+            "--surgery",
+            "lefort-setback",
+            "--set",
+            "tet.degloved_maxilla=true",
+        ],
+    );
     for surgery in ["lefort-advance", "lefort-setback"] {
-        let run: Value = serde_json::from_str(
-            &std::fs::read_to_string(out.join(format!("runs/real/{surgery}/report.json"))).unwrap(),
-        )
-        .unwrap();
+        let run = run_report(&out, "real", surgery);
         let t = &run["tet"];
         let count = |k: &str| t[k].as_u64().unwrap();
         println!(
@@ -369,10 +364,7 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
         "bsso-advance",
         &["--set", "tet.degloved_maxilla=true"],
     );
-    let run: Value = serde_json::from_str(
-        &std::fs::read_to_string(bsso.join("runs/phantom01/bsso-advance/report.json")).unwrap(),
-    )
-    .unwrap();
+    let run = run_report(&bsso, "phantom01", "bsso-advance");
     assert_eq!(run["tet"]["degloved_nodes"], 0, "{}", run["tet"]);
     assert_eq!(run["tet"]["lifted_in_tension"], 0, "{}", run["tet"]);
 

@@ -707,6 +707,23 @@ const PENETRATION_MM: f64 = 0.01;
 /// free_nodes`) rather than by factoring again.
 const BORDER_MAX_DOFS: usize = 150;
 
+/// A node of the degloved maxilla on its bone (`predict`'s one-sided rounds): its sliding hold
+/// n · u = value with n the unit normal into the tissue, and its holds to rest it again.
+struct OneSided {
+    node: usize,
+    normal: [f64; 3],
+    value: f64,
+    rest: (Hold, LinearHold),
+}
+
+impl OneSided {
+    /// How far the node lies off its bone along the normal at displacement `u` (mm; negative:
+    /// inside the bone's move).
+    fn gap(&self, u: [f64; 3]) -> f64 {
+        crate::vec3::dot(self.normal, u) - self.value
+    }
+}
+
 /// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
 const TEAR_ROUNDS: usize = 8;
 
@@ -967,9 +984,17 @@ pub fn predict(
                 // (n · u below the bone's normal move) rests on it again. Rounds until the set
                 // settles: freeing a few borders the factor, freeing many or resting again
                 // factors anew.
-                let one_sided: Vec<(usize, Hold, LinearHold)> = (0..mesh.nodes.len())
+                let one_sided: Vec<OneSided> = (0..mesh.nodes.len())
                     .filter(|n| raised[*n] && constraint[*n] == SLIDING)
-                    .map(|n| (n, hold[n], linear_hold[n]))
+                    .filter_map(|n| match hold[n] {
+                        Hold::Slide { normal, value } => Some(OneSided {
+                            node: n,
+                            normal: crate::vec3::scale(normal, 1.0 / crate::vec3::norm(normal)),
+                            value,
+                            rest: (hold[n], linear_hold[n]),
+                        }),
+                        _ => None,
+                    })
                     .collect();
                 degloved_settled = one_sided.is_empty();
                 let rounds = if one_sided.is_empty() { 0 } else { ONE_SIDED_ROUNDS + 1 };
@@ -977,23 +1002,15 @@ pub fn predict(
                     let ku = crate::fem::sparse::multiply(&k, u.as_flattened());
                     let mut freed = Vec::new();
                     let mut rests = Vec::new();
-                    for &(n, rest, _) in &one_sided {
-                        let Hold::Slide { normal, value } = rest else {
-                            continue;
-                        };
-                        let nn = crate::vec3::scale(normal, 1.0 / crate::vec3::norm(normal));
-                        match hold[n] {
-                            Hold::Slide { .. } => {
-                                let force = crate::vec3::dot(nn, [0, 1, 2].map(|c| ku[3 * n + c]));
-                                if force < 0.0 {
-                                    freed.push(n);
-                                }
+                    for o in &one_sided {
+                        let n = o.node;
+                        if hold[n] == Hold::Free {
+                            if o.gap(u[n]) < -PENETRATION_MM {
+                                rests.push(n);
                             }
-                            _ => {
-                                if crate::vec3::dot(nn, u[n]) - value < -PENETRATION_MM {
-                                    rests.push(n);
-                                }
-                            }
+                        } else if crate::vec3::dot(o.normal, [0, 1, 2].map(|c| ku[3 * n + c])) < 0.0
+                        {
+                            freed.push(n);
                         }
                     }
                     if freed.is_empty() && rests.is_empty() {
@@ -1014,12 +1031,9 @@ pub fn predict(
                     if rests.is_empty() && 3 * freed.len() <= BORDER_MAX_DOFS {
                         c.free_nodes(&freed)?;
                     } else {
-                        for &(n, rest, linear_rest) in &one_sided {
-                            if rests.contains(&n) {
-                                constraint[n] = SLIDING;
-                                hold[n] = rest;
-                                linear_hold[n] = linear_rest;
-                            }
+                        for o in one_sided.iter().filter(|o| rests.contains(&o.node)) {
+                            constraint[o.node] = SLIDING;
+                            (hold[o.node], linear_hold[o.node]) = o.rest;
                         }
                         lifted.retain(|n| !rests.contains(n));
                         c = Constrained::ordered(&k, &hold, nodes.len(), ordering(&order))?;
@@ -1029,13 +1043,8 @@ pub fn predict(
                 lifted_in_tension = lifted.len();
                 lifted_penetration_mm = one_sided
                     .iter()
-                    .filter(|(n, _, _)| hold[*n] == Hold::Free)
-                    .filter_map(|&(n, rest, _)| match rest {
-                        Hold::Slide { normal, value } => Some(
-                            value - crate::vec3::dot(normal, u[n]) / crate::vec3::norm(normal),
-                        ),
-                        _ => None,
-                    })
+                    .filter(|o| hold[o.node] == Hold::Free)
+                    .map(|o| -o.gap(u[o.node]))
                     .fold(0.0, f64::max);
                 // Where the solution turns an element next to bone inside out, the bone would
                 // drag that tissue through itself or through the bone of another piece (the
