@@ -334,15 +334,48 @@ pub struct System {
 /// with A the factored free block, B = K[free, added] and C = K[added, added], the added
 /// unknowns y solve the Schur complement S y = g − Bᵀ A⁻¹ b (S = C − Bᵀ A⁻¹ B, dense k × k),
 /// then x = A⁻¹ b − A⁻¹ B y. k triangular solves once, instead of a second factorisation.
+/// A bordered DOF may be held again at a prescribed value (`System::hold_border`): its y is
+/// then given and only S's block on the others is factored (a contact node resting again).
 struct Border {
+    /// The bordered DOFs, in the order bordered (W's and S's columns).
     added: Vec<usize>,
+    /// Of each, whether it is held again at its prescribed value.
+    held: Vec<bool>,
     /// B: (free index, border index, value).
     b: Vec<(usize, usize, f64)>,
     /// K between an added DOF and a DOF still fixed: (border index, global DOF, value).
     coupling: Vec<(usize, usize, f64)>,
-    /// A⁻¹ B (free × k).
-    w: faer::Mat<f64>,
-    s: nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>,
+    /// W = A⁻¹ B (free × k), in the blocks of columns bordered together (a round's new
+    /// columns are solved and stored without copying the earlier ones).
+    w: Vec<faer::Mat<f64>>,
+    /// S over every bordered DOF.
+    schur: nalgebra::DMatrix<f64>,
+    /// The border indices not held, and S's Cholesky factor on them (None: all held).
+    unknown: Vec<usize>,
+    s: Option<nalgebra::linalg::Cholesky<f64, nalgebra::Dyn>>,
+}
+
+impl Border {
+    /// Factor S on the bordered DOFs that are not held.
+    fn factor_unknown(&mut self) -> Result<()> {
+        self.unknown = (0..self.added.len()).filter(|e| !self.held[*e]).collect();
+        let u = &self.unknown;
+        self.s = if u.is_empty() {
+            None
+        } else {
+            let s = nalgebra::DMatrix::from_fn(u.len(), u.len(), |i, j| self.schur[(u[i], u[j])]);
+            Some(nalgebra::linalg::Cholesky::new(s).ok_or_else(|| {
+                Error::numerical(
+                    NumericalKind::Singular,
+                    format!(
+                        "freeing {} held components leaves the system singular",
+                        u.len()
+                    ),
+                )
+            })?)
+        };
+        Ok(())
+    }
 }
 
 impl System {
@@ -406,60 +439,106 @@ impl System {
     }
 
     /// Free the fixed DOFs `dofs` (with those freed before) without refactoring: the system is
-    /// bordered (see [`Border`]); k = all DOFs freed so far costs k triangular solves.
+    /// bordered (see [`Border`]). Each DOF bordered for the first time costs one triangular
+    /// solve; one bordered before and held again since is an unknown again at no solve.
     pub fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
-        let mut added: Vec<usize> = self.border.take().map_or_else(Vec::new, |b| b.added);
-        added.extend(dofs.iter().filter(|g| self.free_index[**g] == usize::MAX));
-        added.sort_unstable();
-        added.dedup();
-        let k = added.len();
-        let mut pos = std::collections::HashMap::with_capacity(k);
+        let (mut added, mut held, mut w) = match self.border.take() {
+            Some(b) => (b.added, b.held, b.w),
+            None => (Vec::new(), Vec::new(), Vec::new()),
+        };
+        // Border index by global DOF (usize::MAX: not bordered); a lookup per K entry below.
+        let mut pos = vec![usize::MAX; self.n];
         for (i, g) in added.iter().enumerate() {
-            pos.insert(*g, i);
+            pos[*g] = i;
         }
+        let k0 = added.len();
+        for &g in dofs {
+            match pos[g] {
+                usize::MAX if self.free_index[g] == usize::MAX => {
+                    pos[g] = added.len();
+                    added.push(g);
+                    held.push(false);
+                }
+                usize::MAX => {}
+                e => held[e] = false,
+            }
+        }
+        let k = added.len();
         let mut c = nalgebra::DMatrix::<f64>::zeros(k, k);
         let (mut b, mut coupling) = (Vec::new(), Vec::new());
         let mut off = |e: usize, other: usize, v: f64| match self.free_index[other] {
             usize::MAX => coupling.push((e, other, v)),
             f => b.push((f, e, v)),
         };
+        const NO: usize = usize::MAX;
         for &(r, col, v) in &self.k {
-            match (pos.get(&r), pos.get(&col)) {
-                (Some(&a), Some(&d)) => {
+            match (pos[r], pos[col]) {
+                (NO, NO) => {}
+                (a, NO) => off(a, col, v),
+                (NO, d) => off(d, r, v),
+                (a, d) => {
                     c[(a, d)] += v;
                     if a != d {
                         c[(d, a)] += v;
                     }
                 }
-                (Some(&a), None) => off(a, col, v),
-                (None, Some(&d)) => off(d, r, v),
-                (None, None) => {}
             }
         }
-        let mut w = faer::Mat::<f64>::zeros(self.free.len(), k);
-        for &(f, e, v) in &b {
-            w[(f, e)] += v;
-        }
-        self.llt.solve_in_place(w.as_mut());
-        for &(f, e, v) in &b {
-            for d in 0..k {
-                c[(e, d)] -= v * w[(f, d)];
+        // Only the new columns of W are solved, a share of them on each core (the factor's
+        // own solve is sequential; fem/cholesky.rs says why).
+        if k > k0 {
+            let mut block = faer::Mat::<f64>::zeros(self.free.len(), k - k0);
+            for &(f, e, v) in &b {
+                if e >= k0 {
+                    block[(f, e - k0)] += v;
+                }
             }
+            let parts = rayon::current_num_threads().clamp(1, k - k0);
+            block
+                .as_mut()
+                .par_col_partition_mut(parts)
+                .for_each(|cols| self.llt.solve_in_place(cols));
+            w.push(block);
         }
-        let s = nalgebra::linalg::Cholesky::new(c).ok_or_else(|| {
-            Error::numerical(
-                NumericalKind::Singular,
-                format!("freeing {k} held components leaves the system singular"),
-            )
-        })?;
-        self.border = Some(Border {
+        let mut first = 0;
+        for block in &w {
+            for &(f, e, v) in &b {
+                for j in 0..block.ncols() {
+                    c[(e, first + j)] -= v * block[(f, j)];
+                }
+            }
+            first += block.ncols();
+        }
+        let mut border = Border {
             added,
+            held,
             b,
             coupling,
             w,
-            s,
-        });
+            schur: c,
+            unknown: Vec::new(),
+            s: None,
+        };
+        border.factor_unknown()?;
+        self.border = Some(border);
         Ok(())
+    }
+
+    /// Hold the bordered DOFs `dofs` again, at the values a solve prescribes for them, without
+    /// refactoring (a DOF that was never bordered is refused: it needs no hold).
+    pub fn hold_border(&mut self, dofs: &[usize]) -> Result<()> {
+        let Some(border) = self.border.as_mut() else {
+            return Err(Error::config(
+                "hold_border: no DOF has been freed by bordering",
+            ));
+        };
+        for g in dofs {
+            let e = border.added.iter().position(|a| a == g).ok_or_else(|| {
+                Error::config(format!("hold_border: DOF {g} was not freed by bordering"))
+            })?;
+            border.held[e] = true;
+        }
+        border.factor_unknown()
     }
 
     /// Nonzeros of the Cholesky factor L (for reports).
@@ -492,13 +571,21 @@ impl System {
     pub fn solve(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Vec<Vec<f64>> {
         let nf = self.free.len();
         let m = rhs.len();
-        // Freed DOFs are unknowns: no prescribed value of theirs enters the right-hand side.
+        // Freed DOFs are unknowns: no prescribed value of theirs enters the right-hand side
+        // (a bordered DOF held again enters through W, below).
         let mut prescribed = prescribed.to_vec();
-        if let Some(bd) = &self.border {
-            for p in &mut prescribed {
-                bd.added.iter().for_each(|g| p[*g] = 0.0);
-            }
-        }
+        let given: Vec<Vec<f64>> = match &self.border {
+            Some(bd) => prescribed
+                .iter_mut()
+                .map(|p| {
+                    bd.added
+                        .iter()
+                        .map(|g| std::mem::replace(&mut p[*g], 0.0))
+                        .collect()
+                })
+                .collect(),
+            None => Vec::new(),
+        };
         let mut b = faer::Mat::<f64>::zeros(nf, m);
         for c in 0..m {
             for (i, &g) in self.free.iter().enumerate() {
@@ -512,6 +599,7 @@ impl System {
         let mut x = b;
         if let Some(bd) = &self.border {
             let k = bd.added.len();
+            let mut ys = faer::Mat::<f64>::zeros(k, m);
             for c in 0..m {
                 let mut g =
                     nalgebra::DVector::<f64>::from_iterator(k, bd.added.iter().map(|a| rhs[c][*a]));
@@ -521,17 +609,39 @@ impl System {
                 for &(f, e, v) in &bd.b {
                     g[e] -= v * x[(f, c)];
                 }
-                let y = bd.s.solve(&g);
-                for f in 0..nf {
-                    let mut d = 0.0;
-                    for e in 0..k {
-                        d += bd.w[(f, e)] * y[e];
+                // Held DOFs take their given values; the others solve S_uu y_u = g_u − S_uh y_h.
+                let mut y = nalgebra::DVector::<f64>::zeros(k);
+                for e in 0..k {
+                    if bd.held[e] {
+                        y[e] = given[c][e];
                     }
-                    x[(f, c)] -= d;
+                }
+                if let Some(s) = &bd.s {
+                    let mut gu = nalgebra::DVector::<f64>::from_iterator(
+                        bd.unknown.len(),
+                        bd.unknown.iter().map(|e| g[*e]),
+                    );
+                    for (i, &e) in bd.unknown.iter().enumerate() {
+                        for d in (0..k).filter(|d| bd.held[*d]) {
+                            gu[i] -= bd.schur[(e, d)] * y[d];
+                        }
+                    }
+                    let yu = s.solve(&gu);
+                    for (i, &e) in bd.unknown.iter().enumerate() {
+                        y[e] = yu[i];
+                    }
                 }
                 for (e, a) in bd.added.iter().enumerate() {
+                    ys[(e, c)] = y[e];
                     prescribed[c][*a] = y[e];
                 }
+            }
+            // x −= W Y for every case at once (dense products, not k passes over x).
+            let mut first = 0;
+            for block in &bd.w {
+                let wy = block * ys.subrows(first, block.ncols());
+                x -= wy;
+                first += block.ncols();
             }
         }
         (0..m)
@@ -643,6 +753,60 @@ mod tests {
             assert_eq!((a.0, a.1), (b.0, b.1));
             assert_eq!(a.2.to_bits(), b.2.to_bits(), "entry {:?}", (a.0, a.1));
         }
+    }
+
+    /// Bordered DOFs held again (at their prescribed values), freed again and joined by new
+    /// ones give what a factorisation with that set fixed gives: the contact rounds' sequence.
+    #[test]
+    fn bordered_dofs_held_again_equal_factoring_with_them_fixed() {
+        let n = 40;
+        let mut k = Vec::new();
+        for i in 0..n {
+            k.push((i, i, 2.5 + (i % 7) as f64 * 0.3));
+            if i > 0 {
+                k.push((i, i - 1, -1.0 - (i % 3) as f64 * 0.2));
+            }
+            if i > 4 {
+                k.push((i, i - 5, -0.1));
+            }
+        }
+        let mut fixed = vec![false; n];
+        for i in [0, 3, 4, 11, 12, 20, 27, 39] {
+            fixed[i] = true;
+        }
+        let rhs: Vec<f64> = (0..n).map(|i| ((i * 13) % 5) as f64 - 2.0).collect();
+        let pre: Vec<f64> = (0..n).map(|i| 0.1 * i as f64 - 1.0).collect();
+        let mut bordered = System::new(n, k.clone(), &fixed).unwrap();
+        // (freed, held again) per round; the last frees a held one again and a new one.
+        let rounds: [(&[usize], &[usize]); 4] = [
+            (&[11, 27, 4], &[]),
+            (&[], &[27]),
+            (&[12], &[11, 4]),
+            (&[27, 39, 4], &[12]),
+        ];
+        for (freed, held) in rounds {
+            if !freed.is_empty() {
+                bordered.free_more(freed).unwrap();
+            }
+            if !held.is_empty() {
+                bordered.hold_border(held).unwrap();
+            }
+            freed.iter().for_each(|g| fixed[*g] = false);
+            held.iter().for_each(|g| fixed[*g] = true);
+            let fresh = System::new(n, k.clone(), &fixed).unwrap();
+            let a = &bordered.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
+            let b = &fresh.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
+            for i in 0..n {
+                assert!(
+                    (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
+                    "{freed:?} {held:?} DOF {i}: {} {}",
+                    a[i],
+                    b[i]
+                );
+            }
+        }
+        // A DOF never bordered cannot be held again.
+        assert!(bordered.hold_border(&[5]).is_err());
     }
 
     /// Freeing fixed DOFs by bordering the factor gives what a factorisation with them free

@@ -703,9 +703,6 @@ const RELEASE_ROUNDS: usize = 6;
 /// round-off is far below; a tenth of a voxel is far above it).
 const ONE_SIDED_ROUNDS: usize = 8;
 const PENETRATION_MM: f64 = 0.01;
-/// The most components a one-sided round frees on the factor's border (`Constrained::
-/// free_nodes`) rather than by factoring again.
-const BORDER_MAX_DOFS: usize = 150;
 
 /// A node of the degloved maxilla on its bone (`predict`'s one-sided rounds): its sliding hold
 /// n · u = value with n the unit normal into the tissue, and its holds to rest it again.
@@ -722,6 +719,23 @@ impl OneSided {
     fn gap(&self, u: [f64; 3]) -> f64 {
         crate::vec3::dot(self.normal, u) - self.value
     }
+}
+
+/// (K u) on the rows of the `watched` nodes only (zero elsewhere), from K's lower triangle in one
+/// pass: the one-sided contact's hold forces, where a whole product would cost a pass over K
+/// arranged by rows.
+fn rows_times(k: &[(usize, usize, f64)], watched: &[bool], u: &[[f64; 3]]) -> Vec<f64> {
+    let u = u.as_flattened();
+    let mut ku = vec![0.0; u.len()];
+    for &(r, c, v) in k {
+        if watched[r / 3] {
+            ku[r] += v * u[c];
+        }
+        if r != c && watched[c / 3] {
+            ku[c] += v * u[r];
+        }
+    }
+    ku
 }
 
 /// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
@@ -998,8 +1012,10 @@ pub fn predict(
                     .collect();
                 degloved_settled = one_sided.is_empty();
                 let rounds = if one_sided.is_empty() { 0 } else { ONE_SIDED_ROUNDS + 1 };
+                let mut watched = vec![false; nodes.len()];
+                one_sided.iter().for_each(|o| watched[o.node] = true);
                 for round in 0..rounds {
-                    let ku = crate::fem::sparse::multiply(&k, u.as_flattened());
+                    let ku = rows_times(&k, &watched, &u);
                     let mut freed = Vec::new();
                     let mut rests = Vec::new();
                     for o in &one_sided {
@@ -1026,17 +1042,21 @@ pub fn predict(
                         linear_hold[n] = LinearHold::Free;
                     }
                     lifted.extend(&freed);
-                    // Bordering costs a solve per freed component; past a few hundred a new
-                    // factorisation is cheaper (the real CT's first round frees ~300 nodes).
-                    if rests.is_empty() && 3 * freed.len() <= BORDER_MAX_DOFS {
+                    let mut rested = Vec::with_capacity(rests.len());
+                    for o in one_sided.iter().filter(|o| rests.contains(&o.node)) {
+                        constraint[o.node] = SLIDING;
+                        (hold[o.node], linear_hold[o.node]) = o.rest;
+                        rested.push((o.node, o.rest.0));
+                    }
+                    lifted.retain(|n| !rests.contains(n));
+                    // The factor is bordered by the normal components of the nodes lifted so
+                    // far (one solve each, the first time), and a node that rests again is held
+                    // on the border: no round factors anew.
+                    if !freed.is_empty() {
                         c.free_nodes(&freed)?;
-                    } else {
-                        for o in one_sided.iter().filter(|o| rests.contains(&o.node)) {
-                            constraint[o.node] = SLIDING;
-                            (hold[o.node], linear_hold[o.node]) = o.rest;
-                        }
-                        lifted.retain(|n| !rests.contains(n));
-                        c = Constrained::ordered(&k, &hold, nodes.len(), ordering(&order))?;
+                    }
+                    if !rested.is_empty() {
+                        c.rest_nodes(&rested)?;
                     }
                     u = c.solve(&[(&hold, &f)])?.remove(0);
                 }

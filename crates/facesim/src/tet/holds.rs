@@ -313,6 +313,30 @@ impl Constrained {
         self.sys.free_more(&dofs)
     }
 
+    /// Hold nodes freed by [`Constrained::free_nodes`] again, each by its hold as when factored
+    /// (the same frame; its values may differ), without refactoring: their components on the
+    /// factor's border are given again (`fem::assembly::System::hold_border`).
+    pub(crate) fn rest_nodes(&mut self, rests: &[(usize, Hold)]) -> Result<()> {
+        let mut dofs = Vec::new();
+        let mut frames = Vec::with_capacity(rests.len());
+        for &(n, hold) in rests {
+            let again = hold.frame(n)?;
+            let f = &self.frames[n];
+            if f.held != 0 || f.axes != again.axes {
+                return Err(Error::config(format!(
+                    "volumetric model: node {n} rests again in another frame than it was factored in, or was not freed"
+                )));
+            }
+            dofs.extend((0..again.held).map(|i| 3 * n + i));
+            frames.push((n, again));
+        }
+        self.sys.hold_border(&dofs)?;
+        for (n, f) in frames {
+            self.frames[n] = f;
+        }
+        Ok(())
+    }
+
     /// The node frames the factor was made in (a freed node: nothing held).
     pub(crate) fn frames(&self) -> &[Frame] {
         &self.frames
