@@ -332,6 +332,9 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
             "{surgery}: {t}"
         );
         assert_eq!(count("inverted_elements"), 0, "{surgery}");
+        // Nothing torn: a volume of +0, not an empty sum's −0 printed as "-0.0".
+        assert_eq!(count("torn_elements"), 0, "{surgery}");
+        assert_eq!(t["torn_volume_mm3"].to_string(), "0.0", "{surgery}");
     }
     let rows = read_csv(&out.join("validation.csv"));
     let ratio = |surgery: &str, landmark: &str| {

@@ -1205,7 +1205,8 @@ pub fn predict(
         .filter(|e| torn[*e])
         .filter_map(|e| crate::tet::gradients(mesh.tets[e].map(|n| mesh.nodes[n as usize])))
         .map(|(v, _)| v)
-        .sum();
+        // From +0: an empty f64 sum is −0, which report.json would print as "-0.0".
+        .fold(0.0, |a, v| a + v);
     if torn_elements > 0 {
         rec.warn(format!(
             "the move tears {torn_elements} tetrahedra ({torn_volume_mm3:.0} mm³) of tissue off the face that it would turn inside out (the osteotomy gap): their stiffness is a trace of their tissue's ([tet] tear_gap; docs/pipeline.md \"Large moves\")"
