@@ -722,8 +722,8 @@ impl OneSided {
 }
 
 /// (K u) on the rows of the `watched` nodes only (zero elsewhere), from K's lower triangle in one
-/// pass: the one-sided contact's hold forces, where a whole product would cost a pass over K
-/// arranged by rows.
+/// pass: the one-sided contact's hold forces. (`fem::sparse::multiply` sorts K into rows first,
+/// about 0.5 s a round on the real CT.)
 fn rows_times(k: &[(usize, usize, f64)], watched: &[bool], u: &[[f64; 3]]) -> Vec<f64> {
     let u = u.as_flattened();
     let mut ku = vec![0.0; u.len()];
