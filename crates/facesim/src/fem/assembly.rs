@@ -755,10 +755,11 @@ mod tests {
         }
     }
 
-    /// Bordered DOFs held again (at their prescribed values), freed again and joined by new
-    /// ones give what a factorisation with that set fixed gives: the contact rounds' sequence.
-    #[test]
-    fn bordered_dofs_held_again_equal_factoring_with_them_fixed() {
+    /// K's lower triangle, the fixed DOFs and a load.
+    type Chain = (Vec<(usize, usize, f64)>, Vec<bool>, Vec<f64>);
+
+    /// A 1-D chain of springs with ground springs, stiffness varying: SPD, fully coupled.
+    fn chain() -> Chain {
         let n = 40;
         let mut k = Vec::new();
         for i in 0..n {
@@ -775,6 +776,38 @@ mod tests {
             fixed[i] = true;
         }
         let rhs: Vec<f64> = (0..n).map(|i| ((i * 13) % 5) as f64 - 2.0).collect();
+        (k, fixed, rhs)
+    }
+
+    /// `bordered` solves (rhs, pre) as a fresh factorisation with `fixed` does, to 1e-12.
+    fn assert_solves_as_factored(
+        bordered: &System,
+        k: &[(usize, usize, f64)],
+        fixed: &[bool],
+        rhs: &[f64],
+        pre: &[f64],
+        what: &str,
+    ) {
+        let fresh = System::new(fixed.len(), k.to_vec(), fixed).unwrap();
+        let (rhs, pre) = (vec![rhs.to_vec()], vec![pre.to_vec()]);
+        let a = &bordered.solve(&rhs, &pre)[0];
+        let b = &fresh.solve(&rhs, &pre)[0];
+        for i in 0..fixed.len() {
+            assert!(
+                (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
+                "{what}: DOF {i}: {} {}",
+                a[i],
+                b[i]
+            );
+        }
+    }
+
+    /// Bordered DOFs held again (at their prescribed values), freed again and joined by new
+    /// ones give what a factorisation with that set fixed gives: the contact rounds' sequence.
+    #[test]
+    fn bordered_dofs_held_again_equal_factoring_with_them_fixed() {
+        let (k, mut fixed, rhs) = chain();
+        let n = fixed.len();
         let pre: Vec<f64> = (0..n).map(|i| 0.1 * i as f64 - 1.0).collect();
         let mut bordered = System::new(n, k.clone(), &fixed).unwrap();
         // (freed, held again) per round; the last frees a held one again and a new one.
@@ -793,17 +826,8 @@ mod tests {
             }
             freed.iter().for_each(|g| fixed[*g] = false);
             held.iter().for_each(|g| fixed[*g] = true);
-            let fresh = System::new(n, k.clone(), &fixed).unwrap();
-            let a = &bordered.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
-            let b = &fresh.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
-            for i in 0..n {
-                assert!(
-                    (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
-                    "{freed:?} {held:?} DOF {i}: {} {}",
-                    a[i],
-                    b[i]
-                );
-            }
+            let what = format!("freed {freed:?}, held again {held:?}");
+            assert_solves_as_factored(&bordered, &k, &fixed, &rhs, &pre, &what);
         }
         // A DOF never bordered cannot be held again.
         assert!(bordered.hold_border(&[5]).is_err());
@@ -813,23 +837,8 @@ mod tests {
     /// gives, for loads and prescribed values alike, over two rounds of freeing.
     #[test]
     fn bordered_freeing_equals_factoring_with_the_dofs_free() {
-        // A 1-D chain of springs with ground springs, stiffness varying: SPD, fully coupled.
-        let n = 40;
-        let mut k = Vec::new();
-        for i in 0..n {
-            k.push((i, i, 2.5 + (i % 7) as f64 * 0.3));
-            if i > 0 {
-                k.push((i, i - 1, -1.0 - (i % 3) as f64 * 0.2));
-            }
-            if i > 4 {
-                k.push((i, i - 5, -0.1));
-            }
-        }
-        let mut fixed = vec![false; n];
-        for i in [0, 3, 4, 11, 12, 20, 27, 39] {
-            fixed[i] = true;
-        }
-        let rhs: Vec<f64> = (0..n).map(|i| ((i * 13) % 5) as f64 - 2.0).collect();
+        let (k, mut fixed, rhs) = chain();
+        let n = fixed.len();
         let pre: Vec<f64> = (0..n)
             .map(|i| if fixed[i] { 0.1 * i as f64 } else { 0.0 })
             .collect();
@@ -837,17 +846,8 @@ mod tests {
         for freed in [vec![11, 27], vec![4, 12, 39]] {
             bordered.free_more(&freed).unwrap();
             freed.iter().for_each(|g| fixed[*g] = false);
-            let fresh = System::new(n, k.clone(), &fixed).unwrap();
-            let a = &bordered.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
-            let b = &fresh.solve(std::slice::from_ref(&rhs), std::slice::from_ref(&pre))[0];
-            for i in 0..n {
-                assert!(
-                    (a[i] - b[i]).abs() < 1e-12 * (1.0 + b[i].abs()),
-                    "{i}: {} {}",
-                    a[i],
-                    b[i]
-                );
-            }
+            let what = format!("freed {freed:?}");
+            assert_solves_as_factored(&bordered, &k, &fixed, &rhs, &pre, &what);
         }
     }
 }

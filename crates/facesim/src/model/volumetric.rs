@@ -996,8 +996,7 @@ pub fn predict(
                 // way only. Where the hold's force n · (K u) points into the bone (the bone pulls
                 // the tissue after it) the node lifts off; a lifted node the bone would pass into
                 // (n · u below the bone's normal move) rests on it again. Rounds until the set
-                // settles: freeing a few borders the factor, freeing many or resting again
-                // factors anew.
+                // settles, none factoring anew (below).
                 let one_sided: Vec<OneSided> = (0..mesh.nodes.len())
                     .filter(|n| raised[*n] && constraint[*n] == SLIDING)
                     .filter_map(|n| match hold[n] {
