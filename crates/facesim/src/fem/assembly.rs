@@ -330,24 +330,25 @@ pub struct System {
     border: Option<Border>,
 }
 
-/// Fixed DOFs freed after factoring, solved by bordering the factor instead of refactoring:
-/// with A the factored free block, B = K[free, added] and C = K[added, added], the added
-/// unknowns y solve the Schur complement S y = g − Bᵀ A⁻¹ b (S = C − Bᵀ A⁻¹ B, dense k × k),
-/// then x = A⁻¹ b − A⁻¹ B y. k triangular solves once, instead of a second factorisation.
+/// Fixed DOFs freed after factoring, solved by bordering the factor instead of refactoring.
+/// With A = Pᵀ L Lᵀ P the factored free block, B = K[free, added] and C = K[added, added], the
+/// added unknowns y solve the Schur complement S y = g − Gᵀ z, S = C − Gᵀ G (dense k × k),
+/// where G = L⁻¹ P B and z = L⁻¹ P b; then x = Pᵀ L⁻ᵀ (z − G y). G is nonzero only on the
+/// factor's reach of B's rows (`Cholesky::forward_from`), where it is kept: a bordered DOF
+/// costs a forward sweep over that reach once, and a solve costs one solve of A and a product
+/// with G (its two sweeps run apart, the border between them).
 /// A bordered DOF may be held again at a prescribed value (`System::hold_border`): its y is
 /// then given and only S's block on the others is factored (a contact node resting again).
 struct Border {
-    /// The bordered DOFs, in the order bordered (W's and S's columns).
+    /// The bordered DOFs, in the order bordered (G's and S's columns).
     added: Vec<usize>,
     /// Of each, whether it is held again at its prescribed value.
     held: Vec<bool>,
-    /// B: (free index, border index, value).
-    b: Vec<(usize, usize, f64)>,
     /// K between an added DOF and a DOF still fixed: (border index, global DOF, value).
     coupling: Vec<(usize, usize, f64)>,
-    /// W = A⁻¹ B (free × k), in the blocks of columns bordered together (a round's new
-    /// columns are solved and stored without copying the earlier ones).
-    w: Vec<faer::Mat<f64>>,
+    /// G on the factor positions `g_at` (its rows), zero on every other.
+    g_at: Vec<usize>,
+    g: faer::Mat<f64>,
     /// S over every bordered DOF.
     schur: nalgebra::DMatrix<f64>,
     /// The border indices not held, and S's Cholesky factor on them (None: all held).
@@ -439,12 +440,13 @@ impl System {
     }
 
     /// Free the fixed DOFs `dofs` (with those freed before) without refactoring: the system is
-    /// bordered (see [`Border`]). Each DOF bordered for the first time costs one triangular
-    /// solve; one bordered before and held again since is an unknown again at no solve.
+    /// bordered (see [`Border`]). Each DOF bordered for the first time costs a solve on the
+    /// factor's reach of B's rows; one bordered before and held again since is an unknown again
+    /// at no solve.
     pub fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
-        let (mut added, mut held, mut w) = match self.border.take() {
-            Some(b) => (b.added, b.held, b.w),
-            None => (Vec::new(), Vec::new(), Vec::new()),
+        let (mut added, mut held, before) = match self.border.take() {
+            Some(b) => (b.added, b.held, Some((b.schur, b.g_at, b.g))),
+            None => (Vec::new(), Vec::new(), None),
         };
         // Border index by global DOF (usize::MAX: not bordered); a lookup per K entry below.
         let mut pos = vec![usize::MAX; self.n];
@@ -484,37 +486,86 @@ impl System {
                 }
             }
         }
-        // Only the new columns of W are solved, a share of them on each core (the factor's
-        // own solve is sequential; fem/cholesky.rs says why).
+        // A and the earlier columns of B are as they were: so are G's and S's between them.
+        let (mut g_at, old_g) = match before {
+            Some((schur, at, g)) => {
+                c.view_mut((0, 0), (k0, k0)).copy_from(&schur);
+                (at, g)
+            }
+            None => (Vec::new(), faer::Mat::zeros(0, 0)),
+        };
+        let mut g = old_g;
         if k > k0 {
-            let mut block = faer::Mat::<f64>::zeros(self.free.len(), k - k0);
-            for &(f, e, v) in &b {
-                if e >= k0 {
-                    block[(f, e - k0)] += v;
-                }
-            }
+            // G's new columns, L⁻¹ P B_new, on the reach of their own rows: the columns shared
+            // among the cores (the factor's own sweeps are sequential; fem/cholesky.rs says why).
             let parts = rayon::current_num_threads().clamp(1, k - k0);
-            block
-                .as_mut()
-                .par_col_partition_mut(parts)
-                .for_each(|cols| self.llt.solve_in_place(cols));
-            w.push(block);
-        }
-        let mut first = 0;
-        for block in &w {
-            for &(f, e, v) in &b {
-                for j in 0..block.ncols() {
-                    c[(e, first + j)] -= v * block[(f, j)];
+            let width = (k - k0).div_ceil(parts);
+            let mut columns = vec![Vec::new(); parts];
+            for &(f, e, v) in b.iter().filter(|t| t.1 >= k0) {
+                let j = e - k0;
+                columns[j / width].push((f, j % width, v));
+            }
+            let solved: Vec<(Vec<usize>, faer::Mat<f64>)> = columns
+                .par_iter()
+                .enumerate()
+                .map(|(p, bp)| {
+                    let ncols = (k - k0).saturating_sub(p * width).min(width);
+                    self.llt.forward_from(bp, ncols)
+                })
+                .collect();
+            // G's rows: the earlier ones, then the positions first reached now.
+            let mut row_of = vec![usize::MAX; self.free.len()];
+            for (i, p) in g_at.iter().enumerate() {
+                row_of[*p] = i;
+            }
+            for (at, _) in &solved {
+                for p in at {
+                    if row_of[*p] == usize::MAX {
+                        row_of[*p] = g_at.len();
+                        g_at.push(*p);
+                    }
                 }
             }
-            first += block.ncols();
+            let mut grown = faer::Mat::<f64>::zeros(g_at.len(), k);
+            grown
+                .as_mut()
+                .submatrix_mut(0, 0, g.nrows(), k0)
+                .copy_from(g.as_ref());
+            let mut first = k0;
+            for (at, part) in &solved {
+                for (i, p) in at.iter().enumerate() {
+                    for j in 0..part.ncols() {
+                        grown[(row_of[*p], first + j)] = part[(i, j)];
+                    }
+                }
+                first += part.ncols();
+            }
+            g = grown;
+            // S's new columns: C − Gᵀ G_new.
+            let gtg = g.transpose() * g.as_ref().subcols(k0, k - k0);
+            for j in k0..k {
+                for e in 0..k {
+                    c[(e, j)] -= gtg[(e, j - k0)];
+                }
+            }
+            // S is symmetric: its new rows are its new columns (the new block made exactly so).
+            for j in k0..k {
+                for e in 0..k0 {
+                    c[(j, e)] = c[(e, j)];
+                }
+                for e in k0..j {
+                    let mean = 0.5 * (c[(e, j)] + c[(j, e)]);
+                    c[(e, j)] = mean;
+                    c[(j, e)] = mean;
+                }
+            }
         }
         let mut border = Border {
             added,
             held,
-            b,
             coupling,
-            w,
+            g_at,
+            g,
             schur: c,
             unknown: Vec::new(),
             s: None,
@@ -595,55 +646,67 @@ impl System {
                 b[(fr, c)] -= v * prescribed[c][gc];
             }
         }
-        self.llt.solve_in_place(b.as_mut());
-        let mut x = b;
-        if let Some(bd) = &self.border {
-            let k = bd.added.len();
-            let mut ys = faer::Mat::<f64>::zeros(k, m);
-            for c in 0..m {
-                let mut g =
-                    nalgebra::DVector::<f64>::from_iterator(k, bd.added.iter().map(|a| rhs[c][*a]));
-                for &(e, col, v) in &bd.coupling {
-                    g[e] -= v * prescribed[c][col];
-                }
-                for &(f, e, v) in &bd.b {
-                    g[e] -= v * x[(f, c)];
-                }
-                // Held DOFs take their given values; the others solve S_uu y_u = g_u − S_uh y_h.
-                let mut y = nalgebra::DVector::<f64>::zeros(k);
-                for e in 0..k {
-                    if bd.held[e] {
-                        y[e] = given[c][e];
-                    }
-                }
-                if let Some(s) = &bd.s {
-                    let mut gu = nalgebra::DVector::<f64>::from_iterator(
-                        bd.unknown.len(),
-                        bd.unknown.iter().map(|e| g[*e]),
+        let x = match &self.border {
+            None => {
+                self.llt.solve_in_place(b.as_mut());
+                b
+            }
+            Some(bd) => {
+                let mut z = self.llt.forward(b.as_ref());
+                let zg = faer::Mat::<f64>::from_fn(bd.g_at.len(), m, |i, c| z[(bd.g_at[i], c)]);
+                let gtz = bd.g.transpose() * zg.as_ref();
+                let k = bd.added.len();
+                let mut ys = faer::Mat::<f64>::zeros(k, m);
+                for c in 0..m {
+                    let mut g = nalgebra::DVector::<f64>::from_iterator(
+                        k,
+                        bd.added
+                            .iter()
+                            .enumerate()
+                            .map(|(e, a)| rhs[c][*a] - gtz[(e, c)]),
                     );
-                    for (i, &e) in bd.unknown.iter().enumerate() {
-                        for d in (0..k).filter(|d| bd.held[*d]) {
-                            gu[i] -= bd.schur[(e, d)] * y[d];
+                    for &(e, col, v) in &bd.coupling {
+                        g[e] -= v * prescribed[c][col];
+                    }
+                    // Held DOFs take their given values; the others solve S_uu y_u = g_u − S_uh y_h.
+                    let mut y = nalgebra::DVector::<f64>::zeros(k);
+                    for e in 0..k {
+                        if bd.held[e] {
+                            y[e] = given[c][e];
                         }
                     }
-                    let yu = s.solve(&gu);
-                    for (i, &e) in bd.unknown.iter().enumerate() {
-                        y[e] = yu[i];
+                    if let Some(s) = &bd.s {
+                        let mut gu = nalgebra::DVector::<f64>::from_iterator(
+                            bd.unknown.len(),
+                            bd.unknown.iter().map(|e| g[*e]),
+                        );
+                        for (i, &e) in bd.unknown.iter().enumerate() {
+                            for d in (0..k).filter(|d| bd.held[*d]) {
+                                gu[i] -= bd.schur[(e, d)] * y[d];
+                            }
+                        }
+                        let yu = s.solve(&gu);
+                        for (i, &e) in bd.unknown.iter().enumerate() {
+                            y[e] = yu[i];
+                        }
+                    }
+                    for (e, a) in bd.added.iter().enumerate() {
+                        ys[(e, c)] = y[e];
+                        prescribed[c][*a] = y[e];
                     }
                 }
-                for (e, a) in bd.added.iter().enumerate() {
-                    ys[(e, c)] = y[e];
-                    prescribed[c][*a] = y[e];
+                // z − G y, then the backward sweep, every case at once.
+                let gy = bd.g.as_ref() * ys.as_ref();
+                for c in 0..m {
+                    for (i, p) in bd.g_at.iter().enumerate() {
+                        z[(*p, c)] -= gy[(i, c)];
+                    }
                 }
+                let mut x = faer::Mat::<f64>::zeros(nf, m);
+                self.llt.backward(z, x.as_mut());
+                x
             }
-            // x −= W Y for every case at once (dense products, not k passes over x).
-            let mut first = 0;
-            for block in &bd.w {
-                let wy = block * ys.subrows(first, block.ncols());
-                x -= wy;
-                first += block.ncols();
-            }
-        }
+        };
         (0..m)
             .map(|c| {
                 let mut a = prescribed[c].clone();
@@ -802,35 +865,69 @@ mod tests {
         }
     }
 
+    /// A 7-point Laplacian on a 12³ grid with every 9th DOF fixed: a factor faer makes
+    /// supernodal (the chain's is simplicial), whose forward sweep the border runs apart.
+    fn grid() -> Chain {
+        let m = 12;
+        let id = |x: usize, y: usize, z: usize| x + m * (y + m * z);
+        let mut k = Vec::new();
+        for z in 0..m {
+            for y in 0..m {
+                for x in 0..m {
+                    let i = id(x, y, z);
+                    k.push((i, i, 6.05 + (i % 4) as f64 * 0.1));
+                    for (a, b, c) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
+                        if a < m && b < m && c < m {
+                            k.push((id(a, b, c), i, -1.0));
+                        }
+                    }
+                }
+            }
+        }
+        let n = m * m * m;
+        let fixed: Vec<bool> = (0..n).map(|i| i % 9 == 0).collect();
+        let rhs: Vec<f64> = (0..n).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();
+        (k, fixed, rhs)
+    }
+
     /// Bordered DOFs held again (at their prescribed values), freed again and joined by new
-    /// ones give what a factorisation with that set fixed gives: the contact rounds' sequence.
+    /// ones give what a factorisation with that set fixed gives: the contact rounds' sequence,
+    /// on a simplicial factor (the chain) and a supernodal one (the grid).
     #[test]
     fn bordered_dofs_held_again_equal_factoring_with_them_fixed() {
-        let (k, mut fixed, rhs) = chain();
-        let n = fixed.len();
-        let pre: Vec<f64> = (0..n).map(|i| 0.1 * i as f64 - 1.0).collect();
-        let mut bordered = System::new(n, k.clone(), &fixed).unwrap();
         // (freed, held again) per round; the last frees a held one again and a new one.
-        let rounds: [(&[usize], &[usize]); 4] = [
+        let chain_rounds: [(&[usize], &[usize]); 4] = [
             (&[11, 27, 4], &[]),
             (&[], &[27]),
             (&[12], &[11, 4]),
             (&[27, 39, 4], &[12]),
         ];
-        for (freed, held) in rounds {
-            if !freed.is_empty() {
-                bordered.free_more(freed).unwrap();
+        let grid_rounds: [(&[usize], &[usize]); 4] = [
+            (&[9, 900, 1503, 1719, 18, 27], &[]),
+            (&[], &[900, 18]),
+            (&[855, 450], &[9, 1503]),
+            (&[900, 1503, 1017], &[855]),
+        ];
+        for ((k, mut fixed, rhs), rounds) in [(chain(), chain_rounds), (grid(), grid_rounds)] {
+            let n = fixed.len();
+            let pre: Vec<f64> = (0..n).map(|i| 0.1 * (i % 40) as f64 - 1.0).collect();
+            let mut bordered = System::new(n, k.clone(), &fixed).unwrap();
+            assert_eq!(bordered.llt.pattern().is_supernodal(), n > 1000);
+            for (freed, held) in rounds {
+                if !freed.is_empty() {
+                    bordered.free_more(freed).unwrap();
+                }
+                if !held.is_empty() {
+                    bordered.hold_border(held).unwrap();
+                }
+                freed.iter().for_each(|g| fixed[*g] = false);
+                held.iter().for_each(|g| fixed[*g] = true);
+                let what = format!("{n} DOFs: freed {freed:?}, held again {held:?}");
+                assert_solves_as_factored(&bordered, &k, &fixed, &rhs, &pre, &what);
             }
-            if !held.is_empty() {
-                bordered.hold_border(held).unwrap();
-            }
-            freed.iter().for_each(|g| fixed[*g] = false);
-            held.iter().for_each(|g| fixed[*g] = true);
-            let what = format!("freed {freed:?}, held again {held:?}");
-            assert_solves_as_factored(&bordered, &k, &fixed, &rhs, &pre, &what);
+            // A DOF never bordered cannot be held again.
+            assert!(bordered.hold_border(&[5]).is_err());
         }
-        // A DOF never bordered cannot be held again.
-        assert!(bordered.hold_border(&[5]).is_err());
     }
 
     /// Freeing fixed DOFs by bordering the factor gives what a factorisation with them free
