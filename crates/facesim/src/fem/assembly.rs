@@ -440,9 +440,9 @@ impl System {
     }
 
     /// Free the fixed DOFs `dofs` (with those freed before) without refactoring: the system is
-    /// bordered (see [`Border`]). Each DOF bordered for the first time costs a solve on the
-    /// factor's reach of B's rows; one bordered before and held again since is an unknown again
-    /// at no solve.
+    /// bordered (see [`Border`]). The DOFs bordered for the first time cost a forward sweep
+    /// over the factor's reach of their neighbours; one bordered before and held again since is
+    /// an unknown again at no sweep.
     pub fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
         let (mut added, mut held, before) = match self.border.take() {
             Some(b) => (b.added, b.held, Some((b.schur, b.g_at, b.g))),

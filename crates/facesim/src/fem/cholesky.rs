@@ -313,9 +313,9 @@ impl Cholesky<f64> {
     /// L⁻¹ P B for a sparse B (`b`: row, column, value; `ncols` columns), computed only where
     /// it can be nonzero: on the positions of the supernodes on the elimination tree paths from
     /// B's rows to the root (the "reach", Gilbert & Peierls 1988). Returns those positions and
-    /// L⁻¹ P B on them (zero on every other). A few bordered nodes' neighbours reach about a
-    /// quarter of a volumetric head's factor (the real CT: 6.6 M of 27 M nonzeros for 263
-    /// nodes), and nothing of the size of the whole system is made.
+    /// L⁻¹ P B on them (zero on every other). The neighbours of the 263 nodes the real CT's
+    /// degloved maxilla lifts first reach about a quarter of its factor's 27 M stored values,
+    /// and nothing of the size of the whole system is made.
     pub(crate) fn forward_from(
         &self,
         b: &[(usize, usize, f64)],
