@@ -370,6 +370,22 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     let run = run_report(&bsso, "phantom01", "bsso-advance");
     assert_eq!(run["tet"]["degloved_nodes"], 0, "{}", run["tet"]);
     assert_eq!(run["tet"]["lifted_in_tension"], 0, "{}", run["tet"]);
+    // The bundled phantom's face has no lip profile (no Sn, Ls or Sto found): its mandibular
+    // advance leaves the upper teeth in place, so it raises nothing rather than asking for them.
+    let out = common::kept_dir("facesim-degloved-no-lips");
+    let r = facesim(&[
+        "run",
+        root().join("data-samples/phantom").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "tet.degloved_maxilla=true",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert!(report["landmarks"]["Sn"]["pre"].is_null(), "Sn was found");
+    assert_eq!(report["tet"]["degloved_nodes"], 0, "{}", report["tet"]);
 
     // Without sliding, or on the 10-node element, the option is refused in one line.
     let jaws = root().join("data-samples/jaws");

@@ -26,8 +26,8 @@ const ABOVE_SN_MM: f64 = 20.0;
 const UPPER_VERMILION_MM: f64 = 8.0;
 
 /// Per mesh node: whether it is bone tissue raised by the Le Fort I approach. All false when no
-/// segment carries the upper teeth. Missing landmarks are an error naming them: the option asks
-/// for a region the landmarks must find.
+/// segment carries the upper teeth, whatever landmarks were found. Otherwise missing landmarks are
+/// an error naming them: the option asks for a region the landmarks must find.
 pub(crate) fn raised(
     (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
     nodes: &[[f64; 3]],
@@ -45,6 +45,28 @@ pub(crate) fn raised(
             .and_then(|l| l.position)
             .map(|p| frame.coords(p)[1])
     };
+    // The upper teeth need no landmark to tell: of the tooth nodes lip or cheek cover, the
+    // upper half by height, and the segment that carries most of them. Left in place (a BSSO, a
+    // genioplasty), nothing is raised, and a face whose lips the landmarks miss (a scan cut
+    // above them, a phantom without a lip profile) still runs. (Not the group highest on
+    // average: a few dense nodes above a Le Fort cut read as tooth would outrank it.)
+    let mut teeth: Vec<(f64, Option<usize>)> = nodes
+        .iter()
+        .zip(covered)
+        .filter_map(|(p, c)| {
+            c.filter(|c| c.tooth)
+                .map(|c| (frame.coords(*p)[1], c.segment()))
+        })
+        .collect();
+    teeth.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let upper = &teeth[..teeth.len() / 2];
+    let moved = |s: usize| upper.iter().filter(|t| t.1 == Some(s)).count();
+    if !upper
+        .iter()
+        .any(|t| t.1.is_some_and(|s| 2 * moved(s) > upper.len()))
+    {
+        return Ok(vec![false; nodes.len()]);
+    }
     let sn = height("Sn").ok_or_else(|| missing("subnasale (Sn), which was not found".into()))?;
     let bottom = match (height("Sto"), height("Ls")) {
         (Some(sto), _) => sto,
