@@ -869,21 +869,7 @@ mod tests {
     /// supernodal (the chain's is simplicial), whose forward sweep the border runs apart.
     fn grid() -> Chain {
         let m = 12;
-        let id = |x: usize, y: usize, z: usize| x + m * (y + m * z);
-        let mut k = Vec::new();
-        for z in 0..m {
-            for y in 0..m {
-                for x in 0..m {
-                    let i = id(x, y, z);
-                    k.push((i, i, 6.05 + (i % 4) as f64 * 0.1));
-                    for (a, b, c) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
-                        if a < m && b < m && c < m {
-                            k.push((id(a, b, c), i, -1.0));
-                        }
-                    }
-                }
-            }
-        }
+        let k = crate::fem::cholesky::grid_laplacian(m);
         let n = m * m * m;
         let fixed: Vec<bool> = (0..n).map(|i| i % 9 == 0).collect();
         let rhs: Vec<f64> = (0..n).map(|i| ((i * 7) % 11) as f64 - 5.0).collect();

@@ -462,30 +462,40 @@ fn forward_sweep(
     }
 }
 
+/// The lower triangle of a 7-point Laplacian on an m³ grid with a varying diagonal shift: SPD,
+/// and from m ≈ 10 large enough for faer to factor it supernodally (the tests here and the
+/// bordered factor's in fem/assembly.rs).
+#[cfg(test)]
+pub(crate) fn grid_laplacian(m: usize) -> Vec<(usize, usize, f64)> {
+    let id = |x: usize, y: usize, z: usize| x + m * (y + m * z);
+    let mut t = Vec::new();
+    for z in 0..m {
+        for y in 0..m {
+            for x in 0..m {
+                let i = id(x, y, z);
+                t.push((i, i, 6.1 + (i % 5) as f64 * 0.1));
+                for (a, b, c) in [(x + 1, y, z), (x, y + 1, z), (x, y, z + 1)] {
+                    if a < m && b < m && c < m {
+                        t.push((id(a, b, c), i, -1.0));
+                    }
+                }
+            }
+        }
+    }
+    t
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use faer::sparse::{SparseColMat, Triplet};
 
-    /// A 7-point Laplacian on an m³ grid with a varying diagonal shift: SPD, and large enough
-    /// for faer to factor it supernodally.
+    /// The grid Laplacian as a sparse matrix.
     fn grid(m: usize) -> SparseColMat<usize, f64> {
-        let id = |x: usize, y: usize, z: usize| x + m * (y + m * z);
-        let mut t = Vec::new();
-        for z in 0..m {
-            for y in 0..m {
-                for x in 0..m {
-                    let i = id(x, y, z);
-                    t.push(Triplet::new(i, i, 6.1 + (i % 5) as f64 * 0.1));
-                    for (dx, dy, dz) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
-                        let (a, b, c) = (x + dx, y + dy, z + dz);
-                        if a < m && b < m && c < m {
-                            t.push(Triplet::new(id(a, b, c), i, -1.0));
-                        }
-                    }
-                }
-            }
-        }
+        let t: Vec<Triplet<usize, usize, f64>> = grid_laplacian(m)
+            .into_iter()
+            .map(|(r, c, v)| Triplet::new(r, c, v))
+            .collect();
         SparseColMat::try_new_from_triplets(m * m * m, m * m * m, &t).unwrap()
     }
 
