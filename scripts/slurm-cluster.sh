@@ -3,7 +3,7 @@
 # machine"): munged, slurmctld and slurmd of Debian's slurm-wlm, run as root, every file —
 # configuration, munge key, state, spool, logs, sockets — under DIR, nothing in /etc.
 #
-#   scripts/slurm-cluster.sh start DIR [WATCH_PID]   # prints `export SLURM_CONF=DIR/slurm.conf`
+#   scripts/slurm-cluster.sh start DIR [WATCH_PID]   # prints `export SLURM_CONF=… PATH=DIR/bin:…`
 #   scripts/slurm-cluster.sh stop DIR                # stops the daemons by PID, removes DIR
 #
 # The node has this machine's CPUs and memory (less 1 GB), one partition `cohort`, memory as a
@@ -37,11 +37,7 @@ stop() {
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -9 "$pid" 2>/dev/null || true
   done
-  # slurmd's link to its configuration cache (configless mode), and its cgroups.
-  if [ -L /run/slurm/conf ]; then
-    case "$(readlink /run/slurm/conf)" in "$dir" | "$dir"/*) rm -f /run/slurm/conf ;; esac
-  fi
-  rmdir /run/slurm 2>/dev/null || true
+  # slurmd's cgroups.
   local cg
   for cg in /sys/fs/cgroup/*/slurm_"$(hostname -s)"; do
     [ -d "$cg" ] && find "$cg" -depth -type d -exec rmdir {} + 2>/dev/null || true
@@ -53,16 +49,20 @@ start() {
   local dir="$1" watch="${2:-}"
   [ "$(id -u)" = 0 ] || die "needs root (the daemons run as root; sudo or a root CI job)"
   local p
-  for p in slurmctld slurmd munged sbatch squeue scontrol; do
+  for p in slurmctld slurmd munged sbatch srun squeue scontrol; do
     command -v "$p" >/dev/null 2>&1 ||
       die "$p missing: run scripts/test-setup.sh (apt: slurmctld slurmd slurm-client munge)"
   done
   [ ! -e "$dir" ] || [ -z "$(ls -A "$dir")" ] || die "$dir exists and is not empty"
-  [ ! -e /run/slurm/conf ] && [ ! -L /run/slurm/conf ] ||
-    die "/run/slurm/conf exists: another Slurm (or a test cluster left behind) runs here"
   [ ! -e /etc/slurm/slurm.conf ] ||
     die "/etc/slurm/slurm.conf exists: this machine has its own Slurm; use that, not a test cluster"
-  mkdir -p "$dir"/{munge,state,spool,log,pids}
+  # A second slurmd on this host would share the node's cgroups; a stale one is a cluster whose
+  # stop never ran (its processes outlived a killed watchdog). Files left behind do not matter:
+  # nothing outside DIR is read.
+  local running
+  running="$(pgrep -a -x 'slurmd|slurmd-wlm|slurmctld|slurmctld-wlm' || true)"
+  [ -z "$running" ] || die "Slurm daemons already run here (stop them first): $(echo "$running" | tr '\n' ';')"
+  mkdir -p "$dir"/{munge,state,spool,log,pids,bin}
   dir="$(cd "$dir" && pwd)"
   chmod 700 "$dir/munge"
 
@@ -143,12 +143,15 @@ ConstrainRAMSpace=yes
 ConstrainSwapSpace=no
 EOF
   export SLURM_CONF="$dir/slurm.conf"
-  # Slurm's clients look for SLURM_CONF, then /etc/slurm, then /run/slurm/conf (where a
-  # configless slurmd links its cached copy). The executor plugin's job step strips SLURM_CONF
-  # from the srun it starts inside a job, so that srun finds this file through the link, which
-  # stop removes.
-  mkdir -p /run/slurm
-  ln -s "$dir" /run/slurm/conf
+  # Slurm's clients find this file by SLURM_CONF. The executor plugin's job step strips every
+  # SLURM_* variable from the srun it starts inside a job, which would then look in /etc/slurm
+  # and /run/slurm/conf (a configless slurmd's cache), outside DIR. DIR/bin/srun puts it back;
+  # DIR/bin goes first on the PATH that sbatch --export=ALL hands the job.
+  local srun
+  srun="$(command -v srun)"
+  printf '#!/bin/sh\n# Written by scripts/slurm-cluster.sh: srun with this cluster'"'"'s configuration.\nSLURM_CONF=%s exec %s "$@"\n' \
+    "$SLURM_CONF" "$srun" >"$dir/bin/srun"
+  chmod 755 "$dir/bin/srun"
 
   # munged's socket first, then the controller, then the node daemon.
   for _ in $(seq 50); do [ -S "$dir/munge/munge.socket" ] && break; sleep 0.1; done
@@ -175,7 +178,7 @@ EOF
       slurm-watchdog "$watch" "$0" "$dir" >/dev/null 2>&1 &
     echo $! >"$dir/pids/watchdog"
   fi
-  echo "export SLURM_CONF=$SLURM_CONF"
+  echo "export SLURM_CONF=$SLURM_CONF PATH=$dir/bin:\$PATH"
 }
 
 case "${1:-}" in

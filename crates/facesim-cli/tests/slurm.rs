@@ -122,8 +122,19 @@ impl Cluster {
 
     fn cmd(&self, program: &str) -> Command {
         let mut c = Command::new(program);
-        c.env("SLURM_CONF", &self.conf);
+        self.env(&mut c);
         c
+    }
+
+    /// What `slurm-cluster.sh start` prints for a shell: SLURM_CONF, and DIR/bin (its srun,
+    /// which puts back the SLURM_CONF the executor plugin's job step strips) first on PATH.
+    fn env<'c>(&self, c: &'c mut Command) -> &'c mut Command {
+        let path = std::env::var_os("PATH").unwrap_or_default();
+        let path = std::env::join_paths(
+            std::iter::once(self.dir.join("bin")).chain(std::env::split_paths(&path)),
+        )
+        .unwrap();
+        c.env("SLURM_CONF", &self.conf).env("PATH", path)
     }
 
     fn out(&self, program: &str, args: &[&str]) -> String {
@@ -373,7 +384,7 @@ fn cohort_on_a_real_slurm_with_faults() {
     let out = work.join("slurm");
     let slurm_snake = |extra: &[&str]| {
         let mut c = snake(&cases, &out, &slurm_args);
-        c.args(extra).env("SLURM_CONF", &cluster.conf);
+        cluster.env(c.args(extra));
         c
     };
     let our_jobs = || cluster.out("squeue", &["--states=all", "--noheader", "--format=%i"]);
@@ -586,7 +597,8 @@ fn cohort_on_a_real_slurm_with_faults() {
     std::fs::create_dir_all(&grouped_wd).unwrap();
     let grouped_log = std::fs::File::create(work.join("slurm-grouped.log")).unwrap();
     let mut grouped_child = Reaped(
-        snake(&cases, &grouped, &slurm_args)
+        cluster
+            .env(&mut snake(&cases, &grouped, &slurm_args))
             .current_dir(&grouped_wd)
             .arg("plans=[\"case.toml\"]")
             .arg(format!("cases=[{}]", same.join(", ")))
@@ -598,7 +610,6 @@ fn cohort_on_a_real_slurm_with_faults() {
                 "--cores",
                 "1",
             ])
-            .env("SLURM_CONF", &cluster.conf)
             .stdout(grouped_log.try_clone().unwrap())
             .stderr(grouped_log)
             .stdin(Stdio::null())
