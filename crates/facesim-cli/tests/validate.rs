@@ -408,6 +408,58 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     }
 }
 
+/// `[tet] degloved_maxilla = "auto"`, the default: a coarse phantom's Le Fort I advance raises
+/// the tissue over its anterior maxilla as `true` does (the same nodes, the same face); where
+/// `true` is refused — here sliding off — it steps aside, says why in a warning and report.json
+/// `tet.degloved_not_applied`, and the run goes on bonded.
+#[test]
+fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_cannot() {
+    let by_default = validate_one_phantom("facesim-degloved-auto", "lefort-advance", &[]);
+    let asked = validate_one_phantom(
+        "facesim-degloved-asked",
+        "lefort-advance",
+        &["--set", "tet.degloved_maxilla=true"],
+    );
+    let (d, a) = (
+        run_report(&by_default, "phantom01", "lefort-advance"),
+        run_report(&asked, "phantom01", "lefort-advance"),
+    );
+    assert!(
+        d["tet"]["degloved_nodes"].as_u64().unwrap() > 10,
+        "{}",
+        d["tet"]
+    );
+    assert_eq!(d["tet"]["degloved_nodes"], a["tet"]["degloved_nodes"]);
+    assert_eq!(d["tet"]["lifted_in_tension"], a["tet"]["lifted_in_tension"]);
+    assert!(d["tet"]["degloved_not_applied"].is_null(), "{}", d["tet"]);
+    let face =
+        |o: &Path| std::fs::read(o.join("runs/phantom01/lefort-advance/face_post.ply")).unwrap();
+    assert!(
+        face(&by_default) == face(&asked),
+        "the default's face is not true's"
+    );
+
+    // Sliding off (the 10-node element's step aside, the same branch, is model::degloved's unit
+    // test: a 10-node phantom run takes minutes).
+    let out = validate_one_phantom(
+        "facesim-degloved-aside",
+        "lefort-advance",
+        &["--set", "tet.sliding=false"],
+    );
+    let run = run_report(&out, "phantom01", "lefort-advance");
+    assert_eq!(run["tet"]["degloved_nodes"], 0, "{}", run["tet"]);
+    let reason = run["tet"]["degloved_not_applied"]
+        .as_str()
+        .unwrap_or_default();
+    assert!(reason.contains("sliding and release_cuts"), "{reason:?}");
+    let warned = run["warnings"].as_array().unwrap().iter().any(|w| {
+        w.as_str()
+            .unwrap()
+            .contains("degloved_maxilla = \"auto\" stepped aside")
+    });
+    assert!(warned, "{}", run["warnings"]);
+}
+
 #[test]
 fn bad_input_is_one_line() {
     let out = common::kept_dir("facesim-validate-bad").join("v");

@@ -100,7 +100,7 @@ impl Default for Tet {
             deep_size_mm: 8.0,
             margin_mm: 30.0,
             nose_youngs_kpa: 0.0,
-            degloved_maxilla: false,
+            degloved_maxilla: Degloved::Auto,
             skin: e(30.0, 0.45),
             muscle: e(10.0, 0.45),
             fat_dark: e(2.0, 0.45),

@@ -185,6 +185,57 @@ mod tests {
     }
 
     #[test]
+    fn degloved_maxilla_is_auto_true_or_false_and_nothing_else() {
+        let parse = |v: &str| {
+            Case::parse_with(
+                MIN,
+                Path::new("case.toml"),
+                &overrides_table(&[format!("tet.degloved_maxilla={v}")]).unwrap(),
+            )
+        };
+        assert_eq!(
+            Case::parse(MIN, Path::new("case.toml"))
+                .unwrap()
+                .tet
+                .degloved_maxilla,
+            Degloved::Auto
+        );
+        assert_eq!(parse("auto").unwrap().tet.degloved_maxilla, Degloved::Auto);
+        assert_eq!(parse("true").unwrap().tet.degloved_maxilla, Degloved::On);
+        assert_eq!(parse("false").unwrap().tet.degloved_maxilla, Degloved::Off);
+        let e = parse("yes").unwrap_err().to_string();
+        assert!(
+            e.contains("case.toml") && e.contains("true, false or \"auto\""),
+            "{e}"
+        );
+        // As used, in report.json's parameters: the word a user would write.
+        let json = |d: Degloved| serde_json::to_string(&d).unwrap();
+        assert_eq!(
+            (json(Degloved::Auto).as_str(), json(Degloved::On).as_str()),
+            ("\"auto\"", "true")
+        );
+        // `true` refuses what "auto" steps aside from.
+        let e = Case::parse_with(
+            MIN,
+            Path::new("case.toml"),
+            &overrides_table(&[
+                "tet.degloved_maxilla=true".into(),
+                "tet.sliding=false".into(),
+            ])
+            .unwrap(),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("needs sliding = true"), "{e}");
+        let c = Case::parse_with(
+            MIN,
+            Path::new("case.toml"),
+            &overrides_table(&["tet.sliding=false".into()]).unwrap(),
+        );
+        assert!(c.is_ok());
+    }
+
+    #[test]
     fn unknown_keys_and_wrong_types_name_the_key() {
         let e = Case::parse(
             &format!("{MIN}[springs]\nmax_lenght_mm = 3.0\n"),

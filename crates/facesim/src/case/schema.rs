@@ -219,6 +219,58 @@ pub enum TetElement {
     Quadratic,
 }
 
+/// `[tet] degloved_maxilla`: `"auto"`, `true` or `false` in case.toml.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Degloved {
+    /// On where it can serve: `sliding` and `release_cuts` on, the 4-node element, and, for a
+    /// plan that moves the upper teeth, subnasale and stomion or labrale superius found.
+    /// Elsewhere off, with a warning and report.json `tet.degloved_not_applied`.
+    #[default]
+    Auto,
+    /// On; a case it cannot serve is refused.
+    On,
+    Off,
+}
+
+impl Degloved {
+    /// Whether it was asked for by name (`true`): then what it cannot serve is an error.
+    pub fn required(self) -> bool {
+        self == Degloved::On
+    }
+}
+
+impl Serialize for Degloved {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            Degloved::Auto => s.serialize_str("auto"),
+            Degloved::On => s.serialize_bool(true),
+            Degloved::Off => s.serialize_bool(false),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for Degloved {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = Degloved;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("true, false or \"auto\"")
+            }
+            fn visit_bool<E: serde::de::Error>(self, v: bool) -> std::result::Result<Degloved, E> {
+                Ok(if v { Degloved::On } else { Degloved::Off })
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<Degloved, E> {
+                match v {
+                    "auto" => Ok(Degloved::Auto),
+                    _ => Err(E::invalid_value(serde::de::Unexpected::Str(v), &self)),
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
 /// Young's modulus (kPa) and Poisson ratio of one tissue: `[tet.skin]` etc., and the material
 /// of each element of the volumetric model (`crate::tet`).
 #[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq)]
@@ -284,9 +336,10 @@ pub struct Tet {
     pub nose_youngs_kpa: f64,
     /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
     /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
-    /// docs/validation.md). Default false; needs `sliding` and `release_cuts`.
+    /// docs/validation.md). `"auto"`, the default: on where it can serve, stepping aside with a
+    /// warning where it cannot; `true`: on, refusing a case it cannot serve; `false`: off.
     #[serde(default)]
-    pub degloved_maxilla: bool,
+    pub degloved_maxilla: Degloved,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,

@@ -98,17 +98,17 @@ impl Case {
                 t.nose_youngs_kpa
             ));
         }
-        if t.degloved_maxilla && !(t.sliding && t.release_cuts) {
+        if t.degloved_maxilla.required() && !(t.sliding && t.release_cuts) {
             return bad(
-                "[tet] degloved_maxilla rests the raised tissue on its bone, which needs sliding = true and release_cuts = true"
+                "[tet] degloved_maxilla = true rests the raised tissue on its bone, which needs sliding = true and release_cuts = true (\"auto\", the default, steps aside)"
                     .into(),
             );
         }
-        if t.degloved_maxilla && t.element == TetElement::Quadratic {
+        if t.degloved_maxilla.required() && t.element == TetElement::Quadratic {
             // The one-sided rounds free corner nodes; the 10-node element's midpoints on the bone
             // would stay bonded between them.
             return bad(
-                "[tet] degloved_maxilla runs on element \"linear\" (the 10-node element's midpoints on the bone would stay bonded)"
+                "[tet] degloved_maxilla = true runs on element \"linear\" (the 10-node element's midpoints on the bone would stay bonded; \"auto\", the default, steps aside)"
                     .into(),
             );
         }

@@ -14,6 +14,7 @@
 //! move leaves the maxilla's tissue attached, as the operation does, and the chin's soft tissue
 //! is never raised here (the sagittal split is reached from behind the teeth).
 
+use crate::case::{Tet, TetElement};
 use crate::error::{Error, Result};
 use crate::landmarks::{HeadFrame, Landmark};
 use crate::tet::conditions::Covered;
@@ -25,20 +26,50 @@ const ABOVE_SN_MM: f64 = 20.0;
 /// upper vermilion's height (7–9 mm in adults; Farkas 1994).
 const UPPER_VERMILION_MM: f64 = 8.0;
 
-/// Per mesh node: whether it is bone tissue raised by the Le Fort I approach. All false when no
-/// segment carries the upper teeth, whatever landmarks were found. Otherwise missing landmarks are
-/// an error naming them: the option asks for a region the landmarks must find.
+/// What the Le Fort I approach raises on this mesh.
+pub(crate) enum Raised {
+    /// No segment carries the upper teeth (a BSSO, a genioplasty): nothing is raised, whatever
+    /// the landmarks.
+    Nothing,
+    /// Per mesh node: whether it is bone tissue raised by the approach.
+    Nodes(Vec<bool>),
+    /// The upper teeth move, but the region's limits were not found: why, as a sentence's end
+    /// ("needs subnasale (Sn), which was not found").
+    Unknown(String),
+}
+
+/// The raised nodes the run takes (None: nothing raised), and why `"auto"` stepped aside (None
+/// when it did not). `true` makes a region it cannot find an error (what it cannot run on,
+/// `case::validate` refused before); `"auto"` steps aside from both, but only on a plan that moves
+/// the upper teeth: a mandibular plan has nothing to raise, and nothing to warn about.
+pub(crate) fn applied(t: &Tet, raised: Raised) -> Result<(Option<Vec<bool>>, Option<String>)> {
+    let aside = |why: &str| Ok((None, Some(why.to_string())));
+    match raised {
+        Raised::Nothing => Ok((None, None)),
+        Raised::Unknown(why) if t.degloved_maxilla.required() => Err(Error::config(format!(
+            "[tet] degloved_maxilla: the raised region {why}; give it as a [[landmark]] in case.toml"
+        ))),
+        Raised::Unknown(why) => aside(&format!("the raised region {why}")),
+        Raised::Nodes(_) if !(t.sliding && t.release_cuts) => {
+            aside("it needs [tet] sliding and release_cuts, which are off")
+        }
+        Raised::Nodes(_) if t.element == TetElement::Quadratic => aside(
+            "it runs on the 4-node element (the 10-node element's midpoints on the bone would stay bonded)",
+        ),
+        Raised::Nodes(r) => Ok((Some(r), None)),
+    }
+}
+
+/// The raised region from the pre-operative landmarks, the mesh nodes and what lip or cheek
+/// covers.
 pub(crate) fn raised(
     (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
     nodes: &[[f64; 3]],
     covered: &[Option<Covered>],
-) -> Result<Vec<bool>> {
-    let missing = |why: String| {
-        Error::config(format!(
-            "[tet] degloved_maxilla: the raised region needs {why}; give it as a [[landmark]] in case.toml"
-        ))
+) -> Raised {
+    let Some(frame) = frame else {
+        return Raised::Unknown("needs a head frame (the skin is empty)".into());
     };
-    let frame = frame.ok_or_else(|| missing("a head frame (the skin is empty)".into()))?;
     let height = |label: &str| -> Option<f64> {
         lms.iter()
             .find(|l| l.label == label)
@@ -65,16 +96,18 @@ pub(crate) fn raised(
         .iter()
         .any(|t| t.1.is_some_and(|s| 2 * moved(s) > upper.len()))
     {
-        return Ok(vec![false; nodes.len()]);
+        return Raised::Nothing;
     }
-    let sn = height("Sn").ok_or_else(|| missing("subnasale (Sn), which was not found".into()))?;
+    let Some(sn) = height("Sn") else {
+        return Raised::Unknown("needs subnasale (Sn), which was not found".into());
+    };
     let bottom = match (height("Sto"), height("Ls")) {
         (Some(sto), _) => sto,
         (None, Some(ls)) => ls - UPPER_VERMILION_MM,
         (None, None) => {
-            return Err(missing(
-                "stomion (Sto) or labrale superius (Ls), neither of which was found".into(),
-            ));
+            return Raised::Unknown(
+                "needs stomion (Sto) or labrale superius (Ls), neither of which was found".into(),
+            );
         }
     };
     let top = sn + ABOVE_SN_MM;
@@ -105,14 +138,76 @@ pub(crate) fn raised(
         .filter(|(s, k)| s.is_some() && 2 * k > total)
         .map(|(s, _)| *s)
         .next();
-    Ok(match maxilla {
+    match maxilla {
         // The raised region: the maxilla's segment and the bone above the cut it was raised
         // from, not another segment's.
-        Some(m) => in_band
-            .iter()
-            .zip(covered)
-            .map(|(b, c)| *b && c.is_some_and(|c| c.segment().is_none() || c.segment() == m))
-            .collect(),
-        None => vec![false; nodes.len()],
-    })
+        Some(m) => Raised::Nodes(
+            in_band
+                .iter()
+                .zip(covered)
+                .map(|(b, c)| *b && c.is_some_and(|c| c.segment().is_none() || c.segment() == m))
+                .collect(),
+        ),
+        None => Raised::Nothing,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::case::{Case, Degloved};
+    use std::path::Path;
+
+    fn tet(sets: &[&str]) -> Tet {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        let over = crate::case::overrides_table(&sets).unwrap();
+        Case::parse_with(
+            "[ct]\npath = \"ct.nii.gz\"\n",
+            Path::new("case.toml"),
+            &over,
+        )
+        .unwrap()
+        .tet
+    }
+
+    #[test]
+    fn auto_serves_where_it_can_and_steps_aside_only_where_the_upper_teeth_move() {
+        let nodes = || Raised::Nodes(vec![true, false]);
+        let unknown = || Raised::Unknown("needs subnasale (Sn), which was not found".into());
+        let auto = tet(&[]);
+        assert_eq!(auto.degloved_maxilla, Degloved::Auto);
+        assert_eq!(
+            applied(&auto, nodes()).unwrap(),
+            (Some(vec![true, false]), None)
+        );
+        assert_eq!(applied(&auto, Raised::Nothing).unwrap(), (None, None));
+        let (r, why) = applied(&auto, unknown()).unwrap();
+        assert!(r.is_none() && why.unwrap().contains("subnasale"));
+        for (set, words) in [
+            ("tet.sliding=false", "sliding and release_cuts"),
+            ("tet.release_cuts=false", "sliding and release_cuts"),
+            ("tet.element=quadratic", "4-node element"),
+        ] {
+            let t = tet(&[set]);
+            let (r, why) = applied(&t, nodes()).unwrap();
+            assert!(r.is_none(), "{set}");
+            assert!(
+                why.as_deref().unwrap_or_default().contains(words),
+                "{set}: {why:?}"
+            );
+            // A mandibular plan: nothing to raise, nothing to say.
+            assert_eq!(applied(&t, Raised::Nothing).unwrap(), (None, None), "{set}");
+        }
+        // Asked for by name: served, or an error naming what is missing.
+        let on = tet(&["tet.degloved_maxilla=true"]);
+        assert_eq!(
+            applied(&on, nodes()).unwrap(),
+            (Some(vec![true, false]), None)
+        );
+        let e = applied(&on, unknown()).unwrap_err().to_string();
+        assert!(
+            e.contains("degloved_maxilla") && e.contains("subnasale"),
+            "{e}"
+        );
+    }
 }

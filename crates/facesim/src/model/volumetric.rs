@@ -5,7 +5,7 @@
 //! given scan, at full resolution).
 
 use super::predicted::Predicted;
-use crate::case::{Case, TetElement, TetMaterial};
+use crate::case::{Case, Degloved, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::fem::cholesky::{MeshAnalyses, Ordering};
@@ -468,6 +468,10 @@ pub struct TetReport {
     /// every lifted one clear of it (false: a warning says how far from it they ended).
     #[serde(default)]
     pub degloved_settled: bool,
+    /// Why `[tet] degloved_maxilla = "auto"` stepped aside on a plan that moves the upper teeth
+    /// (absent when it served, was off, or had nothing to raise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degloved_not_applied: Option<String>,
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
@@ -864,15 +868,26 @@ pub fn predict(
     );
     // With `[tet] degloved_maxilla`, the bone a Le Fort I approach raises slides too, and (with
     // the teeth it covers) rests on its bone one-sidedly: the one-sided rounds below.
-    let raised = if t.degloved_maxilla && t.sliding && t.release_cuts {
-        super::degloved::raised(
-            scene.landmarks_pre(skin, Path::new("case.toml"))?,
-            &mesh.nodes,
-            &covered,
-        )?
-    } else {
-        vec![false; mesh.nodes.len()]
+    // `[tet] degloved_maxilla`: "auto" (the default) steps aside where `true` is refused or
+    // fails, with a warning and report.json's reason (`model::degloved::applied`).
+    let (raised, degloved_not_applied) = match t.degloved_maxilla {
+        Degloved::Off => (None, None),
+        asked => {
+            let found = match scene.landmarks_pre(skin, Path::new("case.toml")) {
+                Ok(found) => found,
+                // The landmark stage reports why (`commands::run`).
+                Err(_) if !asked.required() => (None, Vec::new()),
+                Err(e) => return Err(e),
+            };
+            super::degloved::applied(t, super::degloved::raised(found, &mesh.nodes, &covered))?
+        }
     };
+    if let Some(why) = &degloved_not_applied {
+        rec.warn(format!(
+            "[tet] degloved_maxilla = \"auto\" stepped aside: {why}; the tissue over the anterior maxilla stays attached to its bone"
+        ));
+    }
+    let raised = raised.unwrap_or_else(|| vec![false; mesh.nodes.len()]);
     let contact: Vec<Option<Mucosa>> = covered
         .iter()
         .zip(&raised)
@@ -1307,6 +1322,7 @@ pub fn predict(
         lifted_in_tension,
         lifted_penetration_mm,
         degloved_settled,
+        degloved_not_applied,
         floating_pieces: pieces,
         newton,
         face_vertices_unreached: embedding.unreached(),
