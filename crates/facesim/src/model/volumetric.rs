@@ -867,9 +867,9 @@ pub fn predict(
         &|p| !crate::pipeline::model::rigid_mask(case, &[p])[0],
     );
     // With `[tet] degloved_maxilla`, the bone a Le Fort I approach raises slides too, and (with
-    // the teeth it covers) rests on its bone one-sidedly: the one-sided rounds below.
-    // `[tet] degloved_maxilla`: "auto" (the default) steps aside where `true` is refused or
-    // fails, with a warning and report.json's reason (`model::degloved::applied`).
+    // the teeth it covers) rests on its bone one-sidedly: the one-sided rounds below. "auto"
+    // (the default) steps aside where `true` is refused or fails, with a warning and
+    // report.json's reason (`model::degloved::applied`).
     let (raised, degloved_not_applied) = match t.degloved_maxilla {
         Degloved::Off => (None, None),
         asked => {
