@@ -213,6 +213,45 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         dy(tip)
     );
     assert!(dy(forehead).abs() < 1e-6);
+    // Two boxes (docs/pipeline.md "Region"): the face region, inside the CT, and the tissue
+    // mesh's, the region grown by margin_mm once more, which holds every node. The scan ends
+    // through the upper lip (z = 0): there the tissue ends in a free surface half a voxel past
+    // the last slice, not in a held face at it.
+    let tet = o.report.tet.as_ref().expect("the volumetric model ran");
+    let margin = 30.0;
+    let (lo, hi) = tet.mesh_box.expect("report.json tet.mesh_box");
+    let (vlo, vhi) = o.volume.bounds();
+    // The upper corner is rounded up to whole cells of the lattice's coarsest size (8 mm).
+    for k in 0..3 {
+        assert!((lo[k] - (tet.region.0[k] - margin)).abs() < 1e-9, "{k}");
+        let over = hi[k] - (tet.region.1[k] + margin);
+        assert!((-1e-9..8.0).contains(&over), "{k}: {over}");
+        assert!(
+            tet.region.0[k] >= vlo[k] && tet.region.1[k] <= vhi[k],
+            "{k}"
+        );
+    }
+    let mesh = facesim::tet::vtu::read(&out.path().join("tets.vtu")).unwrap();
+    assert!(
+        mesh.nodes
+            .iter()
+            .all(|p| (0..3).all(|k| p[k] >= lo[k] - 1e-9 && p[k] <= hi[k] + 1e-9))
+    );
+    let past_end: Vec<u8> = mesh
+        .nodes
+        .iter()
+        .zip(&mesh.constraint)
+        .filter(|(p, _)| p[2] < vlo[2] - 0.1)
+        .map(|(_, c)| *c)
+        .collect();
+    // (Held there, no node would lie past the last slice. Most of these are bone, or skin
+    // outside [surface] movable, held as anywhere else; the lip's and the mouth's are free.)
+    let free = past_end.iter().filter(|c| **c == 0).count();
+    assert!(
+        past_end.len() > 500 && free > 20,
+        "{free} of {} nodes past the scan's end are free",
+        past_end.len()
+    );
     // The default model is the volumetric one: its mesh, no springs.
     for f in [
         "face_post.obj",

@@ -596,7 +596,7 @@ fn run_one(
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
     on_run(&case.info, s, &outcome)?;
     prune(&outcome.out_dir);
-    let mesh_box = outcome.report.tet.as_ref().map(|t| t.region);
+    let face_region = outcome.report.tet.as_ref().map(|t| t.region);
     Ok(RunLandmarks {
         carried: outcome
             .report
@@ -605,19 +605,20 @@ fn run_one(
             .into_iter()
             .map(|(_, c)| c)
             .collect(),
-        mesh_box,
+        face_region,
     })
 }
 
-/// What a run tells about its landmarks: where they went, and the box of the tissue mesh (the
-/// moved bone's box grown by `[tet] margin_mm`; its faces are held).
+/// What a run tells about its landmarks: where they went, and the face region (report.json
+/// `tet.region`: the moved bone's box grown by `[tet] margin_mm`; the face beyond it is not
+/// carried by the tissue mesh, which reaches `margin_mm` further to its held faces).
 struct RunLandmarks {
     carried: Vec<Carried>,
-    mesh_box: Option<([f64; 3], [f64; 3])>,
+    face_region: Option<([f64; 3], [f64; 3])>,
 }
 
-/// A landmark nearer than this to the tissue mesh's held faces is noted: the hold, not the
-/// tissue, may set its move.
+/// A landmark nearer than this to the face region's edge is noted: the face beyond the edge
+/// stays, so the edge, not the tissue, may set its move.
 const NEAR_HELD_FACE_MM: f64 = 10.0;
 
 /// Distance (mm) from p inside the box to its nearest face; negative outside.
@@ -671,8 +672,8 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 row.why = Some(u.to_string());
                 return row;
             }
-            let (carried, mesh_box) = match &run {
-                Ok(r) => (&r.carried, r.mesh_box),
+            let (carried, face_region) = match &run {
+                Ok(r) => (&r.carried, r.face_region),
                 Err(e) => {
                     row.why = Some(format!("the run failed: {e}"));
                     return row;
@@ -687,12 +688,12 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
             });
             let depth = |label: &str| -> Option<f64> {
                 let p = carried.iter().find(|c| c.label == label)?.pre?;
-                Some(depth_in(mesh_box.as_ref()?, p))
+                Some(depth_in(face_region.as_ref()?, p))
             };
             if let Some((label, _)) = still {
                 row.why = Some(match depth(label) {
                     Some(d) if d < 0.0 => format!(
-                        "{label} did not move: it lies {:.1} mm outside the tissue mesh (the moved bone's box grown by [tet] margin_mm; report.json tet.region), which holds it still",
+                        "{label} did not move: it lies {:.1} mm outside the face region (the moved bone's box grown by [tet] margin_mm; report.json tet.region), whose face stays",
                         -d
                     ),
                     _ => format!(
@@ -707,7 +708,7 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 .filter_map(|(label, _)| {
                     let d = depth(label)?;
                     (d < NEAR_HELD_FACE_MM).then(|| {
-                        format!("{label} is {d:.1} mm from the tissue mesh's held boundary (report.json tet.region)")
+                        format!("{label} is {d:.1} mm from the face region's edge (report.json tet.region), beyond which the face stays")
                     })
                 })
                 .collect();

@@ -407,9 +407,15 @@ pub struct NewtonStep {
 pub struct TetReport {
     pub material: TetMaterial,
     pub element: TetElement,
-    /// The modelled region (LPS mm): the box around the moved bone grown by `[tet] margin_mm`,
-    /// and grown further to hold the nose tip when the nose's base is inside.
+    /// The face region (LPS mm): the box around the moved bone grown by `[tet] margin_mm`,
+    /// within the CT, and grown further to hold the nose tip when the nose's base is inside.
+    /// The face inside it is carried by the tissue mesh; the face beyond it stays.
     pub region: ([f64; 3], [f64; 3]),
+    /// The tissue mesh's box (LPS mm): `region` grown by `[tet] margin_mm` once more, its upper
+    /// corner rounded up to whole lattice cells (`tet::from_ct::SoftTissueMesh::lattice_box`).
+    /// Its faces are held; where the scan ends inside it the tissue ends in a free surface.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mesh_box: Option<([f64; 3], [f64; 3])>,
     /// Pronasale (LPS mm) when the region was grown to hold it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub region_grown_for_nose_tip: Option<[f64; 3]>,
@@ -563,10 +569,14 @@ fn hold_tissue(
     (h, released, held)
 }
 
-/// The box (LPS mm) around the skull points the plan moves, grown by `margin` and kept inside
-/// the CT's voxel centres (where the scan ends, the tissue is cut and held like the region's other
-/// cut faces, not left as a free surface), then grown to take in the nose ([`take_in_nose`]), with
-/// the nose tip when it grew; None when the plan moves no bone.
+/// The face region (LPS mm): the box around the skull points the plan moves, grown by `margin`
+/// and kept inside the CT's voxel centres, then grown to take in the nose ([`take_in_nose`]), with
+/// the nose tip when it grew; None when the plan moves no bone. The face inside it is carried by
+/// the mesh; the mesh itself fills this box grown by `margin` once more ([`MeshParams`]), whose
+/// faces are held. That second margin reaches past the CT wherever the first was clipped, so
+/// where the scan ends the tissue ends in a free surface, not a held one: the anatomy beyond the
+/// scan is not modelled, and holding the scan's end instead pinned the real CT's upper lip, cut
+/// by the scan 4.5 mm below labrale superius (docs/pipeline.md "Region").
 fn region(scene: &Scene, skin: &Mesh, margin: f64) -> Option<(Box3, Option<[f64; 3]>)> {
     let skull = &scene.face.skull.vertices;
     let (_, moved) = scene.model.plan.apply(skull, 1.0);
@@ -1295,6 +1305,7 @@ pub fn predict(
         material: t.material,
         element: t.element,
         region: roi,
+        mesh_box: Some(mesh.lattice_box),
         region_grown_for_nose_tip: nose_tip,
         nodes: nodes.len(),
         tets: mesh.tets.len(),

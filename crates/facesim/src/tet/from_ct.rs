@@ -59,6 +59,10 @@ pub struct SoftTissueMesh {
     pub tets: Vec<[u32; 4]>,
     /// Per tetrahedron, a soft label of `crate::segment` (SKIN, FAT_DARK, FAT_BRIGHT, MUSCLE).
     pub tissue: Vec<u8>,
+    /// The box the lattice filled (LPS mm): `roi` widened by `margin_mm`, its upper corner
+    /// rounded up to whole lattice cells. Its faces are the `Cut` faces; beyond the CT the
+    /// fields read air, so where the scan ends inside it the tissue ends in a surface.
+    pub lattice_box: ([f64; 3], [f64; 3]),
     /// Per node.
     pub kind: Vec<NodeKind>,
     pub quality: Quality,
@@ -124,6 +128,13 @@ pub fn soft_tissue(
     } else {
         0
     };
+    // The lattices' own boxes (`stuffing::Lattice::new`, `graded::background`): from `lo`,
+    // whole cells of the coarsest size up past `hi`.
+    let cell = h * f64::from(1u32 << levels);
+    let lattice_box = (
+        lo,
+        [0, 1, 2].map(|a| lo[a] + ((hi[a] - lo[a]) / cell - 1e-9).ceil().max(1.0) * cell),
+    );
     let m = if levels == 0 {
         stuffing::stuff(&f, lo, hi, h)?
     } else {
@@ -202,6 +213,7 @@ pub fn soft_tissue(
         nodes: m.nodes,
         tets: m.tets,
         tissue,
+        lattice_box,
         kind,
         quality,
         voxel_volume_mm3,

@@ -225,7 +225,7 @@ struct Calibrand {
     anchors: Vec<Option<SurfaceAnchor>>,
     /// Per soft landmark label, its index among the reduced model's outputs (landmark bounds).
     outputs: Vec<(String, usize)>,
-    mesh_box: Option<([f64; 3], [f64; 3])>,
+    face_region: Option<([f64; 3], [f64; 3])>,
     /// The run's case: the nominal parameters the box's ratios scale.
     base: Case,
     /// The run's tissue state, which its reduced models keep.
@@ -295,7 +295,7 @@ impl Calibrand {
                 .collect(),
             anchors,
             outputs,
-            mesh_box: o.report.tet.as_ref().map(|t| t.region),
+            face_region: o.report.tet.as_ref().map(|t| t.region),
             base,
             state: tissue_state(o),
         })
@@ -336,7 +336,7 @@ impl Calibrand {
             self.surgery,
             Ok(RunLandmarks {
                 carried,
-                mesh_box: self.mesh_box,
+                face_region: self.face_region,
             }),
         );
         Ok(rows
