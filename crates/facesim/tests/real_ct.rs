@@ -252,6 +252,10 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         "{free} of {} nodes past the scan's end are free",
         past_end.len()
     );
+    // report.json says where: the lip and the mouth at the scan's end, beside the moved teeth.
+    let end = tet.scan_end.expect("report.json tet.scan_end");
+    assert!(end.free_nodes > 0 && end.free_nodes <= free, "{end:?}");
+    assert!(end.nearest_moved_bone_mm < 10.0, "{end:?}");
     // The default model is the volumetric one: its mesh, no springs.
     for f in [
         "face_post.obj",

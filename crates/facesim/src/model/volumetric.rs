@@ -481,6 +481,11 @@ pub struct TetReport {
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
+    /// Where the scan ends inside the tissue mesh's box: the free tissue nodes past the CT's
+    /// outermost voxel centres (the surface the tissue ends in there) and how near bone the plan
+    /// moves they come. None: the scan ends nowhere in the tissue, or its end lies still.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan_end: Option<ScanEnd>,
     /// Nonlinear material: the load steps.
     pub newton: Option<Vec<NewtonStep>>,
     /// Face vertices farther from the mesh's skin than the reach (carried by extrapolation).
@@ -567,6 +572,51 @@ fn hold_tissue(
         None => condition(&mesh.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
     };
     (h, released, held)
+}
+
+/// Where the scan ends in the tissue (report.json `tet.scan_end`).
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+pub struct ScanEnd {
+    pub free_nodes: usize,
+    /// From the nearest of them to a node on bone the plan moves (mm).
+    pub nearest_moved_bone_mm: f64,
+}
+
+/// The free nodes past the CT's outermost voxel centres (`bounds`): the tissue's free surface
+/// where the scan ends (beyond the CT the fields read air, docs/pipeline.md "Region"), with the
+/// distance from the nearest of them to moved bone; None when there are none or nothing moves.
+fn scan_end(
+    nodes: &[[f64; 3]],
+    constraint: &[u8],
+    bounds: ([f64; 3], [f64; 3]),
+) -> Option<ScanEnd> {
+    // The skin iso-surface closes within a voxel past the last centre; a tenth of a millimetre
+    // keeps nodes warped onto the centres' plane out.
+    let past = |p: &[f64; 3]| (0..3).any(|k| p[k] < bounds.0[k] - 0.1 || p[k] > bounds.1[k] + 0.1);
+    let end: Vec<[f64; 3]> = nodes
+        .iter()
+        .zip(constraint)
+        .filter(|(p, c)| **c == FREE && past(p))
+        .map(|(p, _)| *p)
+        .collect();
+    let moved: Vec<[f64; 3]> = nodes
+        .iter()
+        .zip(constraint)
+        .filter(|(_, c)| **c == MOVED)
+        .map(|(p, _)| *p)
+        .collect();
+    let nearest = end
+        .iter()
+        .flat_map(|a| {
+            moved
+                .iter()
+                .map(move |b| crate::vec3::norm(crate::vec3::sub(*a, *b)))
+        })
+        .fold(f64::INFINITY, f64::min);
+    (!end.is_empty() && nearest.is_finite()).then_some(ScanEnd {
+        free_nodes: end.len(),
+        nearest_moved_bone_mm: nearest,
+    })
 }
 
 /// The face region (LPS mm): the box around the skull points the plan moves, grown by `margin`
@@ -936,6 +986,9 @@ pub fn predict(
         case,
         linear_solve,
     );
+    // Not a warning: the bundled jaws phantom and both real CTs end in tissue within 3 mm of
+    // moved bone (docs/pipeline.md "Region").
+    let scan_end = scan_end(&mesh.nodes, &constraint, scene.vol.bounds());
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: each moves rigidly with the bone it lies on (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"
@@ -1335,6 +1388,7 @@ pub fn predict(
         degloved_settled,
         degloved_not_applied,
         floating_pieces: pieces,
+        scan_end,
         newton,
         face_vertices_unreached: embedding.unreached(),
         face_to_mesh_mm: stats(&reached),
