@@ -619,7 +619,7 @@ struct RunLandmarks {
 
 /// A landmark nearer than this to the face region's edge is noted: the face beyond the edge
 /// stays, so the edge, not the tissue, may set its move.
-const NEAR_HELD_FACE_MM: f64 = 10.0;
+const NEAR_REGION_EDGE_MM: f64 = 10.0;
 
 /// Distance (mm) from p inside the box to its nearest face; negative outside.
 fn depth_in(b: &([f64; 3], [f64; 3]), p: [f64; 3]) -> f64 {
@@ -707,7 +707,7 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 .iter()
                 .filter_map(|(label, _)| {
                     let d = depth(label)?;
-                    (d < NEAR_HELD_FACE_MM).then(|| {
+                    (d < NEAR_REGION_EDGE_MM).then(|| {
                         format!("{label} is {d:.1} mm from the face region's edge (report.json tet.region), beyond which the face stays")
                     })
                 })

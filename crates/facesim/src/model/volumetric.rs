@@ -483,7 +483,7 @@ pub struct TetReport {
     pub floating_pieces: usize,
     /// Where the scan ends inside the tissue mesh's box: the free tissue nodes past the CT's
     /// outermost voxel centres (the surface the tissue ends in there) and how near bone the plan
-    /// moves they come. None: the scan ends nowhere in the tissue, or its end lies still.
+    /// moves they come. None: the scan ends nowhere in the tissue, or no bone moves.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scan_end: Option<ScanEnd>,
     /// Nonlinear material: the load steps.
