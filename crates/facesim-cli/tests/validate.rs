@@ -1,7 +1,8 @@
 //! `facesim validate` through the real binary (issue 26 item 2): one coarse phantom and one
 //! surgery, its ratios recomputed from the run's own report.json and its ranges held against
 //! docs/validation.md's table; a Le Fort I's region holding the whole nose; the real headsq's
-//! BSSO advance against the published chin ratio; bad input as one line.
+//! BSSO advance against the published chin ratio; the tissue the Le Fort I's and the
+//! genioplasty's approaches raise; bad input as one line.
 
 mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
@@ -390,8 +391,8 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     // Without sliding, or on the 10-node element, the option is refused in one line.
     let jaws = root().join("data-samples/jaws");
     for (set, problem) in [
-        ("tet.sliding=false", "needs sliding = true"),
-        ("tet.element=\"quadratic\"", "runs on element \"linear\""),
+        ("tet.sliding=false", "needs [tet] sliding and release_cuts"),
+        ("tet.element=\"quadratic\"", "runs on the 4-node element"),
     ] {
         let out = common::kept_dir("facesim-degloved-refused");
         let r = facesim(&[
@@ -458,6 +459,78 @@ fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_
             .contains("degloved_maxilla = \"auto\" stepped aside")
     });
     assert!(warned, "{}", run["warnings"]);
+}
+
+/// `[tet] degloved_chin = "auto"`, the default (docs/validation.md "The degloved chin"): a
+/// coarse phantom's advancement genioplasty raises the tissue over the anterior mandible, from
+/// the lower teeth down, and rests it on the bone one way: the rounds settle, lifted nodes lie
+/// clear of the bone, nothing inverts, `true` gives the same face. Resting one way, the soft
+/// tissue above the cut lifts off the symphysis that stays as the chin pushes it forward, so the
+/// soft chin follows the bony chin further than bonded to it (`false`). A BSSO moves the chin
+/// with the teeth: nothing is raised.
+#[test]
+fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() {
+    let by_default = validate_one_phantom("facesim-degloved-chin", "genioplasty", &[]);
+    let asked = validate_one_phantom(
+        "facesim-degloved-chin-asked",
+        "genioplasty",
+        &["--set", "tet.degloved_chin=true"],
+    );
+    let bonded = validate_one_phantom(
+        "facesim-degloved-chin-off",
+        "genioplasty",
+        &["--set", "tet.degloved_chin=false"],
+    );
+    let (d, a, b) = (
+        run_report(&by_default, "phantom01", "genioplasty"),
+        run_report(&asked, "phantom01", "genioplasty"),
+        run_report(&bonded, "phantom01", "genioplasty"),
+    );
+    let t = &d["tet"];
+    let count = |k: &str| t[k].as_u64().unwrap();
+    println!(
+        "genioplasty: {} raised ({} by the chin's approach), {} lifted off, deepest {:.4} mm",
+        count("degloved_nodes"),
+        count("degloved_chin_nodes"),
+        count("lifted_in_tension"),
+        t["lifted_penetration_mm"].as_f64().unwrap()
+    );
+    assert!(count("degloved_chin_nodes") > 10, "{t}");
+    assert_eq!(count("degloved_nodes"), count("degloved_chin_nodes"), "{t}");
+    assert!(count("lifted_in_tension") > 0, "{t}");
+    assert_eq!(t["degloved_settled"], true, "{t}");
+    assert!(t["lifted_penetration_mm"].as_f64().unwrap() <= 0.01, "{t}");
+    assert_eq!(count("inverted_elements"), 0);
+    assert!(t["degloved_chin_not_applied"].is_null(), "{t}");
+    assert_eq!(b["tet"]["degloved_nodes"], 0, "{}", b["tet"]);
+    let face =
+        |o: &Path| std::fs::read(o.join("runs/phantom01/genioplasty/face_post.ply")).unwrap();
+    assert!(
+        face(&by_default) == face(&asked),
+        "the default's face is not true's"
+    );
+    assert_eq!(a["tet"]["degloved_chin_nodes"], t["degloved_chin_nodes"]);
+
+    let pog = |o: &Path| {
+        let rows = read_csv(&o.join("validation.csv"));
+        let row = rows
+            .iter()
+            .find(|r| r["surgery"] == "genioplasty" && r["landmark"] == "Pog'")
+            .expect("no genioplasty Pog' row");
+        num(&row["predicted_ratio"]).unwrap()
+    };
+    let (raised, attached) = (pog(&by_default), pog(&bonded));
+    println!("genioplasty Pog'/Pog: {raised:.3} raised, {attached:.3} attached");
+    assert!(raised > attached + 0.02, "{raised} vs {attached}");
+
+    let bsso = validate_one_phantom("facesim-degloved-chin-bsso", "bsso-advance", &[]);
+    let run = run_report(&bsso, "phantom01", "bsso-advance");
+    assert_eq!(run["tet"]["degloved_chin_nodes"], 0, "{}", run["tet"]);
+    assert!(
+        run["tet"]["degloved_chin_not_applied"].is_null(),
+        "{}",
+        run["tet"]
+    );
 }
 
 #[test]

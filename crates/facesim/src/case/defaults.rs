@@ -101,6 +101,7 @@ impl Default for Tet {
             margin_mm: 30.0,
             nose_youngs_kpa: 0.0,
             degloved_maxilla: Degloved::Auto,
+            degloved_chin: Degloved::Auto,
             skin: e(30.0, 0.45),
             muscle: e(10.0, 0.45),
             fat_dark: e(2.0, 0.45),

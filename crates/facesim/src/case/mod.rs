@@ -185,7 +185,7 @@ mod tests {
     }
 
     #[test]
-    fn degloved_maxilla_is_auto_true_or_false_and_nothing_else() {
+    fn degloved_maxilla_and_chin_are_auto_true_or_false_and_nothing_else() {
         let parse = |v: &str| {
             Case::parse_with(
                 MIN,
@@ -214,19 +214,32 @@ mod tests {
             (json(Degloved::Auto).as_str(), json(Degloved::On).as_str()),
             ("\"auto\"", "true")
         );
-        // `true` refuses what "auto" steps aside from.
-        let e = Case::parse_with(
-            MIN,
-            Path::new("case.toml"),
-            &overrides_table(&[
-                "tet.degloved_maxilla=true".into(),
-                "tet.sliding=false".into(),
-            ])
-            .unwrap(),
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("needs sliding = true"), "{e}");
+        // `true` refuses what "auto" steps aside from, naming the option; both approaches.
+        for option in ["degloved_maxilla", "degloved_chin"] {
+            for (off, words) in [
+                ("tet.sliding=false", "sliding and release_cuts"),
+                ("tet.element=quadratic", "4-node element"),
+            ] {
+                let e = Case::parse_with(
+                    MIN,
+                    Path::new("case.toml"),
+                    &overrides_table(&[format!("tet.{option}=true"), off.into()]).unwrap(),
+                )
+                .unwrap_err()
+                .to_string();
+                assert!(
+                    e.contains(&format!("[tet] {option} = true")) && e.contains(words),
+                    "{e}"
+                );
+            }
+        }
+        assert_eq!(
+            Case::parse(MIN, Path::new("case.toml"))
+                .unwrap()
+                .tet
+                .degloved_chin,
+            Degloved::Auto
+        );
         let c = Case::parse_with(
             MIN,
             Path::new("case.toml"),

@@ -219,12 +219,13 @@ pub enum TetElement {
     Quadratic,
 }
 
-/// `[tet] degloved_maxilla`: `"auto"`, `true` or `false` in case.toml.
+/// `[tet] degloved_maxilla` and `degloved_chin`: `"auto"`, `true` or `false` in case.toml.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Degloved {
-    /// On where it can serve: `sliding` and `release_cuts` on, the 4-node element, and, for a
-    /// plan that moves the upper teeth, subnasale and stomion or labrale superius found.
-    /// Elsewhere off, with a warning and report.json `tet.degloved_not_applied`.
+    /// On where it can serve: `sliding` and `release_cuts` on, the 4-node element, and the
+    /// region's limits found (for a plan that moves the upper teeth, subnasale and stomion or
+    /// labrale superius). Elsewhere off, with a warning and report.json's reason
+    /// (`tet.degloved_not_applied`, `tet.degloved_chin_not_applied`).
     #[default]
     Auto,
     /// On; a case it cannot serve is refused.
@@ -340,6 +341,11 @@ pub struct Tet {
     /// warning where it cannot; `true`: on, refusing a case it cannot serve; `false`: off.
     #[serde(default)]
     pub degloved_maxilla: Degloved,
+    /// The tissue a genioplasty's approach raises off the anterior mandible rests on the bone the
+    /// same way, on a plan that moves a chin segment (`model::degloved`; docs/validation.md).
+    /// `"auto"`, `true` and `false` as `degloved_maxilla`.
+    #[serde(default)]
+    pub degloved_chin: Degloved,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,
@@ -347,6 +353,20 @@ pub struct Tet {
 }
 
 impl Tet {
+    /// Why the raised tissue cannot rest on its bone one way in this case (None: it can): the
+    /// one-sided rounds slide and free the corner nodes of the 4-node element.
+    pub(crate) fn one_sided_unavailable(&self) -> Option<&'static str> {
+        if !(self.sliding && self.release_cuts) {
+            Some("it needs [tet] sliding and release_cuts, which are off")
+        } else if self.element == TetElement::Quadratic {
+            Some(
+                "it runs on the 4-node element (the 10-node element's midpoints on the bone would stay bonded)",
+            )
+        } else {
+            None
+        }
+    }
+
     /// The material of a tissue label (`crate::labels`) (soft labels; anything else is
     /// muscle, the bulk of the face's soft tissue).
     pub fn elastic(&self, label: u8) -> TissueElastic {

@@ -98,19 +98,15 @@ impl Case {
                 t.nose_youngs_kpa
             ));
         }
-        if t.degloved_maxilla.required() && !(t.sliding && t.release_cuts) {
-            return bad(
-                "[tet] degloved_maxilla = true rests the raised tissue on its bone, which needs sliding = true and release_cuts = true (\"auto\", the default, steps aside)"
-                    .into(),
-            );
-        }
-        if t.degloved_maxilla.required() && t.element == TetElement::Quadratic {
-            // The one-sided rounds free corner nodes; the 10-node element's midpoints on the bone
-            // would stay bonded between them.
-            return bad(
-                "[tet] degloved_maxilla = true runs on element \"linear\" (the 10-node element's midpoints on the bone would stay bonded; \"auto\", the default, steps aside)"
-                    .into(),
-            );
+        for (option, asked) in [
+            ("degloved_maxilla", t.degloved_maxilla),
+            ("degloved_chin", t.degloved_chin),
+        ] {
+            if let Some(why) = t.one_sided_unavailable().filter(|_| asked.required()) {
+                return bad(format!(
+                    "[tet] {option} = true rests the raised tissue on its bone one way, and {why} (\"auto\", the default, steps aside)"
+                ));
+            }
         }
         if t.material == TetMaterial::NeoHookean && t.element == TetElement::Quadratic {
             return bad(

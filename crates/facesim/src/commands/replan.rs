@@ -327,7 +327,7 @@ pub fn replan_with(
     if let Some(t) = &run_report.tet {
         if t.lifted_off > 0 {
             warnings.push(format!(
-                "the run lifted {} tissue nodes off the bone ({} of them the degloved maxilla's, where the bone pulled it): the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`",
+                "the run lifted {} tissue nodes off the bone ({} of them raised by the approach, where the bone pulled it): the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`",
                 t.lifted_off, t.lifted_in_tension
             ));
         }

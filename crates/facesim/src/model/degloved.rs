@@ -1,20 +1,28 @@
-//! The degloved anterior maxilla (`[tet] degloved_maxilla`, docs/validation.md "The degloved
-//! maxilla"). A Le Fort I is reached through an incision in the upper vestibule, and the
-//! mucoperiosteum is raised off the front and sides of the maxilla up to the piriform rim and the
-//! infraorbital nerve before the bone is cut. Until it heals the soft tissue there rests on the
-//! bone: pushed where the bone moves into it, left behind where the bone moves away. With the
-//! option, the bone nodes that lip or cheek cover over that region slide on their bone and lift
-//! off where the bone would pull them (`model::volumetric`'s one-sided rounds).
+//! The tissue an operation's approach raises off the bone (`[tet] degloved_maxilla` and
+//! `[tet] degloved_chin`, docs/validation.md "The degloved maxilla" and "The degloved chin").
+//! Until it heals that tissue rests on the bone: pushed where the bone moves into it, left behind
+//! where the bone moves away. With the options, the bone nodes that lip or cheek cover over the
+//! raised region slide on their bone and lift off where the bone would pull them
+//! (`model::volumetric`'s one-sided rounds).
 //!
-//! The region, in the head frame of the pre-operative landmarks: the bone that lip or cheek
-//! covers (`tet::conditions::covered_bone`), from the lips' meeting line (stomion; without it,
-//! [`UPPER_VERMILION_MM`] below labrale superius) up to [`ABOVE_SN_MM`] above subnasale, on the
-//! segment that carries the upper teeth and on the bone left above it. It applies when a segment
-//! carries most of the upper teeth (a Le Fort I, alone or in a bimaxillary move): a mandibular
-//! move leaves the maxilla's tissue attached, as the operation does, and the chin's soft tissue
-//! is never raised here (the sagittal split is reached from behind the teeth).
+//! A Le Fort I is reached through an incision in the upper vestibule, and the mucoperiosteum is
+//! raised off the front and sides of the maxilla up to the piriform rim and the infraorbital
+//! nerve before the bone is cut. The region, in the head frame of the pre-operative landmarks:
+//! the bone that lip or cheek covers (`tet::conditions::covered_bone`), from the lips' meeting
+//! line (stomion; without it, [`UPPER_VERMILION_MM`] below labrale superius) up to
+//! [`ABOVE_SN_MM`] above subnasale, on the segment that carries the upper teeth and on the bone
+//! left above it. It applies when a segment carries most of the upper teeth (a Le Fort I, alone or
+//! in a bimaxillary move).
+//!
+//! A genioplasty is reached through an incision in the lower vestibule, and the periosteum is
+//! raised off the symphysis down to its lower border, between the mental nerves, before the chin
+//! is cut. The region: the bone that lip or cheek covers from the top of the lower teeth down,
+//! within [`MENTAL_FORAMEN_MM`] of the midsagittal plane, on every segment and on the bone left in
+//! place. It applies when a moved segment under the lip or cheek lies below the lower teeth and
+//! carries almost none of them (a chin). A sagittal split is reached from behind the teeth: a BSSO
+//! alone raises nothing, and neither approach raises anything for a plan it is not part of.
 
-use crate::case::{Tet, TetElement};
+use crate::case::{Degloved, Tet};
 use crate::error::{Error, Result};
 use crate::landmarks::{HeadFrame, Landmark};
 use crate::tet::conditions::Covered;
@@ -25,39 +33,144 @@ const ABOVE_SN_MM: f64 = 20.0;
 /// Without stomion, the lips' meeting line is taken this far below labrale superius (mm): the
 /// upper vermilion's height (7–9 mm in adults; Farkas 1994).
 const UPPER_VERMILION_MM: f64 = 8.0;
+/// The chin's raised region ends this far either side of the midsagittal plane (mm): the mental
+/// foramina, which the dissection spares (25.9 and 25.5 mm from the midline, right and left, on
+/// 180 CBCTs; Sheikhi & Karbasi Kheir 2016, Int J Dent, doi 10.1155/2016/5821048).
+const MENTAL_FORAMEN_MM: f64 = 25.0;
+/// A segment carrying at most this share of the tooth nodes lip or cheek cover carries none of
+/// the teeth: a CT's dental streaks put a few on a chin segment (2 of 121 on headsq).
+const STREAKS: f64 = 0.1;
 
-/// What the Le Fort I approach raises on this mesh.
+/// The two approaches and their options.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Approach {
+    /// `[tet] degloved_maxilla`: a Le Fort I's.
+    Maxilla,
+    /// `[tet] degloved_chin`: a genioplasty's.
+    Chin,
+}
+
+impl Approach {
+    /// The case.toml key.
+    pub(crate) fn option(self) -> &'static str {
+        match self {
+            Approach::Maxilla => "degloved_maxilla",
+            Approach::Chin => "degloved_chin",
+        }
+    }
+
+    /// What the case asks of it.
+    pub(crate) fn asked(self, t: &Tet) -> Degloved {
+        match self {
+            Approach::Maxilla => t.degloved_maxilla,
+            Approach::Chin => t.degloved_chin,
+        }
+    }
+}
+
+/// What an approach raises on this mesh.
 pub(crate) enum Raised {
-    /// No segment carries the upper teeth (a BSSO, a genioplasty): nothing is raised, whatever
-    /// the landmarks.
+    /// The plan has no part the approach serves (for the maxilla's, no segment carries the upper
+    /// teeth; for the chin's, no segment is a chin): nothing is raised, whatever the landmarks.
     Nothing,
     /// Per mesh node: whether it is bone tissue raised by the approach.
     Nodes(Vec<bool>),
-    /// The upper teeth move, but the region's limits were not found: why, as a sentence's end
-    /// ("needs subnasale (Sn), which was not found").
+    /// The approach serves the plan, but the region's limits were not found: why, as a
+    /// sentence's end ("needs subnasale (Sn), which was not found").
     Unknown(String),
 }
 
 /// The raised nodes the run takes (None: nothing raised), and why `"auto"` stepped aside (None
 /// when it did not). `true` makes a region it cannot find an error (what it cannot run on,
-/// `case::validate` refused before); `"auto"` steps aside from both, but only on a plan that moves
-/// the upper teeth: a mandibular plan has nothing to raise, and nothing to warn about.
-pub(crate) fn applied(t: &Tet, raised: Raised) -> Result<(Option<Vec<bool>>, Option<String>)> {
+/// `case::validate` refused before); `"auto"` steps aside from both, but only on a plan the
+/// approach serves: elsewhere there is nothing to raise, and nothing to warn about.
+pub(crate) fn applied(
+    t: &Tet,
+    approach: Approach,
+    raised: Raised,
+) -> Result<(Option<Vec<bool>>, Option<String>)> {
     let aside = |why: &str| Ok((None, Some(why.to_string())));
     match raised {
         Raised::Nothing => Ok((None, None)),
-        Raised::Unknown(why) if t.degloved_maxilla.required() => Err(Error::config(format!(
-            "[tet] degloved_maxilla: the raised region {why}; give it as a [[landmark]] in case.toml"
+        Raised::Unknown(why) if approach.asked(t).required() => Err(Error::config(format!(
+            "[tet] {}: the raised region {why}; give it as a [[landmark]] in case.toml",
+            approach.option()
         ))),
         Raised::Unknown(why) => aside(&format!("the raised region {why}")),
-        Raised::Nodes(_) if !(t.sliding && t.release_cuts) => {
-            aside("it needs [tet] sliding and release_cuts, which are off")
-        }
-        Raised::Nodes(_) if t.element == TetElement::Quadratic => aside(
-            "it runs on the 4-node element (the 10-node element's midpoints on the bone would stay bonded)",
-        ),
-        Raised::Nodes(r) => Ok((Some(r), None)),
+        Raised::Nodes(r) => match t.one_sided_unavailable() {
+            Some(why) => aside(why),
+            None => Ok((Some(r), None)),
+        },
     }
+}
+
+/// The tooth nodes lip or cheek cover: their height in the head frame, highest first, and their
+/// segment.
+fn teeth(
+    frame: &HeadFrame,
+    nodes: &[[f64; 3]],
+    covered: &[Option<Covered>],
+) -> Vec<(f64, Option<usize>)> {
+    let mut teeth: Vec<(f64, Option<usize>)> = nodes
+        .iter()
+        .zip(covered)
+        .filter_map(|(p, c)| {
+            c.filter(|c| c.tooth)
+                .map(|c| (frame.coords(*p)[1], c.segment()))
+        })
+        .collect();
+    teeth.sort_by(|a, b| b.0.total_cmp(&a.0));
+    teeth
+}
+
+/// What a genioplasty's approach raises: nothing unless a moved segment is a chin (under lip or
+/// cheek, mostly below the top of the lower teeth, carrying almost none of them); then the bone
+/// lip or cheek cover from the top of the lower teeth down, between the mental foramina.
+pub(crate) fn raised_chin(
+    frame: Option<&HeadFrame>,
+    nodes: &[[f64; 3]],
+    covered: &[Option<Covered>],
+) -> Raised {
+    let Some(frame) = frame else {
+        return Raised::Unknown("needs a head frame (the skin is empty)".into());
+    };
+    let teeth = teeth(frame, nodes, covered);
+    // The lower teeth: the lower half of the tooth nodes by height (as for the upper teeth in
+    // `raised`); their top bounds the region.
+    let Some(&(top, _)) = teeth.get(teeth.len() / 2) else {
+        return Raised::Nothing;
+    };
+    let mut segments: Vec<(usize, usize, usize)> = Vec::new(); // (segment, covered nodes, below top)
+    for (p, c) in nodes.iter().zip(covered) {
+        let Some(s) = c.and_then(|c| c.segment()) else {
+            continue;
+        };
+        let below = usize::from(frame.coords(*p)[1] <= top);
+        match segments.iter_mut().find(|(t, _, _)| *t == s) {
+            Some((_, n, b)) => {
+                *n += 1;
+                *b += below;
+            }
+            None => segments.push((s, 1, below)),
+        }
+    }
+    let carried = |s: usize| teeth.iter().filter(|t| t.1 == Some(s)).count();
+    let chin = segments
+        .iter()
+        .any(|&(s, n, below)| 2 * below > n && carried(s) as f64 <= STREAKS * teeth.len() as f64);
+    if !chin {
+        return Raised::Nothing;
+    }
+    Raised::Nodes(
+        nodes
+            .iter()
+            .zip(covered)
+            .map(|(p, c)| {
+                let [side, height, _] = frame.coords(*p);
+                c.is_some() && height <= top && side.abs() <= MENTAL_FORAMEN_MM
+            })
+            .collect(),
+    )
 }
 
 /// The raised region from the pre-operative landmarks, the mesh nodes and what lip or cheek
@@ -81,15 +194,7 @@ pub(crate) fn raised(
     // genioplasty), nothing is raised, and a face whose lips the landmarks miss (a scan cut
     // above them, a phantom without a lip profile) still runs. (Not the group highest on
     // average: a few dense nodes above a Le Fort cut read as tooth would outrank it.)
-    let mut teeth: Vec<(f64, Option<usize>)> = nodes
-        .iter()
-        .zip(covered)
-        .filter_map(|(p, c)| {
-            c.filter(|c| c.tooth)
-                .map(|c| (frame.coords(*p)[1], c.segment()))
-        })
-        .collect();
-    teeth.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let teeth = teeth(&frame, nodes, covered);
     let upper = &teeth[..teeth.len() / 2];
     let moved = |s: usize| upper.iter().filter(|t| t.1 == Some(s)).count();
     if !upper
@@ -177,11 +282,14 @@ mod tests {
         let auto = tet(&[]);
         assert_eq!(auto.degloved_maxilla, Degloved::Auto);
         assert_eq!(
-            applied(&auto, nodes()).unwrap(),
+            applied(&auto, Approach::Maxilla, nodes()).unwrap(),
             (Some(vec![true, false]), None)
         );
-        assert_eq!(applied(&auto, Raised::Nothing).unwrap(), (None, None));
-        let (r, why) = applied(&auto, unknown()).unwrap();
+        assert_eq!(
+            applied(&auto, Approach::Maxilla, Raised::Nothing).unwrap(),
+            (None, None)
+        );
+        let (r, why) = applied(&auto, Approach::Maxilla, unknown()).unwrap();
         assert!(r.is_none() && why.unwrap().contains("subnasale"));
         for (set, words) in [
             ("tet.sliding=false", "sliding and release_cuts"),
@@ -189,25 +297,114 @@ mod tests {
             ("tet.element=quadratic", "4-node element"),
         ] {
             let t = tet(&[set]);
-            let (r, why) = applied(&t, nodes()).unwrap();
+            let (r, why) = applied(&t, Approach::Maxilla, nodes()).unwrap();
             assert!(r.is_none(), "{set}");
             assert!(
                 why.as_deref().unwrap_or_default().contains(words),
                 "{set}: {why:?}"
             );
             // A mandibular plan: nothing to raise, nothing to say.
-            assert_eq!(applied(&t, Raised::Nothing).unwrap(), (None, None), "{set}");
+            assert_eq!(
+                applied(&t, Approach::Maxilla, Raised::Nothing).unwrap(),
+                (None, None),
+                "{set}"
+            );
         }
         // Asked for by name: served, or an error naming what is missing.
         let on = tet(&["tet.degloved_maxilla=true"]);
         assert_eq!(
-            applied(&on, nodes()).unwrap(),
+            applied(&on, Approach::Maxilla, nodes()).unwrap(),
             (Some(vec![true, false]), None)
         );
-        let e = applied(&on, unknown()).unwrap_err().to_string();
+        let e = applied(&on, Approach::Maxilla, unknown())
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("degloved_maxilla") && e.contains("subnasale"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn the_chin_asked_for_by_name_names_its_own_option() {
+        let auto = tet(&[]);
+        assert_eq!(auto.degloved_chin, Degloved::Auto);
+        let unknown = || Raised::Unknown("needs a head frame (the skin is empty)".into());
+        // Asked for by the maxilla's name only: the chin's "auto" steps aside.
+        let maxilla = tet(&["tet.degloved_maxilla=true"]);
+        let (r, why) = applied(&maxilla, Approach::Chin, unknown()).unwrap();
+        assert!(r.is_none() && why.unwrap().contains("head frame"));
+        let on = tet(&["tet.degloved_chin=true"]);
+        let e = applied(&on, Approach::Chin, unknown())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("[tet] degloved_chin") && e.contains("head frame"),
+            "{e}"
+        );
+        let off = tet(&["tet.sliding=false"]);
+        let (r, why) = applied(&off, Approach::Chin, Raised::Nodes(vec![true])).unwrap();
+        assert!(r.is_none() && why.unwrap().contains("sliding"));
+    }
+
+    /// Heights are z, the midsagittal plane x = 0. The upper teeth at z = 10, the lower at 0,
+    /// the anterior mandible below them.
+    #[test]
+    fn the_chin_is_raised_for_a_segment_below_the_teeth_that_carries_none_of_them() {
+        let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let nodes = [
+            [0.0, 0.0, 10.0],   // upper tooth
+            [5.0, 0.0, 10.0],   // upper tooth
+            [0.0, 0.0, 0.0],    // lower tooth
+            [5.0, 0.0, 0.0],    // lower tooth
+            [0.0, 0.0, -10.0],  // the symphysis above the cut
+            [40.0, 0.0, -10.0], // the body of the mandible beyond the mental foramen
+            [0.0, 0.0, -25.0],  // the chin
+            [0.0, 5.0, -25.0],  // not covered: inside the chin
+        ];
+        let covered = |mandible: Option<usize>, chin: Option<usize>| {
+            vec![
+                Some(Covered::at_rest(None, true)),
+                Some(Covered::at_rest(None, true)),
+                Some(Covered::at_rest(mandible, true)),
+                Some(Covered::at_rest(mandible, true)),
+                Some(Covered::at_rest(mandible, false)),
+                Some(Covered::at_rest(mandible, false)),
+                Some(Covered::at_rest(chin, false)),
+                None,
+            ]
+        };
+        // A genioplasty: the lower teeth, the symphysis and the chin between the mental foramina.
+        let Raised::Nodes(r) = raised_chin(Some(&frame), &nodes, &covered(None, Some(0))) else {
+            panic!("a genioplasty raises the chin");
+        };
+        assert_eq!(r, [false, false, true, true, true, false, true, false]);
+        // A BSSO advance with a genioplasty: the chin still.
+        assert!(matches!(
+            raised_chin(Some(&frame), &nodes, &covered(Some(1), Some(0))),
+            Raised::Nodes(_)
+        ));
+        // A BSSO alone (the chin moves with the teeth), or nothing moved: nothing.
+        for (mandible, chin) in [(Some(0), Some(0)), (None, None)] {
+            assert!(matches!(
+                raised_chin(Some(&frame), &nodes, &covered(mandible, chin)),
+                Raised::Nothing
+            ));
+        }
+        // A segment above the lower teeth that carries none (a zygoma): nothing.
+        let mut above = covered(None, None);
+        above[4] = None;
+        above[5] = None;
+        let high = [[30.0, 0.0, 30.0]; 1];
+        let nodes_high: Vec<[f64; 3]> = nodes.iter().chain(&high).copied().collect();
+        above.push(Some(Covered::at_rest(Some(2), false)));
+        assert!(matches!(
+            raised_chin(Some(&frame), &nodes_high, &above),
+            Raised::Nothing
+        ));
+        assert!(matches!(
+            raised_chin(None, &nodes, &covered(None, Some(0))),
+            Raised::Unknown(_)
+        ));
     }
 }

@@ -4,6 +4,7 @@
 //! held, the skin is free; the solved displacement carries the face (the extracted skin or the
 //! given scan, at full resolution).
 
+use super::degloved::{self, Approach};
 use super::predicted::Predicted;
 use crate::case::{Case, Degloved, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
@@ -461,9 +462,10 @@ pub struct TetReport {
     /// Tetrahedra of the external nose given `[tet] nose_youngs_kpa` (0 without it).
     #[serde(default)]
     pub nose_elements: usize,
-    /// `[tet] degloved_maxilla`: bone nodes of the raised region (sliding, one-sided), those
-    /// lifted off where the bone pulled them, and the deepest a lifted node lies inside its bone's
-    /// move when the rounds end (mm; 0 when every lifted node is clear of it).
+    /// `[tet] degloved_maxilla` and `degloved_chin`: bone nodes of the raised regions (sliding,
+    /// one-sided), those lifted off where the bone pulled them, and the deepest a lifted node
+    /// lies inside its bone's move when the rounds end (mm; 0 when every lifted node is clear of
+    /// it).
     #[serde(default)]
     pub degloved_nodes: usize,
     #[serde(default)]
@@ -478,6 +480,12 @@ pub struct TetReport {
     /// (absent when it served, was off, or had nothing to raise).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub degloved_not_applied: Option<String>,
+    /// `[tet] degloved_chin`: of `degloved_nodes`, those the genioplasty's approach raised, and
+    /// why `"auto"` stepped aside on a plan that moves a chin (absent when it did not).
+    #[serde(default)]
+    pub degloved_chin_nodes: usize,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub degloved_chin_not_applied: Option<String>,
     /// Pieces of the mesh held by fewer than three nodes, moved rigidly with their bone.
     #[serde(default)]
     pub floating_pieces: usize,
@@ -926,27 +934,56 @@ pub fn predict(
         &scene.seg,
         &|p| !crate::pipeline::model::rigid_mask(case, &[p])[0],
     );
-    // With `[tet] degloved_maxilla`, the bone a Le Fort I approach raises slides too, and (with
-    // the teeth it covers) rests on its bone one-sidedly: the one-sided rounds below. "auto"
-    // (the default) steps aside where `true` is refused or fails, with a warning and
-    // report.json's reason (`model::degloved::applied`).
-    let (raised, degloved_not_applied) = match t.degloved_maxilla {
-        Degloved::Off => (None, None),
-        asked => {
-            let found = match scene.landmarks_pre(skin, Path::new("case.toml")) {
-                Ok(found) => found,
-                // The landmark stage reports why (`commands::run`).
-                Err(_) if !asked.required() => (None, Vec::new()),
-                Err(e) => return Err(e),
-            };
-            super::degloved::applied(t, super::degloved::raised(found, &mesh.nodes, &covered))?
+    // With `[tet] degloved_maxilla` and `degloved_chin`, the bone a Le Fort I's or a
+    // genioplasty's approach raises slides too, and (with the teeth it covers) rests on its bone
+    // one-sidedly: the one-sided rounds below. "auto" (the default) steps aside where `true` is
+    // refused or fails, with a warning and report.json's reason (`model::degloved::applied`).
+    let found = if t.degloved_maxilla == Degloved::Off && t.degloved_chin == Degloved::Off {
+        (None, Vec::new())
+    } else {
+        match scene.landmarks_pre(skin, Path::new("case.toml")) {
+            Ok(found) => found,
+            // The landmark stage reports why (`commands::run`).
+            Err(_) if !(t.degloved_maxilla.required() || t.degloved_chin.required()) => {
+                (None, Vec::new())
+            }
+            Err(e) => return Err(e),
         }
     };
-    if let Some(why) = &degloved_not_applied {
-        rec.warn(format!(
-            "[tet] degloved_maxilla = \"auto\" stepped aside: {why}; the tissue over the anterior maxilla stays attached to its bone"
-        ));
+    let mut not_applied = [None, None];
+    let mut raised: Option<Vec<bool>> = None;
+    let mut degloved_chin_nodes = 0;
+    for (k, approach) in [Approach::Maxilla, Approach::Chin].into_iter().enumerate() {
+        if approach.asked(t) == Degloved::Off {
+            continue;
+        }
+        let region = match approach {
+            Approach::Maxilla => degloved::raised(found.clone(), &mesh.nodes, &covered),
+            Approach::Chin => degloved::raised_chin(found.0.as_ref(), &mesh.nodes, &covered),
+        };
+        let (r, why) = degloved::applied(t, approach, region)?;
+        if let Some(why) = &why {
+            rec.warn(format!(
+                "[tet] {} = \"auto\" stepped aside: {why}; the tissue over the {} stays attached to its bone",
+                approach.option(),
+                match approach {
+                    Approach::Maxilla => "anterior maxilla",
+                    Approach::Chin => "chin",
+                }
+            ));
+        }
+        not_applied[k] = why;
+        if let Some(r) = r {
+            if approach == Approach::Chin {
+                degloved_chin_nodes = r.iter().filter(|b| **b).count();
+            }
+            raised = Some(match raised {
+                Some(q) => q.iter().zip(&r).map(|(a, b)| *a || *b).collect(),
+                None => r,
+            });
+        }
     }
+    let [degloved_not_applied, degloved_chin_not_applied] = not_applied;
     let raised = raised.unwrap_or_else(|| vec![false; mesh.nodes.len()]);
     let contact: Vec<Option<Mucosa>> = covered
         .iter()
@@ -1276,7 +1313,7 @@ pub fn predict(
     }
     if !degloved_settled {
         rec.warn(format!(
-            "[tet] degloved_maxilla: the raised tissue's one-sided contact did not settle in {ONE_SIDED_ROUNDS} rounds ({lifted_in_tension} nodes lifted off, the deepest {lifted_penetration_mm:.3} mm inside its bone's move)"
+            "[tet] degloved_maxilla/degloved_chin: the raised tissue's one-sided contact did not settle in {ONE_SIDED_ROUNDS} rounds ({lifted_in_tension} nodes lifted off, the deepest {lifted_penetration_mm:.3} mm inside its bone's move)"
         ));
     }
     let inverted_tets = match &quadratic {
@@ -1387,6 +1424,8 @@ pub fn predict(
         lifted_penetration_mm,
         degloved_settled,
         degloved_not_applied,
+        degloved_chin_nodes,
+        degloved_chin_not_applied,
         floating_pieces: pieces,
         scan_end,
         newton,

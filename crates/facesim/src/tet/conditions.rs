@@ -254,7 +254,8 @@ pub(crate) const LIP_REACH_MM: f64 = 35.0;
 ///
 /// Returns every bone node that lip or cheek covers (criterion (2)), each with whether it lies on
 /// a tooth (criterion (1)): the contact nodes are those on a tooth; `[tet] degloved_maxilla`
-/// takes the others over the anterior maxilla too (`model::degloved`).
+/// and `degloved_chin` take the others over the anterior maxilla and the chin too
+/// (`model::degloved`).
 pub(crate) fn covered_bone(
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
@@ -367,6 +368,21 @@ impl Covered {
     /// The node's segment (None: bone left in place).
     pub(crate) fn segment(&self) -> Option<usize> {
         self.mucosa.segment
+    }
+
+    /// A covered node on `segment`, at rest, for tests of what reads the covered bone.
+    #[cfg(test)]
+    pub(crate) fn at_rest(segment: Option<usize>, tooth: bool) -> Covered {
+        Covered {
+            mucosa: Mucosa {
+                normal: [1.0, 0.0, 0.0],
+                node_move: [0.0; 3],
+                rest_normal: [1.0, 0.0, 0.0],
+                at: [0.0; 3],
+                segment,
+            },
+            tooth,
+        }
     }
 }
 

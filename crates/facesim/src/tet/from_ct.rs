@@ -128,13 +128,6 @@ pub fn soft_tissue(
     } else {
         0
     };
-    // The lattices' own boxes (`stuffing::Lattice::new`, `graded::background`): from `lo`,
-    // whole cells of the coarsest size up past `hi`.
-    let cell = h * f64::from(1u32 << levels);
-    let lattice_box = (
-        lo,
-        [0, 1, 2].map(|a| lo[a] + ((hi[a] - lo[a]) / cell - 1e-9).ceil().max(1.0) * cell),
-    );
     let m = if levels == 0 {
         stuffing::stuff(&f, lo, hi, h)?
     } else {
@@ -191,7 +184,7 @@ pub fn soft_tissue(
         nodes,
         tets,
         kind: Vec::new(),
-        flattened: m.flattened,
+        ..m
     };
     let labels: Vec<Option<u8>> = m
         .tets
@@ -205,15 +198,13 @@ pub fn soft_tissue(
     let tissue = labels.into_iter().map(|l| l.unwrap_or(MUSCLE)).collect();
     let quality = Quality::of(&m.nodes, &m.tets);
     // The box as meshed: rounded up to whole cubes of the coarsest size.
-    let coarsest = h * f64::from(1u32 << levels);
-    let hi =
-        [0, 1, 2].map(|a| lo[a] + ((hi[a] - lo[a]) / coarsest - 1e-9).ceil().max(1.0) * coarsest);
+    let (lo, hi) = m.bounds;
     let voxel_volume_mm3 = voxel_volume(vol, &skin, &bone, skin_iso, bone_iso, lo, hi);
     Ok(SoftTissueMesh {
         nodes: m.nodes,
         tets: m.tets,
         tissue,
-        lattice_box,
+        lattice_box: m.bounds,
         kind,
         quality,
         voxel_volume_mm3,

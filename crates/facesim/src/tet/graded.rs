@@ -524,6 +524,7 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
             vertex: &|v| (vertex_point(v), kind[v]),
             cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
         },
+        (bg.point(bg.box_lo), bg.point(bg.box_hi)),
         "graded stuffing",
     )
 }

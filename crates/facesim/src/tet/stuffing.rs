@@ -72,6 +72,9 @@ pub struct Stuffed {
     /// Tetrahedra with all four corners warped onto the surface and flattened beyond the
     /// angle bounds, left out (see `stuff`).
     pub flattened: usize,
+    /// The box the lattice filled (mm): from the asked box's lower corner, whole cells of the
+    /// lattice's (coarsest) size up past its upper one. Its faces are where `Cut` nodes lie.
+    pub bounds: ([f64; 3], [f64; 3]),
 }
 
 /// The implicit domain function: negative inside.
@@ -523,6 +526,7 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
             vertex: &|v| (vertex_point(v), kind[v]),
             cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
         },
+        (lat.point(lat.box_lo), lat.point(lat.box_hi)),
         "stuffing",
     )
 }
@@ -565,6 +569,7 @@ pub(super) fn compact(
     on_surface: &dyn Fn(usize) -> bool,
     inside: &dyn Fn([f64; 3]) -> bool,
     at: &Places,
+    bounds: ([f64; 3], [f64; 3]),
     what: &str,
 ) -> Result<Stuffed> {
     let mut vertex_node = vec![u32::MAX; vertices];
@@ -649,6 +654,7 @@ pub(super) fn compact(
         tets,
         kind: node_kind,
         flattened,
+        bounds,
     })
 }
 
