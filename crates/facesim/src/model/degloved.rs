@@ -19,7 +19,7 @@
 //! is cut. The region: the bone that lip or cheek covers from the top of the lower teeth down,
 //! within [`MENTAL_FORAMEN_MM`] of the midsagittal plane, on every segment and on the bone left in
 //! place. It applies when a moved segment under the lip or cheek lies below the lower teeth and
-//! carries almost none of them (a chin). A sagittal split is reached from behind the teeth: a BSSO
+//! B point (a chin; [`raised_chin`]). A sagittal split is reached from behind the teeth: a BSSO
 //! alone raises nothing, and neither approach raises anything for a plan it is not part of.
 
 use crate::case::{Degloved, Tet};
@@ -123,13 +123,17 @@ fn teeth(
     teeth
 }
 
-/// What a genioplasty's approach raises: nothing unless a moved segment is a chin (under lip or
-/// cheek, mostly below the top of the lower teeth, carrying almost none of them); then the bone
-/// lip or cheek cover from the top of the lower teeth down, between the mental foramina.
+/// What a genioplasty's approach raises: nothing unless a moved segment is a chin; then the
+/// bone lip or cheek cover from the top of the lower teeth down, between the mental foramina.
+/// A chin: its covered bone lies mostly below the top of the lower teeth, and its bone lies
+/// below B point, as a cut under the incisors' apices leaves it (without B point: it carries at
+/// most [`STREAKS`] of the tooth nodes covered). A sagittal split's distal segment carries the
+/// lower teeth and B point: not a chin. `bone_segment`: per node, the segment of a bone node.
 pub(crate) fn raised_chin(
-    frame: Option<&HeadFrame>,
+    (frame, lms): (Option<&HeadFrame>, &[Landmark]),
     nodes: &[[f64; 3]],
     covered: &[Option<Covered>],
+    bone_segment: &[Option<usize>],
 ) -> Raised {
     let Some(frame) = frame else {
         return Raised::Unknown("needs a head frame (the skin is empty)".into());
@@ -140,12 +144,18 @@ pub(crate) fn raised_chin(
     let Some(&(top, _)) = teeth.get(teeth.len() / 2) else {
         return Raised::Nothing;
     };
+    let height = |p: &[f64; 3]| frame.coords(*p)[1];
+    let b_point = lms
+        .iter()
+        .find(|l| l.label == "B")
+        .and_then(|l| l.position)
+        .map(|p| height(&p));
     let mut segments: Vec<(usize, usize, usize)> = Vec::new(); // (segment, covered nodes, below top)
     for (p, c) in nodes.iter().zip(covered) {
         let Some(s) = c.and_then(|c| c.segment()) else {
             continue;
         };
-        let below = usize::from(frame.coords(*p)[1] <= top);
+        let below = usize::from(height(p) <= top);
         match segments.iter_mut().find(|(t, _, _)| *t == s) {
             Some((_, n, b)) => {
                 *n += 1;
@@ -154,10 +164,22 @@ pub(crate) fn raised_chin(
             None => segments.push((s, 1, below)),
         }
     }
+    let bone_top = |s: usize| {
+        nodes
+            .iter()
+            .zip(bone_segment)
+            .filter(|(_, b)| **b == Some(s))
+            .map(|(p, _)| height(p))
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
     let carried = |s: usize| teeth.iter().filter(|t| t.1 == Some(s)).count();
-    let chin = segments
-        .iter()
-        .any(|&(s, n, below)| 2 * below > n && carried(s) as f64 <= STREAKS * teeth.len() as f64);
+    let chin = segments.iter().any(|&(s, n, below)| {
+        2 * below > n
+            && match b_point {
+                Some(b) => bone_top(s) < b,
+                None => carried(s) as f64 <= STREAKS * teeth.len() as f64,
+            }
+    });
     if !chin {
         return Raised::Nothing;
     }
@@ -348,9 +370,10 @@ mod tests {
     }
 
     /// Heights are z, the midsagittal plane x = 0. The upper teeth at z = 10, the lower at 0,
-    /// the anterior mandible below them.
+    /// B point at −15, the anterior mandible below them.
     #[test]
-    fn the_chin_is_raised_for_a_segment_below_the_teeth_that_carries_none_of_them() {
+    fn the_chin_is_raised_for_a_segment_below_b_point_and_the_lower_teeth() {
+        use crate::landmarks::{Kind, Source};
         let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
         let nodes = [
             [0.0, 0.0, 10.0],   // upper tooth
@@ -362,48 +385,80 @@ mod tests {
             [0.0, 0.0, -25.0],  // the chin
             [0.0, 5.0, -25.0],  // not covered: inside the chin
         ];
-        let covered = |mandible: Option<usize>, chin: Option<usize>| {
-            vec![
-                Some(Covered::at_rest(None, true)),
-                Some(Covered::at_rest(None, true)),
-                Some(Covered::at_rest(mandible, true)),
-                Some(Covered::at_rest(mandible, true)),
-                Some(Covered::at_rest(mandible, false)),
-                Some(Covered::at_rest(mandible, false)),
-                Some(Covered::at_rest(chin, false)),
-                None,
+        let b = Landmark {
+            label: "B".into(),
+            kind: Kind::Bone,
+            position: Some([0.0, 0.0, -15.0]),
+            source: Source::Detected,
+            missing: None,
+        };
+        let with_b = std::slice::from_ref(&b);
+        // Every node here is bone; `covered` leaves the last one out.
+        let segs = |mandible: Option<usize>, chin: Option<usize>| {
+            [
+                None, None, mandible, mandible, mandible, mandible, chin, chin,
             ]
         };
-        // A genioplasty: the lower teeth, the symphysis and the chin between the mental foramina.
-        let Raised::Nodes(r) = raised_chin(Some(&frame), &nodes, &covered(None, Some(0))) else {
-            panic!("a genioplasty raises the chin");
+        let covered = |mandible: Option<usize>, chin: Option<usize>| {
+            let s = segs(mandible, chin);
+            let tooth = [true, true, true, true, false, false, false];
+            let mut c: Vec<Option<Covered>> = (0..7)
+                .map(|k| Some(Covered::at_rest(s[k], tooth[k])))
+                .collect();
+            c.push(None);
+            c
         };
-        assert_eq!(r, [false, false, true, true, true, false, true, false]);
-        // A BSSO advance with a genioplasty: the chin still.
-        assert!(matches!(
-            raised_chin(Some(&frame), &nodes, &covered(Some(1), Some(0))),
-            Raised::Nodes(_)
-        ));
-        // A BSSO alone (the chin moves with the teeth), or nothing moved: nothing.
-        for (mandible, chin) in [(Some(0), Some(0)), (None, None)] {
-            assert!(matches!(
-                raised_chin(Some(&frame), &nodes, &covered(mandible, chin)),
-                Raised::Nothing
-            ));
+        let raise = |lms: &[Landmark], mandible: Option<usize>, chin: Option<usize>| {
+            raised_chin(
+                (Some(&frame), lms),
+                &nodes,
+                &covered(mandible, chin),
+                &segs(mandible, chin),
+            )
+        };
+        for lms in [with_b, &[]] {
+            // A genioplasty: the lower teeth, the symphysis and the chin between the mental
+            // foramina.
+            let Raised::Nodes(r) = raise(lms, None, Some(0)) else {
+                panic!("a genioplasty raises the chin");
+            };
+            assert_eq!(r, [false, false, true, true, true, false, true, false]);
+            // A BSSO advance with a genioplasty: the chin still.
+            assert!(matches!(raise(lms, Some(1), Some(0)), Raised::Nodes(_)));
+            // A BSSO alone (the chin moves with the teeth and B point), or nothing moved.
+            for (mandible, chin) in [(Some(0), Some(0)), (None, None)] {
+                assert!(matches!(raise(lms, mandible, chin), Raised::Nothing));
+            }
         }
+        // A distal segment whose teeth the lip does not cover (an open vestibule: the lip faces
+        // them across air): the tooth count cannot tell, B point does.
+        let mut bare = covered(Some(0), Some(0));
+        bare[2] = None;
+        bare[3] = None;
+        let segs_bsso = segs(Some(0), Some(0));
+        assert!(matches!(
+            raised_chin((Some(&frame), with_b), &nodes, &bare, &segs_bsso),
+            Raised::Nothing
+        ));
         // A segment above the lower teeth that carries none (a zygoma): nothing.
         let mut above = covered(None, None);
         above[4] = None;
         above[5] = None;
-        let high = [[30.0, 0.0, 30.0]; 1];
-        let nodes_high: Vec<[f64; 3]> = nodes.iter().chain(&high).copied().collect();
         above.push(Some(Covered::at_rest(Some(2), false)));
+        let nodes_high: Vec<[f64; 3]> = nodes.iter().chain(&[[30.0, 0.0, 30.0]]).copied().collect();
+        let mut segs_high = segs(None, None).to_vec();
+        segs_high.push(Some(2));
         assert!(matches!(
-            raised_chin(Some(&frame), &nodes_high, &above),
+            raised_chin((Some(&frame), with_b), &nodes_high, &above, &segs_high),
             Raised::Nothing
         ));
         assert!(matches!(
-            raised_chin(None, &nodes, &covered(None, Some(0))),
+            raised_chin(
+                (None, with_b),
+                &nodes,
+                &covered(None, Some(0)),
+                &segs(None, Some(0))
+            ),
             Raised::Unknown(_)
         ));
     }

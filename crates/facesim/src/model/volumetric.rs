@@ -950,6 +950,20 @@ pub fn predict(
             Err(e) => return Err(e),
         }
     };
+    // The segment of each bone node: where a segment's bone ends tells a chin (`degloved`).
+    let bone_segment: Vec<Option<usize>> = if t.degloved_chin == Degloved::Off {
+        Vec::new()
+    } else {
+        mesh.nodes
+            .iter()
+            .zip(&mesh.kind)
+            .map(|(p, k)| {
+                (*k == NodeKind::Bone)
+                    .then(|| crate::tet::plan_holds::segment_at(&case.osteotomy, *p).0)
+                    .flatten()
+            })
+            .collect()
+    };
     let mut not_applied = [None, None];
     let mut raised: Option<Vec<bool>> = None;
     let mut degloved_chin_nodes = 0;
@@ -959,7 +973,12 @@ pub fn predict(
         }
         let region = match approach {
             Approach::Maxilla => degloved::raised(found.clone(), &mesh.nodes, &covered),
-            Approach::Chin => degloved::raised_chin(found.0.as_ref(), &mesh.nodes, &covered),
+            Approach::Chin => degloved::raised_chin(
+                (found.0.as_ref(), &found.1),
+                &mesh.nodes,
+                &covered,
+                &bone_segment,
+            ),
         };
         let (r, why) = degloved::applied(t, approach, region)?;
         if let Some(why) = &why {
