@@ -109,6 +109,9 @@ fn the_inner_lip_slides_on_the_teeth_or_moves_with_them() {
     );
     // The vestibule's mucosa faces the teeth across 2 mm of air: found, and sliding or attached.
     assert!(s.mucosa_nodes > 20, "{s:?}");
+    // A BSSO's distal segment carries the lower teeth and B point: no chin, nothing raised,
+    // though the open vestibule leaves few of its teeth under the lip (`model::degloved`).
+    assert_eq!((s.degloved_nodes, s.degloved_chin_nodes), (0, 0), "{s:?}");
     // (a piece of tissue held by fewer than three nodes follows its bone, mucosa and all); the
     // bone at the saw lines slides too (released, not lifted off), and so does the bone where
     // lip or cheek lies on a tooth with no air between (issue 25 item 5: `contact_nodes`, here the
