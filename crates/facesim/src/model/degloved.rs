@@ -59,6 +59,14 @@ impl Approach {
         }
     }
 
+    /// The bone whose tissue stays attached when it steps aside (its warning).
+    pub(crate) fn over(self) -> &'static str {
+        match self {
+            Approach::Maxilla => "anterior maxilla",
+            Approach::Chin => "chin",
+        }
+    }
+
     /// What the case asks of it.
     pub(crate) fn asked(self, t: &Tet) -> Degloved {
         match self {
@@ -128,12 +136,13 @@ fn teeth(
 /// A chin: its covered bone lies mostly below the top of the lower teeth, and its bone lies
 /// below B point, as a cut under the incisors' apices leaves it (without B point: it carries at
 /// most [`STREAKS`] of the tooth nodes covered). A sagittal split's distal segment carries the
-/// lower teeth and B point: not a chin. `bone_segment`: per node, the segment of a bone node.
+/// lower teeth and B point: not a chin. `bone_segment`: the segment of a node's bone (None for
+/// a node not on bone or on bone left in place), asked only of a plan with a candidate chin.
 pub(crate) fn raised_chin(
     (frame, lms): (Option<&HeadFrame>, &[Landmark]),
     nodes: &[[f64; 3]],
     covered: &[Option<Covered>],
-    bone_segment: &[Option<usize>],
+    bone_segment: &dyn Fn(usize) -> Option<usize>,
 ) -> Raised {
     let Some(frame) = frame else {
         return Raised::Unknown("needs a head frame (the skin is empty)".into());
@@ -165,11 +174,9 @@ pub(crate) fn raised_chin(
         }
     }
     let bone_top = |s: usize| {
-        nodes
-            .iter()
-            .zip(bone_segment)
-            .filter(|(_, b)| **b == Some(s))
-            .map(|(p, _)| height(p))
+        (0..nodes.len())
+            .filter(|n| bone_segment(*n) == Some(s))
+            .map(|n| height(&nodes[n]))
             .fold(f64::NEG_INFINITY, f64::max)
     };
     let carried = |s: usize| teeth.iter().filter(|t| t.1 == Some(s)).count();
@@ -198,7 +205,7 @@ pub(crate) fn raised_chin(
 /// The raised region from the pre-operative landmarks, the mesh nodes and what lip or cheek
 /// covers.
 pub(crate) fn raised(
-    (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
+    (frame, lms): (Option<&HeadFrame>, &[Landmark]),
     nodes: &[[f64; 3]],
     covered: &[Option<Covered>],
 ) -> Raised {
@@ -216,7 +223,7 @@ pub(crate) fn raised(
     // genioplasty), nothing is raised, and a face whose lips the landmarks miss (a scan cut
     // above them, a phantom without a lip profile) still runs. (Not the group highest on
     // average: a few dense nodes above a Le Fort cut read as tooth would outrank it.)
-    let teeth = teeth(&frame, nodes, covered);
+    let teeth = teeth(frame, nodes, covered);
     let upper = &teeth[..teeth.len() / 2];
     let moved = |s: usize| upper.iter().filter(|t| t.1 == Some(s)).count();
     if !upper
@@ -409,11 +416,12 @@ mod tests {
             c
         };
         let raise = |lms: &[Landmark], mandible: Option<usize>, chin: Option<usize>| {
+            let s = segs(mandible, chin);
             raised_chin(
                 (Some(&frame), lms),
                 &nodes,
                 &covered(mandible, chin),
-                &segs(mandible, chin),
+                &|n| s[n],
             )
         };
         for lms in [with_b, &[]] {
@@ -437,7 +445,7 @@ mod tests {
         bare[3] = None;
         let segs_bsso = segs(Some(0), Some(0));
         assert!(matches!(
-            raised_chin((Some(&frame), with_b), &nodes, &bare, &segs_bsso),
+            raised_chin((Some(&frame), with_b), &nodes, &bare, &|n| segs_bsso[n]),
             Raised::Nothing
         ));
         // A segment above the lower teeth that carries none (a zygoma): nothing.
@@ -449,16 +457,15 @@ mod tests {
         let mut segs_high = segs(None, None).to_vec();
         segs_high.push(Some(2));
         assert!(matches!(
-            raised_chin((Some(&frame), with_b), &nodes_high, &above, &segs_high),
+            raised_chin((Some(&frame), with_b), &nodes_high, &above, &|n| segs_high
+                [n]),
             Raised::Nothing
         ));
         assert!(matches!(
-            raised_chin(
-                (None, with_b),
-                &nodes,
-                &covered(None, Some(0)),
-                &segs(None, Some(0))
-            ),
+            raised_chin((None, with_b), &nodes, &covered(None, Some(0)), &|n| segs(
+                None,
+                Some(0)
+            )[n]),
             Raised::Unknown(_)
         ));
     }

@@ -950,19 +950,11 @@ pub fn predict(
             Err(e) => return Err(e),
         }
     };
-    // The segment of each bone node: where a segment's bone ends tells a chin (`degloved`).
-    let bone_segment: Vec<Option<usize>> = if t.degloved_chin == Degloved::Off {
-        Vec::new()
-    } else {
-        mesh.nodes
-            .iter()
-            .zip(&mesh.kind)
-            .map(|(p, k)| {
-                (*k == NodeKind::Bone)
-                    .then(|| crate::tet::plan_holds::segment_at(&case.osteotomy, *p).0)
-                    .flatten()
-            })
-            .collect()
+    // The segment of a bone node: where a segment's bone ends tells a chin (`degloved`).
+    let bone_segment = |n: usize| {
+        (mesh.kind[n] == NodeKind::Bone)
+            .then(|| crate::tet::plan_holds::segment_at(&case.osteotomy, mesh.nodes[n]).0)
+            .flatten()
     };
     let mut not_applied = [None, None];
     let mut raised: Option<Vec<bool>> = None;
@@ -972,7 +964,9 @@ pub fn predict(
             continue;
         }
         let region = match approach {
-            Approach::Maxilla => degloved::raised(found.clone(), &mesh.nodes, &covered),
+            Approach::Maxilla => {
+                degloved::raised((found.0.as_ref(), &found.1), &mesh.nodes, &covered)
+            }
             Approach::Chin => degloved::raised_chin(
                 (found.0.as_ref(), &found.1),
                 &mesh.nodes,
@@ -985,10 +979,7 @@ pub fn predict(
             rec.warn(format!(
                 "[tet] {} = \"auto\" stepped aside: {why}; the tissue over the {} stays attached to its bone",
                 approach.option(),
-                match approach {
-                    Approach::Maxilla => "anterior maxilla",
-                    Approach::Chin => "chin",
-                }
+                approach.over()
             ));
         }
         not_applied[k] = why;
