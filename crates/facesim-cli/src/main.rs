@@ -91,7 +91,7 @@ enum Cmd {
         table: TableArgs,
     },
     /// The tissue parameters fitted to the published ratios on one half of the table and
-    /// checked on the other (docs/validation.md "Calibration on the reduced model"): every
+    /// checked on the other (docs/validation-notes.md "Calibration on the reduced model"): every
     /// validation run at the defaults storing its reduced model, a grid over the
     /// `[uncertainty]` box answered by the reduced models, the optimum confirmed by full runs.
     /// calibration.md, calibration.csv, calibration_grid.csv, defaults/ and optimum/ in --out.

@@ -363,14 +363,14 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
     assert!((22.0..=26.0).contains(&largest_move(&face)));
 }
 
-/// `[tet] nose_youngs_kpa` (docs/validation.md "A structural candidate: the nasal framework"): the
-/// external nose, found from the pre-operative landmarks, takes one stiffer modulus. On the real
-/// CT (5 mm Le Fort I advance) the framework's tetrahedra must lie where the run's own landmarks
-/// put the nose — between the alae, above subnasale, below soft nasion, in front of the anterior
-/// nasal spine — and a stiff nose must follow the maxilla less at its base (Sn/ANS falls; measured
-/// 0.571 → 0.515 at 1 MPa, 0.506 at 3 MPa) while the default leaves every element its tissue's.
-/// The nose's tetrahedra are terms of their own in the reduced model: its band and re-solves
-/// hold with the nose as without.
+/// `[tet] nose_youngs_kpa` (docs/validation-notes.md "A structural candidate: the nasal
+/// framework"): the external nose, found from the pre-operative landmarks, takes one stiffer
+/// modulus. On the real CT (5 mm Le Fort I advance) the framework's tetrahedra must lie where the
+/// run's own landmarks put the nose — between the alae, above subnasale, below soft nasion, in
+/// front of the anterior nasal spine — and a stiff nose must follow the maxilla less at its base
+/// (Sn/ANS falls; measured 0.571 → 0.515 at 1 MPa, 0.506 at 3 MPa) while the default leaves every
+/// element its tissue's. The nose's tetrahedra are terms of their own in the reduced model: its
+/// band and re-solves hold with the nose as without.
 #[test]
 fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");

@@ -284,8 +284,8 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
     assert!(t[2] < -1.0 && t[1] < -4.5, "{t:?}");
 }
 
-/// `[tet] degloved_maxilla` (docs/validation.md "The degloved maxilla") on the real CT's Le Fort
-/// I advance and setback: the tissue raised off the anterior maxilla rests on it one way only.
+/// `[tet] degloved_maxilla` (docs/validation-notes.md "The degloved maxilla") on the real CT's Le
+/// Fort I advance and setback: the tissue raised off the anterior maxilla rests on it one way only.
 /// Signorini's conditions where the rounds end: every raised node still on the bone is pushed by
 /// it (the rounds settled), every lifted one lies clear of the bone's move (within 0.01 mm).
 /// The bone pulls the tissue after it in a setback and pushes it in an advance, so the model is
@@ -461,7 +461,7 @@ fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_
     assert!(warned, "{}", run["warnings"]);
 }
 
-/// `[tet] degloved_chin = "auto"`, the default (docs/validation.md "The degloved chin"): a
+/// `[tet] degloved_chin = "auto"`, the default (docs/validation-notes.md "The degloved chin"): a
 /// coarse phantom's advancement genioplasty raises the tissue over the anterior mandible, from
 /// the lower teeth down, and rests it on the bone one way: the rounds settle, lifted nodes lie
 /// clear of the bone, nothing inverts, `true` gives the same face. Resting one way, the soft

@@ -333,16 +333,19 @@ pub struct Tet {
     pub margin_mm: f64,
     /// Young's modulus (kPa) of the external nose as one framework (cartilage with its skin and
     /// fat, an effective modulus): 0, the default, leaves the nose to its tissues. The region is
-    /// found from the pre-operative landmarks (`tet::nose`; docs/validation.md).
+    /// found from the pre-operative landmarks (`tet::nose`; docs/validation-notes.md "A structural
+    /// candidate: the nasal framework").
     pub nose_youngs_kpa: f64,
     /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
     /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
-    /// docs/validation.md). `"auto"`, the default: on where it can serve, stepping aside with a
-    /// warning where it cannot; `true`: on, refusing a case it cannot serve; `false`: off.
+    /// docs/validation-notes.md "The degloved maxilla"). `"auto"`, the default: on where it can
+    /// serve, stepping aside with a warning where it cannot; `true`: on, refusing a case it cannot
+    /// serve; `false`: off.
     #[serde(default)]
     pub degloved_maxilla: Degloved,
     /// The tissue a genioplasty's approach raises off the anterior mandible rests on the bone the
-    /// same way, on a plan that moves a chin segment (`model::degloved`; docs/validation.md).
+    /// same way, on a plan that moves a chin segment (`model::degloved`; docs/validation-notes.md
+    /// "The degloved chin").
     /// `"auto"`, `true` and `false` as `degloved_maxilla`.
     #[serde(default)]
     pub degloved_chin: Degloved,

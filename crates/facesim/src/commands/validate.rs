@@ -42,7 +42,8 @@ pub struct Options {
 }
 
 /// The moves, in the head's directions: advance and setback along its forward axis, impaction
-/// along its up axis. Sizes are those of common plans (docs/validation.md, "The moves").
+/// along its up axis. Sizes are those of common plans (docs/validation.md, "What was compared").
+/// The output's validation.md lists them under "The moves".
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Toward {
     Forward,
@@ -118,7 +119,8 @@ pub struct Validation {
     pub out_dir: PathBuf,
 }
 
-/// validation.toml beside a sample's case.toml (docs/validation.md, "The cases").
+/// validation.toml beside a sample's case.toml (docs/validation.md, "What was compared"; the
+/// output's validation.md lists each case under "The cases").
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CaseFile {

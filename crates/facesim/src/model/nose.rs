@@ -1,7 +1,8 @@
-//! The external nose as one framework (`[tet] nose_youngs_kpa`, docs/validation.md "A structural
-//! candidate: the nasal framework"). The nose keeps its shape by cartilage (septal cartilage
-//! 2–6 MPa) hinged on the nasal bones; meshed as soft tissue (10–30 kPa) it follows the maxilla
-//! wholesale. With the option, the tetrahedra of the external nose take one effective modulus.
+//! The external nose as one framework (`[tet] nose_youngs_kpa`, docs/validation-notes.md "A
+//! structural candidate: the nasal framework"). The nose keeps its shape by cartilage (septal
+//! cartilage 2–6 MPa) hinged on the nasal bones; meshed as soft tissue (10–30 kPa) it follows the
+//! maxilla wholesale. With the option, the tetrahedra of the external nose take one effective
+//! modulus.
 //!
 //! The region, in the head frame of the pre-operative landmarks: between the alae (half the alar
 //! width either side of pronasale, 17 mm without alare), from [`ABOVE_SN_MM`] above subnasale to
