@@ -59,6 +59,68 @@ fn bsso_advance_runs_and_moves_the_lower_lip() {
     assert!(ls0[2] > sto[2] && sto[2] > li0[2]);
 }
 
+/// The nose tip on a head pitched face-down (docs/landmarks.md, Prn): headsq's dorsum runs
+/// within 2.3 mm of the CT's vertical for 60 mm, so its most anterior skin point lies on the
+/// dorsum, 30 mm above the tip. Pronasale must be the most protruded point of the nose: checked
+/// here on the run's face_pre.ply itself, as the midsagittal skin vertex (within 2 mm of the
+/// plane) between subnasale and soft nasion farthest in front of the line N'–Sn, and by the
+/// nose's proportions (adult sn–prn 20 ± 2 mm, Farkas 1994; this 3.2 mm CT's nose is coarse).
+#[test]
+fn the_nose_tip_of_a_head_pitched_face_down_is_its_tip() {
+    let (r, out) = run_in();
+    let at = |l: &str| {
+        landmark(&r, l)
+            .unwrap_or_else(|| panic!("{l}: {}", r["landmarks"][l]))
+            .0
+    };
+    let (prn, sn, n) = (at("Prn"), at("Sn"), at("N'"));
+    let axis = |k: &str| -> [f64; 3] {
+        let a = r["head_frame"][k].as_array().unwrap();
+        [0, 1, 2].map(|i| a[i].as_f64().unwrap())
+    };
+    let (origin, lateral, up, ant) = (
+        axis("origin"),
+        axis("lateral"),
+        axis("vertical"),
+        axis("anterior"),
+    );
+    let dot = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| a[k] * b[k]).sum::<f64>();
+    let rel = |p: [f64; 3]| [0, 1, 2].map(|k| p[k] - origin[k]);
+    // (height, depth forward) in the midsagittal plane.
+    let plane = |p: [f64; 3]| (dot(rel(p), up), dot(rel(p), ant));
+    let ((hn, an), (hs, as_)) = (plane(n), plane(sn));
+    let front = |p: [f64; 3]| {
+        let (h, a) = plane(p);
+        let (dh, da) = (hs - hn, as_ - an);
+        (da * (h - hn) - dh * (a - an)) / (dh * dh + da * da).sqrt()
+    };
+    let face = facesim::mesh::ply::read(&out.join("face_pre.ply")).unwrap();
+    let tip = face
+        .vertices
+        .iter()
+        .filter(|v| dot(rel(**v), lateral).abs() < 2.0)
+        .filter(|v| (hs..hn).contains(&plane(**v).0))
+        .max_by(|a, b| front(**a).total_cmp(&front(**b)))
+        .copied()
+        .unwrap();
+    let d = (0..3)
+        .map(|k| (tip[k] - prn[k]).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    println!("Prn {prn:?}, the profile's most protruded vertex {tip:?}: {d:.2} mm");
+    assert!(
+        d < 3.2,
+        "Prn {prn:?} is {d:.2} mm from the nose's most protruded point {tip:?}"
+    );
+    let sn_prn = (0..3).map(|k| (sn[k] - prn[k]).powi(2)).sum::<f64>().sqrt();
+    assert!((10.0..=30.0).contains(&sn_prn), "Sn–Prn {sn_prn:.1} mm");
+    assert!(
+        front(prn) > 8.0,
+        "Prn {:.1} mm in front of N'–Sn",
+        front(prn)
+    );
+}
+
 /// The chin landmarks found where they belong (docs/landmarks.md "The chin": chord definitions
 /// that hold on this head, which lies some 25° face-down), and the soft/hard ratio at the chin
 /// within a broad physical range. Soft menton is not in this scan: the CT's last slice is 4.5 mm

@@ -320,7 +320,6 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
         return;
     };
     let va = |i: usize| [p.height(i), p.a[i]];
-    f.put("Prn", Kind::Soft, Ok(va(prn)));
     let miss = |e: Ext, what: &str, down: bool| {
         let end = if down { end_lo } else { end_hi };
         format!(
@@ -402,27 +401,43 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
     }
     // Subnasale: between Prn and Ls, the profile point farthest behind the chord Prn–Ls (the
     // corner where the columella meets the lip).
-    let sn = ls.map(|ls| {
-        let [v1, a1] = va(prn);
-        let [v2, a2] = va(ls);
-        let (dv, da) = (v2 - v1, a2 - a1);
-        let len = (dv * dv + da * da).sqrt().max(1e-12);
-        (ls..=prn)
-            .filter(|i| p.a[*i].is_finite())
-            .max_by(|x, y| {
-                let d = |i: usize| {
-                    let [v, a] = va(i);
-                    // Signed distance behind the chord (posterior side positive).
-                    ((a - a1) * dv - (v - v1) * da) / len
-                };
-                d(*x).total_cmp(&d(*y))
-            })
-            .map(va)
-    });
+    let subnasale = |prn: usize| {
+        ls.and_then(|ls| {
+            let [v1, a1] = va(prn);
+            let [v2, a2] = va(ls);
+            let (dv, da) = (v2 - v1, a2 - a1);
+            let len = (dv * dv + da * da).sqrt().max(1e-12);
+            (ls..=prn)
+                .filter(|i| p.a[*i].is_finite())
+                .max_by(|x, y| {
+                    let d = |i: usize| {
+                        let [v, a] = va(i);
+                        // Signed distance behind the chord (posterior side positive).
+                        ((a - a1) * dv - (v - v1) * da) / len
+                    };
+                    d(*x).total_cmp(&d(*y))
+                })
+                .map(va)
+        })
+    };
+    // Pronasale, the most protruded point of the nose: the profile's point farthest in front of
+    // the chord N'–Sn, where both are found (then Sn again, from it). The profile's most anterior
+    // point, which the chain starts from, is the tip only for a head upright in its frame: VTK's
+    // headsq lies pitched face-down and its dorsum runs within 2.3 mm of the frame's vertical for
+    // 60 mm, so its most anterior point lay 30 mm above the tip, on the dorsum.
+    let first = subnasale(prn);
+    let tip = n_soft
+        .zip(first)
+        .and_then(|(n, s)| off_chord(p, va(n), s, Ext::Convex));
+    let (prn, sn) = match tip {
+        Some((tip, _)) => (tip, subnasale(tip)),
+        None => (prn, first),
+    };
+    f.put("Prn", Kind::Soft, Ok(va(prn)));
     f.put(
         "Sn",
         Kind::Soft,
-        sn.flatten().ok_or_else(|| {
+        sn.ok_or_else(|| {
             "defined between pronasale and labrale superius (Ls), which is missing".into()
         }),
     );
