@@ -424,11 +424,13 @@ fn soft_landmarks(p: &Profile, scan: bool, f: &mut Found) {
     // the chord N'–Sn, where both are found (then Sn again, from it). The profile's most anterior
     // point, which the chain starts from, is the tip only for a head upright in its frame: VTK's
     // headsq lies pitched face-down and its dorsum runs within 2.3 mm of the frame's vertical for
-    // 60 mm, so its most anterior point lay 30 mm above the tip, on the dorsum.
+    // 60 mm, so its most anterior point lay 30 mm above the tip, on the dorsum. A nose that
+    // does not stand PROMINENCE_MM out of that chord keeps the most anterior point.
     let first = subnasale(prn);
     let tip = n_soft
         .zip(first)
-        .and_then(|(n, s)| off_chord(p, va(n), s, Ext::Convex));
+        .and_then(|(n, s)| off_chord(p, va(n), s, Ext::Convex))
+        .filter(|(_, front)| *front >= PROMINENCE_MM);
     let (prn, sn) = match tip {
         Some((tip, _)) => (tip, subnasale(tip)),
         None => (prn, first),
