@@ -65,6 +65,7 @@ fn bsso_advance_runs_and_moves_the_lower_lip() {
 /// here on the run's face_pre.ply itself, as the midsagittal skin vertex (within 2 mm of the
 /// plane) between subnasale and soft nasion farthest in front of the line N'–Sn, and by the
 /// nose's proportions (adult sn–prn 20 ± 2 mm, Farkas 1994; this 3.2 mm CT's nose is coarse).
+/// Its alae, which horizontal sections do not find on this nose, are reported missing.
 #[test]
 fn the_nose_tip_of_a_head_pitched_face_down_is_its_tip() {
     let (r, out) = run_in();
@@ -119,6 +120,16 @@ fn the_nose_tip_of_a_head_pitched_face_down_is_its_tip() {
         "Prn {:.1} mm in front of N'–Sn",
         front(prn)
     );
+    // The alae of this coarse, pitched nose: the grooves its horizontal sections find are not a
+    // nose's width apart (docs/landmarks.md, Al), so both are missing, saying why, not placed.
+    for side in ["Al-R", "Al-L"] {
+        let why = r["landmarks"][side]["missing"].as_str().unwrap_or_default();
+        assert!(
+            landmark(&r, side).is_none() && why.contains("apart"),
+            "{side}: {}",
+            r["landmarks"][side]
+        );
+    }
 }
 
 /// The chin landmarks found where they belong (docs/landmarks.md "The chin": chord definitions

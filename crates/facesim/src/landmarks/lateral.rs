@@ -33,6 +33,11 @@ const ALA_MIN_MM: f64 = 5.0;
 const ALA_MAX_MM: f64 = 30.0;
 /// Skin more than this behind the nose tip (or stomion) is not the face's front.
 const FRONT_DEPTH_MM: f64 = 45.0;
+/// Alae found farther apart or nearer than these (mm) are not a nose's: adult alar width is
+/// 31–38 mm (Farkas 1994), and these leave 6–7 mm either side. On VTK's headsq (3.2 mm voxels,
+/// the head pitched face-down) the grooves found lay 19.7 mm apart low on the nose's base, or
+/// 46.6 mm apart on the cheeks.
+const ALAR_WIDTH_MM: (f64, f64) = (25.0, 45.0);
 
 /// A paired landmark: its label and LPS position, or why it is missing.
 pub(super) type Spot = (&'static str, Result<[f64; 3], String>);
@@ -47,11 +52,24 @@ pub(super) fn paired(
     let coords: Vec<[f64; 3]> = skin.vertices.iter().map(|p| frame.coords(*p)).collect();
     let at = |label: &str| at(label).map(|p| frame.coords(p));
     let mut out = Vec::with_capacity(4);
-    for (label, side) in [("Al-R", -1.0), ("Al-L", 1.0)] {
+    let mut alae = [("Al-R", -1.0), ("Al-L", 1.0)].map(|(label, side)| {
         let spot = match (at("Sn"), at("Prn")) {
             (Some(sn), Some(prn)) => alare(&coords, &skin.triangles, sn, prn, side),
             _ => Err("searched between subnasale and pronasale, and one is missing".into()),
         };
+        (label, spot)
+    });
+    if let [(_, Ok(r)), (_, Ok(l))] = &alae {
+        let width = l[0] - r[0];
+        let (lo, hi) = ALAR_WIDTH_MM;
+        if !(lo..=hi).contains(&width) {
+            let why = format!(
+                "the alar grooves found lie {width:.1} mm apart, not a nose's width ({lo:.0}–{hi:.0} mm; adults 31–38 mm, Farkas 1994)"
+            );
+            alae = alae.map(|(label, _)| (label, Err(why.clone())));
+        }
+    }
+    for (label, spot) in alae {
         out.push((label, spot.map(|c| frame.point(c))));
     }
     for (label, side) in [("Ch-R", -1.0), ("Ch-L", 1.0)] {
