@@ -49,16 +49,27 @@ pub enum Toward {
     Forward,
     Back,
     Up,
+    /// The mandible's autorotation: turned about the condyles (a lateral axis through the
+    /// case's pivot) until its incisal edge has risen the mm along up, closing onto the
+    /// impacted maxilla. Only where the case has a mandible; else the step is left out.
+    Closing,
 }
 
 /// (segment, direction, mm) per surgery, in the order they apply: each segment moves the points
 /// inside its region at their current position, so the mandible goes before the maxilla (a
-/// forward move of a pitched head's maxilla takes it down, into the mandible's region).
+/// forward move of a pitched head's maxilla takes it down, into the mandible's region) — except
+/// the impaction's autorotation, which closes the lower teeth up into where the upper were, so
+/// the maxilla must have left first.
+///
+/// A Le Fort I impaction always turns the mandible: with nothing holding it open, it closes
+/// about the condyles until the teeth meet again (autorotation), and the published impaction
+/// ratios are measured on such patients; the upper lip's shortening comes largely from the
+/// lower lip rising under it.
 pub fn moves(s: Surgery) -> &'static [(&'static str, Toward, f64)] {
     use Toward::*;
     match s {
         Surgery::LeFortAdvance => &[("maxilla", Forward, 5.0)],
-        Surgery::LeFortImpaction => &[("maxilla", Up, 4.0)],
+        Surgery::LeFortImpaction => &[("maxilla", Up, 4.0), ("mandible", Closing, 4.0)],
         Surgery::LeFortSetback => &[("maxilla", Back, 4.0)],
         Surgery::BssoAdvance => &[("mandible", Forward, 5.0)],
         Surgery::BssoSetback => &[("mandible", Back, 4.0)],
@@ -109,7 +120,22 @@ pub struct CaseInfo {
     pub up: [f64; 3],
     /// (segment, region as written in case.toml syntax, how it was placed).
     pub segments: Vec<(String, String, String)>,
+    /// The mandible's autorotation (condylar pivot and lower incisal edge, how placed); None
+    /// where the case has no mandible.
+    pub autorotation: Option<Autorotation>,
     pub seconds: f64,
+}
+
+/// Where the mandible turns in an impaction's autorotation (LPS mm).
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Autorotation {
+    /// On the condylar axis, in the midsagittal plane: the axis is the head's lateral one
+    /// through it.
+    pub pivot: [f64; 3],
+    /// The lower incisal edge, whose rise the turn matches to the maxilla's.
+    pub incisal: [f64; 3],
+    pub placed: String,
 }
 
 pub struct Validation {
@@ -141,6 +167,9 @@ struct CaseFile {
     /// Segments this CT cannot have, and why.
     #[serde(default)]
     missing: BTreeMap<String, String>,
+    /// The mandible's autorotation, required with a mandible segment.
+    #[serde(default)]
+    autorotation: Option<Autorotation>,
 }
 
 #[derive(Deserialize)]
@@ -273,6 +302,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             let prefix = format!("[{done}/{total_runs}] {name} {}:", s.key());
             if let Some((seg, why)) = moves(s)
                 .iter()
+                .filter(|(_, t, _)| *t != Toward::Closing)
                 .find(|(seg, _, _)| !case.regions.contains_key(*seg))
                 .map(|(seg, _, _)| {
                     let why =
@@ -426,6 +456,12 @@ fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
             ));
         }
     }
+    if cf.segments.contains_key("mandible") != cf.autorotation.is_some() {
+        return Err(Error::input(
+            &file,
+            "a mandible segment needs [autorotation] (pivot, incisal, placed: where the mandible turns as it closes after an impaction), and [autorotation] a mandible",
+        ));
+    }
     let (forward, up) = directions(frame, cf.pitch_deg);
     let mut about = cf.about;
     if !cf.pitch_note.is_empty() {
@@ -450,6 +486,7 @@ fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
                 .iter()
                 .map(|(k, s)| (k.clone(), region_text(&s.region), s.placed.clone()))
                 .collect(),
+            autorotation: cf.autorotation,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
@@ -536,6 +573,11 @@ fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Pre
                 .iter()
                 .map(|(n, b, how)| (n.to_string(), region_text(&box_value(*b)), how.to_string()))
                 .collect(),
+            autorotation: Some(Autorotation {
+                pivot: shape.condylar_pivot(),
+                incisal: shape.landmark("lower incisor tip").unwrap_or(front[1]),
+                placed: "the phantom's condylar pivot (midway between the condyle centres) and its lower incisor's incisal edge".into(),
+            }),
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
@@ -548,13 +590,36 @@ fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Pre
     }
 }
 
-/// The unit vector of a move toward `t`.
+/// The unit vector of a move toward `t` (a closing turn's: up, where its incisal edge goes).
 fn unit_of(info: &CaseInfo, t: Toward) -> [f64; 3] {
     match t {
         Toward::Forward => info.forward,
         Toward::Back => scale(info.forward, -1.0),
-        Toward::Up => info.up,
+        Toward::Up | Toward::Closing => info.up,
     }
+}
+
+/// The plan's `rotate_deg` of the autorotation that raises the incisal edge by `rise_mm` along
+/// up: a turn θ about the lateral axis f × u through the pivot (which turns forward into up) moves
+/// an edge a mm in front of the pivot and b mm below it up by a sin θ + b (1 − cos θ).
+fn closing_turn(info: &CaseInfo, a: &Autorotation, rise_mm: f64) -> Result<[f64; 3]> {
+    let d = crate::vec3::sub(a.incisal, a.pivot);
+    let (front, below) = (
+        crate::vec3::dot(d, info.forward),
+        -crate::vec3::dot(d, info.up),
+    );
+    if front < 20.0 {
+        return Err(Error::config(format!(
+            "validate: case {}: the autorotation's incisal edge lies {front:.1} mm in front of its pivot (the condyles lie 80-100 mm behind the incisors)",
+            info.name
+        )));
+    }
+    // a sin θ − b cos θ = rise − b, i.e. h sin(θ − φ) with h = √(a² + b²), φ = atan2(b, a).
+    let h = front.hypot(below);
+    let theta = below.atan2(front) + ((rise_mm - below) / h).clamp(-1.0, 1.0).asin();
+    let lateral = crate::vec3::cross(info.forward, info.up);
+    let lateral = scale(lateral, 1.0 / crate::vec3::norm(lateral));
+    Ok(crate::osteotomy::rotate_deg_about(lateral, theta))
 }
 
 /// One surgery on one case through `facesim run`'s library call, with the product's defaults
@@ -569,15 +634,29 @@ fn run_one(
     on_run: &mut OnRun,
 ) -> Result<RunLandmarks> {
     let mut osteotomies = Vec::new();
+    let floats =
+        |v: [f64; 3]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
     for (seg, toward, mm) in moves(s) {
-        let t = scale(unit_of(&case.info, *toward), *mm);
+        let Some(region) = case.regions.get(*seg) else {
+            continue; // an autorotation where the CT has no mandible (the skip check holds the rest)
+        };
         let mut o = toml::Table::new();
         o.insert("name".into(), toml::Value::String(seg.to_string()));
-        o.insert("region".into(), case.regions[*seg].clone());
-        o.insert(
-            "translate".into(),
-            toml::Value::Array(t.iter().map(|x| toml::Value::Float(*x)).collect()),
-        );
+        o.insert("region".into(), region.clone());
+        match (toward, &case.info.autorotation) {
+            (Toward::Closing, Some(a)) => {
+                let deg = closing_turn(&case.info, a, *mm)?;
+                o.insert("rotate_deg".into(), floats(deg));
+                o.insert("pivot".into(), floats(a.pivot));
+            }
+            (Toward::Closing, None) => continue,
+            _ => {
+                o.insert(
+                    "translate".into(),
+                    floats(scale(unit_of(&case.info, *toward), *mm)),
+                );
+            }
+        }
         osteotomies.push(toml::Value::Table(o));
     }
     let mut over = toml::Table::new();
@@ -736,6 +815,17 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
             }
             row
         })
+        .map(|mut row| {
+            let closes = moves(s).iter().any(|(_, t, _)| *t == Toward::Closing);
+            if closes && info.autorotation.is_none() {
+                let note = "no mandible in this CT: the maxilla moved alone, without the autorotation";
+                row.why = Some(match row.why.take() {
+                    Some(w) => format!("{w}; {note}"),
+                    None => note.into(),
+                });
+            }
+            row
+        })
         .collect()
 }
 
@@ -850,7 +940,12 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
     for srg in Surgery::ALL {
         let m: Vec<String> = moves(srg)
             .iter()
-            .map(|(seg, t, mm)| format!("{seg} {mm} mm {}", format!("{t:?}").to_lowercase()))
+            .map(|(seg, t, mm)| match t {
+                Toward::Closing => format!(
+                    "{seg} turned about the condyles until its incisal edge has risen {mm} mm (autorotation; where the CT has a mandible)"
+                ),
+                _ => format!("{seg} {mm} mm {}", format!("{t:?}").to_lowercase()),
+            })
             .collect();
         s.push_str(&format!("| {} | {} |\n", srg.title(), m.join(", then ")));
     }
@@ -867,6 +962,14 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
         ));
         for (seg, region, how) in &c.segments {
             s.push_str(&format!("- {seg}: `{region}`: {how}\n"));
+        }
+        if let Some(a) = &c.autorotation {
+            s.push_str(&format!(
+                "- autorotation: pivot {}, lower incisal edge {}: {}\n",
+                v3(a.pivot),
+                v3(a.incisal),
+                a.placed
+            ));
         }
         s.push('\n');
     }
@@ -1006,6 +1109,48 @@ mod tests {
         // Face down: forward points anterior (−y) and down (−z).
         assert!(fwd[1] < -0.95 && (fwd[2] + 16f64.to_radians().sin()).abs() < 1e-12);
         assert_eq!(directions(&f, 0.0), (f.anterior, f.vertical));
+    }
+
+    #[test]
+    fn the_closing_turn_raises_the_incisal_edge_by_the_impaction_about_the_condyles() {
+        let f = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let (forward, up) = directions(&f, 16.0);
+        let info = CaseInfo {
+            name: "t".into(),
+            about: String::new(),
+            pitch_deg: 16.0,
+            forward,
+            up,
+            segments: Vec::new(),
+            autorotation: None,
+            seconds: 0.0,
+        };
+        // headsq's pivot and incisal edge.
+        let a = Autorotation {
+            pivot: [108.0, -96.0, -42.0],
+            incisal: [97.6, -154.0, -103.5],
+            placed: String::new(),
+        };
+        let r = crate::osteotomy::rotation(closing_turn(&info, &a, 4.0).unwrap());
+        let turned = |p: [f64; 3]| {
+            let d = crate::vec3::sub(p, a.pivot);
+            let rd = [0, 1, 2].map(|i| (0..3).map(|k| r[i][k] * d[k]).sum::<f64>());
+            crate::vec3::add(rd, a.pivot)
+        };
+        let moved = crate::vec3::sub(turned(a.incisal), a.incisal);
+        assert!((dot(moved, up) - 4.0).abs() < 1e-9, "{moved:?}");
+        // About the lateral axis: nothing moves sideways, the pivot stays, and the chin comes
+        // forward as it closes.
+        let lateral = crate::vec3::cross(forward, up);
+        assert!(dot(moved, lateral).abs() < 1e-9);
+        assert!(crate::vec3::norm(crate::vec3::sub(turned(a.pivot), a.pivot)) < 1e-12);
+        assert!(dot(moved, forward) > 0.5);
+        // An edge behind its pivot is refused.
+        let behind = Autorotation {
+            incisal: a.pivot,
+            ..a
+        };
+        assert!(closing_turn(&info, &behind, 4.0).is_err());
     }
 
     #[test]

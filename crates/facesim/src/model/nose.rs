@@ -7,7 +7,7 @@
 //! The region, in the head frame of the pre-operative landmarks: between the alae (half the alar
 //! width either side of pronasale, 17 mm without alare), from [`ABOVE_SN_MM`] above subnasale to
 //! [`BELOW_N_MM`] below soft nasion, in front of the piriform aperture (the anterior nasal
-//! spine's depth, else the alar creases').
+//! spine's depth, else the alar creases', else 15 mm behind subnasale).
 
 use crate::case::TissueElastic;
 use crate::error::{Error, Result};
@@ -19,6 +19,10 @@ const ABOVE_SN_MM: f64 = 2.5;
 /// The nose's root ends this far below soft nasion (mm): the nasal bones hold the framework
 /// there.
 const BELOW_N_MM: f64 = 7.0;
+/// The anterior nasal spine's depth behind subnasale where neither it nor the alae are found
+/// (mm): the upper lip's thickness at its base, about 15 mm in adults (Holdaway 1983, "basic
+/// upper lip thickness"); on the real CT 15.5, on the phantoms 10–17.
+const SN_TO_ANS_MM: f64 = 15.0;
 /// Half the nose's width without alare (mm; adult alar width 31–38 mm, Farkas 1994).
 const HALF_WIDTH_MM: f64 = 17.0;
 
@@ -64,11 +68,12 @@ pub(crate) fn nose_tets(
     };
     let half = alae.map_or(HALF_WIDTH_MM, |(r, l)| 0.5 * (l[0] - r[0]).abs());
     // The piriform aperture's depth: the anterior nasal spine's, else the alar creases' (on the
-    // real CT within 1 mm of it; a coarse CT's spine is often not found).
+    // real CT within 1 mm of it; a coarse CT's spine is often not found), else subnasale's less
+    // the soft tissue's thickness there.
     let back = match (at("ANS"), alae) {
         (Ok(ans), _) => ans[2],
         (Err(_), Some((r, l))) => 0.5 * (r[2] + l[2]),
-        (Err(e), None) => return Err(e),
+        (Err(_), None) => sn[2] - SN_TO_ANS_MM,
     };
     let (bottom, top) = (sn[1] + ABOVE_SN_MM, n[1] - BELOW_N_MM);
     Ok(tets
@@ -80,4 +85,73 @@ pub(crate) fn nose_tets(
             (s - prn[0]).abs() <= half && v >= bottom && v <= top && a >= back
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::landmarks::{Kind, Source};
+
+    fn found(label: &str, p: [f64; 3]) -> Landmark {
+        Landmark {
+            label: label.into(),
+            kind: Kind::Soft,
+            position: Some(p),
+            source: Source::Detected,
+            missing: None,
+        }
+    }
+
+    /// One small tetrahedron per centroid.
+    fn tets_at(centres: &[[f64; 3]]) -> (Vec<[f64; 3]>, Vec<[u32; 4]>) {
+        let mut nodes = Vec::new();
+        let mut tets = Vec::new();
+        for c in centres {
+            let k = nodes.len() as u32;
+            let corners = [
+                [1.0, 0.0, 0.0],
+                [-1.0, 1.0, 0.0],
+                [-1.0, -1.0, 0.5],
+                [1.0, 0.0, -0.5],
+            ];
+            let mean: [f64; 3] =
+                std::array::from_fn(|a| corners.iter().map(|p| p[a]).sum::<f64>() / 4.0);
+            nodes.extend(corners.map(|p| std::array::from_fn(|a| c[a] + p[a] - mean[a])));
+            tets.push([k, k + 1, k + 2, k + 3]);
+        }
+        (nodes, tets)
+    }
+
+    #[test]
+    fn without_the_spine_or_the_alae_the_nose_ends_15_mm_behind_subnasale() {
+        // Upright head, anterior = −y: subnasale at depth 85, so the nose reaches back to 70.
+        let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let lms = vec![
+            found("Prn", [0.0, -100.0, 10.0]),
+            found("Sn", [0.0, -85.0, 0.0]),
+            found("N'", [0.0, -90.0, 50.0]),
+        ];
+        // In front of 70, just behind it, beside the nose, below its base.
+        let (nodes, tets) = tets_at(&[
+            [0.0, -72.0, 20.0],
+            [0.0, -68.0, 20.0],
+            [20.0, -90.0, 20.0],
+            [0.0, -90.0, 1.0],
+        ]);
+        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets).unwrap();
+        assert_eq!(inside, [true, false, false, false]);
+        // A found spine sets the depth instead.
+        let mut with_ans = lms;
+        with_ans.push(found("ANS", [0.0, -75.0, 2.0]));
+        let inside = nose_tets((Some(frame), with_ans), &nodes, &tets).unwrap();
+        assert_eq!(inside, [false, false, false, false]);
+        // Subnasale itself cannot be done without.
+        let err = nose_tets(
+            (Some(frame), vec![found("Prn", [0.0, -100.0, 10.0])]),
+            &nodes,
+            &tets,
+        )
+        .unwrap_err();
+        assert!(err.to_string().contains("Sn"), "{err}");
+    }
 }
