@@ -185,6 +185,118 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
     assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog&apos; (horizontal)"));
 }
 
+/// A Le Fort I impaction closes the mandible after it (the autorotation): the run's plan turns
+/// the mandible about the condylar pivot validation.md names until the lower incisal edge it
+/// names has risen the impaction, the run's own report reads the plan as an impaction, with
+/// validation.csv's ratios, and the lower lip rises with the teeth.
+#[test]
+fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
+    let out = validate_one_phantom("facesim-validate-impaction", "lefort-impaction", &[]);
+    let run = run_report(&out, "phantom01", "lefort-impaction");
+    let plan = run["parameters"]["osteotomy"].as_array().unwrap();
+    let seg = |name: &str| plan.iter().find(|o| o["name"] == name).unwrap();
+    let (maxilla, mandible) = (seg("maxilla"), seg("mandible"));
+    let up = vec3(&maxilla["translate"]).unwrap();
+    assert!((up.iter().map(|x| x * x).sum::<f64>().sqrt() - 4.0).abs() < 1e-9);
+    let up = up.map(|x| x / 4.0);
+    // validation.md: "- autorotation: pivot (x, y, z), lower incisal edge (x, y, z): …".
+    let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    let line = md
+        .lines()
+        .find(|l| l.starts_with("- autorotation: pivot ("))
+        .expect("validation.md names the autorotation");
+    let points: Vec<[f64; 3]> = line
+        .split('(')
+        .skip(1)
+        .take(2)
+        .map(|p| {
+            let v: Vec<f64> = p
+                .split(')')
+                .next()
+                .unwrap()
+                .split(',')
+                .map(|x| x.trim().parse().unwrap())
+                .collect();
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    let (printed, incisal) = (points[0], points[1]);
+    let pivot = vec3(&mandible["pivot"]).unwrap();
+    assert!(
+        (0..3).all(|k| (pivot[k] - printed[k]).abs() < 6e-4),
+        "{pivot:?} {printed:?}"
+    );
+    // R = Rz·Ry·Rx of rotate_deg (docs/case.md), about the pivot.
+    let [a, b, c] = vec3(&mandible["rotate_deg"]).unwrap().map(f64::to_radians);
+    let rx = [
+        [1.0, 0.0, 0.0],
+        [0.0, a.cos(), -a.sin()],
+        [0.0, a.sin(), a.cos()],
+    ];
+    let ry = [
+        [b.cos(), 0.0, b.sin()],
+        [0.0, 1.0, 0.0],
+        [-b.sin(), 0.0, b.cos()],
+    ];
+    let rz = [
+        [c.cos(), -c.sin(), 0.0],
+        [c.sin(), c.cos(), 0.0],
+        [0.0, 0.0, 1.0],
+    ];
+    let apply = |m: [[f64; 3]; 3], v: [f64; 3]| {
+        [0, 1, 2].map(|i| (0..3).map(|k| m[i][k] * v[k]).sum::<f64>())
+    };
+    let d = [0, 1, 2].map(|k| incisal[k] - pivot[k]);
+    let turned = apply(rz, apply(ry, apply(rx, d)));
+    let rise: f64 = (0..3).map(|k| (turned[k] - d[k]) * up[k]).sum();
+    assert!((rise - 4.0).abs() < 2e-3, "the incisal edge rose {rise} mm");
+    assert!(
+        (2.0..4.5).contains(&(a.to_degrees().abs() + b.to_degrees().abs() + c.to_degrees().abs())),
+        "an autorotation of a few degrees: {:?}",
+        mandible["rotate_deg"]
+    );
+    // The run's own report reads the plan as an impaction, with the same ratios.
+    assert_eq!(
+        run["published_ratios"]["surgery"], "lefort-impaction",
+        "{}",
+        run["published_ratios"]
+    );
+    let rows = read_csv(&out.join("validation.csv"));
+    let mut compared = 0;
+    for row in &rows {
+        let Some(ratio) = num(&row["predicted_ratio"]) else {
+            continue;
+        };
+        let own = run["published_ratios"]["rows"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["soft"] == row["landmark"].as_str())
+            .and_then(|r| r["predicted"].as_f64());
+        if let Some(own) = own {
+            assert!(
+                (ratio - own).abs() < 1.5e-3,
+                "{}: csv {ratio}, run {own}",
+                row["landmark"]
+            );
+            compared += 1;
+        }
+    }
+    assert!(compared >= 2, "{rows:?}");
+    // The lower lip rises with the closing teeth, more than the maxilla's 4 mm takes subnasale.
+    let rise_of = |label: &str| {
+        let lm = &run["landmarks"][label];
+        let (p, q) = (vec3(&lm["pre"]).unwrap(), vec3(&lm["post"]).unwrap());
+        (0..3).map(|k| (q[k] - p[k]) * up[k]).sum::<f64>()
+    };
+    assert!(
+        rise_of("Li") > rise_of("Sn") && rise_of("Li") > 2.0,
+        "Li {} Sn {}",
+        rise_of("Li"),
+        rise_of("Sn")
+    );
+}
+
 /// The region's held faces must not cut through the nose over a moving maxilla: on this
 /// phantom the box of a Le Fort I grown by `[tet] margin_mm` ends 2.3 mm short of pronasale,
 /// which was held still ("Prn did not move"). Grown to hold the tip with 10 mm about it, the
@@ -564,5 +676,31 @@ fn bad_input_is_one_line() {
     assert_clean_failure(&r, "/nonexistent-samples", "not found");
     let r = facesim(&["validate", "--out", out.to_str().unwrap(), "--set", "tet"]);
     assert_clean_failure(&r, "--set tet", "expected KEY=VALUE");
+    // headsq's validation.toml without the impaction's autorotation.
+    let samples = common::kept_dir("facesim-validate-bad-samples");
+    let case = samples.join("headsq");
+    std::fs::create_dir_all(&case).unwrap();
+    let real = root().join("data-samples/real-mandible");
+    std::fs::copy(real.join("case.toml"), case.join("case.toml")).unwrap();
+    let ct = case.join("headsq.vti");
+    if !ct.exists() {
+        std::os::unix::fs::symlink(real.join("headsq.vti"), &ct).unwrap();
+    }
+    let text = std::fs::read_to_string(real.join("validation.toml")).unwrap();
+    let cut = text
+        .find("[autorotation]")
+        .expect("headsq's [autorotation]");
+    let bad = case.join("validation.toml");
+    std::fs::write(&bad, &text[..cut]).unwrap();
+    let r = facesim(&[
+        "validate",
+        "--out",
+        out.to_str().unwrap(),
+        "--samples",
+        samples.to_str().unwrap(),
+        "--phantoms",
+        "0",
+    ]);
+    assert_clean_failure(&r, bad.to_str().unwrap(), "needs [autorotation]");
     assert!(!out.exists(), "a failed validation left {}", out.display());
 }

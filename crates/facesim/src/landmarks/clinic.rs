@@ -7,9 +7,10 @@
 //! (docs/validation.md, "In every run"): a segment named for the maxilla (maxilla, Le Fort), the
 //! mandible (mandible, BSSO, sagittal split) or the chin (chin, genioplasty), moving forward, back
 //! or up at the jaw's bony landmark (A or ANS for the maxilla, B or Pog for the mandible, Pog for
-//! the chin; the pivot when none is located), so a rotation reads as the move it gives the jaw. A
-//! plan with any other segment, or a combination
-//! the table has no row for, is reported as such, with no ratios.
+//! the chin; the pivot when none is located), so a rotation reads as the move it gives the jaw. An
+//! impaction whose mandible turns up with it (the autorotation, as `facesim validate` plans it)
+//! is an impaction. A plan with any other segment, or a combination the table has no row for, is
+//! reported as such, with no ratios.
 //!
 //! The ratio is as `facesim validate` measures it and the studies publish it: the soft
 //! landmark's move along the head's anterior (horizontal rows) or vertical (vertical rows) axis
@@ -166,6 +167,15 @@ fn surgery_of(
     let along = |j: Jaw| jaws.iter().find(|(k, _, _)| *k == j).map(|(_, _, m)| *m);
     let none = |why: &str| Err(format!("{reading}: {why}"));
     let forward = |(f, u): (f64, f64)| f.abs() >= u.abs();
+    // The mandible's autorotation after an impaction: turned (not only moved), its chin rising
+    // and not going back. The published impaction ratios come from such patients.
+    let closing = |j: Jaw, (f, u): (f64, f64)| {
+        let turned = jaws
+            .iter()
+            .find(|(k, _, _)| *k == j)
+            .is_some_and(|(_, i, _)| plan[*i].rotate_deg.iter().any(|d| d.abs() > 0.1));
+        turned && u >= LEAST_MOVE_MM && f > -LEAST_MOVE_MM
+    };
     let s = match (along(Jaw::Maxilla), along(Jaw::Mandible), along(Jaw::Chin)) {
         (Some(m), None, None) if forward(m) && m.0 >= LEAST_MOVE_MM => Surgery::LeFortAdvance,
         (Some(m), None, None) if forward(m) && m.0 <= -LEAST_MOVE_MM => Surgery::LeFortSetback,
@@ -178,7 +188,12 @@ fn surgery_of(
         (None, Some(b), None) if b.0 >= LEAST_MOVE_MM => Surgery::BssoAdvance,
         (None, Some(b), None) if b.0 <= -LEAST_MOVE_MM => Surgery::BssoSetback,
         (None, None, Some(c)) if c.0 >= LEAST_MOVE_MM => Surgery::Genioplasty,
-        (Some(m), Some(b), None) if m.0 >= LEAST_MOVE_MM && b.0 >= LEAST_MOVE_MM => {
+        (Some(m), Some(b), None)
+            if !forward(m) && m.1 >= LEAST_MOVE_MM && closing(Jaw::Mandible, b) =>
+        {
+            Surgery::LeFortImpaction
+        }
+        (Some(m), Some(b), None) if forward(m) && m.0 >= LEAST_MOVE_MM && b.0 >= LEAST_MOVE_MM => {
             Surgery::Bimaxillary
         }
         _ => {
@@ -373,6 +388,28 @@ mod tests {
                 .contains("not named for a jaw")
         );
         assert!(key(&[segment("chin", [0.0, 3.0, 0.0], [0.0; 3])]).is_err());
+    }
+
+    #[test]
+    fn an_impaction_with_the_mandible_closing_after_it_is_an_impaction() {
+        let f = frame();
+        // B 80 mm in front of and 60 mm below the pivot (the condyles): a −3° turn about x
+        // takes it 3.0 mm forward and 4.3 mm up.
+        let b = [0.0, -80.0, -60.0];
+        let carried = [lm("B", b, b)];
+        let key = |plan: &[Osteotomy]| surgery_of(plan, &carried, &f).map(|(s, _, _)| s.key());
+        let maxilla = segment("maxilla", [0.0, -1.1, 3.8], [0.0; 3]);
+        let closing = segment("mandible", [0.0; 3], [-3.0, 0.0, 0.0]);
+        assert_eq!(
+            key(&[maxilla.clone(), closing.clone()]),
+            Ok("lefort-impaction")
+        );
+        // Not a bimaxillary advance, though both jaws move forward a little; and the mandible
+        // only translated up, or opening, is no impaction's.
+        let lifted = segment("mandible", [0.0, 0.0, 4.0], [0.0; 3]);
+        assert!(key(&[maxilla.clone(), lifted]).is_err());
+        let opening = segment("mandible", [0.0; 3], [3.0, 0.0, 0.0]);
+        assert!(key(&[maxilla, opening]).is_err());
     }
 
     #[test]
