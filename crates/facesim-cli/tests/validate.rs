@@ -226,32 +226,15 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
         (0..3).all(|k| (pivot[k] - printed[k]).abs() < 6e-4),
         "{pivot:?} {printed:?}"
     );
-    // R = Rz·Ry·Rx of rotate_deg (docs/case.md), about the pivot.
-    let [a, b, c] = vec3(&mandible["rotate_deg"]).unwrap().map(f64::to_radians);
-    let rx = [
-        [1.0, 0.0, 0.0],
-        [0.0, a.cos(), -a.sin()],
-        [0.0, a.sin(), a.cos()],
-    ];
-    let ry = [
-        [b.cos(), 0.0, b.sin()],
-        [0.0, 1.0, 0.0],
-        [-b.sin(), 0.0, b.cos()],
-    ];
-    let rz = [
-        [c.cos(), -c.sin(), 0.0],
-        [c.sin(), c.cos(), 0.0],
-        [0.0, 0.0, 1.0],
-    ];
-    let apply = |m: [[f64; 3]; 3], v: [f64; 3]| {
-        [0, 1, 2].map(|i| (0..3).map(|k| m[i][k] * v[k]).sum::<f64>())
-    };
+    // The plan's rotation (R = Rz·Ry·Rx of rotate_deg, docs/case.md) about the pivot.
+    let deg = vec3(&mandible["rotate_deg"]).unwrap();
+    let r = facesim::osteotomy::rotation(deg);
     let d = [0, 1, 2].map(|k| incisal[k] - pivot[k]);
-    let turned = apply(rz, apply(ry, apply(rx, d)));
+    let turned = [0, 1, 2].map(|i| (0..3).map(|k| r[i][k] * d[k]).sum::<f64>());
     let rise: f64 = (0..3).map(|k| (turned[k] - d[k]) * up[k]).sum();
     assert!((rise - 4.0).abs() < 2e-3, "the incisal edge rose {rise} mm");
     assert!(
-        (2.0..4.5).contains(&(a.to_degrees().abs() + b.to_degrees().abs() + c.to_degrees().abs())),
+        (2.0..4.5).contains(&deg.iter().map(|x| x.abs()).sum::<f64>()),
         "an autorotation of a few degrees: {:?}",
         mandible["rotate_deg"]
     );
