@@ -40,34 +40,6 @@ pub fn rotation(deg: [f64; 3]) -> [[f64; 3]; 3] {
     mul(rz, mul(ry, rx))
 }
 
-/// The angles (degrees) of [`rotation`] that give `r`: its inverse.
-pub fn euler_xyz_deg(r: [[f64; 3]; 3]) -> [f64; 3] {
-    // R[2][0] = −sin(b); R[2][1] = cos(b) sin(a); R[2][2] = cos(b) cos(a);
-    // R[1][0] = cos(b) sin(c); R[0][0] = cos(b) cos(c).
-    let sb = (-r[2][0]).clamp(-1.0, 1.0);
-    let b = sb.asin();
-    let (a, c) = if sb.abs() < 1.0 - 1e-12 {
-        (r[2][1].atan2(r[2][2]), r[1][0].atan2(r[0][0]))
-    } else {
-        // Gimbal lock (b = ±90°): only a ∓ c is determined; take c = 0.
-        (r[0][1].atan2(r[1][1]) * sb.signum(), 0.0)
-    };
-    [a, b, c].map(f64::to_degrees)
-}
-
-/// The plan's angles (degrees, [`rotation`]'s order) of a turn by `angle_rad` about the unit
-/// `axis` (right-handed; Rodrigues' formula).
-pub(crate) fn rotate_deg_about(axis: [f64; 3], angle_rad: f64) -> [f64; 3] {
-    let (s, c) = angle_rad.sin_cos();
-    let [x, y, z] = axis;
-    let t = 1.0 - c;
-    euler_xyz_deg([
-        [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
-        [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
-        [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
-    ])
-}
-
 impl Plan {
     /// The plan of `osteotomies`, whose mask regions have been read (`pipeline::inputs::read_masks`).
     pub fn new(osteotomies: &[Osteotomy]) -> Plan {
@@ -173,25 +145,6 @@ mod tests {
             (w[0]).abs() < 1e-12 && (w[1]).abs() < 1e-12 && (w[2] + 1.0).abs() < 1e-12,
             "{w:?}"
         );
-    }
-
-    #[test]
-    fn a_turn_about_an_oblique_axis_keeps_the_axis_and_turns_a_normal_by_the_angle() {
-        let n = 3f64.sqrt();
-        let axis = [1.0 / n, -1.0 / n, 1.0 / n];
-        let angle = 0.7f64;
-        let r = rotation(rotate_deg_about(axis, angle));
-        let apply = |v: [f64; 3]| [0, 1, 2].map(|a| (0..3).map(|k| r[a][k] * v[k]).sum::<f64>());
-        let a = apply(axis);
-        assert!((0..3).all(|i| (a[i] - axis[i]).abs() < 1e-12), "{a:?}");
-        // A unit vector normal to the axis turns by the angle, right-handed: v × Rv ∥ +axis.
-        let v = [1.0 / 2f64.sqrt(), 1.0 / 2f64.sqrt(), 0.0];
-        let w = apply(v);
-        let dot: f64 = (0..3).map(|i| v[i] * w[i]).sum();
-        assert!((dot - angle.cos()).abs() < 1e-12, "{dot}");
-        let cross = crate::vec3::cross(v, w);
-        let along: f64 = (0..3).map(|i| cross[i] * axis[i]).sum();
-        assert!((along - angle.sin()).abs() < 1e-12, "{along}");
     }
 
     #[test]

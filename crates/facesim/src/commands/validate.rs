@@ -599,6 +599,19 @@ fn unit_of(info: &CaseInfo, t: Toward) -> [f64; 3] {
     }
 }
 
+/// The plan's angles (degrees, `osteotomy::rotation`'s order) of a turn by `angle_rad` about the unit
+/// `axis` (right-handed; Rodrigues' formula).
+fn rotate_deg_about(axis: [f64; 3], angle_rad: f64) -> [f64; 3] {
+    let (s, c) = angle_rad.sin_cos();
+    let [x, y, z] = axis;
+    let t = 1.0 - c;
+    crate::slicer::itk_transform::euler_xyz_deg([
+        [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
+        [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
+        [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
+    ])
+}
+
 /// The plan's `rotate_deg` of the autorotation that raises the incisal edge by `rise_mm` along
 /// up: a turn θ about the lateral axis f × u through the pivot (which turns forward into up) moves
 /// an edge a mm in front of the pivot and b mm below it up by a sin θ + b (1 − cos θ).
@@ -619,7 +632,7 @@ fn closing_turn(info: &CaseInfo, a: &Autorotation, rise_mm: f64) -> Result<[f64;
     let theta = below.atan2(front) + ((rise_mm - below) / h).clamp(-1.0, 1.0).asin();
     let lateral = crate::vec3::cross(info.forward, info.up);
     let lateral = scale(lateral, 1.0 / crate::vec3::norm(lateral));
-    Ok(crate::osteotomy::rotate_deg_about(lateral, theta))
+    Ok(rotate_deg_about(lateral, theta))
 }
 
 /// One surgery on one case through `facesim run`'s library call, with the product's defaults
@@ -1109,6 +1122,25 @@ mod tests {
         // Face down: forward points anterior (−y) and down (−z).
         assert!(fwd[1] < -0.95 && (fwd[2] + 16f64.to_radians().sin()).abs() < 1e-12);
         assert_eq!(directions(&f, 0.0), (f.anterior, f.vertical));
+    }
+
+    #[test]
+    fn a_turn_about_an_oblique_axis_keeps_the_axis_and_turns_a_normal_by_the_angle() {
+        let n = 3f64.sqrt();
+        let axis = [1.0 / n, -1.0 / n, 1.0 / n];
+        let angle = 0.7f64;
+        let r = crate::osteotomy::rotation(rotate_deg_about(axis, angle));
+        let apply = |v: [f64; 3]| [0, 1, 2].map(|a| (0..3).map(|k| r[a][k] * v[k]).sum::<f64>());
+        let a = apply(axis);
+        assert!((0..3).all(|i| (a[i] - axis[i]).abs() < 1e-12), "{a:?}");
+        // A unit vector normal to the axis turns by the angle, right-handed: v × Rv ∥ +axis.
+        let v = [1.0 / 2f64.sqrt(), 1.0 / 2f64.sqrt(), 0.0];
+        let w = apply(v);
+        let dot: f64 = (0..3).map(|i| v[i] * w[i]).sum();
+        assert!((dot - angle.cos()).abs() < 1e-12, "{dot}");
+        let cross = crate::vec3::cross(v, w);
+        let along: f64 = (0..3).map(|i| cross[i] * axis[i]).sum();
+        assert!((along - angle.sin()).abs() < 1e-12, "{along}");
     }
 
     #[test]

@@ -70,16 +70,27 @@ impl RigidMove {
     /// `translate` about `pivot` = the centre, so that R (p − pivot) + pivot + translate is
     /// this move.
     pub fn plan_form(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {
-        (
-            self.translation,
-            crate::osteotomy::euler_xyz_deg(self.rotation),
-            self.centre,
-        )
+        (self.translation, euler_xyz_deg(self.rotation), self.centre)
     }
 }
 
 fn transpose(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
     std::array::from_fn(|i| std::array::from_fn(|j| m[j][i]))
+}
+
+/// Angles (degrees) about x, then y, then z with R = Rz·Ry·Rx (`osteotomy::rotation`'s order).
+pub fn euler_xyz_deg(r: [[f64; 3]; 3]) -> [f64; 3] {
+    // R[2][0] = −sin(b); R[2][1] = cos(b) sin(a); R[2][2] = cos(b) cos(a);
+    // R[1][0] = cos(b) sin(c); R[0][0] = cos(b) cos(c).
+    let sb = (-r[2][0]).clamp(-1.0, 1.0);
+    let b = sb.asin();
+    let (a, c) = if sb.abs() < 1.0 - 1e-12 {
+        (r[2][1].atan2(r[2][2]), r[1][0].atan2(r[0][0]))
+    } else {
+        // Gimbal lock (b = ±90°): only a ∓ c is determined; take c = 0.
+        (r[0][1].atan2(r[1][1]) * sb.signum(), 0.0)
+    };
+    [a, b, c].map(f64::to_degrees)
 }
 
 /// Read a transform file and return the plan move (modelling direction) it describes.
@@ -294,7 +305,7 @@ fn check_rigid(m: &[[f64; 3]; 3]) -> std::result::Result<(), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::osteotomy::{euler_xyz_deg, rotation};
+    use crate::osteotomy::rotation;
 
     fn close(a: [f64; 3], b: [f64; 3], tol: f64) -> bool {
         (0..3).all(|i| (a[i] - b[i]).abs() < tol)
