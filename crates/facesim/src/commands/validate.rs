@@ -599,17 +599,13 @@ fn unit_of(info: &CaseInfo, t: Toward) -> [f64; 3] {
     }
 }
 
-/// The plan's angles (degrees, `osteotomy::rotation`'s order) of a turn by `angle_rad` about the unit
-/// `axis` (right-handed; Rodrigues' formula).
-fn rotate_deg_about(axis: [f64; 3], angle_rad: f64) -> [f64; 3] {
-    let (s, c) = angle_rad.sin_cos();
-    let [x, y, z] = axis;
-    let t = 1.0 - c;
-    crate::slicer::itk_transform::euler_xyz_deg([
-        [c + x * x * t, x * y * t - z * s, x * z * t + y * s],
-        [y * x * t + z * s, c + y * y * t, y * z * t - x * s],
-        [z * x * t - y * s, z * y * t + x * s, c + z * z * t],
-    ])
+/// The plan's angles (degrees, `osteotomy::rotation`'s order) of a turn by `angle_rad` (|θ| ≤ π)
+/// about the unit `axis`, right-handed: the versor (unit quaternion) axis · sin(θ/2), as an ITK
+/// transform file gives it.
+fn rotate_deg_about(axis: [f64; 3], angle_rad: f64) -> Result<[f64; 3]> {
+    use crate::slicer::itk_transform::{euler_xyz_deg, versor};
+    let [x, y, z] = scale(axis, (0.5 * angle_rad).sin());
+    Ok(euler_xyz_deg(versor(x, y, z).map_err(Error::config)?))
 }
 
 /// The plan's `rotate_deg` of the autorotation that raises the incisal edge by `rise_mm` along
@@ -632,7 +628,7 @@ fn closing_turn(info: &CaseInfo, a: &Autorotation, rise_mm: f64) -> Result<[f64;
     let theta = below.atan2(front) + ((rise_mm - below) / h).clamp(-1.0, 1.0).asin();
     let lateral = crate::vec3::cross(info.forward, info.up);
     let lateral = scale(lateral, 1.0 / crate::vec3::norm(lateral));
-    Ok(rotate_deg_about(lateral, theta))
+    rotate_deg_about(lateral, theta)
 }
 
 /// One surgery on one case through `facesim run`'s library call, with the product's defaults
@@ -1129,7 +1125,7 @@ mod tests {
         let n = 3f64.sqrt();
         let axis = [1.0 / n, -1.0 / n, 1.0 / n];
         let angle = 0.7f64;
-        let r = crate::osteotomy::rotation(rotate_deg_about(axis, angle));
+        let r = crate::osteotomy::rotation(rotate_deg_about(axis, angle).unwrap());
         let apply = |v: [f64; 3]| [0, 1, 2].map(|a| (0..3).map(|k| r[a][k] * v[k]).sum::<f64>());
         let a = apply(axis);
         assert!((0..3).all(|i| (a[i] - axis[i]).abs() < 1e-12), "{a:?}");

@@ -253,7 +253,7 @@ fn euler_itk(ax: f64, ay: f64, az: f64, zyx: bool) -> [[f64; 3]; 3] {
 
 /// The rotation of a unit quaternion whose vector part is (x, y, z) (ITK's versor parameters;
 /// w = √(1 − |v|²) ≥ 0).
-fn versor(x: f64, y: f64, z: f64) -> std::result::Result<[[f64; 3]; 3], String> {
+pub(crate) fn versor(x: f64, y: f64, z: f64) -> std::result::Result<[[f64; 3]; 3], String> {
     let n2 = x * x + y * y + z * z;
     if n2 > 1.0 + 1e-9 {
         return Err(format!("versor ({x}, {y}, {z}) has norm > 1"));
