@@ -371,6 +371,10 @@ struct TableArgs {
     /// `--set tet.fat_dark.youngs_kpa=3`): the same table under other tissue parameters.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     set: Vec<String>,
+    /// Keep every output of each run under runs/ (tets.vtu, the meshes, report.html; ~35 MB a
+    /// run), not only its report, landmarks and faces.
+    #[arg(long)]
+    keep_runs: bool,
 }
 
 impl TableArgs {
@@ -392,6 +396,7 @@ impl TableArgs {
             surgeries: surgeries_of(command, &self.surgery)?,
             cases: self.cases,
             overrides,
+            keep_runs: self.keep_runs,
             command: std::env::args().collect::<Vec<_>>().join(" "),
         })
     }

@@ -118,10 +118,16 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
     let out = validate_one_phantom(
         "facesim-validate-phantom",
         "bsso-advance",
-        &["--set", "tet.fat_dark.youngs_kpa=2.5"],
+        &["--set", "tet.fat_dark.youngs_kpa=2.5", "--keep-runs"],
     );
     for f in ["validation.md", "validation.csv", "validation.svg"] {
         assert!(out.join(f).is_file(), "{f} missing");
+    }
+    // --keep-runs keeps each run's every output (the impaction test below checks the default
+    // prunes them).
+    for f in ["tets.vtu", "report.html", "skull_post.ply"] {
+        let kept = out.join("runs/phantom01/bsso-advance").join(f);
+        assert!(kept.is_file(), "--keep-runs: {} missing", kept.display());
     }
     let rows = read_csv(&out.join("validation.csv"));
     let ranges = documented_ranges();
@@ -193,6 +199,13 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
 fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
     let out = validate_one_phantom("facesim-validate-impaction", "lefort-impaction", &[]);
     let run = run_report(&out, "phantom01", "lefort-impaction");
+    // Without --keep-runs a run keeps its report, landmarks and faces only.
+    let run_dir = out.join("runs/phantom01/lefort-impaction");
+    assert!(run_dir.join("face_post.ply").is_file());
+    assert!(
+        !run_dir.join("tets.vtu").exists(),
+        "tets.vtu kept without --keep-runs"
+    );
     let plan = run["parameters"]["osteotomy"].as_array().unwrap();
     let seg = |name: &str| plan.iter().find(|o| o["name"] == name).unwrap();
     let (maxilla, mandible) = (seg("maxilla"), seg("mandible"));

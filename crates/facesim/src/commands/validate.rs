@@ -37,6 +37,8 @@ pub struct Options {
     /// Laid over every run's case after the surgery's plan (`case::overrides_table`, the CLI's
     /// `--set`): other tissue parameters for the same table. Empty: the product's defaults.
     pub overrides: toml::Table,
+    /// Keep every output of each run under runs/ (false: only [`KEPT`]).
+    pub keep_runs: bool,
     /// The command line, for validation.md's header.
     pub command: String,
 }
@@ -325,6 +327,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
                 s,
                 &run_dir,
                 &opts.overrides,
+                opts.keep_runs,
                 &Prefixed { inner: obs, prefix },
                 on_run,
             );
@@ -639,6 +642,7 @@ fn run_one(
     s: Surgery,
     run_dir: &Path,
     overrides: &toml::Table,
+    keep_runs: bool,
     obs: &dyn Observer,
     on_run: &mut OnRun,
 ) -> Result<RunLandmarks> {
@@ -685,7 +689,9 @@ fn run_one(
     crate::case::merge(&mut over, overrides.clone());
     let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
     on_run(&case.info, s, &outcome)?;
-    prune(&outcome.out_dir);
+    if !keep_runs {
+        prune(&outcome.out_dir);
+    }
     let face_region = outcome.report.tet.as_ref().map(|t| t.region);
     Ok(RunLandmarks {
         carried: outcome
@@ -1102,6 +1108,7 @@ mod tests {
             surgeries: vec![],
             cases: vec![],
             overrides: toml::Table::new(),
+            keep_runs: false,
             command: "facesim validate".into(),
         };
         let md = markdown(&v, &opts);
