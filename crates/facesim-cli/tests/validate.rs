@@ -301,6 +301,25 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
 fn a_le_fort_advance_takes_in_the_whole_nose() {
     let out = validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]);
     let run = run_report(&out, "phantom01", "lefort-advance");
+    // A Le Fort I advance treats Class III: its phantom is built with the mandible ahead
+    // (docs/validation.md "What was compared"), and validation.md says so.
+    let built: Vec<PathBuf> = std::fs::read_dir(out.join("phantoms"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(built.len(), 1, "{built:?}");
+    let shape = std::fs::read_to_string(built[0].join("phantom.toml")).unwrap();
+    let mandible = shape
+        .lines()
+        .find_map(|l| l.strip_prefix("mandible_mm = "))
+        .and_then(num)
+        .expect("no mandible_mm in phantom.toml");
+    assert!(
+        mandible > 0.0,
+        "a Class III phantom with prognathism {mandible}"
+    );
+    let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
+    assert!(md.contains("### phantom01 (Class III)"), "{md}");
     let tet = &run["tet"];
     let tip = vec3(&tet["region_grown_for_nose_tip"]).expect("the region did not grow");
     let prn = vec3(&run["landmarks"]["Prn"]["pre"]).unwrap();

@@ -125,7 +125,49 @@ pub struct CaseInfo {
     /// The mandible's autorotation (condylar pivot and lower incisal edge, how placed); None
     /// where the case has no mandible.
     pub autorotation: Option<Autorotation>,
+    /// A phantom built in the skeletal class of the patients a surgery's ratios were measured
+    /// on ([`class_of`]); None: a real CT, or a phantom as its seed drew it.
+    pub class: Option<SkeletalClass>,
     pub seconds: f64,
+}
+
+/// The skeletal class a surgery corrects, and so the class of the patients the published
+/// ratios were measured on: a mandibular setback and a maxillary advance treat Class III
+/// (the mandible ahead of the maxilla), a mandibular advance and a maxillary setback Class II
+/// (behind it). The phantoms of those surgeries are built in that class (their prognathism,
+/// drawn from ±3 mm, given its sign); the impaction (vertical excess, either class), the
+/// genioplasty and the bimaxillary advance run on the phantoms as drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SkeletalClass {
+    II,
+    III,
+}
+
+impl SkeletalClass {
+    /// The phantom's prognathism (mm, `phantom_jaws::Shape` mandible_mm) in this class: the
+    /// drawn size, with the class's sign.
+    fn mandible_mm(self, drawn: f64) -> f64 {
+        match self {
+            SkeletalClass::II => -drawn.abs(),
+            SkeletalClass::III => drawn.abs(),
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            SkeletalClass::II => "Class II",
+            SkeletalClass::III => "Class III",
+        }
+    }
+}
+
+/// The class of the patients a surgery's published ratios come from ([`SkeletalClass`]).
+pub fn class_of(s: Surgery) -> Option<SkeletalClass> {
+    match s {
+        Surgery::LeFortAdvance | Surgery::BssoSetback => Some(SkeletalClass::III),
+        Surgery::LeFortSetback | Surgery::BssoAdvance => Some(SkeletalClass::II),
+        Surgery::LeFortImpaction | Surgery::Genioplasty | Surgery::Bimaxillary => None,
+    }
 }
 
 /// Where the mandible turns in an impaction's autorotation (LPS mm).
@@ -238,13 +280,14 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
     let unit = crate::output::RunDir::create(&opts.out)?;
     let dir = unit.path().to_path_buf();
     let mut skipped = Vec::new();
-    let mut todo: Vec<(String, PathBuf, Option<Shape>)> = Vec::new();
+    // (name, case directory, phantom shape and class, the surgeries run on it)
+    let mut todo: Vec<Todo> = Vec::new();
     for (name, case_dir) in samples(&opts.samples)? {
         if !wanted(&name) {
             continue;
         }
         match fetched(&case_dir) {
-            Ok(()) => todo.push((name, case_dir, None)),
+            Ok(()) => todo.push((name, case_dir, None, surgeries.clone())),
             Err(why) => skipped.push(Skip {
                 case: name.clone(),
                 surgery: None,
@@ -267,25 +310,37 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
         }
     }
     if wanted("phantom") {
-        for (k, (name, shape)) in cohort(opts.phantoms, opts.seed).into_iter().enumerate() {
-            obs.started(&format!("writing phantom {} of {}", k + 1, opts.phantoms));
-            let case_dir = dir.join("phantoms").join(&name);
-            let jaws = JawsOptions {
-                phantom: crate::phantom::PhantomOptions {
-                    spacing: [opts.phantom_spacing_mm; 3],
-                    ..Default::default()
-                },
-                solve_model: None,
-            };
-            crate::phantom_jaws::write_shaped_case(&case_dir, &jaws, &shape)?;
-            todo.push((name, case_dir, Some(shape)));
+        for (k, (name, drawn)) in cohort(opts.phantoms, opts.seed).into_iter().enumerate() {
+            for (class, shape, only) in in_classes(&drawn, &surgeries) {
+                let dir_name = match class {
+                    Some(c) if shape.values() != drawn.values() => {
+                        format!("{name}-class-{}", format!("{c:?}").to_lowercase())
+                    }
+                    _ => name.clone(),
+                };
+                obs.started(&format!(
+                    "writing phantom {} of {} ({dir_name})",
+                    k + 1,
+                    opts.phantoms
+                ));
+                let case_dir = dir.join("phantoms").join(&dir_name);
+                let jaws = JawsOptions {
+                    phantom: crate::phantom::PhantomOptions {
+                        spacing: [opts.phantom_spacing_mm; 3],
+                        ..Default::default()
+                    },
+                    solve_model: None,
+                };
+                crate::phantom_jaws::write_shaped_case(&case_dir, &jaws, &shape)?;
+                todo.push((name.clone(), case_dir, Some((shape, class)), only));
+            }
         }
     }
-    let total_runs = todo.len() * surgeries.len();
+    let total_runs: usize = todo.iter().map(|t| t.3.len()).sum();
     let mut done = 0;
     let mut rows = Vec::new();
     let mut cases = Vec::new();
-    for (name, case_dir, shape) in todo {
+    for (name, case_dir, shape, surgeries) in todo {
         let started = std::time::Instant::now();
         let prefix = format!("[{}/{total_runs}] {name}:", done + 1);
         let frame = head_frame(
@@ -296,7 +351,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             },
         )?;
         let mut case = match &shape {
-            Some(s) => phantom_case(&name, &case_dir, s, &frame),
+            Some((s, class)) => phantom_case(&name, &case_dir, s, *class, &frame),
             None => sample_case(&name, &case_dir, &frame)?,
         };
         for &s in &surgeries {
@@ -336,6 +391,13 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
         case.info.seconds = started.elapsed().as_secs_f64();
         cases.push(case.info);
     }
+    // A phantom's rows in the surgeries' order, whichever class each ran in (the sort is stable:
+    // the rows of one run keep their order).
+    let rank = |c: &str| cases.iter().position(|i| i.name == c).unwrap_or(usize::MAX);
+    rows.sort_by_key(|r| {
+        let s = Surgery::ALL.iter().position(|s| *s == r.published.surgery);
+        (rank(&r.case), s)
+    });
     // A failed run's message names its outputs under the temporary directory, which becomes
     // `opts.out` at the commit below: name them where they will be.
     let (tmp, out) = (dir.display().to_string(), opts.out.display().to_string());
@@ -411,6 +473,40 @@ fn cohort(n: usize, seed: u64) -> Vec<(String, Shape)> {
             (format!("phantom{:02}", k + 1), shape)
         })
         .collect()
+}
+
+/// A validation entry: (case name, case directory, the phantom's shape and class, the surgeries
+/// run on it).
+type Todo = (
+    String,
+    PathBuf,
+    Option<(Shape, Option<SkeletalClass>)>,
+    Vec<Surgery>,
+);
+
+/// A drawn phantom in the classes `surgeries` need ([`class_of`]): one shape per distinct
+/// prognathism, with its class (None: as drawn) and the surgeries run on it, in `surgeries`'
+/// order. A class whose sign the draw already has is the drawn phantom itself.
+fn in_classes(
+    drawn: &Shape,
+    surgeries: &[Surgery],
+) -> Vec<(Option<SkeletalClass>, Shape, Vec<Surgery>)> {
+    let mut out: Vec<(Option<SkeletalClass>, Shape, Vec<Surgery>)> = Vec::new();
+    for &s in surgeries {
+        let class = class_of(s);
+        let mut v = drawn.values();
+        if let Some(c) = class {
+            v[2] = c.mandible_mm(v[2]);
+        }
+        match out.iter_mut().find(|(_, sh, _)| sh.values() == v) {
+            Some((c, _, only)) => {
+                *c = c.or(class);
+                only.push(s);
+            }
+            None => out.push((class, Shape::from_values(v), vec![s])),
+        }
+    }
+    out
 }
 
 /// The head frame of a case's pre-operative skin, as `facesim run`'s landmark stage finds it
@@ -490,6 +586,7 @@ fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
                 .map(|(k, s)| (k.clone(), region_text(&s.region), s.placed.clone()))
                 .collect(),
             autorotation: cf.autorotation,
+            class: None,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
@@ -523,7 +620,13 @@ fn box_value(b: [[f64; 3]; 2]) -> toml::Value {
     toml::Value::Table(t)
 }
 
-fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Prepared {
+fn phantom_case(
+    name: &str,
+    dir: &Path,
+    shape: &Shape,
+    class: Option<SkeletalClass>,
+    frame: &HeadFrame,
+) -> Prepared {
     let [front, _back, maxilla] = shape.boxes();
     let mut chin = front;
     chin[1][2] = PHANTOM_CHIN_CUT_Z * shape.scale;
@@ -561,7 +664,18 @@ fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Pre
         info: CaseInfo {
             name: name.into(),
             about: format!(
-                "jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                match class {
+                    Some(c) => format!(
+                        "In the skeletal class of its surgeries' patients, {} (the mandible {}): ",
+                        c.name(),
+                        match c {
+                            SkeletalClass::II => "behind the maxilla",
+                            SkeletalClass::III => "ahead of the maxilla",
+                        }
+                    ),
+                    None => String::new(),
+                },
                 v[0],
                 v[1],
                 v[2],
@@ -581,6 +695,7 @@ fn phantom_case(name: &str, dir: &Path, shape: &Shape, frame: &HeadFrame) -> Pre
                 incisal: shape.landmark("lower incisor tip").unwrap_or(front[1]),
                 placed: "the phantom's condylar pivot (midway between the condyle centres) and its lower incisor's incisal edge".into(),
             }),
+            class,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
@@ -967,8 +1082,10 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
     s.push_str("\n## The cases\n\n");
     for c in &v.cases {
         s.push_str(&format!(
-            "### {}\n\n{}\n\n- forward {} and up {} (LPS; pitch {}°); {:.0} s\n",
+            "### {}{}\n\n{}\n\n- forward {} and up {} (LPS; pitch {}°); {:.0} s\n",
             c.name,
+            c.class
+                .map_or(String::new(), |k| format!(" ({})", k.name())),
             c.about,
             v3(c.forward),
             v3(c.up),
@@ -1116,6 +1233,52 @@ mod tests {
         assert!(md.contains("1 inside their published range, 1 outside, 1 not measured"));
     }
 
+    /// Each advance's partner setback treats the other class, and a drawn phantom is built in
+    /// each class its surgeries need: the drawn prognathism's size with the class's sign, one
+    /// phantom per distinct shape, the drawn one itself where its sign is the class's.
+    #[test]
+    fn each_surgery_runs_on_a_phantom_of_its_patients_class() {
+        use SkeletalClass::*;
+        assert_eq!(class_of(Surgery::BssoAdvance), Some(II));
+        assert_eq!(class_of(Surgery::BssoSetback), Some(III));
+        assert_eq!(class_of(Surgery::LeFortAdvance), Some(III));
+        assert_eq!(class_of(Surgery::LeFortSetback), Some(II));
+        assert_eq!(class_of(Surgery::LeFortImpaction), None);
+        for drawn_mm in [-2.5, 1.75] {
+            let mut v = crate::phantom_jaws::Shape::default().values();
+            v[2] = drawn_mm;
+            let drawn = Shape::from_values(v);
+            let built = in_classes(&drawn, &Surgery::ALL);
+            assert_eq!(built.len(), 2, "{drawn_mm}");
+            let mut all: Vec<Surgery> = built.iter().flat_map(|b| b.2.clone()).collect();
+            all.sort_by_key(|s| s.key());
+            let mut want = Surgery::ALL.to_vec();
+            want.sort_by_key(|s| s.key());
+            assert_eq!(all, want, "every surgery runs once");
+            for (class, shape, only) in &built {
+                let mandible = shape.values()[2];
+                assert_eq!(mandible.abs(), drawn_mm.abs());
+                // The other parameters are the draw's.
+                for k in [0, 1, 3, 4] {
+                    assert_eq!(shape.values()[k], v[k]);
+                }
+                for s in only {
+                    match class_of(*s) {
+                        Some(II) => assert!(mandible < 0.0, "{s:?} on {mandible}"),
+                        Some(III) => assert!(mandible > 0.0, "{s:?} on {mandible}"),
+                        // As drawn.
+                        None => assert_eq!(mandible, drawn_mm, "{s:?}"),
+                    }
+                }
+                assert_eq!(
+                    *class,
+                    Some(if mandible > 0.0 { III } else { II }),
+                    "the phantom is labelled with its class"
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_pitch_turns_forward_down_and_keeps_the_axes_orthonormal() {
         let f = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
@@ -1158,6 +1321,7 @@ mod tests {
             up,
             segments: Vec::new(),
             autorotation: None,
+            class: None,
             seconds: 0.0,
         };
         // headsq's pivot and incisal edge.
