@@ -351,7 +351,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             },
         )?;
         let mut case = match &shape {
-            Some((s, class)) => phantom_case(&name, &case_dir, s, *class, &frame),
+            Some((s, class)) => phantom_case(&name, &case_dir, s, (*class, &surgeries), &frame),
             None => sample_case(&name, &case_dir, &frame)?,
         };
         for &s in &surgeries {
@@ -624,7 +624,7 @@ fn phantom_case(
     name: &str,
     dir: &Path,
     shape: &Shape,
-    class: Option<SkeletalClass>,
+    (class, runs): (Option<SkeletalClass>, &[Surgery]),
     frame: &HeadFrame,
 ) -> Prepared {
     let [front, _back, maxilla] = shape.boxes();
@@ -666,14 +666,22 @@ fn phantom_case(
             about: format!(
                 "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
                 match class {
-                    Some(c) => format!(
-                        "In the skeletal class of its surgeries' patients, {} (the mandible {}): ",
-                        c.name(),
-                        match c {
-                            SkeletalClass::II => "behind the maxilla",
-                            SkeletalClass::III => "ahead of the maxilla",
-                        }
-                    ),
+                    Some(c) => {
+                        let of: Vec<&str> = runs
+                            .iter()
+                            .filter(|s| class_of(**s) == Some(c))
+                            .map(|s| s.key())
+                            .collect();
+                        format!(
+                            "{} (the mandible {}), the class of the patients of {}: ",
+                            c.name(),
+                            match c {
+                                SkeletalClass::II => "behind the maxilla",
+                                SkeletalClass::III => "ahead of the maxilla",
+                            },
+                            of.join(" and ")
+                        )
+                    }
                     None => String::new(),
                 },
                 v[0],
