@@ -525,16 +525,26 @@ fn cohort_on_a_real_slurm_with_faults() {
         .status();
     let status = first.wait().unwrap();
     assert!(!status.success(), "the interrupted Snakemake exited 0");
-    // Snakemake cancels its running jobs on SIGINT.
-    wait_for("no job pending or running", Duration::from_secs(60), || {
-        cluster
-            .out(
-                "squeue",
-                &["--noheader", "--states=PENDING,RUNNING", "--format=%i"],
-            )
-            .trim()
-            .is_empty()
-    });
+    // Snakemake cancels its running jobs on SIGINT. A cancelled job is COMPLETING until its
+    // processes are gone, and may still write its result then: wait for that too, so that what
+    // is counted as done below is what the re-run finds.
+    wait_for(
+        "no job pending, running or completing",
+        Duration::from_secs(60),
+        || {
+            cluster
+                .out(
+                    "squeue",
+                    &[
+                        "--noheader",
+                        "--states=PENDING,RUNNING,COMPLETING",
+                        "--format=%i",
+                    ],
+                )
+                .trim()
+                .is_empty()
+        },
+    );
     let state = cluster.out(
         "squeue",
         &[
