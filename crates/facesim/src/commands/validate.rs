@@ -159,6 +159,21 @@ impl SkeletalClass {
             SkeletalClass::III => "Class III",
         }
     }
+
+    /// The phantom directory's suffix.
+    fn key(self) -> &'static str {
+        match self {
+            SkeletalClass::II => "class-ii",
+            SkeletalClass::III => "class-iii",
+        }
+    }
+
+    fn mandible_relation(self) -> &'static str {
+        match self {
+            SkeletalClass::II => "behind the maxilla",
+            SkeletalClass::III => "ahead of the maxilla",
+        }
+    }
 }
 
 /// The class of the patients a surgery's published ratios come from ([`SkeletalClass`]).
@@ -280,7 +295,6 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
     let unit = crate::output::RunDir::create(&opts.out)?;
     let dir = unit.path().to_path_buf();
     let mut skipped = Vec::new();
-    // (name, case directory, phantom shape and class, the surgeries run on it)
     let mut todo: Vec<Todo> = Vec::new();
     for (name, case_dir) in samples(&opts.samples)? {
         if !wanted(&name) {
@@ -314,7 +328,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             for (class, shape, only) in in_classes(&drawn, &surgeries) {
                 let dir_name = match class {
                     Some(c) if shape.values() != drawn.values() => {
-                        format!("{name}-class-{}", format!("{c:?}").to_lowercase())
+                        format!("{name}-{}", c.key())
                     }
                     _ => name.clone(),
                 };
@@ -675,10 +689,7 @@ fn phantom_case(
                         format!(
                             "{} (the mandible {}), the class of the patients of {}: ",
                             c.name(),
-                            match c {
-                                SkeletalClass::II => "behind the maxilla",
-                                SkeletalClass::III => "ahead of the maxilla",
-                            },
+                            c.mandible_relation(),
                             of.join(" and ")
                         )
                     }
