@@ -7,7 +7,12 @@
 //! The region, in the head frame of the pre-operative landmarks: between the alae (half the alar
 //! width either side of pronasale, 17 mm without alare), from [`ABOVE_SN_MM`] above subnasale to
 //! [`BELOW_N_MM`] below soft nasion, in front of the piriform aperture (the anterior nasal
-//! spine's depth, else the alar creases', else 15 mm behind subnasale).
+//! spine's depth, else the alar creases', else 15 mm behind subnasale) — less every tetrahedron
+//! with a corner on bone the plan moves. In a Le Fort I down-fracture the septum is freed from
+//! the maxillary crest and the nasal mucosa raised off the nasal floor, so the framework stays
+//! hinged on the fixed nasal bones and is not carried by the segment; a region reaching back to
+//! the maxilla's front (a coarse CT without the spine: 15 mm behind subnasale lies in the bone
+//! on headsq) would otherwise make a stiff block of the tissue bonded to the moving bone.
 
 use crate::case::TissueElastic;
 use crate::error::{Error, Result};
@@ -38,11 +43,13 @@ pub(crate) fn material(tissue: TissueElastic, youngs_kpa: f64) -> TissueElastic 
 /// Per tetrahedron: whether its centroid lies in the external nose the pre-operative head frame
 /// and landmarks locate (`Scene::landmarks_pre`: the skin's, the skull's for the anterior nasal
 /// spine, and the case's own over the detected ones). Missing landmarks are an error naming
-/// them: the option asks for a nose the landmarks must find.
+/// them: the option asks for a nose the landmarks must find. `moved_bone`, per node: on bone
+/// the plan moves; a tetrahedron touching it stays tissue.
 pub(crate) fn nose_tets(
     (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
+    moved_bone: &[bool],
 ) -> Result<Vec<bool>> {
     let missing = |why: String| {
         Error::config(format!(
@@ -82,7 +89,11 @@ pub(crate) fn nose_tets(
             let c: [f64; 3] =
                 std::array::from_fn(|k| t.iter().map(|i| nodes[*i as usize][k]).sum::<f64>() / 4.0);
             let [s, v, a] = frame.coords(c);
-            (s - prn[0]).abs() <= half && v >= bottom && v <= top && a >= back
+            (s - prn[0]).abs() <= half
+                && v >= bottom
+                && v <= top
+                && a >= back
+                && !t.iter().any(|i| moved_bone[*i as usize])
         })
         .collect())
 }
@@ -138,18 +149,25 @@ mod tests {
             [20.0, -90.0, 20.0],
             [0.0, -90.0, 1.0],
         ]);
-        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets).unwrap();
+        let still = vec![false; nodes.len()];
+        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets, &still).unwrap();
         assert_eq!(inside, [true, false, false, false]);
+        // A corner on bone the plan moves keeps the tetrahedron tissue.
+        let mut moved = still.clone();
+        moved[2] = true;
+        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets, &moved).unwrap();
+        assert_eq!(inside, [false, false, false, false]);
         // A found spine sets the depth instead.
         let mut with_ans = lms;
         with_ans.push(found("ANS", [0.0, -75.0, 2.0]));
-        let inside = nose_tets((Some(frame), with_ans), &nodes, &tets).unwrap();
+        let inside = nose_tets((Some(frame), with_ans), &nodes, &tets, &still).unwrap();
         assert_eq!(inside, [false, false, false, false]);
         // Subnasale itself cannot be done without.
         let err = nose_tets(
             (Some(frame), vec![found("Prn", [0.0, -100.0, 10.0])]),
             &nodes,
             &tets,
+            &still,
         )
         .unwrap_err();
         assert!(err.to_string().contains("Sn"), "{err}");

@@ -884,10 +884,16 @@ pub fn predict(
     })?;
     // The external nose as one framework, found from the pre-operative landmarks.
     let nose = if t.nose_youngs_kpa > 0.0 {
+        // The bone the plan moves, on the mesh: the framework is not bonded to it.
+        let (_, moved) = scene.model.plan.apply(&mesh.nodes, 1.0);
+        let moved_bone: Vec<bool> = (mesh.kind.iter().zip(&moved))
+            .map(|(k, m)| *k == NodeKind::Bone && *m)
+            .collect();
         Some(super::nose::nose_tets(
             scene.landmarks_pre(skin, Path::new("case.toml"))?,
             &mesh.nodes,
             &mesh.tets,
+            &moved_bone,
         )?)
     } else {
         None
