@@ -406,12 +406,14 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     let facesim::tet::vtu::CellsOwned::Linear(cells) = &vtu.cells else {
         panic!("a linear mesh")
     };
-    // The segment (case.toml's box): a held node (not free) inside it is on its bone.
-    let segment = |p: [f64; 3]| {
-        (80.0..=170.0).contains(&p[0])
-            && (25.0..=95.0).contains(&p[1])
-            && (-5.0..=22.0).contains(&p[2])
+    // The segment, as the run read it (report.json `parameters`): a held node (not free)
+    // inside its box is on its bone.
+    let corner = |k: &str| -> [f64; 3] {
+        let b = &stiff["parameters"]["osteotomy"][0]["region"]["box"][k];
+        [0, 1, 2].map(|a| b[a].as_f64().unwrap())
     };
+    let (lo, hi) = (corner("min"), corner("max"));
+    let segment = |p: [f64; 3]| (0..3).all(|a| (lo[a]..=hi[a]).contains(&p[a]));
     let mut stiffened = 0;
     for (c, e) in cells.iter().zip(&vtu.youngs_kpa) {
         if *e != 3000.0 {
