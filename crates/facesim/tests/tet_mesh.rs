@@ -509,7 +509,48 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
         );
         assert!(count(from_ct::NodeKind::Skin) > 1000 && count(from_ct::NodeKind::Bone) > 1000);
         assert!(((q.volume_mm3 + m.dropped_volume_mm3) / m.voxel_volume_mm3 - 1.0).abs() < 0.1);
+        scan_end_is_bone_only_where_the_last_slice_is(&vol, &seg, &m);
     }
+}
+
+/// The box reaches below the CT, whose last slice cuts through the upper lip and the teeth
+/// (z = 0). A bone node is on bone: where the scan ends, only where the bone field of the last
+/// slice reaches the bone window (the lip's cut face, tissue at 0–100 HU, is the tissue's free
+/// surface, skin-kind). Until session 58 the cut face's nodes took whichever field lay nearer
+/// its iso-value, and deep tissue's was the bone's: on this CT ~1 400 bone nodes under the lip,
+/// bonded to the maxilla's segment.
+fn scan_end_is_bone_only_where_the_last_slice_is(
+    vol: &Volume,
+    seg: &Segmentation,
+    m: &SoftTissueMesh,
+) {
+    let (first, last) = vol.bounds();
+    let bone = seg.bone_field(vol);
+    let mut end = (0, 0);
+    for (q, k) in m.nodes.iter().zip(&m.kind) {
+        if !(0..3).any(|a| q[a] < first[a] - 0.1 || q[a] > last[a] + 0.1) {
+            continue;
+        }
+        let on_last: [f64; 3] = std::array::from_fn(|a| q[a].clamp(first[a], last[a]));
+        let hu = sample_field(&bone, vol.dims, vol.to_voxel(on_last), -1024.0) as f64;
+        match k {
+            from_ct::NodeKind::Bone => {
+                end.0 += 1;
+                assert!(
+                    hu >= seg.windows.bone - 1.0,
+                    "bone node {q:?} past the scan's end over {hu:.0} HU (bone from {:.0})",
+                    seg.windows.bone
+                );
+            }
+            from_ct::NodeKind::Skin => end.1 += 1,
+            _ => {}
+        }
+    }
+    println!(
+        "  the scan's end: {} bone nodes, {} skin (free surface)",
+        end.0, end.1
+    );
+    assert!(end.1 > 100, "the lip's cut face: {end:?}");
 }
 
 /// Distance from the cube (lo, hi) to the sphere |p| = r.
