@@ -360,7 +360,22 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
         .as_f64()
         .unwrap();
     assert!((0.8..=1.0).contains(&ls), "Ls/A {ls}");
-    assert!((22.0..=26.0).contains(&largest_move(&face)));
+    // The face follows the 25 mm advance (the face at small y) and no further. The lip's edge
+    // where the scan ends, 5 mm below labrale superius, is free (docs/pipeline.md "Region") and
+    // rises 6–8 mm as the teeth carry it forward, so the largest move's length is up to a tenth
+    // over the advance.
+    let forward = face
+        .pre
+        .iter()
+        .zip(&face.post)
+        .map(|(a, b)| a[1] - b[1])
+        .fold(0.0, f64::max);
+    assert!((22.0..=26.0).contains(&forward), "forward {forward} mm");
+    let largest = largest_move(&face);
+    assert!(
+        (22.0..=27.5).contains(&largest),
+        "largest move {largest} mm"
+    );
 }
 
 /// `[tet] nose_youngs_kpa` (docs/validation-notes.md "A structural candidate: the nasal
