@@ -528,7 +528,7 @@ fn scan_end_is_bone_only_where_the_last_slice_is(
     let bone = seg.bone_field(vol);
     let mut end = (0, 0);
     for (q, k) in m.nodes.iter().zip(&m.kind) {
-        if !(0..3).any(|a| q[a] < first[a] - 0.1 || q[a] > last[a] + 0.1) {
+        if !facesim::volume::past_scan_end((first, last), *q) {
             continue;
         }
         let on_last: [f64; 3] = std::array::from_fn(|a| q[a].clamp(first[a], last[a]));

@@ -598,13 +598,10 @@ fn scan_end(
     constraint: &[u8],
     bounds: ([f64; 3], [f64; 3]),
 ) -> Option<ScanEnd> {
-    // The skin iso-surface closes within a voxel past the last centre; a tenth of a millimetre
-    // keeps nodes warped onto the centres' plane out.
-    let past = |p: &[f64; 3]| (0..3).any(|k| p[k] < bounds.0[k] - 0.1 || p[k] > bounds.1[k] + 0.1);
     let end: Vec<[f64; 3]> = nodes
         .iter()
         .zip(constraint)
-        .filter(|(p, c)| **c == FREE && past(p))
+        .filter(|(p, c)| **c == FREE && crate::volume::past_scan_end(bounds, **p))
         .map(|(p, _)| *p)
         .collect();
     let moved: Vec<[f64; 3]> = nodes

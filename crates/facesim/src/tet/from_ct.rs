@@ -161,8 +161,8 @@ pub fn soft_tissue(
             "tetrahedral mesh: no soft tissue inside the region {lo:?} .. {hi:?} (LPS mm)"
         )));
     }
-    // The CT's outermost voxel centres: past them (by more than the rounding of nodes warped
-    // onto their plane) the fields jump to air, and the tissue ends where the scan does.
+    // The CT's outermost voxel centres: past them the fields jump to air, and the tissue ends
+    // where the scan does.
     let (first, last) = vol.bounds();
     let kind: Vec<NodeKind> = m
         .nodes
@@ -172,20 +172,18 @@ pub fn soft_tissue(
             StuffKind::Interior => NodeKind::Interior,
             StuffKind::Cut => NodeKind::Cut,
             StuffKind::Surface => {
-                let past = (0..3).any(|a| q[a] < first[a] - 0.1 || q[a] > last[a] + 0.1);
-                let (s, b) = parts(*q);
-                if past {
+                let on_bone = if crate::volume::past_scan_end((first, last), *q) {
                     // The scan's end: neither iso-surface, both terms below zero, so their
                     // order says nothing. Bone only where bone reaches the last slice; the rest
                     // is the tissue's free surface where the scan ends.
                     let on_last = std::array::from_fn(|a| q[a].clamp(first[a], last[a]));
-                    if parts(on_last).1 >= 0.0 {
-                        NodeKind::Bone
-                    } else {
-                        NodeKind::Skin
-                    }
-                } else if b >= s {
+                    parts(on_last).1 >= 0.0
+                } else {
                     // On f = 0 one of the two terms is zero and the other is not above it.
+                    let (s, b) = parts(*q);
+                    b >= s
+                };
+                if on_bone {
                     NodeKind::Bone
                 } else {
                     NodeKind::Skin

@@ -235,6 +235,13 @@ impl VoxelMap {
     }
 }
 
+/// Whether `p` lies past the voxel centres' box `bounds` ([`Volume::bounds`]): where the scan
+/// ends, beyond which the fields read air. The skin iso-surface closes within a voxel past the
+/// last centre; a tenth of a millimetre keeps nodes warped onto the centres' plane inside.
+pub fn past_scan_end(bounds: ([f64; 3], [f64; 3]), p: [f64; 3]) -> bool {
+    (0..3).any(|k| p[k] < bounds.0[k] - 0.1 || p[k] > bounds.1[k] + 0.1)
+}
+
 pub fn sample_field(data: &[f32], dims: [usize; 3], c: [f64; 3], outside: f32) -> f32 {
     let mut i0 = [0usize; 3];
     let mut f = [0.0f64; 3];
