@@ -100,6 +100,7 @@ impl Default for Tet {
             deep_size_mm: 8.0,
             margin_mm: 30.0,
             nose_youngs_kpa: 0.0,
+            nose_base_above_sn_mm: 2.5,
             degloved_maxilla: Degloved::Auto,
             degloved_chin: Degloved::Auto,
             skin: e(30.0, 0.45),

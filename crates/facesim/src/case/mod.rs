@@ -249,6 +249,27 @@ mod tests {
     }
 
     #[test]
+    fn the_nose_frameworks_base_lies_0_to_30_mm_above_subnasale() {
+        let parse = |v: &str| {
+            Case::parse_with(
+                MIN,
+                Path::new("case.toml"),
+                &overrides_table(&[format!("tet.nose_base_above_sn_mm={v}")]).unwrap(),
+            )
+        };
+        let default = Case::parse(MIN, Path::new("case.toml")).unwrap();
+        assert_eq!(default.tet.nose_base_above_sn_mm, 2.5);
+        assert_eq!(parse("10.0").unwrap().tet.nose_base_above_sn_mm, 10.0);
+        for bad in ["-1.0", "31.0", "nan"] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("case.toml") && e.contains("nose_base_above_sn_mm must be 0 to 30"),
+                "{bad}: {e}"
+            );
+        }
+    }
+
+    #[test]
     fn unknown_keys_and_wrong_types_name_the_key() {
         let e = Case::parse(
             &format!("{MIN}[springs]\nmax_lenght_mm = 3.0\n"),

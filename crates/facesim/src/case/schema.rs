@@ -336,6 +336,9 @@ pub struct Tet {
     /// found from the pre-operative landmarks (`tet::nose`; docs/validation-notes.md "A structural
     /// candidate: the nasal framework").
     pub nose_youngs_kpa: f64,
+    /// Where the framework's base starts, above subnasale (mm): the columella's base and the lip
+    /// below it stay tissue (`model::nose`; docs/validation-notes.md "The framework's base").
+    pub nose_base_above_sn_mm: f64,
     /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
     /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
     /// docs/validation-notes.md "The degloved maxilla"). `"auto"`, the default: on where it can

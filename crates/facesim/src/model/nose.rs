@@ -5,7 +5,8 @@
 //! modulus.
 //!
 //! The region, in the head frame of the pre-operative landmarks: between the alae (half the alar
-//! width either side of pronasale, 17 mm without alare), from [`ABOVE_SN_MM`] above subnasale to
+//! width either side of pronasale, 17 mm without alare), from `[tet] nose_base_above_sn_mm`
+//! (2.5 mm by default: the columella's base and the lip below stay tissue) above subnasale to
 //! [`BELOW_N_MM`] below soft nasion, in front of the piriform aperture (the anterior nasal
 //! spine's depth, else the alar creases', else 15 mm behind subnasale) — less every tetrahedron
 //! with a corner on bone the plan moves. In a Le Fort I down-fracture the septum is freed from
@@ -18,9 +19,6 @@ use crate::case::TissueElastic;
 use crate::error::{Error, Result};
 use crate::landmarks::{HeadFrame, Landmark};
 
-/// The nose's base starts this far above subnasale (mm): the columella's base and the lip below
-/// stay tissue.
-const ABOVE_SN_MM: f64 = 2.5;
 /// The nose's root ends this far below soft nasion (mm): the nasal bones hold the framework
 /// there.
 const BELOW_N_MM: f64 = 7.0;
@@ -44,9 +42,11 @@ pub(crate) fn material(tissue: TissueElastic, youngs_kpa: f64) -> TissueElastic 
 /// and landmarks locate (`Scene::landmarks_pre`: the skin's, the skull's for the anterior nasal
 /// spine, and the case's own over the detected ones). Missing landmarks are an error naming
 /// them: the option asks for a nose the landmarks must find. `moved_bone`, per node: on bone
-/// the plan moves; a tetrahedron touching it stays tissue.
+/// the plan moves; a tetrahedron touching it stays tissue. The framework's base lies
+/// `above_sn_mm` above subnasale.
 pub(crate) fn nose_tets(
     (frame, lms): (Option<HeadFrame>, Vec<Landmark>),
+    above_sn_mm: f64,
     nodes: &[[f64; 3]],
     tets: &[[u32; 4]],
     moved_bone: &[bool],
@@ -82,7 +82,7 @@ pub(crate) fn nose_tets(
         (Err(_), Some((r, l))) => 0.5 * (r[2] + l[2]),
         (Err(_), None) => sn[2] - SN_TO_ANS_MM,
     };
-    let (bottom, top) = (sn[1] + ABOVE_SN_MM, n[1] - BELOW_N_MM);
+    let (bottom, top) = (sn[1] + above_sn_mm, n[1] - BELOW_N_MM);
     Ok(tets
         .iter()
         .map(|t| {
@@ -133,6 +133,9 @@ mod tests {
         (nodes, tets)
     }
 
+    /// `[tet] nose_base_above_sn_mm`'s default.
+    const BASE: f64 = 2.5;
+
     #[test]
     fn without_the_spine_or_the_alae_the_nose_ends_15_mm_behind_subnasale() {
         // Upright head, anterior = −y: subnasale at depth 85, so the nose reaches back to 70.
@@ -150,26 +153,44 @@ mod tests {
             [0.0, -90.0, 1.0],
         ]);
         let still = vec![false; nodes.len()];
-        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets, &still).unwrap();
+        let inside = nose_tets((Some(frame), lms.clone()), BASE, &nodes, &tets, &still).unwrap();
         assert_eq!(inside, [true, false, false, false]);
         // A corner on bone the plan moves keeps the tetrahedron tissue.
         let mut moved = still.clone();
         moved[2] = true;
-        let inside = nose_tets((Some(frame), lms.clone()), &nodes, &tets, &moved).unwrap();
+        let inside = nose_tets((Some(frame), lms.clone()), BASE, &nodes, &tets, &moved).unwrap();
         assert_eq!(inside, [false, false, false, false]);
         // A found spine sets the depth instead.
         let mut with_ans = lms;
         with_ans.push(found("ANS", [0.0, -75.0, 2.0]));
-        let inside = nose_tets((Some(frame), with_ans), &nodes, &tets, &still).unwrap();
+        let inside = nose_tets((Some(frame), with_ans), BASE, &nodes, &tets, &still).unwrap();
         assert_eq!(inside, [false, false, false, false]);
         // Subnasale itself cannot be done without.
         let err = nose_tets(
             (Some(frame), vec![found("Prn", [0.0, -100.0, 10.0])]),
+            BASE,
             &nodes,
             &tets,
             &still,
         )
         .unwrap_err();
         assert!(err.to_string().contains("Sn"), "{err}");
+    }
+
+    #[test]
+    fn the_framework_starts_at_its_base_above_subnasale() {
+        let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
+        let lms = vec![
+            found("Prn", [0.0, -100.0, 10.0]),
+            found("Sn", [0.0, -85.0, 0.0]),
+            found("N'", [0.0, -90.0, 50.0]),
+        ];
+        // The columella 6 mm above subnasale, the tip lobule at 20 mm, the lip 1 mm above it.
+        let (nodes, tets) = tets_at(&[[0.0, -86.0, 6.0], [0.0, -90.0, 20.0], [0.0, -86.0, 1.0]]);
+        let still = vec![false; nodes.len()];
+        let at = |base: f64| nose_tets((Some(frame), lms.clone()), base, &nodes, &tets, &still);
+        assert_eq!(at(BASE).unwrap(), [true, true, false]);
+        assert_eq!(at(10.0).unwrap(), [false, true, false]);
+        assert_eq!(at(0.0).unwrap(), [true, true, true]);
     }
 }

@@ -888,6 +888,7 @@ pub fn predict(
             .collect();
         Some(super::nose::nose_tets(
             scene.landmarks_pre(skin, Path::new("case.toml"))?,
+            t.nose_base_above_sn_mm,
             &mesh.nodes,
             &mesh.tets,
             &moved_bone,
