@@ -460,6 +460,43 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     }
     assert_eq!(stiffened as u64, count);
 
+    // `[tet] nose_base_above_sn_mm` through the command: begun 10 mm above subnasale instead of
+    // 2.5, the framework is the same nose less its base (the columella's lower part and the
+    // nostril sills): no framework tetrahedron below the base (1 mm of slack for the head
+    // frame's tilt), fewer of them, on the same mesh.
+    let high_dir = common::kept_dir("facesim-real-nose-base10");
+    let high = cli::run_ok(
+        &sample,
+        &high_dir,
+        &["tet.nose_youngs_kpa=3000", "tet.nose_base_above_sn_mm=10"],
+    );
+    let high_count = high["tet"]["nose_elements"].as_u64().unwrap();
+    assert!(
+        high_count > 200 && high_count < count,
+        "{high_count} framework tetrahedra from 10 mm, {count} from 2.5 mm"
+    );
+    let high_vtu = facesim::tet::vtu::read(&high_dir.join("tets.vtu")).unwrap();
+    let facesim::tet::vtu::CellsOwned::Linear(high_cells) = &high_vtu.cells else {
+        panic!("a linear mesh")
+    };
+    assert_eq!(high_cells.len(), cells.len());
+    let lowest = high_cells
+        .iter()
+        .zip(&high_vtu.youngs_kpa)
+        .filter(|(_, e)| **e == 3000.0)
+        .map(|(c, _)| {
+            c.iter()
+                .map(|i| high_vtu.nodes[*i as usize][2])
+                .sum::<f64>()
+                / 4.0
+        })
+        .fold(f64::INFINITY, f64::min);
+    assert!(
+        lowest > sn[2] + 10.0 - 1.0,
+        "a framework tetrahedron at z {lowest}, Sn at {}",
+        sn[2]
+    );
+
     // The nose's tetrahedra are terms of their own in the reduced model (slot 4 + tissue, at
     // the nose's modulus): a band by the reduced model runs, and its stored model answers other
     // tissues within its certified bound of a full run with the nose and those tissues.

@@ -172,6 +172,15 @@ mod tests {
 
     const MIN: &str = "[ct]\npath = \"ct.nii.gz\"\n";
 
+    /// The minimal case with one `--set KEY=VALUE` laid over it.
+    fn with_set(set: &str) -> Result<Case> {
+        Case::parse_with(
+            MIN,
+            Path::new("case.toml"),
+            &overrides_table(&[set.to_string()]).unwrap(),
+        )
+    }
+
     #[test]
     fn defaults_fill_in_and_overrides_apply() {
         let c = Case::parse(
@@ -186,13 +195,7 @@ mod tests {
 
     #[test]
     fn degloved_maxilla_and_chin_are_auto_true_or_false_and_nothing_else() {
-        let parse = |v: &str| {
-            Case::parse_with(
-                MIN,
-                Path::new("case.toml"),
-                &overrides_table(&[format!("tet.degloved_maxilla={v}")]).unwrap(),
-            )
-        };
+        let parse = |v: &str| with_set(&format!("tet.degloved_maxilla={v}"));
         assert_eq!(
             Case::parse(MIN, Path::new("case.toml"))
                 .unwrap()
@@ -250,13 +253,7 @@ mod tests {
 
     #[test]
     fn the_nose_frameworks_base_lies_0_to_30_mm_above_subnasale() {
-        let parse = |v: &str| {
-            Case::parse_with(
-                MIN,
-                Path::new("case.toml"),
-                &overrides_table(&[format!("tet.nose_base_above_sn_mm={v}")]).unwrap(),
-            )
-        };
+        let parse = |v: &str| with_set(&format!("tet.nose_base_above_sn_mm={v}"));
         let default = Case::parse(MIN, Path::new("case.toml")).unwrap();
         assert_eq!(default.tet.nose_base_above_sn_mm, 2.5);
         assert_eq!(parse("10.0").unwrap().tet.nose_base_above_sn_mm, 10.0);

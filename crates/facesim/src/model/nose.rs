@@ -136,15 +136,22 @@ mod tests {
     /// `[tet] nose_base_above_sn_mm`'s default.
     const BASE: f64 = 2.5;
 
-    #[test]
-    fn without_the_spine_or_the_alae_the_nose_ends_15_mm_behind_subnasale() {
-        // Upright head, anterior = −y: subnasale at depth 85, so the nose reaches back to 70.
+    /// An upright head (anterior = −y) with the nose's landmarks: subnasale at depth 85 and
+    /// height 0, the tip 10 mm above it, soft nasion at 50.
+    fn upright_nose() -> (HeadFrame, Vec<Landmark>) {
         let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
         let lms = vec![
             found("Prn", [0.0, -100.0, 10.0]),
             found("Sn", [0.0, -85.0, 0.0]),
             found("N'", [0.0, -90.0, 50.0]),
         ];
+        (frame, lms)
+    }
+
+    #[test]
+    fn without_the_spine_or_the_alae_the_nose_ends_15_mm_behind_subnasale() {
+        // Subnasale at depth 85, so the nose reaches back to 70.
+        let (frame, lms) = upright_nose();
         // In front of 70, just behind it, beside the nose, below its base.
         let (nodes, tets) = tets_at(&[
             [0.0, -72.0, 20.0],
@@ -179,12 +186,7 @@ mod tests {
 
     #[test]
     fn the_framework_starts_at_its_base_above_subnasale() {
-        let frame = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
-        let lms = vec![
-            found("Prn", [0.0, -100.0, 10.0]),
-            found("Sn", [0.0, -85.0, 0.0]),
-            found("N'", [0.0, -90.0, 50.0]),
-        ];
+        let (frame, lms) = upright_nose();
         // The columella 6 mm above subnasale, the tip lobule at 20 mm, the lip 1 mm above it.
         let (nodes, tets) = tets_at(&[[0.0, -86.0, 6.0], [0.0, -90.0, 20.0], [0.0, -86.0, 1.0]]);
         let still = vec![false; nodes.len()];
