@@ -257,6 +257,11 @@ mod tests {
         let default = Case::parse(MIN, Path::new("case.toml")).unwrap();
         assert_eq!(default.tet.nose_base_above_sn_mm, 2.5);
         assert_eq!(parse("10.0").unwrap().tet.nose_base_above_sn_mm, 10.0);
+        // A report.json written before the key existed reads back with the default.
+        let mut tet = serde_json::to_value(&default.tet).unwrap();
+        tet.as_object_mut().unwrap().remove("nose_base_above_sn_mm");
+        let old: Tet = serde_json::from_value(tet).unwrap();
+        assert_eq!(old.nose_base_above_sn_mm, 2.5);
         for bad in ["-1.0", "31.0", "nan"] {
             let e = parse(bad).unwrap_err().to_string();
             assert!(

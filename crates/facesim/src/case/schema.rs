@@ -338,6 +338,8 @@ pub struct Tet {
     pub nose_youngs_kpa: f64,
     /// Where the framework's base starts, above subnasale (mm): the columella's base and the lip
     /// below it stay tissue (`model::nose`; docs/validation-notes.md "The framework's base").
+    /// Defaulted when absent, so a report.json written before the key existed reads back.
+    #[serde(default = "nose_base_default")]
     pub nose_base_above_sn_mm: f64,
     /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
     /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
@@ -356,6 +358,11 @@ pub struct Tet {
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,
     pub fat_bright: TissueElastic,
+}
+
+/// `[tet] nose_base_above_sn_mm` where a report.json's parameters lack it.
+fn nose_base_default() -> f64 {
+    Tet::default().nose_base_above_sn_mm
 }
 
 impl Tet {
