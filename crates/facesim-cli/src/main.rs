@@ -360,6 +360,11 @@ struct TableArgs {
     /// The phantoms' voxel size (mm).
     #[arg(long, default_value_t = 2.0)]
     phantom_spacing: f64,
+    /// The phantoms' noses: `hollow`, two nasal passages beside a septum under 4 mm walls, as a
+    /// CT shows a nose; `solid`, soft tissue throughout, as the standard head (docs/phantom.md
+    /// "Nasal passages").
+    #[arg(long, value_parser = ["hollow", "solid"], default_value = "hollow")]
+    phantom_noses: String,
     /// Only this surgery (repeatable): lefort-advance, lefort-impaction, lefort-setback,
     /// bsso-advance, bsso-setback, genioplasty, bimax.
     #[arg(long)]
@@ -393,6 +398,7 @@ impl TableArgs {
             phantoms,
             seed: self.seed,
             phantom_spacing_mm: self.phantom_spacing,
+            phantom_nasal_passages: self.phantom_noses == "hollow",
             surgeries: surgeries_of(command, &self.surgery)?,
             cases: self.cases,
             overrides,

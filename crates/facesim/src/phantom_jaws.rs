@@ -33,6 +33,7 @@
 //! | lips | in contact at stomion; a 2.5 mm skin crease marks the lip line; lips and crease end at the mouth's corners, 26 mm either side |
 //! | alae | wings at the nose's base (+6 at z = 4.5) ending in the alar groove 17 mm either side; zero on the midline |
 //! | skin, fat | 2 mm and 4 mm radially under R_s(φ, z) = envelope + nose + alae + lips − crease + chin (see `skin_radius`) |
+//! | nasal passages | only with `Shape::nasal_passages`: air inside the nose where it stands ≥ 9 mm over the face, from 6 mm behind the face's plane forward, \|x\| ≥ 2.5 (the septum), z ≥ 5 (the nostril sills), ≥ 4 mm inside the skin every way; closed at the nostrils (`nasal_passage`) |
 //!
 //! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
 //! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
@@ -141,6 +142,11 @@ pub struct Shape {
     /// air), as in most CTs, so the lip's inner surface lies on the crowns and the alveolar bone
     /// (the lip–tooth contact of issue 25 item 5). Not a cohort parameter (`values` leaves it out).
     pub closed_lips: bool,
+    /// The nose is a shell over two nasal passages (air either side of a septum, under walls of
+    /// skin and fat; `nasal_passage`), as in a CT, instead of a solid bump. Off in the standard
+    /// head (the bundled sample), on in `facesim validate`'s phantoms (`--phantom-noses`). Not a
+    /// cohort parameter.
+    pub nasal_passages: bool,
 }
 
 impl Default for Shape {
@@ -152,6 +158,7 @@ impl Default for Shape {
             chin_mm: 0.0,
             asymmetry_mm: 0.0,
             closed_lips: false,
+            nasal_passages: false,
         }
     }
 }
@@ -192,6 +199,7 @@ impl Shape {
             chin_mm: v[3],
             asymmetry_mm: v[4],
             closed_lips: false,
+            nasal_passages: false,
         }
     }
 
@@ -273,6 +281,10 @@ const VERMILION: (f64, f64, f64) = (1.6, -11.5, 3.5); // amp, z, σ_z (the upper
 const LOWER_LIP: (f64, f64, f64) = (5.8, -31.0, 9.0); // amp, z, half-width (power 4)
 const CREASE: (f64, f64, f64) = (2.5, -21.0, 1.5); // depth, z, σ_z
 const CHIN: (f64, f64, f64, f64, f64) = (10.8, -56.0, 11.0, 7.5, 0.35); // amp, z, σ below, σ above, σ_φ
+/// The nasal passages: wall (mm), septum half-width (mm), depth behind the face's plane (mm),
+/// the nose's least height over the face (mm), the nostril sills' height z (2.6 mm above
+/// subnasale, z = 2.4).
+const NASAL_PASSAGE: (f64, f64, f64, f64, f64) = (4.0, 2.5, 6.0, 9.0, 5.0);
 /// The lips and their crease end at the mouth's corners: their sideways profile is
 /// exp(−(φ/w)¹²), flat across the mouth and falling within a few millimetres at its corners,
 /// where a Gaussian would fade on past them (adult mouth width 45–55 mm, Farkas 1994).
@@ -312,8 +324,6 @@ pub fn skin_radius(phi: f64, z: f64) -> f64 {
 /// soft-tissue change everywhere, the lower lip and chin turned by the midline shift, the chin
 /// grown by chin_mm, and the lower face moved forward by mandible_mm (fading out sideways).
 fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
-    let (an, zn, sb, sa, sp) = NOSE;
-    let nose = an * gauss(z - zn, if z < zn { sb } else { sa }) * gauss(phi, sp);
     let (au, zu, wu) = UPPER_LIP;
     let (av, zv, sv) = VERMILION;
     let (lips_w, crease_w) = MOUTH_HALF_ANGLE;
@@ -325,8 +335,6 @@ fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let lower = al * (-((z - zl) / wl).powi(4)).exp() * across(phi_l, lips_w);
     let (dc, zc, sc) = CREASE;
     let crease = dc * gauss(z - zc, sc) * across(phi, crease_w);
-    let (aa, za, sza, wa, gap) = ALAE;
-    let alae = aa * gauss(z - za, sza) * (-(phi / wa).powi(12)).exp() * (1.0 - gauss(phi, gap));
     let (ach, zch, sbc, sac, spch) = CHIN;
     let chin =
         (ach + sh.chin_mm) * gauss(z - zch, if z < zch { sbc } else { sac }) * gauss(phi_l, spch);
@@ -337,8 +345,53 @@ fn radius(sh: &Shape, phi: f64, z: f64) -> f64 {
     let brow = ab * gauss(z - zb, sz) * gauss(phi, sp);
     let (de, ze, sze, pe, spe) = EYES;
     let eyes = de * gauss(z - ze, sze) * (gauss(phi - pe, spe) + gauss(phi + pe, spe));
-    envelope(phi, z) + sh.soft_mm + nose + alae + upper + lower - crease + chin + forward + brow
+    envelope(phi, z) + sh.soft_mm + nose_bump(phi, z) + upper + lower - crease
+        + chin
+        + forward
+        + brow
         - eyes
+}
+
+/// The external nose's height over the face (mm, radial): the nose and its alae.
+fn nose_bump(phi: f64, z: f64) -> f64 {
+    let (an, zn, sb, sa, sp) = NOSE;
+    let nose = an * gauss(z - zn, if z < zn { sb } else { sa }) * gauss(phi, sp);
+    let (aa, za, sza, wa, gap) = ALAE;
+    let alae = aa * gauss(z - za, sza) * (-(phi / wa).powi(12)).exp() * (1.0 - gauss(phi, gap));
+    nose + alae
+}
+
+/// The nasal passages (`Shape::nasal_passages`), in the standard frame: air inside the external
+/// nose where it stands at least NASAL_PASSAGE.3 over the face, from NASAL_PASSAGE.2 mm behind
+/// the face's plane (the piriform aperture's depth) forward, beside a septum |x| < NASAL_PASSAGE.1
+/// and above the nostril sills z = NASAL_PASSAGE.4, at least NASAL_PASSAGE.0 inside the skin
+/// every way (the alar and lateral walls, skin over cartilage: 3-5 mm; septum with its mucosa
+/// 4-6 mm). `rho`, `phi` and `r` are p's cylindrical radius, angle and the skin's radius there.
+fn nasal_passage(sh: &Shape, p: [f64; 3], rho: f64, phi: f64, r: f64) -> bool {
+    let (wall, septum, depth, min_bump, sill) = NASAL_PASSAGE;
+    let [x, _, z] = p;
+    if x.abs() < septum || z < sill || phi.abs() > 0.5 {
+        return false;
+    }
+    let bump = nose_bump(phi, z);
+    if bump < min_bump || rho < r - bump - depth || rho > r - wall {
+        return false;
+    }
+    // The wall: p moved `wall` any of 26 ways (the cube's faces, edges and corners) stays
+    // inside the skin.
+    let inside = |q: [f64; 3]| {
+        let rho = (q[0] * q[0] + q[1] * q[1]).sqrt();
+        rho < radius(sh, q[0].atan2(-q[1]), q[2])
+    };
+    let steps: [f64; 3] = [-1.0, 0.0, 1.0];
+    steps.iter().all(|&a| {
+        steps.iter().all(|&b| {
+            steps.iter().all(|&c| {
+                let n = (a * a + b * b + c * c).sqrt();
+                n == 0.0 || inside([0, 1, 2].map(|k| p[k] + wall * [a, b, c][k] / n))
+            })
+        })
+    })
 }
 
 /// The cranium's outer radius at (φ, z): R_BONE plus the bony glabella and the nasal bones.
@@ -570,6 +623,9 @@ fn tissue(sh: &Shape, p: [f64; 3]) -> Tissue {
         return Tissue::Skin;
     }
     if !sh.closed_lips && vestibule(sh, p) {
+        return Tissue::Air;
+    }
+    if sh.nasal_passages && nasal_passage(sh, p, rho, phi, r) {
         return Tissue::Air;
     }
     if let Some((_, tooth)) = bone(sh, p) {
@@ -1061,6 +1117,9 @@ impl Shape {
         for ((name, _, _), v) in SHAPE_RANGES.iter().zip(self.values()) {
             s.push_str(&format!("{name} = {v:?}\n"));
         }
+        if self.nasal_passages {
+            s.push_str("nasal_passages = true\n");
+        }
         s.push_str("\n[landmarks]\n");
         for (name, p) in self.landmarks() {
             s.push_str(&format!(
@@ -1086,6 +1145,74 @@ mod tests {
         // The first bound: s(t) ≈ a t for small t.
         let t1 = upper_bounds()[1];
         assert!((t1 * a / UPPER_WIDTHS[0] - 1.0).abs() < 0.04, "{t1}");
+    }
+
+    /// Points of the nose region on a 1 mm grid (standard frame).
+    fn nose_grid() -> impl Iterator<Item = [f64; 3]> {
+        (-20..=20).flat_map(|x| {
+            (-106..=-66).flat_map(move |y| (0..=44).map(move |z| [x as f64, y as f64, z as f64]))
+        })
+    }
+
+    #[test]
+    fn the_nasal_passages_are_air_inside_a_walled_nose_beside_a_septum() {
+        let hollow = Shape {
+            nasal_passages: true,
+            ..Shape::default()
+        };
+        let solid = Shape::default();
+        let outside = |p: [f64; 3]| {
+            let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
+            rho >= radius(&hollow, p[0].atan2(-p[1]), p[2])
+        };
+        let mut passage = 0usize;
+        let mut z_range = [f64::INFINITY, f64::NEG_INFINITY];
+        for p in nose_grid() {
+            let (h, s) = (tissue(&hollow, p), tissue(&solid, p));
+            if h == s {
+                continue;
+            }
+            // Only solid tissue under the skin turns to air; the skin never does.
+            assert_eq!(h, Tissue::Air, "{p:?}");
+            assert!(matches!(s, Tissue::Fat | Tissue::Soft), "{p:?} was {s:?}");
+            assert!(p[0].abs() >= NASAL_PASSAGE.1, "{p:?} in the septum");
+            // The septum between the passages is tissue.
+            assert_ne!(tissue(&hollow, [0.0, p[1], p[2]]), Tissue::Air, "{p:?}");
+            // The wall: the outside air is at least 3.5 mm away in each of 26 directions.
+            for d in [-1.0f64, 0.0, 1.0].iter().flat_map(|&a| {
+                [-1.0f64, 0.0, 1.0]
+                    .iter()
+                    .flat_map(move |&b| [-1.0f64, 0.0, 1.0].map(move |c| [a, b, c]))
+            }) {
+                let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if n == 0.0 {
+                    continue;
+                }
+                let q = [0, 1, 2].map(|k| p[k] + 3.5 * d[k] / n);
+                assert!(!outside(q), "{p:?}: outside air at {q:?}");
+            }
+            passage += 1;
+            z_range = [z_range[0].min(p[2]), z_range[1].max(p[2])];
+        }
+        println!("passage points {passage}, z {z_range:?}");
+        // Two passages of some millilitres (the external nose's vestibules hold ~2 x 2-5 ml),
+        // from above the nostril sills to the dorsum below the nasal bones' top.
+        assert!(passage > 2000 && passage < 12000, "{passage}");
+        assert!(
+            z_range[0] >= NASAL_PASSAGE.4 && z_range[1] < 40.0,
+            "{z_range:?}"
+        );
+        // Mirror symmetric, and the skin and its landmarks unchanged.
+        for p in nose_grid() {
+            assert_eq!(
+                tissue(&hollow, p),
+                tissue(&hollow, [-p[0], p[1], p[2]]),
+                "{p:?}"
+            );
+        }
+        assert_eq!(hollow.landmarks(), solid.landmarks());
+        assert!(hollow.phantom_toml().contains("nasal_passages = true"));
+        assert!(!solid.phantom_toml().contains("nasal_passages"));
     }
 
     #[test]

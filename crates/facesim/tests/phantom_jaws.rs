@@ -270,6 +270,58 @@ fn labels_are_the_analytic_tissues_away_from_boundaries_and_the_vestibule_is_enc
     }
 }
 
+#[test]
+fn the_nasal_passages_segment_as_a_cavity_inside_the_head() {
+    // `Shape::nasal_passages` (the validation's phantoms): the nose's passages are air
+    // the segmentation keeps out of the head, not connected to the air outside, with the
+    // septum and walls tissue; the solid nose of the standard head has no cavity there.
+    let hollow = pj::Shape {
+        nasal_passages: true,
+        ..Default::default()
+    };
+    let opts = PhantomOptions {
+        spacing: [1.0; 3],
+        ..Default::default()
+    };
+    let (lo, hi) = ([-24.0, -108.0, -4.0], [24.0, -60.0, 44.0]);
+    let seg_of =
+        |vol: &Volume| segment::segment(vol, &Case::default().tissue, Path::new("nose")).unwrap();
+    let vol = hollow.ct_box(&opts, lo, hi);
+    let seg = seg_of(&vol);
+    let solid = seg_of(&pj::ct_box(&opts, lo, hi));
+    let (mut passage, mut walls) = (0usize, 0usize);
+    for a in 0..vol.len() {
+        let c = centre(&vol, a);
+        // Voxels wholly inside a passage (4 points per axis over the cube, as `pure_tissue`).
+        let wholly_passage = (0..64).all(|n| {
+            let o = [n % 4, (n / 4) % 4, n / 16];
+            let p = [0, 1, 2].map(|d| c[d] + (o[d] as f64 / 3.0 - 0.5) * vol.spacing[d]);
+            hollow.tissue_at(p) == Tissue::Air && pj::tissue_at(p) != Tissue::Air
+        });
+        if !wholly_passage {
+            continue;
+        }
+        passage += 1;
+        assert_eq!(seg.labels[a], AIR, "{c:?}");
+        assert!(!seg.head[a], "{c:?}: the passage reaches the outside air");
+        assert!(solid.labels[a] != AIR, "{c:?} is air in the solid nose");
+        // Beside it, across the septum, tissue.
+        let mirror = [0.0, c[1], c[2]];
+        let i = ((mirror[0] - vol.origin[0]) / vol.spacing[0]).round() as usize;
+        let b = a - (a % vol.dims[0]) + i;
+        if seg.labels[b] != AIR {
+            walls += 1;
+        }
+    }
+    println!(
+        "passage voxels {passage}, septum behind {walls}, cavity voxels {} (solid {})",
+        seg.report.cavity_voxels, solid.report.cavity_voxels
+    );
+    assert!(passage > 2000, "{passage}");
+    assert_eq!(walls, passage);
+    assert!(seg.report.cavity_voxels >= solid.report.cavity_voxels + passage);
+}
+
 fn lm(name: &str) -> [f64; 3] {
     pj::landmark(name).unwrap_or_else(|| panic!("no landmark {name}"))
 }

@@ -30,6 +30,9 @@ pub struct Options {
     pub seed: u64,
     /// The phantoms' voxel size (mm).
     pub phantom_spacing_mm: f64,
+    /// The phantoms' noses hollow (`phantom_jaws::Shape::nasal_passages`; the CLI's default),
+    /// not solid.
+    pub phantom_nasal_passages: bool,
     /// Only these surgeries (empty: all).
     pub surgeries: Vec<Surgery>,
     /// Only these cases: sample directory names and/or "phantom" (empty: all).
@@ -344,6 +347,10 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
                         ..Default::default()
                     },
                     solve_model: None,
+                };
+                let shape = Shape {
+                    nasal_passages: opts.phantom_nasal_passages,
+                    ..shape
                 };
                 crate::phantom_jaws::write_shaped_case(&case_dir, &jaws, &shape)?;
                 todo.push((name.clone(), case_dir, Some((shape, class)), only));
@@ -1241,6 +1248,7 @@ mod tests {
             phantoms: 0,
             seed: 1,
             phantom_spacing_mm: 2.0,
+            phantom_nasal_passages: true,
             surgeries: vec![],
             cases: vec![],
             overrides: toml::Table::new(),

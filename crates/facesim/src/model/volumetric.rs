@@ -809,6 +809,10 @@ fn rows_times(k: &[(usize, usize, f64)], watched: &[bool], u: &[[f64; 3]]) -> Ve
 
 /// Rounds of tearing the gap tissue a move inverts (after lift-off) and solving again.
 const TEAR_ROUNDS: usize = 8;
+/// A tearing round that inverts up to this many elements has not spread, whatever the first
+/// round inverted: on a coarse phantom's impaction one torn gap element leaves two neighbours
+/// inverted, which tear in the next round; tissue sheared by a 25 mm move inverts tens.
+const SPREAD_FLOOR: usize = 8;
 
 /// A torn element's stiffness, as a fraction of its tissue's: a trace, so that a node left only
 /// in torn elements still has a definite (if meaningless) displacement.
@@ -1251,8 +1255,10 @@ pub fn predict(
                 // tears it (docs/pipeline.md "Large moves"). It is released: its stiffness falls
                 // to a trace, the model is factored and solved again, a few rounds at most. Tissue
                 // on the face never tears: an inverted element there stays a failure.
-                // A round that inverts more than the first spreads instead of settling (tissue
-                // sheared against a held face, or lips the scan fused): it stops there.
+                // A round that inverts more than the first, and more than [`SPREAD_FLOOR`],
+                // spreads instead of settling (tissue sheared against a held face, or lips the
+                // scan fused): it stops there. (A torn element's few neighbours may invert in
+                // the next round as the gap settles.)
                 // Beyond orthognathic size (centimetres typed as millimetres?) nothing tears: the
                 // inverted elements then refuse the plan.
                 let tears = t.tear_gap && quadratic.is_none() && largest <= LARGE_MOVE_MM;
@@ -1265,7 +1271,7 @@ pub fn predict(
                         .collect();
                     let on_the_face = |e: &usize| carries_face[*e];
                     if inverted.is_empty()
-                        || first.is_some_and(|n| inverted.len() > n)
+                        || first.is_some_and(|n| inverted.len() > n.max(SPREAD_FLOOR))
                         || inverted.iter().any(on_the_face)
                     {
                         break;
