@@ -202,7 +202,12 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
     // The 4 mm impaction squeezes this coarse phantom's gap above the palate: a few elements
     // tear and the tearing settles (a round inverting two neighbours of the first torn one has
     // not spread: model::volumetric's SPREAD_FLOOR), leaving none inverted.
-    assert_eq!(run["tet"]["inverted_elements"].as_u64(), Some(0), "{}", run["tet"]);
+    assert_eq!(
+        run["tet"]["inverted_elements"].as_u64(),
+        Some(0),
+        "{}",
+        run["tet"]
+    );
     // Without --keep-runs a run keeps its report, landmarks and faces only.
     let run_dir = out.join("runs/phantom01/lefort-impaction");
     assert!(run_dir.join("face_post.ply").is_file());
