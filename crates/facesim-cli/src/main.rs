@@ -131,6 +131,11 @@ enum Cmd {
         /// lips over a vestibule, chin and nose, and four jaw plans (docs/phantom.md).
         #[arg(long, value_parser = ["capsule", "jaws"], default_value = "capsule")]
         anatomy: String,
+        /// The jaws phantom's nose: `solid` (the standard head and the bundled sample) or
+        /// `hollow`, two nasal passages beside a septum as a CT shows a nose, as `facesim
+        /// validate` builds its phantoms (docs/phantom.md "Nasal passages").
+        #[arg(long, value_parser = ["solid", "hollow"], default_value = "solid")]
+        nose: String,
         #[command(flatten)]
         shape: ShapeArgs,
     },
@@ -419,10 +424,11 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             noise,
             scan_step,
             anatomy,
+            nose,
             shape,
         } => {
             let opts = phantom_options(spacing, slice, noise, scan_step)?;
-            cmd_phantom(&dir, opts, &anatomy, &shape)
+            cmd_phantom(&dir, opts, &anatomy, &nose, &shape)
         }
         Cmd::PhantomCohort {
             dir,
@@ -655,6 +661,7 @@ fn cmd_phantom(
     dir: &Path,
     opts: facesim::phantom::PhantomOptions,
     anatomy: &str,
+    nose: &str,
     shape: &ShapeArgs,
 ) -> Result<()> {
     if anatomy == "jaws" {
@@ -662,7 +669,15 @@ fn cmd_phantom(
             phantom: opts,
             solve_model: None,
         };
-        facesim::phantom_jaws::write_shaped_case(dir, &jaws, &shape.shape())?;
+        let shape = facesim::phantom_jaws::Shape {
+            nasal_passages: nose == "hollow",
+            ..shape.shape()
+        };
+        facesim::phantom_jaws::write_shaped_case(dir, &jaws, &shape)?;
+    } else if nose != "solid" {
+        return Err(Error::config(
+            "phantom: --nose hollow needs --anatomy jaws (the capsule head has no nose passages to hollow)",
+        ));
     } else if shape.any() {
         return Err(Error::config(
             "phantom: the cohort parameters (--scale, --soft-mm, --mandible-mm, --chin-mm, --asymmetry-mm, --seed) need --anatomy jaws",

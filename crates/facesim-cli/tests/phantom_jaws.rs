@@ -168,3 +168,38 @@ fn the_first_sample_shows_a_face_with_every_soft_landmark() {
     }
     assert!(out.join("report.html").is_file());
 }
+
+#[test]
+fn a_hollow_nose_is_asked_for_by_name_and_only_the_jaws_head_has_one() {
+    // `--nose hollow` (docs/phantom.md "Nasal passages"): the case's phantom.toml says so and
+    // its CT is air inside the nose beside the septum, where the standard head's is tissue;
+    // the capsule head refuses it in one line.
+    let d = common::kept_dir("facesim-jaws-hollow");
+    let r = facesim(&[
+        "phantom",
+        d.to_str().unwrap(),
+        "--anatomy",
+        "jaws",
+        "--nose",
+        "hollow",
+        "--spacing",
+        "2",
+        "--slice",
+        "2",
+        "--noise",
+        "0",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let toml = std::fs::read_to_string(d.join("phantom.toml")).unwrap();
+    assert!(toml.contains("\nnasal_passages = true\n"), "{toml}");
+    let vol = facesim::volume::read_volume(&d.join("ct.nii.gz")).unwrap();
+    let hu = |p: [f64; 3]| f64::from(vol.sample(p, f32::NAN));
+    // A passage point and the septum beside it (standard head: scale 1, no shift).
+    let (passage, septum) = ([8.0, -90.0, 14.0], [0.0, -90.0, 14.0]);
+    assert_eq!(pj::tissue_at(passage), pj::Tissue::Soft);
+    assert!(hu(passage) < -900.0, "passage {} HU", hu(passage));
+    assert!(hu(septum) > -200.0, "septum {} HU", hu(septum));
+    let e = common::kept_dir("facesim-capsule-hollow");
+    let r = facesim(&["phantom", e.to_str().unwrap(), "--nose", "hollow"]);
+    cli::assert_clean_failure(&r, "phantom", "--nose hollow needs --anatomy jaws");
+}
