@@ -161,6 +161,9 @@ enum Cmd {
         /// `[solve] model` written into every plan (default: none, the default model).
         #[arg(long)]
         model: Option<String>,
+        /// The phantoms' noses: `solid` or `hollow` (nasal passages, as `facesim phantom --nose`).
+        #[arg(long, value_parser = ["solid", "hollow"], default_value = "solid")]
+        nose: String,
         #[command(flatten)]
         shape: ShapeArgs,
     },
@@ -438,6 +441,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             noise,
             scan_step,
             model,
+            nose,
             shape,
         } => {
             let jaws = facesim::phantom_jaws::JawsOptions {
@@ -445,8 +449,14 @@ fn dispatch(cmd: Cmd) -> Result<()> {
                 solve_model: model,
             };
             let seed = shape.seed.unwrap_or(1);
-            let written =
-                facesim::phantom_cohort::write_cohort(&dir, cases, seed, &jaws, shape.given())?;
+            let written = facesim::phantom_cohort::write_cohort(
+                &dir,
+                cases,
+                seed,
+                &jaws,
+                shape.given(),
+                nose == "hollow",
+            )?;
             println!(
                 "{} phantom cases written to {} (parameters in phantoms.csv)",
                 written.len(),

@@ -171,7 +171,8 @@ fn the_first_sample_shows_a_face_with_every_soft_landmark() {
 
 #[test]
 fn a_hollow_nose_is_asked_for_by_name_and_only_the_jaws_head_has_one() {
-    // `--nose hollow` (docs/phantom.md "Nasal passages"): the case's phantom.toml says so and
+    // `--nose hollow` (docs/phantom.md "Nasal passages"), of `phantom` and `phantom-cohort`:
+    // the case's phantom.toml says so and
     // its CT is air inside the nose beside the septum, where the standard head's is tissue;
     // the capsule head refuses it in one line.
     let d = common::kept_dir("facesim-jaws-hollow");
@@ -199,6 +200,23 @@ fn a_hollow_nose_is_asked_for_by_name_and_only_the_jaws_head_has_one() {
     assert_eq!(pj::tissue_at(passage), pj::Tissue::Soft);
     assert!(hu(passage) < -900.0, "passage {} HU", hu(passage));
     assert!(hu(septum) > -200.0, "septum {} HU", hu(septum));
+    // A cohort's noses the same way.
+    let c = common::kept_dir("facesim-cohort-hollow");
+    let r = facesim(&[
+        "phantom-cohort",
+        c.to_str().unwrap(),
+        "--cases",
+        "1",
+        "--nose",
+        "hollow",
+        "--spacing",
+        "3",
+        "--slice",
+        "3",
+    ]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let toml = std::fs::read_to_string(c.join("case001/phantom.toml")).unwrap();
+    assert!(toml.contains("\nnasal_passages = true\n"), "{toml}");
     let e = common::kept_dir("facesim-capsule-hollow");
     let r = facesim(&["phantom", e.to_str().unwrap(), "--nose", "hollow"]);
     cli::assert_clean_failure(&r, "phantom", "--nose hollow needs --anatomy jaws");

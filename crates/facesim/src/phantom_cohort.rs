@@ -76,6 +76,7 @@ pub fn write_cohort(
     seed: u64,
     opts: &JawsOptions,
     given: [Option<f64>; 5],
+    nasal_passages: bool,
 ) -> Result<Vec<CohortCase>> {
     if n == 0 {
         return Err(Error::config("phantom-cohort: --cases must be at least 1"));
@@ -87,7 +88,10 @@ pub fn write_cohort(
             CohortCase {
                 name: format!("case{:0width$}", k + 1),
                 seed: s,
-                shape: draw(s, given),
+                shape: Shape {
+                    nasal_passages,
+                    ..draw(s, given)
+                },
             }
         })
         .collect();
