@@ -601,8 +601,8 @@ fn vestibule(sh: &Shape, p: [f64; 3]) -> bool {
     }
 }
 
-/// Exact tissue at p (LPS mm). Precedence: outside air, skin, vestibule, bone and teeth,
-/// brain, fat, soft tissue.
+/// Exact tissue at p (LPS mm). Precedence: outside air, skin, vestibule, nasal passages (when
+/// the shape has them), bone and teeth, brain, fat, soft tissue.
 pub fn tissue_at(p: [f64; 3]) -> Tissue {
     tissue(&Shape::default(), p)
 }
