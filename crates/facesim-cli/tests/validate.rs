@@ -407,6 +407,15 @@ fn hollow_phantom_noses_are_asked_for_and_the_segmentation_finds_their_passages(
         md.contains("--phantom-noses solid"),
         "the command is not recorded"
     );
+    assert!(
+        md.contains("; a solid nose)"),
+        "the phantom's nose is not said"
+    );
+    let md = std::fs::read_to_string(hollow.join("validation.md")).unwrap();
+    assert!(
+        md.contains("; a hollow nose: two nasal passages beside a septum)"),
+        "the phantom's nose is not said"
+    );
 }
 
 #[test]

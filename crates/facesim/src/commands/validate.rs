@@ -685,7 +685,7 @@ fn phantom_case(
         info: CaseInfo {
             name: name.into(),
             about: format!(
-                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm; {}); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
                 match class {
                     Some(c) => {
                         let of: Vec<&str> = runs
@@ -707,6 +707,11 @@ fn phantom_case(
                 v[2],
                 v[3],
                 v[4],
+                if shape.nasal_passages {
+                    "a hollow nose: two nasal passages beside a septum"
+                } else {
+                    "a solid nose"
+                },
                 region_text(&movable)
             ),
             pitch_deg: 0.0,
