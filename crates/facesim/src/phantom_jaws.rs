@@ -379,19 +379,21 @@ fn nasal_passage(sh: &Shape, p: [f64; 3], rho: f64, phi: f64, r: f64) -> bool {
     }
     // The wall: p moved `wall` any of 26 ways (the cube's faces, edges and corners) stays
     // inside the skin.
-    let inside = |q: [f64; 3]| {
-        let rho = (q[0] * q[0] + q[1] * q[1]).sqrt();
-        rho < radius(sh, q[0].atan2(-q[1]), q[2])
-    };
     let steps: [f64; 3] = [-1.0, 0.0, 1.0];
     steps.iter().all(|&a| {
         steps.iter().all(|&b| {
             steps.iter().all(|&c| {
                 let n = (a * a + b * b + c * c).sqrt();
-                n == 0.0 || inside([0, 1, 2].map(|k| p[k] + wall * [a, b, c][k] / n))
+                n == 0.0 || inside_skin(sh, [0, 1, 2].map(|k| p[k] + wall * [a, b, c][k] / n))
             })
         })
     })
+}
+
+/// Whether p (standard frame) lies inside the skin surface ρ = R_s(φ, z) of a shaped head.
+fn inside_skin(sh: &Shape, p: [f64; 3]) -> bool {
+    let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
+    rho < radius(sh, p[0].atan2(-p[1]), p[2])
 }
 
 /// The cranium's outer radius at (φ, z): R_BONE plus the bony glabella and the nasal bones.
@@ -748,10 +750,7 @@ impl Shape {
         let r = |z: f64| radius(sh, turn(z), z);
         let midline_skin = |z: f64| point_at(sh, turn(z), z);
         let (ma, md, chin) = (sh.asymmetry_mm, sh.mandible_mm, sh.chin_mm);
-        standard_landmarks_with(r, midline_skin, ma, md, chin, |p| {
-            let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
-            rho < radius(sh, p[0].atan2(-p[1]), p[2])
-        })
+        standard_landmarks_with(r, midline_skin, ma, md, chin, |p| inside_skin(sh, p))
     }
 }
 
@@ -1161,10 +1160,6 @@ mod tests {
             ..Shape::default()
         };
         let solid = Shape::default();
-        let outside = |p: [f64; 3]| {
-            let rho = (p[0] * p[0] + p[1] * p[1]).sqrt();
-            rho >= radius(&hollow, p[0].atan2(-p[1]), p[2])
-        };
         let mut passage = 0usize;
         let mut z_range = [f64::INFINITY, f64::NEG_INFINITY];
         for p in nose_grid() {
@@ -1189,7 +1184,7 @@ mod tests {
                     continue;
                 }
                 let q = [0, 1, 2].map(|k| p[k] + 3.5 * d[k] / n);
-                assert!(!outside(q), "{p:?}: outside air at {q:?}");
+                assert!(inside_skin(&hollow, q), "{p:?}: outside air at {q:?}");
             }
             passage += 1;
             z_range = [z_range[0].min(p[2]), z_range[1].max(p[2])];
