@@ -643,8 +643,10 @@ fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_
 /// the lower teeth down, and rests it on the bone one way: the rounds settle, lifted nodes lie
 /// clear of the bone, nothing inverts, `true` gives the same face. Resting one way, the soft
 /// tissue above the cut lifts off the symphysis that stays as the chin pushes it forward, so the
-/// soft chin follows the bony chin further than bonded to it (`false`). A BSSO moves the chin
-/// with the teeth: nothing is raised.
+/// soft chin follows the bony chin further than bonded to it (`false`): measured on headsq,
+/// where much of the soft chin lies over the symphysis above the cut (on the coarse phantom,
+/// whose chin lies over the segment, the two differ by 0.005 since the tissue slides on the bone
+/// surface's own normal, session 61). A BSSO moves the chin with the teeth: nothing is raised.
 #[test]
 fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() {
     let by_default = validate_one_phantom("facesim-degloved-chin", "genioplasty", &[]);
@@ -688,17 +690,36 @@ fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() 
     );
     assert_eq!(a["tet"]["degloved_chin_nodes"], t["degloved_chin_nodes"]);
 
-    let pog = |o: &Path| {
-        let rows = read_csv(&o.join("validation.csv"));
+    // The soft chin's follow, on the real head: headsq's CT ends 7.5 mm below pogonion, so much
+    // of its soft chin lies over the symphysis above the cut, which bonded holds it back.
+    common::real_mandible_ct();
+    let headsq = |dir: &str, extra: &[&str]| {
+        let mut args = vec![
+            "--case",
+            "real-mandible",
+            "--phantoms",
+            "0",
+            "--surgery",
+            "genioplasty",
+        ];
+        args.extend_from_slice(extra);
+        let out = validate_into(dir, &args).0;
+        let rows = read_csv(&out.join("validation.csv"));
         let row = rows
             .iter()
             .find(|r| r["surgery"] == "genioplasty" && r["landmark"] == "Pog'")
             .expect("no genioplasty Pog' row");
         num(&row["predicted_ratio"]).unwrap()
     };
-    let (raised, attached) = (pog(&by_default), pog(&bonded));
-    println!("genioplasty Pog'/Pog: {raised:.3} raised, {attached:.3} attached");
-    assert!(raised > attached + 0.02, "{raised} vs {attached}");
+    let raised = headsq("facesim-degloved-chin-headsq", &[]);
+    let attached = headsq(
+        "facesim-degloved-chin-headsq-off",
+        &["--set", "tet.degloved_chin=false"],
+    );
+    println!("headsq genioplasty Pog'/Pog: {raised:.3} raised, {attached:.3} attached");
+    // Published 0.57–1.0 (docs/validation.md); bonded, headsq's soft chin falls below it.
+    assert!(raised > attached + 0.1, "{raised} vs {attached}");
+    assert!((0.57..=1.0).contains(&raised), "{raised}");
 
     let bsso = validate_one_phantom("facesim-degloved-chin-bsso", "bsso-advance", &[]);
     let run = run_report(&bsso, "phantom01", "bsso-advance");

@@ -157,6 +157,24 @@ fn inward(v: &vtu::TetsVtuOwned) -> Vec<[f64; 3]> {
         .collect()
 }
 
+/// The bone surface's normal a node slides on (docs/pipeline.md "Lip–tooth contact"): the
+/// area-weighted mean normal of the skull's facets within `r` of p that face the side `toward`
+/// points to, written out here again by brute force.
+fn bone_normal(skull: &facesim::mesh::Mesh, p: [f64; 3], toward: [f64; 3], r: f64) -> [f64; 3] {
+    let mut sum = [0.0; 3];
+    for t in &skull.triangles {
+        let v = t.map(|i| skull.vertices[i as usize]);
+        let c: [f64; 3] = std::array::from_fn(|k| (v[0][k] + v[1][k] + v[2][k]) / 3.0);
+        let a = facesim::vec3::cross(sub(v[1], v[0]), sub(v[2], v[0]));
+        if norm(sub(c, p)) <= r && dot(a, toward) > 0.0 {
+            sum = facesim::vec3::add(sum, a);
+        }
+    }
+    let l = norm(sum);
+    assert!(l > 0.0, "no skull facet within {r} mm of {p:?}");
+    sum.map(|c| c / l)
+}
+
 /// Is a tooth within `r` mm of p (the phantom's exact tissue on a small grid around it)?
 fn near_tooth(p: [f64; 3], r: f64) -> bool {
     let k = 3;
@@ -238,7 +256,7 @@ fn lips_closed_on_the_teeth_slide_on_them() {
     for &n in picked.iter().filter(|n| va.constraint[**n] == vtu::MOVED) {
         let (us, ua) = (vs.displacement[n], va.displacement[n]);
         tied_err = tied_err.max(norm(sub(ua, advance)));
-        let nn = normal[n];
+        let nn = bone_normal(&on.skull, vs.nodes[n], normal[n], 6.0);
         normal_err = normal_err.max(dot(nn, sub(us, advance)).abs());
         let bt = sub(advance, nn.map(|c| c * dot(nn, advance)));
         let ut = sub(us, nn.map(|c| c * dot(nn, us)));

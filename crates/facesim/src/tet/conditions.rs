@@ -4,6 +4,7 @@
 //! material. Everything here is a function of the mesh, the bone and the plan; the model stage
 //! (`crate::model::volumetric`) calls it.
 
+use super::bone_normal::BoneNormals;
 use super::embed::boundary_faces;
 use super::from_ct::NodeKind;
 use super::plan_holds::{LinearHold, segment_at};
@@ -112,15 +113,17 @@ pub(crate) struct Holds {
     pub overlapping_segments: Vec<usize>,
 }
 
-/// The bone that holds the tissue: the skull surface at rest, the plan's rigid moves and its
-/// segments (`[[osteotomy]]`, in the plan's order).
+/// The bone that holds the tissue: the skull surface at rest and its normals where tissue slides
+/// on it, the plan's rigid moves and its segments (`[[osteotomy]]`, in the plan's order).
 pub(crate) struct Bone<'a> {
     pub skull: &'a Mesh,
+    pub normals: BoneNormals,
     pub plan: &'a Plan,
     pub osteotomy: &'a [Osteotomy],
 }
 
-/// A mucosa node: the bone surface's unit normal at the nearest skull point (after the move)
+/// A mucosa node: the bone surface's unit normal about the nearest skull point (after the move;
+/// `tet::bone_normal`)
 /// and the node's displacement as that bone point's segment carries it (not the bone point's
 /// own displacement: under a rotation the two differ by the turn of the gap between them).
 #[derive(Clone, Copy, Debug)]
@@ -203,6 +206,8 @@ pub(crate) fn mucosa(
                 return None;
             }
             let n = n.map(|v| v / len);
+            // The bone's surface about q, not its one nearest facet (`tet::bone_normal`).
+            let n = bone.normals.at(q, n).unwrap_or(n);
             // The node and the normal carried by the bone's move at q: the image of q + εn
             // minus that of q.
             let eps = 1e-3;
@@ -245,7 +250,8 @@ pub(crate) const LIP_REACH_MM: f64 = 35.0;
 /// attached to the teeth). A bone node is in contact when (1) it lies on a tooth: the median HU
 /// at [`TOOTH_DEPTHS_MM`] into the bone, along the normal, is at least [`TOOTH_HU`]; and (2) lip or cheek
 /// covers it: from the node into the tissue (the normal: the mean direction to its elements'
-/// centroids) the air outside the head is reached within [`LIP_REACH_MM`] through soft tissue
+/// centroids; the node then slides on the bone surface's own normal, `tet::bone_normal`) the
+/// air outside the head is reached within [`LIP_REACH_MM`] through soft tissue
 /// alone (no bone on the way), at the face (`face`: the skin `[surface] movable` lets move, not
 /// the scalp): the labial and buccal faces of the dental arch, not the lingual, palatal or
 /// occlusal ones (tongue, the other jaw). Everything here is the anatomy at rest, not
@@ -330,7 +336,10 @@ pub(crate) fn covered_bone(
             if !out {
                 return None;
             }
-            let n = w.map(|c| c / crate::vec3::norm(*w));
+            // The direction into the tissue tells the ray where to look; the bone's own
+            // surface tells how the tissue slides on it.
+            let into = w.map(|c| c / crate::vec3::norm(*w));
+            let n = bone.normals.at(*p, into).unwrap_or(into);
             // The normal carried by the bone's move: the image of p + εn minus that of p.
             let eps = 1e-3;
             let (moved, which) = plan.apply(&[*p, [0, 1, 2].map(|c| p[c] + eps * n[c])], 1.0);

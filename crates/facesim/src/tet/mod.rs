@@ -22,6 +22,7 @@
 //! units give the same displacements, which are all a prescribed-displacement problem yields).
 
 pub mod blocks;
+pub(crate) mod bone_normal;
 pub mod conditions;
 pub mod embed;
 pub mod from_ct;
