@@ -15,7 +15,6 @@ use crate::mesh::Mesh;
 use crate::pipeline::stage::Stage;
 use crate::pipeline::{Recorder, Scene};
 use crate::plan::{PlanBasis, SegmentBasis};
-use crate::tet::bone_normal::BoneNormals;
 use crate::tet::conditions::{
     Bone, Holds, Mucosa, covered_bone, follow_bone, hold_floating_pieces, holds, materials,
     midpoint_kinds, mucosa, on_face, release_at_cuts,
@@ -506,12 +505,12 @@ pub struct TetReport {
 /// The bone of the scene, moved by the case's plan; its normals where tissue slides on it at the
 /// scale the mesh resolves there (`tet::bone_normal`).
 fn bone<'a>(scene: &'a Scene, case: &'a Case) -> Bone<'a> {
-    Bone {
-        skull: &scene.face.skull,
-        normals: BoneNormals::new(&scene.face.skull, case.tet.skin_size_mm),
-        plan: &scene.model.plan,
-        osteotomy: &case.osteotomy,
-    }
+    Bone::new(
+        &scene.face.skull,
+        &scene.model.plan,
+        &case.osteotomy,
+        case.tet.skin_size_mm,
+    )
 }
 
 /// Per solved node: its kind, the mucosa or contact it slides on, whether it is the face's skin.

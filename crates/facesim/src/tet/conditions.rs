@@ -16,6 +16,7 @@ use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
 use crate::segment::runs::Runs;
 use crate::volume::Volume;
+use std::sync::OnceLock;
 
 /// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
 /// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
@@ -113,13 +114,42 @@ pub(crate) struct Holds {
     pub overlapping_segments: Vec<usize>,
 }
 
-/// The bone that holds the tissue: the skull surface at rest and its normals where tissue slides
-/// on it, the plan's rigid moves and its segments (`[[osteotomy]]`, in the plan's order).
+/// The bone that holds the tissue: the skull surface at rest, the plan's rigid moves and its
+/// segments (`[[osteotomy]]`, in the plan's order), and the surface's normals where tissue slides
+/// on it ([`Bone::normals`]).
 pub(crate) struct Bone<'a> {
     pub skull: &'a Mesh,
-    pub normals: BoneNormals,
     pub plan: &'a Plan,
     pub osteotomy: &'a [Osteotomy],
+    /// The radius (mm) the normals average over (`tet::bone_normal`).
+    normal_radius: f64,
+    normals: OnceLock<BoneNormals>,
+}
+
+impl<'a> Bone<'a> {
+    /// The bone of `skull` moved by `plan`, its normals averaged within `normal_radius` (mm).
+    pub(crate) fn new(
+        skull: &'a Mesh,
+        plan: &'a Plan,
+        osteotomy: &'a [Osteotomy],
+        normal_radius: f64,
+    ) -> Bone<'a> {
+        Bone {
+            skull,
+            plan,
+            osteotomy,
+            normal_radius,
+            normals: OnceLock::new(),
+        }
+    }
+
+    /// The skull surface's normals where tissue slides on it, bucketed on first use: the
+    /// re-solves (`Volumetric::resolve`, the reduced model's assembly) take the holds from the
+    /// run and never ask.
+    pub(crate) fn normals(&self) -> &BoneNormals {
+        self.normals
+            .get_or_init(|| BoneNormals::new(self.skull, self.normal_radius))
+    }
 }
 
 /// A mucosa node: the bone surface's unit normal about the nearest skull point (after the move;
@@ -207,7 +237,7 @@ pub(crate) fn mucosa(
             }
             let n = n.map(|v| v / len);
             // The bone's surface about q, not its one nearest facet (`tet::bone_normal`).
-            let n = bone.normals.at(q, n).unwrap_or(n);
+            let n = bone.normals().at(q, n).unwrap_or(n);
             // The node and the normal carried by the bone's move at q: the image of q + εn
             // minus that of q.
             let eps = 1e-3;
@@ -339,7 +369,7 @@ pub(crate) fn covered_bone(
             // The direction into the tissue tells the ray where to look; the bone's own
             // surface tells how the tissue slides on it.
             let into = w.map(|c| c / crate::vec3::norm(*w));
-            let n = bone.normals.at(*p, into).unwrap_or(into);
+            let n = bone.normals().at(*p, into).unwrap_or(into);
             // The normal carried by the bone's move: the image of p + εn minus that of p.
             let eps = 1e-3;
             let (moved, which) = plan.apply(&[*p, [0, 1, 2].map(|c| p[c] + eps * n[c])], 1.0);
