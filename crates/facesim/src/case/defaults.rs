@@ -103,6 +103,7 @@ impl Default for Tet {
             nose_base_above_sn_mm: 2.5,
             degloved_maxilla: Degloved::Auto,
             degloved_chin: Degloved::Auto,
+            septum_detached: false,
             skin: e(30.0, 0.45),
             muscle: e(10.0, 0.45),
             fat_dark: e(2.0, 0.45),

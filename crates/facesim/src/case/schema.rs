@@ -354,6 +354,13 @@ pub struct Tet {
     /// `"auto"`, `true` and `false` as `degloved_maxilla`.
     #[serde(default)]
     pub degloved_chin: Degloved,
+    /// A Le Fort I's down-fracture separates the nasal septum from the maxilla's nasal crest, and
+    /// the septum stays with the skull base: true holds the tissue on the Le Fort I segment's
+    /// nasal surface still instead of moving it with the maxilla (`model::septum`;
+    /// docs/validation-notes.md "The septum off the maxilla"). false, the default: it moves with
+    /// its bone.
+    #[serde(default)]
+    pub septum_detached: bool,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,

@@ -202,6 +202,22 @@ pub(crate) fn raised_chin(
     )
 }
 
+/// The segment that carries the upper teeth (a Le Fort I's), when one carries more than half
+/// of them: of the tooth nodes lip or cheek cover, the upper half by height.
+pub(crate) fn upper_teeth_segment(
+    frame: &HeadFrame,
+    nodes: &[[f64; 3]],
+    covered: &[Option<Covered>],
+) -> Option<usize> {
+    let teeth = teeth(frame, nodes, covered);
+    let upper = &teeth[..teeth.len() / 2];
+    let moved = |s: usize| upper.iter().filter(|t| t.1 == Some(s)).count();
+    upper
+        .iter()
+        .filter_map(|t| t.1)
+        .find(|s| 2 * moved(*s) > upper.len())
+}
+
 /// The raised region from the pre-operative landmarks, the mesh nodes and what lip or cheek
 /// covers.
 pub(crate) fn raised(
@@ -223,13 +239,7 @@ pub(crate) fn raised(
     // genioplasty), nothing is raised, and a face whose lips the landmarks miss (a scan cut
     // above them, a phantom without a lip profile) still runs. (Not the group highest on
     // average: a few dense nodes above a Le Fort cut read as tooth would outrank it.)
-    let teeth = teeth(frame, nodes, covered);
-    let upper = &teeth[..teeth.len() / 2];
-    let moved = |s: usize| upper.iter().filter(|t| t.1 == Some(s)).count();
-    if !upper
-        .iter()
-        .any(|t| t.1.is_some_and(|s| 2 * moved(s) > upper.len()))
-    {
+    if upper_teeth_segment(frame, nodes, covered).is_none() {
         return Raised::Nothing;
     }
     let Some(sn) = height("Sn") else {

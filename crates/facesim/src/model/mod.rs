@@ -15,6 +15,7 @@ pub mod discretisation;
 mod nose;
 pub mod predicted;
 pub mod reduced;
+mod septum;
 pub mod volumetric;
 
 use crate::case::Case;

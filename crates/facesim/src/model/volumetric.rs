@@ -69,6 +69,9 @@ pub struct Reuse {
     /// them free, so that at the run's own parameters it is the run's face (with sliding off
     /// the tissue stays bonded and nothing lifts off, as in a run).
     lifted: Vec<usize>,
+    /// The nodes `[tet] septum_detached` holds still (empty without it); a re-solve holds them
+    /// alike.
+    still: Vec<bool>,
     roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
     /// The linear mesh's node ordering and symbolic analyses for its factors
@@ -126,6 +129,7 @@ impl Volumetric {
                 kind: &r.kind,
                 mucosa: &r.mucosa,
                 on_face: &r.on_face,
+                still: &r.still,
             },
             &bone(scene, case),
             case,
@@ -208,6 +212,7 @@ impl Volumetric {
                 kind: &r.kind,
                 mucosa: &r.mucosa,
                 on_face: &r.on_face,
+                still: &r.still,
             },
             &bone(scene, c),
             c,
@@ -462,6 +467,10 @@ pub struct TetReport {
     /// Tetrahedra of the external nose given `[tet] nose_youngs_kpa` (0 without it).
     #[serde(default)]
     pub nose_elements: usize,
+    /// Nodes on the maxilla's nasal floor held still with the skull base (`[tet]
+    /// septum_detached`; 0 without it).
+    #[serde(default)]
+    pub septum_nodes: usize,
     /// `[tet] degloved_maxilla` and `degloved_chin`: bone nodes of the raised regions (sliding,
     /// one-sided), those lifted off where the bone pulled them, and the deepest a lifted node
     /// lies inside its bone's move when the rounds end (mm; 0 when every lifted node is clear of
@@ -519,6 +528,8 @@ struct Roles<'a> {
     kind: &'a [NodeKind],
     mucosa: &'a [Option<Mucosa>],
     on_face: &'a [bool],
+    /// Nodes held still whatever their bone does (`[tet] septum_detached`; empty: none).
+    still: &'a [bool],
 }
 
 /// Every solved node's hold (`tet::conditions::holds`; the nodes are the corners, then the
@@ -536,6 +547,7 @@ fn hold_tissue(
         kind,
         mucosa,
         on_face,
+        still,
     } = roles;
     let nodes = quadratic.map_or(&mesh.nodes, |q| &q.nodes);
     // `[surface] movable` holds the face outside it, not the walls of cavities.
@@ -581,7 +593,75 @@ fn hold_tissue(
         Some(q) => condition(&q.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
         None => condition(&mesh.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
     };
+    hold_still(&mut h, still);
     (h, released, held)
+}
+
+/// Hold `still`'s nodes where they are, in the run and in the plan basis.
+fn hold_still(h: &mut Holds, still: &[bool]) {
+    for (n, _) in still.iter().enumerate().filter(|(_, s)| **s) {
+        h.constraint[n] = FIXED;
+        h.hold[n] = Hold::Fixed([0.0; 3]);
+        h.linear[n] = LinearHold::Still;
+    }
+}
+
+/// `[tet] septum_detached`: the tissue on the nasal surface of the segment that carries the
+/// upper teeth (`model::septum`), from the run's holds: a sliding node on that segment's bone
+/// (its own position, or 2 mm into the bone along its normal) with the normal it slides on, a
+/// bonded one with the bone surface's normal on its tissue's side. Empty when no segment carries
+/// the upper teeth; Err says why the region was not found.
+fn septum_nodes(
+    mesh: &SoftTissueMesh,
+    found: &(
+        Option<crate::landmarks::HeadFrame>,
+        Vec<crate::landmarks::Landmark>,
+    ),
+    covered: &[Option<crate::tet::conditions::Covered>],
+    holds: &Holds,
+    bone: &Bone,
+    case: &Case,
+) -> std::result::Result<Vec<bool>, String> {
+    let Some(frame) = found.0.as_ref() else {
+        return Err("needs a head frame (the skin is empty)".into());
+    };
+    let Some(maxilla) = degloved::upper_teeth_segment(frame, &mesh.nodes, covered) else {
+        return Ok(Vec::new());
+    };
+    let Some(sn) = found
+        .1
+        .iter()
+        .find(|l| l.label == "Sn")
+        .and_then(|l| l.position)
+    else {
+        return Err("needs subnasale (Sn), which was not found".into());
+    };
+    let on =
+        |p: [f64; 3]| crate::tet::plan_holds::segment_at(&case.osteotomy, p).0 == Some(maxilla);
+    let inward = crate::tet::conditions::into_tissue(&mesh.nodes, &mesh.tets, &mesh.kind);
+    let on_maxilla: Vec<Option<[f64; 3]>> = (0..mesh.nodes.len())
+        .map(|n| {
+            let p = mesh.nodes[n];
+            match holds.hold[n] {
+                Hold::Slide { normal, .. } => {
+                    let deep = [0, 1, 2].map(|c| p[c] - 2.0 * normal[c]);
+                    (on(p) || on(deep)).then_some(normal)
+                }
+                Hold::Fixed(_)
+                    if holds.constraint[n] == MOVED && mesh.kind[n] == NodeKind::Bone && on(p) =>
+                {
+                    bone.normals().at(p, inward[n])
+                }
+                _ => None,
+            }
+        })
+        .collect();
+    Ok(super::septum::held_still(
+        frame,
+        sn,
+        &mesh.nodes,
+        &on_maxilla,
+    ))
 }
 
 /// Where the scan ends in the tissue (report.json `tet.scan_end`).
@@ -948,7 +1028,10 @@ pub fn predict(
     // genioplasty's approach raises slides too, and (with the teeth it covers) rests on its bone
     // one-sidedly: the one-sided rounds below. "auto" (the default) steps aside where `true` is
     // refused or fails, with a warning and report.json's reason (`model::degloved::applied`).
-    let found = if t.degloved_maxilla == Degloved::Off && t.degloved_chin == Degloved::Off {
+    let found = if t.degloved_maxilla == Degloved::Off
+        && t.degloved_chin == Degloved::Off
+        && !t.septum_detached
+    {
         (None, Vec::new())
     } else {
         match scene.landmarks_pre(skin, Path::new("case.toml")) {
@@ -1021,28 +1104,40 @@ pub fn predict(
     let on_face = on_face(nodes, &kind, &scene.vol, &scene.seg.outside);
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
-    let (
-        Holds {
-            constraint,
-            hold,
-            linear: linear_hold,
-            overlapping_segments,
-            ..
-        },
-        released_at_cuts,
-        (pieces, held_still),
-    ) = hold_tissue(
+    let (mut holds, released_at_cuts, (pieces, held_still)) = hold_tissue(
         &mesh,
         quadratic.as_ref(),
         Roles {
             kind: &kind,
             mucosa: &mucosa,
             on_face: &on_face,
+            still: &[],
         },
         &bone,
         case,
         linear_solve,
     );
+    // `[tet] septum_detached`: found on the run's holds, then held by every re-solve alike.
+    let septum = match (t.septum_detached, quadratic.is_some()) {
+        (false, _) => Ok(Vec::new()),
+        (true, true) => Err("needs the 4-node element".to_string()),
+        (true, false) => septum_nodes(&mesh, &found, &covered, &holds, &bone, case),
+    };
+    let septum = septum.unwrap_or_else(|why| {
+        rec.warn(format!(
+            "[tet] septum_detached stepped aside: {why}; the tissue on the maxilla's nasal floor moves with it"
+        ));
+        Vec::new()
+    });
+    hold_still(&mut holds, &septum);
+    let septum_nodes = septum.iter().filter(|s| **s).count();
+    let Holds {
+        constraint,
+        hold,
+        linear: linear_hold,
+        overlapping_segments,
+        ..
+    } = holds;
     // Not a warning: the bundled jaws phantom and both real CTs end in tissue within 3 mm of
     // moved bone (docs/pipeline.md "Region").
     let scan_end = scan_end(&mesh.nodes, &constraint, scene.vol.bounds());
@@ -1441,6 +1536,7 @@ pub fn predict(
         torn_elements,
         torn_volume_mm3,
         nose_elements,
+        septum_nodes,
         degloved_nodes,
         lifted_in_tension,
         lifted_penetration_mm,
@@ -1475,6 +1571,7 @@ pub fn predict(
                 nose,
                 torn,
                 lifted,
+                still: septum,
                 roi,
                 linear_solve,
                 order,

@@ -302,17 +302,7 @@ pub(crate) fn covered_bone(
     face: &(dyn Fn([f64; 3]) -> bool + Sync),
 ) -> Vec<Option<Covered>> {
     use rayon::prelude::*;
-    let mut inward = vec![[0.0; 3]; nodes.len()];
-    for q in tets {
-        let c: [f64; 3] =
-            std::array::from_fn(|k| q.iter().map(|n| nodes[*n as usize][k]).sum::<f64>() / 4.0);
-        for n in q {
-            let n = *n as usize;
-            if kind[n] == NodeKind::Bone {
-                inward[n] = crate::vec3::add(inward[n], crate::vec3::sub(c, nodes[n]));
-            }
-        }
-    }
+    let inward = into_tissue(nodes, tets, kind);
     let step = 0.5 * vol.spacing.iter().copied().fold(f64::INFINITY, f64::min);
     let voxel = |p: [f64; 3]| {
         let c = vol.to_voxel(p).map(|v| v.round() as i64);
@@ -393,6 +383,27 @@ pub(crate) fn covered_bone(
             })
         })
         .collect()
+}
+
+/// Per node: for a bone node, the sum of the directions from it to its elements' centroids, the
+/// side its tissue lies on (zero for other nodes).
+pub(crate) fn into_tissue(
+    nodes: &[[f64; 3]],
+    tets: &[[u32; 4]],
+    kind: &[NodeKind],
+) -> Vec<[f64; 3]> {
+    let mut inward = vec![[0.0; 3]; nodes.len()];
+    for q in tets {
+        let c: [f64; 3] =
+            std::array::from_fn(|k| q.iter().map(|n| nodes[*n as usize][k]).sum::<f64>() / 4.0);
+        for n in q {
+            let n = *n as usize;
+            if kind[n] == NodeKind::Bone {
+                inward[n] = crate::vec3::add(inward[n], crate::vec3::sub(c, nodes[n]));
+            }
+        }
+    }
+    inward
 }
 
 /// A bone node that lip or cheek covers ([`covered_bone`]): how it slides, and whether it lies
