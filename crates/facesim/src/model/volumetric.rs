@@ -623,7 +623,7 @@ fn septum_nodes(
     case: &Case,
 ) -> std::result::Result<Vec<bool>, String> {
     let Some(frame) = found.0.as_ref() else {
-        return Err("needs a head frame (the skin is empty)".into());
+        return Err("needs the pre-operative landmarks' head frame, which was not found".into());
     };
     let Some(maxilla) = degloved::upper_teeth_segment(frame, &mesh.nodes, covered) else {
         return Ok(Vec::new());
