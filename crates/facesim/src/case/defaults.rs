@@ -104,6 +104,7 @@ impl Default for Tet {
             degloved_maxilla: Degloved::Auto,
             degloved_chin: Degloved::Auto,
             septum_detached: false,
+            scan_end: ScanEndHold::Slides,
             skin: e(30.0, 0.45),
             muscle: e(10.0, 0.45),
             fat_dark: e(2.0, 0.45),

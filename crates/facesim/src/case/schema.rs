@@ -219,6 +219,20 @@ pub enum TetElement {
     Quadratic,
 }
 
+/// `[tet] scan_end`: how the tissue is held where the CT's field of view ends in it.
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum ScanEndHold {
+    /// A traction-free surface: nothing beyond the scan holds the tissue (the model until
+    /// session 63, and what a report.json written before the key existed ran).
+    #[default]
+    Free,
+    /// It slides on the plane the scan ends in: no motion across it, free along it. The mirror
+    /// condition of tissue that goes on past the scan (docs/validation-notes.md "Where the scan
+    /// ends: a truncation study").
+    Slides,
+}
+
 /// `[tet] degloved_maxilla` and `degloved_chin`: `"auto"`, `true` or `false` in case.toml.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Degloved {
@@ -361,6 +375,12 @@ pub struct Tet {
     /// its bone.
     #[serde(default)]
     pub septum_detached: bool,
+    /// Where the scan ends in the tissue (the field of view cutting through a lip or the neck),
+    /// `"slides"`, the default: the tissue there slides on the scan's end plane; `"free"`: a free
+    /// surface. Defaulted to `"free"` when absent, so a report.json written before the key existed
+    /// reads back as it ran.
+    #[serde(default)]
+    pub scan_end: ScanEndHold,
     pub skin: TissueElastic,
     pub muscle: TissueElastic,
     pub fat_dark: TissueElastic,

@@ -6,7 +6,7 @@
 
 use super::degloved::{self, Approach};
 use super::predicted::Predicted;
-use crate::case::{Case, Degloved, TetElement, TetMaterial};
+use crate::case::{Case, Degloved, ScanEndHold, TetElement, TetMaterial};
 use crate::compare::{DistanceStats, stats};
 use crate::error::{Error, Result};
 use crate::fem::cholesky::{MeshAnalyses, Ordering};
@@ -122,7 +122,7 @@ impl Volumetric {
     pub fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
         let r = &self.reuse;
         let nodes = self.nodes();
-        let (Holds { hold, .. }, _, _) = hold_tissue(
+        let (Holds { hold, .. }, _) = hold_tissue(
             &self.mesh,
             self.quadratic.as_ref(),
             Roles {
@@ -130,6 +130,7 @@ impl Volumetric {
                 mucosa: &r.mucosa,
                 on_face: &r.on_face,
                 still: &r.still,
+                scan: scene.vol.bounds(),
             },
             &bone(scene, case),
             case,
@@ -205,7 +206,7 @@ impl Volumetric {
         }
         let c = case;
         let sliding = c.tet.sliding;
-        let (Holds { hold, .. }, _, _) = hold_tissue(
+        let (Holds { hold, .. }, _) = hold_tissue(
             &self.mesh,
             None,
             Roles {
@@ -213,6 +214,7 @@ impl Volumetric {
                 mucosa: &r.mucosa,
                 on_face: &r.on_face,
                 still: &r.still,
+                scan: scene.vol.bounds(),
             },
             &bone(scene, c),
             c,
@@ -530,6 +532,19 @@ struct Roles<'a> {
     on_face: &'a [bool],
     /// Nodes held still whatever their bone does (`[tet] septum_detached`; empty: none).
     still: &'a [bool],
+    /// The CT's outermost voxel centres (`Volume::bounds`): where the scan ends.
+    scan: ([f64; 3], [f64; 3]),
+}
+
+/// How `hold_tissue` held what the tissue's roles leave open.
+struct Held {
+    /// Bone nodes at the saw lines that slide instead (`[tet] release_cuts`).
+    released_at_cuts: usize,
+    /// Pieces of the mesh held by too few nodes, held rigidly, and their nodes.
+    pieces: usize,
+    piece_nodes: usize,
+    /// Free nodes where the scan ends that slide on its end plane (`[tet] scan_end`).
+    on_scan_end: usize,
 }
 
 /// Every solved node's hold (`tet::conditions::holds`; the nodes are the corners, then the
@@ -542,12 +557,13 @@ fn hold_tissue(
     bone: &Bone,
     case: &Case,
     rest_normals: bool,
-) -> (Holds, usize, (usize, usize)) {
+) -> (Holds, Held) {
     let Roles {
         kind,
         mucosa,
         on_face,
         still,
+        scan,
     } = roles;
     let nodes = quadratic.map_or(&mesh.nodes, |q| &q.nodes);
     // `[surface] movable` holds the face outside it, not the walls of cavities.
@@ -593,8 +609,22 @@ fn hold_tissue(
         Some(q) => condition(&q.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
         None => condition(&mesh.tets, nodes, kind, &mut h, &case.tet, &follow, &ms),
     };
+    // After the floating pieces: a piece held by the scan's end plane alone could still slide
+    // along it, so it is held with its bone as before.
+    let on_scan_end = match case.tet.scan_end {
+        ScanEndHold::Slides => crate::tet::conditions::slide_on_scan_end(&mut h, nodes, kind, scan),
+        ScanEndHold::Free => 0,
+    };
     hold_still(&mut h, still);
-    (h, released, held)
+    (
+        h,
+        Held {
+            released_at_cuts: released,
+            pieces: held.0,
+            piece_nodes: held.1,
+            on_scan_end,
+        },
+    )
 }
 
 /// Hold `still`'s nodes where they are, in the run and in the plan basis.
@@ -667,25 +697,40 @@ fn septum_nodes(
 /// Where the scan ends in the tissue (report.json `tet.scan_end`).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct ScanEnd {
+    /// The tissue's free surface there.
     pub free_nodes: usize,
+    /// Nodes there sliding on the scan's end plane (`[tet] scan_end = "slides"`; 0 with
+    /// `"free"`). Defaulted when absent: a report.json written before session 63 had none.
+    #[serde(default)]
+    pub sliding_nodes: usize,
     /// From the nearest of them to a node on bone the plan moves (mm).
     pub nearest_moved_bone_mm: f64,
 }
 
-/// The free nodes past the CT's outermost voxel centres (`bounds`): the tissue's free surface
-/// where the scan ends (beyond the CT the fields read air, docs/pipeline.md "Region"), with the
-/// distance from the nearest of them to moved bone; None when there are none or nothing moves.
+/// The tissue past the CT's outermost voxel centres (`bounds`), where the scan ends (beyond the
+/// CT the fields read air, docs/pipeline.md "Region"): its free nodes, the `sliding` nodes
+/// `[tet] scan_end` slides on the end plane, and the distance from the nearest free or sliding
+/// node there to moved bone; None when there are none or nothing moves.
 fn scan_end(
     nodes: &[[f64; 3]],
     constraint: &[u8],
     bounds: ([f64; 3], [f64; 3]),
+    sliding: usize,
 ) -> Option<ScanEnd> {
     let end: Vec<[f64; 3]> = nodes
         .iter()
         .zip(constraint)
-        .filter(|(p, c)| **c == FREE && crate::volume::past_scan_end(bounds, **p))
+        .filter(|(p, c)| {
+            (**c == FREE || (sliding > 0 && **c == SLIDING))
+                && crate::volume::past_scan_end(bounds, **p)
+        })
         .map(|(p, _)| *p)
         .collect();
+    let free_nodes = nodes
+        .iter()
+        .zip(constraint)
+        .filter(|(p, c)| **c == FREE && crate::volume::past_scan_end(bounds, **p))
+        .count();
     let moved: Vec<[f64; 3]> = nodes
         .iter()
         .zip(constraint)
@@ -701,7 +746,8 @@ fn scan_end(
         })
         .fold(f64::INFINITY, f64::min);
     (!end.is_empty() && nearest.is_finite()).then_some(ScanEnd {
-        free_nodes: end.len(),
+        free_nodes,
+        sliding_nodes: sliding,
         nearest_moved_bone_mm: nearest,
     })
 }
@@ -1104,7 +1150,15 @@ pub fn predict(
     let on_face = on_face(nodes, &kind, &scene.vol, &scene.seg.outside);
     // The linear models (any quadratic element, or the linear material) solve K u = f once.
     let linear_solve = quadratic.is_some() || t.material == TetMaterial::Linear;
-    let (mut holds, released_at_cuts, (pieces, held_still)) = hold_tissue(
+    let (
+        mut holds,
+        Held {
+            released_at_cuts,
+            pieces,
+            piece_nodes: held_still,
+            on_scan_end,
+        },
+    ) = hold_tissue(
         &mesh,
         quadratic.as_ref(),
         Roles {
@@ -1112,6 +1166,7 @@ pub fn predict(
             mucosa: &mucosa,
             on_face: &on_face,
             still: &[],
+            scan: scene.vol.bounds(),
         },
         &bone,
         case,
@@ -1140,7 +1195,7 @@ pub fn predict(
     } = holds;
     // Not a warning: the bundled jaws phantom and both real CTs end in tissue within 3 mm of
     // moved bone (docs/pipeline.md "Region").
-    let scan_end = scan_end(&mesh.nodes, &constraint, scene.vol.bounds());
+    let scan_end = scan_end(&mesh.nodes, &constraint, scene.vol.bounds(), on_scan_end);
     if pieces > 0 {
         rec.warn(format!(
             "{pieces} pieces of the tissue mesh ({held_still} nodes) are held by fewer than three bone or region-face nodes: each moves rigidly with the bone it lies on (thin tissue the mesh separated or hinged; a smaller [tet] skin_size_mm resolves it)"

@@ -114,6 +114,56 @@ pub(crate) struct Holds {
     pub overlapping_segments: Vec<usize>,
 }
 
+/// `[tet] scan_end = "slides"`: every free node past the CT's outermost voxel centres `bounds`
+/// (the tissue's surface where the scan ends, `volume::past_scan_end`) slides on the plane the
+/// scan ends in: n · u = 0 with n that plane's outward normal, the motion along it free. Tissue
+/// that goes on past a plane and is moved mirror-symmetrically about it moves so; a free surface
+/// instead lets the cut lip or neck swing as if nothing lay beyond (docs/validation-notes.md
+/// "Where the scan ends: a truncation study"). A node past two planes (an edge of the field of
+/// view) slides on the one it lies furthest past. The plane is held by the rest of the head, the
+/// bone the plan leaves in place: a plan that moves every bone node of the mesh (the whole head
+/// moved rigidly) leaves nothing to hold it, and the end stays free. How many nodes now slide
+/// there.
+pub(crate) fn slide_on_scan_end(
+    h: &mut Holds,
+    nodes: &[[f64; 3]],
+    kind: &[NodeKind],
+    bounds: ([f64; 3], [f64; 3]),
+) -> usize {
+    let rest_of_head = kind
+        .iter()
+        .zip(&h.linear)
+        .any(|(k, l)| *k == NodeKind::Bone && *l == LinearHold::Still);
+    if !rest_of_head {
+        return 0;
+    }
+    let mut n_sliding = 0;
+    for (n, p) in nodes.iter().enumerate() {
+        if h.constraint[n] != FREE || !crate::volume::past_scan_end(bounds, *p) {
+            continue;
+        }
+        let (mut axis, mut past, mut sign) = (0, f64::NEG_INFINITY, 1.0);
+        for k in 0..3 {
+            for (d, s) in [(bounds.0[k] - p[k], -1.0), (p[k] - bounds.1[k], 1.0)] {
+                if d > past {
+                    (axis, past, sign) = (k, d, s);
+                }
+            }
+        }
+        let mut normal = [0.0; 3];
+        normal[axis] = sign;
+        h.constraint[n] = SLIDING;
+        h.hold[n] = Hold::Slide { normal, value: 0.0 };
+        h.linear[n] = LinearHold::Slides {
+            normal,
+            segment: None,
+            at: *p,
+        };
+        n_sliding += 1;
+    }
+    n_sliding
+}
+
 /// The bone that holds the tissue: the skull surface at rest, the plan's rigid moves and its
 /// segments (`[[osteotomy]]`, in the plan's order), and the surface's normals where tissue slides
 /// on it ([`Bone::normals`]).
