@@ -717,20 +717,17 @@ fn scan_end(
     bounds: ([f64; 3], [f64; 3]),
     sliding: usize,
 ) -> Option<ScanEnd> {
-    let end: Vec<[f64; 3]> = nodes
+    let (end, free_nodes) = nodes
         .iter()
         .zip(constraint)
         .filter(|(p, c)| {
             (**c == FREE || (sliding > 0 && **c == SLIDING))
                 && crate::volume::past_scan_end(bounds, **p)
         })
-        .map(|(p, _)| *p)
-        .collect();
-    let free_nodes = nodes
-        .iter()
-        .zip(constraint)
-        .filter(|(p, c)| **c == FREE && crate::volume::past_scan_end(bounds, **p))
-        .count();
+        .fold((Vec::new(), 0), |(mut end, free), (p, c)| {
+            end.push(*p);
+            (end, free + usize::from(*c == FREE))
+        });
     let moved: Vec<[f64; 3]> = nodes
         .iter()
         .zip(constraint)
