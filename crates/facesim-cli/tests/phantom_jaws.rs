@@ -176,21 +176,7 @@ fn a_hollow_nose_is_asked_for_by_name_and_only_the_jaws_head_has_one() {
     // its CT is air inside the nose beside the septum, where the standard head's is tissue;
     // the capsule head refuses it in one line.
     let d = common::kept_dir("facesim-jaws-hollow");
-    let r = facesim(&[
-        "phantom",
-        d.to_str().unwrap(),
-        "--anatomy",
-        "jaws",
-        "--nose",
-        "hollow",
-        "--spacing",
-        "2",
-        "--slice",
-        "2",
-        "--noise",
-        "0",
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
+    cli::hollow_jaws_phantom(&d, &["--slice", "2", "--noise", "0"]);
     let toml = std::fs::read_to_string(d.join("phantom.toml")).unwrap();
     assert!(toml.contains("\nnasal_passages = true\n"), "{toml}");
     let vol = facesim::volume::read_volume(&d.join("ct.nii.gz")).unwrap();

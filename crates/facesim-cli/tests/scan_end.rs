@@ -55,17 +55,7 @@ fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
 fn a_scan_cut_through_the_lip_slides_on_its_end_plane_and_comes_near_the_uncut_head() {
     let root = common::kept_dir("scan-end");
     let (full, cut) = (root.join("full"), root.join("cut"));
-    let r = cli::facesim(&[
-        "phantom",
-        full.to_str().unwrap(),
-        "--anatomy",
-        "jaws",
-        "--nose",
-        "hollow",
-        "--spacing",
-        "2",
-    ]);
-    assert_eq!(r.code, 0, "{}", r.stderr);
+    cli::hollow_jaws_phantom(&full, &[]);
     // Cut the CT 5 mm below labrale superius: keep the slices at or above it.
     let shape: toml::Table =
         toml::from_str(&std::fs::read_to_string(full.join("phantom.toml")).unwrap()).unwrap();

@@ -23,6 +23,23 @@ pub fn facesim(args: &[&str]) -> CliResult {
     }
 }
 
+/// `facesim phantom DIR --anatomy jaws --nose hollow --spacing 2` and `more` options: the jaws
+/// head with a CT's hollow nose (docs/phantom.md "Nasal passages"); asserts it was written.
+pub fn hollow_jaws_phantom(dir: &Path, more: &[&str]) {
+    let head = [
+        "phantom",
+        dir.to_str().unwrap(),
+        "--anatomy",
+        "jaws",
+        "--nose",
+        "hollow",
+        "--spacing",
+        "2",
+    ];
+    let r = facesim(&[&head[..], more].concat());
+    assert_eq!(r.code, 0, "{}", r.stderr);
+}
+
 /// Assert the CLI failed with one line on stderr that names `file` and contains `problem`.
 pub fn assert_clean_failure(r: &CliResult, file: &str, problem: &str) {
     assert_ne!(r.code, 0, "expected failure, got success: {}", r.stdout);
