@@ -4,7 +4,8 @@
 # configuration, munge key, state, spool, logs, sockets — under DIR, nothing in /etc.
 #
 #   scripts/slurm-cluster.sh start DIR [WATCH_PID]   # prints `export SLURM_CONF=… PATH=DIR/bin:…`
-#   scripts/slurm-cluster.sh stop DIR                # stops the daemons by PID, removes DIR
+#   scripts/slurm-cluster.sh stop DIR                # cancels the jobs, stops the daemons by PID,
+#                                                    # kills what is left, removes DIR and cgroups
 #
 # The node has this machine's CPUs and memory (less 1 GB), one partition `cohort`, memory as a
 # consumable resource (--mem enforced: a job step over it is killed and ends OUT_OF_MEMORY),
@@ -17,10 +18,55 @@ set -euo pipefail
 
 die() { echo "slurm-cluster: $*" >&2; exit 1; }
 
+# The processes of this cluster's jobs: every slurmstepd started by this cluster's slurmd (it
+# inherits SLURM_CONF=DIR/slurm.conf from the daemon) and every process in the node's Slurm
+# cgroups (proctrack/cgroup puts each job's processes there: job scripts, their children, srun
+# and the steps' tasks). Zombies are dead already and left out. Never this script or its parent.
+job_pids() {
+  local conf="$1" host="$2" f pid
+  {
+    for f in /sys/fs/cgroup/*/slurm_"$host"; do
+      if [ -d "$f" ]; then find "$f" -name cgroup.procs -exec cat {} + 2>/dev/null || true; fi
+    done
+    for f in /proc/[0-9]*; do
+      if [ "$(cat "$f/comm" 2>/dev/null)" = slurmstepd ] &&
+        tr '\0' '\n' 2>/dev/null <"$f/environ" | grep -qxF "SLURM_CONF=$conf"; then
+        echo "${f#/proc/}"
+      fi
+    done
+  } | sort -un | while read -r pid; do
+    [ "$pid" != "$$" ] && [ "$pid" != "$PPID" ] || continue
+    # The state is the field after the parenthesised command (which may hold spaces).
+    f="$(cat "/proc/$pid/stat" 2>/dev/null)" || continue
+    f="${f##*) }"
+    if [ "${f%% *}" != Z ]; then echo "$pid"; fi
+  done
+  return 0
+}
+
 stop() {
-  local dir="$1" pid f
+  local dir="$1" pid f host conf ids left
   [ -d "$dir" ] || return 0
   dir="$(cd "$dir" && pwd)"
+  host="$(hostname -s)"
+  conf="$dir/slurm.conf"
+  # The jobs first, while the daemons run: scancel makes slurmd signal every step (SIGTERM, then
+  # SIGKILL after KillWait), slurmstepd waits for its processes, removes the job's cgroups and
+  # exits. slurmstepd is not the daemon's child (it is re-parented to init), so stopping slurmd
+  # alone would leave it, its job script and every child running.
+  # Every client call is bounded: with the controller gone, squeue and scancel retry for minutes.
+  if SLURM_CONF="$conf" timeout 5 scontrol ping 2>/dev/null | grep -q UP; then
+    ids="$(SLURM_CONF="$conf" timeout 5 squeue -h -t PD,R,S,CG,CF,RQ,RS,RH,SE,SO,ST -o %i 2>/dev/null || true)"
+    # shellcheck disable=SC2086 # one id a word
+    [ -z "$ids" ] || SLURM_CONF="$conf" timeout 5 scancel $ids 2>/dev/null || true
+    # KillWait is 5 s: the steps are gone within it, the jobs then leave COMPLETING.
+    local until=$((SECONDS + 20))
+    while [ "$SECONDS" -lt "$until" ]; do
+      left="$(SLURM_CONF="$conf" timeout 5 squeue -h -t R,S,CG,CF -o %i 2>/dev/null || echo failed)"
+      [ -z "$left" ] && [ -z "$(job_pids "$conf" "$host")" ] && break
+      sleep 0.2
+    done
+  fi
   for f in watchdog slurmd slurmctld munged; do
     [ -f "$dir/pids/$f" ] || continue
     pid="$(cat "$dir/pids/$f")"
@@ -28,8 +74,7 @@ stop() {
     # of `bash -c`, so this script may have the watchdog's PID): never kill ourselves.
     [ "$pid" = "$$" ] || [ "$pid" = "$PPID" ] || kill "$pid" 2>/dev/null || true
   done
-  # slurmd and slurmctld exit within a second of SIGTERM; slurmstepd of a job still running
-  # is the daemon's child and goes with it. Wait by PID, then insist.
+  # slurmd and slurmctld exit within a second of SIGTERM. Wait by PID, then insist.
   for f in watchdog slurmd slurmctld munged; do
     [ -f "$dir/pids/$f" ] || continue
     pid="$(cat "$dir/pids/$f")"
@@ -37,11 +82,30 @@ stop() {
     for _ in $(seq 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.1; done
     kill -9 "$pid" 2>/dev/null || true
   done
-  # slurmd's cgroups.
-  local cg
-  for cg in /sys/fs/cgroup/*/slurm_"$(hostname -s)"; do
-    [ -d "$cg" ] && find "$cg" -depth -type d -exec rmdir {} + 2>/dev/null || true
+  # What a cancel did not end (the controller was already gone, a step ignored its signals):
+  # killed by PID until none is left.
+  for _ in $(seq 50); do
+    left="$(job_pids "$conf" "$host")"
+    [ -n "$left" ] || break
+    # shellcheck disable=SC2086 # one PID a word
+    kill -9 $left 2>/dev/null || true
+    sleep 0.1
   done
+  [ -z "$left" ] || echo "slurm-cluster: processes left after stop: $left" >&2
+  # The node's cgroups, deepest first; a cgroup whose last process has just died may refuse
+  # for a moment.
+  local cg
+  for _ in $(seq 50); do
+    left=""
+    for cg in /sys/fs/cgroup/*/slurm_"$host"; do
+      [ -d "$cg" ] || continue
+      find "$cg" -depth -type d -exec rmdir {} + 2>/dev/null || true
+      [ ! -d "$cg" ] || left="$left $cg"
+    done
+    [ -n "$left" ] || break
+    sleep 0.1
+  done
+  [ -z "$left" ] || echo "slurm-cluster: cgroups left after stop:$left" >&2
   rm -rf "$dir"
 }
 
@@ -56,12 +120,16 @@ start() {
   [ ! -e "$dir" ] || [ -z "$(ls -A "$dir")" ] || die "$dir exists and is not empty"
   [ ! -e /etc/slurm/slurm.conf ] ||
     die "/etc/slurm/slurm.conf exists: this machine has its own Slurm; use that, not a test cluster"
-  # A second slurmd on this host would share the node's cgroups; a stale one is a cluster whose
-  # stop never ran (its processes outlived a killed watchdog). Files left behind do not matter:
+  # A second slurmd (or a job's slurmstepd) on this host would share the node's cgroups; a stale
+  # one is a cluster whose stop never ran (its processes outlived a killed watchdog). Files left behind do not matter:
   # nothing outside DIR is read.
-  local running
-  running="$(pgrep -a -x 'slurmd|slurmd-wlm|slurmctld|slurmctld-wlm' || true)"
-  [ -z "$running" ] || die "Slurm daemons already run here (stop them first): $(echo "$running" | tr '\n' ';')"
+  # One name per pgrep: pgrep matches a process name (at most 15 characters) and refuses a
+  # longer pattern, alternatives included.
+  local running="" name
+  for name in slurmd slurmctld slurmstepd slurmd-wlm slurmctld-wlm; do
+    running="$running$(pgrep -a -x "$name" | tr '\n' ';' || true)"
+  done
+  [ -z "$running" ] || die "Slurm daemons already run here (stop them first): $running"
   mkdir -p "$dir"/{munge,state,spool,log,pids,bin}
   dir="$(cd "$dir" && pwd)"
   chmod 700 "$dir/munge"

@@ -32,8 +32,13 @@
 use std::collections::BTreeMap;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
+
+/// One cluster at a time: the tests of this file run in parallel threads, and a second node
+/// daemon on this host would share the node's cgroups (slurm-cluster.sh refuses to start one).
+static ONE_CLUSTER: Mutex<()> = Mutex::new(());
 
 fn exe() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_facesim"))
@@ -96,10 +101,13 @@ fn preconditions() {
     );
 }
 
-/// The one-node cluster; stopped (daemons by PID, directory removed) when dropped.
+/// The one-node cluster; stopped (jobs cancelled, daemons by PID, directory removed) when
+/// dropped.
 struct Cluster {
     dir: PathBuf,
     conf: PathBuf,
+    /// What `slurm-cluster.sh start` wrote to stderr (nothing, when all is well).
+    start_stderr: String,
 }
 
 impl Cluster {
@@ -117,7 +125,20 @@ impl Cluster {
             String::from_utf8_lossy(&o.stderr)
         );
         let conf = dir.join("slurm.conf");
-        Cluster { dir, conf }
+        let start_stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+        Cluster {
+            dir,
+            conf,
+            start_stderr,
+        }
+    }
+
+    fn stop(&self) -> Output {
+        Command::new(root().join("scripts/slurm-cluster.sh"))
+            .arg("stop")
+            .arg(&self.dir)
+            .output()
+            .unwrap()
     }
 
     fn cmd(&self, program: &str) -> Command {
@@ -145,10 +166,7 @@ impl Cluster {
 
 impl Drop for Cluster {
     fn drop(&mut self) {
-        let _ = Command::new(root().join("scripts/slurm-cluster.sh"))
-            .arg("stop")
-            .arg(&self.dir)
-            .status();
+        let _ = self.stop();
     }
 }
 
@@ -303,6 +321,7 @@ fn submitted_jobs(log: &Path) -> Vec<(String, String)> {
 
 #[test]
 fn cohort_on_a_real_slurm_with_faults() {
+    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
     preconditions();
     let t0 = Instant::now();
     let work = root().join("target/tmp/slurm-cohort");
@@ -783,5 +802,216 @@ fn cohort_on_a_real_slurm_with_faults() {
             .join(format!("facesim-slurm-{}", std::process::id()))
             .exists(),
         "the cluster's directory is left"
+    );
+}
+
+/// A process as /proc shows it: parent, state (R, S, Z, …), start time (clock ticks since boot,
+/// which tells a process from a later one given the same PID) and command line.
+#[derive(Clone, Debug)]
+struct Proc {
+    pid: u32,
+    ppid: u32,
+    state: char,
+    start: u64,
+    cmdline: String,
+}
+
+fn proc_of(pid: u32) -> Option<Proc> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The fields after the parenthesised command name (which may hold spaces and parentheses).
+    let rest: Vec<&str> = stat[stat.rfind(')')? + 1..].split_whitespace().collect();
+    let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+    Some(Proc {
+        pid,
+        state: rest.first()?.chars().next()?,
+        ppid: rest.get(1)?.parse().ok()?,
+        start: rest.get(19)?.parse().ok()?,
+        cmdline: String::from_utf8_lossy(&cmdline)
+            .replace('\0', " ")
+            .trim()
+            .to_string(),
+    })
+}
+
+fn processes() -> Vec<Proc> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .flatten()
+        .filter_map(|e| e.file_name().to_str()?.parse().ok())
+        .filter_map(proc_of)
+        .collect()
+}
+
+/// Whether the process recorded as `p` still runs: the same PID with the same start time, not
+/// a zombie (a dead process its parent has not reaped yet).
+fn still_runs(p: &Proc) -> bool {
+    proc_of(p.pid).is_some_and(|now| now.start == p.start && now.state != 'Z')
+}
+
+/// The cgroup directories under /sys/fs/cgroup that hold `pid`, one per hierarchy, read from
+/// /proc/PID/cgroup and /proc/mounts (cgroup v1: one mount per controller set; v2: one
+/// unified mount), whatever layout this machine's slurmd uses.
+fn cgroup_dirs(pid: u32) -> Vec<PathBuf> {
+    let mounts = std::fs::read_to_string("/proc/mounts").unwrap();
+    let mounts: Vec<(String, String, Vec<String>)> = mounts
+        .lines()
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split_whitespace().collect();
+            (f.len() > 3 && f[2].starts_with("cgroup")).then(|| {
+                (
+                    f[2].to_string(),
+                    f[1].to_string(),
+                    f[3].split(',').map(String::from).collect(),
+                )
+            })
+        })
+        .collect();
+    let text = std::fs::read_to_string(format!("/proc/{pid}/cgroup")).unwrap_or_default();
+    text.lines()
+        .filter_map(|l| {
+            let mut f = l.splitn(3, ':');
+            let (_, controllers, path) = (f.next()?, f.next()?, f.next()?);
+            let (_, mount, _) = mounts.iter().find(|(kind, _, opts)| {
+                if controllers.is_empty() {
+                    kind == "cgroup2"
+                } else {
+                    kind == "cgroup" && controllers.split(',').all(|c| opts.iter().any(|o| o == c))
+                }
+            })?;
+            Some(Path::new(mount).join(path.trim_start_matches('/')))
+        })
+        .collect()
+}
+
+/// Jobs that keep running — a `sleep`, and a job script with a background child and a job
+/// step (`srun`) of its own — then `slurm-cluster.sh stop` mid-run: no slurmstepd, no job
+/// process and none of the node's Slurm cgroups may be left, checked by the PIDs and cgroup
+/// directories recorded before the stop. `start` must print nothing on stderr.
+#[test]
+fn stop_ends_running_jobs_and_their_cgroups() {
+    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    preconditions();
+    let work = root().join("target/tmp/slurm-stop");
+    let _ = std::fs::remove_dir_all(&work);
+    std::fs::create_dir_all(&work).unwrap();
+    let cluster = Cluster::start();
+    assert_eq!(
+        cluster.start_stderr.trim(),
+        "",
+        "slurm-cluster.sh start wrote to stderr"
+    );
+
+    let script = work.join("job.sh");
+    std::fs::write(&script, "#!/bin/sh\nsleep 300 &\nsrun sleep 300 &\nwait\n").unwrap();
+    let mut jobs = Vec::new();
+    for args in [
+        vec!["--wrap".to_string(), "sleep 300".to_string()],
+        vec![script.display().to_string()],
+    ] {
+        let o = run_ok(
+            cluster
+                .cmd("sbatch")
+                .args(["--parsable", "--mem=50", "--output=/dev/null"])
+                .arg(format!("--chdir={}", work.display()))
+                .args(&args),
+        );
+        jobs.push(o.trim().split(';').next().unwrap().to_string());
+    }
+    // Every slurmstepd of the two jobs (two batch steps, the script's step 0) and its process
+    // tree, up to the three sleeps.
+    let mut recorded = Vec::new();
+    wait_for(
+        "both jobs' slurmstepd and their three sleeps",
+        Duration::from_secs(60),
+        || {
+            let all = processes();
+            let steps = |p: &Proc| {
+                jobs.iter().any(|j| {
+                    p.cmdline.starts_with(&format!("slurmstepd: [{j}."))
+                        && !p.cmdline.contains(".extern]")
+                })
+            };
+            let mut tree: Vec<Proc> = all.iter().filter(|p| steps(p)).cloned().collect();
+            let mut grew = true;
+            while grew {
+                let more: Vec<Proc> = all
+                    .iter()
+                    .filter(|p| {
+                        tree.iter().any(|t| t.pid == p.ppid) && !tree.iter().any(|t| t.pid == p.pid)
+                    })
+                    .cloned()
+                    .collect();
+                grew = !more.is_empty();
+                tree.extend(more);
+            }
+            let sleeps = tree
+                .iter()
+                .filter(|p| p.cmdline.ends_with("sleep 300") && !p.cmdline.contains("srun"))
+                .count();
+            let stepds = tree.iter().filter(|p| steps(p)).count();
+            recorded = tree;
+            stepds == 3 && sleeps == 3
+        },
+    );
+    let stepds: Vec<&Proc> = recorded
+        .iter()
+        .filter(|p| p.cmdline.starts_with("slurmstepd"))
+        .collect();
+    // The node's cgroups, as the job processes' /proc/PID/cgroup name them: each job's own
+    // directory and the node's root of them (the first component named slurm…).
+    let mut cgroups = std::collections::BTreeSet::new();
+    for p in recorded
+        .iter()
+        .filter(|p| !p.cmdline.starts_with("slurmstepd"))
+    {
+        for dir in cgroup_dirs(p.pid) {
+            let slurm =
+                |c: std::path::Component| c.as_os_str().to_string_lossy().starts_with("slurm");
+            let Some(i) = dir.components().position(slurm) else {
+                continue;
+            };
+            let node: PathBuf = dir.components().take(i + 1).collect();
+            cgroups.insert(node);
+            cgroups.insert(dir);
+        }
+    }
+    assert!(
+        cgroups.iter().any(|c| c.to_string_lossy().contains("job_")),
+        "no job cgroup found for {recorded:?}"
+    );
+    for c in &cgroups {
+        assert!(c.is_dir(), "{}", c.display());
+    }
+    let state = cluster.out("squeue", &["--noheader", "--format=%i %T"]);
+    assert_eq!(
+        state.lines().filter(|l| l.ends_with(" RUNNING")).count(),
+        2,
+        "{state}"
+    );
+
+    let t = Instant::now();
+    let o = cluster.stop();
+    let stop_seconds = t.elapsed().as_secs_f64();
+    assert!(
+        o.status.success(),
+        "stop failed: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(!cluster.dir.exists(), "the cluster's directory is left");
+    let left: Vec<&Proc> = recorded.iter().filter(|p| still_runs(p)).collect();
+    assert!(
+        left.is_empty(),
+        "left running after stop ({} processes recorded, {} slurmstepd): {left:#?}",
+        recorded.len(),
+        stepds.len()
+    );
+    let left: Vec<&PathBuf> = cgroups.iter().filter(|c| c.exists()).collect();
+    assert!(left.is_empty(), "cgroups left after stop: {left:#?}");
+    println!(
+        "slurm stop: {} processes ({} slurmstepd) and {} cgroup directories before, none after; \
+         stop took {stop_seconds:.1} s",
+        recorded.len(),
+        stepds.len(),
+        cgroups.len()
     );
 }
