@@ -38,11 +38,12 @@ fn fails_writing_nothing(case: &Path, file: &str, problem: &str) {
 }
 
 /// One full run of the bundled sample, shared by the tests that read its outputs (a run costs
-/// ~15 s; CI time matters).
+/// ~15 s; CI time matters). Its output lies apart from the shared phantom case, which the tests
+/// only read.
 fn bundled_run() -> &'static Path {
     static OUT: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     OUT.get_or_init(|| {
-        let out = phantom_dir().join("run1");
+        let out = common::out_dir("facesim-bundled-run");
         let r = facesim(&[
             "run",
             phantom_dir().to_str().unwrap(),
@@ -115,7 +116,7 @@ fn phantom_case_runs_and_writes_every_output() {
 
     // Running again gives byte-identical meshes (determinism with rayon); what is compared is
     // made before the solve, so the second run's model may be coarse.
-    let run2 = phantom_dir().join("run2");
+    let run2 = common::out_dir("facesim-bundled-run2");
     let mut args = vec![
         "run",
         phantom_dir().to_str().unwrap(),
@@ -128,7 +129,7 @@ fn phantom_case_runs_and_writes_every_output() {
     for f in ["face_pre.ply", "skull_pre.ply", "labels.nii.gz"] {
         assert_eq!(
             std::fs::read(out.join(f)).unwrap(),
-            std::fs::read(phantom_dir().join("run2").join(f)).unwrap(),
+            std::fs::read(run2.join(f)).unwrap(),
             "{f}"
         );
     }
@@ -200,8 +201,10 @@ fn compare_and_render_read_every_format_a_run_writes() {
     assert!(want.starts_with("mean "), "{want}");
     assert_eq!(headline(compare("face_post.stl", false)), want, "STL");
 
+    // The pictures go to a directory of this test's own: the run's is read by other tests.
+    let pictures = common::kept_dir("facesim-render");
     let picture = |mesh: &str| {
-        let png = out.join(format!("{mesh}.png"));
+        let png = pictures.join(format!("{mesh}.png"));
         let r = facesim(&[
             "render",
             out.join(mesh).to_str().unwrap(),

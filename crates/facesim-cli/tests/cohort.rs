@@ -5,6 +5,9 @@
 //! run's report.json and displacement.csv, the broken case's rows carry facesim's one-line
 //! error, and the charts exist. Also `run --set` and the phantom's refusals.
 
+#[path = "../../facesim/tests/common/mod.rs"]
+mod common;
+
 use facesim::phantom_jaws::Shape;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,11 +31,11 @@ fn snakemake() -> PathBuf {
     p
 }
 
+/// A new, empty directory under target/tmp (kept for inspection) named after `name`: a fixed
+/// name, emptied first, would be emptied under a second copy of the test command still
+/// running in it.
 fn tmp(name: &str) -> PathBuf {
-    let d = root().join("target/tmp").join(name);
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    common::kept_dir(&format!("facesim-{name}"))
 }
 
 fn run_ok(cmd: &mut Command) -> String {

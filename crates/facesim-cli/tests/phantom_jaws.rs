@@ -34,7 +34,8 @@ fn jaws_dir() -> &'static Path {
 /// `landmarks`.
 fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
     let dir = jaws_dir();
-    let out = dir.join(format!("out_{file}"));
+    // Apart from the shared case: the tests run their plans at once.
+    let out = common::out_dir(&format!("facesim-jaws-{}", file.trim_end_matches(".toml")));
     let r = facesim(&[
         "run",
         dir.join(file).to_str().unwrap(),
@@ -140,7 +141,7 @@ fn setback_rotation_and_le_fort_move_the_face_their_way() {
 #[test]
 fn the_first_sample_shows_a_face_with_every_soft_landmark() {
     let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
-    let out = common::kept_dir("facesim-first-sample");
+    let out = common::out_dir("facesim-first-sample");
     let report = cli::run_ok(&case, &out, &[]);
     assert_eq!(
         report["warnings"],

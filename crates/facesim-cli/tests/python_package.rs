@@ -3,6 +3,11 @@
 //! crate), installed into the venv scripts/test-setup.sh makes (target/slicer-venv), and tested
 //! by pytest (python/tests) against this build's `facesim` binary: run, replan and sweep equal
 //! the command line's files, bad input raises FacesimError, the interpreter lock is released.
+//!
+//! The wheel directory, the package installed in the venv and pytest's kept files are one per
+//! checkout, shared by every copy of the test command: the whole test holds a file lock, so a
+//! second copy waits instead of removing the first one's wheel, reinstalling the package under
+//! its pytest or emptying its files.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -35,6 +40,13 @@ fn run(cmd: &mut Command, what: &str) -> String {
 #[test]
 fn the_installed_wheel_equals_the_command_line() {
     let python = venv_tool("python");
+    let lock_path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("python-package.lock");
+    let lock = std::fs::File::create(&lock_path)
+        .unwrap_or_else(|e| panic!("{}: {e}", lock_path.display()));
+    // Released when `lock` is dropped at the end of the test, or by the kernel if the process
+    // dies.
+    lock.lock()
+        .unwrap_or_else(|e| panic!("{}: {e}", lock_path.display()));
     let wheels = root().join("target/wheels");
     // Only this build's wheel in the directory pip installs from.
     if let Ok(entries) = std::fs::read_dir(&wheels) {

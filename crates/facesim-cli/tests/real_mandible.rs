@@ -19,7 +19,7 @@ fn run() -> Value {
 fn run_in() -> (Value, std::path::PathBuf) {
     common::real_mandible_ct();
     let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real-mandible");
-    let out = common::kept_dir("facesim-real-mandible");
+    let out = common::out_dir("facesim-real-mandible");
     let r = facesim(&[
         "run",
         case.to_str().unwrap(),

@@ -81,7 +81,7 @@ fn a_scan_cut_through_the_lip_slides_on_its_end_plane_and_comes_near_the_uncut_h
 
     let quick = "tet.error_estimate=false";
     let run = |case: &Path, name: &str, sets: &[&str]| {
-        cli::run_ok(case, &common::kept_dir(name), &[&[quick], sets].concat())
+        cli::run_ok(case, &common::out_dir(name), &[&[quick], sets].concat())
     };
     let uncut = run(&full, "scan-end-uncut", &[]);
     let slides = run(&cut, "scan-end-slides", &[]);

@@ -12,7 +12,7 @@ use std::path::PathBuf;
 /// directory and report.json.
 fn run_real(name: &str, sets: &[&str]) -> (PathBuf, serde_json::Value) {
     let ct = common::real_ct();
-    let out = common::kept_dir(name);
+    let out = common::out_dir(name);
     let report = cli::run_ok(ct.parent().unwrap(), &out, sets);
     (out, report)
 }

@@ -22,7 +22,7 @@ fn run(name: &str, sets: &[&str]) -> Face {
 
 /// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
 fn run_case(case: &Path, name: &str, sets: &[&str]) -> (Face, serde_json::Value) {
-    let out = common::kept_dir(name);
+    let out = common::out_dir(name);
     let report = cli::run_ok(case, &out, sets);
     let (pre, post) = cli::face_positions(&out);
     (Face { pre, post }, report)
@@ -393,9 +393,9 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
 fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");
     common::real_ct();
-    let out = common::kept_dir("facesim-real-nose");
+    let out = common::out_dir("facesim-real-nose");
     let stiff = cli::run_ok(&sample, &out, &["tet.nose_youngs_kpa=3000"]);
-    let plain = cli::run_ok(&sample, &common::kept_dir("facesim-real-nose-off"), &[]);
+    let plain = cli::run_ok(&sample, &common::out_dir("facesim-real-nose-off"), &[]);
     let ratio = |r: &serde_json::Value| r["soft_hard_ratios"]["Sn/ANS"]["ratio"].as_f64().unwrap();
     let count = stiff["tet"]["nose_elements"].as_u64().unwrap();
     println!(
@@ -465,7 +465,7 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     // 2.5, the framework is the same nose less its base (the columella's lower part and the
     // nostril sills): no framework tetrahedron below the base (1 mm of slack for the head
     // frame's tilt), fewer of them, on the same mesh.
-    let high_dir = common::kept_dir("facesim-real-nose-base10");
+    let high_dir = common::out_dir("facesim-real-nose-base10");
     let high = cli::run_ok(
         &sample,
         &high_dir,
@@ -501,7 +501,7 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     // The nose's tetrahedra are terms of their own in the reduced model (slot 4 + tissue, at
     // the nose's modulus): a band by the reduced model runs, and its stored model answers other
     // tissues within its certified bound of a full run with the nose and those tissues.
-    let reduced_dir = common::kept_dir("facesim-real-nose-reduced");
+    let reduced_dir = common::out_dir("facesim-real-nose-reduced");
     let nose = ["tet.nose_youngs_kpa=3000"];
     let band = cli::run_ok(
         &sample,
@@ -533,7 +533,7 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     let plan = reduced_dir.with_extension("tissue.toml");
     let text = format!("[tet.muscle]\nyoungs_kpa = {muscle_kpa}\n");
     std::fs::write(&plan, text).unwrap();
-    let replanned = common::kept_dir("facesim-real-nose-replan");
+    let replanned = common::out_dir("facesim-real-nose-replan");
     let r = cli::facesim(&[
         "replan",
         reduced_dir.to_str().unwrap(),
@@ -552,7 +552,7 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     ]
     .into();
     let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
-    let full_dir = common::kept_dir("facesim-real-nose-full");
+    let full_dir = common::out_dir("facesim-real-nose-full");
     cli::run_ok(&sample, &full_dir, &sets);
     let post = |d: &Path| {
         facesim::mesh::read_mesh(&d.join("face_post.ply"))
@@ -591,8 +591,8 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
 fn a_detached_septum_holds_the_nasal_floor_still_and_subnasale_follows_less() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");
     common::real_ct();
-    let on_dir = common::kept_dir("facesim-real-septum");
-    let off_dir = common::kept_dir("facesim-real-septum-off");
+    let on_dir = common::out_dir("facesim-real-septum");
+    let off_dir = common::out_dir("facesim-real-septum-off");
     let on = cli::run_ok(&sample, &on_dir, &["tet.septum_detached=true"]);
     let off = cli::run_ok(&sample, &off_dir, &[]);
     let held = on["tet"]["septum_nodes"].as_u64().unwrap() as usize;

@@ -550,7 +550,7 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     assert_eq!(run["tet"]["lifted_in_tension"], 0, "{}", run["tet"]);
     // The bundled phantom's face has no lip profile (no Sn, Ls or Sto found): its mandibular
     // advance leaves the upper teeth in place, so it raises nothing rather than asking for them.
-    let out = common::kept_dir("facesim-degloved-no-lips");
+    let out = common::out_dir("facesim-degloved-no-lips");
     let r = facesim(&[
         "run",
         root().join("data-samples/phantom").to_str().unwrap(),
@@ -571,7 +571,7 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
         ("tet.sliding=false", "needs [tet] sliding and release_cuts"),
         ("tet.element=\"quadratic\"", "runs on the 4-node element"),
     ] {
-        let out = common::kept_dir("facesim-degloved-refused");
+        let out = common::out_dir("facesim-degloved-refused");
         let r = facesim(&[
             "run",
             jaws.to_str().unwrap(),

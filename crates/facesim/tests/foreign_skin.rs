@@ -25,7 +25,7 @@ fn clear_outward(ct: &facesim::volume::Volume, p: [f64; 3], axis: [f64; 2], leve
 /// The whole iso-surface as the case's skin: the run keeps the face a range scan sees, matching
 /// the CT's own skin, with nothing from inside the head, and says what it dropped.
 /// The real CT's case with its whole iso-surface at −500 HU as `[skin]` (`iso.stl`), made once
-/// per test binary.
+/// per test binary; the tests only read it and run it into directories of their own.
 fn foreign_case() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
@@ -60,7 +60,7 @@ fn a_whole_ct_isosurface_is_cut_to_its_outer_face() {
     let ct = facesim::volume::read_volume(&common::real_ct()).unwrap();
     let d = foreign_case();
     let iso = d.join("iso.stl");
-    let out = run(d, &d.join("out"), &[]);
+    let out = run(d, &common::out_dir("facesim-foreign-run"), &[]);
 
     let fs = out
         .report
@@ -164,11 +164,11 @@ fn a_whole_ct_isosurface_is_cut_to_its_outer_face() {
 fn a_c1_model_runs_on_the_cut_skin_like_on_its_own_scan() {
     let d = foreign_case();
     let model = ["solve.model=\"equilibrium\""];
-    let foreign = run(d, &d.join("out-equilibrium"), &model);
+    let foreign = run(d, &common::out_dir("facesim-foreign-equilibrium"), &model);
     let real = common::real_ct();
     let own = run(
         real.parent().unwrap(),
-        &d.join("out-own-equilibrium"),
+        &common::out_dir("facesim-foreign-own-equilibrium"),
         &model,
     );
 

@@ -42,7 +42,7 @@ const TET_SKIPS: [&str; 1] = ["coarsen"];
 const MOVABLE: ([f64; 3], f64) = ([0.0, -60.0, -45.0], 70.0);
 
 fn run(case: Case) -> facesim::Result<Outcome> {
-    commands::run_case(case, &common::kept_dir("facesim-pipeline"), &Quiet)
+    commands::run_case(case, &common::out_dir("facesim-pipeline"), &Quiet)
 }
 
 fn displacement(o: &Outcome) -> Vec<f64> {

@@ -184,8 +184,11 @@ fn real_ct_decimation_reaches_its_target_or_is_undone_with_a_warning() {
 fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_the_forehead() {
     let ct = common::real_ct();
     let case_dir = ct.parent().unwrap();
-    let out = tempfile::tempdir().unwrap();
-    let o = facesim::commands::run(case_dir, Some(out.path()), &facesim::observe::Quiet).unwrap();
+    // `out` inside the temporary directory: its parent, where the output library keeps its
+    // temporaries, is then this test's alone and not the system's temporary directory.
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("out");
+    let o = facesim::commands::run(case_dir, Some(&out), &facesim::observe::Quiet).unwrap();
     let pre = &o.skin.vertices;
     let post = &o.face_post.vertices;
     let tip = (0..pre.len())
@@ -232,7 +235,7 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
             "{k}"
         );
     }
-    let mesh = facesim::tet::vtu::read(&out.path().join("tets.vtu")).unwrap();
+    let mesh = facesim::tet::vtu::read(&out.join("tets.vtu")).unwrap();
     assert!(
         mesh.nodes
             .iter()
@@ -273,7 +276,7 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         "displacement.csv",
         "face_displacement.ply",
     ] {
-        assert!(out.path().join(f).is_file(), "{f}");
+        assert!(out.join(f).is_file(), "{f}");
     }
 }
 

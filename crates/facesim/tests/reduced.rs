@@ -50,7 +50,7 @@ fn case() -> Case {
 }
 
 fn run(c: Case, name: &str) -> Outcome {
-    commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+    commands::run_case(c, &common::out_dir(name), &Quiet).unwrap()
 }
 
 /// The coarse first sample with 10 samples by the reduced method: shared by the tests that

@@ -79,7 +79,7 @@ fn two_segments(moves: [([f64; 3], [f64; 3], [f64; 3]); 2]) -> Vec<Osteotomy> {
 fn run_plan(osteotomy: Vec<Osteotomy>, prefix: &str) -> Outcome {
     let mut case = jaws_case();
     case.osteotomy = osteotomy;
-    commands::run_case(case, &common::kept_dir(prefix), &Quiet).unwrap()
+    commands::run_case(case, &common::out_dir(prefix), &Quiet).unwrap()
 }
 
 /// The run whose basis the tests re-plan from: both segments advanced.

@@ -141,7 +141,7 @@ fn on_a_coarse_skin_the_carried_face_is_linearised_too() {
 #[test]
 fn a_c1_run_replans_end_to_end_as_a_linear_preview() {
     let case = phantom_case(SolveModel::Equilibrium);
-    let out = common::kept_dir("facesim-replan-c1");
+    let out = common::out_dir("facesim-replan-c1");
     let run = commands::run_case(case.clone(), &out, &Quiet).unwrap();
     let report = run.report.plan_basis.as_ref().unwrap();
     assert_eq!(report.model, "c1-linearised");
@@ -179,7 +179,7 @@ fn a_c1_run_replans_end_to_end_as_a_linear_preview() {
     full_case.osteotomy = plan;
     let full = commands::run_case(
         full_case,
-        &common::kept_dir("facesim-replan-c1-full"),
+        &common::out_dir("facesim-replan-c1-full"),
         &Quiet,
     )
     .unwrap();

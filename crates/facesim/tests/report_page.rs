@@ -1112,7 +1112,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     case.tet.error_estimate = false;
     case.uncertainty.samples = 8;
     case.uncertainty.method = Method::Reduced;
-    let dir = common::kept_dir("facesim-page-tissue");
+    let dir = common::out_dir("facesim-page-tissue");
     let o = facesim::commands::run_case(case.clone(), &dir, &Quiet).unwrap();
     let html = o.out_dir.join("report.html");
     assert_self_contained(&std::fs::read_to_string(&html).unwrap());

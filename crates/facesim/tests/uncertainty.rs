@@ -32,7 +32,7 @@ fn points(c: &mut Case, samples: usize, nu: f64, muscle_fat: f64, skin_fat: f64,
 }
 
 fn run(c: Case, name: &str) -> Outcome {
-    commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+    commands::run_case(c, &common::out_dir(name), &Quiet).unwrap()
 }
 
 use common::{band_columns, report_json as json};

@@ -33,7 +33,7 @@ fn whole_skull(translate: [f64; 3], rotate_deg: [f64; 3]) -> Case {
 }
 
 fn run(c: Case, name: &str) -> Outcome {
-    commands::run_case(c, &common::kept_dir(name), &Quiet).unwrap()
+    commands::run_case(c, &common::out_dir(name), &Quiet).unwrap()
 }
 
 fn moves(o: &Outcome) -> Vec<[f64; 3]> {

@@ -67,7 +67,7 @@ fn run_sized(dir: &Path, file: &str, sliding: bool, skin_mm: f64) -> Outcome {
     case.tet.skin_size_mm = skin_mm;
     case.tet.deep_size_mm = 2.0 * skin_mm;
     case.tet.sliding = sliding;
-    commands::run_case(case, &common::kept_dir("facesim-jaws-run"), &Quiet).unwrap()
+    commands::run_case(case, &common::out_dir("facesim-jaws-run"), &Quiet).unwrap()
 }
 
 /// The displacement of the face vertex nearest the named landmark.

@@ -15,6 +15,16 @@ pub fn kept_dir(prefix: &str) -> PathBuf {
         .keep()
 }
 
+/// A new output directory for one facesim unit (a run, re-plan, sweep, validation, …): `out`
+/// inside a fresh [`kept_dir`], not yet made. The output library keeps a unit's temporaries and
+/// lock file in the output's parent and clears there what it takes for a dead run's leftovers;
+/// with a parent of its own, a unit never meets another test's, however many tests (and test
+/// commands) run at once. Never point a unit at a [`kept_dir`] itself: its parent is
+/// target/tmp, which every test shares.
+pub fn out_dir(prefix: &str) -> PathBuf {
+    kept_dir(prefix).join("out")
+}
+
 /// A run's report.json.
 pub fn report_json(o: &facesim::commands::Outcome) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(o.out_dir.join("report.json")).unwrap()).unwrap()
