@@ -3,7 +3,8 @@
 result.json files given (run_case.py) and their runs' report.json — region "face" for the whole
 face, then report.json's facial regions. A failed run has one row, region "face", its status
 facesim's one-line error (or Slurm's reason, "slurm: job N OUT_OF_MEMORY (…)") and the figures
-empty; --failures writes those runs alone (the failure table). Every row carries its
+empty; every earlier attempt of a run Slurm retried has such a row too (its attempt, request,
+peak and Slurm's state); --failures writes those rows alone (the failure table). Every row carries its
 provenance: facesim's version and binary hash, the case's hash, the overrides and the hash of
 the run's full parameters (report.json "parameters", written once per hash under --parameters).
 Standard library only."""
@@ -14,6 +15,7 @@ import hashlib
 import json
 import os
 import sys
+import tempfile
 
 BASE = [
     "case", "plan", "variant", "region", "status", "vertices", "mean_mm", "p90_mm",
@@ -23,7 +25,13 @@ PROVENANCE = [
     "facesim_version", "facesim_sha256", "case_sha256", "overrides", "parameters_sha256",
     "slurm_job",
 ]
-FAILURES = ["case", "plan", "variant", "status", "slurm_job", "log"]
+# Which attempt a row is of (the run's outcome is its rows whose attempt is `attempts`), what
+# it asked the scheduler for and how Slurm ended it (empty for an attempt that ran to its end).
+ATTEMPT = ["attempt", "attempts", "requested_mem_mb", "requested_runtime_min", "slurm_state"]
+FAILURES = [
+    "case", "plan", "variant", "status", "slurm_job", "log", "attempt", "requested_mem_mb",
+    "requested_runtime_min", "peak_mem_mb", "slurm_state",
+]
 
 
 def p90(values):
@@ -49,19 +57,45 @@ def canonical_sha256(value):
     return hashlib.sha256(text.encode()).hexdigest(), text
 
 
+def figure(value, digits):
+    """A number as the table writes it; empty for none."""
+    return "" if value is None else f"{value:.{digits}f}"
+
+
+def attempt_rows(res, base):
+    """One row (region "face", figures empty) per attempt before the one `res` describes."""
+    rows = []
+    for e in res.get("earlier_attempts") or []:
+        rows.append(dict(
+            {k: base[k] for k in ("case", "plan", "variant", "attempts")},
+            region="face", status=e.get("status", ""), slurm_job=e.get("slurm_job", ""),
+            attempt=e.get("attempt", 0), requested_mem_mb=figure(e.get("requested_mem_mb"), 0),
+            requested_runtime_min=figure(e.get("requested_runtime_min"), 0),
+            peak_mem_mb=figure(e.get("peak_mem_mb"), 1), slurm_state=e.get("slurm_state", ""),
+            facesim_version=base["facesim_version"], facesim_sha256=base["facesim_sha256"],
+            case_sha256=base["case_sha256"], overrides=base["overrides"]))
+    return rows
+
+
 def rows_of(result_path, parameters_dir=None):
     with open(result_path) as f:
         res = json.load(f)
     base = {k: res.get(k) for k in ("case", "plan", "variant", "status")}
     base["seconds"] = f"{res['seconds']:.3f}"
-    base["peak_mem_mb"] = f"{res['peak_mem_mb']:.1f}"
+    base["peak_mem_mb"] = figure(res.get("peak_mem_mb"), 1)
+    base["attempt"] = res.get("attempt", 1)
+    base["attempts"] = base["attempt"]
+    base["requested_mem_mb"] = figure(res.get("requested_mem_mb"), 0)
+    base["requested_runtime_min"] = figure(res.get("requested_runtime_min"), 0)
+    base["slurm_state"] = res.get("slurm_state", "")
     base["facesim_version"] = res.get("facesim_version", "")
     base["facesim_sha256"] = res.get("facesim_sha256", "")
     base["case_sha256"] = res.get("case_sha256", "")
     base["overrides"] = "; ".join(res.get("overrides") or [])
     base["slurm_job"] = res.get("slurm_job", "")
+    earlier = attempt_rows(res, base)
     if res["status"] != "ok":
-        return [dict(base, region="face")], {}
+        return earlier + [dict(base, region="face")], {}
     out_dir = os.path.join(os.path.dirname(result_path), res["out_dir"])
     with open(os.path.join(out_dir, "report.json")) as f:
         rep = json.load(f)
@@ -71,9 +105,8 @@ def rows_of(result_path, parameters_dir=None):
         os.makedirs(parameters_dir, exist_ok=True)
         target = os.path.join(parameters_dir, f"{digest}.json")
         if not os.path.exists(target):
-            with open(target + ".tmp", "w") as f:
+            with replacing(target) as f:
                 f.write(text + "\n")
-            os.replace(target + ".tmp", target)
     base["facesim_seconds"] = f"{rep['timings']['total']:.3f}"
     base["model"] = rep["parameters"]["solve"]["model"]
     extra = {}
@@ -93,16 +126,52 @@ def rows_of(result_path, parameters_dir=None):
         rows.append(dict(base, region=name, vertices=s["vertices"],
                          mean_mm=f"{s['mean']:.6f}", p90_mm=f"{s['p90']:.6f}",
                          max_mm=f"{s['max']:.6f}"))
-    return rows, extra
+    return earlier + rows, extra
+
+
+def umask() -> int:
+    """The process's umask, read without changing it (/proc/self/status; 022 if unreadable)."""
+    try:
+        with open("/proc/self/status") as f:
+            return next((int(l.split()[1], 8) for l in f if l.startswith("Umask:")), 0o022)
+    except (OSError, ValueError, IndexError):
+        return 0o022
+
+
+class replacing:
+    """`with replacing(path) as f:` writes `path` whole or not at all: a temporary of its own
+    in the same directory (two writers of one path never share one), renamed over `path` at
+    the end, removed on an error."""
+
+    def __init__(self, path):
+        self.path = path
+
+    def __enter__(self):
+        d = os.path.dirname(self.path) or "."
+        fd, self.tmp = tempfile.mkstemp(
+            dir=d, prefix=os.path.basename(self.path) + ".", suffix=".tmp")
+        # mkstemp's file is private (0600); the table is as readable as any file written here.
+        os.fchmod(fd, 0o666 & ~umask())
+        self.f = os.fdopen(fd, "w", newline="")
+        return self.f
+
+    def __exit__(self, kind, value, tb):
+        self.f.close()
+        if kind is None:
+            os.replace(self.tmp, self.path)
+        else:
+            try:
+                os.unlink(self.tmp)
+            except OSError:
+                pass
+        return False
 
 
 def write_csv(path, columns, rows):
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
+    with replacing(path) as f:
         w = csv.DictWriter(f, fieldnames=columns, restval="", extrasaction="ignore")
         w.writeheader()
         w.writerows(rows)
-    os.replace(tmp, path)
 
 
 def main():
@@ -117,8 +186,9 @@ def main():
         r, extra = rows_of(path, a.parameters)
         rows += r
         extra_cols += [c for c in extra if c not in extra_cols]
-    rows.sort(key=lambda r: (r["case"], r["plan"], r["variant"], r["region"] != "face"))
-    write_csv(a.out, BASE + extra_cols + PROVENANCE, rows)
+    rows.sort(key=lambda r: (r["case"], r["plan"], r["variant"], r["attempt"],
+                             r["region"] != "face"))
+    write_csv(a.out, BASE + extra_cols + PROVENANCE + ATTEMPT, rows)
     if a.failures:
         # The run's log, relative to OUT.
         failed = [
@@ -126,7 +196,7 @@ def main():
             for r in rows if r["status"] != "ok"
         ]
         write_csv(a.failures, FAILURES, failed)
-    failed = sum(1 for r in rows if r["status"] != "ok")
+    failed = sum(1 for r in rows if r["status"] != "ok" and r["attempt"] == r["attempts"])
     print(f"{a.out}: {len(rows)} rows, {len(a.results)} runs, {failed} failed")
 
 

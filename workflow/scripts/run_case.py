@@ -5,11 +5,15 @@ facesim process, and its provenance (facesim's version and binary hash, the case
 Exits 0 whether facesim succeeded or not, so one broken case does not stop the cohort; only a
 failure of this script itself (e.g. an unwritable output) is an error.
 
-Under Slurm (SLURM_JOB_ID set) each attempt appends its job id to --jobs-file. A retry
-(--attempt 2, 3, …) first asks Slurm how the previous attempt's job ended: killed for its memory
-or time limit (OUT_OF_MEMORY, TIMEOUT), the same limits would kill it again, so the retry records
-Slurm's reason as the run's status instead of running facesim; any other end (cancelled, node
-lost) runs it again. Standard library only."""
+Under Slurm (SLURM_JOB_ID set) each attempt appends its job id to --jobs-file. Every attempt
+also keeps a record beside it (JOBS without ".jobs" + ".attempt-N.json": its job, the memory and
+time Slurm granted, facesim's peak memory so far, kept up to date while facesim runs), so an
+attempt Slurm kills still leaves what it asked for and what it used. A retry (--attempt 2, 3, …)
+asks Slurm how each earlier attempt's job ended and lists them in result.json
+("earlier_attempts"). The Snakefile asks Slurm too, and gives a retry after OUT_OF_MEMORY or
+TIMEOUT more memory or time (docs/cohort.md, "Retries that grow"); a retry whose request did not
+grow (at the configured maximum) would be killed again, so it records Slurm's reason as the run's
+status instead of running facesim. Standard library only."""
 
 import argparse
 import hashlib
@@ -19,6 +23,8 @@ import resource
 import shutil
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 import tomllib
 
@@ -95,8 +101,43 @@ def facesim_provenance(facesim: str):
     return version, digest
 
 
+def mem_mb(text: str):
+    """Slurm's memory figure ("1234K", "300M", "2G", "0") in MB; None when empty."""
+    text = text.strip()
+    if not text:
+        return None
+    scale = {"K": 1 / 1024, "M": 1.0, "G": 1024.0, "T": 1024.0 ** 2}
+    try:
+        if text[-1].upper() in scale:
+            return float(text[:-1]) * scale[text[-1].upper()]
+        return float(text) / 1024 ** 2  # bytes
+    except ValueError:
+        return None
+
+
+def minutes(text: str):
+    """Slurm's time limit ("1:00", "2:00:00", "1-00:00:00") in minutes; None for UNLIMITED or
+    anything else."""
+    days, _, rest = text.strip().rpartition("-")
+    try:
+        parts = [int(x) for x in rest.split(":")]
+        day = int(days) if days else 0
+    except ValueError:
+        return None
+    if len(parts) == 3:
+        h, m, sec = parts
+    elif len(parts) == 2:
+        h, m, sec = (0, *parts) if not days else (*parts, 0)
+    elif len(parts) == 1:
+        h, m, sec = (0, parts[0], 0) if not days else (parts[0], 0, 0)
+    else:
+        return None
+    return day * 1440 + h * 60 + m + sec / 60
+
+
 def slurm_job_end(job_id: str):
-    """How a finished Slurm job ended: (state, details), None when Slurm no longer knows it.
+    """How a finished Slurm job ended: (state, details, peak MB or None), None when Slurm no
+    longer knows it. The peak is sacct's MaxRSS over the job's steps (accounting only).
 
     With an accounting database, sacct gives every step's state. Without one, scontrol gives
     the job's (slurmctld keeps a finished job for MinJobAge). Through the executor plugin the
@@ -106,15 +147,18 @@ def slurm_job_end(job_id: str):
     try:
         p = subprocess.run(
             ["sacct", "-j", job_id, "-n", "-P",
-             "-o", "JobID,State,ExitCode,Elapsed,Timelimit,ReqMem"],
+             "-o", "JobID,State,ExitCode,Elapsed,Timelimit,ReqMem,MaxRSS"],
             capture_output=True, text=True, timeout=60)
         lines = [l.split("|") for l in p.stdout.strip().splitlines()] if p.returncode == 0 else []
         if lines:
-            states = [(l + [""] * 6)[1].split()[0] for l in lines]
-            job = (lines[0] + [""] * 6)
+            states = [(l + [""] * 7)[1].split()[0] for l in lines]
+            job = (lines[0] + [""] * 7)
             state = next((s for s in states if s in LIMIT_STATES), states[0])
+            peaks = [mem_mb((l + [""] * 7)[6]) for l in lines]
+            peaks = [x for x in peaks if x is not None]
             return state, (f"job {job[1]}, steps {' '.join(states[1:]) or '-'}, exit code "
-                           f"{job[2]}, ran {job[3]} of {job[4]}, memory {job[5]}")
+                           f"{job[2]}, ran {job[3]} of {job[4]}, memory {job[5]}"), \
+                (max(peaks) if peaks else None)
     except (OSError, subprocess.TimeoutExpired, IndexError):
         pass
     try:
@@ -139,32 +183,156 @@ def slurm_job_end(job_id: str):
         if said:
             state = "TIMEOUT" if "TIME LIMIT" in said[0] else "OUT_OF_MEMORY"
             details = f"job FAILED, {said[0]}; {details}"
-    return state, details
+    return state, details, None
+
+
+def slurm_request(job_id: str):
+    """The memory (MB) and time limit (minutes) Slurm gave this job, from scontrol (MinMemoryNode,
+    or MinMemoryCPU × NumCPUs; TimeLimit), else SLURM_MEM_PER_NODE; None for what neither says.
+    (The executor plugin's job step strips SLURM_* variables from the srun it runs this under.)"""
+    kv = {}
+    try:
+        p = subprocess.run(["scontrol", "-o", "show", "job", job_id],
+                           capture_output=True, text=True, timeout=60)
+        kv = dict(w.split("=", 1) for w in p.stdout.split() if "=" in w)
+    except (OSError, subprocess.TimeoutExpired):
+        pass
+    mem = mem_mb(kv.get("MinMemoryNode", ""))
+    if mem is None and kv.get("MinMemoryCPU"):
+        cpu = mem_mb(kv["MinMemoryCPU"])
+        n = kv.get("NumCPUs", "")
+        mem = cpu * int(n) if cpu is not None and n.isdigit() else None
+    if mem is None and os.environ.get("SLURM_MEM_PER_NODE", "").isdigit():
+        mem = float(os.environ["SLURM_MEM_PER_NODE"])
+    return mem, minutes(kv.get("TimeLimit", ""))
+
+
+def umask() -> int:
+    """The process's umask, read without changing it (/proc/self/status; 022 if unreadable)."""
+    try:
+        with open("/proc/self/status") as f:
+            return next((int(l.split()[1], 8) for l in f if l.startswith("Umask:")), 0o022)
+    except (OSError, ValueError, IndexError):
+        return 0o022
+
+
+def write_json(path: str, value):
+    """Writes `path` whole or not at all: a temporary of its own in the same directory (two
+    writers of one path never share one), then renamed over it."""
+    d = os.path.dirname(path) or "."
+    os.makedirs(d, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=d, prefix=os.path.basename(path) + ".", suffix=".tmp")
+    try:
+        # mkstemp's file is private (0600); the result is as readable as any file written here.
+        os.fchmod(fd, 0o666 & ~umask())
+        with os.fdopen(fd, "w") as f:
+            json.dump(value, f, indent=1)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def attempt_record_path(jobs_file: str, attempt: int) -> str:
+    base = jobs_file[: -len(".jobs")] if jobs_file.endswith(".jobs") else jobs_file
+    return f"{base}.attempt-{attempt}.json"
+
+
+def read_json(path: str):
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def earlier_attempts(jobs_file: str, attempt: int):
+    """The run's attempts before this one, as their records and Slurm tell: attempt, Slurm job,
+    requested memory and time, peak memory (sacct's MaxRSS, else facesim's peak the attempt
+    recorded), Slurm's state and the run's status for it."""
+    out = []
+    for n in range(1, attempt):
+        rec = read_json(attempt_record_path(jobs_file, n)) or {}
+        job = rec.get("slurm_job") or ""
+        end = slurm_job_end(job) if job else None
+        peak = end[2] if end and end[2] is not None else rec.get("peak_mem_mb")
+        state = end[0] if end else ""
+        if end:
+            status = f"slurm: job {job} {end[0]} ({end[1]})"
+        elif rec and job:
+            status = f"attempt {n} ended without a result (Slurm no longer knows job {job})"
+        elif rec:
+            status = f"attempt {n} ended without a result"
+        else:
+            status = f"attempt {n} ended before run_case.py started"
+        out.append({
+            "attempt": n,
+            "slurm_job": job,
+            "requested_mem_mb": rec.get("requested_mem_mb"),
+            "requested_runtime_min": rec.get("requested_runtime_min"),
+            "peak_mem_mb": peak,
+            "slurm_state": state,
+            "status": status,
+        })
+    return out
+
+
+class PeakWatch:
+    """Keeps the attempt's record up to date with facesim's peak resident memory (VmHWM, read
+    from /proc every quarter second while it runs), so a job Slurm kills leaves its peak."""
+
+    def __init__(self, path: str, record: dict, pid: int):
+        self.path, self.record, self.pid = path, record, pid
+        self.done = threading.Event()
+        self.thread = threading.Thread(target=self.watch, daemon=True)
+        self.thread.start()
+
+    def watch(self):
+        written = self.record.get("peak_mem_mb") or 0.0
+        while not self.done.wait(0.25):
+            try:
+                with open(f"/proc/{self.pid}/status") as f:
+                    kib = next((int(l.split()[1]) for l in f if l.startswith("VmHWM:")), 0)
+            except (OSError, ValueError, IndexError):
+                continue
+            if kib / 1024.0 >= written + 1.0:
+                written = kib / 1024.0
+                self.record["peak_mem_mb"] = written
+                try:
+                    write_json(self.path, self.record)
+                except OSError:
+                    pass
+
+    def stop(self):
+        self.done.set()
+        self.thread.join()
+
+
+def report_peak_heap(out_dir: str):
+    """The largest peak heap (MB) of report.json's stage_costs, None without one."""
+    rep = read_json(os.path.join(out_dir, "report.json")) or {}
+    peaks = [c.get("peak_heap_mb") for c in (rep.get("stage_costs") or {}).values()
+             if isinstance(c, dict)]
+    peaks = [x for x in peaks if isinstance(x, (int, float))]
+    return max(peaks) if peaks else None
 
 
 def record_attempt(jobs_file: str, attempt: int):
-    """Under Slurm: the previous attempt's job id (None on the first), then this attempt's id
-    appended to jobs_file (which the first attempt starts afresh)."""
+    """Under Slurm: this attempt's job id appended to jobs_file (which the first attempt starts
+    afresh)."""
     job_id = os.environ.get("SLURM_JOB_ID")
     if not jobs_file or not job_id:
-        return None
-    previous = None
-    if attempt > 1 and os.path.exists(jobs_file):
-        with open(jobs_file) as f:
-            lines = [l.split() for l in f if l.strip()]
-        previous = lines[-1][0] if lines else None
+        return
     os.makedirs(os.path.dirname(jobs_file) or ".", exist_ok=True)
     with open(jobs_file, "w" if attempt <= 1 else "a") as f:
         f.write(f"{job_id} {attempt}\n")
-    return previous
 
 
 def write_result(path: str, result: dict):
-    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(result, f, indent=1)
-    os.replace(tmp, path)
+    write_json(path, result)
 
 
 def main() -> int:
@@ -180,6 +348,10 @@ def main() -> int:
     ap.add_argument("--set", action="append", default=[], dest="sets")
     ap.add_argument("--attempt", type=int, default=1, help="Snakemake's attempt (retries)")
     ap.add_argument("--jobs-file", default="", help="the Slurm job ids of this run's attempts")
+    ap.add_argument("--mem-mb", type=float, default=None,
+                    help="the memory Snakemake asked for (recorded when not under Slurm)")
+    ap.add_argument("--runtime-min", type=float, default=None,
+                    help="the time Snakemake asked for (recorded when not under Slurm)")
     a = ap.parse_args()
 
     version, binary_sha = facesim_provenance(a.facesim)
@@ -196,16 +368,50 @@ def main() -> int:
         "attempt": a.attempt,
         "out_dir": os.path.relpath(a.out, os.path.dirname(a.result) or "."),
     }
-    previous = record_attempt(a.jobs_file, a.attempt)
-    if previous:
-        end = slurm_job_end(previous)
-        print(f"attempt {a.attempt}; previous attempt: Slurm job {previous}: {end}", flush=True)
-        if end and end[0] in LIMIT_STATES:
-            # The same request would be killed again: the run's status is Slurm's reason.
-            result.update(status=f"slurm: job {previous} {end[0]} ({end[1]})", exit_code=None,
-                          seconds=0.0, peak_mem_mb=0.0, slurm_job=previous)
-            write_result(a.result, result)
-            return 0
+    job = os.environ.get("SLURM_JOB_ID", "")
+    mem, limit = slurm_request(job) if job else (None, None)
+    record = {
+        "attempt": a.attempt,
+        "slurm_job": job,
+        "requested_mem_mb": mem if mem is not None else a.mem_mb,
+        "requested_runtime_min": limit if limit is not None else a.runtime_min,
+        "peak_mem_mb": None,
+    }
+    result.update((k, record[k]) for k in ("requested_mem_mb", "requested_runtime_min"))
+    result["slurm_state"] = ""
+    record_attempt(a.jobs_file, a.attempt)
+    record_path = attempt_record_path(a.jobs_file, a.attempt) if a.jobs_file else ""
+    if record_path:
+        if a.attempt <= 1:
+            # A new run: records of an earlier run of this case, plan and variant are stale.
+            base = os.path.basename(attempt_record_path(a.jobs_file, 0))[: -len("0.json")]
+            d = os.path.dirname(record_path) or "."
+            for name in os.listdir(d):
+                if name.startswith(base) and name.endswith(".json"):
+                    os.unlink(os.path.join(d, name))
+        write_json(record_path, record)
+    earlier = earlier_attempts(a.jobs_file, a.attempt) if a.jobs_file else []
+    result["earlier_attempts"] = earlier
+    if earlier:
+        previous = earlier[-1]
+        print(f"attempt {a.attempt}; earlier attempts: {earlier}", flush=True)
+        # Over a limit, a retry runs only if that limit grew (the Snakefile grows it up to the
+        # configured maximum): the same request would be killed again.
+        limit_key = {"OUT_OF_MEMORY": "requested_mem_mb",
+                     "TIMEOUT": "requested_runtime_min"}.get(previous["slurm_state"])
+        if limit_key:
+            before, now = previous.get(limit_key), record.get(limit_key)
+            if before is None or now is None or now <= before:
+                # The run's outcome is that attempt's: its status is Slurm's reason.
+                result.update({k: v for k, v in previous.items() if k != "status"})
+                what = "memory" if limit_key == "requested_mem_mb" else "time limit"
+                result.update(
+                    status=f"{previous['status']}; not retried: the {what} cannot grow",
+                    exit_code=None, seconds=0.0, earlier_attempts=earlier[:-1])
+                if result.get("peak_mem_mb") is None:
+                    result["peak_mem_mb"] = 0.0
+                write_result(a.result, result)
+                return 0
 
     cmd = [a.facesim]
     if a.threads > 0:
@@ -216,20 +422,30 @@ def main() -> int:
     print("$", " ".join(cmd), flush=True)
     start = time.monotonic()
     try:
-        p = subprocess.run(cmd, capture_output=True, text=True)
-        code, stdout, stderr = p.returncode, p.stdout, p.stderr
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        watch = PeakWatch(record_path, record, p.pid) if record_path else None
+        stdout, stderr = p.communicate()
+        code = p.returncode
+        if watch:
+            watch.stop()
     except OSError as e:
         code, stdout, stderr = -1, "", f"facesim: cannot run {a.facesim}: {e.strerror}"
     seconds = time.monotonic() - start
-    # This script starts one child: the children's peak RSS is facesim's (KiB on Linux).
-    peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    # The children's peak RSS (KiB on Linux) is facesim's: the other children (facesim
+    # --version, scontrol) are small.
+    peak_mb = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0
+    if not peak_mb:
+        peak_mb = report_peak_heap(a.out) or 0.0
     sys.stdout.write(stdout)
     sys.stdout.write(stderr)
+    if record_path:
+        record["peak_mem_mb"] = peak_mb
+        write_json(record_path, record)
     result.update(
         status="ok" if code == 0 else one_line_error(stderr, code),
         exit_code=code,
         seconds=seconds,
-        peak_mem_mb=peak_kib / 1024.0,
+        peak_mem_mb=peak_mb,
     )
     write_result(a.result, result)
     return 0
