@@ -416,7 +416,7 @@ translate = [0.0, -6.0, 0.0]
 /// Write a complete phantom case into `dir`.
 pub fn write_case(dir: &std::path::Path, opts: &PhantomOptions) -> Result<()> {
     use crate::error::Error;
-    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    crate::output::create_dir_guarded(dir)?;
     let vol = ct(opts);
     crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
     crate::volume::dicom_io::write_series(&vol, &dir.join("ct_dicom"), "1")?;

@@ -98,7 +98,7 @@ pub fn write_cohort(
     for c in &cases {
         c.shape.validate()?;
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    crate::output::create_dir_guarded(dir)?;
     for c in &cases {
         write_shaped_case(&dir.join(&c.name), opts, &c.shape)?;
     }

@@ -1091,7 +1091,7 @@ pub fn write_shaped_case(dir: &std::path::Path, opts: &JawsOptions, shape: &Shap
             "phantom face scan step {step} mm must be at least 0.1 mm"
         )));
     }
-    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    crate::output::create_dir_guarded(dir)?;
     let vol = shape.ct(&opts.phantom);
     crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
     crate::mesh::ply::write(

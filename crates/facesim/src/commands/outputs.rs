@@ -117,7 +117,7 @@ pub fn write(
 }
 
 fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &Case) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::output(dir, e))?;
+    crate::output::create_dir_guarded(dir)?;
     let coloured = coloured_face(&p.face_post, dist);
     let skull = &scene.face.skull;
     let mut skull_post = skull.clone();

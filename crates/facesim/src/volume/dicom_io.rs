@@ -695,9 +695,10 @@ fn format_ds(v: f64) -> String {
 /// HU are rounded to integers (RescaleSlope 1, RescaleIntercept 0).
 pub fn write_series(vol: &Volume, dest: &Path, series_uid_suffix: &str) -> Result<()> {
     let parent = dest.parent().unwrap_or(Path::new("."));
-    let tmp = parent.join(format!(".facesim-tmp-dicom-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp).map_err(|e| Error::output(&tmp, e))?;
+    crate::output::create_dir_guarded(parent)?;
+    // A directory of this call's own (`mkdir` refuses an existing name): series written at once
+    // beside each other, by threads or processes, never share it.
+    let tmp = crate::output::fresh_dir(parent, ".facesim-tmp-dicom-")?;
     let ids = SeriesIds::new(vol, series_uid_suffix);
     let ct = uids::CT_IMAGE_STORAGE;
     let result = (|| -> Result<()> {
@@ -720,7 +721,7 @@ pub fn write_series(vol: &Volume, dest: &Path, series_uid_suffix: &str) -> Resul
         let _ = std::fs::remove_dir_all(&tmp);
         return Err(e);
     }
-    replace_dir(&tmp, dest)
+    crate::output::replace_dir(&tmp, dest)
 }
 
 /// What every slice of a written series shares: its UIDs and ImageOrientationPatient.
@@ -836,17 +837,4 @@ fn slice_object(vol: &Volume, k: usize, ids: &SeriesIds, sop: &str) -> InMemDico
     }
     put(tags::PIXEL_DATA, VR::OW, PrimitiveValue::from(bytes));
     obj
-}
-
-/// Move a finished directory into place, replacing an older one only after the new one exists.
-fn replace_dir(tmp: &Path, dest: &Path) -> Result<()> {
-    if dest.exists() {
-        let old = dest.with_extension(format!("old-{}", std::process::id()));
-        std::fs::rename(dest, &old).map_err(|e| Error::output(dest, e))?;
-        std::fs::rename(tmp, dest).map_err(|e| Error::output(dest, e))?;
-        let _ = std::fs::remove_dir_all(&old);
-    } else {
-        std::fs::rename(tmp, dest).map_err(|e| Error::output(dest, e))?;
-    }
-    Ok(())
 }
