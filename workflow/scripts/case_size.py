@@ -1,5 +1,5 @@
-"""A case's size as the cohort workflow sizes its jobs (docs/cohort.md, "Resources from the case's
-size"): the CT's voxel count and the skin scan's vertex count, read from the files' headers
+"""A case's size as the cohort workflow sizes its jobs (docs/cohort.md, "Resources from the
+model", its fallback formula): the CT's voxel count and the skin scan's vertex count, read from the files' headers
 without loading them, and the resources a `facesim run` of that size needs. Standard library
 only; imported by workflow/Snakefile and workflow/scripts/size_figures.py.
 
@@ -134,6 +134,64 @@ def resources_for(voxels, vertices):
     kvert = (vertices or 0) / 1e3
     mem = MEM_MARGIN * (MEM_BASE_MB + MEM_MB_PER_MVOXEL * mvox + MEM_MB_PER_KVERTEX * kvert)
     sec = RUNTIME_MARGIN * (SECONDS_BASE + SECONDS_PER_MVOXEL * mvox + SECONDS_PER_KVERTEX * kvert)
+    return int(math.ceil(mem / 100.0) * 100), max(MIN_RUNTIME_MIN, int(math.ceil(sec / 60.0)))
+
+
+# Resources from the model itself (docs/cohort.md "Resources from the model"): `facesim estimate`
+# builds the run's mesh and analyses its factor symbolically, and predicts the run's peak memory
+# and wall time. A job holds more than facesim (the job script, Snakemake's job step): JOB_MB on
+# top. Its time is the prediction for a quiet machine like docs/cohort.md's, times
+# ESTIMATE_RUNTIME_MARGIN for a loaded or slower node, at least MIN_RUNTIME_MIN.
+JOB_MB = 300
+ESTIMATE_RUNTIME_MARGIN = 4
+
+
+def estimate(facesim, plan, sets, threads, cache):
+    """`facesim estimate`'s JSON for a plan with the variant's --set arguments (a list), kept in
+    the file `cache` (None: not kept, as in a dry run) so the job step and later invocations
+    read it instead of asking again; None if the estimate fails (a broken case: the run will
+    say why)."""
+    import json
+    import subprocess
+    import tempfile
+
+    if cache is not None:
+        try:
+            with open(cache) as f:
+                return json.load(f)
+        except (OSError, ValueError):
+            pass
+    cmd = [facesim, "--threads", str(threads), "estimate", plan, *sets]
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    if out.returncode != 0:
+        return None
+    try:
+        e = json.loads(out.stdout)
+    except ValueError:
+        return None
+    if cache is None:
+        return e
+    os.makedirs(os.path.dirname(cache), exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(cache), prefix=".estimate-")
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(e, f)
+        os.replace(tmp, cache)
+    except OSError:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+    return e
+
+
+def resources_from_estimate(e):
+    """(mem_mb, runtime minutes) from `facesim estimate`'s JSON."""
+    mem = e["peak_mem_mb"] + JOB_MB
+    sec = ESTIMATE_RUNTIME_MARGIN * e["wall_s"]
     return int(math.ceil(mem / 100.0) * 100), max(MIN_RUNTIME_MIN, int(math.ceil(sec / 60.0)))
 
 

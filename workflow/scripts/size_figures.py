@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""The figures behind the workflow's resource formula (docs/cohort.md, "Resources from the case's
-size"): one jaws phantom per voxel size, each run with the models given, one after the other;
+"""The figures behind the workflow's resource formula (docs/cohort.md, "Resources from the
+model", its fallback formula): one jaws phantom per voxel size, each run with the models given, one after the other;
 prints CT voxels, skin-scan vertices, wall seconds and peak resident memory per run as CSV.
 
     size_figures.py FACESIM WORK [--spacings 3,2.5,2,1.5] [--models tet,equilibrium]

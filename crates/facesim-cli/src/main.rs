@@ -42,6 +42,15 @@ enum Cmd {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },
+    /// Predict a run's peak memory and wall time before running it (JSON on stdout): the
+    /// volumetric model's mesh and the symbolic analysis of its factor, no numeric work
+    /// (docs/cohort.md "Resources from the model").
+    Estimate {
+        case_dir: PathBuf,
+        /// Override a case key as `run --set` does (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
+    },
     /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
     /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
     /// re-solving (docs/plan-basis.md); or, from the run's reduced_model.bin at its plan, for new
@@ -324,6 +333,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let subject = match &cli.cmd {
         Cmd::Run { case_dir, .. } => Some(case_dir.display().to_string()),
+        Cmd::Estimate { case_dir, .. } => Some(case_dir.display().to_string()),
         Cmd::PhantomCohort { dir, .. } => Some(dir.display().to_string()),
         Cmd::Inspect { path } => Some(path.display().to_string()),
         Cmd::Study { out_dir, .. } => Some(format!("the study into {}", out_dir.display())),
@@ -420,6 +430,7 @@ impl TableArgs {
 fn dispatch(cmd: Cmd) -> Result<()> {
     match cmd {
         Cmd::Run { case_dir, out, set } => cmd_run(&case_dir, out.as_deref(), &set),
+        Cmd::Estimate { case_dir, set } => cmd_estimate(&case_dir, &set),
         Cmd::Phantom {
             dir,
             spacing,
@@ -645,6 +656,16 @@ fn cmd_run(case_dir: &Path, out: Option<&Path>, set: &[String]) -> Result<()> {
     for w in &r.warnings {
         eprintln!("warning: {w}");
     }
+    Ok(())
+}
+
+fn cmd_estimate(case_dir: &Path, set: &[String]) -> Result<()> {
+    let overrides = facesim::case::overrides_table(set)?;
+    let e = facesim::commands::estimate::estimate(case_dir, &overrides, &Progress::auto())?;
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&e).map_err(|e| Error::output(case_dir, e))?
+    );
     Ok(())
 }
 

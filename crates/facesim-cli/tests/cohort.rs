@@ -200,24 +200,29 @@ fn cohort_workflow_runs_cases_variants_and_a_broken_case() {
     assert_eq!(count("gather"), Some(1), "{plan}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
     // The same workflow through the Slurm profile (dry run; tests/slurm.rs runs it on a real
-    // cluster): each run asks for the memory and time workflow/scripts/case_size.py gives its
-    // case's size, the profile's partition reaches the jobs.
+    // cluster): each run asks for what `facesim estimate` predicts for its plan and variant
+    // (its peak memory plus the job's own 300 MB, rounded up to 100 MB; four times its time, at
+    // least 5 minutes), the profile's partition reaches the jobs.
     let profile = root().join("workflow/profiles/slurm");
     let slurm = run_ok(snake(&["-n"]).arg("--workflow-profile").arg(&profile));
-    let sized = run_ok(
-        Command::new("python3")
-            .arg(root().join("workflow/scripts/case_size.py"))
-            .arg(cases.join(&params[0]["case"]).join("case.toml")),
-    );
-    let figures: Vec<&str> = sized.split_whitespace().collect();
-    let (mem, minutes) = (figures[3], figures[4]);
+    let estimated = Command::new(exe())
+        .args(["--threads", "1", "estimate"])
+        .arg(cases.join(&params[0]["case"]).join("case.toml"))
+        .args(["--set", "solve.model=\"equilibrium\""])
+        .output()
+        .unwrap();
+    assert!(estimated.status.success());
+    let estimated = String::from_utf8_lossy(&estimated.stdout);
+    let e: serde_json::Value = serde_json::from_str(&estimated).unwrap();
+    let mem = ((e["peak_mem_mb"].as_f64().unwrap() + 300.0) / 100.0).ceil() * 100.0;
+    let minutes = (4.0 * e["wall_s"].as_f64().unwrap() / 60.0).ceil().max(5.0);
     assert!(
         slurm.contains(&format!("mem_mb={mem},"))
             && slurm.contains(&format!("runtime={minutes},"))
             && slurm.contains("slurm_partition=CHANGE-ME"),
-        "{sized}\n{slurm}"
+        "{estimated}\n{slurm}"
     );
-    // The broken case's CT cannot be sized: the fixed fallback.
+    // The broken case cannot be estimated, nor its CT sized: the fixed fallback.
     assert!(slurm.contains("mem_mb=4000,"), "{slurm}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
     // The real run on two cores.

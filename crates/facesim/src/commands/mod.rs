@@ -3,6 +3,8 @@
 //!
 //! - [`mod@run`]: `facesim run` (the pipeline, the model, landmarks, uncertainty; every output file and
 //!   report.json, written by [`outputs`]);
+//! - [`estimate`]: `facesim estimate` (a run's peak memory and time predicted from its mesh and
+//!   the symbolic analysis of its factor, before any numeric work);
 //! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/plan-basis.md);
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
@@ -12,6 +14,7 @@
 //! - [`validate`]: `facesim validate` (every surgery type on the real samples and a phantom
 //!   cohort against the published soft/hard ratios; its chart is the caller's too).
 
+pub mod estimate;
 pub mod landmarks;
 pub mod outputs;
 pub mod replan;

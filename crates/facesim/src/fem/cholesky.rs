@@ -187,6 +187,37 @@ impl Pattern {
         self.0.len_val()
     }
 
+    /// The order of the analysed matrix.
+    pub(crate) fn columns(&self) -> usize {
+        self.0.ncols()
+    }
+
+    /// Floating-point operations of the numeric factorisation, Σ over the factor's columns of
+    /// the squared column count (the dense update each column makes): what `facesim estimate`
+    /// scales its time with.
+    pub(crate) fn factor_flops(&self) -> f64 {
+        match self.0.raw() {
+            SymbolicCholeskyRaw::Supernodal(s) => {
+                let (begin, end) = (s.supernode_begin(), s.supernode_end());
+                let rows = s.col_ptr_for_row_idx();
+                (0..s.n_supernodes())
+                    .map(|k| {
+                        let width = (end[k] - begin[k]) as f64;
+                        let below = (rows[k + 1] - rows[k]) as f64;
+                        // Column j of the block has (width - j) + below entries.
+                        (0..width as usize)
+                            .map(|j| (width - j as f64 + below).powi(2))
+                            .sum::<f64>()
+                    })
+                    .sum()
+            }
+            SymbolicCholeskyRaw::Simplicial(s) => {
+                let ptr = s.col_ptr();
+                ptr.windows(2).map(|w| ((w[1] - w[0]) as f64).powi(2)).sum()
+            }
+        }
+    }
+
     /// Whether faer chose its supernodal factor (dense blocks) over the simplicial one.
     #[cfg(test)]
     pub(crate) fn is_supernodal(&self) -> bool {
@@ -465,6 +496,60 @@ fn forward_sweep(
 /// The lower triangle of a 7-point Laplacian on an m³ grid with a varying diagonal shift: SPD,
 /// and from m ≈ 10 large enough for faer to factor it supernodally (the tests here and the
 /// bordered factor's in fem/assembly.rs).
+/// The factor of a stiffness matrix with three DOFs per node on `elements` (each a list of node
+/// indices), restricted to the nodes `solved`, analysed in `ordering` without any value: what
+/// `facesim estimate` reads the size of a run's factor from before any numeric work.
+pub(crate) fn pattern_of_elements<'e>(
+    solved: &[bool],
+    elements: impl Iterator<Item = &'e [u32]> + Clone,
+    ordering: Ordering<'_>,
+) -> Result<Pattern, FaerError> {
+    let mut index = vec![usize::MAX; solved.len()];
+    let mut count = 0;
+    for (i, s) in index.iter_mut().zip(solved) {
+        if *s {
+            *i = count;
+            count += 1;
+        }
+    }
+    // Each solved node's solved neighbours at or after it, ascending (itself included).
+    let mut after: Vec<Vec<u32>> = vec![Vec::new(); count];
+    for e in elements {
+        for &a in e {
+            let ia = index[a as usize];
+            if ia == usize::MAX {
+                continue;
+            }
+            for &b in e {
+                let ib = index[b as usize];
+                if ib != usize::MAX && ib >= ia {
+                    after[ia].push(ib as u32);
+                }
+            }
+        }
+    }
+    let mut col_ptr = Vec::with_capacity(3 * count + 1);
+    let mut row_idx = Vec::new();
+    let mut dofs = Vec::with_capacity(3 * count);
+    col_ptr.push(0usize);
+    let nodes: Vec<usize> = (0..solved.len()).filter(|n| solved[*n]).collect();
+    for (ia, list) in after.iter_mut().enumerate() {
+        list.sort_unstable();
+        list.dedup();
+        for j in 0..3 {
+            for &ib in list.iter() {
+                let first = if ib as usize == ia { j } else { 0 };
+                row_idx.extend((first..3).map(|i| 3 * ib as usize + i));
+            }
+            col_ptr.push(row_idx.len());
+            dofs.push(3 * nodes[ia] + j);
+        }
+    }
+    let n = 3 * count;
+    let lower = faer::sparse::SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+    Pattern::analyse_with(lower.as_ref(), ordering, &dofs)
+}
+
 #[cfg(test)]
 pub(crate) fn grid_laplacian(m: usize) -> Vec<(usize, usize, f64)> {
     let id = |x: usize, y: usize, z: usize| x + m * (y + m * z);
@@ -553,5 +638,75 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The factor analysed from the elements alone, for `facesim estimate`, is the very factor
+    /// of the assembled stiffness with the same nodes held, in the same ordering.
+    #[test]
+    fn the_pattern_of_the_elements_is_the_assembled_stiffness_pattern() {
+        use crate::tet::{Constrained, Hold, TetMesh, TissueElastic};
+        let m = 7;
+        let id = |x: usize, y: usize, z: usize| ((x * m + y) * m + z) as u32;
+        let mut tets = Vec::new();
+        for x in 0..m - 1 {
+            for y in 0..m - 1 {
+                for z in 0..m - 1 {
+                    tets.extend(crate::mesh::kuhn_cell([x, y, z], id));
+                }
+            }
+        }
+        let nodes: Vec<[f64; 3]> = (0..m * m * m)
+            .map(|n| [(n / (m * m)) as f64, ((n / m) % m) as f64, (n % m) as f64])
+            .collect();
+        // Kuhn's tetrahedra come in both orientations: each made positive.
+        for t in &mut tets {
+            let p = |i: usize| nodes[t[i] as usize];
+            let d = |i: usize| crate::vec3::sub(p(i), p(0));
+            if crate::vec3::dot(crate::vec3::cross(d(1), d(2)), d(3)) < 0.0 {
+                t.swap(1, 2);
+            }
+        }
+        let material = vec![
+            TissueElastic {
+                youngs_kpa: 3.0,
+                poisson: 0.45
+            };
+            tets.len()
+        ];
+        let mesh = TetMesh {
+            nodes,
+            tets,
+            material,
+        };
+        // The bottom layer and a column of nodes held.
+        let solved: Vec<bool> = (0..mesh.nodes.len())
+            .map(|n| n / (m * m) != 0 && n % (m + 2) != 0)
+            .collect();
+        let holds: Vec<Hold> = solved
+            .iter()
+            .map(|s| {
+                if *s {
+                    Hold::Free
+                } else {
+                    Hold::Fixed([0.0; 3])
+                }
+            })
+            .collect();
+        let order = || MeshAnalyses::new(NodeOrder::of_tets(&solved, &mesh.tets).unwrap());
+        let (a, b) = (order(), order());
+        let k = mesh.assemble().unwrap();
+        let assembled = Constrained::ordered(&k, &holds, mesh.nodes.len(), Ordering::Nodes(&a))
+            .unwrap()
+            .factor_nnz();
+        let p = pattern_of_elements(
+            &solved,
+            mesh.tets.iter().map(|t| &t[..]),
+            Ordering::Nodes(&b),
+        )
+        .unwrap();
+        assert_eq!(p.columns(), 3 * solved.iter().filter(|s| **s).count());
+        assert_eq!(p.factor_nnz(), assembled);
+        // Σ column count² is at least the nonzeros (every column holds its diagonal).
+        assert!(p.factor_flops() >= p.factor_nnz() as f64);
     }
 }

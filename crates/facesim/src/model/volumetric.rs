@@ -431,6 +431,10 @@ pub struct TetReport {
     pub tets: usize,
     pub dofs: usize,
     pub free_dofs: usize,
+    /// Nonzeros of the Cholesky factor of the solved system: 8 bytes each, what sets the run's
+    /// peak memory (`facesim estimate` predicts it before the run).
+    #[serde(default)]
+    pub factor_nonzeros: usize,
     /// Nodes per role: skin (free), bone moved with a segment, bone or cut faces held.
     pub skin_nodes: usize,
     /// Skin-kind nodes facing a cavity within `[tet] mucosa_gap_mm` of the skull, and those
@@ -984,6 +988,81 @@ pub(super) fn predict_face(
     })
 }
 
+/// The size of the system a run of the volumetric model factors, for `facesim estimate`: the
+/// run's own mesh, and its stiffness restricted to the nodes the plan leaves to solve (bone the
+/// plan does not move is held; moved, sliding and soft nodes are counted as solved, so the
+/// factor is the run's or a little larger), analysed symbolically in the run's ordering.
+pub(crate) struct SystemSize {
+    pub nodes: usize,
+    pub elements: usize,
+    pub unknowns: usize,
+    pub factor_nonzeros: usize,
+    pub factor_flops: f64,
+}
+
+/// [`SystemSize`] of `case` on `scene`; None when the plan moves no bone.
+pub(crate) fn system_size(scene: &Scene, case: &Case) -> Result<Option<SystemSize>> {
+    let t = &case.tet;
+    let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin);
+    let Some((roi, _)) = region(scene, skin, t.margin_mm) else {
+        return Ok(None);
+    };
+    let params = MeshParams {
+        skin_size_mm: t.skin_size_mm,
+        deep_size_mm: t.deep_size_mm,
+        margin_mm: t.margin_mm,
+    };
+    let mesh = crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)?;
+    let (_, moved) = scene.model.plan.apply(&mesh.nodes, 1.0);
+    let corner_solved: Vec<bool> = (mesh.kind.iter().zip(&moved))
+        .map(|(k, m)| *k != NodeKind::Bone || *m)
+        .collect();
+    let failed = |e| {
+        Error::numerical(
+            crate::error::NumericalKind::Singular,
+            format!("symbolic Cholesky: {e:?}"),
+        )
+    };
+    let (nodes, elements, pattern) = if t.element == TetElement::Quadratic {
+        let linear = TetMesh {
+            nodes: mesh.nodes.clone(),
+            tets: mesh.tets.clone(),
+            material: materials(&mesh.tissue, t),
+        };
+        let q = Tet10Mesh::from_linear(&linear, Rule::Full);
+        // A midpoint is solved when either end is.
+        let mut solved = corner_solved.clone();
+        solved.extend(
+            q.edges
+                .iter()
+                .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
+        );
+        let pattern = crate::fem::cholesky::pattern_of_elements(
+            &solved,
+            q.tets.iter().map(|t| &t[..]),
+            Ordering::NestedDissection,
+        )
+        .map_err(failed)?;
+        (q.nodes.len(), q.tets.len(), pattern)
+    } else {
+        let order = NodeOrder::of_tets(&corner_solved, &mesh.tets).map(MeshAnalyses::new);
+        let pattern = crate::fem::cholesky::pattern_of_elements(
+            &corner_solved,
+            mesh.tets.iter().map(|t| &t[..]),
+            ordering(&order),
+        )
+        .map_err(failed)?;
+        (mesh.nodes.len(), mesh.tets.len(), pattern)
+    };
+    Ok(Some(SystemSize {
+        nodes,
+        elements,
+        unknowns: pattern.columns(),
+        factor_nonzeros: pattern.factor_nnz(),
+        factor_flops: pattern.factor_flops(),
+    }))
+}
+
 /// Mesh, solve and carry the face; None when the plan moves no bone.
 pub fn predict(
     scene: &Scene,
@@ -1430,6 +1509,9 @@ pub fn predict(
                         torn[e] = true;
                     }
                     linear.material = torn_trace(material.clone(), &torn);
+                    // The old factor goes before the new one is made: two at once set the
+                    // run's peak (a rotation on a 2.5 mm phantom: 3.3 GB against 2.0 GB).
+                    drop(c);
                     c = Constrained::ordered(
                         &stiffness(&linear)?,
                         &hold,
@@ -1544,7 +1626,12 @@ pub fn predict(
         let rest: Vec<Hold> = linear_hold.iter().map(|l| l.hold(&[])).collect();
         let factor = match factor {
             Some(c) if c.takes(&rest) => c,
-            _ => Constrained::ordered(&stiffness(&linear)?, &rest, nodes.len(), ordering(&order))?,
+            run_factor => {
+                // The run's factor goes before the basis's is made: two at once would set the
+                // run's peak memory.
+                drop(run_factor);
+                Constrained::ordered(&stiffness(&linear)?, &rest, nodes.len(), ordering(&order))?
+            }
         };
         let inputs = BasisInputs {
             factor: &factor,
@@ -1570,6 +1657,7 @@ pub fn predict(
         tets: mesh.tets.len(),
         dofs: 3 * nodes.len(),
         free_dofs: 3 * counted(&constraint, FREE),
+        factor_nonzeros,
         skin_nodes: kind.iter().filter(|k| **k == NodeKind::Skin).count(),
         mucosa_nodes,
         sliding_nodes: counted(&constraint, SLIDING),

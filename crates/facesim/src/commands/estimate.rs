@@ -1,0 +1,126 @@
+//! `facesim estimate` (docs/cohort.md "Resources from the model"): a run's peak memory and wall
+//! time, predicted before it runs from what sets them. For the volumetric model that is the
+//! Cholesky factor: the run's own mesh is built and its stiffness analysed symbolically (no
+//! value is computed), giving the factor's nonzeros and operations. The C1 models' cost follows
+//! the CT and the face scan.
+//!
+//! The coefficients below were fitted to measured peaks (resident set, `/usr/bin/time`) and wall
+//! times of `facesim run` on the bundled samples and 2.5 mm phantom cohorts, then raised so
+//! that no fitted case is under-predicted; docs/cohort.md has the table of predicted against
+//! measured, on cases the fit did not see too.
+
+use crate::error::Result;
+use crate::observe::Observer;
+use crate::pipeline::{Recorder, inputs, prepare};
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// What `facesim estimate` prints (JSON).
+#[derive(Serialize, Debug, Clone)]
+pub struct Estimate {
+    /// `tet` or the C1 model's name.
+    pub model: String,
+    /// Worker threads the run would use (`--threads`, default all cores).
+    pub threads: usize,
+    pub ct_voxels: usize,
+    pub scan_vertices: usize,
+    /// The volumetric model's system (absent for the C1 models, or when no bone moves).
+    pub system: Option<System>,
+    /// Predicted peak resident memory of the run (MB, 10⁶ bytes).
+    pub peak_mem_mb: f64,
+    /// Predicted wall time of the run (s) on a machine like docs/cohort.md's.
+    pub wall_s: f64,
+    /// What the estimate itself took (s).
+    pub seconds: f64,
+}
+
+/// The factor a volumetric run makes.
+#[derive(Serialize, Debug, Clone)]
+pub struct System {
+    pub nodes: usize,
+    pub elements: usize,
+    pub unknowns: usize,
+    pub factor_nonzeros: usize,
+    /// Floating-point operations of one numeric factorisation (10⁹).
+    pub factor_gflop: f64,
+}
+
+/// The fitted memory model, times [`MARGIN`]: a fixed part (the program, the landmarks, the
+/// face), the CT (its HU as f32, the labels and masks: bytes per voxel) and the factor (its
+/// values, 8 bytes per nonzero of the run's factor, which the estimate's slightly larger system
+/// over-counts, and the workspace beside it). Fitted by least squares on 16 runs (docs/cohort.md
+/// "Resources from the model"): 239 MB + 9.28 bytes per estimated nonzero, the CT at 8 bytes a
+/// voxel; measured / fitted from 0.85 to 1.12.
+const BASE_MB: f64 = 239.0;
+const BYTES_PER_VOXEL: f64 = 8.0;
+const BYTES_PER_FACTOR_NONZERO: f64 = 9.28;
+/// The C1 models: their factor is the face's (tens of MB); the CT and a fixed part set the peak.
+const C1_BASE_MB: f64 = 250.0;
+const C1_BYTES_PER_VOXEL: f64 = 12.0;
+const C1_BYTES_PER_SCAN_VERTEX: f64 = 5000.0;
+/// Wall time: a fixed part and the factorisation's operations (one factorisation and the solves
+/// and plan basis around it), fitted on the same runs: 3.4 s + 0.0334 s per 10⁹ operations
+/// on the 2-core machine of docs/cohort.md.
+const SECONDS_BASE: f64 = 3.4;
+const SECONDS_PER_GFLOP: f64 = 0.0334;
+const C1_SECONDS_BASE: f64 = 3.0;
+const C1_SECONDS_PER_SCAN_VERTEX: f64 = 2e-4;
+/// Both predictions are the fit times this, so that no fitted run is under-predicted (the
+/// largest measured / fitted was 1.12).
+const MARGIN: f64 = 1.15;
+
+/// `facesim estimate CASE`: read the case and its inputs, run the stages before the model, and
+/// for the volumetric model build its mesh and analyse its factor.
+pub fn estimate(case_path: &Path, overrides: &toml::Table, obs: &dyn Observer) -> Result<Estimate> {
+    let start = Instant::now();
+    let mut rec = Recorder::new(obs);
+    let (inputs, _) = inputs::read_with(case_path, overrides, &mut rec)?;
+    let scene = prepare(inputs, &mut rec)?;
+    let case = &scene.case;
+    let ct_voxels = scene.vol.data.len();
+    let scan_vertices = scene
+        .face
+        .fine
+        .as_ref()
+        .unwrap_or(&scene.face.skin)
+        .vertices
+        .len();
+    let threads = rayon::current_num_threads();
+    let c1 = case.solve.model.on_springs();
+    let system = if c1 {
+        None
+    } else {
+        crate::model::volumetric::system_size(&scene, case)?.map(|s| System {
+            nodes: s.nodes,
+            elements: s.elements,
+            unknowns: s.unknowns,
+            factor_nonzeros: s.factor_nonzeros,
+            factor_gflop: s.factor_flops / 1e9,
+        })
+    };
+    let (vox, scan) = (ct_voxels as f64, scan_vertices as f64);
+    let (mem_mb, wall_s) = match &system {
+        Some(sys) => (
+            BASE_MB
+                + (vox * BYTES_PER_VOXEL + sys.factor_nonzeros as f64 * BYTES_PER_FACTOR_NONZERO)
+                    / 1e6,
+            SECONDS_BASE + sys.factor_gflop * SECONDS_PER_GFLOP,
+        ),
+        // No bone moves (the run stops after its mesh would be built), or a C1 model.
+        None => (
+            C1_BASE_MB + (vox * C1_BYTES_PER_VOXEL + scan * C1_BYTES_PER_SCAN_VERTEX) / 1e6,
+            C1_SECONDS_BASE + scan * C1_SECONDS_PER_SCAN_VERTEX,
+        ),
+    };
+    Ok(Estimate {
+        model: case.solve.model.name().into(),
+        threads,
+        ct_voxels,
+        scan_vertices,
+        system,
+        peak_mem_mb: MARGIN * mem_mb,
+        wall_s: MARGIN * wall_s,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
