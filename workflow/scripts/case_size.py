@@ -153,7 +153,8 @@ def estimate(facesim, plan, sets, threads, cache):
     say why)."""
     import json
     import subprocess
-    import tempfile
+
+    from replacing import write_json
 
     if cache is not None:
         try:
@@ -174,17 +175,10 @@ def estimate(facesim, plan, sets, threads, cache):
         return None
     if cache is None:
         return e
-    os.makedirs(os.path.dirname(cache), exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(cache), prefix=".estimate-")
     try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(e, f)
-        os.replace(tmp, cache)
+        write_json(cache, e)
     except OSError:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        pass
     return e
 
 

@@ -23,10 +23,11 @@ import resource
 import shutil
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 import tomllib
+
+from replacing import write_json
 
 # Slurm job states a retry with the same request would meet again.
 LIMIT_STATES = ("OUT_OF_MEMORY", "TIMEOUT")
@@ -205,35 +206,6 @@ def slurm_request(job_id: str):
     if mem is None and os.environ.get("SLURM_MEM_PER_NODE", "").isdigit():
         mem = float(os.environ["SLURM_MEM_PER_NODE"])
     return mem, minutes(kv.get("TimeLimit", ""))
-
-
-def umask() -> int:
-    """The process's umask, read without changing it (/proc/self/status; 022 if unreadable)."""
-    try:
-        with open("/proc/self/status") as f:
-            return next((int(l.split()[1], 8) for l in f if l.startswith("Umask:")), 0o022)
-    except (OSError, ValueError, IndexError):
-        return 0o022
-
-
-def write_json(path: str, value):
-    """Writes `path` whole or not at all: a temporary of its own in the same directory (two
-    writers of one path never share one), then renamed over it."""
-    d = os.path.dirname(path) or "."
-    os.makedirs(d, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=d, prefix=os.path.basename(path) + ".", suffix=".tmp")
-    try:
-        # mkstemp's file is private (0600); the result is as readable as any file written here.
-        os.fchmod(fd, 0o666 & ~umask())
-        with os.fdopen(fd, "w") as f:
-            json.dump(value, f, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
 
 
 def attempt_record_path(jobs_file: str, attempt: int) -> str:

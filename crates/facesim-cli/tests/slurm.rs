@@ -1097,3 +1097,95 @@ fn stop_ends_running_jobs_and_their_cgroups() {
         cgroups.len()
     );
 }
+
+/// The default (volumetric) model on the cluster with `auto` resources: two phantoms of a seed
+/// no fit saw, each with its translation and its rotation plan, every job sized by `facesim
+/// estimate` (docs/cohort.md "Resources from the model"). No job may end OUT_OF_MEMORY, every
+/// run completes on its first attempt, and each asked for more memory than it peaked at.
+#[test]
+fn the_default_model_on_auto_resources_loses_no_job_to_memory() {
+    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    preconditions();
+    let work = root().join("target/tmp/slurm-default-model");
+    let _ = std::fs::remove_dir_all(&work);
+    std::fs::create_dir_all(&work).unwrap();
+    let cases = work.join("cases");
+    run_ok(Command::new(exe()).arg("phantom-cohort").arg(&cases).args([
+        "--cases",
+        "2",
+        "--seed",
+        "777",
+        "--spacing",
+        "2.5",
+        "--slice",
+        "2.5",
+    ]));
+    let config = work.join("config.yaml");
+    std::fs::write(
+        &config,
+        format!(
+            "plans: [\"case.toml\", \"case_rotation.toml\"]\nthreads: 2\nretry_growth: 2\n\
+             shared_storage: [\"{}\", \"{}\"]\n",
+            root().display(),
+            venv().display()
+        ),
+    )
+    .unwrap();
+    let cluster = Cluster::start();
+    let out = work.join("slurm");
+    let mut c = Command::new(snakemake());
+    c.current_dir(&work)
+        .arg("-s")
+        .arg(root().join("workflow/Snakefile"))
+        .arg("--workflow-profile")
+        .arg(root().join("workflow/profiles/slurm"))
+        .args([
+            "--default-resources",
+            "slurm_partition=cohort",
+            "--slurm-status-command",
+            "squeue",
+            "--slurm-init-seconds-before-status-checks",
+            "2",
+        ])
+        .arg("--configfile")
+        .arg(&config)
+        .arg("--config")
+        .arg(format!("cohort={}", cases.display()))
+        .arg(format!("out={}", out.display()))
+        .arg(format!("facesim={}", exe().display()));
+    run_ok(cluster.env(&mut c));
+    let rows = read_csv(&out.join("cohort.csv"));
+    let mut runs = 0;
+    for r in &rows {
+        assert_ne!(r["slurm_state"], "OUT_OF_MEMORY", "{r:?}");
+        assert_eq!(r["status"], "ok", "{r:?}");
+        assert_eq!(r["attempts"], "1", "a run needed a retry: {r:?}");
+        if r["region"] != "face" {
+            continue;
+        }
+        assert!(!r["slurm_job"].is_empty(), "{r:?}");
+        let (asked, peak): (f64, f64) = (
+            r["requested_mem_mb"].parse().unwrap(),
+            r["peak_mem_mb"].parse().unwrap(),
+        );
+        assert!(
+            peak > 500.0 && asked > peak,
+            "asked {asked} MB, peaked at {peak}: {r:?}"
+        );
+        runs += 1;
+    }
+    assert_eq!(runs, 4, "{rows:?}");
+    // Each job was sized by the model's own estimate, kept for the job step.
+    for case in ["case001", "case002"] {
+        for plan in ["case", "case_rotation"] {
+            let e = out
+                .join("estimates")
+                .join(case)
+                .join(plan)
+                .join("default.json");
+            let e: serde_json::Value = serde_json::from_slice(&std::fs::read(&e).unwrap()).unwrap();
+            assert!(e["system"]["factor_nonzeros"].as_u64().unwrap() > 0);
+        }
+    }
+    drop(cluster);
+}

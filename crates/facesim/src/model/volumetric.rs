@@ -988,6 +988,15 @@ pub(super) fn predict_face(
     })
 }
 
+/// The tissue mesh's sizes from `[tet]`.
+fn mesh_params(t: &crate::case::Tet) -> MeshParams {
+    MeshParams {
+        skin_size_mm: t.skin_size_mm,
+        deep_size_mm: t.deep_size_mm,
+        margin_mm: t.margin_mm,
+    }
+}
+
 /// The size of the system a run of the volumetric model factors, for `facesim estimate`: the
 /// run's own mesh, and its stiffness restricted to the nodes the plan leaves to solve (bone the
 /// plan does not move is held; moved, sliding and soft nodes are counted as solved, so the
@@ -1007,11 +1016,7 @@ pub(crate) fn system_size(scene: &Scene, case: &Case) -> Result<Option<SystemSiz
     let Some((roi, _)) = region(scene, skin, t.margin_mm) else {
         return Ok(None);
     };
-    let params = MeshParams {
-        skin_size_mm: t.skin_size_mm,
-        deep_size_mm: t.deep_size_mm,
-        margin_mm: t.margin_mm,
-    };
+    let params = mesh_params(t);
     let mesh = crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)?;
     let (_, moved) = scene.model.plan.apply(&mesh.nodes, 1.0);
     let corner_solved: Vec<bool> = (mesh.kind.iter().zip(&moved))
@@ -1079,11 +1084,7 @@ pub fn predict(
     let Some((roi, nose_tip)) = region(scene, skin, t.margin_mm) else {
         return Ok(None);
     };
-    let params = MeshParams {
-        skin_size_mm: t.skin_size_mm,
-        deep_size_mm: t.deep_size_mm,
-        margin_mm: t.margin_mm,
-    };
+    let params = mesh_params(t);
     let mesh = rec.time(Stage::TetMesh, "meshing the soft tissue", || {
         crate::tet::from_ct::soft_tissue(&scene.vol, &scene.seg, roi, &params)
     })?;
