@@ -278,31 +278,15 @@ impl RunDir {
             sync_dir(parent);
         }
         pause("committed");
-        self.remove_unit_dir()
-            .map_err(|e| Error::output(&self.unit, e))?;
+        remove_unit(&self.unit).map_err(|e| Error::output(&self.unit, e))?;
         Ok(self.dest.clone())
-    }
-
-    /// Remove the unit's directory, the lock file last, while the lock is still held.
-    fn remove_unit_dir(&self) -> std::io::Result<()> {
-        for sub in ["new", "old"] {
-            match std::fs::remove_dir_all(self.unit.join(sub)) {
-                Err(e) if e.kind() != std::io::ErrorKind::NotFound => return Err(e),
-                _ => {}
-            }
-        }
-        let _ = std::fs::remove_file(self.unit.join("lock"));
-        match std::fs::remove_dir(&self.unit) {
-            Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
-            _ => Ok(()),
-        }
     }
 }
 
 impl Drop for RunDir {
     fn drop(&mut self) {
         if !self.committed {
-            let _ = self.remove_unit_dir();
+            let _ = remove_unit(&self.unit);
         }
     }
 }
@@ -449,12 +433,24 @@ fn remove_if_dead(unit: &Path) {
         return; // a live unit (this process's own included)
     }
     pause("sweep locked");
-    for sub in ["new", "old"] {
-        let _ = std::fs::remove_dir_all(unit.join(sub));
-    }
-    let _ = std::fs::remove_file(&lock_path);
-    let _ = std::fs::remove_dir(unit);
+    let _ = remove_unit(unit);
     drop(lock);
+}
+
+/// Remove unit directory `unit` whose lock the caller holds: `new/` and `old/`, then the lock
+/// file, then the directory. Every step is tried; the first error (a missing piece is none) is
+/// returned.
+fn remove_unit(unit: &Path) -> std::io::Result<()> {
+    let gone = |r: std::io::Result<()>| match r {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(e),
+        _ => Ok(()),
+    };
+    let new = gone(std::fs::remove_dir_all(unit.join("new")));
+    let old = gone(std::fs::remove_dir_all(unit.join("old")));
+    // The lock file's own error does not count: the directory's removal says it.
+    let _ = std::fs::remove_file(unit.join("lock"));
+    let dir = gone(std::fs::remove_dir(unit));
+    new.and(old).and(dir)
 }
 
 /// A point of the protocol where the concurrency tests pause a thread; nothing otherwise.
