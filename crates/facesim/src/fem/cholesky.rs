@@ -646,15 +646,7 @@ mod tests {
     fn the_pattern_of_the_elements_is_the_assembled_stiffness_pattern() {
         use crate::tet::{Constrained, Hold, TetMesh, TissueElastic};
         let m = 7;
-        let id = |x: usize, y: usize, z: usize| ((x * m + y) * m + z) as u32;
-        let mut tets = Vec::new();
-        for x in 0..m - 1 {
-            for y in 0..m - 1 {
-                for z in 0..m - 1 {
-                    tets.extend(crate::mesh::kuhn_cell([x, y, z], id));
-                }
-            }
-        }
+        let mut tets = crate::mesh::kuhn_grid(m);
         let nodes: Vec<[f64; 3]> = (0..m * m * m)
             .map(|n| [(n / (m * m)) as f64, ((n / m) % m) as f64, (n % m) as f64])
             .collect();

@@ -355,20 +355,6 @@ mod tests {
         );
     }
 
-    /// The tetrahedra of an m³ grid of nodes (6 per cube, Kuhn's split), numbered as `grid`.
-    fn grid_tets(m: usize) -> Vec<[u32; 4]> {
-        let id = |x: usize, y: usize, z: usize| ((x * m + y) * m + z) as u32;
-        let mut t = Vec::new();
-        for x in 0..m - 1 {
-            for y in 0..m - 1 {
-                for z in 0..m - 1 {
-                    t.extend(crate::mesh::kuhn_cell([x, y, z], id));
-                }
-            }
-        }
-        t
-    }
-
     /// The mesh's node ordering serves holds other than the ones it was made for: the DOFs of
     /// a node held there drop out, those of a node freed since come last, every free DOF once;
     /// its factor fills about as little as the free DOFs' own nested dissection; and a pattern
@@ -379,7 +365,7 @@ mod tests {
         let nodes = m * m * m;
         // Made for: the bottom layer (x = 0) held whole.
         let solved: Vec<bool> = (0..nodes).map(|n| n / (m * m) != 0).collect();
-        let order = NodeOrder::of_tets(&solved, &grid_tets(m)).unwrap();
+        let order = NodeOrder::of_tets(&solved, &crate::mesh::kuhn_grid(m)).unwrap();
         // Used for: also the top layer held, one component of every node in the middle layer
         // held (sliding), and two bottom nodes freed.
         let freed = [5usize, 40];

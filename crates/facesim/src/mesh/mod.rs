@@ -95,6 +95,22 @@ pub(crate) fn kuhn_cell(c: [usize; 3], id: impl Fn(usize, usize, usize) -> u32) 
     })
 }
 
+/// The tetrahedra of an m³ grid of nodes, node `(x, y, z)` numbered `(x·m + y)·m + z`: six Kuhn
+/// tetrahedra per cube ([`kuhn_cell`]), orientation not fixed.
+#[cfg(test)]
+pub(crate) fn kuhn_grid(m: usize) -> Vec<[u32; 4]> {
+    let id = |x: usize, y: usize, z: usize| ((x * m + y) * m + z) as u32;
+    let mut t = Vec::new();
+    for x in 0..m - 1 {
+        for y in 0..m - 1 {
+            for z in 0..m - 1 {
+                t.extend(kuhn_cell([x, y, z], id));
+            }
+        }
+    }
+    t
+}
+
 /// Two triangles over four points with fractional coordinates: the file-format tests' mesh.
 #[cfg(test)]
 pub(crate) fn two_triangles() -> Mesh {
