@@ -7,11 +7,15 @@ only; imported by workflow/Snakefile and workflow/scripts/size_figures.py.
 """
 
 import gzip
+import json
 import math
 import os
 import struct
+import subprocess
 import sys
 import tomllib
+
+from replacing import write_json
 
 
 def _nifti_voxels(path):
@@ -151,10 +155,6 @@ def estimate(facesim, plan, sets, threads, cache):
     the file `cache` (None: not kept, as in a dry run) so the job step and later invocations
     read it instead of asking again; None if the estimate fails (a broken case: the run will
     say why)."""
-    import json
-    import subprocess
-
-    from replacing import write_json
 
     if cache is not None:
         try:
