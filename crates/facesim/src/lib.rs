@@ -49,6 +49,7 @@
 // No unwrap/expect outside tests: input-dependent failures are errors, not panics (issue 7).
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
+pub mod anatomy;
 pub mod case;
 pub mod commands;
 pub mod compare;

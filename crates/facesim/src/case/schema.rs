@@ -24,6 +24,13 @@ pub struct Case {
     pub surface: Surface,
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
+    /// `[[surgery]]`: osteotomies in clinical terms, their cuts found from the CT
+    /// (docs/planning.md).
+    #[serde(default)]
+    pub surgery: Vec<Surgery>,
+    /// `[head]`: how the clinical head frame is found, and a pitch correction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub head: Option<Head>,
     pub solve: Solve,
     pub tet: Tet,
     pub output: Output,
@@ -196,6 +203,75 @@ pub struct Osteotomy {
     pub rotate_deg: [f64; 3],
     #[serde(default)]
     pub pivot: [f64; 3],
+}
+
+/// The osteotomy a `[[surgery]]` names.
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq, PartialOrd, Ord)]
+#[serde(rename_all = "kebab-case")]
+pub enum SurgeryKind {
+    /// Le Fort I: the maxilla below a cut from the piriform rim, above the tooth apices, back to
+    /// the pterygomaxillary junction.
+    LeFortI,
+    /// Bilateral sagittal split: the tooth-bearing mandible; the rami and condyles stay.
+    Bsso,
+    /// Genioplasty: the chin below the canine apices and the mental foramina.
+    Genioplasty,
+}
+
+/// A landmark named as a pivot, or a point (LPS mm).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(untagged)]
+pub enum Pivot {
+    Landmark(String),
+    Point([f64; 3]),
+}
+
+/// `[[surgery]]`: one osteotomy in the surgeon's words. Moves are in the clinical head frame:
+/// forward, up and toward the patient's left; rotations in degrees about the frame's axes
+/// through the pivot (docs/planning.md "Signs").
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Surgery {
+    pub kind: SurgeryKind,
+    #[serde(default)]
+    pub advance_mm: f64,
+    #[serde(default)]
+    pub up_mm: f64,
+    #[serde(default)]
+    pub left_mm: f64,
+    #[serde(default)]
+    pub pitch_deg: f64,
+    #[serde(default)]
+    pub roll_deg: f64,
+    #[serde(default)]
+    pub yaw_deg: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pivot: Option<Pivot>,
+    #[serde(default)]
+    pub autorotate: bool,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
+}
+
+/// How the clinical head frame is found (`[head] frame`).
+#[derive(Clone, Copy, Debug, Deserialize, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrameChoice {
+    /// Frankfort horizontal (porion and orbitale, both sides) and the midsagittal plane.
+    Frankfort,
+    /// The soft-tissue facial plane N'–Pog' vertical: natural head position estimated.
+    FacialPlane,
+}
+
+/// `[head]`: the clinical frame's method (default: Frankfort where the CT holds porion and
+/// orbitale, else the facial plane) and a pitch correction added to the found frame.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Head {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<FrameChoice>,
+    #[serde(default)]
+    pub pitch_deg: f64,
 }
 
 /// The volumetric model's constitutive law.
