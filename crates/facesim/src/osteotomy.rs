@@ -1,7 +1,8 @@
 //! Bone moves (docs/case.md `[[osteotomy]]`, Koch §4.4): each segment moves the skull points
 //! inside its region by a rigid transform p' = R (p − pivot) + pivot + translate, with
 //! R = Rz·Ry·Rx (rotate about x, then y, then z; degrees). Segments apply in order, each to the
-//! points inside its region at their current position.
+//! points inside its region at their current position; a segment a `[[surgery]]` cut
+//! (`crate::anatomy`) selects by the pre-operative position, since it is one piece of bone.
 
 use crate::case::Osteotomy;
 use crate::error::{Error, Result};
@@ -99,8 +100,14 @@ impl Plan {
                         + scale * o.translate[a];
                 }
             };
-            for ((p, q), m) in out.iter_mut().zip(anchor.iter_mut()).zip(moved.iter_mut()) {
-                if o.region.contains(*q) {
+            let pre = o.region.selects_pre_operative();
+            for (((p, q), m), q0) in out
+                .iter_mut()
+                .zip(anchor.iter_mut())
+                .zip(moved.iter_mut())
+                .zip(anchors)
+            {
+                if o.region.contains(if pre { *q0 } else { *q }) {
                     turn(p);
                     turn(q);
                     *m = Some(k);

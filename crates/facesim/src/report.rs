@@ -74,6 +74,13 @@ pub struct Report {
     /// The head frame the landmarks were found in (docs/landmarks.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub head_frame: Option<HeadFrame>,
+    /// The clinical head frame the plan is read in: how it was found (docs/planning.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clinical_frame: Option<crate::anatomy::readback::FrameReport>,
+    /// The plan in the surgeon's terms: per segment its six moves in the clinical frame, per
+    /// bony landmark its move forward, up and left (docs/planning.md).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plan: Option<crate::anatomy::readback::PlanReport>,
     /// Label → pre, post (LPS mm), change_mm; a missing landmark says why.
     pub landmarks: Ordered<Carried>,
     /// Nasolabial and mentolabial angles, lips to the E-line: before, after, change.

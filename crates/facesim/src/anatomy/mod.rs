@@ -8,8 +8,12 @@
 //!
 //! Every landmark is detected or missing with the reason; positions are LPS mm.
 
+pub mod cuts;
 pub mod head;
 pub mod jaws;
+pub mod moves;
+pub mod readback;
+pub mod surgery;
 
 use crate::labels;
 use crate::volume::Volume;
@@ -55,4 +59,26 @@ pub fn turned(frame: &crate::landmarks::HeadFrame, pitch_deg: f64) -> crate::lan
     f.anterior = sub(scale(frame.anterior, c), scale(frame.vertical, s));
     f.vertical = add(scale(frame.vertical, c), scale(frame.anterior, s));
     f
+}
+
+/// The clinical frame and the bony landmarks of a head.
+pub struct Anatomy {
+    pub frame: head::ClinicalFrame,
+    /// Every label of [`LANDMARKS`], detected or missing with the reason.
+    pub landmarks: Vec<crate::landmarks::Landmark>,
+}
+
+/// Find the clinical frame (from `midsagittal`, the skin's symmetry frame, and `soft`, its
+/// soft-tissue landmarks) and then the jaw landmarks in it. Err: `[head] frame` asks for a
+/// method the CT cannot give.
+pub fn find(
+    bone: &Bone,
+    midsagittal: &crate::landmarks::HeadFrame,
+    soft: &[crate::landmarks::Landmark],
+    head: &crate::case::Head,
+) -> Result<Anatomy, String> {
+    let frame = head::clinical_frame(bone, midsagittal, soft, head)?;
+    let mut landmarks = frame.landmarks.clone();
+    landmarks.extend(jaws::jaw_landmarks(bone, &frame.frame));
+    Ok(Anatomy { frame, landmarks })
 }

@@ -78,11 +78,19 @@ impl SurfaceFile {
 pub struct Mask {
     pub path: PathBuf,
     pub voxels: Option<std::sync::Arc<crate::volume::Volume>>,
+    /// A segment a `[[surgery]]` cut (`crate::anatomy::cuts`): it selects the bone it cut
+    /// before any move, so that segments cut from one bone and moved together (a chin on a
+    /// moved mandible) each keep their own bone.
+    pub found: bool,
 }
 
 impl From<PathBuf> for Mask {
     fn from(path: PathBuf) -> Mask {
-        Mask { path, voxels: None }
+        Mask {
+            path,
+            voxels: None,
+            found: false,
+        }
     }
 }
 
@@ -120,6 +128,12 @@ impl Mask {
 }
 
 impl Region {
+    /// Whether the region selects points at their pre-operative position (a segment cut by a
+    /// `[[surgery]]`), not at their position after the plan's earlier steps.
+    pub fn selects_pre_operative(&self) -> bool {
+        matches!(self, Region::Mask(m) if m.found)
+    }
+
     /// Whether p (LPS mm) is inside; a mask must have been read (`pipeline::inputs::read_masks`).
     pub fn contains(&self, p: [f64; 3]) -> bool {
         match self {

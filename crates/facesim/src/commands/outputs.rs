@@ -154,6 +154,19 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
             volume::nifti_io::write_labels(&scene.vol, &scene.seg.labels, &o.join("labels.nii.gz"))
         }),
     ];
+    let mut jobs = jobs;
+    // The segments `[[surgery]]` cut: each as the skull surface it moves and as a voxel mask.
+    for planned in scene.anatomy.iter().flat_map(|a| &a.planned) {
+        jobs.push(Box::new(move || {
+            let region = planned.segment.region("");
+            let keep: Vec<bool> = skull.vertices.iter().map(|v| region.contains(*v)).collect();
+            let part = skull.sub_mesh(&keep);
+            mesh::write_mesh(&part, &o.join(format!("segment_{}.ply", planned.name)))
+        }));
+        jobs.push(Box::new(move || {
+            volume::nifti_io::write(&planned.segment.mask, &o.join(format!("segment_{}.nii.gz", planned.name)))
+        }));
+    }
     use rayon::prelude::*;
     jobs.into_par_iter()
         .map(|j| j())

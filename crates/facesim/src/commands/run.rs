@@ -219,6 +219,14 @@ fn finish(
         None,
         warnings,
     );
+    if let Some(a) = &scene.anatomy {
+        report.clinical_frame = Some(crate::anatomy::readback::FrameReport::of(&a.anatomy));
+        report.plan = Some(crate::anatomy::readback::plan_report(
+            &a.anatomy,
+            &a.planned,
+            &scene.model.plan,
+        ));
+    }
     report.discretisation_error = discretisation;
     report.nonlinear_vs_linear = prediction.linear_face().map(|linear| {
         crate::model::discretisation::nonlinear_vs_linear(

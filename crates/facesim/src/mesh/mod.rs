@@ -128,6 +128,27 @@ pub(crate) fn two_triangles() -> Mesh {
 impl Mesh {
     /// The closed axis-aligned box [min, max] as 12 triangles wound outwards (a region, a test
     /// body).
+    /// The triangles whose three vertices are kept, with only the vertices they use.
+    pub fn sub_mesh(&self, keep: &[bool]) -> Mesh {
+        let mut index = vec![u32::MAX; self.vertices.len()];
+        let mut vertices = Vec::new();
+        let mut triangles = Vec::new();
+        for t in &self.triangles {
+            if !t.iter().all(|&v| keep[v as usize]) {
+                continue;
+            }
+            triangles.push(t.map(|v| {
+                let v = v as usize;
+                if index[v] == u32::MAX {
+                    index[v] = vertices.len() as u32;
+                    vertices.push(self.vertices[v]);
+                }
+                index[v]
+            }));
+        }
+        Mesh::new(vertices, triangles)
+    }
+
     pub fn cuboid(min: [f64; 3], max: [f64; 3]) -> Self {
         // Corner i has max[a] where bit a of i is set.
         let v = (0..8)

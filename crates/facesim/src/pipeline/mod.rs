@@ -15,6 +15,7 @@
 //! `stage`), and report.json is assembled once at the end (`report`).
 //! `facesim run`, the study (crates/facesim-lab) and the tests call these same functions.
 
+pub mod anatomy;
 pub mod bone_overlap;
 pub mod face;
 pub mod inputs;
@@ -49,6 +50,9 @@ pub struct Scene {
     pub seg: Segmentation,
     pub face: face::Face,
     pub model: model::Model,
+    /// The clinical frame, the bony landmarks and the planned surgeries (None: no midsagittal
+    /// frame, and no `[[surgery]]`).
+    pub anatomy: Option<anatomy::Anatomical>,
     /// The pre-operative landmarks, located once ([`Scene::landmarks_pre`]).
     located: std::sync::OnceLock<Option<Located>>,
 }
@@ -92,22 +96,33 @@ impl Scene {
 
 /// Stages 1–4 on a case whose files are read: tissues, surfaces, face, model.
 pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scene> {
-    let inputs::Inputs { case, ct, scan } = inputs;
+    let inputs::Inputs { mut case, ct, scan } = inputs;
     let seg = tissues(&ct, &case, rec)?;
     rec.warnings.extend(seg.report.warnings.iter().cloned());
     // The cleaned bone field serves the skull surface and the spring tracer.
     let bone_field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &bone_field, &case, rec)?;
     let face = face::place(surf, scan, &ct, &case, rec)?;
+    // The pre-operative landmarks: the midsagittal frame and soft landmarks the anatomy needs.
+    let user = inputs::user_landmarks(&case)?;
+    let located = crate::landmarks::locate(&face.skin, Some(&face.skull), &user, Path::new("case.toml"))?;
+    let anatomy = anatomy::find(&mut case, &ct, &seg, &located, rec)?;
     let model = model::build(&face, &ct, &seg, &bone_field, &case, rec)?;
     drop(bone_field);
+    let kept = std::sync::OnceLock::new();
+    let _ = kept.set(Some(Located {
+        key: crate::mesh::checksum(&face.skin.vertices),
+        frame: located.0,
+        landmarks: located.1,
+    }));
     Ok(Scene {
         case,
         vol: ct,
         seg,
         face,
         model,
-        located: std::sync::OnceLock::new(),
+        anatomy,
+        located: kept,
     })
 }
 

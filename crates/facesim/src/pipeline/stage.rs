@@ -19,6 +19,8 @@ pub enum Stage {
     ReadScan,
     PlaceScan,
     Coarsen,
+    /// The clinical frame, the bony landmarks and the cuts of `[[surgery]]` (docs/planning.md).
+    Anatomy,
     Springs,
     TetMesh,
     Solve,
@@ -35,7 +37,7 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in pipeline order (reading a report's keys back).
-    const ALL: [Stage; 16] = [
+    const ALL: [Stage; 17] = [
         Stage::ReadCt,
         Stage::Segment,
         Stage::Surfaces,
@@ -43,6 +45,7 @@ impl Stage {
         Stage::ReadScan,
         Stage::PlaceScan,
         Stage::Coarsen,
+        Stage::Anatomy,
         Stage::Springs,
         Stage::TetMesh,
         Stage::Solve,
@@ -63,6 +66,7 @@ impl Stage {
             Stage::ReadScan => "read_scan",
             Stage::PlaceScan => "place_scan",
             Stage::Coarsen => "coarsen",
+            Stage::Anatomy => "anatomy",
             Stage::Springs => "springs",
             Stage::TetMesh => "tet_mesh",
             Stage::Solve => "solve",

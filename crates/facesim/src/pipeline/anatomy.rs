@@ -1,0 +1,61 @@
+//! The anatomy stage (docs/planning.md): the clinical head frame and the bony landmarks from the
+//! CT, and the `[[surgery]]` entries turned into osteotomies over the segments their cuts free.
+
+use super::{Recorder, Stage};
+use crate::anatomy::surgery::{self, Planned};
+use crate::anatomy::{self, Anatomy, Bone, cuts::Found};
+use crate::case::Case;
+use crate::error::{Error, Result};
+use crate::landmarks::{HeadFrame, Landmark};
+use crate::segment::Segmentation;
+use crate::volume::Volume;
+
+/// What the stage found: the anatomy and the planned surgeries (the osteotomies they add lead
+/// the case's plan).
+pub struct Anatomical {
+    pub anatomy: Anatomy,
+    pub planned: Vec<Planned>,
+}
+
+/// The anatomy of the head, and the case's `[[surgery]]` entries as osteotomies placed before its
+/// `[[osteotomy]]` entries. None when the skin gives no midsagittal frame and no surgery asks
+/// for one.
+pub fn find(
+    case: &mut Case,
+    ct: &Volume,
+    seg: &Segmentation,
+    located: &(Option<HeadFrame>, Vec<Landmark>),
+    rec: &mut Recorder,
+) -> Result<Option<Anatomical>> {
+    let (Some(midsagittal), soft) = located else {
+        if case.surgery.is_empty() {
+            return Ok(None);
+        }
+        return Err(Error::config(
+            "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
+        ));
+    };
+    let found = rec.time(Stage::Anatomy, "finding the head frame, bony landmarks and cuts", || {
+        let bone = Bone {
+            vol: ct,
+            labels: &seg.labels,
+        };
+        let head = case.head.clone().unwrap_or_default();
+        let anatomy = anatomy::find(&bone, midsagittal, soft, &head)
+            .map_err(|e| Error::config(format!("case.toml: [head]: {e}")))?;
+        let planned = surgery::plan(
+            &case.surgery,
+            &Found {
+                landmarks: &anatomy.landmarks,
+            },
+            &anatomy.frame.frame,
+            &bone,
+        )
+        .map_err(|e| Error::config(format!("case.toml: {e}")))?;
+        Ok(Anatomical { anatomy, planned })
+    })?;
+    let mut steps: Vec<_> = found.planned.iter().map(|p| p.osteotomy.clone()).collect();
+    steps.append(&mut case.osteotomy);
+    case.osteotomy = steps;
+    Ok(Some(found))
+}
