@@ -116,7 +116,10 @@ mod tests {
         crate::anatomy::turned(
             &HeadFrame::with_up(
                 [10.0, -80.0, 5.0],
-                crate::landmarks::frame::unit([1.0, 0.05, -0.02]),
+                {
+                    let v = [1.0, 0.05, -0.02];
+                    scale(v, 1.0 / crate::vec3::norm(v))
+                },
                 [0.0, 0.0, 1.0],
                 0.0,
             ),

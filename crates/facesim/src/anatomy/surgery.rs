@@ -233,8 +233,8 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
         }
         let m = stated(s);
         check_size(&m).map_err(at)?;
-        let (pivot, pivot_label) = pivot_of(s, f).map_err(at)?;
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
+        let (pivot, pivot_label) = pivot_of(s, f).map_err(at)?;
         let rigid = Rigid::of(frame, &m, pivot);
         let name = s.name.clone().unwrap_or_else(|| default_name(s.kind).into());
         match s.kind {
@@ -306,4 +306,286 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
         return Err(format!("[[surgery]]: two segments are named '{}'; give one a `name`", w[0]));
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::case::Case;
+    use crate::landmarks::{Kind, Landmark, Source};
+    use crate::osteotomy::Plan;
+    use crate::vec3::dot;
+    use std::path::Path;
+    use std::sync::OnceLock;
+
+    struct Phantom {
+        vol: Volume,
+        labels: Vec<u8>,
+    }
+    use crate::volume::Volume;
+
+    /// The jaws phantom at 1.5 mm with its default tissue windows.
+    fn phantom() -> &'static Phantom {
+        static P: OnceLock<Phantom> = OnceLock::new();
+        P.get_or_init(|| {
+            let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
+            let seg = crate::segment::segment(&vol, &Case::default().tissue, Path::new("phantom")).unwrap();
+            Phantom {
+                vol,
+                labels: seg.labels,
+            }
+        })
+    }
+
+    /// The upright frame of the phantom (left +x, up +z, forward −y).
+    fn frame() -> HeadFrame {
+        HeadFrame::with_up([0.0, -70.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], 0.0)
+    }
+
+    /// The landmarks the cuts need, on the phantom: its analytic incisor tips, A, B, pogonion,
+    /// menton and condyles (`phantom_jaws::landmarks`), and the rest placed on its geometry
+    /// (docs/phantom.md "Jaws"): apices 23.5 and 21 mm from the edges (the phantom has crowns
+    /// and no roots), the piriform rim and ANS at the maxilla's top (z 1, under the Le Fort I
+    /// gap at 1.5–4.5), the pterygomaxillary junctions behind the maxilla (y −12), the first
+    /// molars on the upper arch at z −23, the mental foramina on the lower arch's labial face.
+    fn fixture() -> Vec<Landmark> {
+        let at = |n: &str| crate::phantom_jaws::landmark(n).unwrap();
+        let up = |p: [f64; 3], d: f64| [p[0], p[1], p[2] + d];
+        let u1 = at("upper incisor tip");
+        let l1 = at("lower incisor tip");
+        let (pog, me) = (at("pogonion"), at("menton"));
+        let points: Vec<(&str, [f64; 3])> = vec![
+            ("ANS", [0.0, -71.0, 1.0]),
+            ("A", at("A point")),
+            ("PNS", [0.0, -14.0, -4.0]),
+            ("Pir-R", [-10.0, -68.0, 1.0]),
+            ("Pir-L", [10.0, -68.0, 1.0]),
+            ("PTM-R", [-33.0, -12.0, -5.0]),
+            ("PTM-L", [33.0, -12.0, -5.0]),
+            ("U1", u1),
+            ("U1-apex", up(u1, 23.5)),
+            ("L1", l1),
+            ("L1-apex", up(l1, -21.0)),
+            ("U6-R", [-29.0, -42.0, -23.0]),
+            ("U6-L", [29.0, -42.0, -23.0]),
+            ("B", at("B point")),
+            ("Pog", pog),
+            ("Gn", scale(add(pog, me), 0.5)),
+            ("Me", me),
+            ("MF-R", [-22.0, -54.0, -46.0]),
+            ("MF-L", [22.0, -54.0, -46.0]),
+            ("Go-R", [-43.0, 15.0, -56.0]),
+            ("Go-L", [43.0, 15.0, -56.0]),
+            ("Co-R", up(at("condyle right"), 4.0)),
+            ("Co-L", up(at("condyle left"), 4.0)),
+        ];
+        points
+            .into_iter()
+            .map(|(l, p)| Landmark {
+                label: l.into(),
+                kind: Kind::Bone,
+                position: Some(p),
+                source: Source::Detected,
+                missing: None,
+            })
+            .collect()
+    }
+
+    fn surgery(kind: SurgeryKind) -> Surgery {
+        Surgery {
+            kind,
+            advance_mm: 0.0,
+            up_mm: 0.0,
+            left_mm: 0.0,
+            pitch_deg: 0.0,
+            roll_deg: 0.0,
+            yaw_deg: 0.0,
+            pivot: None,
+            autorotate: false,
+            name: None,
+        }
+    }
+
+    fn planned(s: &[Surgery], lms: &[Landmark]) -> Result<Vec<Planned>, String> {
+        let p = phantom();
+        let bone = Bone {
+            vol: &p.vol,
+            labels: &p.labels,
+        };
+        plan(s, &Found { landmarks: lms }, &frame(), &bone)
+    }
+
+    /// The share of the phantom's bone voxels satisfying `part` that `seg` holds.
+    fn share(seg: &Planned, part: impl Fn([f64; 3]) -> bool) -> f64 {
+        let p = phantom();
+        let region = seg.segment.region("");
+        let (mut n, mut inside) = (0usize, 0usize);
+        for idx in 0..p.labels.len() {
+            if p.labels[idx] != crate::labels::BONE {
+                continue;
+            }
+            let c = p.vol.ijk(idx);
+            let w = p.vol.to_world([c[0] as f64, c[1] as f64, c[2] as f64]);
+            if part(w) {
+                n += 1;
+                inside += region.contains(w) as usize;
+            }
+        }
+        assert!(n > 100, "the phantom has bone there");
+        inside as f64 / n as f64
+    }
+
+    #[test]
+    fn each_cut_frees_the_phantoms_bone_of_its_segment_and_nothing_else() {
+        let lms = fixture();
+        let all = planned(
+            &[
+                surgery(SurgeryKind::LeFortI),
+                surgery(SurgeryKind::Bsso),
+                surgery(SurgeryKind::Genioplasty),
+            ],
+            &lms,
+        )
+        .unwrap();
+        let [maxilla, mandible, chin] = [&all[0], &all[1], &all[2]];
+        // Maxilla and upper teeth: below the Le Fort I gap, above the occlusion, in front of
+        // the skull base's plates.
+        assert!(share(maxilla, |p| p[2] < 1.0 && p[2] > -23.5 && p[1] < -14.0) > 0.98);
+        assert_eq!(share(maxilla, |p| p[2] > 5.0), 0.0, "no cranium");
+        assert_eq!(share(maxilla, |p| p[2] < -26.0), 0.0, "no mandible");
+        // The distal segment: the tooth-bearing body in front of the split, without the chin.
+        assert!(share(mandible, |p| p[2] < -26.0 && p[2] > -45.0 && p[1] < -35.0) > 0.98);
+        assert_eq!(share(mandible, |p| p[1] > -20.0), 0.0, "no ramus or condyle");
+        assert_eq!(share(mandible, |p| p[2] < -56.0 && p[1] < -50.0), 0.0, "no chin");
+        // The chin: below the cut under the apices and foramina.
+        assert!(share(chin, |p| p[2] < -54.0 && p[1] < -50.0) > 0.98);
+        assert_eq!(share(chin, |p| p[2] > -47.0), 0.0);
+    }
+
+    /// The moved position of p under the plan of `all`.
+    fn moved(all: &[Planned], p: [f64; 3]) -> [f64; 3] {
+        let steps: Vec<Osteotomy> = all.iter().map(|p| p.osteotomy.clone()).collect();
+        Plan::new(&steps).apply(&[p], 1.0).0[0]
+    }
+
+    fn close(a: [f64; 3], b: [f64; 3]) {
+        assert!(norm(sub(a, b)) < 1e-9, "{a:?} vs {b:?}");
+    }
+
+    #[test]
+    fn the_plan_moves_each_pivot_landmark_exactly_as_stated_in_the_head_frame() {
+        let lms = fixture();
+        let f = Found { landmarks: &lms };
+        let fr = frame();
+        let lf = Surgery {
+            advance_mm: 5.0,
+            up_mm: 2.0,
+            pitch_deg: 3.0,
+            ..surgery(SurgeryKind::LeFortI)
+        };
+        let bsso = Surgery {
+            advance_mm: -4.0,
+            yaw_deg: 2.0,
+            ..surgery(SurgeryKind::Bsso)
+        };
+        let genio = Surgery {
+            advance_mm: 6.0,
+            up_mm: 2.0,
+            ..surgery(SurgeryKind::Genioplasty)
+        };
+        let all = planned(&[lf, bsso, genio], &lms).unwrap();
+        let u1 = f.at("U1").unwrap();
+        close(moved(&all, u1), add(u1, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))));
+        let l1 = f.at("L1").unwrap();
+        close(moved(&all, l1), sub(l1, scale(fr.anterior, 4.0)));
+        // The chin rides on the distal segment's setback, then moves by its own.
+        let pog = f.at("Pog").unwrap();
+        let bsso_turn = Rigid::of(&fr, &all[1].stated, l1);
+        let expect = add(bsso_turn.apply(pog), add(scale(fr.anterior, 6.0), scale(fr.vertical, 2.0)));
+        close(moved(&all, pog), expect);
+        // Read back in the frame, each segment's moves are the stated ones.
+        let back = moves::read_back(&fr, crate::osteotomy::rotation(all[0].osteotomy.rotate_deg), all[0].osteotomy.translate);
+        assert!((back.pitch_deg - 3.0).abs() < 1e-9 && (back.advance_mm - 5.0).abs() < 1e-9, "{back:?}");
+        // A 3° clockwise turn about the incisor lifts the maxilla behind it (a point in the
+        // alveolar bone 25 mm behind the incisors).
+        let u6 = [-22.0, -48.0, -5.0];
+        let d = sub(moved(&all, u6), add(u6, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))));
+        assert!(dot(d, fr.vertical) > 1.0, "{d:?}");
+    }
+
+    #[test]
+    fn an_impaction_with_autorotation_closes_the_mandible_until_the_incisors_meet_again() {
+        let lms = fixture();
+        let f = Found { landmarks: &lms };
+        let fr = frame();
+        let lf = Surgery {
+            up_mm: 4.0,
+            autorotate: true,
+            ..surgery(SurgeryKind::LeFortI)
+        };
+        let all = planned(&[lf], &lms).unwrap();
+        assert_eq!(all.len(), 2);
+        assert_eq!(all[1].what, "autorotation");
+        let (u1, l1) = (f.at("U1").unwrap(), f.at("L1").unwrap());
+        let rise = |p: [f64; 3]| fr.coords(moved(&all, p))[1] - fr.coords(p)[1];
+        assert!((rise(u1) - 4.0).abs() < 1e-9);
+        assert!((rise(l1) - 4.0).abs() < 1e-6, "{}", rise(l1));
+        // Closing about the condyles: the chin comes forward, the condyles stay.
+        assert!(fr.coords(moved(&all, f.at("Pog").unwrap()))[2] > fr.coords(f.at("Pog").unwrap())[2]);
+        let co = f.at("Co-R").unwrap();
+        assert!(norm(sub(moved(&all, co), co)) < 0.5);
+        assert!(all[1].stated.pitch_deg < -1.0, "closing is a negative pitch: {:?}", all[1].stated);
+    }
+
+    #[test]
+    fn bad_plans_are_one_line_naming_the_entry_and_what_is_missing() {
+        let lms = fixture();
+        let err = |s: Surgery, lms: &[Landmark]| planned(&[s], lms).err().unwrap();
+        // No mandible.
+        let upper: Vec<Landmark> = lms
+            .iter()
+            .map(|l| {
+                if ["L1", "L1-apex", "B", "Pog", "Gn", "Me", "MF-R", "MF-L", "Go-R", "Go-L", "Co-R", "Co-L"].contains(&l.label.as_str()) {
+                    Landmark::missing(&l.label, Kind::Bone, "the CT's field of view ends above the mandible".into())
+                } else {
+                    l.clone()
+                }
+            })
+            .collect();
+        let e = err(surgery(SurgeryKind::Bsso), &upper);
+        assert!(e.starts_with("[[surgery]] 1 (bsso): a BSSO needs the mandible; needs L1 (the CT's field of view ends above the mandible)"), "{e}");
+        let e = err(surgery(SurgeryKind::Genioplasty), &upper);
+        assert!(e.contains("L1-apex (the CT's field of view"), "{e}");
+        // A pivot that was not found, or is no landmark.
+        let e = err(Surgery { pivot: Some(Pivot::Landmark("menton".into())), ..surgery(SurgeryKind::LeFortI) }, &upper);
+        assert!(e.contains("pivot \"menton\" was not found: Me (the CT's field of view"), "{e}");
+        let e = err(Surgery { pivot: Some(Pivot::Landmark("nose".into())), ..surgery(SurgeryKind::LeFortI) }, &lms);
+        assert!(e.contains("pivot \"nose\" is not a landmark"), "{e}");
+        // Too far, too much.
+        let e = err(Surgery { advance_mm: 16.0, up_mm: 14.0, ..surgery(SurgeryKind::LeFortI) }, &lms);
+        assert!(e.contains("21.3 mm, more than 20 mm"), "{e}");
+        let e = err(Surgery { yaw_deg: -31.0, ..surgery(SurgeryKind::Genioplasty) }, &lms);
+        assert!(e.contains("-31 degrees, more than 30"), "{e}");
+        // Autorotation with a split.
+        let rot = Surgery { up_mm: 3.0, autorotate: true, ..surgery(SurgeryKind::LeFortI) };
+        let e = planned(&[rot, surgery(SurgeryKind::Bsso)], &lms).err().unwrap();
+        assert!(e.contains("autorotate with a bsso"), "{e}");
+        // A Le Fort I level under an orbit's floor.
+        let mut low_orbits = lms.clone();
+        for (l, x) in [("Or-R", -30.0), ("Or-L", 30.0)] {
+            low_orbits.push(Landmark { label: l.into(), kind: Kind::Bone, position: Some([x, -60.0, 10.0]), source: Source::Detected, missing: None });
+        }
+        let e = err(surgery(SurgeryKind::LeFortI), &low_orbits);
+        assert!(e.contains("orbit's floor"), "{e}");
+        // Roots too close to menton for a chin.
+        let mut short = lms.clone();
+        for l in short.iter_mut().filter(|l| l.label == "L1-apex") {
+            l.position = l.position.map(|p| [p[0], p[1], -60.0]);
+        }
+        let e = err(surgery(SurgeryKind::Genioplasty), &short);
+        assert!(e.contains("through the roots"), "{e}");
+        for e in [e] {
+            assert!(!e.contains('\n'));
+        }
+    }
 }
