@@ -215,50 +215,31 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
         !run_dir.join("tets.vtu").exists(),
         "tets.vtu kept without --keep-runs"
     );
-    let plan = run["parameters"]["osteotomy"].as_array().unwrap();
-    let seg = |name: &str| plan.iter().find(|o| o["name"] == name).unwrap();
+    // report.json `plan`: the maxilla up 4 mm in the head frame, the mandible turned about the
+    // condyles found on the CT until the lower incisal edge has risen as much.
+    let plan = &run["plan"];
+    let seg = |name: &str| {
+        plan["segments"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|o| o["name"] == name)
+            .unwrap()
+            .clone()
+    };
     let (maxilla, mandible) = (seg("maxilla"), seg("mandible"));
-    let up = vec3(&maxilla["translate"]).unwrap();
-    assert!((up.iter().map(|x| x * x).sum::<f64>().sqrt() - 4.0).abs() < 1e-9);
-    let up = up.map(|x| x / 4.0);
-    // validation.md: "- autorotation: pivot (x, y, z), lower incisal edge (x, y, z): …".
+    assert!((maxilla["moves"]["up_mm"].as_f64().unwrap() - 4.0).abs() < 1e-9, "{maxilla}");
+    assert_eq!(mandible["surgery"], "autorotation");
+    assert_eq!(mandible["pivot_landmark"], "condyles");
+    let pitch = mandible["moves"]["pitch_deg"].as_f64().unwrap();
+    assert!((-4.5..-2.0).contains(&pitch), "a closing turn of a few degrees: {mandible}");
+    let l1_up = plan["landmarks"]["L1"]["up_mm"].as_f64().unwrap();
+    assert!((l1_up - 4.0).abs() < 1e-6, "the lower incisal edge rose {l1_up} mm");
+    let up = vec3(&run["clinical_frame"]["up"]).unwrap();
     let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
-    let line = md
-        .lines()
-        .find(|l| l.starts_with("- autorotation: pivot ("))
-        .expect("validation.md names the autorotation");
-    let points: Vec<[f64; 3]> = line
-        .split('(')
-        .skip(1)
-        .take(2)
-        .map(|p| {
-            let v: Vec<f64> = p
-                .split(')')
-                .next()
-                .unwrap()
-                .split(',')
-                .map(|x| x.trim().parse().unwrap())
-                .collect();
-            [v[0], v[1], v[2]]
-        })
-        .collect();
-    let (printed, incisal) = (points[0], points[1]);
-    let pivot = vec3(&mandible["pivot"]).unwrap();
     assert!(
-        (0..3).all(|k| (pivot[k] - printed[k]).abs() < 6e-4),
-        "{pivot:?} {printed:?}"
-    );
-    // The plan's rotation (R = Rz·Ry·Rx of rotate_deg, docs/case.md) about the pivot.
-    let deg = vec3(&mandible["rotate_deg"]).unwrap();
-    let r = facesim::osteotomy::rotation(deg);
-    let d = [0, 1, 2].map(|k| incisal[k] - pivot[k]);
-    let turned = [0, 1, 2].map(|i| (0..3).map(|k| r[i][k] * d[k]).sum::<f64>());
-    let rise: f64 = (0..3).map(|k| (turned[k] - d[k]) * up[k]).sum();
-    assert!((rise - 4.0).abs() < 2e-3, "the incisal edge rose {rise} mm");
-    assert!(
-        (2.0..4.5).contains(&deg.iter().map(|x| x.abs()).sum::<f64>()),
-        "an autorotation of a few degrees: {:?}",
-        mandible["rotate_deg"]
+        md.contains("- autorotation: about the condyles Co-R and Co-L found on the CT"),
+        "validation.md names the autorotation"
     );
     // The run's own report reads the plan as an impaction, with the same ratios.
     assert_eq!(
@@ -459,6 +440,9 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
     let run = run_report(&out, "real-mandible", "bsso-advance");
     let t = vec3(&run["parameters"]["osteotomy"][0]["translate"]).unwrap();
     assert!(t[2] < -1.0 && t[1] < -4.5, "{t:?}");
+    // Found from the CT: the frame's pitch is the head's, 10-25 degrees face-down.
+    let pitch = run["clinical_frame"]["pitch_deg"].as_f64().unwrap();
+    assert!((10.0..25.0).contains(&pitch), "{}", run["clinical_frame"]);
 }
 
 /// `[tet] degloved_maxilla` (docs/validation-notes.md "The degloved maxilla") on the real CT's Le
@@ -762,7 +746,7 @@ fn bad_input_is_one_line() {
     assert_clean_failure(&r, "/nonexistent-samples", "not found");
     let r = facesim(&["validate", "--out", out.to_str().unwrap(), "--set", "tet"]);
     assert_clean_failure(&r, "--set tet", "expected KEY=VALUE");
-    // headsq's validation.toml without the impaction's autorotation.
+    // A validation.toml that still places a segment by hand: segments come from `[[surgery]]`.
     let samples = common::kept_dir("facesim-validate-bad-samples");
     let case = samples.join("headsq");
     std::fs::create_dir_all(&case).unwrap();
@@ -773,11 +757,12 @@ fn bad_input_is_one_line() {
         std::os::unix::fs::symlink(real.join("headsq.vti"), &ct).unwrap();
     }
     let text = std::fs::read_to_string(real.join("validation.toml")).unwrap();
-    let cut = text
-        .find("[autorotation]")
-        .expect("headsq's [autorotation]");
     let bad = case.join("validation.toml");
-    std::fs::write(&bad, &text[..cut]).unwrap();
+    std::fs::write(
+        &bad,
+        format!("{text}\n[segments.maxilla]\nregion = {{ box = {{ min = [0.0, 0.0, 0.0], max = [1.0, 1.0, 1.0] }} }}\n"),
+    )
+    .unwrap();
     let r = facesim(&[
         "validate",
         "--out",
@@ -787,6 +772,6 @@ fn bad_input_is_one_line() {
         "--phantoms",
         "0",
     ]);
-    assert_clean_failure(&r, bad.to_str().unwrap(), "needs [autorotation]");
+    assert_clean_failure(&r, bad.to_str().unwrap(), "unknown field `segments`");
     assert!(!out.exists(), "a failed validation left {}", out.display());
 }

@@ -8,11 +8,12 @@
 use crate::error::{Error, Result};
 use crate::landmarks::measure::along;
 use crate::landmarks::published::{PUBLISHED, Published, Surgery};
-use crate::landmarks::{Carried, HeadFrame};
+use crate::anatomy::Anatomy;
+use crate::landmarks::Carried;
 use crate::observe::Observer;
 use crate::phantom_jaws::{JawsOptions, Shape};
 use crate::pipeline::{Recorder, inputs, surfaces, tissues};
-use crate::vec3::{add, scale};
+use crate::vec3::scale;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -123,11 +124,13 @@ pub struct CaseInfo {
     pub pitch_deg: f64,
     pub forward: [f64; 3],
     pub up: [f64; 3],
-    /// (segment, region as written in case.toml syntax, how it was placed).
+    /// How the clinical frame was found (report.json `clinical_frame.why`).
+    pub frame_why: String,
+    /// (segment, the cut, its bone or why the CT cannot have it), as `[[surgery]]` finds them.
     pub segments: Vec<(String, String, String)>,
-    /// The mandible's autorotation (condylar pivot and lower incisal edge, how placed); None
-    /// where the case has no mandible.
-    pub autorotation: Option<Autorotation>,
+    /// The mandible's autorotation about the condyles found from the CT; None where the CT
+    /// has no mandible (why).
+    pub autorotation: std::result::Result<(), String>,
     /// A phantom built in the skeletal class of the patients a surgery's ratios were measured
     /// on ([`class_of`]); None: a real CT, or a phantom as its seed drew it.
     pub class: Option<SkeletalClass>,
@@ -188,18 +191,6 @@ pub fn class_of(s: Surgery) -> Option<SkeletalClass> {
     }
 }
 
-/// Where the mandible turns in an impaction's autorotation (LPS mm).
-#[derive(Clone, Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Autorotation {
-    /// On the condylar axis, in the midsagittal plane: the axis is the head's lateral one
-    /// through it.
-    pub pivot: [f64; 3],
-    /// The lower incisal edge, whose rise the turn matches to the maxilla's.
-    pub incisal: [f64; 3],
-    pub placed: String,
-}
-
 pub struct Validation {
     pub rows: Vec<Row>,
     pub skipped: Vec<Skip>,
@@ -213,40 +204,19 @@ pub struct Validation {
 #[serde(deny_unknown_fields)]
 struct CaseFile {
     about: String,
-    /// The head's pitch in the CT (degrees, face down +): forward and up are the landmark
-    /// frame's anterior and vertical turned by it about the frame's lateral axis.
-    #[serde(default)]
-    pitch_deg: f64,
-    #[serde(default)]
-    pitch_note: String,
     /// The skin that may move, when case.toml's leaves out what a surgery type moves (the nose).
     #[serde(default)]
     movable: Option<toml::Value>,
     #[serde(default)]
     movable_note: String,
-    #[serde(default)]
-    segments: BTreeMap<String, SegmentFile>,
-    /// Segments this CT cannot have, and why.
-    #[serde(default)]
-    missing: BTreeMap<String, String>,
-    /// The mandible's autorotation, required with a mandible segment.
-    #[serde(default)]
-    autorotation: Option<Autorotation>,
 }
 
-#[derive(Deserialize)]
-#[serde(deny_unknown_fields)]
-struct SegmentFile {
-    region: toml::Value,
-    placed: String,
-}
-
-/// A case ready to run: its directory, directions and segment regions.
+/// A case ready to run: its directory, directions and which segments its CT can have.
 struct Prepared {
     info: CaseInfo,
     dir: PathBuf,
-    regions: BTreeMap<String, toml::Value>,
-    missing: BTreeMap<String, String>,
+    /// Per segment (maxilla, mandible, chin): Ok, or why the CT cannot have it.
+    possible: BTreeMap<String, std::result::Result<(), String>>,
     /// `[surface] movable` over case.toml's.
     movable: Option<toml::Value>,
 }
@@ -364,7 +334,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
     for (name, case_dir, shape, surgeries) in todo {
         let started = std::time::Instant::now();
         let prefix = format!("[{}/{total_runs}] {name}:", done + 1);
-        let frame = head_frame(
+        let anatomy = anatomy_of(
             &case_dir,
             &Prefixed {
                 inner: obs,
@@ -372,8 +342,8 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             },
         )?;
         let mut case = match &shape {
-            Some((s, class)) => phantom_case(&name, &case_dir, s, (*class, &surgeries), &frame),
-            None => sample_case(&name, &case_dir, &frame)?,
+            Some((s, class)) => phantom_case(&name, &case_dir, s, (*class, &surgeries), &anatomy),
+            None => sample_case(&name, &case_dir, &anatomy)?,
         };
         for &s in &surgeries {
             done += 1;
@@ -381,13 +351,10 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             if let Some((seg, why)) = moves(s)
                 .iter()
                 .filter(|(_, t, _)| *t != Toward::Closing)
-                .find(|(seg, _, _)| !case.regions.contains_key(*seg))
-                .map(|(seg, _, _)| {
-                    let why =
-                        case.missing.get(*seg).cloned().unwrap_or_else(|| {
-                            "no such segment in the case's validation.toml".into()
-                        });
-                    (seg, why)
+                .find_map(|(seg, _, _)| match case.possible.get(*seg) {
+                    Some(Ok(())) => None,
+                    Some(Err(why)) => Some((seg, why.clone())),
+                    None => Some((seg, "no such segment".to_string())),
                 })
             {
                 skipped.push(Skip {
@@ -530,9 +497,9 @@ fn in_classes(
     out
 }
 
-/// The head frame of a case's pre-operative skin, as `facesim run`'s landmark stage finds it
-/// (report.json `head_frame`): the stages up to the skin, no model.
-fn head_frame(case_dir: &Path, obs: &dyn Observer) -> Result<HeadFrame> {
+/// The clinical frame and bony landmarks of a case, as `facesim run`'s anatomy stage finds
+/// them: the stages up to the skin, the landmarks, no model.
+fn anatomy_of(case_dir: &Path, obs: &dyn Observer) -> Result<Anatomy> {
     let mut rec = Recorder::new(obs);
     let (inputs, files) = inputs::read_with(case_dir, &toml::Table::new(), &mut rec)?;
     let inputs::Inputs { case, ct, scan } = inputs;
@@ -540,53 +507,65 @@ fn head_frame(case_dir: &Path, obs: &dyn Observer) -> Result<HeadFrame> {
     let field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &field, &case, &mut rec)?;
     let face = crate::pipeline::face::place(surf, scan, &ct, &case, &mut rec)?;
-    crate::landmarks::head_frame(&face.skin).ok_or_else(|| {
-        Error::input(
-            &files.case_file,
-            "validate: no head frame (the skin is empty)",
-        )
-    })
+    let (frame, soft) = crate::landmarks::locate(&face.skin, Some(&face.skull), &[], &files.case_file)?;
+    let frame = frame.ok_or_else(|| {
+        Error::input(&files.case_file, "validate: no head frame (the skin is empty)")
+    })?;
+    let bone = crate::anatomy::Bone {
+        vol: &ct,
+        labels: &seg.labels,
+    };
+    crate::anatomy::find(&bone, &frame, &soft, &case.head.clone().unwrap_or_default())
+        .map_err(|e| Error::input(&files.case_file, format!("[head]: {e}")))
 }
 
-/// Forward and up of the head: the frame's anterior and vertical turned face-down by `pitch`.
-fn directions(frame: &HeadFrame, pitch_deg: f64) -> ([f64; 3], [f64; 3]) {
-    let (s, c) = pitch_deg.to_radians().sin_cos();
-    (
-        add(scale(frame.anterior, c), scale(frame.vertical, -s)),
-        add(scale(frame.vertical, c), scale(frame.anterior, s)),
-    )
+/// The segments `[[surgery]]` would cut on this anatomy: (name, cut, how) for the case's
+/// description, and per segment whether the CT can have it.
+fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, BTreeMap<String, std::result::Result<(), String>>) {
+    use crate::anatomy::cuts::{Found, cut};
+    use crate::case::SurgeryKind;
+    let f = Found {
+        landmarks: &a.landmarks,
+    };
+    let mut described = Vec::new();
+    let mut possible = BTreeMap::new();
+    for (kind, what) in [
+        (SurgeryKind::LeFortI, "le-fort-i"),
+        (SurgeryKind::Bsso, "bsso"),
+        (SurgeryKind::Genioplasty, "genioplasty"),
+    ] {
+        let name = crate::anatomy::surgery::default_name(kind).to_string();
+        let r = cut(kind, &f, &a.frame.frame).map(|_| ());
+        described.push((
+            name.clone(),
+            format!("[[surgery]] kind = \"{what}\""),
+            match &r {
+                Ok(()) => "cut from the bony landmarks found on the CT (docs/planning.md \"The cuts\")".to_string(),
+                Err(why) => format!("not possible on this CT: {why}"),
+            },
+        ));
+        possible.insert(name, r);
+    }
+    (described, possible)
 }
 
 fn region_text(v: &toml::Value) -> String {
     v.to_string()
 }
 
-fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
+/// The mandible's autorotation as the CT allows it: Ok, or why not.
+fn autorotation_of(a: &Anatomy) -> std::result::Result<(), String> {
+    let f = crate::anatomy::cuts::Found {
+        landmarks: &a.landmarks,
+    };
+    crate::anatomy::cuts::mandible(&f, &a.frame.frame).map(|_| ())
+}
+
+fn sample_case(name: &str, dir: &Path, anatomy: &Anatomy) -> Result<Prepared> {
     let file = dir.join("validation.toml");
     let text = std::fs::read_to_string(&file).map_err(|e| Error::input(&file, e))?;
     let cf: CaseFile = toml::from_str(&text).map_err(|e| Error::input(&file, e.message()))?;
-    if !cf.pitch_deg.is_finite() || cf.pitch_deg.abs() > 60.0 {
-        return Err(Error::input(&file, "pitch_deg must be within ±60 degrees"));
-    }
-    for seg in cf.segments.keys() {
-        if !["maxilla", "mandible", "chin"].contains(&seg.as_str()) {
-            return Err(Error::input(
-                &file,
-                format!("segment '{seg}': the segments are maxilla, mandible and chin"),
-            ));
-        }
-    }
-    if cf.segments.contains_key("mandible") != cf.autorotation.is_some() {
-        return Err(Error::input(
-            &file,
-            "a mandible segment needs [autorotation] (pivot, incisal, placed: where the mandible turns as it closes after an impaction), and [autorotation] a mandible",
-        ));
-    }
-    let (forward, up) = directions(frame, cf.pitch_deg);
     let mut about = cf.about;
-    if !cf.pitch_note.is_empty() {
-        about = format!("{about} Pitch: {}", cf.pitch_note);
-    }
     if let Some(m) = &cf.movable {
         about = format!(
             "{about} Movable skin: `{}` over case.toml's: {}",
@@ -594,51 +573,25 @@ fn sample_case(name: &str, dir: &Path, frame: &HeadFrame) -> Result<Prepared> {
             cf.movable_note
         );
     }
+    let (segments, possible) = segments_of(anatomy);
+    let f = &anatomy.frame;
     Ok(Prepared {
         info: CaseInfo {
             name: name.into(),
             about,
-            pitch_deg: cf.pitch_deg,
-            forward,
-            up,
-            segments: cf
-                .segments
-                .iter()
-                .map(|(k, s)| (k.clone(), region_text(&s.region), s.placed.clone()))
-                .collect(),
-            autorotation: cf.autorotation,
+            pitch_deg: f.pitch_deg + f.correction_deg,
+            forward: f.frame.anterior,
+            up: f.frame.vertical,
+            frame_why: f.why.clone(),
+            segments,
+            autorotation: autorotation_of(anatomy),
             class: None,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
-        regions: cf
-            .segments
-            .into_iter()
-            .map(|(k, s)| (k, s.region))
-            .collect(),
-        missing: cf.missing,
+        possible,
         movable: cf.movable,
     })
-}
-
-/// The standard head's genioplasty level (mm): below the lower vestibule's sulcus (z −45) and
-/// the B-point dip (−42), above the bony pogonion (−55); the phantom's teeth have no roots.
-const PHANTOM_CHIN_CUT_Z: f64 = -48.0;
-
-fn box_value(b: [[f64; 3]; 2]) -> toml::Value {
-    let arr = |p: [f64; 3]| {
-        toml::Value::Array(
-            p.iter()
-                .map(|x| toml::Value::Float((x * 10.0).round() / 10.0))
-                .collect(),
-        )
-    };
-    let mut inner = toml::Table::new();
-    inner.insert("min".into(), arr(b[0]));
-    inner.insert("max".into(), arr(b[1]));
-    let mut t = toml::Table::new();
-    t.insert("box".into(), toml::Value::Table(inner));
-    toml::Value::Table(t)
 }
 
 fn phantom_case(
@@ -646,29 +599,9 @@ fn phantom_case(
     dir: &Path,
     shape: &Shape,
     (class, runs): (Option<SkeletalClass>, &[Surgery]),
-    frame: &HeadFrame,
+    anatomy: &Anatomy,
 ) -> Prepared {
-    let [front, _back, maxilla] = shape.boxes();
-    let mut chin = front;
-    chin[1][2] = PHANTOM_CHIN_CUT_Z * shape.scale;
-    let segs = [
-        (
-            "maxilla",
-            maxilla,
-            "the phantom's maxilla box (Shape::boxes): the occlusal plane to the Le Fort I gap, in front of the rami",
-        ),
-        (
-            "mandible",
-            front,
-            "the distal segment of a sagittal split: the phantom's mandible-front box (Shape::boxes), below the occlusal plane in front of the rami; the rami stay",
-        ),
-        (
-            "chin",
-            chin,
-            "the mandible-front box below z = −48 mm (scaled): under the lower sulcus and the B-point dip, above pogonion",
-        ),
-    ];
-    let (forward, up) = directions(frame, 0.0);
+    let (segments, possible) = segments_of(anatomy);
     let v = shape.values();
     // The phantom case's movable sphere (centre (0, −30, −35) mm, radius 85 mm, scaled) has the
     // nose tip on its edge; 10 mm more takes it in, as the Le Fort I types need.
@@ -685,7 +618,7 @@ fn phantom_case(
         info: CaseInfo {
             name: name.into(),
             about: format!(
-                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm; {}); built upright, pitch 0. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm; {}); built upright. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
                 match class {
                     Some(c) => {
                         let of: Vec<&str> = runs
@@ -714,27 +647,17 @@ fn phantom_case(
                 },
                 region_text(&movable)
             ),
-            pitch_deg: 0.0,
-            forward,
-            up,
-            segments: segs
-                .iter()
-                .map(|(n, b, how)| (n.to_string(), region_text(&box_value(*b)), how.to_string()))
-                .collect(),
-            autorotation: Some(Autorotation {
-                pivot: shape.condylar_pivot(),
-                incisal: shape.landmark("lower incisor tip").unwrap_or(front[1]),
-                placed: "the phantom's condylar pivot (midway between the condyle centres) and its lower incisor's incisal edge".into(),
-            }),
+            pitch_deg: anatomy.frame.pitch_deg + anatomy.frame.correction_deg,
+            forward: anatomy.frame.frame.anterior,
+            up: anatomy.frame.frame.vertical,
+            frame_why: anatomy.frame.why.clone(),
+            segments,
+            autorotation: autorotation_of(anatomy),
             class,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
-        regions: segs
-            .iter()
-            .map(|(n, b, _)| (n.to_string(), box_value(*b)))
-            .collect(),
-        missing: BTreeMap::new(),
+        possible,
         movable: Some(movable),
     }
 }
@@ -746,38 +669,6 @@ fn unit_of(info: &CaseInfo, t: Toward) -> [f64; 3] {
         Toward::Back => scale(info.forward, -1.0),
         Toward::Up | Toward::Closing => info.up,
     }
-}
-
-/// The plan's angles (degrees, `osteotomy::rotation`'s order) of a turn by `angle_rad` (|θ| ≤ π)
-/// about the unit `axis`, right-handed: the versor (unit quaternion) axis · sin(θ/2), as an ITK
-/// transform file gives it.
-fn rotate_deg_about(axis: [f64; 3], angle_rad: f64) -> Result<[f64; 3]> {
-    use crate::slicer::itk_transform::{euler_xyz_deg, versor};
-    let [x, y, z] = scale(axis, (0.5 * angle_rad).sin());
-    Ok(euler_xyz_deg(versor(x, y, z).map_err(Error::config)?))
-}
-
-/// The plan's `rotate_deg` of the autorotation that raises the incisal edge by `rise_mm` along
-/// up: a turn θ about the lateral axis f × u through the pivot (which turns forward into up) moves
-/// an edge a mm in front of the pivot and b mm below it up by a sin θ + b (1 − cos θ).
-fn closing_turn(info: &CaseInfo, a: &Autorotation, rise_mm: f64) -> Result<[f64; 3]> {
-    let d = crate::vec3::sub(a.incisal, a.pivot);
-    let (front, below) = (
-        crate::vec3::dot(d, info.forward),
-        -crate::vec3::dot(d, info.up),
-    );
-    if front < 20.0 {
-        return Err(Error::config(format!(
-            "validate: case {}: the autorotation's incisal edge lies {front:.1} mm in front of its pivot (the condyles lie 80-100 mm behind the incisors)",
-            info.name
-        )));
-    }
-    // a sin θ − b cos θ = rise − b, i.e. h sin(θ − φ) with h = √(a² + b²), φ = atan2(b, a).
-    let h = front.hypot(below);
-    let theta = below.atan2(front) + ((rise_mm - below) / h).clamp(-1.0, 1.0).asin();
-    let lateral = crate::vec3::cross(info.forward, info.up);
-    let lateral = scale(lateral, 1.0 / crate::vec3::norm(lateral));
-    rotate_deg_about(lateral, theta)
 }
 
 /// One surgery on one case through `facesim run`'s library call, with the product's defaults
@@ -792,38 +683,41 @@ fn run_one(
     obs: &dyn Observer,
     on_run: &mut OnRun,
 ) -> Result<RunLandmarks> {
-    let mut osteotomies = Vec::new();
-    let floats =
-        |v: [f64; 3]| toml::Value::Array(v.iter().map(|x| toml::Value::Float(*x)).collect());
+    // One `[[surgery]]` per segment moved, in the head's terms; the impaction's autorotation
+    // where the CT has the mandible's condyles.
+    let mut entries: Vec<(String, toml::Table)> = Vec::new();
     for (seg, toward, mm) in moves(s) {
-        let Some(region) = case.regions.get(*seg) else {
-            continue; // an autorotation where the CT has no mandible (the skip check holds the rest)
+        let kind = match *seg {
+            "maxilla" => "le-fort-i",
+            "mandible" => "bsso",
+            _ => "genioplasty",
         };
-        let mut o = toml::Table::new();
-        o.insert("name".into(), toml::Value::String(seg.to_string()));
-        o.insert("region".into(), region.clone());
-        match (toward, &case.info.autorotation) {
-            (Toward::Closing, Some(a)) => {
-                let deg = closing_turn(&case.info, a, *mm)?;
-                o.insert("rotate_deg".into(), floats(deg));
-                o.insert("pivot".into(), floats(a.pivot));
+        if *toward == Toward::Closing {
+            if case.info.autorotation.is_ok()
+                && let Some((_, lf)) = entries.iter_mut().find(|(k, _)| k == "le-fort-i")
+            {
+                lf.insert("autorotate".into(), toml::Value::Boolean(true));
             }
-            (Toward::Closing, None) => continue,
-            _ => {
-                o.insert(
-                    "translate".into(),
-                    floats(scale(unit_of(&case.info, *toward), *mm)),
-                );
-            }
+            continue;
         }
-        osteotomies.push(toml::Value::Table(o));
+        let mut e = toml::Table::new();
+        e.insert("kind".into(), toml::Value::String(kind.into()));
+        let (key, v) = match toward {
+            Toward::Forward => ("advance_mm", *mm),
+            Toward::Back => ("advance_mm", -*mm),
+            _ => ("up_mm", *mm),
+        };
+        e.insert(key.into(), toml::Value::Float(v));
+        entries.push((kind.into(), e));
     }
+    let surgeries = entries.into_iter().map(|(_, e)| toml::Value::Table(e)).collect();
     let mut over = toml::Table::new();
     over.insert(
         "name".into(),
         toml::Value::String(format!("validate-{}-{}", case.info.name, s.key())),
     );
-    over.insert("osteotomy".into(), toml::Value::Array(osteotomies));
+    over.insert("surgery".into(), toml::Value::Array(surgeries));
+    over.insert("osteotomy".into(), toml::Value::Array(Vec::new()));
     if let Some(m) = &case.movable {
         let mut surface = toml::Table::new();
         surface.insert("movable".into(), m.clone());
@@ -978,11 +872,11 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
         })
         .map(|mut row| {
             let closes = moves(s).iter().any(|(_, t, _)| *t == Toward::Closing);
-            if closes && info.autorotation.is_none() {
-                let note = "no mandible in this CT: the maxilla moved alone, without the autorotation";
+            if let (true, Err(why)) = (closes, &info.autorotation) {
+                let note = format!("the maxilla moved alone, without the autorotation: {why}");
                 row.why = Some(match row.why.take() {
                     Some(w) => format!("{w}; {note}"),
-                    None => note.into(),
+                    None => note,
                 });
             }
             row
@@ -1113,7 +1007,7 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
     s.push_str("\n## The cases\n\n");
     for c in &v.cases {
         s.push_str(&format!(
-            "### {}{}\n\n{}\n\n- forward {} and up {} (LPS; pitch {}°); {:.0} s\n",
+            "### {}{}\n\n{}\n\n- forward {} and up {} (LPS; pitch {:.1}° face-down from the CT's axes: {}); {:.0} s\n",
             c.name,
             c.class
                 .map_or(String::new(), |k| format!(" ({})", k.name())),
@@ -1121,18 +1015,17 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
             v3(c.forward),
             v3(c.up),
             c.pitch_deg,
+            c.frame_why,
             c.seconds
         ));
         for (seg, region, how) in &c.segments {
             s.push_str(&format!("- {seg}: `{region}`: {how}\n"));
         }
-        if let Some(a) = &c.autorotation {
-            s.push_str(&format!(
-                "- autorotation: pivot {}, lower incisal edge {}: {}\n",
-                v3(a.pivot),
-                v3(a.incisal),
-                a.placed
-            ));
+        match &c.autorotation {
+            Ok(()) => s.push_str("- autorotation: about the condyles Co-R and Co-L found on the CT
+"),
+            Err(why) => s.push_str(&format!("- autorotation: not possible: {why}
+")),
         }
         s.push('\n');
     }
@@ -1211,7 +1104,6 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vec3::dot;
 
     fn row(p: &'static Published, ratio: Option<f64>) -> Row {
         Row {
@@ -1309,79 +1201,6 @@ mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn the_pitch_turns_forward_down_and_keeps_the_axes_orthonormal() {
-        let f = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
-        let (fwd, up) = directions(&f, 16.0);
-        assert!((dot(fwd, fwd) - 1.0).abs() < 1e-12 && (dot(up, up) - 1.0).abs() < 1e-12);
-        assert!(dot(fwd, up).abs() < 1e-12);
-        // Face down: forward points anterior (−y) and down (−z).
-        assert!(fwd[1] < -0.95 && (fwd[2] + 16f64.to_radians().sin()).abs() < 1e-12);
-        assert_eq!(directions(&f, 0.0), (f.anterior, f.vertical));
-    }
-
-    #[test]
-    fn a_turn_about_an_oblique_axis_keeps_the_axis_and_turns_a_normal_by_the_angle() {
-        let n = 3f64.sqrt();
-        let axis = [1.0 / n, -1.0 / n, 1.0 / n];
-        let angle = 0.7f64;
-        let r = crate::osteotomy::rotation(rotate_deg_about(axis, angle).unwrap());
-        let apply = |v: [f64; 3]| [0, 1, 2].map(|a| (0..3).map(|k| r[a][k] * v[k]).sum::<f64>());
-        let a = apply(axis);
-        assert!((0..3).all(|i| (a[i] - axis[i]).abs() < 1e-12), "{a:?}");
-        // A unit vector normal to the axis turns by the angle, right-handed: v × Rv ∥ +axis.
-        let v = [1.0 / 2f64.sqrt(), 1.0 / 2f64.sqrt(), 0.0];
-        let w = apply(v);
-        let dot: f64 = (0..3).map(|i| v[i] * w[i]).sum();
-        assert!((dot - angle.cos()).abs() < 1e-12, "{dot}");
-        let cross = crate::vec3::cross(v, w);
-        let along: f64 = (0..3).map(|i| cross[i] * axis[i]).sum();
-        assert!((along - angle.sin()).abs() < 1e-12, "{along}");
-    }
-
-    #[test]
-    fn the_closing_turn_raises_the_incisal_edge_by_the_impaction_about_the_condyles() {
-        let f = HeadFrame::from_plane([0.0; 3], [1.0, 0.0, 0.0], 0.0);
-        let (forward, up) = directions(&f, 16.0);
-        let info = CaseInfo {
-            name: "t".into(),
-            about: String::new(),
-            pitch_deg: 16.0,
-            forward,
-            up,
-            segments: Vec::new(),
-            autorotation: None,
-            class: None,
-            seconds: 0.0,
-        };
-        // headsq's pivot and incisal edge.
-        let a = Autorotation {
-            pivot: [108.0, -96.0, -42.0],
-            incisal: [97.6, -154.0, -103.5],
-            placed: String::new(),
-        };
-        let r = crate::osteotomy::rotation(closing_turn(&info, &a, 4.0).unwrap());
-        let turned = |p: [f64; 3]| {
-            let d = crate::vec3::sub(p, a.pivot);
-            let rd = [0, 1, 2].map(|i| (0..3).map(|k| r[i][k] * d[k]).sum::<f64>());
-            crate::vec3::add(rd, a.pivot)
-        };
-        let moved = crate::vec3::sub(turned(a.incisal), a.incisal);
-        assert!((dot(moved, up) - 4.0).abs() < 1e-9, "{moved:?}");
-        // About the lateral axis: nothing moves sideways, the pivot stays, and the chin comes
-        // forward as it closes.
-        let lateral = crate::vec3::cross(forward, up);
-        assert!(dot(moved, lateral).abs() < 1e-9);
-        assert!(crate::vec3::norm(crate::vec3::sub(turned(a.pivot), a.pivot)) < 1e-12);
-        assert!(dot(moved, forward) > 0.5);
-        // An edge behind its pivot is refused.
-        let behind = Autorotation {
-            incisal: a.pivot,
-            ..a
-        };
-        assert!(closing_turn(&info, &behind, 4.0).is_err());
     }
 
     #[test]
