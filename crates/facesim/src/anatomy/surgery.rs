@@ -209,9 +209,41 @@ fn closing_turn(f: &Found, frame: &HeadFrame, maxilla: &Rigid) -> Result<Rigid, 
     Ok(turn(0.5 * (lo + hi)))
 }
 
-/// The planned segments of `surgeries`, in order; the autorotation's mandible follows its Le
-/// Fort I. Err: one line naming the entry (1-based) and the problem.
-pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) -> Result<Vec<Planned>, String> {
+/// One segment's move, before its bone is cut: what `replan` needs (the run's segments are
+/// reused) and what [`plan`] cuts the bone for.
+pub struct Move {
+    pub what: &'static str,
+    pub name: String,
+    pub stated: Moves,
+    pub pivot: [f64; 3],
+    pub pivot_label: String,
+    /// The whole move (a chin on a moved mandible: the mandible's, then its own).
+    rigid: Rigid,
+    /// The cut, or for the autorotation the mandible's two parts.
+    cuts: Vec<Cut>,
+    /// The segment (index in the list) the chin is taken out of.
+    parent: Option<usize>,
+    /// The entry (1-based) that asked for it.
+    entry: usize,
+}
+
+impl Move {
+    /// The osteotomy of this move over `region` (a run's segment, for `replan`).
+    pub fn osteotomy_over(&self, region: crate::case::Region) -> Osteotomy {
+        Osteotomy {
+            name: self.name.clone(),
+            region,
+            translate: self.rigid.t,
+            rotate_deg: moves::lps_angles(self.rigid.r),
+            pivot: self.rigid.pivot,
+        }
+    }
+}
+
+/// The moves of `surgeries` in the frame, in order (the autorotation's mandible after its Le
+/// Fort I, a chin last), each with its cut. Err: one line naming the entry (1-based) and the
+/// problem.
+pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<Vec<Move>, String> {
     let count = |k: SurgeryKind| surgeries.iter().filter(|s| s.kind == k).count();
     for k in [SurgeryKind::LeFortI, SurgeryKind::Bsso, SurgeryKind::Genioplasty] {
         if count(k) > 1 {
@@ -222,10 +254,10 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
     if rotating && count(SurgeryKind::Bsso) > 0 {
         return Err("[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into());
     }
-    let mut out: Vec<Planned> = Vec::new();
-    // The mandible's move a genioplasty's chin follows, and the mandible's cuts.
+    let mut out: Vec<Move> = Vec::new();
+    // The mandible's move a genioplasty's chin follows.
     let mut carrier: Option<(usize, Rigid)> = None;
-    let mut chin: Option<(usize, &Surgery, Rigid, Cut)> = None;
+    let mut chin: Option<Move> = None;
     for (i, s) in surgeries.iter().enumerate() {
         let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
         if s.autorotate && s.kind != SurgeryKind::LeFortI {
@@ -236,69 +268,55 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
         let (pivot, pivot_label) = pivot_of(s, f).map_err(at)?;
         let rigid = Rigid::of(frame, &m, pivot);
-        let name = s.name.clone().unwrap_or_else(|| default_name(s.kind).into());
+        let mv = Move {
+            what: key(s.kind),
+            name: s.name.clone().unwrap_or_else(|| default_name(s.kind).into()),
+            stated: m,
+            pivot,
+            pivot_label,
+            rigid,
+            cuts: vec![cut],
+            parent: None,
+            entry: i + 1,
+        };
         match s.kind {
             SurgeryKind::Genioplasty => {
-                chin = Some((i, s, rigid, cut));
+                chin = Some(mv);
                 continue;
             }
             SurgeryKind::Bsso => carrier = Some((out.len(), rigid)),
             SurgeryKind::LeFortI => {}
         }
-        let segment = cuts::segment(bone, &[&cut], &name).map_err(at)?;
-        out.push(Planned {
-            what: key(s.kind),
-            osteotomy: rigid.osteotomy(&name, &segment),
-            name,
-            stated: m,
-            pivot,
-            pivot_label,
-            segment,
-        });
+        out.push(mv);
         if s.autorotate {
             let turn = closing_turn(f, frame, &rigid).map_err(at)?;
             let (body, rami) = cuts::mandible(f, frame).map_err(at)?;
-            let segment = cuts::segment(bone, &[&body, &rami], "mandible").map_err(at)?;
-            let name = "mandible".to_string();
             carrier = Some((out.len(), turn));
-            out.push(Planned {
+            out.push(Move {
                 what: "autorotation",
-                osteotomy: turn.osteotomy(&name, &segment),
-                name,
+                name: "mandible".into(),
                 stated: moves::read_back(frame, turn.r, turn.t),
                 pivot: turn.pivot,
                 pivot_label: "condyles".into(),
-                segment,
+                rigid: turn,
+                cuts: vec![body, rami],
+                parent: None,
+                entry: i + 1,
             });
         }
     }
-    if let Some((i, s, rigid, cut)) = chin {
-        let at = |e: String| format!("[[surgery]] {} (genioplasty): {e}", i + 1);
-        let name = s.name.clone().unwrap_or_else(|| "chin".into());
-        let segment = cuts::segment(bone, &[&cut], &name).map_err(at)?;
-        let whole = match &carrier {
-            Some((k, first)) => {
-                // The chin leaves the mandible's segment and moves with it, then by its own
-                // moves about the moved pivot.
-                let parent = out[*k].segment.minus(&segment);
-                let moved_pivot = first.apply(rigid.pivot);
-                let own = Rigid { pivot: moved_pivot, ..rigid };
-                let p = &mut out[*k];
-                p.osteotomy = first.osteotomy(&p.name, &parent);
-                p.segment = parent;
-                own.after(first)
-            }
-            None => rigid,
-        };
-        out.push(Planned {
-            what: "genioplasty",
-            osteotomy: whole.osteotomy(&name, &segment),
-            name,
-            stated: stated(s),
-            pivot: rigid.pivot,
-            pivot_label: pivot_of(s, f).map(|p| p.1).unwrap_or_default(),
-            segment,
-        });
+    if let Some(mut c) = chin {
+        if let Some((k, first)) = carrier {
+            // The chin leaves the mandible's segment and moves with it, then by its own moves
+            // about the moved pivot.
+            let own = Rigid {
+                pivot: first.apply(c.rigid.pivot),
+                ..c.rigid
+            };
+            c.rigid = own.after(&first);
+            c.parent = Some(k);
+        }
+        out.push(c);
     }
     let mut names: Vec<&str> = out.iter().map(|p| p.name.as_str()).collect();
     names.sort();
@@ -306,6 +324,36 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
         return Err(format!("[[surgery]]: two segments are named '{}'; give one a `name`", w[0]));
     }
     Ok(out)
+}
+
+/// The planned segments of `surgeries` ([`moves_of`]), each cut from the CT's bone.
+pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) -> Result<Vec<Planned>, String> {
+    let moves = moves_of(surgeries, f, frame)?;
+    let mut segments = Vec::with_capacity(moves.len());
+    for m in &moves {
+        let at = |e: String| format!("[[surgery]] {} ({}): {e}", m.entry, m.what);
+        let refs: Vec<&Cut> = m.cuts.iter().collect();
+        let seg = cuts::segment(bone, &refs, &m.name).map_err(at)?;
+        segments.push(seg);
+    }
+    for (k, m) in moves.iter().enumerate() {
+        if let Some(p) = m.parent {
+            segments[p] = segments[p].minus(&segments[k]);
+        }
+    }
+    Ok(moves
+        .into_iter()
+        .zip(segments)
+        .map(|(m, segment)| Planned {
+            what: m.what,
+            osteotomy: m.rigid.osteotomy(&m.name, &segment),
+            name: m.name,
+            stated: m.stated,
+            pivot: m.pivot,
+            pivot_label: m.pivot_label,
+            segment,
+        })
+        .collect())
 }
 
 #[cfg(test)]
