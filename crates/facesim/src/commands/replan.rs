@@ -22,6 +22,10 @@ use std::path::{Path, PathBuf};
 pub struct NewPlan {
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
+    /// `[[surgery]]` entries (docs/planning.md): read in the run's clinical frame, about its
+    /// landmarks, over the segments the run cut; they lead the plan, as in a run.
+    #[serde(default)]
+    pub surgery: Vec<crate::case::Surgery>,
     pub tet: Option<TissueChange>,
     pub uncertainty: Option<Uncertainty>,
 }
@@ -59,6 +63,57 @@ impl TissueChange {
         }
         (t, self.sliding.unwrap_or(sliding))
     }
+}
+
+/// PLAN.toml's `[[surgery]]` entries as osteotomies over the run's segments, read in the run's
+/// clinical frame about the landmarks it found (report.json `clinical_frame` and `plan`),
+/// followed by its `[[osteotomy]]` entries.
+fn surgery_plan(run_dir: &Path, basis: &PlanBasis, new: &NewPlan, plan_file: &Path) -> Result<Vec<Osteotomy>> {
+    let report = Report::read(&run_dir.join("report.json"))?;
+    let (Some(frame), Some(found)) = (&report.clinical_frame, &report.plan) else {
+        return Err(Error::input(
+            plan_file,
+            "[[surgery]]: the run's report.json has no clinical frame or plan (a run of a CT without a face, or an older facesim); use [[osteotomy]] or run the case again",
+        ));
+    };
+    let landmarks: Vec<crate::landmarks::Landmark> = found
+        .landmarks
+        .0
+        .iter()
+        .map(|(label, m)| crate::landmarks::Landmark {
+            label: label.clone(),
+            kind: crate::landmarks::Kind::Bone,
+            position: m.pre,
+            source: crate::landmarks::Source::Detected,
+            missing: m.missing.clone(),
+        })
+        .collect();
+    let moves = crate::anatomy::surgery::moves_of(
+        &new.surgery,
+        &crate::anatomy::cuts::Found {
+            landmarks: &landmarks,
+        },
+        &frame.frame(),
+    )
+    .map_err(|e| Error::input(plan_file, e))?;
+    let mut plan = Vec::new();
+    for m in &moves {
+        let Some(run) = basis.run_plan.iter().find(|o| o.name == m.name) else {
+            let names: Vec<&str> = basis.run_plan.iter().map(|o| o.name.as_str()).collect();
+            return Err(Error::input(
+                plan_file,
+                format!(
+                    "[[surgery]] {}: its segment '{}' was not cut by the run (its segments: {}); a new cut needs a new run",
+                    m.what,
+                    m.name,
+                    names.join(", ")
+                ),
+            ));
+        };
+        plan.push(m.osteotomy_over(run.region.clone()));
+    }
+    plan.extend(new.osteotomy.iter().cloned());
+    Ok(plan)
 }
 
 /// A PLAN.toml.
@@ -263,6 +318,17 @@ pub fn replan_with(
     plan_file: &Path,
     dest: Option<&Path>,
 ) -> Result<Replanned> {
+    let surgeries;
+    let new = if new.surgery.is_empty() {
+        new
+    } else {
+        surgeries = NewPlan {
+            osteotomy: surgery_plan(run_dir, basis, new, plan_file)?,
+            surgery: Vec::new(),
+            ..new.clone()
+        };
+        &surgeries
+    };
     let wants_band = new.uncertainty.as_ref().is_some_and(|u| u.samples > 0);
     let what = if new.tet.is_some() {
         "[tet]"
@@ -297,8 +363,19 @@ pub fn replan_with(
     post.vertices = face_post.clone();
     let skull_pre = run_dir.join("skull_pre.ply");
     let skull_post = if skull_pre.exists() {
-        // The bone each segment moves: mask and surface regions read as the run read them.
+        // The bone each segment moves: mask and surface regions read as the run read them, the
+        // segments the run cut from its own output.
         let mut plan = plan.to_vec();
+        for o in &mut plan {
+            if let Region::Mask(m) = &mut o.region
+                && m.path.is_relative()
+                && m.path.to_string_lossy().starts_with("segment_")
+                && run_dir.join(&m.path).is_file()
+            {
+                m.path = run_dir.join(&m.path);
+                m.found = true;
+            }
+        }
         crate::pipeline::inputs::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
         let mut s = mesh::read_mesh(&skull_pre)?;
         s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
