@@ -10,7 +10,7 @@
 //!   the piriform rim's lowest point and the upper incisor apex, in front of the
 //!   pterygomaxillary junctions, within 8 mm lateral of them.
 //! - **BSSO** (the distal segment): below the occlusal plane and in front of a coronal plane
-//!   12 mm behind the upper first molars (the second molars' distal side, where the split
+//!   20 mm behind the upper first molars' cusps (behind the second molars, where the split
 //!   leaves the body for the ramus). The proximal segments, with the condyles, stay.
 //! - **Genioplasty**: below a plane 3 mm under the lower incisor apex on the midline and 4 mm
 //!   under each mental foramen, in front of a coronal plane 12 mm behind the foramina.
@@ -31,7 +31,7 @@ const LE_FORT_ABOVE_MM: f64 = 3.0;
 /// Lateral reach of the Le Fort I segment beyond the pterygomaxillary junctions (mm).
 const LE_FORT_LATERAL_MM: f64 = 8.0;
 /// The sagittal split leaves the body this far behind the upper first molars (mm).
-const SPLIT_BEHIND_MOLAR_MM: f64 = 12.0;
+const SPLIT_BEHIND_MOLAR_MM: f64 = 20.0;
 /// The genioplasty cut under the lower incisor apex and under the mental foramina (mm).
 const CHIN_BELOW_APEX_MM: f64 = 3.0;
 const CHIN_BELOW_FORAMEN_MM: f64 = 4.0;
@@ -226,9 +226,9 @@ pub fn bsso(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
         }
     };
     if let Some(go) = f.mean(&["Go-R", "Go-L"])
-        && split <= frame.coords(go)[2] + 5.0
+        && split <= frame.coords(go)[2] + 10.0
     {
-        return Err("the sagittal split would reach the mandible's angle: the molars lie within 17 mm of gonion".into());
+        return Err("the sagittal split would reach the mandible's angle: the first molars lie within 30 mm of gonion".into());
     }
     let planes = vec![
         flip(occ),
