@@ -180,7 +180,10 @@ fn check_size(m: &Moves) -> Result<(), String> {
 /// at its height below the moved upper one (degrees, right-handed about Co-R → Co-L).
 fn closing_turn(f: &Found, frame: &HeadFrame, maxilla: &Rigid) -> Result<Rigid, String> {
     let need = |l: &str| f.at(l).ok_or_else(|| format!("autorotation needs {}", f.why(l)));
-    let (co_r, co_l, u1, l1) = (need("Co-R")?, need("Co-L")?, need("U1")?, need("L1")?);
+    let (co_r, co_l, l1) = (need("Co-R")?, need("Co-L")?, need("L1")?);
+    // The maxilla's move at the upper incisal edge; without it (a field of view ending in the
+    // crowns) at the lower one, where the edges meet.
+    let u1 = f.at("U1").unwrap_or(l1);
     let axis = sub(co_l, co_r);
     let axis = scale(axis, 1.0 / norm(axis).max(1e-12));
     let pivot = scale(add(co_r, co_l), 0.5);
@@ -266,7 +269,19 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
         let m = stated(s);
         check_size(&m).map_err(at)?;
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
-        let (pivot, pivot_label) = pivot_of(s, f).map_err(at)?;
+        let turns = [m.pitch_deg, m.roll_deg, m.yaw_deg].iter().any(|a| *a != 0.0);
+        let (pivot, pivot_label) = match pivot_of(s, f) {
+            Ok(p) => p,
+            // Without a turn the pivot does not matter: any landmark the segment has.
+            Err(_) if !turns && s.pivot.is_none() => {
+                let any = ["U1", "A", "ANS", "L1", "B", "Pog", "Me"]
+                    .iter()
+                    .find_map(|l| f.at(l))
+                    .unwrap_or(frame.origin);
+                (any, "point".into())
+            }
+            Err(e) => return Err(at(e)),
+        };
         let rigid = Rigid::of(frame, &m, pivot);
         let mv = Move {
             what: key(s.kind),

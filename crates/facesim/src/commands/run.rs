@@ -115,6 +115,18 @@ fn finish(
             &scene.model.plan,
         ))
     })?;
+    // The published ratios of a plan in clinical terms: its surgery type from its entries'
+    // kinds, its moves in the clinical frame.
+    let mut analysis = analysis;
+    if let Some(a) = scene.anatomy.as_ref().filter(|a| !a.planned.is_empty()) {
+        let kinds: Vec<(String, &str)> = a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
+        analysis.clinic = Some(crate::landmarks::clinic::against_published_planned(
+            scene.model.plan.segments(),
+            &analysis.carried,
+            &a.anatomy.frame.frame,
+            &kinds,
+        ));
+    }
     // The band before any file is written: a failed sample leaves no outputs half-written.
     let (band, reduced) = if case.uncertainty.samples == 0 {
         (None, None)

@@ -1,9 +1,10 @@
-//! A run held against the clinic (issue 26 item 4; report.json `published_ratios`, the page's
+//! A run held against the clinic (report.json `published_ratios`, the page's
 //! "against the clinic" table): the plan read as a surgery type of the published table
 //! (`published`), and each of that type's soft-tissue ratios as this run predicts it, beside
 //! the published range and its source.
 //!
-//! The surgery type comes from the segments' names and their moves in the head frame
+//! The surgery type comes from the `[[surgery]]` entries that cut the segments (their kinds), or
+//! for `[[osteotomy]]` segments from their names, and their moves in the head frame
 //! (docs/validation.md, "In every run"): a segment named for the maxilla (maxilla, Le Fort), the
 //! mandible (mandible, BSSO, sagittal split) or the chin (chin, genioplasty), moving forward, back
 //! or up at the jaw's bony landmark (A or ANS for the maxilla, B or Pog for the mandible, Pog for
@@ -96,7 +97,7 @@ impl Jaw {
 
 /// The jaw a segment's name says it is (case-insensitive; the chin before the mandible, since
 /// a genioplasty segment is part of the mandible).
-fn jaw_of(name: &str) -> Option<Jaw> {
+fn jaw_by_name(name: &str) -> Option<Jaw> {
     let n = name.to_ascii_lowercase();
     let has = |words: &[&str]| words.iter().any(|w| n.contains(w));
     if has(&["chin", "genio"]) {
@@ -126,6 +127,7 @@ fn surgery_of(
     plan: &[Osteotomy],
     carried: &[Carried],
     frame: &HeadFrame,
+    jaw_of: &dyn Fn(&Osteotomy) -> Option<Jaw>,
 ) -> std::result::Result<Reading, String> {
     if plan.is_empty() {
         return Err("the plan moves no bone".into());
@@ -133,7 +135,7 @@ fn surgery_of(
     let mut jaws = Vec::new();
     let mut read = Vec::new();
     for (i, o) in plan.iter().enumerate() {
-        let Some(j) = jaw_of(&o.name) else {
+        let Some(j) = jaw_of(o) else {
             return Err(format!(
                 "segment '{}' is not named for a jaw (maxilla / Le Fort, mandible / BSSO, chin / genioplasty): the published ratios are per surgery type",
                 o.name
@@ -285,7 +287,35 @@ fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) 
 
 /// The plan's surgery type and its published rows as this run predicts them.
 pub fn against_published(plan: &[Osteotomy], carried: &[Carried], frame: &HeadFrame) -> Clinic {
-    match surgery_of(plan, carried, frame) {
+    against_published_as(plan, carried, frame, &|o| jaw_by_name(&o.name))
+}
+
+/// [`against_published`] of a plan whose `[[surgery]]` entries say which jaw each of their
+/// segments is (`surgeries`: segment name and kind — "le-fort-i", "bsso", "genioplasty",
+/// "autorotation"), read in the clinical frame; its other segments by name.
+pub fn against_published_planned(
+    plan: &[Osteotomy],
+    carried: &[Carried],
+    frame: &HeadFrame,
+    surgeries: &[(String, &str)],
+) -> Clinic {
+    against_published_as(plan, carried, frame, &|o| {
+        match surgeries.iter().find(|(n, _)| *n == o.name).map(|(_, k)| *k) {
+            Some("le-fort-i") => Some(Jaw::Maxilla),
+            Some("bsso" | "autorotation") => Some(Jaw::Mandible),
+            Some("genioplasty") => Some(Jaw::Chin),
+            _ => jaw_by_name(&o.name),
+        }
+    })
+}
+
+fn against_published_as(
+    plan: &[Osteotomy],
+    carried: &[Carried],
+    frame: &HeadFrame,
+    jaw_of: &dyn Fn(&Osteotomy) -> Option<Jaw>,
+) -> Clinic {
+    match surgery_of(plan, carried, frame, jaw_of) {
         Err(reading) => Clinic {
             reading,
             ..Clinic::default()
@@ -350,7 +380,7 @@ mod tests {
     #[test]
     fn plans_read_as_the_tables_surgery_types() {
         let f = frame();
-        let key = |plan: &[Osteotomy]| surgery_of(plan, &[], &f).map(|(s, _, _)| s.key());
+        let key = |plan: &[Osteotomy]| surgery_of(plan, &[], &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key());
         let fwd = [0.0, -5.0, 0.0];
         assert_eq!(
             key(&[segment("Maxilla", fwd, [0.0; 3])]),
@@ -397,7 +427,7 @@ mod tests {
         // takes it 3.0 mm forward and 4.3 mm up.
         let b = [0.0, -80.0, -60.0];
         let carried = [lm("B", b, b)];
-        let key = |plan: &[Osteotomy]| surgery_of(plan, &carried, &f).map(|(s, _, _)| s.key());
+        let key = |plan: &[Osteotomy]| surgery_of(plan, &carried, &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key());
         let maxilla = segment("maxilla", [0.0, -1.1, 3.8], [0.0; 3]);
         let closing = segment("mandible", [0.0; 3], [-3.0, 0.0, 0.0]);
         assert_eq!(
