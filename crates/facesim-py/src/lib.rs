@@ -129,7 +129,8 @@ fn plan_of(plan: &Bound<'_, PyAny>) -> PyResult<(PathBuf, Option<String>)> {
 
 /// The face outputs for a new plan from the plan basis of the run in `out_dir`, without
 /// re-solving (as `facesim replan`, and writing the same files into `out`, default
-/// OUT_DIR/replan). `plan`: a PLAN.toml path or a dict `{"osteotomy": [...]}`.
+/// OUT_DIR/replan). `plan`: a PLAN.toml path or a dict `{"osteotomy": [...]}` or
+/// `{"surgery": [...]}` (docs/planning.md).
 #[pyfunction]
 #[pyo3(signature = (out_dir, plan, out = None))]
 fn replan(
