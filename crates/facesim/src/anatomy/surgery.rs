@@ -176,6 +176,42 @@ fn check_size(m: &Moves) -> Result<(), String> {
     Ok(())
 }
 
+/// What `[[surgery]]` entries can be told wrong without the CT: one entry of each kind,
+/// `autorotate` on a Le Fort I without a BSSO, moves within the limits, pivot names that are
+/// landmarks. Err: one line naming the entry (1-based).
+pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
+    let count = |k: SurgeryKind| surgeries.iter().filter(|s| s.kind == k).count();
+    for k in [SurgeryKind::LeFortI, SurgeryKind::Bsso, SurgeryKind::Genioplasty] {
+        if count(k) > 1 {
+            return Err(format!("[[surgery]]: {} appears {} times; one of each kind", key(k), count(k)));
+        }
+    }
+    let rotating = surgeries.iter().any(|s| s.autorotate);
+    if rotating && count(SurgeryKind::Bsso) > 0 {
+        return Err("[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into());
+    }
+    for (i, s) in surgeries.iter().enumerate() {
+        let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
+        if s.autorotate && s.kind != SurgeryKind::LeFortI {
+            return Err(at("autorotate applies to a le-fort-i".into()));
+        }
+        check_size(&stated(s)).map_err(at)?;
+        match &s.pivot {
+            Some(Pivot::Landmark(n)) if n != "condyles" && !super::LANDMARKS.contains(&pivot_label(n)) => {
+                return Err(at(format!(
+                    "pivot \"{n}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
+                    super::LANDMARKS.join(", ")
+                )));
+            }
+            Some(Pivot::Point(p)) if p.iter().any(|x| !x.is_finite()) => {
+                return Err(at("its pivot point must be finite".into()));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// The closing turn of the mandible about the condylar axis that keeps the lower incisal edge
 /// at its height below the moved upper one (degrees, right-handed about Co-R → Co-L).
 fn closing_turn(f: &Found, frame: &HeadFrame, maxilla: &Rigid) -> Result<Rigid, String> {
@@ -247,27 +283,14 @@ impl Move {
 /// Fort I, a chin last), each with its cut. Err: one line naming the entry (1-based) and the
 /// problem.
 pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<Vec<Move>, String> {
-    let count = |k: SurgeryKind| surgeries.iter().filter(|s| s.kind == k).count();
-    for k in [SurgeryKind::LeFortI, SurgeryKind::Bsso, SurgeryKind::Genioplasty] {
-        if count(k) > 1 {
-            return Err(format!("[[surgery]]: {} appears {} times; one of each kind", key(k), count(k)));
-        }
-    }
-    let rotating = surgeries.iter().any(|s| s.autorotate);
-    if rotating && count(SurgeryKind::Bsso) > 0 {
-        return Err("[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into());
-    }
+    check_entries(surgeries)?;
     let mut out: Vec<Move> = Vec::new();
     // The mandible's move a genioplasty's chin follows.
     let mut carrier: Option<(usize, Rigid)> = None;
     let mut chin: Option<Move> = None;
     for (i, s) in surgeries.iter().enumerate() {
         let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
-        if s.autorotate && s.kind != SurgeryKind::LeFortI {
-            return Err(at("autorotate applies to a le-fort-i".into()));
-        }
         let m = stated(s);
-        check_size(&m).map_err(at)?;
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
         let turns = [m.pitch_deg, m.roll_deg, m.yaw_deg].iter().any(|a| *a != 0.0);
         let (pivot, pivot_label) = match pivot_of(s, f) {

@@ -176,6 +176,12 @@ impl Case {
                 return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
             }
         }
+        crate::anatomy::surgery::check_entries(&self.surgery).or_else(bad)?;
+        if let Some(h) = &self.head
+            && !(h.pitch_deg.is_finite() && h.pitch_deg.abs() <= 45.0)
+        {
+            return bad("[head] pitch_deg must be within ±45 degrees".into());
+        }
         for o in &self.osteotomy {
             o.region.validate(&format!("osteotomy '{}'", o.name))?;
             if o.translate
