@@ -57,6 +57,12 @@ fn xml() -> String {
       <longflag>transforms</longflag>
       <description><![CDATA[One linear (rigid) transform per bone segment, in the same order: the move applied to the segment in the Transforms module.]]></description>
     </transform>
+    <string multiple="true">
+      <name>surgery</name>
+      <label>Surgery (clinical terms)</label>
+      <longflag>surgery</longflag>
+      <description><![CDATA[Instead of segment models: one entry per osteotomy as a surgeon states it, "KIND key=value ...", e.g. "le-fort-i advance_mm=5 up_mm=2" or "bsso advance_mm=-4"; KIND is le-fort-i, bsso or genioplasty; keys advance_mm, up_mm, left_mm, pitch_deg, roll_deg, yaw_deg, pivot, autorotate, name (docs/planning.md). The cuts are found from the CT.]]></description>
+    </string>
     <geometry fileExtensions=".vtk">
       <name>movable</name>
       <label>Movable region model (optional)</label>
@@ -107,6 +113,8 @@ struct Args {
     segments: Vec<PathBuf>,
     transforms: Vec<PathBuf>,
     movable: Option<PathBuf>,
+    /// `--surgery` entries, "KIND key=value ...".
+    surgery: Vec<String>,
     model: Option<String>,
     predicted_face: Option<PathBuf>,
     landmarks: Option<PathBuf>,
@@ -141,6 +149,13 @@ fn parse_args(argv: &[String]) -> std::result::Result<Args, String> {
             "--segments" => a.segments.extend(list(&value)),
             "--transforms" => a.transforms.extend(list(&value)),
             "--movable" => a.movable = Some(value.into()),
+            "--surgery" => a.surgery.extend(
+                value
+                    .split(',')
+                    .map(str::trim)
+                    .filter(|s| !s.is_empty())
+                    .map(String::from),
+            ),
             "--model" => a.model = Some(value),
             "--predictedFace" => a.predicted_face = Some(value.into()),
             "--landmarks" => a.landmarks = Some(value.into()),
@@ -233,8 +248,34 @@ fn write_case(a: &Args, dir: &Path) -> Result<()> {
             toml_path(&absolute(tr))
         ));
     }
+    for entry in &a.surgery {
+        t.push_str(&surgery_table(entry)?);
+    }
     let case = dir.join("case.toml");
     std::fs::write(&case, t).map_err(|e| Error::output(&case, e))
+}
+
+/// One `--surgery` entry ("KIND key=value ...") as a `[[surgery]]` table; numbers and booleans
+/// stay bare, anything else (a pivot's name) is quoted. The case's own checks judge the keys.
+fn surgery_table(entry: &str) -> Result<String> {
+    let mut words = entry.split_whitespace();
+    let kind = words.next().unwrap_or_default();
+    let mut t = format!("\n[[surgery]]\nkind = \"{}\"\n", kind.replace('"', ""));
+    for w in words {
+        let Some((k, v)) = w.split_once('=') else {
+            return Err(Error::config(format!(
+                "FaceSimPredict: --surgery \"{entry}\": \"{w}\" is not key=value (e.g. advance_mm=5)"
+            )));
+        };
+        let bare = v.parse::<f64>().is_ok() || v == "true" || v == "false";
+        let value = if bare {
+            v.to_string()
+        } else {
+            format!("\"{}\"", v.replace('"', ""))
+        };
+        t.push_str(&format!("{} = {value}\n", k.replace(['"', '=', ' '], "")));
+    }
+    Ok(t)
 }
 
 /// The predicted face in the format its file name asks for (.vtp, .vtk, .stl, .ply, .obj).

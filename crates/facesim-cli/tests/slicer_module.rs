@@ -234,3 +234,38 @@ fn a_non_rigid_transform_is_one_line_naming_the_file_and_nothing_is_written() {
     );
     assert!(!face_out.exists());
 }
+
+/// `--surgery` entries become `[[surgery]]` tables: a malformed one, or one the case's checks
+/// refuse, is one line and nothing is written.
+#[test]
+fn a_surgery_in_clinical_terms_is_checked_like_case_toml() {
+    let spec = parsed_by_ctk_cli();
+    let p = param(&spec, "surgery");
+    assert_eq!(p["typ"], "string");
+    assert_eq!(p["multiple"].as_bool(), Some(true));
+    let dir = common::kept_dir("facesim-slicer-surgery");
+    let opts = facesim::phantom::PhantomOptions {
+        spacing: [6.0; 3],
+        supersample: 1,
+        ..Default::default()
+    };
+    let ct = dir.join("ct.nrrd");
+    facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
+    let face_out = dir.join("predicted.vtp");
+    for (entry, problem) in [
+        ("bsso advance_mm", "is not key=value"),
+        ("le-fort-i advance_mm=30", "more than 20 mm"),
+        ("le-fort-i pivot=nose yaw_deg=2", "is not a landmark"),
+    ] {
+        let out = Command::new(exe())
+            .args(["--ct", ct.to_str().unwrap(), "--surgery", entry])
+            .args(["--predictedFace", face_out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(!out.status.success(), "{entry}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(problem), "{entry}: {err}");
+        assert!(!face_out.exists());
+    }
+}
