@@ -13,7 +13,7 @@ mod tests;
 
 use super::Bone;
 use crate::landmarks::{HeadFrame, Kind, Landmark, Source};
-use grid::{BONE, Grid, H, OUT, TOOTH, hard};
+use grid::{Grid, H, OUT, TOOTH, hard};
 
 /// Typical crown-tip-to-apex lengths of the central incisors (mm): upper 23.5, lower 21.
 pub const UPPER_INCISOR_MM: f64 = 23.5;
@@ -22,14 +22,12 @@ pub const LOWER_INCISOR_MM: f64 = 21.0;
 /// A landmark in frame coordinates (s, v, a), or why it is missing.
 type Spot = Result<[f64; 3], String>;
 
-/// Integer cell index (s, v, a).
-type Cell = [isize; 3];
-
 /// The jaw landmarks of `super::LANDMARKS` (all but porion and orbitale), each detected or
 /// missing with the reason, searched in the clinical frame `frame`.
 pub fn jaw_landmarks(bone: &Bone, frame: &HeadFrame) -> Vec<Landmark> {
     let g = Grid::new(bone, frame);
-    let found = detect(&g);
+    let hu = |c: [f64; 3]| bone.vol.sample(frame.point(c), -1000.0) as f64;
+    let found = detect(&g, &hu);
     super::LANDMARKS[4..]
         .iter()
         .map(|label| {
@@ -54,7 +52,8 @@ pub fn jaw_landmarks(bone: &Bone, frame: &HeadFrame) -> Vec<Landmark> {
 }
 
 /// Every landmark's spot, in frame coordinates.
-fn detect(g: &Grid) -> Vec<(&'static str, Spot)> {
+/// `hu` reads the CT (trilinear) at frame coordinates.
+fn detect(g: &Grid, hu: &dyn Fn([f64; 3]) -> f64) -> Vec<(&'static str, Spot)> {
     let mut out: Vec<(&'static str, Spot)> = Vec::new();
     let upper = upper_incisor(g);
     let anchor = upper.anchor;
@@ -71,7 +70,7 @@ fn detect(g: &Grid) -> Vec<(&'static str, Spot)> {
     // The maxilla: palate, ANS, A, PNS, then the piriform rims and the pterygomaxillary
     // junctions from them.
     let maxilla = match anchor {
-        Some(anc) => maxilla(g, anc, upper.found.as_ref().ok()),
+        Some(anc) => maxilla(g, hu, anc, upper.found.as_ref().ok()),
         None => Err(upper
             .found
             .as_ref()
@@ -110,19 +109,21 @@ fn detect(g: &Grid) -> Vec<(&'static str, Spot)> {
         }
     }
     // Upper first molars.
-    let u6 = match &upper.found {
-        Ok(u) => upper_molars(g, u),
-        Err(why) => [Err(why.clone()), Err(why.clone())],
+    let u6 = match (&upper.found, anchor) {
+        (Ok(u), _) => upper_molars(g, (u.iv_edge, g.index(2, u.edge[2]))),
+        (Err(_), Some(anc)) => upper_molars(g, anc),
+        (Err(why), None) => [Err(why.clone()), Err(why.clone())],
     };
     out.push(("U6-R", u6[0].clone()));
     out.push(("U6-L", u6[1].clone()));
     // The mandible.
-    let lower = match (&upper.found, anchor) {
-        (Ok(u), _) => lower_incisor(g, u),
-        (Err(_), Some(anc)) => Err(mandible_absent(g, anc)
-            .unwrap_or_else(|| "the upper incisal edge is not found".into())),
-        (Err(why), None) => Err(why.clone()),
-    };
+    let lower =
+        match (&upper.found, anchor) {
+            (Ok(u), _) => lower_incisor(g, u),
+            (Err(_), Some(anc)) => Err(mandible_absent(g, anc)
+                .unwrap_or_else(|| "the upper incisal edge is not found".into())),
+            (Err(why), None) => Err(why.clone()),
+        };
     let mand_labels = [
         "L1", "L1-apex", "B", "Pog", "Gn", "Me", "MF-R", "MF-L", "Go-R", "Go-L", "Co-R", "Co-L",
     ];
@@ -130,7 +131,7 @@ fn detect(g: &Grid) -> Vec<(&'static str, Spot)> {
         (Ok(l), Ok(u)) => {
             out.push(("L1", Ok(l.edge)));
             out.push(("L1-apex", Ok(l.apex)));
-            let sym = symphysis(g, u, l);
+            let sym = symphysis(g, hu, u, l);
             match &sym {
                 Ok(s) => {
                     out.push(("B", s.b.clone()));
@@ -150,7 +151,7 @@ fn detect(g: &Grid) -> Vec<(&'static str, Spot)> {
             out.push(("MF-L", mf[1].clone()));
             for (k, (go, co)) in [("Go-R", "Co-R"), ("Go-L", "Co-L")].into_iter().enumerate() {
                 let sign = if k == 0 { -1.0 } else { 1.0 };
-                let (gonion, condyle) = ramus(g, u, l, me, sign);
+                let (gonion, condyle) = ramus(g, hu, u, l, me, sign);
                 out.push((go, gonion));
                 out.push((co, condyle));
             }
@@ -185,7 +186,13 @@ fn front(
 }
 
 /// Whether any cell of slab `ss` at (iv, ia) is accepted by `keep`.
-fn any(g: &Grid, iv: isize, ia: isize, ss: &std::ops::RangeInclusive<isize>, keep: impl Fn(u8) -> bool) -> bool {
+fn any(
+    g: &Grid,
+    iv: isize,
+    ia: isize,
+    ss: &std::ops::RangeInclusive<isize>,
+    keep: impl Fn(u8) -> bool,
+) -> bool {
     ss.clone().any(|is| keep(g.at(is, iv, ia)))
 }
 
@@ -374,9 +381,10 @@ fn incisor_edge(
         (None, Some(_)) => false,
         (None, None) => return None,
     };
+    let reach = reach(right).unwrap_or(a_hi);
     let side: Vec<&(isize, isize)> = cells
         .iter()
-        .filter(|(is, _)| if right { *is <= mid } else { *is >= mid })
+        .filter(|(is, ia)| (if right { *is <= mid } else { *is >= mid }) && *ia >= reach - 1)
         .collect();
     let n = side.len() as f64;
     let s = side.iter().map(|c| c.0 as f64).sum::<f64>() / n;
@@ -424,8 +432,11 @@ fn lower_incisor(g: &Grid, u: &Upper) -> Result<Lower, String> {
         .rev()
         .find(|&iv| front(g, iv, &ss, a_lo, a_hi, is_tooth).is_some());
     let Some(iv_first) = first else {
-        return Err(mandible_absent(g, (u.iv_edge, u.ia_front))
-            .unwrap_or_else(|| "no lower incisor within 30 mm below the upper incisal edge".into()));
+        return Err(
+            mandible_absent(g, (u.iv_edge, u.ia_front)).unwrap_or_else(|| {
+                "no lower incisor within 30 mm below the upper incisal edge".into()
+            }),
+        );
     };
     let a_l = front(g, iv_first, &ss, a_lo, a_hi, is_tooth).unwrap_or(u.ia_front);
     // The lower crown's back bound in row iv: behind the upper crown's section when the
@@ -478,11 +489,6 @@ struct Maxilla {
     ans: Spot,
     a: Spot,
     pns: Spot,
-    /// The palate's level near its front and back ends (row indices), its back end's a index.
-    iv_floor: isize,
-    iv_back: isize,
-    ia_back: isize,
-    ia_ans: isize,
 }
 
 /// The midsagittal slab of the palate and the symphysis (mm either side).
@@ -503,7 +509,12 @@ const PALATE_BEHIND_MM: f64 = 25.0;
 /// A: the deepest point of the concave anterior face of the maxilla between ANS and the upper
 /// alveolus (10 mm above the incisal edge, about the alveolar crest), deepest measured behind
 /// the line joining those two ends of the midline profile.
-fn maxilla(g: &Grid, anchor: (isize, isize), upper: Option<&Upper>) -> Result<Maxilla, String> {
+fn maxilla(
+    g: &Grid,
+    hu: &dyn Fn([f64; 3]) -> f64,
+    anchor: (isize, isize),
+    upper: Option<&Upper>,
+) -> Result<Maxilla, String> {
     let ss = slab(g, MIDLINE_HALF_MM);
     let bone = |iv: isize, ia: isize| any(g, iv, ia, &ss, hard);
     let (iv0, ia0) = anchor;
@@ -569,78 +580,123 @@ fn maxilla(g: &Grid, anchor: (isize, isize), upper: Option<&Upper>) -> Result<Ma
         .filter(|&iv| bone(iv, ia_front))
         .collect();
     let ans_v = tip_rows.iter().sum::<isize>() as f64 / tip_rows.len().max(1) as f64;
-    let ans = [0.0, g.coord(1, 0) + ans_v * H, g.coord(2, ia_front) + 0.5 * H];
+    let ans = [
+        0.0,
+        g.coord(1, 0) + ans_v * H,
+        g.coord(2, ia_front) + 0.5 * H,
+    ];
     let pns = [
         0.0,
         g.coord(1, 0) + mid_back * H,
         g.coord(2, ia_back) - 0.5 * H,
     ];
-    let a = match upper {
-        Some(u) => a_point(g, &ss, u, floor_front, ans),
-        None => Err("the upper incisal edge is not found".into()),
+    // The alveolar crest: 10 mm above the incisal edge, or 8 mm above the lowest crown seen.
+    let crest = match upper {
+        Some(u) => (u.iv_edge + (10.0 / H) as isize, u.ia_front),
+        None => (iv0 + (8.0 / H) as isize, ia0),
     };
+    let a = a_point(g, hu, &ss, crest, ans);
     Ok(Maxilla {
         ans: Ok(ans),
         a,
         pns: Ok(pns),
-        iv_floor: floor_front,
-        iv_back: mid_back.round() as isize,
-        ia_back,
-        ia_ans: ia_front,
     })
 }
 
-/// The midline profile's deepest point behind the chord between its ends (rows iv_lo..=iv_hi,
-/// profile `prof` in a indices): (row, depth mm).
+/// The CT's bone edge on the midline: HU over this is bone's cortex, not soft tissue.
+const EDGE_HU: f64 = 400.0;
+
+/// The front of the bone in row `iv` to a quarter millimetre, as a fractional a index: from
+/// 2 mm in front of the cell front `ia` backward, the first point where the CT (the brightest
+/// of three samples 1 mm apart across the midline) reaches `EDGE_HU`; the cell's front edge
+/// where it does not within 3 mm.
+fn refine_front(g: &Grid, hu: &dyn Fn([f64; 3]) -> f64, iv: isize, ia: isize) -> f64 {
+    let v = g.coord(1, iv);
+    let a0 = g.coord(2, ia);
+    (0..=20)
+        .map(|k| a0 + 2.0 - 0.25 * k as f64)
+        .find(|&a| [-1.0, 0.0, 1.0].iter().any(|&s| hu([s, v, a]) >= EDGE_HU))
+        .map_or(ia as f64 + 0.5, |a| (a - g.coord(2, 0)) / H)
+}
+
+/// The deepest point of a midline profile (rows and their front a index) behind the chord
+/// between its ends: (row, depth mm). Of rows within 0.25 mm of the deepest, the middle one
+/// that is on the profile (a flat bottom's middle).
 fn deepest(prof: &[(isize, f64)]) -> Option<(isize, f64)> {
     let (&(v0, a0), &(v1, a1)) = (prof.first()?, prof.last()?);
     let span = (v1 - v0) as f64;
-    prof.iter()
+    let depth: Vec<(isize, f64)> = prof
+        .iter()
         .map(|&(iv, a)| {
-            let t = if span != 0.0 { (iv - v0) as f64 / span } else { 0.0 };
+            let t = if span != 0.0 {
+                (iv - v0) as f64 / span
+            } else {
+                0.0
+            };
             (iv, a0 + t * (a1 - a0) - a)
         })
-        .max_by(|x, y| x.1.total_cmp(&y.1))
+        .collect();
+    let best = depth.iter().map(|x| x.1).fold(f64::NEG_INFINITY, f64::max);
+    let deep: Vec<&(isize, f64)> = depth.iter().filter(|x| x.1 >= best - 0.25).collect();
+    let mid = deep.iter().map(|x| x.0 as f64).sum::<f64>() / deep.len().max(1) as f64;
+    deep.iter()
+        .min_by(|x, y| {
+            (x.0 as f64 - mid)
+                .abs()
+                .total_cmp(&(y.0 as f64 - mid).abs())
+        })
+        .map(|x| (x.0, best))
 }
 
+/// A point on the midline profile between the alveolar crest `crest` (row, the incisor's front
+/// a index) and ANS.
 fn a_point(
     g: &Grid,
+    hu: &dyn Fn([f64; 3]) -> f64,
     ss: &std::ops::RangeInclusive<isize>,
-    u: &Upper,
-    iv_floor: isize,
+    crest: (isize, isize),
     ans: [f64; 3],
 ) -> Spot {
-    let lo = u.iv_edge + (10.0 / H) as isize;
+    let lo = crest.0;
     let hi = g.index(1, ans[1]) - 1;
     if hi - lo < 3 {
         return Err("the maxilla between ANS and the incisors is too short to hold A point".into());
     }
-    let _ = iv_floor;
-    let a_min = u.ia_front - 25;
+    let a_min = crest.1 - 25;
     let prof: Vec<(isize, f64)> = (lo..=hi)
-        .filter_map(|iv| front(g, iv, ss, a_min, u.ia_front + 5, hard).map(|f| (iv, f as f64)))
+        .filter_map(|iv| {
+            front(g, iv, ss, a_min, crest.1 + 5, hard).map(|f| (iv, refine_front(g, hu, iv, f)))
+        })
         .collect();
     let mut chord = prof.clone();
     chord.push((g.index(1, ans[1]), g.index(2, ans[2]) as f64));
-    let (iv, _) = deepest(&chord).ok_or_else(|| "no anterior maxilla on the midline".to_string())?;
-    let a = prof
-        .iter()
-        .find(|p| p.0 == iv)
-        .map_or(f64::NAN, |p| p.1);
-    Ok([0.0, g.coord(1, iv), g.coord(2, 0) + (a + 0.5) * H])
+    let (iv, depth) =
+        deepest(&chord).ok_or_else(|| "no anterior maxilla on the midline".to_string())?;
+    if depth < 0.5 {
+        return Err(
+            "the maxilla's anterior face is not concave between ANS and the incisors".into(),
+        );
+    }
+    let a = prof.iter().find(|p| p.0 == iv).map_or(f64::NAN, |p| p.1);
+    Ok([0.0, g.coord(1, iv), g.coord(2, 0) + a * H])
 }
 
-/// Pir-R and Pir-L: not yet located.
+/// Pir-R and Pir-L, the lowest points of the piriform aperture's lateral rims: not detected
+/// (the thin rim is not followed reliably at clinical CT resolutions); missing with that reason
+/// rather than placed wrong.
 fn piriform(g: &Grid, m: &Maxilla) -> [Spot; 2] {
     let _ = (g, m);
-    let why = || Err("the piriform rim is not located".to_string());
+    let why = || Err("not detected: the piriform rim is not traced from the CT".to_string());
     [why(), why()]
 }
 
-/// PTM-R and PTM-L: not yet located.
+/// PTM-R and PTM-L, the pterygomaxillary junctions: not detected (the fissure between the
+/// maxillary tuberosity and the pterygoid plates is not traced reliably at clinical CT
+/// resolutions); missing with that reason rather than placed wrong.
 fn pterygomaxillary(g: &Grid, m: &Maxilla) -> [Spot; 2] {
     let _ = (g, m);
-    let why = || Err("the pterygomaxillary junction is not located".to_string());
+    let why =
+        || Err("not detected: the pterygomaxillary fissure is not traced from the CT".to_string());
     [why(), why()]
 }
 
@@ -649,10 +705,13 @@ fn pterygomaxillary(g: &Grid, m: &Maxilla) -> [Spot; 2] {
 /// column there is followed down from 15 mm above the incisal level through the maxilla and
 /// the crown to its end, stopping 2 mm under the incisal level (the lower molars below); U6 is
 /// the middle of the columns ending lowest.
-fn upper_molars(g: &Grid, u: &Upper) -> [Spot; 2] {
-    let iv_top = u.iv_edge + (15.0 / H) as isize;
-    let iv_stop = u.iv_edge - (2.0 / H) as isize;
-    let ia_u1 = g.index(2, u.edge[2]);
+///
+/// `incisal` is U1's row and a index (or, where the CT ends above the incisal edge, the lowest
+/// row of the incisor crown it holds).
+fn upper_molars(g: &Grid, incisal: (isize, isize)) -> [Spot; 2] {
+    let iv_top = incisal.0 + (15.0 / H) as isize;
+    let iv_stop = incisal.0 - (2.0 / H) as isize;
+    let ia_u1 = incisal.1;
     let a_range = (ia_u1 - (35.0 / H) as isize)..=(ia_u1 - (25.0 / H) as isize);
     [-1.0, 1.0].map(|side: f64| {
         let s_range = if side < 0.0 {
@@ -661,9 +720,11 @@ fn upper_molars(g: &Grid, u: &Upper) -> [Spot; 2] {
             g.index(0, 8.0)..=g.index(0, 40.0)
         };
         let mut ends: Vec<(isize, isize, isize)> = Vec::new();
+        let mut cut = false;
         for is in s_range.clone() {
             for ia in a_range.clone() {
-                let Some(start) = (iv_stop..=iv_top).rev().find(|&iv| hard(g.at(is, iv, ia))) else {
+                let Some(start) = (iv_stop..=iv_top).rev().find(|&iv| hard(g.at(is, iv, ia)))
+                else {
                     continue;
                 };
                 let mut iv = start;
@@ -671,9 +732,13 @@ fn upper_molars(g: &Grid, u: &Upper) -> [Spot; 2] {
                     iv -= 1;
                 }
                 if (iv..=iv + 2).any(|r| g.at(is, r, ia) == TOOTH) {
+                    cut |= g.at(is, iv - 1, ia) == OUT;
                     ends.push((is, iv, ia));
                 }
             }
+        }
+        if cut {
+            return Err("the CT's field of view ends within the upper molar crowns".into());
         }
         let Some(low) = ends.iter().map(|e| e.1).min() else {
             return Err("no upper molar found 25–35 mm behind the upper incisors".into());
@@ -704,7 +769,12 @@ struct Symphysis {
 ///   pogonion, deepest measured behind the line joining those two;
 /// - Gn, gnathion: the most anterior-inferior point of the chin's outline (the point the
 ///   outline's tangent at 45° to the frame's vertical touches), between pogonion and menton.
-fn symphysis(g: &Grid, u: &Upper, l: &Lower) -> Result<Symphysis, String> {
+fn symphysis(
+    g: &Grid,
+    hu: &dyn Fn([f64; 3]) -> f64,
+    u: &Upper,
+    l: &Lower,
+) -> Result<Symphysis, String> {
     let ss = slab(g, MIDLINE_HALF_MM);
     let bone = |iv: isize, ia: isize| any(g, iv, ia, &ss, hard);
     let (v_max, a_min) = (u.iv_edge - 1, u.ia_front - (45.0 / H) as isize);
@@ -740,28 +810,40 @@ fn symphysis(g: &Grid, u: &Upper, l: &Lower) -> Result<Symphysis, String> {
     let low: Vec<isize> = cells.iter().filter(|c| c.0 == iv_me).map(|c| c.1).collect();
     let a_me = low.iter().sum::<isize>() as f64 / low.len() as f64;
     let cut = (low.iter().min().copied().unwrap_or(0)..=low.iter().max().copied().unwrap_or(0))
-        .any(|ia| ss.clone().any(|is| g.at(is, iv_me - 1, ia) == OUT || g.at(is, iv_me - 2, ia) == OUT));
+        .any(|ia| {
+            ss.clone()
+                .any(|is| g.at(is, iv_me - 1, ia) == OUT || g.at(is, iv_me - 2, ia) == OUT)
+        });
     let me: Spot = if cut {
         Err("the CT's field of view ends within the chin".into())
     } else {
-        Ok(coords(g, [g.index(0, 0.0) as f64, iv_me as f64 - 0.5, a_me]))
+        Ok(coords(
+            g,
+            [g.index(0, 0.0) as f64, iv_me as f64 - 0.5, a_me],
+        ))
     };
     // The anterior profile of the component.
     let mut prof: Vec<(isize, f64)> = Vec::new();
     for iv in iv_me..=l.iv_first {
         if let Some(f) = cells.iter().filter(|c| c.0 == iv).map(|c| c.1).max() {
-            prof.push((iv, f as f64));
+            prof.push((iv, refine_front(g, hu, iv, f)));
         }
     }
+    // Prominence: how far in front of the line from menton to the lower incisal edge.
     let pog_hi = iv_me + ((l.iv_first - iv_me) as f64 * 0.6).round() as isize;
+    let (v_l1, a_l1) = (g.index(1, l.edge[1]) as f64, g.index(2, l.edge[2]) as f64);
+    let prom = |p: &(isize, f64)| {
+        let t = (p.0 as f64 - iv_me as f64) / (v_l1 - iv_me as f64).max(1.0);
+        p.1 - (a_me + t * (a_l1 - a_me))
+    };
     let best = prof
         .iter()
         .filter(|p| p.0 <= pog_hi)
-        .map(|p| p.1)
+        .map(prom)
         .fold(f64::NEG_INFINITY, f64::max);
     let plateau: Vec<isize> = prof
         .iter()
-        .filter(|p| p.0 <= pog_hi && p.1 >= best)
+        .filter(|p| p.0 <= pog_hi && prom(p) >= best - 0.25)
         .map(|p| p.0)
         .collect();
     let pog = if plateau.is_empty() {
@@ -770,7 +852,9 @@ fn symphysis(g: &Grid, u: &Upper, l: &Lower) -> Result<Symphysis, String> {
         Err("the CT's field of view ends within the chin".to_string())
     } else {
         let iv = plateau.iter().sum::<isize>() as f64 / plateau.len() as f64;
-        Ok(coords(g, [g.index(0, 0.0) as f64, iv, best + 0.5]))
+        let row = iv.round() as isize;
+        let a = prof.iter().find(|p| p.0 == row).map_or(f64::NAN, |p| p.1);
+        Ok(coords(g, [g.index(0, 0.0) as f64, iv, a]))
     };
     let b = match &pog {
         Ok(p) => {
@@ -784,7 +868,7 @@ fn symphysis(g: &Grid, u: &Upper, l: &Lower) -> Result<Symphysis, String> {
             match deepest(&chord) {
                 Some((iv, _)) if iv > iv_pog => {
                     let a = prof.iter().find(|q| q.0 == iv).map_or(f64::NAN, |q| q.1);
-                    Ok(coords(g, [g.index(0, 0.0) as f64, iv as f64, a + 0.5]))
+                    Ok(coords(g, [g.index(0, 0.0) as f64, iv as f64, a]))
                 }
                 _ => Err("no concavity between the lower incisor and pogonion".into()),
             }
@@ -798,7 +882,12 @@ fn symphysis(g: &Grid, u: &Upper, l: &Lower) -> Result<Symphysis, String> {
                 .iter()
                 .filter(|c| c.0 <= iv_pog)
                 .max_by_key(|c| c.1 - c.0)
-                .map(|c| coords(g, [g.index(0, 0.0) as f64, c.0 as f64 - 0.3, c.1 as f64 + 0.3]))
+                .map(|c| {
+                    coords(
+                        g,
+                        [g.index(0, 0.0) as f64, c.0 as f64 - 0.3, c.1 as f64 + 0.3],
+                    )
+                })
                 .ok_or_else(|| "no chin outline between pogonion and menton".into())
         }
         (Err(why), _) | (_, Err(why)) => Err(why.clone()),
@@ -823,7 +912,9 @@ fn mental_foramina(g: &Grid, l: &Lower, me: Option<[f64; 3]>) -> [Spot; 2] {
                 .map(|d| g.index(0, side * d as f64))
                 .find(|&is| (ia - 1..=ia + 1).any(|a| hard(g.at(is, iv, a))))
         };
-        let rows: Vec<isize> = (iv_floor..=iv_crest).filter(|&iv| outer(iv).is_some()).collect();
+        let rows: Vec<isize> = (iv_floor..=iv_crest)
+            .filter(|&iv| outer(iv).is_some())
+            .collect();
         let Some(&bottom) = rows.first() else {
             return Err("no mandibular body found below the premolars".into());
         };
@@ -850,7 +941,14 @@ fn mental_foramina(g: &Grid, l: &Lower, me: Option<[f64; 3]>) -> [Spot; 2] {
 /// gives the ramus tangent (its edge facing most backward) and the mandibular-plane tangent
 /// (its edge facing most downward); gonion is the outline point farthest out along their
 /// angle's bisector.
-fn ramus(g: &Grid, u: &Upper, l: &Lower, me: Option<[f64; 3]>, side: f64) -> (Spot, Spot) {
+fn ramus(
+    g: &Grid,
+    hu: &dyn Fn([f64; 3]) -> f64,
+    u: &Upper,
+    l: &Lower,
+    me: Option<[f64; 3]>,
+    side: f64,
+) -> (Spot, Spot) {
     let iv_o = (u.iv_edge + l.iv_top) / 2;
     let (s_lo, s_hi) = if side < 0.0 {
         (g.index(0, -75.0), g.index(0, -25.0))
@@ -922,38 +1020,51 @@ fn ramus(g: &Grid, u: &Upper, l: &Lower, me: Option<[f64; 3]>, side: f64) -> (Sp
     // Up to the condyle.
     let mut prev = start.clone();
     let mut iv = iv_o;
+    let top = |c: &Vec<(isize, isize)>, iv: isize| {
+        let n = c.len() as f64;
+        let s = c.iter().map(|x| x.0 as f64).sum::<f64>() / n;
+        let a = c.iter().map(|x| x.1 as f64).sum::<f64>() / n;
+        coords(g, [s, iv as f64, a])
+    };
+    // The level where the sweep ran into the skull base, if it did; from there on each section
+    // keeps only the cells next to the last one's (the condylar head, not the fossa around it).
+    let mut merged: Option<(isize, Vec<(isize, isize)>)> = None;
     let condyle: Spot = loop {
         let mut comps = components(iv + 1, Some(&prev));
         comps.retain(|c| !c.is_empty());
-        let mean_a = |c: &Vec<(isize, isize)>| c.iter().map(|x| x.1 as f64).sum::<f64>() / c.len() as f64;
+        let mean_a =
+            |c: &Vec<(isize, isize)>| c.iter().map(|x| x.1 as f64).sum::<f64>() / c.len() as f64;
         let biggest = comps.iter().map(|c| c.len()).max().unwrap_or(0);
         let next = comps
             .into_iter()
             .filter(|c| c.len() * 10 >= biggest * 3)
             .min_by(|x, y| mean_a(x).total_cmp(&mean_a(y)));
-        let top = |c: &Vec<(isize, isize)>, iv: isize| {
-            let n = c.len() as f64;
-            let s = c.iter().map(|x| x.0 as f64).sum::<f64>() / n;
-            let a = c.iter().map(|x| x.1 as f64).sum::<f64>() / n;
-            coords(g, [s, iv as f64 + 0.5, a])
+        let iv_merged = merged.as_ref().map_or(iv, |m| m.0);
+        let Some(mut c) = next else {
+            break condyle_top(hu, top(&prev, iv), iv_merged, iv);
         };
-        match next {
-            None => break Ok(top(&prev, iv)),
-            Some(c) => {
-                let grown = c.len() > 3 * prev.len() && c.len() as f64 * H * H > 150.0;
-                if grown || c.len() as f64 * H * H > 900.0 {
-                    break Ok(top(&prev, iv));
-                }
-                if c.iter().any(|&(is, ia)| g.at(is, iv + 2, ia) == OUT) {
-                    break Err("the CT's field of view ends within the condyle".into());
-                }
-                iv += 1;
-                side_cells.extend(c.iter().map(|&(is, ia)| (is, iv, ia)));
-                prev = c;
-                if iv > iv_o + (90.0 / H) as isize {
-                    break Err("the ramus does not end within 90 mm above the teeth".into());
-                }
+        let grown = c.len() * 10 > prev.len() * 18 && (c.len() - prev.len()) as f64 * H * H > 40.0;
+        if merged.is_some() || grown || c.len() as f64 * H * H > 900.0 {
+            let (_, foot) = merged.get_or_insert_with(|| (iv, prev.clone()));
+            let near = |&(is, ia): &(isize, isize)| {
+                foot.iter()
+                    .any(|&(ps, pa)| (ps - is).abs() <= 2 && (pa - ia).abs() <= 2)
+            };
+            c.retain(near);
+            if c.is_empty() || iv >= iv_merged + (12.0 / H) as isize {
+                break condyle_top(hu, top(&prev, iv), iv_merged, iv);
             }
+        }
+        if c.iter().any(|&(is, ia)| g.at(is, iv + 2, ia) == OUT) {
+            break Err("the CT's field of view ends within the condyle".into());
+        }
+        iv += 1;
+        if merged.is_none() {
+            side_cells.extend(c.iter().map(|&(is, ia)| (is, iv, ia)));
+        }
+        prev = c;
+        if iv > iv_o + (90.0 / H) as isize {
+            break Err("the ramus does not end within 90 mm above the teeth".into());
         }
     };
     // Down to the lower border.
@@ -972,6 +1083,50 @@ fn ramus(g: &Grid, u: &Upper, l: &Lower, me: Option<[f64; 3]>, side: f64) -> (Sp
     }
     let gonion = gonion(g, &side_cells, me);
     (gonion, condyle)
+}
+
+/// The top of the condylar head on the vertical through `c` (the middle of the highest section
+/// swept, at row `iv_end`; `iv_merged` the row where the sweep met the skull base, or
+/// `iv_end`): the CT's value (averaged over 3 × 3 mm) is lowest in the joint space (or the soft
+/// tissue) above the head; the top is where, going down from that minimum, the value first
+/// reaches halfway to the head's (its highest within 4 mm below the minimum).
+fn condyle_top(hu: &dyn Fn([f64; 3]) -> f64, c: [f64; 3], iv_merged: isize, iv_end: isize) -> Spot {
+    let step = 0.25;
+    let at = |v: f64| {
+        let mut sum = 0.0;
+        for ds in [-1.0, 0.0, 1.0] {
+            for da in [-1.0, 0.0, 1.0] {
+                sum += hu([c[0] + ds, v, c[2] + da]);
+            }
+        }
+        sum / 9.0
+    };
+    let v0 = c[1] - (iv_end - iv_merged) as f64 * H - 2.0;
+    let n = ((c[1] + 3.0 - v0) / step).ceil().max(1.0) as usize;
+    let prof: Vec<(f64, f64)> = (0..=n)
+        .map(|k| v0 + k as f64 * step)
+        .map(|v| (v, at(v)))
+        .collect();
+    let Some(k_min) = (0..prof.len()).min_by(|&x, &y| prof[x].1.total_cmp(&prof[y].1)) else {
+        return Err("the condyle is not found".into());
+    };
+    let h_min = prof[k_min].1;
+    let back = (4.0 / step) as usize;
+    let h_head = prof[k_min.saturating_sub(back)..=k_min]
+        .iter()
+        .map(|x| x.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if h_head - h_min < 150.0 {
+        return Err(
+            "the condylar head is not told from the skull base at this CT's resolution".into(),
+        );
+    }
+    let half = 0.5 * (h_head + h_min);
+    let top = (0..=k_min)
+        .rev()
+        .find(|&k| prof[k].1 >= half)
+        .map_or(prof[k_min].0, |k| prof[k].0 + 0.5 * step);
+    Ok([c[0], top, c[2]])
 }
 
 fn gonion(g: &Grid, cells: &[(isize, isize, isize)], me: Option<[f64; 3]>) -> Spot {
@@ -1006,10 +1161,22 @@ fn gonion(g: &Grid, cells: &[(isize, isize, isize)], me: Option<[f64; 3]>) -> Sp
             base = Some((n, len * -n[1]));
         }
     }
+    // The mandibular plane through menton (Downs): the outline's edge from menton backward.
+    if let Some(m) = me
+        && let Some(k) = hull.iter().position(|p| p[0] == m[2] && p[1] == m[1])
+    {
+        let p = hull[(k + hull.len() - 1) % hull.len()];
+        let d = [m[2] - p[0], m[1] - p[1]];
+        let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        if len > 0.0 && d[1] < 0.0 {
+            base = Some(([d[1] / len, -d[0] / len], len));
+        }
+    }
     let (Some((nr, _)), Some((nb, _))) = (ramus, base) else {
         return Err("the ramus and the lower border do not form an angle".into());
     };
     let d = unit2([nr[0] + nb[0], nr[1] + nb[1]]);
+
     let dot = |c: &(isize, isize, isize)| g.coord(2, c.2) * d[0] + g.coord(1, c.1) * d[1];
     let best = cells.iter().map(dot).fold(f64::NEG_INFINITY, f64::max);
     let near: Vec<&(isize, isize, isize)> = cells.iter().filter(|c| dot(c) >= best - 1.0).collect();
@@ -1017,12 +1184,7 @@ fn gonion(g: &Grid, cells: &[(isize, isize, isize)], me: Option<[f64; 3]>) -> Sp
         return Err("the mandible's angle is not found".into());
     }
     let n = near.len() as f64;
-    let mean = |k: usize| {
-        near.iter()
-            .map(|c| [c.0, c.1, c.2][k] as f64)
-            .sum::<f64>()
-            / n
-    };
+    let mean = |k: usize| near.iter().map(|c| [c.0, c.1, c.2][k] as f64).sum::<f64>() / n;
     // Onto the outline: half a cell outward along the bisector.
     let c = coords(g, [mean(0), mean(1), mean(2)]);
     Ok([c[0], c[1] + 0.5 * d[1], c[2] + 0.5 * d[0]])
@@ -1062,13 +1224,18 @@ fn scale(a: [f64; 3], k: f64) -> [f64; 3] {
 
 fn unit(a: [f64; 3]) -> [f64; 3] {
     let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    if n > 0.0 { scale(a, 1.0 / n) } else { [0.0, 1.0, 0.0] }
+    if n > 0.0 {
+        scale(a, 1.0 / n)
+    } else {
+        [0.0, 1.0, 0.0]
+    }
 }
 
 fn unit2(a: [f64; 2]) -> [f64; 2] {
     let n = (a[0] * a[0] + a[1] * a[1]).sqrt();
-    if n > 0.0 { [a[0] / n, a[1] / n] } else { [-1.0, 0.0] }
+    if n > 0.0 {
+        [a[0] / n, a[1] / n]
+    } else {
+        [-1.0, 0.0]
+    }
 }
-
-#[allow(dead_code)]
-const _CLASSES: [u8; 2] = [BONE, TOOTH];
