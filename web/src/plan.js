@@ -16,12 +16,75 @@ export function rotation(deg) {
   ];
 }
 
-/** The 12 entries of M = [R − I | t′] (row-major) of one segment's move; zeros when absent. */
+/** The right-handed rotation by `deg` degrees about the unit axis `u` (Rodrigues), rows; as
+ *  crates/facesim/src/anatomy/moves.rs `about_axis`. */
+export function aboutAxis(u, deg) {
+  const a = (deg * Math.PI) / 180;
+  const [s, c] = [Math.sin(a), Math.cos(a)];
+  const k = [
+    [0, -u[2], u[1]],
+    [u[2], 0, -u[0]],
+    [-u[1], u[0], 0],
+  ];
+  const r = [[], [], []];
+  for (let i = 0; i < 3; i++)
+    for (let j = 0; j < 3; j++) {
+      let kk = 0;
+      for (let m = 0; m < 3; m++) kk += k[i][m] * k[m][j];
+      r[i][j] = (i === j ? 1 : 0) + s * k[i][j] + (1 - c) * kk;
+    }
+  return r;
+}
+
+function mul(a, b) {
+  const r = [[], [], []];
+  for (let i = 0; i < 3; i++)
+    for (let j = 0; j < 3; j++) r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
+  return r;
+}
+
+/** The six clinical moves (docs/planning.md "Signs") as the page's move in LPS: R = R_yaw·R_roll·
+ *  R_pitch, right-handed about the frame's left, forward and up axes, t = advance·forward +
+ *  up·up + left·left (p' = R (p − pivot) + pivot + t). `frame`: {forward, up, left} (LPS units);
+ *  a key left out is 0. */
+export function clinicalMove(moves, frame) {
+  const v = (k) => Number(moves[k] || 0);
+  const rot = mul(aboutAxis(frame.up, v("yaw_deg")), mul(aboutAxis(frame.forward, v("roll_deg")), aboutAxis(frame.left, v("pitch_deg"))));
+  const translate = [0, 1, 2].map((i) => v("advance_mm") * frame.forward[i] + v("up_mm") * frame.up[i] + v("left_mm") * frame.left[i]);
+  return { translate, rotation: rot };
+}
+
+/** A move's rotation matrix (rows): `rotation` when given, else from `rotate_deg`. */
+export function moveRotation(move) {
+  return move.rotation || rotation(move.rotate_deg || [0, 0, 0]);
+}
+
+/** The clinical moves of an LPS move (translate, rotation), as moves.rs `read_back`. */
+export function readBack(move, frame) {
+  const t = move.translate || [0, 0, 0];
+  const r = moveRotation(move);
+  const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+  // R in the frame's basis (x left, y up, z forward): Ry(yaw) Rz(roll) Rx(pitch).
+  const axes = [frame.left, frame.up, frame.forward];
+  const m = axes.map((a) => axes.map((b) => dot(a, [0, 1, 2].map((i) => dot(r[i], b)))));
+  const deg = (x) => (x * 180) / Math.PI;
+  return {
+    advance_mm: dot(t, frame.forward),
+    up_mm: dot(t, frame.up),
+    left_mm: dot(t, frame.left),
+    pitch_deg: deg(Math.atan2(-m[1][2], m[1][1])),
+    roll_deg: deg(Math.asin(Math.min(Math.max(m[1][0], -1), 1))),
+    yaw_deg: deg(Math.atan2(-m[2][0], m[0][0])),
+  };
+}
+
+/** The 12 entries of M = [R − I | t′] (row-major) of one segment's move; zeros when absent. A
+ *  move is {translate, rotate_deg} (R = Rz·Ry·Rx) or {translate, rotation} (R's rows). */
 export function planMatrix(move, pivot, m = new Float64Array(12)) {
   m.fill(0);
   if (!move) return m;
   const t = move.translate || [0, 0, 0];
-  const r = rotation(move.rotate_deg || [0, 0, 0]);
+  const r = moveRotation(move);
   for (let i = 0; i < 3; i++) {
     let rp = 0;
     for (let j = 0; j < 3; j++) {

@@ -6,7 +6,7 @@
 // uint32 / uint8). Frame: LPS, millimetres.
 import * as THREE from "three";
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
-import { planMatrix, predictFace, moveRigid, interleaveColumns } from "./plan.js";
+import { planMatrix, predictFace, moveRigid, interleaveColumns, clinicalMove, readBack } from "./plan.js";
 import { viridis } from "./viridis.js";
 import { surfaceMaterial, setOpacity, viewUp, setHeadUp } from "./shading.js";
 import { vertexNormals, leadingVertexNormals } from "./normals.js";
@@ -22,6 +22,9 @@ import { materials, theta as thetaOf, outside, solveOnline, outputBound, reduced
 // facesim.options.dragPixelRatio = 1 draws every frame at full resolution (web/bench/rate.mjs).
 const DRAG_PIXEL_RATIO = 0.5;
 const DRAG_SETTLE_MS = 200;
+// The views keep this much of the picture (CSS px) free at its left and right edges for the
+// landmark labels (a label sits 6 px beside its marker and is up to ~40 px wide).
+const LABEL_ROOM_PX = 56;
 const BACKGROUND = 0xf4f4f4;
 const SKIN = 0xd9a98c;
 // The face's opacity with the skull seen through it.
@@ -65,6 +68,28 @@ const VIEW_TEXT = {
   "profile-left": "in profile from the patient's left",
   "three-quarter": "in three-quarter view from the patient's front right",
 };
+// The plan's sliders per segment: [key, label, unit, tooltip]. Clinical: docs/planning.md
+// "Signs"; LPS: [translate | rotate_deg, axis index].
+const SLIDER_KEYS = {
+  clinical: [
+    ["advance_mm", "advance", "mm", "forward (+) or back (−, setback) along the clinical frame's forward axis"],
+    ["up_mm", "up", "mm", "up (+, impaction) or down (−)"],
+    ["left_mm", "left", "mm", "toward the patient's left (+)"],
+    ["pitch_deg", "pitch", "°", "about the left axis through the pivot: + turns the front down"],
+    ["roll_deg", "roll", "°", "about the forward axis through the pivot: + raises the patient's left side"],
+    ["yaw_deg", "yaw", "°", "about the up axis through the pivot: + turns the front toward the patient's left"],
+  ],
+  lps: [
+    [["translate", 0], "move x", "mm", "along LPS x (the patient's left)"],
+    [["translate", 1], "move y", "mm", "along LPS y (the back of the head)"],
+    [["translate", 2], "move z", "mm", "along LPS z (up)"],
+    [["rotate_deg", 0], "turn x", "°", "about LPS x through the pivot (first)"],
+    [["rotate_deg", 1], "turn y", "°", "about LPS y through the pivot (second)"],
+    [["rotate_deg", 2], "turn z", "°", "about LPS z through the pivot (third)"],
+  ],
+};
+/** A plan slider's value as shown: to 0.1, with its unit; no "−0.0" for a read-back round-off. */
+const sliderText = (v, unit) => `${(Math.abs(v) < 0.05 ? 0 : Number(v)).toFixed(1)} ${unit}`;
 const MODES = [
   ["before", "before"],
   ["after", "after"],
@@ -89,6 +114,8 @@ function main() {
           name: s.name,
           pivot: s.pivot,
           runPlan: { translate: s.translate, rotate_deg: s.rotate_deg },
+          // The run's move read in the clinical frame (null without one).
+          runMoves: s.moves || null,
           columns: interleaveColumns(f32(s.columns), 3 * n),
         })),
       }
@@ -111,7 +138,20 @@ function main() {
     up: new THREE.Vector3(...hf.up).normalize(),
     left: new THREE.Vector3(...hf.left).normalize(),
   };
-  setHeadUp(frame.up);
+  // The clinical frame (report.json clinical_frame): the plan's sliders are moves in it, and the
+  // views stand in it, so that a pitched head is shown upright. Without one, the head frame.
+  const cf = data.clinical_frame || null;
+  const clinical = cf ? { forward: cf.forward, up: cf.up, left: cf.left } : null;
+  const viewFrame = cf
+    ? {
+        origin: new THREE.Vector3(...cf.origin),
+        front: new THREE.Vector3(...cf.forward).normalize(),
+        up: new THREE.Vector3(...cf.up).normalize(),
+        left: new THREE.Vector3(...cf.left).normalize(),
+      }
+    : frame;
+  const viewSource = cf ? `the clinical frame (${cf.method})` : hf.source;
+  setHeadUp(viewFrame.up);
 
   // ---- layout: controls and tables on the left; the picture, its toolbar, labels, legend and
   // the profile tracing on the right ----
@@ -240,12 +280,16 @@ function main() {
     boneMarkers.instanceMatrix.needsUpdate = true;
   }
 
-  // ---- camera: the head's views ----
-  const box = new THREE.Box3().setFromBufferAttribute(faceBefore.geometry.getAttribute("position"));
+  // ---- camera: the head's views, framed on the face ----
+  // The face the views frame: the soft-tissue landmarks and the facial regions' vertices (nose,
+  // lips, chin, cheeks), before and after the run's plan; the whole skin when the run has
+  // neither.
+  const facePoints = faceFramePoints(facePre, facePost, data.region_of ? decode(data.region_of, Uint8Array) : null, landmarks);
+  const box = new THREE.Box3().setFromArray(facePoints);
   const centre = box.getCenter(new THREE.Vector3());
   const radius = 0.5 * box.getSize(new THREE.Vector3()).length();
-  camera.up.copy(frame.up); // before OrbitControls, which orbits about camera.up
-  camera.position.copy(centre).addScaledVector(frame.front, 3 * radius);
+  camera.up.copy(viewFrame.up); // before OrbitControls, which orbits about camera.up
+  camera.position.copy(centre).addScaledVector(viewFrame.front, 3 * radius);
   const controls = new OrbitControls(camera, canvas);
   controls.target.copy(centre);
   controls.update();
@@ -581,10 +625,21 @@ function main() {
     state.view = name;
     const aspect = view.clientWidth / Math.max(view.clientHeight, 1);
     const half = THREE.MathUtils.degToRad(camera.fov / 2);
-    const fit = Math.min(half, Math.atan(Math.tan(half) * aspect));
+    const toCam = v[2](viewFrame);
+    const up = viewFrame.up.clone().addScaledVector(toCam, -viewFrame.up.dot(toCam)).normalize();
+    const right = up.clone().cross(toCam);
+    // Room for the labels beside the markers at the sides, and for the toolbar and the legend
+    // over the picture's top and bottom edges (CSS px, the same at both edges).
+    const w = Math.max(view.clientWidth, 1);
+    const h = Math.max(view.clientHeight, 1);
+    const marginX = Math.min(LABEL_ROOM_PX, 0.25 * w);
+    const marginY = Math.min(Math.max(toolbar.offsetTop + toolbar.offsetHeight + 10, legend.offsetHeight + 18, 50), 0.3 * h);
+    const tanY = Math.tan(half) * (1 - (2 * marginY) / h);
+    const tanX = Math.tan(half) * aspect * (1 - (2 * marginX) / w);
+    const { target, distance } = fitFace(facePoints, right, up, toCam, tanX, tanY);
     moveCamera(() => {
-      controls.target.copy(centre);
-      camera.position.copy(centre).addScaledVector(v[2](frame), (0.7 * radius) / Math.sin(fit));
+      controls.target.copy(target);
+      camera.position.copy(target).addScaledVector(toCam, distance);
     });
     showState();
   }
@@ -602,8 +657,8 @@ function main() {
     const zoom = (k) => moveCamera(() => camera.position.sub(controls.target).multiplyScalar(k).add(controls.target));
     const right = () => axis.subVectors(controls.target, camera.position).cross(camera.up).normalize();
     const keys = {
-      ArrowLeft: () => turn(frame.up, -STEP),
-      ArrowRight: () => turn(frame.up, STEP),
+      ArrowLeft: () => turn(viewFrame.up, -STEP),
+      ArrowRight: () => turn(viewFrame.up, STEP),
       ArrowUp: () => turn(right(), -STEP),
       ArrowDown: () => turn(right(), STEP),
       "+": () => zoom(0.85),
@@ -665,7 +720,7 @@ function main() {
   side.appendChild(
     el("p", { class: "hint", id: "keys-hint" }, "On the picture: drag to turn, wheel to zoom, right-drag to move. With the picture focused (Tab): ← → turn, ↑ ↓ tilt, + − zoom, 1 front, 2 profile right, 3 profile left, 4 three-quarter, 0 back to the profile."),
   );
-  side.appendChild(el("p", { class: "frame-note" }, `Views and tracing use ${hf.source}.`));
+  side.appendChild(el("p", { class: "frame-note" }, cf ? `Views use ${viewSource}; the tracing uses ${hf.source}.` : `Views and tracing use ${hf.source}.`));
   const shownBox = el("fieldset");
   shownBox.appendChild(el("legend", {}, "show"));
   const toggle = (label, key, id) => {
@@ -710,29 +765,37 @@ function main() {
     planBox.appendChild(el("p", { class: "why" }, data.no_basis_reason || "This output directory has no plan basis, so the page cannot re-plan."));
   } else {
     planBox.appendChild(el("p", { class: "label" }, basis.label));
+    planBox.appendChild(
+      el("p", { class: "hint", id: "plan-axes" }, clinical
+        ? `In the clinical frame (${cf.method}), about each segment's pivot: advance, up, left (mm); pitch (+ turns the front down), roll (+ raises the patient's left side), yaw (+ turns the front to the patient's left), in degrees; applied pitch, roll, yaw, then the move.`
+        : "Along and about the CT's axes (LPS: x to the patient's left, y to the back, z up), about each segment's pivot: turned about x, then y, then z, then moved."),
+    );
     for (const s of basis.segments) {
       planBox.appendChild(el("h3", {}, s.name));
-      const put = (key, i, label, unit) => {
-        const l = el("label", { class: "slider" });
-        const value = s.runPlan[key][i];
+      const initial = clinical ? s.runMoves || readBack(s.runPlan, clinical) : null;
+      for (const [key, label, unit, title] of SLIDER_KEYS[clinical ? "clinical" : "lps"]) {
+        const l = el("label", { class: "slider", title });
+        const value = clinical ? initial[key] : s.runPlan[key[0]][key[1]];
         const lim = Math.max(unit === "mm" ? 15 : 20, Math.ceil(Math.abs(value)));
         const r = el("input", { type: "range", min: -lim, max: lim, step: 0.1, value: String(value) });
         r.dataset.segment = s.name;
-        const text = (v) => `${Number(v).toFixed(1)} ${unit}`;
-        r.setAttribute("aria-valuetext", text(value));
-        const out = el("output", {}, text(value));
+        r.dataset.move = clinical ? key : `${key[0]}/${key[1]}`;
+        r.setAttribute("aria-valuetext", sliderText(value, unit));
+        const out = el("output", {}, sliderText(value, unit));
+        // The slider's value: exact as set (the run's plan, setPlan), the range input's own
+        // (on its 0.1 step) once dragged.
+        const slider = { r, out, unit, value };
         r.addEventListener("input", () => {
-          out.textContent = text(r.value);
+          slider.value = Number(r.value);
+          out.textContent = sliderText(r.value, unit);
           r.setAttribute("aria-valuetext", out.textContent);
           sliderMoved = true;
           requestFrame();
         });
         l.append(`${label} `, r, out);
         planBox.appendChild(l);
-        sliders.set(`${s.name}/${key}/${i}`, { r, out, unit });
-      };
-      ["x", "y", "z"].forEach((a, i) => put("translate", i, `move ${a}`, "mm"));
-      ["x", "y", "z"].forEach((a, i) => put("rotate_deg", i, `turn ${a}`, "°"));
+        sliders.set(`${s.name}/${r.dataset.move}`, slider);
+      }
     }
     const reset = el("button", { type: "button" }, "the run's plan");
     reset.addEventListener("click", () => {
@@ -750,30 +813,43 @@ function main() {
   }
   side.appendChild(planBox);
 
+  /** The sliders' plan: per segment its LPS move ({translate, rotate_deg}, or {translate,
+   *  rotation} from the clinical moves). */
   function sliderPlan() {
     const p = {};
     for (const s of basis.segments) {
-      const get = (key, i) => Number(sliders.get(`${s.name}/${key}/${i}`).r.value);
-      p[s.name] = { translate: [0, 1, 2].map((i) => get("translate", i)), rotate_deg: [0, 1, 2].map((i) => get("rotate_deg", i)) };
+      const get = (move) => sliders.get(`${s.name}/${move}`).value;
+      if (clinical) {
+        const m = {};
+        for (const [key] of SLIDER_KEYS.clinical) m[key] = get(key);
+        p[s.name] = clinicalMove(m, clinical);
+      } else p[s.name] = { translate: [0, 1, 2].map((i) => get(`translate/${i}`)), rotate_deg: [0, 1, 2].map((i) => get(`rotate_deg/${i}`)) };
     }
     return p;
   }
-  function setSliders(p) {
+  /** The sliders to the LPS plan `p` (a segment left out: no move); with a clinical frame, its
+   *  moves read back in it unless `moves` (segment → clinical moves) gives them. */
+  function setSliders(p, moves = null) {
     for (const s of basis.segments) {
       const seg = p[s.name] || { translate: [0, 0, 0], rotate_deg: [0, 0, 0] };
-      for (const key of ["translate", "rotate_deg"])
-        for (let i = 0; i < 3; i++) {
-          const { r, out, unit } = sliders.get(`${s.name}/${key}/${i}`);
-          const v = (seg[key] || [0, 0, 0])[i];
-          // A plan beyond the slider's range widens it, so the sliders keep the plan exactly.
-          if (Math.abs(v) > Number(r.max)) {
-            r.max = String(Math.ceil(Math.abs(v)));
-            r.min = String(-Math.ceil(Math.abs(v)));
-          }
-          r.value = String(v);
-          out.textContent = `${Number(v).toFixed(1)} ${unit}`;
-          r.setAttribute("aria-valuetext", out.textContent);
+      let values;
+      if (clinical) {
+        const m = moves ? moves[s.name] || {} : seg === s.runPlan && s.runMoves ? s.runMoves : readBack(seg, clinical);
+        values = SLIDER_KEYS.clinical.map(([key]) => [key, Number(m[key] || 0)]);
+      } else values = SLIDER_KEYS.lps.map(([key]) => [`${key[0]}/${key[1]}`, (seg[key[0]] || [0, 0, 0])[key[1]]]);
+      for (const [move, v] of values) {
+        const slider = sliders.get(`${s.name}/${move}`);
+        const { r, out, unit } = slider;
+        // A plan beyond the slider's range widens it; the slider keeps the value exactly.
+        if (Math.abs(v) > Number(r.max)) {
+          r.max = String(Math.ceil(Math.abs(v)));
+          r.min = String(-Math.ceil(Math.abs(v)));
         }
+        slider.value = v;
+        r.value = String(v);
+        out.textContent = sliderText(v, unit);
+        r.setAttribute("aria-valuetext", out.textContent);
+      }
     }
   }
   function applyPlan(p) {
@@ -944,8 +1020,9 @@ function main() {
   }
   const planDiffers = () =>
     !!plan && !!basis && basis.segments.some((s) => {
-      const p = plan[s.name] || { translate: [0, 0, 0], rotate_deg: [0, 0, 0] };
-      return ["translate", "rotate_deg"].some((k) => [0, 1, 2].some((i) => (p[k] || [0, 0, 0])[i] !== s.runPlan[k][i]));
+      const a = planMatrix(plan[s.name] || { translate: [0, 0, 0] }, s.pivot, new Float64Array(12));
+      const b = planMatrix(s.runPlan, s.pivot, new Float64Array(12));
+      return a.some((x, k) => Math.abs(x - b[k]) > 1e-9);
     });
   const setText = (e, text) => {
     if (e.textContent !== text) e.textContent = text;
@@ -1209,6 +1286,48 @@ function main() {
       applyPlan(p);
       dragFrame(true);
     },
+    /** Re-plan in the clinical frame: segment name → {advance_mm, up_mm, left_mm, pitch_deg,
+     *  roll_deg, yaw_deg} (a key left out: 0; docs/planning.md "Signs", about the segment's
+     *  pivot); a segment left out does not move. Drawn before it returns, as setPlan. */
+    setPlanClinical(p) {
+      if (!basis) throw new Error(data.no_basis_reason || "report.html: no plan basis");
+      if (!clinical) throw new Error("report.html: this run has no clinical frame; use setPlan (LPS)");
+      const keys = SLIDER_KEYS.clinical.map(([k]) => k);
+      for (const [name, m] of Object.entries(p)) {
+        if (!basis.segments.some((s) => s.name === name)) throw new Error(`report.html: the plan names an unknown segment '${name}'`);
+        for (const k of Object.keys(m || {}))
+          if (!keys.includes(k)) throw new Error(`report.html: no clinical move '${k}' (${keys.join(", ")})`);
+      }
+      const lps = {};
+      for (const [name, m] of Object.entries(p)) lps[name] = clinicalMove(m || {}, clinical);
+      setSliders(lps, p);
+      sliderMoved = false;
+      applyPlan(lps);
+      dragFrame(true);
+    },
+    /** The plan's sliders: {frame: "clinical" | "lps", segments: name → {move key → value}}
+     *  (clinical keys advance_mm … yaw_deg; LPS keys "translate/0" … "rotate_deg/2"), the
+     *  values as the sliders hold them; null without a basis. */
+    sliders() {
+      if (!basis) return null;
+      const segments = {};
+      for (const s of basis.segments) {
+        segments[s.name] = {};
+        for (const [key] of SLIDER_KEYS[clinical ? "clinical" : "lps"]) {
+          const move = clinical ? key : `${key[0]}/${key[1]}`;
+          const { value, r, out } = sliders.get(`${s.name}/${move}`);
+          segments[s.name][move] = { value, input: Number(r.value), text: out.textContent };
+        }
+      }
+      return { frame: clinical ? "clinical" : "lps", segments };
+    },
+    /** The plan's matrices M = [R − I | t′] (12 entries, row-major) per segment, as the face is
+     *  computed from them (the run's plan before any re-planning). */
+    planMatrices() {
+      const out = {};
+      if (basis) for (const s of basis.segments) out[s.name] = Array.from(planMatrix((plan || {})[s.name] || (plan ? null : s.runPlan), s.pivot, new Float64Array(12)));
+      return out;
+    },
     /** The tissue sliders: {poisson, muscle_fat, skin_fat, sliding} (a key left out keeps its
      *  value; null: the run's). Applied and drawn before it returns, as a slider move is; returns
      *  tissue(). A value outside the trained range is not answered: the page says so. */
@@ -1288,9 +1407,13 @@ function main() {
         height: view.clientHeight,
       };
     },
-    /** The head frame the views and the tracing use. */
+    /** The head frame the tracing uses (and the views, without a clinical frame). */
     frame() {
       return { ...hf };
+    },
+    /** The frame the views stand in: the clinical frame when the run has one, else frame(). */
+    viewFrame() {
+      return { origin: viewFrame.origin.toArray(), front: viewFrame.front.toArray(), up: viewFrame.up.toArray(), left: viewFrame.left.toArray(), source: viewSource };
     },
     /** The picture (labels and legend drawn in) as a PNG data URL of the canvas' size. */
     png,
@@ -1320,6 +1443,46 @@ function main() {
   refreshProfile();
   describe();
   document.body.dataset.ready = "1";
+}
+
+/** The points the views frame (flat LPS): the soft landmarks (before and after the run's plan)
+ *  and the face vertices of the facial regions (before and after); every skin vertex when
+ *  there are fewer than 10 such points. */
+function faceFramePoints(pre, post, regionOf, landmarks) {
+  const out = [];
+  for (const l of landmarks) if (l.anchor) out.push(...l.pre, ...l.post);
+  if (regionOf && regionOf.length === pre.length / 3)
+    for (let v = 0; v < regionOf.length; v++)
+      if (regionOf[v] !== 255) out.push(pre[3 * v], pre[3 * v + 1], pre[3 * v + 2], post[3 * v], post[3 * v + 1], post[3 * v + 2]);
+  if (out.length < 30) return Float64Array.from(pre);
+  return Float64Array.from(out);
+}
+
+/** Where a camera looking along −toCam (`right`, `up`, `toCam` orthonormal) stands to see every
+ *  point within the half-angle tangents tanX, tanY: the target is the middle of the points'
+ *  extent across and along the view, the distance the least that fits them in perspective
+ *  (a point x across, z towards the camera from the target needs distance ≥ z + |x| / tan). */
+function fitFace(points, right, up, toCam, tanX, tanY) {
+  const lo = [Infinity, Infinity, Infinity];
+  const hi = [-Infinity, -Infinity, -Infinity];
+  const axes = [right, up, toCam];
+  for (let i = 0; i < points.length; i += 3)
+    axes.forEach((a, k) => {
+      const c = points[i] * a.x + points[i + 1] * a.y + points[i + 2] * a.z;
+      lo[k] = Math.min(lo[k], c);
+      hi[k] = Math.max(hi[k], c);
+    });
+  const mid = lo.map((l, k) => 0.5 * (l + hi[k]));
+  const target = new THREE.Vector3();
+  axes.forEach((a, k) => target.addScaledVector(a, mid[k]));
+  let distance = 0;
+  for (let i = 0; i < points.length; i += 3) {
+    const [x, y, z] = axes.map((a, k) => points[i] * a.x + points[i + 1] * a.y + points[i + 2] * a.z - mid[k]);
+    distance = Math.max(distance, z + Math.abs(x) / tanX, z + Math.abs(y) / tanY);
+  }
+  // In front of the near plane (1 mm) with room to spare.
+  distance = Math.max(distance, hi[2] - mid[2] + 10);
+  return { target, distance };
 }
 
 /** Which side of the skin mesh faces out (three.js FrontSide or BackSide): the side the normal

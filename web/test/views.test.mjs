@@ -17,7 +17,11 @@ const plan = JSON.parse(readFileSync(planFile, "utf8"));
 mkdirSync(shots, { recursive: true });
 const { browser, page, problems } = await openReport(html, { width: 1000, height: 700 });
 try {
-  const result = { info: await page.evaluate(() => window.facesim.info()), frame: await page.evaluate(() => window.facesim.frame()) };
+  const result = {
+    info: await page.evaluate(() => window.facesim.info()),
+    frame: await page.evaluate(() => window.facesim.frame()),
+    view_frame: await page.evaluate(() => window.facesim.viewFrame()),
+  };
   result.default_view = result.info.view;
 
   /** What the picture shows now (see the header). */

@@ -67,6 +67,43 @@ impl From<&crate::landmarks::HeadFrame> for PageFrame {
     }
 }
 
+/// The clinical head frame (report.json `clinical_frame`, docs/planning.md "The head frame"): the
+/// plan's sliders are advance, up, left, pitch, roll and yaw in it, and the views are set in it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PageClinicalFrame {
+    /// "frankfort", "facial-plane" or "ct-axes".
+    pub method: String,
+    /// A point on the midsagittal plane; forward, up and toward the patient's left (LPS units).
+    pub origin: [f64; 3],
+    pub forward: [f64; 3],
+    pub up: [f64; 3],
+    pub left: [f64; 3],
+}
+
+impl From<&crate::anatomy::readback::FrameReport> for PageClinicalFrame {
+    fn from(f: &crate::anatomy::readback::FrameReport) -> PageClinicalFrame {
+        PageClinicalFrame {
+            method: f.method.clone(),
+            origin: f.origin,
+            forward: f.forward,
+            up: f.up,
+            left: f.left,
+        }
+    }
+}
+
+impl PageClinicalFrame {
+    fn head_frame(&self) -> crate::landmarks::HeadFrame {
+        crate::landmarks::HeadFrame {
+            origin: self.origin,
+            lateral: self.left,
+            vertical: self.up,
+            anterior: self.forward,
+            symmetry_residual_mm: f64::NAN,
+        }
+    }
+}
+
 /// The tissue sliders' data (issue 28 item 5; docs/report-page.md "Tissue sliders"): the run's
 /// certified reduced models, one per sliding state, re-solved live in the page.
 pub struct PageTissue<'a> {
@@ -148,6 +185,9 @@ pub struct PageData<'a> {
     pub no_basis_reason: String,
     /// The head frame; None: the LPS axes (front −y, up +z) through the face's middle.
     pub head_frame: Option<PageFrame>,
+    /// The clinical frame; None: the sliders move along and turn about the LPS axes, the views
+    /// use `head_frame`.
+    pub clinical_frame: Option<PageClinicalFrame>,
     /// The tissue sliders (None: the run has no reduced model; the page says how to get one).
     pub tissue: Option<PageTissue<'a>>,
 }
@@ -221,11 +261,28 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
                     .iter()
                     .flat_map(|c| c.iter().flat_map(|p| p.map(|x| x as f32)))
                     .collect();
+                // The run's move read in the clinical frame: the clinical sliders' start.
+                let moves = data.clinical_frame.as_ref().map(|c| {
+                    let m = crate::anatomy::moves::read_back(
+                        &c.head_frame(),
+                        crate::osteotomy::rotation(s.rotate_deg),
+                        s.translate,
+                    );
+                    serde_json::json!({
+                        "advance_mm": m.advance_mm,
+                        "up_mm": m.up_mm,
+                        "left_mm": m.left_mm,
+                        "pitch_deg": m.pitch_deg,
+                        "roll_deg": m.roll_deg,
+                        "yaw_deg": m.yaw_deg,
+                    })
+                });
                 segs.push(serde_json::json!({
                     "name": s.name,
                     "pivot": s.pivot,
                     "translate": s.translate,
                     "rotate_deg": s.rotate_deg,
+                    "moves": moves,
                     "columns": base64(&f32_bytes(&flat)),
                 }));
             }
@@ -277,6 +334,13 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
             "left": frame.left,
             "source": frame_source,
         },
+        "clinical_frame": data.clinical_frame.as_ref().map(|c| serde_json::json!({
+            "method": c.method,
+            "origin": c.origin,
+            "forward": c.forward,
+            "up": c.up,
+            "left": c.left,
+        })),
         "tissue": tissue,
     });
     // "</" never appears inside the inline blocks: JSON may escape '/', and the bundle is built

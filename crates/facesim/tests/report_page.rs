@@ -490,6 +490,7 @@ fn unbase64(s: &str) -> Vec<u8> {
 }
 
 /// The head frame of report.json: origin, front, up, left.
+#[derive(Clone, Copy)]
 struct Frame {
     origin: [f64; 3],
     front: [f64; 3],
@@ -663,6 +664,28 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
         assert!(d < 1e-9, "frame {page}: {} vs {ours:?}", pf[page]);
     }
     assert_eq!(r["default_view"], json!("profile-right"));
+    // The views stand in the clinical frame (report.json clinical_frame) when the run has one.
+    let cf = &report["clinical_frame"];
+    let vframe = if cf.is_object() {
+        Frame {
+            origin: v3(&cf["origin"]),
+            front: v3(&cf["forward"]),
+            up: v3(&cf["up"]),
+            left: v3(&cf["left"]),
+        }
+    } else {
+        frame
+    };
+    let vf = &r["view_frame"];
+    for (page, ours) in [
+        ("origin", vframe.origin),
+        ("front", vframe.front),
+        ("up", vframe.up),
+        ("left", vframe.left),
+    ] {
+        let d = norm(sub(v3(&vf[page]), ours));
+        assert!(d < 1e-9, "view frame {page}: {} vs {ours:?}", vf[page]);
+    }
 
     // ---- every view and face: drawn, silhouette where it belongs, labels at their landmarks ----
     let lm_report = &report["landmarks"];
@@ -703,7 +726,7 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
         };
         let prn = shown_at("Prn").expect("no Prn on the jaws phantom");
         let toward = sub(cam.pos, prn);
-        let side_on = dot(toward, frame.left).abs() / norm(toward) > 0.99;
+        let side_on = dot(toward, vframe.left).abs() / norm(toward) > 0.99;
         if view.starts_with("profile") {
             assert!(side_on, "{what}: the camera is not at the side");
             // The nose tip is skin; a few mm in front of it (of the more anterior of before and
@@ -734,8 +757,8 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
         }
         if view == "front" {
             // Left-right symmetric coverage about the projected midsagittal line.
-            let a = cam.project(add(frame.origin, scale(frame.up, 60.0)));
-            let b = cam.project(sub(frame.origin, scale(frame.up, 60.0)));
+            let a = cam.project(add(vframe.origin, scale(vframe.up, 60.0)));
+            let b = cam.project(sub(vframe.origin, scale(vframe.up, 60.0)));
             let (mut left, mut right) = (0usize, 0usize);
             for y in 0..mask.h {
                 let xm = a[0] + (b[0] - a[0]) * (y as f64 - a[1]) / (b[1] - a[1]);
@@ -926,7 +949,7 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
                 assert!((a - 15.0).abs() < 0.5, "{key} turned {a}°");
                 if key == "ArrowRight" {
                     // About the head's vertical: the height above the target is kept.
-                    assert!((dot(before, frame.up) - dot(now, frame.up)).abs() < 1e-6);
+                    assert!((dot(before, vframe.up) - dot(now, vframe.up)).abs() < 1e-6);
                 }
             }
             "-" => {
@@ -935,12 +958,12 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
             }
             _ => {
                 let (view, axis) = match key {
-                    "1" => ("front", frame.front),
-                    "2" => ("profile-right", scale(frame.left, -1.0)),
-                    "3" => ("profile-left", frame.left),
+                    "1" => ("front", vframe.front),
+                    "2" => ("profile-right", scale(vframe.left, -1.0)),
+                    "3" => ("profile-left", vframe.left),
                     _ => (
                         "three-quarter",
-                        scale(sub(frame.front, frame.left), 1.0 / 2f64.sqrt()),
+                        scale(sub(vframe.front, vframe.left), 1.0 / 2f64.sqrt()),
                     ),
                 };
                 assert_eq!(k["view"], json!(view), "key {key}");
@@ -993,6 +1016,326 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
             std::fs::copy(shots.join(from), docs.join(to)).unwrap();
         }
     }
+}
+
+// ---- the plan in the surgeon's terms: sliders in the clinical frame; the views on the face ----
+
+/// Run web/test/clinical.test.mjs on `html` with `steps` ([api, argument] pairs).
+fn drive_clinical(html: &Path, steps: &serde_json::Value, shot: &str) -> serde_json::Value {
+    let dir = html.parent().unwrap();
+    let steps_file = dir.join("clinical-steps.json");
+    std::fs::write(&steps_file, steps.to_string()).unwrap();
+    let out = dir.join("clinical.json");
+    let shot = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("../test-artefacts")
+        .join(shot);
+    let run = Command::new("node")
+        .current_dir(web_dir())
+        .arg("test/clinical.test.mjs")
+        .args([html, &steps_file, &out, &shot])
+        .output()
+        .expect("node missing: run scripts/test-setup.sh");
+    assert!(
+        run.status.success(),
+        "clinical.test.mjs failed: {}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    for k in ["console_errors", "page_errors", "outside_requests"] {
+        assert_eq!(r[k], json!([]), "{k} in {}", html.display());
+    }
+    r
+}
+
+/// The right-handed rotation by `deg` about the unit axis `u` (Rodrigues), written here from
+/// docs/planning.md "Signs", not taken from the crate.
+fn rodrigues(u: [f64; 3], deg: f64) -> [[f64; 3]; 3] {
+    let (s, c) = deg.to_radians().sin_cos();
+    let mut r = [[0.0; 3]; 3];
+    let k = [[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] = c * f64::from(u8::from(i == j)) + s * k[i][j] + (1.0 - c) * u[i] * u[j];
+        }
+    }
+    r
+}
+
+/// `rotate_deg` [rx, ry, rz] with R = Rz·Ry·Rx (setPlan's convention, docs/report-page.md).
+fn zyx_degrees(r: [[f64; 3]; 3]) -> [f64; 3] {
+    [
+        r[2][1].atan2(r[2][2]).to_degrees(),
+        (-r[2][0]).asin().to_degrees(),
+        r[1][0].atan2(r[0][0]).to_degrees(),
+    ]
+}
+
+/// Largest |a − b| over two flat arrays of one length.
+fn max_abs(a: &[f64], b: &[f64]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn the_jaws_sample_page_plans_in_the_clinical_frame_and_frames_the_face() {
+    use facesim::vec3::{dot, scale, sub};
+    // The first sample (data-samples/jaws: the mandible advanced 5 mm), run by the pipeline; its
+    // report.html has the clinical frame and an exact plan basis.
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws/case.toml");
+    let dir = common::kept_dir("facesim-page-clinical");
+    let o = facesim::commands::run(&case, Some(&dir.join("out")), &Quiet).unwrap();
+    let html = o.out_dir.join("report.html");
+    assert_self_contained(&std::fs::read_to_string(&html).unwrap());
+    let report = common::report_json(&o);
+    let cf = &report["clinical_frame"];
+    assert!(cf.is_object(), "the jaws sample has no clinical frame");
+    let (forward, up, left) = (v3(&cf["forward"]), v3(&cf["up"]), v3(&cf["left"]));
+    let seg = &report["plan"]["segments"][0];
+    let name = seg["name"].as_str().unwrap().to_string();
+
+    // advance 5 against translate = 5 × forward; pitch 3° against the LPS rotation about the
+    // left axis through the pivot (the pivot's part of the move is setPlan's own).
+    let pitch = zyx_degrees(rodrigues(left, 3.0));
+    let steps = json!([
+        ["setPlanClinical", {name.clone(): {"advance_mm": 5.0}}],
+        ["setPlan", {name.clone(): {"translate": scale(forward, 5.0), "rotate_deg": [0.0, 0.0, 0.0]}}],
+        ["setPlanClinical", {name.clone(): {"pitch_deg": 3.0}}],
+        ["setPlan", {name.clone(): {"translate": [0.0, 0.0, 0.0], "rotate_deg": pitch}}],
+        ["setPlanClinical", {name.clone(): {"advance": 5.0}}],
+        ["setPlanClinical", {"maxilla": {"advance_mm": 5.0}}],
+    ]);
+    let r = drive_clinical(&html, &steps, "clinical/jaws-default.png");
+    let st = r["steps"].as_array().unwrap();
+    for s in &st[..4] {
+        assert_eq!(s["error"], json!(null));
+    }
+
+    // ---- the sliders: the run's plan read back in the clinical frame (report.json) ----
+    assert_eq!(r["sliders"]["frame"], json!("clinical"));
+    assert_eq!(
+        r["slider_labels"],
+        json!(["advance", "up", "left", "pitch", "roll", "yaw"])
+    );
+    let moves = &seg["moves"];
+    for key in [
+        "advance_mm",
+        "up_mm",
+        "left_mm",
+        "pitch_deg",
+        "roll_deg",
+        "yaw_deg",
+    ] {
+        let want = moves[key].as_f64().unwrap();
+        let got = &r["sliders"]["segments"][&name][key];
+        let value = got["value"].as_f64().unwrap();
+        println!("slider {key}: {value} (report.json {want})");
+        assert!(
+            (value - want).abs() <= 1e-9 * want.abs().max(1.0),
+            "slider {key} starts at {value}, report.json plan moves {want}"
+        );
+        // What the slider shows: its value to 0.1 with its unit, the range input on its 0.1 step.
+        let unit = if key.ends_with("_mm") { " mm" } else { " °" };
+        let text = got["text"].as_str().unwrap();
+        let shown: f64 = text.strip_suffix(unit).unwrap().parse().unwrap();
+        assert!((shown - want).abs() <= 0.05 + 1e-9, "{key}: shows {text}");
+        assert!(
+            (got["input"].as_f64().unwrap() - want).abs() <= 0.05 + 1e-9,
+            "{key}: {got}"
+        );
+    }
+    // The run advanced the mandible: 5 mm along LPS −y, read in the frame.
+    let advance = moves["advance_mm"].as_f64().unwrap();
+    assert!(advance > 4.0, "advance read back {advance}");
+
+    // ---- setPlanClinical: exact against setPlan of the same LPS move ----
+    let rel = |a: &[f64], b: &[f64]| {
+        let scale_ = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        max_abs(a, b) / scale_
+    };
+    let (adv, adv_lps) = (&st[0], &st[1]);
+    let face_diff = max_abs(&flat(&adv["vertices"]), &flat(&adv_lps["vertices"]));
+    let mat_rel = rel(
+        &flat(&adv["matrices"][&name]),
+        &flat(&adv_lps["matrices"][&name]),
+    );
+    println!(
+        "advance 5 vs translate 5·forward: face |Δ| {face_diff:e} mm, plan matrix {mat_rel:e} relative"
+    );
+    assert!(
+        mat_rel <= 1e-9,
+        "advance 5: plan matrix {mat_rel} relative off"
+    );
+    assert!(
+        face_diff <= 1e-9,
+        "advance 5: the face is {face_diff} mm off setPlan's"
+    );
+    let face_pre: Vec<f64> = o.skin.vertices.iter().flatten().copied().collect();
+    let moved = max_abs(&flat(&adv["vertices"]), &face_pre);
+    assert!(moved > 2.0, "advance 5 hardly moved the face: {moved} mm");
+    // The sliders show the clinical plan; after setPlan, its moves read back.
+    let sl = |s: &serde_json::Value, k: &str| {
+        s["sliders"]["segments"][&name][k]["value"]
+            .as_f64()
+            .unwrap()
+    };
+    assert_eq!(sl(adv, "advance_mm"), 5.0);
+    assert_eq!(sl(adv, "pitch_deg"), 0.0);
+    assert!((sl(adv_lps, "advance_mm") - 5.0).abs() < 1e-9 && sl(adv_lps, "up_mm").abs() < 1e-9);
+
+    let (pit, pit_lps) = (&st[2], &st[3]);
+    let mat_rel = rel(
+        &flat(&pit["matrices"][&name]),
+        &flat(&pit_lps["matrices"][&name]),
+    );
+    let face_pit = flat(&pit["vertices"]);
+    let face_diff = max_abs(&face_pit, &flat(&pit_lps["vertices"]));
+    let face_scale = face_pre.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    println!(
+        "pitch 3° vs setPlan of Rz·Ry·Rx = {pitch:?}: plan matrix {mat_rel:e} relative, face |Δ| {face_diff:e} mm (float32 vertices up to {face_scale:.0} mm)"
+    );
+    assert!(
+        mat_rel <= 1e-9,
+        "pitch 3°: plan matrix {mat_rel} relative off"
+    );
+    // The vertex buffer is float32: one rounding step of the largest coordinate at most.
+    assert!(
+        face_diff <= face_scale * f64::from(f32::EPSILON),
+        "pitch 3°: the face is {face_diff} mm off setPlan's"
+    );
+    assert!(
+        (sl(pit_lps, "pitch_deg") - 3.0).abs() < 1e-9,
+        "pitch read back"
+    );
+    // A positive pitch turns the front down: in front of the pivot, the chin goes down.
+    let pivot = v3(&seg["pivot"]);
+    let chin = |s: &serde_json::Value| v3(&s["landmarks"]["Pog"]);
+    let pog_pre = v3(&report["landmarks"]["Pog"]["pre"]);
+    if dot(sub(pog_pre, pivot), forward) > 10.0 {
+        assert!(
+            dot(sub(chin(pit), pog_pre), up) < -0.1,
+            "pitch +3° did not lower the chin"
+        );
+    }
+    // Unknown keys and segments are refused.
+    assert!(
+        st[4]["error"]
+            .as_str()
+            .unwrap()
+            .contains("no clinical move 'advance'")
+    );
+    assert!(
+        st[5]["error"]
+            .as_str()
+            .unwrap()
+            .contains("unknown segment 'maxilla'")
+    );
+
+    // ---- the default view: profile, upright in the clinical frame, framed on the face ----
+    assert_face_framed(&r, up, forward, left, "the jaws sample");
+}
+
+/// The page as it opens (`r` from clinical.test.mjs): the profile from the patient's right,
+/// upright in the clinical frame (`up`, `forward`, `left`), framed on the face: the nose tip and
+/// the lip landmarks at least 40 px inside the picture with their labels whole on it, the face
+/// from G' (or N') to Me' (or Pog' or the lowest lip landmark) over more than half its height.
+fn assert_face_framed(
+    r: &serde_json::Value,
+    up: [f64; 3],
+    forward: [f64; 3],
+    left: [f64; 3],
+    what: &str,
+) {
+    use facesim::vec3::{dot, norm, sub};
+    assert_eq!(r["info"]["view"], json!("profile-right"), "{what}");
+    let vf = &r["view_frame"];
+    for (k, want) in [("front", forward), ("up", up), ("left", left)] {
+        assert!(
+            norm(sub(v3(&vf[k]), want)) < 1e-9,
+            "{what}: view frame {k}: {} vs {want:?}",
+            vf[k]
+        );
+    }
+    let cam = Camera::new(&r["camera"]);
+    assert!(
+        dot(cam.up, up) > 0.999,
+        "{what}: the profile is not upright: {:?}",
+        cam.up
+    );
+    assert!(
+        dot(cam.right, forward) > 0.999,
+        "{what}: the face does not look right"
+    );
+    let [w, h] = cam.size;
+    let lm = &r["landmarks"];
+    let mut found = Vec::new();
+    for label in ["Prn", "Sn", "Ls", "Sto", "Li", "Pog'"] {
+        let Some(p) = lm.get(label).map(v3) else {
+            continue;
+        };
+        found.push(label);
+        let q = cam.project(p);
+        println!("{what}: {label} at ({:.0}, {:.0}) of {w} × {h}", q[0], q[1]);
+        assert!(
+            q[0] >= 40.0 && q[0] <= w - 40.0 && q[1] >= 40.0 && q[1] <= h - 40.0,
+            "{what}: {label} at {q:?}: not 40 px inside the {w} × {h} picture"
+        );
+        // Its label on the picture, whole.
+        let l = &r["labels"][label];
+        assert_eq!(l["shown"], json!(true), "{what}: label {label} hidden");
+        let b = flat(&l["box"]);
+        assert!(
+            b[0] >= 0.0 && b[0] + b[2] <= w && b[1] >= 0.0 && b[1] + b[3] <= h,
+            "{what}: label {label} at {b:?} leaves the {w} × {h} picture"
+        );
+    }
+    assert!(
+        found.contains(&"Prn") && found.contains(&"Ls"),
+        "{what}: no Prn or Ls ({found:?})"
+    );
+    // Framed on the face, not the whole head.
+    let top = lm.get("G'").or(lm.get("N'")).map(v3).unwrap();
+    let bottom = ["Me'", "Pog'", "Li", "Sto", "Ls"]
+        .iter()
+        .find_map(|l| lm.get(*l).map(v3))
+        .unwrap();
+    let height_px = cam.project(bottom)[1] - cam.project(top)[1];
+    let height_mm = dot(sub(top, bottom), up);
+    println!("{what}: the face's {height_mm:.0} mm from G'/N' down: {height_px:.0} px of {h}");
+    assert!(
+        height_px > 0.5 * h,
+        "{what}: the face is small in its picture: {height_px:.0} px of {h}"
+    );
+}
+
+#[test]
+fn the_real_ct_page_opens_in_profile_with_the_nose_and_lips_inside_the_picture() {
+    // The real CT (data-samples/real: ProMED 0051, a 5 mm maxillary advancement), run by the
+    // pipeline; its own page as it opens.
+    common::real_ct();
+    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real/case.toml");
+    let dir = common::kept_dir("facesim-page-real");
+    let o = facesim::commands::run(&case, Some(&dir.join("out")), &Quiet).unwrap();
+    let report = common::report_json(&o);
+    let cf = &report["clinical_frame"];
+    assert!(cf.is_object(), "the real CT has no clinical frame");
+    let r = drive_clinical(
+        &o.out_dir.join("report.html"),
+        &json!([]),
+        "clinical/real-default.png",
+    );
+    assert_eq!(r["sliders"]["frame"], json!("clinical"));
+    assert_face_framed(
+        &r,
+        v3(&cf["up"]),
+        v3(&cf["forward"]),
+        v3(&cf["left"]),
+        "the real CT",
+    );
 }
 
 // ---- the tissue sliders (issue 28 item 5): the reduced model re-solved in the page ----

@@ -164,7 +164,10 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
             mesh::write_mesh(&part, &o.join(format!("segment_{}.ply", planned.name)))
         }));
         jobs.push(Box::new(move || {
-            volume::nifti_io::write(&planned.segment.mask, &o.join(format!("segment_{}.nii.gz", planned.name)))
+            volume::nifti_io::write(
+                &planned.segment.mask,
+                &o.join(format!("segment_{}.nii.gz", planned.name)),
+            )
         }));
     }
     use rayon::prelude::*;
@@ -261,11 +264,24 @@ pub(crate) fn write_page(
             face_stats_line(&e.moving_face, &e.regions),
         ));
     }
+    let clinical_frame: Option<crate::report_page::PageClinicalFrame> =
+        report.clinical_frame.as_ref().map(Into::into);
     for o in &case.osteotomy {
-        figures.push((
-            format!("plan: {}", o.name),
-            format!("translate {:?} mm, rotate {:?}°", o.translate, o.rotate_deg),
-        ));
+        let text = match &report.clinical_frame {
+            Some(c) => {
+                let m = crate::anatomy::moves::read_back(
+                    &c.frame(),
+                    crate::osteotomy::rotation(o.rotate_deg),
+                    o.translate,
+                );
+                format!(
+                    "advance {:.1}, up {:.1}, left {:.1} mm; pitch {:.1}, roll {:.1}, yaw {:.1}°",
+                    m.advance_mm, m.up_mm, m.left_mm, m.pitch_deg, m.roll_deg, m.yaw_deg
+                )
+            }
+            None => format!("translate {:?} mm, rotate {:?}°", o.translate, o.rotate_deg),
+        };
+        figures.push((format!("plan: {}", o.name), text));
     }
     for (stage, cost) in &report.costs.0 {
         figures.push((
@@ -308,6 +324,7 @@ pub(crate) fn write_page(
                           run `facesim replan` for other plans."
             .into(),
         head_frame: analysis.frame.as_ref().map(Into::into),
+        clinical_frame,
         tissue: reduced.map(|r| page_tissue(r, analysis, case)),
     };
     crate::report_page::write_report_html(dir, &data)
