@@ -58,13 +58,22 @@ pub fn clinical_frame(
 ) -> Result<ClinicalFrame, String> {
     let facial = facial_plane_pitch(midsagittal, soft);
     let mut search_pitch = facial.as_ref().map_or(0.0, |p| p.clamp(-35.0, 35.0));
-    let mut found = detect(bone, &super::turned(midsagittal, search_pitch));
+    let mut found = detect(bone, &super::turned(midsagittal, search_pitch), None);
     if head.frame != Some(FrameChoice::FacialPlane) {
+        let mut porion_pitch = search_pitch;
         for _ in 0..3 {
             match fit_frankfort(midsagittal, &found) {
                 Ok(fit) if (fit.pitch_deg - search_pitch).abs() > 0.5 => {
                     search_pitch = fit.pitch_deg;
-                    found = detect(bone, &super::turned(midsagittal, search_pitch));
+                    // The canal's top moves by its radius times the turn (< 0.5 mm for 8°):
+                    // porion is searched again only after a larger turn.
+                    let po: Found = found[..2].to_vec();
+                    let keep = (search_pitch - porion_pitch).abs() < PORION_RESEARCH_DEG;
+                    if !keep {
+                        porion_pitch = search_pitch;
+                    }
+                    let f = super::turned(midsagittal, search_pitch);
+                    found = detect(bone, &f, keep.then_some(&po));
                 }
                 _ => break,
             }
@@ -159,6 +168,8 @@ fn facial_plane_pitch(mid: &HeadFrame, soft: &[Landmark]) -> Result<f64, String>
     Ok(da.atan2(dv).to_degrees())
 }
 
+/// A turn of the search frame (degrees) after which porion is searched again.
+const PORION_RESEARCH_DEG: f64 = 8.0;
 /// HU below which a sample is air (the ear canal's lumen).
 const AIR_HU: f32 = -300.0;
 /// HU from which a sample is bone (also where the segmentation says bone).
@@ -225,7 +236,11 @@ impl Grid {
     }
 
     fn ijk(&self, k: usize) -> [usize; 3] {
-        [k % self.n[0], (k / self.n[0]) % self.n[1], k / (self.n[0] * self.n[1])]
+        [
+            k % self.n[0],
+            (k / self.n[0]) % self.n[1],
+            k / (self.n[0] * self.n[1]),
+        ]
     }
 
     fn coords(&self, i: [f64; 3]) -> [f64; 3] {
@@ -244,16 +259,34 @@ fn side_name(side: f64) -> &'static str {
     if side < 0.0 { "right" } else { "left" }
 }
 
-/// Po-R, Po-L, Or-R, Or-L searched in the frame `f`: LPS positions or why each is missing.
-fn detect(bone: &Bone, f: &HeadFrame) -> Vec<(&'static str, Result<[f64; 3], String>)> {
-    let mut out = Vec::with_capacity(4);
-    for (label, side) in [("Po-R", -1.0), ("Po-L", 1.0)] {
-        out.push((label, porion(bone, f, side).map(|c| f.point(c))));
-    }
-    for (label, side) in [("Or-R", -1.0), ("Or-L", 1.0)] {
-        out.push((label, orbitale(bone, f, side).map(|c| f.point(c))));
-    }
-    out
+type Found = Vec<(&'static str, Result<[f64; 3], String>)>;
+
+/// Po-R, Po-L (searched in `f` unless `porions` are given) and Or-R, Or-L searched in `f`:
+/// LPS positions or why each is missing. The sides run in parallel.
+fn detect(bone: &Bone, f: &HeadFrame, porions: Option<&Found>) -> Found {
+    let side = |label: &'static str,
+                s: f64,
+                find: fn(&Bone, &HeadFrame, f64) -> Result<[f64; 3], String>| {
+        (label, find(bone, f, s).map(|c| f.point(c)))
+    };
+    let (po, or) = rayon::join(
+        || match porions {
+            Some(p) => p.clone(),
+            None => {
+                let (r, l) =
+                    rayon::join(|| side("Po-R", -1.0, porion), || side("Po-L", 1.0, porion));
+                vec![r, l]
+            }
+        },
+        || {
+            let (r, l) = rayon::join(
+                || side("Or-R", -1.0, orbitale),
+                || side("Or-L", 1.0, orbitale),
+            );
+            vec![r, l]
+        },
+    );
+    po.into_iter().chain(or).collect()
 }
 
 /// Where porion is searched (frame mm, the side's half; the origin at the nose tip's level):
@@ -266,7 +299,7 @@ const PORION_BOX: [[f64; 2]; 3] = [[20.0, 100.0], [-70.0, 70.0], [-150.0, -30.0]
 const CANAL_WALL_MM: f64 = 12.0;
 /// Porion is the top of the canal within this path length (mm) of its bony opening: the
 /// tympanic membrane lies 15–20 mm deeper, and the middle ear and mastoid cells beyond it.
-const CANAL_LATERAL_MM: f64 = 10.0;
+const CANAL_LATERAL_MM: f64 = 16.0;
 
 /// Porion of one side (`side` -1 right, +1 left) in frame coordinates: the air connected to the
 /// outside that enters bone there (the external acoustic meatus: air with bone above, below,
@@ -324,17 +357,19 @@ fn porion(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
     }
     let reach = (CANAL_WALL_MM / STEP).round() as i64;
     let walled = |i: [usize; 3]| {
-        [(1, 1), (1, -1), (2, 1), (2, -1)].iter().all(|&(a, delta)| {
-            (1..=reach).any(|t| {
-                let x = i[a] as i64 + delta * t;
-                if x < 0 || x >= g.n[a] as i64 {
-                    return false;
-                }
-                let mut j = i;
-                j[a] = x as usize;
-                g.bone[g.idx(j)]
+        [(1, 1), (1, -1), (2, 1), (2, -1)]
+            .iter()
+            .all(|&(a, delta)| {
+                (1..=reach).any(|t| {
+                    let x = i[a] as i64 + delta * t;
+                    if x < 0 || x >= g.n[a] as i64 {
+                        return false;
+                    }
+                    let mut j = i;
+                    j[a] = x as usize;
+                    g.bone[g.idx(j)]
+                })
             })
-        })
     };
     let canal: Vec<([usize; 3], u32)> = (0..g.hu.len())
         .filter(|k| dist[*k] != u32::MAX)
@@ -347,11 +382,7 @@ fn porion(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
         ));
     };
     let keep = d0 + (CANAL_LATERAL_MM / STEP).round() as u32;
-    let near: Vec<[usize; 3]> = canal
-        .iter()
-        .filter(|c| c.1 <= keep)
-        .map(|c| c.0)
-        .collect();
+    let near: Vec<[usize; 3]> = canal.iter().filter(|c| c.1 <= keep).map(|c| c.0).collect();
     if near.len() < 20 {
         return Err(format!(
             "the {name} ear canal's bony part is too small to be the external acoustic meatus ({} mm³)",
@@ -414,27 +445,41 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
     // Per (s, v): Some(bone hit index along a) or None (unknown); deep when the soft path is long.
     let mut hit = vec![None::<usize>; ns * nv];
     let mut deep = vec![false; ns * nv];
+    // Rays that leave the CT before bone: what lies behind them is unknown.
+    let mut open = vec![false; ns * nv];
+    // Rays that cross air inside the head (a sinus, the nose) before bone.
+    let mut cavity = vec![false; ns * nv];
     let depth = (ORBIT_DEPTH_MM / STEP).round() as usize;
     for iv in 0..nv {
         for is in 0..ns {
-            let mut entry = None;
+            // Soft tissue crossed before bone; air inside (a sinus) does not count.
+            let mut soft = 0;
+            let mut entered = false;
+            let mut known = true;
             for ia in (0..na).rev() {
                 let k = g.idx([is, iv, ia]);
                 let h = g.hu[k];
+                // In front of the face the CT may end: air until the skin; within, unknown.
                 if h.is_nan() {
-                    break;
-                }
-                if entry.is_none() && h >= AIR_HU {
-                    entry = Some(ia);
+                    if entered {
+                        known = false;
+                        break;
+                    }
+                    continue;
                 }
                 if g.bone[k] {
                     hit[is + ns * iv] = Some(ia);
                     break;
                 }
+                if h >= AIR_HU {
+                    entered = true;
+                    soft += 1;
+                } else if entered {
+                    cavity[is + ns * iv] = true;
+                }
             }
-            let stop = hit[is + ns * iv].unwrap_or(0);
-            deep[is + ns * iv] = entry.is_some_and(|e| e >= stop + depth)
-                && (hit[is + ns * iv].is_some() || g.hu[g.idx([is, iv, 0])].is_finite());
+            deep[is + ns * iv] = known && soft >= depth;
+            open[is + ns * iv] = !known;
         }
     }
     // The opening: 4-connected regions of deep rays; the one with most rays 22–45 mm out.
@@ -447,10 +492,14 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
         }
         let mut stack = vec![start];
         comp[start] = id;
-        let (mut size, mut score) = (0, 0);
+        let (mut size, mut score, mut floored) = (0, 0, true);
         while let Some(k) = stack.pop() {
             size += 1;
             let (is, iv) = (k % ns, k / ns);
+            // An orbit has bone under its opening: not the grid's end nor the CT's.
+            if iv == 0 || open[k - ns] {
+                floored = false;
+            }
             let s = (g.lo[0] + is as f64 * STEP).abs();
             if (22.0..=45.0).contains(&s) {
                 score += 1;
@@ -475,7 +524,7 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
                 }
             }
         }
-        if best.is_none_or(|b| score > b.1) {
+        if floored && best.is_none_or(|b| score > b.1) {
             best = Some((id, score, size));
         }
         id += 1;
@@ -497,7 +546,9 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
         if high - low < min_height || low == 0 {
             continue;
         }
-        if hit[is + ns * (low - 1)].is_some() {
+        // The rim is solid bone under the skin: its ray meets no sinus before it.
+        let below = is + ns * (low - 1);
+        if hit[below].is_some() && !cavity[below] {
             rim.push((is, low - 1));
         }
     }
@@ -620,60 +671,339 @@ fn fit_frankfort(
 }
 
 #[cfg(test)]
-mod dump {
-    use crate::landmarks::HeadFrame;
-    use std::io::Write;
+mod tests {
+    use super::*;
+    use crate::pipeline::{Recorder, face, inputs, surfaces, tissues};
+    use crate::vec3::{dot, sub};
+    use crate::volume::Volume;
     use std::path::Path;
+    use std::sync::OnceLock;
 
-    fn dump(dir: &str, tag: &str) {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-        let case_path = root.join(dir).join("case.toml");
-        let (case, _) = crate::case::Case::load(&case_path).unwrap();
-        let t = std::time::Instant::now();
-        let scene = crate::pipeline::prepare_case(&case, &crate::observe::Quiet).unwrap();
-        eprintln!("prepare {:?}", t.elapsed());
-        let vol = &scene.vol;
-        let frame: HeadFrame = crate::landmarks::head_frame(&scene.face.skin).unwrap();
-        let lms = crate::landmarks::detect::detect(&scene.face.skin, Some(&scene.face.skull), &frame);
-        let out = root.join("target/tmp/headdump");
-        std::fs::create_dir_all(&out).unwrap();
-        let mut f = std::fs::File::create(out.join(format!("{tag}.txt"))).unwrap();
-        writeln!(f, "dims {:?}", vol.dims).unwrap();
-        writeln!(f, "spacing {:?}", vol.spacing).unwrap();
-        writeln!(f, "origin {:?}", vol.origin).unwrap();
-        writeln!(f, "direction {:?}", vol.direction).unwrap();
-        writeln!(f, "frame {:?}", frame).unwrap();
-        for l in &lms {
-            writeln!(f, "lm {} {:?} {:?}", l.label, l.position, l.missing).unwrap();
-        }
-        let bytes: Vec<u8> = vol.data.iter().flat_map(|v| v.to_le_bytes()).collect();
-        std::fs::write(out.join(format!("{tag}.f32")), bytes).unwrap();
-        std::fs::write(out.join(format!("{tag}.labels")), &scene.seg.labels).unwrap();
+    /// A CT with its labels, the skin's midsagittal frame and its soft landmarks.
+    struct Head3 {
+        vol: Volume,
+        labels: Vec<u8>,
+        mid: HeadFrame,
+        soft: Vec<Landmark>,
     }
 
-    #[test]
-    #[ignore]
-    fn show_real() {
-        for dir in ["data-samples/real", "data-samples/real-mandible"] {
-            let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-            let (case, _) = crate::case::Case::load(&root.join(dir).join("case.toml")).unwrap();
-            let scene = crate::pipeline::prepare_case(&case, &crate::observe::Quiet).unwrap();
-            let frame = crate::landmarks::head_frame(&scene.face.skin).unwrap();
-            let lms = crate::landmarks::detect::detect(&scene.face.skin, Some(&scene.face.skull), &frame);
-            let bone = super::Bone { vol: &scene.vol, labels: &scene.seg.labels };
+    impl Head3 {
+        fn run(&self, head: &Head) -> (Result<ClinicalFrame, String>, f64) {
+            let bone = Bone {
+                vol: &self.vol,
+                labels: &self.labels,
+            };
             let t = std::time::Instant::now();
-            let cf = super::clinical_frame(&bone, &frame, &lms, &Default::default()).unwrap();
-            eprintln!("{dir}: {:?} {:?} pitch {:.2} roll {:?} why {}", t.elapsed(), cf.method, cf.pitch_deg, cf.plane_roll_deg, cf.why);
-            for l in &cf.landmarks {
-                eprintln!("  {} {:?} {:?}", l.label, l.position.map(|p| p.map(|x| (x * 10.0).round() / 10.0)), l.missing);
-            }
+            let r = clinical_frame(&bone, &self.mid, &self.soft, head);
+            (r, t.elapsed().as_secs_f64())
+        }
+    }
+
+    /// A real sample read as the pipeline reads it (its stages up to the face); None, with a
+    /// line saying so, when its CT has not been fetched.
+    fn real(dir: &str) -> Option<Head3> {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../data-samples")
+            .join(dir);
+        let (case, _) = crate::case::Case::load(&dir).unwrap();
+        if !case.ct.path.exists() {
+            println!("{} is not fetched: skipped", case.ct.path.display());
+            return None;
+        }
+        let mut rec = Recorder::new(&crate::observe::Quiet);
+        let inp = inputs::read_case(case, &mut rec).unwrap();
+        let seg = tissues(&inp.ct, &inp.case, &mut rec).unwrap();
+        let field = seg.bone_field(&inp.ct);
+        let surf = surfaces::extract(&inp.ct, &seg, &field, &inp.case, &mut rec).unwrap();
+        let face = face::place(surf, None, &inp.ct, &inp.case, &mut rec).unwrap();
+        let mid = crate::landmarks::head_frame(&face.skin).unwrap();
+        let soft = crate::landmarks::detect::detect(&face.skin, Some(&face.skull), &mid);
+        Some(Head3 {
+            vol: inp.ct,
+            labels: seg.labels,
+            mid,
+            soft,
+        })
+    }
+
+    /// The jaws phantom at 1.5 mm (upright, face toward −y; no ear canals or orbits in its
+    /// bone) with its analytic skin, the skin turned face-down by `pitch_deg` about the x axis
+    /// through the condyles' level.
+    fn phantom(pitch_deg: f64) -> Head3 {
+        static CT: OnceLock<(Volume, Vec<u8>)> = OnceLock::new();
+        let (vol, labels) = CT.get_or_init(|| {
+            let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
+            let seg = crate::segment::segment(
+                &vol,
+                &crate::case::Case::default().tissue,
+                Path::new("phantom"),
+            )
+            .unwrap();
+            (vol, seg.labels)
+        });
+        let mut skin = crate::phantom_jaws::face_scan(2.0);
+        let (s, c) = pitch_deg.to_radians().sin_cos();
+        for p in &mut skin.vertices {
+            // Face-down: forward (−y) tips down (−z).
+            let (y, z) = (p[1], p[2]);
+            p[1] = y * c - z * s;
+            p[2] = z * c + y * s;
+        }
+        let mid = crate::landmarks::head_frame(&skin).unwrap();
+        let soft = crate::landmarks::detect::detect(&skin, None, &mid);
+        Head3 {
+            vol: vol.clone(),
+            labels: labels.clone(),
+            mid,
+            soft,
+        }
+    }
+
+    /// Porion and orbitale placed by hand (LPS mm), each with how.
+    type Fixture = [(&'static str, [f64; 3], &'static str); 4];
+
+    /// ProMED CT 0051 (0.96 × 0.96 × 1.5 mm; LPS x = 0.957 i, y = 244.04 − 0.957 j,
+    /// z = 1.5 k). Porion: the top of the air lumen (the −300 HU crossing) under the canal's
+    /// bony roof, read on coronal slices; orbitale: the top of the inferior rim (the 300 HU
+    /// crossing going down from the orbit), read per sagittal slice, the lowest slice's.
+    const REAL_CT: Fixture = [
+        (
+            "Po-R",
+            [75.6, 130.6, 36.6],
+            "coronal j 117-120: lumen k 20-24 from the concha (i 58) to i 92 under a roof of 1000-1400 HU; its top at i 79, j 118.5, k 24.4",
+        ),
+        (
+            "Po-L",
+            [174.2, 133.0, 36.6],
+            "coronal j 115-117: lumen k 21-24, i 172-198 under a roof at k 25-27; its top at i 182, j 116, k 24.4",
+        ),
+        (
+            "Or-R",
+            [93.8, 60.3, 41.8],
+            "sagittal i 84-110: rim top k 31.1 (i 88) down to 27.9 at i 98 (j 192), up to 30.6 at i 110; the lowest at i 98",
+        ),
+        (
+            "Or-L",
+            [158.9, 56.5, 46.0],
+            "sagittal i 150-180: rim top 30.6-31.0 flat over i 156-168 (within 0.3 mm), the lowest at i 166, j 196, k 30.6",
+        ),
+    ];
+
+    /// VTK headsq (3.2 × 3.2 × 1.5 mm; x = 3.2 i, y = −3.2 j, z = −1.5 k), the head ~14°
+    /// face-down. Porion as above on coronal slices; orbitale per sagittal slice as the top of
+    /// the rim's front bone (300 HU crossing), highest in a frame turned 14° face-down, the
+    /// lowest slice's.
+    const REAL_MANDIBLE: Fixture = [
+        (
+            "Po-R",
+            [57.6, -89.6, -25.9],
+            "coronal j 27-28: lumen k 18-21, i 13-19 (-300..-800 HU) under a roof of 600-1400 HU at k 16-18; the -300 HU crossing at i 18, j 28, k 17.25",
+        ),
+        (
+            "Po-L",
+            [139.2, -89.6, -27.0],
+            "coronal j 27-28: lumen k 19-23, i 43-48 under a roof at k 16-17 (700-1400 HU); the crossing at i 43.5, j 28, k 18.0",
+        ),
+        (
+            "Or-R",
+            [70.4, -160.0, -43.6],
+            "sagittal i 20-22: the rim's front bone at j 50, its top k 28.1-29.1; lowest at i 22 (the rim is at the front there)",
+        ),
+        (
+            "Or-L",
+            [121.6, -160.0, -44.1],
+            "sagittal i 38-41: the rim's front bone at j 50 (i 38), top k 29.4; i 39-40 have no front lip (top at j 47)",
+        ),
+    ];
+
+    /// Pitch (face down +) and roll (left up +) of the Frankfort plane of four points in the
+    /// midsagittal frame, from the porion and orbitale midpoints and the left and right means.
+    fn hand_angles(mid: &HeadFrame, pts: &Fixture) -> (f64, f64) {
+        let c: Vec<[f64; 3]> = pts.iter().map(|p| mid.coords(p.1)).collect();
+        let mean = |a: usize, b: usize, k: usize| 0.5 * (c[a][k] + c[b][k]);
+        let pitch = (mean(0, 1, 1) - mean(2, 3, 1))
+            .atan2(mean(2, 3, 2) - mean(0, 1, 2))
+            .to_degrees();
+        let roll = (mean(1, 3, 1) - mean(0, 2, 1))
+            .atan2(mean(1, 3, 0) - mean(0, 2, 0))
+            .to_degrees();
+        (pitch, roll)
+    }
+
+    /// Detected against hand points: height and depth (v, a: what sets the plane) within
+    /// `tol_va` mm, the lateral offset within `tol_s` (a flat rim or a level canal roof has its
+    /// highest or lowest point anywhere along it).
+    fn check(
+        name: &str,
+        h: &Head3,
+        fixture: &Fixture,
+        tol_va: f64,
+        tol_s: f64,
+        tol_deg: f64,
+    ) -> ClinicalFrame {
+        let (cf, secs) = h.run(&Head::default());
+        let cf = cf.unwrap();
+        println!("{name}: {:?}, {secs:.2} s: {}", cf.method, cf.why);
+        for (label, hand, _) in fixture {
+            let l = cf.landmarks.iter().find(|l| l.label == *label).unwrap();
+            let p = l
+                .position
+                .unwrap_or_else(|| panic!("{label}: {:?}", l.missing));
+            let d = h.mid.coords(sub(p, *hand));
+            let d = sub(d, h.mid.coords([0.0; 3]));
+            println!(
+                "  {label}: detected [{:.1}, {:.1}, {:.1}] hand [{:.1}, {:.1}, {:.1}] (s, v, a) off [{:.1}, {:.1}, {:.1}] mm",
+                p[0], p[1], p[2], hand[0], hand[1], hand[2], d[0], d[1], d[2]
+            );
+            assert!(
+                d[1].abs() <= tol_va && d[2].abs() <= tol_va && d[0].abs() <= tol_s,
+                "{name} {label}: off {d:?} mm"
+            );
+        }
+        let (pitch, roll) = hand_angles(&h.mid, fixture);
+        let roll_found = cf.plane_roll_deg.unwrap();
+        println!(
+            "  pitch {:.1}° (hand {pitch:.1}°), Frankfort roll {roll_found:.1}° (hand {roll:.1}°)",
+            cf.pitch_deg
+        );
+        assert_eq!(cf.method, Method::Frankfort);
+        assert!(
+            (cf.pitch_deg - pitch).abs() <= tol_deg,
+            "pitch {}",
+            cf.pitch_deg
+        );
+        assert!((roll_found - roll).abs() <= tol_deg, "roll {roll_found}");
+        // The frame is the midsagittal one turned by the pitch.
+        let f = cf.frame;
+        assert!((dot(f.lateral, h.mid.lateral) - 1.0).abs() < 1e-9);
+        let turned = dot(f.anterior, h.mid.vertical).asin().to_degrees();
+        assert!((turned + cf.pitch_deg).abs() < 1e-6, "{turned}");
+        assert!(secs < 1.5, "{secs} s");
+        cf
+    }
+
+    #[test]
+    fn real_ct_frankfort_matches_the_hand_points() {
+        let Some(h) = real("real") else { return };
+        check("real", &h, &REAL_CT, 3.0, 5.0, 2.0);
+    }
+
+    #[test]
+    fn real_mandible_frankfort_matches_the_hand_points() {
+        let Some(h) = real("real-mandible") else {
+            return;
+        };
+        // 3.2 mm voxels in-plane: a voxel and a half for (v, a), two laterally.
+        let cf = check("real-mandible", &h, &REAL_MANDIBLE, 4.5, 6.5, 2.5);
+        // The facial plane on this head (validation.toml: 16.2°) agrees within Holdaway's spread.
+        let fp = facial_plane_pitch(&h.mid, &h.soft).unwrap();
+        println!("  facial plane {fp:.1}°");
+        assert!((fp - 16.2).abs() < 1.0, "{fp}");
+        assert!((cf.pitch_deg - fp).abs() < 6.0);
+    }
+
+    #[test]
+    fn phantom_falls_back_to_the_facial_plane() {
+        let h = phantom(0.0);
+        let (cf, secs) = h.run(&Head::default());
+        let cf = cf.unwrap();
+        println!(
+            "phantom: {:?} {:.2}° {secs:.2} s: {}",
+            cf.method, cf.pitch_deg, cf.why
+        );
+        assert_eq!(cf.method, Method::FacialPlane);
+        for l in &cf.landmarks {
+            println!("  {} {:?}", l.label, l.missing);
+            assert!(l.position.is_none() && l.missing.as_ref().is_some_and(|m| !m.is_empty()));
+        }
+        // Its known upright frame: N'–Pog' of the analytic skin.
+        let n = crate::phantom_jaws::landmark("soft tissue nasion").unwrap();
+        let pog = crate::phantom_jaws::landmark("soft tissue pogonion").unwrap();
+        let upright = (pog[1] - n[1]).atan2(n[2] - pog[2]).to_degrees();
+        println!("  analytic facial plane {upright:.2}°");
+        assert!((cf.pitch_deg - upright).abs() < 1.0);
+        assert!(cf.pitch_deg.abs() < 5.0);
+        assert!(cf.why.starts_with("facial plane"), "{}", cf.why);
+    }
+
+    #[test]
+    fn a_pitched_phantom_comes_back_with_its_pitch() {
+        let base = phantom(0.0).run(&Head::default()).0.unwrap().pitch_deg;
+        for pitch in [-15.0, -10.0, 10.0, 15.0] {
+            let cf = phantom(pitch).run(&Head::default()).0.unwrap();
+            println!(
+                "phantom turned {pitch}°: {:.2}° ({base:.2}° upright)",
+                cf.pitch_deg
+            );
+            assert_eq!(cf.method, Method::FacialPlane);
+            assert!(
+                (cf.pitch_deg - base - pitch).abs() < 1.0,
+                "{}",
+                cf.pitch_deg
+            );
         }
     }
 
     #[test]
-    #[ignore]
-    fn dump_real() {
-        dump("data-samples/real", "real");
-        dump("data-samples/real-mandible", "mandible");
+    fn frankfort_forced_on_the_phantom_names_what_is_missing() {
+        let h = phantom(0.0);
+        let head = Head {
+            frame: Some(FrameChoice::Frankfort),
+            pitch_deg: 0.0,
+        };
+        let e = h.run(&head).0.unwrap_err();
+        println!("{e}");
+        assert!(e.starts_with("[head] frame = \"frankfort\""));
+        assert!(
+            e.contains("Po-R") && e.contains("Or-L") && !e.contains('\n'),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_pitch_correction_adds_exactly() {
+        let h = phantom(0.0);
+        let plain = h.run(&Head::default()).0.unwrap();
+        let head = Head {
+            frame: Some(FrameChoice::FacialPlane),
+            pitch_deg: 7.5,
+        };
+        let cf = h.run(&head).0.unwrap();
+        assert_eq!(cf.method, Method::FacialPlane);
+        assert_eq!(cf.pitch_deg, plain.pitch_deg);
+        assert_eq!(cf.correction_deg, 7.5);
+        let want = crate::anatomy::turned(&h.mid, plain.pitch_deg + 7.5);
+        for (a, b) in [
+            (cf.frame.anterior, want.anterior),
+            (cf.frame.vertical, want.vertical),
+        ] {
+            assert!(sub(a, b).iter().all(|x| x.abs() < 1e-12));
+        }
+        let up = |f: &HeadFrame| dot(f.anterior, h.mid.vertical).asin().to_degrees();
+        assert!((up(&plain.frame) - up(&cf.frame) - 7.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_facial_plane_forced_without_soft_pogonion_is_an_error() {
+        let h = phantom(0.0);
+        let soft: Vec<Landmark> = h
+            .soft
+            .iter()
+            .filter(|l| l.label != "Pog'")
+            .cloned()
+            .collect();
+        let bone = Bone {
+            vol: &h.vol,
+            labels: &h.labels,
+        };
+        let head = Head {
+            frame: Some(FrameChoice::FacialPlane),
+            pitch_deg: 0.0,
+        };
+        let e = clinical_frame(&bone, &h.mid, &soft, &head).unwrap_err();
+        assert!(e.contains("Pog'"), "{e}");
+        let cf = clinical_frame(&bone, &h.mid, &soft, &Head::default()).unwrap();
+        assert_eq!(cf.method, Method::CtAxes);
+        assert_eq!(cf.pitch_deg, 0.0);
     }
 }
