@@ -1313,29 +1313,36 @@ fn assert_face_framed(
 }
 
 #[test]
-fn the_real_ct_page_opens_in_profile_with_the_nose_and_lips_inside_the_picture() {
-    // The real CT (data-samples/real: ProMED 0051, a 5 mm maxillary advancement), run by the
-    // pipeline; its own page as it opens.
+fn the_real_ct_pages_open_in_profile_with_the_nose_and_lips_inside_the_picture() {
+    // Both real CTs, run by the pipeline, their own pages as they open: data-samples/real
+    // (ProMED 0051, a 5 mm maxillary advancement; its clinical frame the CT's axes) and
+    // data-samples/real-mandible (VTK's headsq, a 5 mm BSSO advancement; Frankfort, the head
+    // pitched about 11° in the CT).
     common::real_ct();
-    let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real/case.toml");
-    let dir = common::kept_dir("facesim-page-real");
-    let o = facesim::commands::run(&case, Some(&dir.join("out")), &Quiet).unwrap();
-    let report = common::report_json(&o);
-    let cf = &report["clinical_frame"];
-    assert!(cf.is_object(), "the real CT has no clinical frame");
-    let r = drive_clinical(
-        &o.out_dir.join("report.html"),
-        &json!([]),
-        "clinical/real-default.png",
-    );
-    assert_eq!(r["sliders"]["frame"], json!("clinical"));
-    assert_face_framed(
-        &r,
-        v3(&cf["up"]),
-        v3(&cf["forward"]),
-        v3(&cf["left"]),
-        "the real CT",
-    );
+    common::real_mandible_ct();
+    for (sample, shot) in [
+        ("real", "clinical/real-default.png"),
+        ("real-mandible", "clinical/real-mandible-default.png"),
+    ] {
+        let case = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../data-samples")
+            .join(sample)
+            .join("case.toml");
+        let dir = common::kept_dir(&format!("facesim-page-{sample}"));
+        let o = facesim::commands::run(&case, Some(&dir.join("out")), &Quiet).unwrap();
+        let report = common::report_json(&o);
+        let cf = &report["clinical_frame"];
+        assert!(cf.is_object(), "{sample}: no clinical frame");
+        let r = drive_clinical(&o.out_dir.join("report.html"), &json!([]), shot);
+        assert_eq!(r["sliders"]["frame"], json!("clinical"));
+        assert_face_framed(
+            &r,
+            v3(&cf["up"]),
+            v3(&cf["forward"]),
+            v3(&cf["left"]),
+            &format!("data-samples/{sample}"),
+        );
+    }
 }
 
 // ---- the tissue sliders (issue 28 item 5): the reduced model re-solved in the page ----
