@@ -93,7 +93,7 @@ fn detect(g: &Grid, hu: &dyn Fn([f64; 3]) -> f64) -> Vec<(&'static str, Spot)> {
     let side_labels = [("Pir-R", "Pir-L"), ("PTM-R", "PTM-L")];
     match &maxilla {
         Ok(m) => {
-            let pir = piriform(g, m);
+            let pir = piriform(g, hu, m);
             out.push(("Pir-R", pir[0].clone()));
             out.push(("Pir-L", pir[1].clone()));
             let ptm = pterygomaxillary(g, m);
@@ -681,13 +681,90 @@ fn a_point(
     Ok([0.0, g.coord(1, iv), g.coord(2, 0) + a * H])
 }
 
-/// Pir-R and Pir-L, the lowest points of the piriform aperture's lateral rims: not detected
-/// (the thin rim is not followed reliably at clinical CT resolutions); missing with that reason
-/// rather than placed wrong.
-fn piriform(g: &Grid, m: &Maxilla) -> [Spot; 2] {
-    let _ = (g, m);
-    let why = || Err("not detected: the piriform rim is not traced from the CT".to_string());
-    [why(), why()]
+/// Pir-R and Pir-L: the lowest point of the piriform aperture's lateral rim each side. Seen
+/// from the front, the aperture is where no bone lies within 30 mm behind ANS's depth (the
+/// nasal cavity), from ANS's level up; it is the region of such lines of sight connected to
+/// the one 12 mm above ANS beside the midline, within 25 mm of it. Each side of the septum its
+/// outline's lowest row holds the rim's lowest point (the middle of that row, where the
+/// lateral rim runs into the aperture's floor); the point is put on the front face of the bone
+/// under it (the most anterior point reaching 400 HU within 2 mm below).
+fn piriform(g: &Grid, hu: &dyn Fn([f64; 3]) -> f64, m: &Maxilla) -> [Spot; 2] {
+    let Ok(ans) = m.ans else {
+        return [
+            Err("ANS is not found".into()),
+            Err("ANS is not found".into()),
+        ];
+    };
+    let ia0 = g.index(2, ans[2]) + (5.0 / H) as isize;
+    let depth = (30.0 / H) as isize;
+    let (s_lo, s_hi) = (g.index(0, -25.0), g.index(0, 25.0));
+    let (v_lo, v_hi) = (g.index(1, ans[1] - 5.0), g.index(1, ans[1] + 35.0));
+    let w = (s_hi - s_lo + 1) as usize;
+    let hgt = (v_hi - v_lo + 1) as usize;
+    let key = |is: isize, iv: isize| (is - s_lo) as usize + w * (iv - v_lo) as usize;
+    // A line of sight through the aperture: inside the CT all the way, no bone on it.
+    let open: Vec<bool> = (0..w * hgt)
+        .map(|k| {
+            let (is, iv) = (s_lo + (k % w) as isize, v_lo + (k / w) as isize);
+            (ia0 - depth..=ia0).all(|ia| {
+                let c = g.at(is, iv, ia);
+                c != OUT && !hard(c)
+            })
+        })
+        .collect();
+    let seed_v = g.index(1, ans[1] + 12.0);
+    let mid = g.index(0, 0.0);
+    let mut seen = vec![false; w * hgt];
+    let mut stack: Vec<(isize, isize)> = (2..=8)
+        .flat_map(|d| [(mid - d, seed_v), (mid + d, seed_v)])
+        .filter(|&(is, iv)| open[key(is, iv)])
+        .collect();
+    let mut cells = Vec::new();
+    while let Some((is, iv)) = stack.pop() {
+        if seen[key(is, iv)] {
+            continue;
+        }
+        seen[key(is, iv)] = true;
+        cells.push((is, iv));
+        for (ds, dv) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+            let (s2, v2) = (is + ds, iv + dv);
+            if s2 >= s_lo && s2 <= s_hi && v2 >= v_lo && v2 <= v_hi && open[key(s2, v2)] {
+                stack.push((s2, v2));
+            }
+        }
+    }
+    [-1.0, 1.0].map(|side: f64| {
+        let on_side: Vec<&(isize, isize)> = cells
+            .iter()
+            .filter(|c| side * (c.0 - mid) as f64 >= 2.0)
+            .collect();
+        if on_side
+            .iter()
+            .any(|c| c.0 == s_lo || c.0 == s_hi || c.1 == v_lo)
+        {
+            return Err("the piriform aperture is not closed by bone around it".into());
+        }
+        let Some(low) = on_side.iter().map(|c| c.1).min() else {
+            return Err("no piriform aperture above ANS".into());
+        };
+        let row: Vec<isize> = on_side.iter().filter(|c| c.1 == low).map(|c| c.0).collect();
+        let is = row.iter().sum::<isize>() as f64 / row.len() as f64;
+        let c = coords(g, [is, low as f64 - 0.5, ia0 as f64]);
+        let steps = (depth as f64 * H / 0.25) as usize;
+        // The most anterior bone within 2 mm below the rim.
+        let a = (1..=4)
+            .filter_map(|k| {
+                let below = c[1] - 0.5 * k as f64;
+                (0..=steps)
+                    .map(|j| c[2] - 0.25 * j as f64)
+                    .find(|&a| hu([c[0], below, a]) >= EDGE_HU)
+            })
+            .fold(f64::NEG_INFINITY, f64::max);
+        if !a.is_finite() {
+            return Err("no bone under the piriform aperture".into());
+        }
+        Ok([c[0], c[1], a])
+    })
 }
 
 /// PTM-R and PTM-L, the pterygomaxillary junctions: not detected (the fissure between the

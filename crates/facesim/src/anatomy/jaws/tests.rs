@@ -139,13 +139,24 @@ fn phantom_jaw_landmarks_lie_on_its_analytic_anatomy() {
     let c = phantom();
     let (l, _) = c.landmarks();
     well_formed(&l);
+    for x in &l {
+        println!("phantom {} {:?} {:?}", x.label, x.position, x.missing);
+    }
     let truth = |n: &str| crate::phantom_jaws::landmark(n).unwrap();
     let mirror = |p: [f64; 3]| [-p[0], p[1], p[2]];
     // Either central incisor: the phantom's are mirror images (its tip is the right one's).
     let either = |got: [f64; 3], p: [f64; 3]| dist(got, p).min(dist(got, mirror(p)));
     let u1 = position(&l, "U1");
+    println!(
+        "phantom U1 {:.1} mm",
+        either(u1, truth("upper incisor tip"))
+    );
     assert!(either(u1, truth("upper incisor tip")) < 2.5, "U1 {u1:?}");
     let l1 = position(&l, "L1");
+    println!(
+        "phantom L1 {:.1} mm",
+        either(l1, truth("lower incisor tip"))
+    );
     assert!(either(l1, truth("lower incisor tip")) < 3.0, "L1 {l1:?}");
     let fixture: &Fixture = &[
         (
@@ -216,6 +227,10 @@ fn phantom_jaw_landmarks_lie_on_its_analytic_anatomy() {
         ),
     ];
     check("phantom", &l, fixture);
+    // Its maxilla is a closed band under a soft nose: no piriform aperture.
+    for label in ["Pir-R", "Pir-L"] {
+        assert_eq!(missing(&l, label), "no piriform aperture above ANS");
+    }
     // Gnathion: on the chin's outline between pogonion and menton.
     let (gn, pog, me) = (position(&l, "Gn"), position(&l, "Pog"), position(&l, "Me"));
     assert!(gn[2] < pog[2] && gn[2] > me[2] - 1.0, "Gn {gn:?}");
@@ -294,6 +309,18 @@ const REAL: &Fixture = &[
         3.0,
         "the palate's back end (a -74 at v -17..-18)",
     ),
+    (
+        "Pir-R",
+        [122.6, 37.9, 22.4],
+        4.0,
+        "frontal view, lines of sight with no bone over 400 HU from 5 mm before ANS to 25 mm behind: the aperture's lowest row right of the septum (v -11.5, s -2..-6.5), the bone's front below (it slopes back about 1 mm per mm from the septum: 4 mm)",
+    ),
+    (
+        "Pir-L",
+        [130.2, 43.6, 21.6],
+        3.0,
+        "as Pir-R, left of the septum (v -12.5, s 2.5..5)",
+    ),
 ];
 
 #[test]
@@ -301,6 +328,14 @@ fn real_ct_without_mandible_finds_the_maxilla_and_says_why_the_rest_is_missing()
     let Some(c) = real() else { return };
     let (l, t) = c.landmarks();
     println!("real: {t:.3} s");
+    for x in &l {
+        println!(
+            "{} {:?} {:?}",
+            x.label,
+            x.position.map(|p| c.frame.coords(p)),
+            x.missing
+        );
+    }
     well_formed(&l);
     assert!(t < 2.0, "{t} s");
     check("real", &l, REAL);
@@ -380,6 +415,18 @@ const REAL_MANDIBLE: &Fixture = &[
         "the hard palate's end along its midline row v -37.5 (HU falls through 300 at a -55.5; the soft palate goes on below)",
     ),
     (
+        "Pir-R",
+        [90.6, -158.6, -69.5],
+        3.0,
+        "frontal view as on the other CT: the aperture's lowest row right of the septum (v -35, s -4..-9), the bone's front below",
+    ),
+    (
+        "Pir-L",
+        [101.9, -158.1, -69.5],
+        3.0,
+        "as Pir-R, left of the septum (v -35, s 2..8)",
+    ),
+    (
         "U6-R",
         [71.9, -133.0, -83.7],
         3.0,
@@ -417,6 +464,14 @@ fn real_ct_with_mandible_matches_the_hand_placed_landmarks() {
     let Some(c) = real_mandible() else { return };
     let (l, t) = c.landmarks();
     println!("real-mandible: {t:.3} s");
+    for x in &l {
+        println!(
+            "{} {:?} {:?}",
+            x.label,
+            x.position.map(|p| c.frame.coords(p)),
+            x.missing
+        );
+    }
     well_formed(&l);
     assert!(t < 2.0, "{t} s");
     check("real-mandible", &l, REAL_MANDIBLE);
