@@ -9,9 +9,10 @@
 //! - **Le Fort I**: above the occlusal plane, below a horizontal plane 3 mm above the higher of
 //!   the piriform rim's lowest point and the upper incisor apex, in front of the
 //!   pterygomaxillary junctions, within 8 mm lateral of them.
-//! - **BSSO** (the distal segment): below the occlusal plane and in front of a coronal plane
-//!   20 mm behind the upper first molars' cusps (behind the second molars, where the split
-//!   leaves the body for the ramus). The proximal segments, with the condyles, stay.
+//! - **BSSO** (the distal segment): below the occlusal plane and in front of a coronal plane at
+//!   the ramus' anterior border (30 mm in front of gonion; without gonion, 20 mm behind the
+//!   upper first molars), where the split leaves the body for the ramus. The proximal
+//!   segments, with the condyles, stay.
 //! - **Genioplasty**: below a plane 3 mm under the lower incisor apex on the midline and 4 mm
 //!   under each mental foramen, in front of a coronal plane 12 mm behind the foramina.
 //! - **Autorotation** (a Le Fort I impaction's option): the whole mandible, below the occlusal
@@ -30,7 +31,10 @@ use std::sync::Arc;
 const LE_FORT_ABOVE_MM: f64 = 3.0;
 /// Lateral reach of the Le Fort I segment beyond the pterygomaxillary junctions (mm).
 const LE_FORT_LATERAL_MM: f64 = 8.0;
-/// The sagittal split leaves the body this far behind the upper first molars (mm).
+/// The sagittal split leaves the body at the ramus' anterior border: this far in front of
+/// gonion (the adult minimum ramus breadth, about 30 mm), or without gonion this far behind the
+/// upper first molars' cusps (mm).
+const RAMUS_BREADTH_MM: f64 = 30.0;
 const SPLIT_BEHIND_MOLAR_MM: f64 = 20.0;
 /// The genioplasty cut under the lower incisor apex and under the mental foramina (mm).
 const CHIN_BELOW_APEX_MM: f64 = 3.0;
@@ -105,21 +109,25 @@ impl Found<'_> {
 pub struct Cut {
     pub planes: Vec<Plane>,
     pub seeds: Vec<[f64; 3]>,
+    /// What the user should know about how the cut was placed (a run's warning).
+    pub note: Option<String>,
 }
 
-/// The occlusal plane (through the incisal point and the upper first molars' cusps), as the
-/// half-space above it; horizontal in `frame` through the incisal point when the molars are
-/// missing. The incisal point is midway between the incisal edges (the upper edge alone
-/// without a mandible).
+/// The plane between the upper and the lower teeth, as the half-space above it: through the
+/// incisal point (midway between the incisal edges; the upper edge alone without a mandible),
+/// parallel to the upper occlusal plane (the upper incisal edge and the upper first molars'
+/// cusps), horizontal in `frame` when the molars are missing. Parallel rather than through the
+/// molars: with the bite open (headsq's incisors stand 8 mm apart) a plane through the upper
+/// molars' cusps would leave their crowns below it.
 fn above_occlusal(f: &Found, frame: &HeadFrame) -> Option<Plane> {
     let incisal = match (f.at("U1"), f.at("L1")) {
         (Some(u), Some(l)) => scale(add(u, l), 0.5),
         (Some(u), None) => u,
         _ => return None,
     };
-    let normal = match (f.at("U6-R"), f.at("U6-L")) {
-        (Some(r), Some(l)) => {
-            let n = cross(sub(l, r), sub(incisal, r));
+    let normal = match (f.at("U6-R"), f.at("U6-L"), f.at("U1")) {
+        (Some(r), Some(l), Some(u1)) => {
+            let n = cross(sub(l, r), sub(u1, r));
             let n = scale(n, 1.0 / norm(n).max(1e-12));
             if dot(n, frame.vertical) < 0.0 { scale(n, -1.0) } else { n }
         }
@@ -145,7 +153,6 @@ fn higher(frame: &HeadFrame, a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// The Le Fort I cut.
 pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
-    let [u1, apex] = f.all(["U1", "U1-apex"], "a Le Fort I")?;
     let rim = f
         .mean(&["Pir-R", "Pir-L"])
         .or_else(|| f.at("ANS"))
@@ -154,18 +161,30 @@ pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
         .mean(&["PTM-R", "PTM-L"])
         .or_else(|| f.at("PNS"))
         .ok_or_else(|| format!("a Le Fort I needs the pterygomaxillary junctions or PNS: {}, {}", f.why("PTM-R"), f.why("PNS")))?;
-    let v_cut = higher(frame, rim, apex) + LE_FORT_ABOVE_MM;
+    // Without the incisors (a field of view ending in their crowns) the cut is placed from the
+    // rim alone, and says so (`Cut::note`).
+    let (v_cut, note) = match f.at("U1-apex") {
+        Some(apex) => (higher(frame, rim, apex) + LE_FORT_ABOVE_MM, None),
+        None => (
+            frame.coords(rim)[1] + LE_FORT_ABOVE_MM,
+            Some(format!(
+                "the Le Fort I cut is {LE_FORT_ABOVE_MM} mm above the piriform rim (or ANS), not checked against the incisor roots: {}",
+                f.why("U1-apex")
+            )),
+        ),
+    };
+    let reference = f.at("U1").unwrap_or(rim);
     if let Some(or) = f.mean(&["Or-R", "Or-L"]) {
         let v_or = frame.coords(or)[1];
         if v_cut > v_or - ORBIT_CLEARANCE_MM {
             return Err(format!(
-                "a Le Fort I cut {:.1} mm above the incisal edge would pass within {ORBIT_CLEARANCE_MM} mm of the orbit's floor (orbitale {:.1} mm above it)",
-                v_cut - frame.coords(u1)[1],
-                v_or - frame.coords(u1)[1]
+                "a Le Fort I cut {:.1} mm above the incisal edge (or ANS) would pass within {ORBIT_CLEARANCE_MM} mm of the orbit's floor (orbitale {:.1} mm above it)",
+                v_cut - frame.coords(reference)[1],
+                v_or - frame.coords(reference)[1]
             ));
         }
     }
-    let c = frame.coords(u1);
+    let c = frame.coords(reference);
     let mut planes = vec![
         // Below the cut.
         Plane {
@@ -203,7 +222,11 @@ pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
         .iter()
         .filter_map(|l| f.at(l))
         .collect();
-    Ok(Cut { planes, seeds })
+    Ok(Cut {
+        planes,
+        seeds,
+        note,
+    })
 }
 
 /// Why a mandibular surgery cannot be planned: the mandible's landmarks that are missing.
@@ -211,25 +234,28 @@ fn mandible_needed<const N: usize>(f: &Found, labels: [&str; N], kind: &str) -> 
     f.all(labels, &format!("a {kind} needs the mandible;"))
 }
 
+/// Where the sagittal split leaves the body for the ramus (frame anteriority): the ramus'
+/// anterior border, `RAMUS_BREADTH_MM` in front of gonion; without gonion,
+/// `SPLIT_BEHIND_MOLAR_MM` behind the upper first molars (behind the second molars).
+fn split_at(f: &Found, frame: &HeadFrame) -> Result<f64, String> {
+    if let Some(go) = f.mean(&["Go-R", "Go-L"]) {
+        return Ok(frame.coords(go)[2] + RAMUS_BREADTH_MM);
+    }
+    match f.mean(&["U6-R", "U6-L"]) {
+        Some(m) => Ok(frame.coords(m)[2] - SPLIT_BEHIND_MOLAR_MM),
+        None => Err(format!(
+            "a BSSO needs gonion or the upper first molars to place the split: {}, {}",
+            f.why("Go-R"),
+            f.why("U6-R")
+        )),
+    }
+}
+
 /// The BSSO's distal segment.
 pub fn bsso(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     let [l1, pog] = mandible_needed(f, ["L1", "Pog"], "BSSO")?;
     let occ = above_occlusal(f, frame).ok_or("a BSSO needs the upper incisal edge U1 for the occlusal plane")?;
-    let split = match f.mean(&["U6-R", "U6-L"]) {
-        Some(m) => frame.coords(m)[2] - SPLIT_BEHIND_MOLAR_MM,
-        None => {
-            return Err(format!(
-                "a BSSO needs the upper first molars to place the split: {}, {}",
-                f.why("U6-R"),
-                f.why("U6-L")
-            ));
-        }
-    };
-    if let Some(go) = f.mean(&["Go-R", "Go-L"])
-        && split <= frame.coords(go)[2] + 10.0
-    {
-        return Err("the sagittal split would reach the mandible's angle: the first molars lie within 30 mm of gonion".into());
-    }
+    let split = split_at(f, frame)?;
     let planes = vec![
         flip(occ),
         Plane {
@@ -241,7 +267,11 @@ pub fn bsso(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
         .into_iter()
         .flatten()
         .collect();
-    Ok(Cut { planes, seeds })
+    Ok(Cut {
+        planes,
+        seeds,
+        note: None,
+    })
 }
 
 /// The genioplasty's chin.
@@ -271,17 +301,18 @@ pub fn genioplasty(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
         },
     ];
     let seeds = [Some(pog), Some(me), f.at("Gn")].into_iter().flatten().collect();
-    Ok(Cut { planes, seeds })
+    Ok(Cut {
+        planes,
+        seeds,
+        note: None,
+    })
 }
 
 /// The whole mandible, for the autorotation after a Le Fort I impaction.
 pub fn mandible(f: &Found, frame: &HeadFrame) -> Result<(Cut, Cut), String> {
     let [l1, pog, co_r, co_l] = mandible_needed(f, ["L1", "Pog", "Co-R", "Co-L"], "autorotation")?;
     let occ = above_occlusal(f, frame).ok_or("autorotation needs the upper incisal edge U1")?;
-    let ramus = match f.mean(&["U6-R", "U6-L"]) {
-        Some(m) => frame.coords(m)[2] - SPLIT_BEHIND_MOLAR_MM,
-        None => 0.5 * (frame.coords(l1)[2] + frame.coords(co_r)[2]),
-    };
+    let ramus = split_at(f, frame).unwrap_or(0.5 * (frame.coords(l1)[2] + frame.coords(co_r)[2]));
     let top = frame.coords(co_r)[1].min(frame.coords(co_l)[1]) - 3.0;
     let front = Plane {
         point: frame.point([0.0, 0.0, ramus]),
@@ -294,6 +325,7 @@ pub fn mandible(f: &Found, frame: &HeadFrame) -> Result<(Cut, Cut), String> {
     let body = Cut {
         planes: vec![flip(occ), front],
         seeds: seeds.clone(),
+        note: None,
     };
     let rami = Cut {
         planes: vec![
@@ -304,6 +336,7 @@ pub fn mandible(f: &Found, frame: &HeadFrame) -> Result<(Cut, Cut), String> {
             },
         ],
         seeds,
+        note: None,
     };
     Ok((body, rami))
 }

@@ -29,6 +29,8 @@ pub struct Planned {
     /// The segment's whole move, as an LPS osteotomy over the found segment.
     pub osteotomy: Osteotomy,
     pub segment: Segment,
+    /// How its cut was placed where the user should know (run warnings).
+    pub notes: Vec<String>,
 }
 
 /// A rigid transform p' = R (p − pivot) + pivot + t.
@@ -383,6 +385,7 @@ pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) ->
         .into_iter()
         .zip(segments)
         .map(|(m, segment)| Planned {
+            notes: m.cuts.iter().filter_map(|c| c.note.clone()).collect(),
             what: m.what,
             osteotomy: m.rigid.osteotomy(&m.name, &segment),
             name: m.name,

@@ -54,6 +54,9 @@ pub fn find(
         .map_err(|e| Error::config(format!("case.toml: {e}")))?;
         Ok(Anatomical { anatomy, planned })
     })?;
+    for note in found.planned.iter().flat_map(|p| &p.notes) {
+        rec.warn(note.clone());
+    }
     let mut steps: Vec<_> = found.planned.iter().map(|p| p.osteotomy.clone()).collect();
     steps.append(&mut case.osteotomy);
     case.osteotomy = steps;
