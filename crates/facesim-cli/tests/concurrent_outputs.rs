@@ -63,13 +63,7 @@ fn eight_replans_at_a_time_into_one_parent_give_complete_outputs() {
         .unwrap();
     assert!(status.success(), "the run failed");
     let plan = tmp.path().join("plan.toml");
-    std::fs::write(
-        &plan,
-        "[[osteotomy]]\nname = \"mandible\"\n\
-         region = { box = { min = [-90.0, -120.0, -110.0], max = [90.0, -11.0, -25.0] } }\n\
-         translate = [0.0, -3.0, 0.0]\n",
-    )
-    .unwrap();
+    std::fs::write(&plan, "[[surgery]]\nkind = \"bsso\"\nadvance_mm = 3.0\n").unwrap();
     let alone = tmp.path().join("alone");
     assert!(replan(&run, &plan, &alone).status.success());
     let want = contents(&alone);

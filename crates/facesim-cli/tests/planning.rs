@@ -4,6 +4,7 @@
 //! line naming case.toml with nothing written.
 
 mod cli;
+#[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
 use cli::{assert_clean_failure, facesim};
@@ -52,7 +53,12 @@ fn close(a: [f64; 3], b: [f64; 3], tol: f64) {
 }
 
 fn run(case: &Path, out: &Path) -> Value {
-    let r = facesim(&["run", case.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let r = facesim(&[
+        "run",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
@@ -70,7 +76,14 @@ fn le_fort_i_advance_5_and_bsso_setback_4_on_the_pitched_head_move_along_its_for
     let forward = v3(&frame["forward"]);
     // headsq lies face-down: the head's forward dips well below the scanner's horizontal.
     assert!(forward[2] < -0.15, "{frame}");
-    for (label, mm) in [("A", 5.0), ("ANS", 5.0), ("U1", 5.0), ("Pog", -4.0), ("B", -4.0), ("L1", -4.0)] {
+    for (label, mm) in [
+        ("A", 5.0),
+        ("ANS", 5.0),
+        ("U1", 5.0),
+        ("Pog", -4.0),
+        ("B", -4.0),
+        ("L1", -4.0),
+    ] {
         let (clinical, lps) = moved(&report, label);
         close(clinical, [mm, 0.0, 0.0], 1e-9);
         close(lps, forward.map(|f| f * mm), 1e-9);
@@ -82,10 +95,19 @@ fn le_fort_i_advance_5_and_bsso_setback_4_on_the_pitched_head_move_along_its_for
     }
     // The segments are written; a maxillary advance with a mandibular setback is none of the
     // published table's surgery types, and the report says so.
-    for f in ["segment_maxilla.ply", "segment_maxilla.nii.gz", "segment_mandible.ply", "report.html"] {
+    for f in [
+        "segment_maxilla.ply",
+        "segment_maxilla.nii.gz",
+        "segment_mandible.ply",
+        "report.html",
+    ] {
         assert!(out.join(f).is_file(), "{f}");
     }
-    assert!(report["published_ratios"]["surgery"].is_null(), "{}", report["published_ratios"]);
+    assert!(
+        report["published_ratios"]["surgery"].is_null(),
+        "{}",
+        report["published_ratios"]
+    );
 }
 
 #[test]
@@ -123,7 +145,10 @@ fn bad_plans_on_the_jaws_phantom_are_one_line_and_write_nothing() {
     for (plan, problem) in [
         ("kind = \"le-fort-i\"\nadvance_mm = 25.0", "more than 20 mm"),
         ("kind = \"genioplasty\"\npitch_deg = 40.0", "more than 30"),
-        ("kind = \"bsso\"\nyaw_deg = 2.0\npivot = \"nose\"", "is not a landmark"),
+        (
+            "kind = \"bsso\"\nyaw_deg = 2.0\npivot = \"nose\"",
+            "is not a landmark",
+        ),
         ("kind = \"le-fort-ii\"", "unknown variant"),
     ] {
         let dir = case("facesim-plan-bad", &ct, &format!("[[surgery]]\n{plan}\n"));

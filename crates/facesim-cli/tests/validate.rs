@@ -228,13 +228,22 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
             .clone()
     };
     let (maxilla, mandible) = (seg("maxilla"), seg("mandible"));
-    assert!((maxilla["moves"]["up_mm"].as_f64().unwrap() - 4.0).abs() < 1e-9, "{maxilla}");
+    assert!(
+        (maxilla["moves"]["up_mm"].as_f64().unwrap() - 4.0).abs() < 1e-9,
+        "{maxilla}"
+    );
     assert_eq!(mandible["surgery"], "autorotation");
     assert_eq!(mandible["pivot_landmark"], "condyles");
     let pitch = mandible["moves"]["pitch_deg"].as_f64().unwrap();
-    assert!((-4.5..-2.0).contains(&pitch), "a closing turn of a few degrees: {mandible}");
+    assert!(
+        (-4.5..-2.0).contains(&pitch),
+        "a closing turn of a few degrees: {mandible}"
+    );
     let l1_up = plan["landmarks"]["L1"]["up_mm"].as_f64().unwrap();
-    assert!((l1_up - 4.0).abs() < 1e-6, "the lower incisal edge rose {l1_up} mm");
+    assert!(
+        (l1_up - 4.0).abs() < 1e-6,
+        "the lower incisal edge rose {l1_up} mm"
+    );
     let up = vec3(&run["clinical_frame"]["up"]).unwrap();
     let md = std::fs::read_to_string(out.join("validation.md")).unwrap();
     assert!(

@@ -151,7 +151,10 @@ fn the_cuts_on_headsq_take_the_hand_placed_maxilla_mandible_and_chin() {
             // An axis-aligned box in a head pitched 12-16 degrees: its floor, level with the
             // incisal edges, rises through the lower molars behind them. The bone it takes
             // there is the mandible's: what the maxilla's cut leaves, the mandible's holds.
-            assert!(share >= 0.75 && other >= 0.9, "{seg}: {share}, {other} elsewhere");
+            assert!(
+                share >= 0.75 && other >= 0.9,
+                "{seg}: {share}, {other} elsewhere"
+            );
         } else {
             assert!(share >= 0.9, "{seg}: {share}");
         }

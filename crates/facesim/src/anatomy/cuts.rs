@@ -100,7 +100,12 @@ impl Found<'_> {
 
     fn mean(&self, labels: &[&str]) -> Option<[f64; 3]> {
         let ps: Vec<[f64; 3]> = labels.iter().filter_map(|l| self.at(l)).collect();
-        (!ps.is_empty()).then(|| scale(ps.iter().fold([0.0; 3], |a, p| add(a, *p)), 1.0 / ps.len() as f64))
+        (!ps.is_empty()).then(|| {
+            scale(
+                ps.iter().fold([0.0; 3], |a, p| add(a, *p)),
+                1.0 / ps.len() as f64,
+            )
+        })
     }
 }
 
@@ -129,7 +134,11 @@ fn above_occlusal(f: &Found, frame: &HeadFrame) -> Option<Plane> {
         (Some(r), Some(l), Some(u1)) => {
             let n = cross(sub(l, r), sub(u1, r));
             let n = scale(n, 1.0 / norm(n).max(1e-12));
-            if dot(n, frame.vertical) < 0.0 { scale(n, -1.0) } else { n }
+            if dot(n, frame.vertical) < 0.0 {
+                scale(n, -1.0)
+            } else {
+                n
+            }
         }
         _ => frame.vertical,
     };
@@ -156,11 +165,23 @@ pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     let rim = f
         .mean(&["Pir-R", "Pir-L"])
         .or_else(|| f.at("ANS"))
-        .ok_or_else(|| format!("a Le Fort I needs the piriform rim or ANS: {}, {}", f.why("Pir-R"), f.why("ANS")))?;
+        .ok_or_else(|| {
+            format!(
+                "a Le Fort I needs the piriform rim or ANS: {}, {}",
+                f.why("Pir-R"),
+                f.why("ANS")
+            )
+        })?;
     let back = f
         .mean(&["PTM-R", "PTM-L"])
         .or_else(|| f.at("PNS"))
-        .ok_or_else(|| format!("a Le Fort I needs the pterygomaxillary junctions or PNS: {}, {}", f.why("PTM-R"), f.why("PNS")))?;
+        .ok_or_else(|| {
+            format!(
+                "a Le Fort I needs the pterygomaxillary junctions or PNS: {}, {}",
+                f.why("PTM-R"),
+                f.why("PNS")
+            )
+        })?;
     // Without the incisors (a field of view ending in their crowns) the cut is placed from the
     // rim alone, and says so (`Cut::note`).
     let (v_cut, note) = match f.at("U1-apex") {
@@ -230,7 +251,11 @@ pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
 }
 
 /// Why a mandibular surgery cannot be planned: the mandible's landmarks that are missing.
-fn mandible_needed<const N: usize>(f: &Found, labels: [&str; N], kind: &str) -> Result<[[f64; 3]; N], String> {
+fn mandible_needed<const N: usize>(
+    f: &Found,
+    labels: [&str; N],
+    kind: &str,
+) -> Result<[[f64; 3]; N], String> {
     f.all(labels, &format!("a {kind} needs the mandible;"))
 }
 
@@ -254,7 +279,8 @@ fn split_at(f: &Found, frame: &HeadFrame) -> Result<f64, String> {
 /// The BSSO's distal segment.
 pub fn bsso(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     let [l1, pog] = mandible_needed(f, ["L1", "Pog"], "BSSO")?;
-    let occ = above_occlusal(f, frame).ok_or("a BSSO needs the upper incisal edge U1 for the occlusal plane")?;
+    let occ = above_occlusal(f, frame)
+        .ok_or("a BSSO needs the upper incisal edge U1 for the occlusal plane")?;
     let split = split_at(f, frame)?;
     let planes = vec![
         flip(occ),
@@ -291,16 +317,26 @@ pub fn genioplasty(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     // The plane through the three points, its normal pointing down.
     let n = cross(sub(l, mid), sub(r, mid));
     let n = scale(n, 1.0 / norm(n).max(1e-12));
-    let n = if dot(n, frame.vertical) > 0.0 { scale(n, -1.0) } else { n };
+    let n = if dot(n, frame.vertical) > 0.0 {
+        scale(n, -1.0)
+    } else {
+        n
+    };
     let back = frame.coords(r)[2].min(frame.coords(l)[2]) - CHIN_BEHIND_FORAMEN_MM;
     let planes = vec![
-        Plane { point: mid, normal: n },
+        Plane {
+            point: mid,
+            normal: n,
+        },
         Plane {
             point: frame.point([0.0, 0.0, back]),
             normal: frame.anterior,
         },
     ];
-    let seeds = [Some(pog), Some(me), f.at("Gn")].into_iter().flatten().collect();
+    let seeds = [Some(pog), Some(me), f.at("Gn")]
+        .into_iter()
+        .flatten()
+        .collect();
     Ok(Cut {
         planes,
         seeds,
@@ -370,7 +406,9 @@ impl Segment {
                     if data[idx] == 0.0 {
                         continue;
                     }
-                    let c = o.to_voxel(m.to_world([i as f64, j as f64, k as f64])).map(f64::round);
+                    let c = o
+                        .to_voxel(m.to_world([i as f64, j as f64, k as f64]))
+                        .map(f64::round);
                     if (0..3).all(|a| c[a] >= 0.0 && c[a] < o.dims[a] as f64)
                         && o.data[o.idx(c[0] as usize, c[1] as usize, c[2] as usize)] != 0.0
                     {
@@ -381,7 +419,10 @@ impl Segment {
         }
         let voxels = self.bone_voxels.saturating_sub(other.bone_voxels);
         Segment {
-            mask: Arc::new(Volume { data, ..(**m).clone() }),
+            mask: Arc::new(Volume {
+                data,
+                ..(**m).clone()
+            }),
             bone_voxels: voxels,
             bone_ml: self.bone_ml * voxels as f64 / self.bone_voxels.max(1) as f64,
         }
@@ -411,7 +452,9 @@ pub fn segment(bone: &Bone, cuts: &[&Cut], what: &str) -> Result<Segment, String
             let mut v = Vec::new();
             for j in 0..ny {
                 for i in 0..nx {
-                    if bone.labels[vol.idx(i, j, k)] == crate::labels::BONE && inside(world(i, j, k)) {
+                    if bone.labels[vol.idx(i, j, k)] == crate::labels::BONE
+                        && inside(world(i, j, k))
+                    {
                         v.push([i, j, k]);
                     }
                 }
@@ -495,7 +538,9 @@ pub fn segment(bone: &Bone, cuts: &[&Cut], what: &str) -> Result<Segment, String
                                 continue;
                             }
                             let n = [n[0] as usize, n[1] as usize, n[2] as usize];
-                            if data[at(n)] == 0.0 && (state[at(n)] == 2 || inside(world(n[0], n[1], n[2]))) {
+                            if data[at(n)] == 0.0
+                                && (state[at(n)] == 2 || inside(world(n[0], n[1], n[2])))
+                            {
                                 data[at(n)] = 1.0;
                             }
                         }
@@ -521,7 +566,15 @@ pub fn segment(bone: &Bone, cuts: &[&Cut], what: &str) -> Result<Segment, String
 /// The voxel of `hits` nearest to p within `reach` mm.
 fn nearest(hits: &[[usize; 3]], vol: &Volume, p: [f64; 3], reach: f64) -> Option<[usize; 3]> {
     hits.par_iter()
-        .map(|h| (norm(sub(vol.to_world([h[0] as f64, h[1] as f64, h[2] as f64]), p)), *h))
+        .map(|h| {
+            (
+                norm(sub(
+                    vol.to_world([h[0] as f64, h[1] as f64, h[2] as f64]),
+                    p,
+                )),
+                *h,
+            )
+        })
         .filter(|(d, _)| *d <= reach)
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, h)| h)

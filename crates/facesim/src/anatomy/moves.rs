@@ -79,7 +79,10 @@ pub fn rotation(frame: &HeadFrame, m: &Moves) -> M3 {
 pub fn translation(frame: &HeadFrame, m: &Moves) -> [f64; 3] {
     add(
         scale(frame.anterior, m.advance_mm),
-        add(scale(frame.vertical, m.up_mm), scale(frame.lateral, m.left_mm)),
+        add(
+            scale(frame.vertical, m.up_mm),
+            scale(frame.lateral, m.left_mm),
+        ),
     )
 }
 
@@ -134,11 +137,20 @@ mod tests {
             let r = rotation(&f, &m);
             [0, 1, 2].map(|i| (0..3).map(|k| r[i][k] * v[k]).sum::<f64>())
         };
-        let pitch = Moves { pitch_deg: 10.0, ..Moves::default() };
+        let pitch = Moves {
+            pitch_deg: 10.0,
+            ..Moves::default()
+        };
         assert!(dot(turn(pitch, f.anterior), f.vertical) < -0.17);
-        let roll = Moves { roll_deg: 10.0, ..Moves::default() };
+        let roll = Moves {
+            roll_deg: 10.0,
+            ..Moves::default()
+        };
         assert!(dot(turn(roll, f.lateral), f.vertical) > 0.17);
-        let yaw = Moves { yaw_deg: 10.0, ..Moves::default() };
+        let yaw = Moves {
+            yaw_deg: 10.0,
+            ..Moves::default()
+        };
         assert!(dot(turn(yaw, f.anterior), f.lateral) > 0.17);
     }
 
@@ -146,8 +158,20 @@ mod tests {
     fn the_lps_angles_rebuild_the_rotation_and_the_moves_read_back() {
         let f = pitched_frame();
         for m in [
-            Moves { advance_mm: 5.0, up_mm: 2.0, left_mm: -1.0, pitch_deg: 3.0, roll_deg: -2.0, yaw_deg: 1.5 },
-            Moves { pitch_deg: -25.0, roll_deg: 12.0, yaw_deg: -29.0, ..Moves::default() },
+            Moves {
+                advance_mm: 5.0,
+                up_mm: 2.0,
+                left_mm: -1.0,
+                pitch_deg: 3.0,
+                roll_deg: -2.0,
+                yaw_deg: 1.5,
+            },
+            Moves {
+                pitch_deg: -25.0,
+                roll_deg: 12.0,
+                yaw_deg: -29.0,
+                ..Moves::default()
+            },
         ] {
             let r = rotation(&f, &m);
             let back = crate::osteotomy::rotation(lps_angles(r));

@@ -123,7 +123,11 @@ pub fn plan_report(a: &Anatomy, planned: &[Planned], plan: &Plan) -> PlanReport 
                 surgery: p.map(|p| p.what.to_string()),
                 pivot: o.pivot,
                 pivot_landmark: p.map(|p| p.pivot_label.clone()).filter(|l| l != "point"),
-                moves: moves::read_back(frame, crate::osteotomy::rotation(o.rotate_deg), o.translate),
+                moves: moves::read_back(
+                    frame,
+                    crate::osteotomy::rotation(o.rotate_deg),
+                    o.translate,
+                ),
                 bone_ml: p.map(|p| p.segment.bone_ml),
                 mesh: p.map(|p| format!("segment_{}.ply", p.name)),
                 mask: p.map(|p| format!("segment_{}.nii.gz", p.name)),

@@ -5,9 +5,9 @@
 //! a BSSO or an autorotation also moves is taken out of that segment and moved by the genioplasty
 //! after the mandible's move.
 
+use super::Bone;
 use super::cuts::{self, Cut, Found, Segment};
 use super::moves::{self, Moves};
-use super::Bone;
 use crate::case::{Osteotomy, Pivot, Surgery, SurgeryKind};
 use crate::landmarks::HeadFrame;
 use crate::vec3::{add, norm, scale, sub};
@@ -131,7 +131,11 @@ fn pivot_of(s: &Surgery, f: &Found) -> Result<([f64; 3], String), String> {
     if name == "condyles" {
         return match (f.at("Co-R"), f.at("Co-L")) {
             (Some(r), Some(l)) => Ok((scale(add(r, l), 0.5), "condyles".into())),
-            _ => Err(format!("pivot \"condyles\" was not found: {}, {}", f.why("Co-R"), f.why("Co-L"))),
+            _ => Err(format!(
+                "pivot \"condyles\" was not found: {}, {}",
+                f.why("Co-R"),
+                f.why("Co-L")
+            )),
         };
     }
     let label = pivot_label(name);
@@ -183,14 +187,24 @@ fn check_size(m: &Moves) -> Result<(), String> {
 /// landmarks. Err: one line naming the entry (1-based).
 pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
     let count = |k: SurgeryKind| surgeries.iter().filter(|s| s.kind == k).count();
-    for k in [SurgeryKind::LeFortI, SurgeryKind::Bsso, SurgeryKind::Genioplasty] {
+    for k in [
+        SurgeryKind::LeFortI,
+        SurgeryKind::Bsso,
+        SurgeryKind::Genioplasty,
+    ] {
         if count(k) > 1 {
-            return Err(format!("[[surgery]]: {} appears {} times; one of each kind", key(k), count(k)));
+            return Err(format!(
+                "[[surgery]]: {} appears {} times; one of each kind",
+                key(k),
+                count(k)
+            ));
         }
     }
     let rotating = surgeries.iter().any(|s| s.autorotate);
     if rotating && count(SurgeryKind::Bsso) > 0 {
-        return Err("[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into());
+        return Err(
+            "[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into(),
+        );
     }
     for (i, s) in surgeries.iter().enumerate() {
         let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
@@ -199,7 +213,9 @@ pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
         }
         check_size(&stated(s)).map_err(at)?;
         match &s.pivot {
-            Some(Pivot::Landmark(n)) if n != "condyles" && !super::LANDMARKS.contains(&pivot_label(n)) => {
+            Some(Pivot::Landmark(n))
+                if n != "condyles" && !super::LANDMARKS.contains(&pivot_label(n)) =>
+            {
                 return Err(at(format!(
                     "pivot \"{n}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
                     super::LANDMARKS.join(", ")
@@ -217,7 +233,10 @@ pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
 /// The closing turn of the mandible about the condylar axis that keeps the lower incisal edge
 /// at its height below the moved upper one (degrees, right-handed about Co-R → Co-L).
 fn closing_turn(f: &Found, frame: &HeadFrame, maxilla: &Rigid) -> Result<Rigid, String> {
-    let need = |l: &str| f.at(l).ok_or_else(|| format!("autorotation needs {}", f.why(l)));
+    let need = |l: &str| {
+        f.at(l)
+            .ok_or_else(|| format!("autorotation needs {}", f.why(l)))
+    };
     let (co_r, co_l, l1) = (need("Co-R")?, need("Co-L")?, need("L1")?);
     // The maxilla's move at the upper incisal edge; without it (a field of view ending in the
     // crowns) at the lower one, where the edges meet.
@@ -294,7 +313,9 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
         let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
         let m = stated(s);
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
-        let turns = [m.pitch_deg, m.roll_deg, m.yaw_deg].iter().any(|a| *a != 0.0);
+        let turns = [m.pitch_deg, m.roll_deg, m.yaw_deg]
+            .iter()
+            .any(|a| *a != 0.0);
         let (pivot, pivot_label) = match pivot_of(s, f) {
             Ok(p) => p,
             // Without a turn the pivot does not matter: any landmark the segment has.
@@ -310,7 +331,10 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
         let rigid = Rigid::of(frame, &m, pivot);
         let mv = Move {
             what: key(s.kind),
-            name: s.name.clone().unwrap_or_else(|| default_name(s.kind).into()),
+            name: s
+                .name
+                .clone()
+                .unwrap_or_else(|| default_name(s.kind).into()),
             stated: m,
             pivot,
             pivot_label,
@@ -361,13 +385,21 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
     let mut names: Vec<&str> = out.iter().map(|p| p.name.as_str()).collect();
     names.sort();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
-        return Err(format!("[[surgery]]: two segments are named '{}'; give one a `name`", w[0]));
+        return Err(format!(
+            "[[surgery]]: two segments are named '{}'; give one a `name`",
+            w[0]
+        ));
     }
     Ok(out)
 }
 
 /// The planned segments of `surgeries` ([`moves_of`]), each cut from the CT's bone.
-pub fn plan(surgeries: &[Surgery], f: &Found, frame: &HeadFrame, bone: &Bone) -> Result<Vec<Planned>, String> {
+pub fn plan(
+    surgeries: &[Surgery],
+    f: &Found,
+    frame: &HeadFrame,
+    bone: &Bone,
+) -> Result<Vec<Planned>, String> {
     let moves = moves_of(surgeries, f, frame)?;
     let mut segments = Vec::with_capacity(moves.len());
     for m in &moves {
@@ -418,7 +450,8 @@ mod tests {
         static P: OnceLock<Phantom> = OnceLock::new();
         P.get_or_init(|| {
             let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
-            let seg = crate::segment::segment(&vol, &Case::default().tissue, Path::new("phantom")).unwrap();
+            let seg = crate::segment::segment(&vol, &Case::default().tissue, Path::new("phantom"))
+                .unwrap();
             Phantom {
                 vol,
                 labels: seg.labels,
@@ -544,8 +577,16 @@ mod tests {
         assert_eq!(share(maxilla, |p| p[2] < -26.0), 0.0, "no mandible");
         // The distal segment: the tooth-bearing body in front of the split, without the chin.
         assert!(share(mandible, |p| p[2] < -26.0 && p[2] > -45.0 && p[1] < -35.0) > 0.98);
-        assert_eq!(share(mandible, |p| p[1] > -20.0), 0.0, "no ramus or condyle");
-        assert_eq!(share(mandible, |p| p[2] < -56.0 && p[1] < -50.0), 0.0, "no chin");
+        assert_eq!(
+            share(mandible, |p| p[1] > -20.0),
+            0.0,
+            "no ramus or condyle"
+        );
+        assert_eq!(
+            share(mandible, |p| p[2] < -56.0 && p[1] < -50.0),
+            0.0,
+            "no chin"
+        );
         // The chin: below the cut under the apices and foramina.
         assert!(share(chin, |p| p[2] < -54.0 && p[1] < -50.0) > 0.98);
         assert_eq!(share(chin, |p| p[2] > -47.0), 0.0);
@@ -584,21 +625,37 @@ mod tests {
         };
         let all = planned(&[lf, bsso, genio], &lms).unwrap();
         let u1 = f.at("U1").unwrap();
-        close(moved(&all, u1), add(u1, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))));
+        close(
+            moved(&all, u1),
+            add(u1, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))),
+        );
         let l1 = f.at("L1").unwrap();
         close(moved(&all, l1), sub(l1, scale(fr.anterior, 4.0)));
         // The chin rides on the distal segment's setback, then moves by its own.
         let pog = f.at("Pog").unwrap();
         let bsso_turn = Rigid::of(&fr, &all[1].stated, l1);
-        let expect = add(bsso_turn.apply(pog), add(scale(fr.anterior, 6.0), scale(fr.vertical, 2.0)));
+        let expect = add(
+            bsso_turn.apply(pog),
+            add(scale(fr.anterior, 6.0), scale(fr.vertical, 2.0)),
+        );
         close(moved(&all, pog), expect);
         // Read back in the frame, each segment's moves are the stated ones.
-        let back = moves::read_back(&fr, crate::osteotomy::rotation(all[0].osteotomy.rotate_deg), all[0].osteotomy.translate);
-        assert!((back.pitch_deg - 3.0).abs() < 1e-9 && (back.advance_mm - 5.0).abs() < 1e-9, "{back:?}");
+        let back = moves::read_back(
+            &fr,
+            crate::osteotomy::rotation(all[0].osteotomy.rotate_deg),
+            all[0].osteotomy.translate,
+        );
+        assert!(
+            (back.pitch_deg - 3.0).abs() < 1e-9 && (back.advance_mm - 5.0).abs() < 1e-9,
+            "{back:?}"
+        );
         // A 3° clockwise turn about the incisor lifts the maxilla behind it (a point in the
         // alveolar bone 25 mm behind the incisors).
         let u6 = [-22.0, -48.0, -5.0];
-        let d = sub(moved(&all, u6), add(u6, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))));
+        let d = sub(
+            moved(&all, u6),
+            add(u6, add(scale(fr.anterior, 5.0), scale(fr.vertical, 2.0))),
+        );
         assert!(dot(d, fr.vertical) > 1.0, "{d:?}");
     }
 
@@ -620,10 +677,16 @@ mod tests {
         assert!((rise(u1) - 4.0).abs() < 1e-9);
         assert!((rise(l1) - 4.0).abs() < 1e-6, "{}", rise(l1));
         // Closing about the condyles: the chin comes forward, the condyles stay.
-        assert!(fr.coords(moved(&all, f.at("Pog").unwrap()))[2] > fr.coords(f.at("Pog").unwrap())[2]);
+        assert!(
+            fr.coords(moved(&all, f.at("Pog").unwrap()))[2] > fr.coords(f.at("Pog").unwrap())[2]
+        );
         let co = f.at("Co-R").unwrap();
         assert!(norm(sub(moved(&all, co), co)) < 0.5);
-        assert!(all[1].stated.pitch_deg < -1.0, "closing is a negative pitch: {:?}", all[1].stated);
+        assert!(
+            all[1].stated.pitch_deg < -1.0,
+            "closing is a negative pitch: {:?}",
+            all[1].stated
+        );
     }
 
     #[test]
@@ -634,8 +697,17 @@ mod tests {
         let upper: Vec<Landmark> = lms
             .iter()
             .map(|l| {
-                if ["L1", "L1-apex", "B", "Pog", "Gn", "Me", "MF-R", "MF-L", "Go-R", "Go-L", "Co-R", "Co-L"].contains(&l.label.as_str()) {
-                    Landmark::missing(&l.label, Kind::Bone, "the CT's field of view ends above the mandible".into())
+                if [
+                    "L1", "L1-apex", "B", "Pog", "Gn", "Me", "MF-R", "MF-L", "Go-R", "Go-L",
+                    "Co-R", "Co-L",
+                ]
+                .contains(&l.label.as_str())
+                {
+                    Landmark::missing(
+                        &l.label,
+                        Kind::Bone,
+                        "the CT's field of view ends above the mandible".into(),
+                    )
                 } else {
                     l.clone()
                 }
@@ -646,23 +718,63 @@ mod tests {
         let e = err(surgery(SurgeryKind::Genioplasty), &upper);
         assert!(e.contains("L1-apex (the CT's field of view"), "{e}");
         // A pivot that was not found, or is no landmark.
-        let e = err(Surgery { pivot: Some(Pivot::Landmark("menton".into())), ..surgery(SurgeryKind::LeFortI) }, &upper);
-        assert!(e.contains("pivot \"menton\" was not found: Me (the CT's field of view"), "{e}");
-        let e = err(Surgery { pivot: Some(Pivot::Landmark("nose".into())), ..surgery(SurgeryKind::LeFortI) }, &lms);
+        let e = err(
+            Surgery {
+                pivot: Some(Pivot::Landmark("menton".into())),
+                ..surgery(SurgeryKind::LeFortI)
+            },
+            &upper,
+        );
+        assert!(
+            e.contains("pivot \"menton\" was not found: Me (the CT's field of view"),
+            "{e}"
+        );
+        let e = err(
+            Surgery {
+                pivot: Some(Pivot::Landmark("nose".into())),
+                ..surgery(SurgeryKind::LeFortI)
+            },
+            &lms,
+        );
         assert!(e.contains("pivot \"nose\" is not a landmark"), "{e}");
         // Too far, too much.
-        let e = err(Surgery { advance_mm: 16.0, up_mm: 14.0, ..surgery(SurgeryKind::LeFortI) }, &lms);
+        let e = err(
+            Surgery {
+                advance_mm: 16.0,
+                up_mm: 14.0,
+                ..surgery(SurgeryKind::LeFortI)
+            },
+            &lms,
+        );
         assert!(e.contains("21.3 mm, more than 20 mm"), "{e}");
-        let e = err(Surgery { yaw_deg: -31.0, ..surgery(SurgeryKind::Genioplasty) }, &lms);
+        let e = err(
+            Surgery {
+                yaw_deg: -31.0,
+                ..surgery(SurgeryKind::Genioplasty)
+            },
+            &lms,
+        );
         assert!(e.contains("-31 degrees, more than 30"), "{e}");
         // Autorotation with a split.
-        let rot = Surgery { up_mm: 3.0, autorotate: true, ..surgery(SurgeryKind::LeFortI) };
-        let e = planned(&[rot, surgery(SurgeryKind::Bsso)], &lms).err().unwrap();
+        let rot = Surgery {
+            up_mm: 3.0,
+            autorotate: true,
+            ..surgery(SurgeryKind::LeFortI)
+        };
+        let e = planned(&[rot, surgery(SurgeryKind::Bsso)], &lms)
+            .err()
+            .unwrap();
         assert!(e.contains("autorotate with a bsso"), "{e}");
         // A Le Fort I level under an orbit's floor.
         let mut low_orbits = lms.clone();
         for (l, x) in [("Or-R", -30.0), ("Or-L", 30.0)] {
-            low_orbits.push(Landmark { label: l.into(), kind: Kind::Bone, position: Some([x, -60.0, 10.0]), source: Source::Detected, missing: None });
+            low_orbits.push(Landmark {
+                label: l.into(),
+                kind: Kind::Bone,
+                position: Some([x, -60.0, 10.0]),
+                source: Source::Detected,
+                missing: None,
+            });
         }
         let e = err(surgery(SurgeryKind::LeFortI), &low_orbits);
         assert!(e.contains("orbit's floor"), "{e}");
@@ -673,8 +785,6 @@ mod tests {
         }
         let e = err(surgery(SurgeryKind::Genioplasty), &short);
         assert!(e.contains("through the roots"), "{e}");
-        for e in [e] {
-            assert!(!e.contains('\n'));
-        }
+        assert!(!e.contains('\n'));
     }
 }

@@ -68,7 +68,12 @@ impl TissueChange {
 /// PLAN.toml's `[[surgery]]` entries as osteotomies over the run's segments, read in the run's
 /// clinical frame about the landmarks it found (report.json `clinical_frame` and `plan`),
 /// followed by its `[[osteotomy]]` entries.
-fn surgery_plan(run_dir: &Path, basis: &PlanBasis, new: &NewPlan, plan_file: &Path) -> Result<Vec<Osteotomy>> {
+fn surgery_plan(
+    run_dir: &Path,
+    basis: &PlanBasis,
+    new: &NewPlan,
+    plan_file: &Path,
+) -> Result<Vec<Osteotomy>> {
     let report = Report::read(&run_dir.join("report.json"))?;
     let (Some(frame), Some(found)) = (&report.clinical_frame, &report.plan) else {
         return Err(Error::input(

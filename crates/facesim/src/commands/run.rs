@@ -119,7 +119,8 @@ fn finish(
     // kinds, its moves in the clinical frame.
     let mut analysis = analysis;
     if let Some(a) = scene.anatomy.as_ref().filter(|a| !a.planned.is_empty()) {
-        let kinds: Vec<(String, &str)> = a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
+        let kinds: Vec<(String, &str)> =
+            a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
         analysis.clinic = Some(crate::landmarks::clinic::against_published_planned(
             scene.model.plan.segments(),
             &analysis.carried,

@@ -5,11 +5,11 @@
 //! each run's report.json, landmarks and faces under `runs/`; the chart (validation.svg) is the
 //! caller's (crates/facesim-lab `validation_chart`).
 
+use crate::anatomy::Anatomy;
 use crate::error::{Error, Result};
+use crate::landmarks::Carried;
 use crate::landmarks::measure::along;
 use crate::landmarks::published::{PUBLISHED, Published, Surgery};
-use crate::anatomy::Anatomy;
-use crate::landmarks::Carried;
 use crate::observe::Observer;
 use crate::phantom_jaws::{JawsOptions, Shape};
 use crate::pipeline::{Recorder, inputs, surfaces, tissues};
@@ -216,7 +216,7 @@ struct Prepared {
     info: CaseInfo,
     dir: PathBuf,
     /// Per segment (maxilla, mandible, chin): Ok, or why the CT cannot have it.
-    possible: BTreeMap<String, std::result::Result<(), String>>,
+    possible: Possible,
     /// `[surface] movable` over case.toml's.
     movable: Option<toml::Value>,
 }
@@ -507,9 +507,13 @@ fn anatomy_of(case_dir: &Path, obs: &dyn Observer) -> Result<Anatomy> {
     let field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &field, &case, &mut rec)?;
     let face = crate::pipeline::face::place(surf, scan, &ct, &case, &mut rec)?;
-    let (frame, soft) = crate::landmarks::locate(&face.skin, Some(&face.skull), &[], &files.case_file)?;
+    let (frame, soft) =
+        crate::landmarks::locate(&face.skin, Some(&face.skull), &[], &files.case_file)?;
     let frame = frame.ok_or_else(|| {
-        Error::input(&files.case_file, "validate: no head frame (the skin is empty)")
+        Error::input(
+            &files.case_file,
+            "validate: no head frame (the skin is empty)",
+        )
     })?;
     let bone = crate::anatomy::Bone {
         vol: &ct,
@@ -519,9 +523,12 @@ fn anatomy_of(case_dir: &Path, obs: &dyn Observer) -> Result<Anatomy> {
         .map_err(|e| Error::input(&files.case_file, format!("[head]: {e}")))
 }
 
+/// Per segment (maxilla, mandible, chin): Ok, or why the CT cannot have it.
+type Possible = BTreeMap<String, std::result::Result<(), String>>;
+
 /// The segments `[[surgery]]` would cut on this anatomy: (name, cut, how) for the case's
 /// description, and per segment whether the CT can have it.
-fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, BTreeMap<String, std::result::Result<(), String>>) {
+fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, Possible) {
     use crate::anatomy::cuts::{Found, cut};
     use crate::case::SurgeryKind;
     let f = Found {
@@ -540,7 +547,10 @@ fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, BTreeMap<String, 
             name.clone(),
             format!("[[surgery]] kind = \"{what}\""),
             match &r {
-                Ok(()) => "cut from the bony landmarks found on the CT (docs/planning.md \"The cuts\")".to_string(),
+                Ok(()) => {
+                    "cut from the bony landmarks found on the CT (docs/planning.md \"The cuts\")"
+                        .to_string()
+                }
                 Err(why) => format!("not possible on this CT: {why}"),
             },
         ));
@@ -710,7 +720,10 @@ fn run_one(
         e.insert(key.into(), toml::Value::Float(v));
         entries.push((kind.into(), e));
     }
-    let surgeries = entries.into_iter().map(|(_, e)| toml::Value::Table(e)).collect();
+    let surgeries = entries
+        .into_iter()
+        .map(|(_, e)| toml::Value::Table(e))
+        .collect();
     let mut over = toml::Table::new();
     over.insert(
         "name".into(),
@@ -1022,10 +1035,14 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
             s.push_str(&format!("- {seg}: `{region}`: {how}\n"));
         }
         match &c.autorotation {
-            Ok(()) => s.push_str("- autorotation: about the condyles Co-R and Co-L found on the CT
-"),
-            Err(why) => s.push_str(&format!("- autorotation: not possible: {why}
-")),
+            Ok(()) => s.push_str(
+                "- autorotation: about the condyles Co-R and Co-L found on the CT
+",
+            ),
+            Err(why) => s.push_str(&format!(
+                "- autorotation: not possible: {why}
+"
+            )),
         }
         s.push('\n');
     }

@@ -299,13 +299,15 @@ pub fn against_published_planned(
     frame: &HeadFrame,
     surgeries: &[(String, &str)],
 ) -> Clinic {
-    against_published_as(plan, carried, frame, &|o| {
-        match surgeries.iter().find(|(n, _)| *n == o.name).map(|(_, k)| *k) {
-            Some("le-fort-i") => Some(Jaw::Maxilla),
-            Some("bsso" | "autorotation") => Some(Jaw::Mandible),
-            Some("genioplasty") => Some(Jaw::Chin),
-            _ => jaw_by_name(&o.name),
-        }
+    against_published_as(plan, carried, frame, &|o| match surgeries
+        .iter()
+        .find(|(n, _)| *n == o.name)
+        .map(|(_, k)| *k)
+    {
+        Some("le-fort-i") => Some(Jaw::Maxilla),
+        Some("bsso" | "autorotation") => Some(Jaw::Mandible),
+        Some("genioplasty") => Some(Jaw::Chin),
+        _ => jaw_by_name(&o.name),
     })
 }
 
@@ -380,7 +382,9 @@ mod tests {
     #[test]
     fn plans_read_as_the_tables_surgery_types() {
         let f = frame();
-        let key = |plan: &[Osteotomy]| surgery_of(plan, &[], &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key());
+        let key = |plan: &[Osteotomy]| {
+            surgery_of(plan, &[], &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key())
+        };
         let fwd = [0.0, -5.0, 0.0];
         assert_eq!(
             key(&[segment("Maxilla", fwd, [0.0; 3])]),
@@ -427,7 +431,9 @@ mod tests {
         // takes it 3.0 mm forward and 4.3 mm up.
         let b = [0.0, -80.0, -60.0];
         let carried = [lm("B", b, b)];
-        let key = |plan: &[Osteotomy]| surgery_of(plan, &carried, &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key());
+        let key = |plan: &[Osteotomy]| {
+            surgery_of(plan, &carried, &f, &|o| jaw_by_name(&o.name)).map(|(s, _, _)| s.key())
+        };
         let maxilla = segment("maxilla", [0.0, -1.1, 3.8], [0.0; 3]);
         let closing = segment("mandible", [0.0; 3], [-3.0, 0.0, 0.0]);
         assert_eq!(

@@ -35,25 +35,29 @@ pub fn find(
             "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
         ));
     };
-    let found = rec.time(Stage::Anatomy, "finding the head frame, bony landmarks and cuts", || {
-        let bone = Bone {
-            vol: ct,
-            labels: &seg.labels,
-        };
-        let head = case.head.clone().unwrap_or_default();
-        let anatomy = anatomy::find(&bone, midsagittal, soft, &head)
-            .map_err(|e| Error::config(format!("case.toml: [head]: {e}")))?;
-        let planned = surgery::plan(
-            &case.surgery,
-            &Found {
-                landmarks: &anatomy.landmarks,
-            },
-            &anatomy.frame.frame,
-            &bone,
-        )
-        .map_err(|e| Error::config(format!("case.toml: {e}")))?;
-        Ok(Anatomical { anatomy, planned })
-    })?;
+    let found = rec.time(
+        Stage::Anatomy,
+        "finding the head frame, bony landmarks and cuts",
+        || {
+            let bone = Bone {
+                vol: ct,
+                labels: &seg.labels,
+            };
+            let head = case.head.clone().unwrap_or_default();
+            let anatomy = anatomy::find(&bone, midsagittal, soft, &head)
+                .map_err(|e| Error::config(format!("case.toml: [head]: {e}")))?;
+            let planned = surgery::plan(
+                &case.surgery,
+                &Found {
+                    landmarks: &anatomy.landmarks,
+                },
+                &anatomy.frame.frame,
+                &bone,
+            )
+            .map_err(|e| Error::config(format!("case.toml: {e}")))?;
+            Ok(Anatomical { anatomy, planned })
+        },
+    )?;
     for note in found.planned.iter().flat_map(|p| &p.notes) {
         rec.warn(note.clone());
     }

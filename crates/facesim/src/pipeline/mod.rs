@@ -105,7 +105,8 @@ pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scen
     let face = face::place(surf, scan, &ct, &case, rec)?;
     // The pre-operative landmarks: the midsagittal frame and soft landmarks the anatomy needs.
     let user = inputs::user_landmarks(&case)?;
-    let located = crate::landmarks::locate(&face.skin, Some(&face.skull), &user, Path::new("case.toml"))?;
+    let located =
+        crate::landmarks::locate(&face.skin, Some(&face.skull), &user, Path::new("case.toml"))?;
     let anatomy = anatomy::find(&mut case, &ct, &seg, &located, rec)?;
     let model = model::build(&face, &ct, &seg, &bone_field, &case, rec)?;
     drop(bone_field);
