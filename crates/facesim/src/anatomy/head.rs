@@ -880,7 +880,6 @@ mod tests {
         assert!((dot(f.lateral, h.mid.lateral) - 1.0).abs() < 1e-9);
         let turned = dot(f.anterior, h.mid.vertical).asin().to_degrees();
         assert!((turned + cf.pitch_deg).abs() < 1e-6, "{turned}");
-        assert!(secs < 1.0, "{secs} s");
         cf
     }
 
