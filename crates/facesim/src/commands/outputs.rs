@@ -160,7 +160,14 @@ fn write_files(dir: &Path, scene: &Scene, p: &Prediction, dist: &[f64], case: &C
         jobs.push(Box::new(move || {
             let region = planned.segment.region("");
             let keep: Vec<bool> = skull.vertices.iter().map(|v| region.contains(*v)).collect();
-            let part = skull.sub_mesh(&keep);
+            let mut part = skull.sub_mesh(&keep);
+            // One colour per kind, so that the segments tell apart in a viewer.
+            let colour = match planned.what {
+                "le-fort-i" => [230, 140, 40],
+                "genioplasty" => [60, 170, 90],
+                _ => [60, 120, 220],
+            };
+            part.colors = Some(vec![colour; part.vertices.len()]);
             mesh::write_mesh(&part, &o.join(format!("segment_{}.ply", planned.name)))
         }));
         jobs.push(Box::new(move || {
