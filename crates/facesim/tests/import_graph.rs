@@ -89,9 +89,36 @@ fn module_files(src: &Path) -> BTreeMap<String, PathBuf> {
             if parts.first().is_some_and(|p| p == "bin" || p == "main") {
                 return None;
             }
+            // A file its parent declares `#[cfg(test)] mod name;` is test code, as a
+            // `#[cfg(test)] mod … { }` block is.
+            if test_only(&f) {
+                return None;
+            }
             Some((parts.join("::"), f))
         })
         .collect()
+}
+
+/// Whether the module file `f` is declared `#[cfg(test)] mod name;` by its parent (the
+/// sibling mod.rs, or the file named like its folder).
+fn test_only(f: &Path) -> bool {
+    let name = f.file_stem().unwrap().to_string_lossy().into_owned();
+    if name == "mod" || name == "lib" {
+        return false;
+    }
+    let dir = f.parent().unwrap();
+    let parents = [
+        dir.join("mod.rs"),
+        dir.join("lib.rs"),
+        dir.with_extension("rs"),
+    ];
+    parents.iter().any(|p| {
+        std::fs::read_to_string(p).is_ok_and(|text| {
+            let toks = tokens(&text);
+            toks.windows(10)
+                .any(|w| w.join("") == format!("#[cfg(test)]mod{name};"))
+        })
+    })
 }
 
 /// The code of a Rust file as tokens: identifiers, `::` and single punctuation, with comments,

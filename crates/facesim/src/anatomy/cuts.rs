@@ -18,7 +18,7 @@
 //! - **Autorotation** (a Le Fort I impaction's option): the whole mandible, below the occlusal
 //!   plane in front of the rami and 3 mm below the condylion behind.
 
-use super::Bone;
+use super::bone::Bone;
 use crate::case::{Region, SurgeryKind};
 use crate::landmarks::{HeadFrame, Landmark};
 use crate::vec3::{add, cross, dot, norm, scale, sub};

@@ -1,6 +1,6 @@
 //! The clinical head frame (docs/planning.md "The head frame").
 
-use super::Bone;
+use super::bone::{Bone, turned};
 use crate::case::{FrameChoice, Head};
 use crate::labels;
 use crate::landmarks::{HeadFrame, Kind, Landmark, Source};
@@ -58,7 +58,7 @@ pub fn clinical_frame(
 ) -> Result<ClinicalFrame, String> {
     let facial = facial_plane_pitch(midsagittal, soft);
     let mut search_pitch = facial.as_ref().map_or(0.0, |p| p.clamp(-35.0, 35.0));
-    let mut found = detect(bone, &super::turned(midsagittal, search_pitch), None);
+    let mut found = detect(bone, &turned(midsagittal, search_pitch), None);
     if head.frame != Some(FrameChoice::FacialPlane) {
         let mut porion_pitch = search_pitch;
         for _ in 0..3 {
@@ -72,7 +72,7 @@ pub fn clinical_frame(
                     if !keep {
                         porion_pitch = search_pitch;
                     }
-                    let f = super::turned(midsagittal, search_pitch);
+                    let f = turned(midsagittal, search_pitch);
                     found = detect(bone, &f, keep.then_some(&po));
                 }
                 _ => break,
@@ -130,7 +130,7 @@ pub fn clinical_frame(
         ),
     };
     Ok(ClinicalFrame {
-        frame: super::turned(midsagittal, pitch_deg + head.pitch_deg),
+        frame: turned(midsagittal, pitch_deg + head.pitch_deg),
         method,
         why,
         pitch_deg,
@@ -973,7 +973,7 @@ mod tests {
         assert_eq!(cf.method, Method::FacialPlane);
         assert_eq!(cf.pitch_deg, plain.pitch_deg);
         assert_eq!(cf.correction_deg, 7.5);
-        let want = crate::anatomy::turned(&h.mid, plain.pitch_deg + 7.5);
+        let want = crate::anatomy::bone::turned(&h.mid, plain.pitch_deg + 7.5);
         for (a, b) in [
             (cf.frame.anterior, want.anterior),
             (cf.frame.vertical, want.vertical),

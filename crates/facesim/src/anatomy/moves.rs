@@ -116,7 +116,7 @@ mod tests {
     use super::*;
 
     fn pitched_frame() -> HeadFrame {
-        crate::anatomy::turned(
+        crate::anatomy::bone::turned(
             &HeadFrame::with_up(
                 [10.0, -80.0, 5.0],
                 {

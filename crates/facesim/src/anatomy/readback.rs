@@ -2,7 +2,7 @@
 //! docs/planning.md "The plan read back"): each segment's six moves in the clinical head frame,
 //! and each bony landmark's move forward, up and toward the patient's left.
 
-use super::Anatomy;
+use super::find::Anatomy;
 use super::moves::{self, Moves};
 use super::surgery::Planned;
 use crate::landmarks::{HeadFrame, Ordered};

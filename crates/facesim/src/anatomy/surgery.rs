@@ -5,16 +5,14 @@
 //! a BSSO or an autorotation also moves is taken out of that segment and moved by the genioplasty
 //! after the mandible's move.
 
-use super::Bone;
+use super::bone::{Bone, LANDMARKS};
 use super::cuts::{self, Cut, Found, Segment};
 use super::moves::{self, Moves};
 use crate::case::{Osteotomy, Pivot, Surgery, SurgeryKind};
 use crate::landmarks::HeadFrame;
 use crate::vec3::{add, norm, scale, sub};
 
-/// The largest translation (mm) and rotation (degrees) a surgery may state.
-pub const MAX_MOVE_MM: f64 = 20.0;
-pub const MAX_TURN_DEG: f64 = 30.0;
+use crate::case::MAX_TURN_DEG;
 
 /// One planned segment.
 pub struct Planned {
@@ -94,14 +92,10 @@ pub fn default_name(kind: SurgeryKind) -> &'static str {
 }
 
 fn key(kind: SurgeryKind) -> &'static str {
-    match kind {
-        SurgeryKind::LeFortI => "le-fort-i",
-        SurgeryKind::Bsso => "bsso",
-        SurgeryKind::Genioplasty => "genioplasty",
-    }
+    kind.key()
 }
 
-/// The landmark a pivot name means: a label of `super::LANDMARKS`, or one of the spoken names.
+/// The landmark a pivot name means: a label of `LANDMARKS`, or one of the spoken names.
 fn pivot_label(name: &str) -> &str {
     match name {
         "upper-incisor" => "U1",
@@ -139,10 +133,10 @@ fn pivot_of(s: &Surgery, f: &Found) -> Result<([f64; 3], String), String> {
         };
     }
     let label = pivot_label(name);
-    if !super::LANDMARKS.contains(&label) {
+    if !LANDMARKS.contains(&label) {
         return Err(format!(
             "pivot \"{name}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
-            super::LANDMARKS.join(", ")
+            LANDMARKS.join(", ")
         ));
     }
     f.at(label)
@@ -161,70 +155,21 @@ fn stated(s: &Surgery) -> Moves {
     }
 }
 
-/// A stated move within the limits, finite.
-fn check_size(m: &Moves) -> Result<(), String> {
-    let t = [m.advance_mm, m.up_mm, m.left_mm];
-    let a = [m.pitch_deg, m.roll_deg, m.yaw_deg];
-    if t.iter().chain(&a).any(|v| !v.is_finite()) {
-        return Err("its moves must be finite numbers".into());
-    }
-    let len = norm(t);
-    if len > MAX_MOVE_MM {
-        return Err(format!(
-            "it moves the segment {len:.1} mm, more than {MAX_MOVE_MM} mm: check the units (mm) and the signs"
-        ));
-    }
-    if let Some(x) = a.iter().find(|x| x.abs() > MAX_TURN_DEG) {
-        return Err(format!(
-            "it turns the segment {x} degrees, more than {MAX_TURN_DEG}: check the units (degrees)"
-        ));
-    }
-    Ok(())
-}
-
-/// What `[[surgery]]` entries can be told wrong without the CT: one entry of each kind,
-/// `autorotate` on a Le Fort I without a BSSO, moves within the limits, pivot names that are
-/// landmarks. Err: one line naming the entry (1-based).
+/// What `[[surgery]]` entries can be told wrong without the CT (`crate::case`'s checks, at
+/// load) and pivot names that are no landmark. Err: one line naming the entry (1-based).
 pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
-    let count = |k: SurgeryKind| surgeries.iter().filter(|s| s.kind == k).count();
-    for k in [
-        SurgeryKind::LeFortI,
-        SurgeryKind::Bsso,
-        SurgeryKind::Genioplasty,
-    ] {
-        if count(k) > 1 {
-            return Err(format!(
-                "[[surgery]]: {} appears {} times; one of each kind",
-                key(k),
-                count(k)
-            ));
-        }
-    }
-    let rotating = surgeries.iter().any(|s| s.autorotate);
-    if rotating && count(SurgeryKind::Bsso) > 0 {
-        return Err(
-            "[[surgery]]: autorotate with a bsso: the bsso places the mandible; drop one".into(),
-        );
-    }
+    crate::case::check_surgeries(surgeries)?;
     for (i, s) in surgeries.iter().enumerate() {
-        let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
-        if s.autorotate && s.kind != SurgeryKind::LeFortI {
-            return Err(at("autorotate applies to a le-fort-i".into()));
-        }
-        check_size(&stated(s)).map_err(at)?;
-        match &s.pivot {
-            Some(Pivot::Landmark(n))
-                if n != "condyles" && !super::LANDMARKS.contains(&pivot_label(n)) =>
-            {
-                return Err(at(format!(
-                    "pivot \"{n}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
-                    super::LANDMARKS.join(", ")
-                )));
-            }
-            Some(Pivot::Point(p)) if p.iter().any(|x| !x.is_finite()) => {
-                return Err(at("its pivot point must be finite".into()));
-            }
-            _ => {}
+        if let Some(Pivot::Landmark(n)) = &s.pivot
+            && n != "condyles"
+            && !LANDMARKS.contains(&pivot_label(n))
+        {
+            return Err(format!(
+                "[[surgery]] {} ({}): pivot \"{n}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
+                i + 1,
+                key(s.kind),
+                LANDMARKS.join(", ")
+            ));
         }
     }
     Ok(())
@@ -577,11 +522,8 @@ mod tests {
         assert_eq!(share(maxilla, |p| p[2] < -26.0), 0.0, "no mandible");
         // The distal segment: the tooth-bearing body in front of the split, without the chin.
         assert!(share(mandible, |p| p[2] < -26.0 && p[2] > -45.0 && p[1] < -35.0) > 0.98);
-        assert_eq!(
-            share(mandible, |p| p[1] > -20.0),
-            0.0,
-            "no ramus or condyle"
-        );
+        // The rami (y −8..18) stay: the split is at their anterior border.
+        assert_eq!(share(mandible, |p| p[1] > -8.0), 0.0, "no ramus or condyle");
         assert_eq!(
             share(mandible, |p| p[2] < -56.0 && p[1] < -50.0),
             0.0,

@@ -10,12 +10,14 @@ mod defaults;
 mod region;
 mod schema;
 mod solve_model;
+mod surgery;
 pub mod uncertainty;
 mod validate;
 
 pub use defaults::DEFAULTS_TOML;
 pub use region::{Mask, Region, SurfaceFile};
 pub use schema::*;
+pub use surgery::{MAX_MOVE_MM, MAX_TURN_DEG, check_surgeries};
 pub use uncertainty::Uncertainty;
 
 /// Recursively lay `over` on top of `base` (tables merge, everything else replaces).

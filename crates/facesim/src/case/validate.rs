@@ -176,7 +176,7 @@ impl Case {
                 return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
             }
         }
-        crate::anatomy::surgery::check_entries(&self.surgery).or_else(bad)?;
+        super::check_surgeries(&self.surgery).or_else(bad)?;
         if let Some(h) = &self.head
             && !(h.pitch_deg.is_finite() && h.pitch_deg.abs() <= 45.0)
         {

@@ -1,7 +1,7 @@
 //! The anatomy stage (docs/planning.md): the clinical head frame and the bony landmarks from the
 //! CT, and the `[[surgery]]` entries turned into osteotomies over the segments their cuts free.
 
-use super::{Recorder, Stage};
+use super::stage::{Recorder, Stage};
 use crate::anatomy::surgery::{self, Planned};
 use crate::anatomy::{self, Anatomy, Bone, cuts::Found};
 use crate::case::Case;

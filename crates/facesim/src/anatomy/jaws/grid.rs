@@ -2,7 +2,7 @@
 //! millimetre, each cell outside the CT, soft, bone or tooth. The detectors walk it along the
 //! frame's axes, so a head pitched in the scanner reads as an upright one.
 
-use super::super::Bone;
+use crate::anatomy::bone::Bone;
 use crate::labels;
 use crate::landmarks::HeadFrame;
 use rayon::prelude::*;

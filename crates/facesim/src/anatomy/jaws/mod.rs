@@ -11,7 +11,7 @@ mod grid;
 #[cfg(test)]
 mod tests;
 
-use super::Bone;
+use super::bone::Bone;
 use crate::landmarks::{HeadFrame, Kind, Landmark, Source};
 use grid::{Grid, H, OUT, TOOTH, hard};
 
@@ -28,7 +28,7 @@ pub fn jaw_landmarks(bone: &Bone, frame: &HeadFrame) -> Vec<Landmark> {
     let g = Grid::new(bone, frame);
     let hu = |c: [f64; 3]| bone.vol.sample(frame.point(c), -1000.0) as f64;
     let found = detect(&g, &hu);
-    super::LANDMARKS[4..]
+    super::bone::LANDMARKS[4..]
         .iter()
         .map(|label| {
             let spot = found
