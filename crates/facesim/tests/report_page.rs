@@ -1476,7 +1476,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     let inside = json!({"poisson": 0.455, "muscle_fat": 12.0, "skin_fat": 6.0});
     let steps = json!({
         "tissues": [inside, {"muscle_fat": 2.0}, {"poisson": 0.30}],
-        "plan": {case.osteotomy[0].name.clone(): {"translate": [0.0, -8.0, 1.0], "rotate_deg": [0.0, 0.0, 0.0]}},
+        "plan": {o.report.parameters.as_ref().unwrap().osteotomy[0].name.clone(): {"translate": [0.0, -8.0, 1.0], "rotate_deg": [0.0, 0.0, 0.0]}},
     });
     let steps_file = dir.join("tissue-steps.json");
     std::fs::write(&steps_file, steps.to_string()).unwrap();
