@@ -36,8 +36,16 @@ fn phantom_case() -> Case {
     case
 }
 
-const TET_SKIPS_WITHOUT_MOVE: [&str; 5] = ["coarsen", "tet_mesh", "solve", "embed", "plan_basis"];
-const TET_SKIPS: [&str; 1] = ["coarsen"];
+const TET_SKIPS_WITHOUT_MOVE: [&str; 6] = [
+    "coarsen",
+    "anatomy",
+    "tet_mesh",
+    "solve",
+    "embed",
+    "plan_basis",
+];
+// A plan of [[osteotomy]] regions needs no bony landmark: no anatomy stage.
+const TET_SKIPS: [&str; 2] = ["coarsen", "anatomy"];
 
 const MOVABLE: ([f64; 3], f64) = ([0.0, -60.0, -45.0], 70.0);
 
@@ -131,7 +139,7 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
         .iter()
         .map(|s| s.stage.as_str())
         .collect();
-    assert_eq!(skipped, ["coarsen", "solve", "embed"]);
+    assert_eq!(skipped, ["coarsen", "anatomy", "solve", "embed"]);
     assert!(displacement(&o).iter().all(|d| *d == 0.0));
     let o = run(c1()).unwrap();
     let skipped: Vec<&str> = o
@@ -140,7 +148,7 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
         .iter()
         .map(|s| s.stage.as_str())
         .collect();
-    assert_eq!(skipped, ["coarsen", "embed"]);
+    assert_eq!(skipped, ["coarsen", "anatomy", "embed"]);
     // The volumetric model (the default) carries the scan whole: it never coarsens, and with
     // no bone move it neither meshes nor solves.
     let mut case = phantom_case();

@@ -18,8 +18,8 @@ pub struct Anatomical {
 }
 
 /// The anatomy of the head, and the case's `[[surgery]]` entries as osteotomies placed before its
-/// `[[osteotomy]]` entries. None when the skin gives no midsagittal frame and no surgery asks
-/// for one.
+/// `[[osteotomy]]` entries. None (the stage skipped) when the case has no `[[surgery]]` and no
+/// `[head]`: a plan of `[[osteotomy]]` regions needs no landmark of the bone.
 pub fn find(
     case: &mut Case,
     ct: &Volume,
@@ -27,6 +27,13 @@ pub fn find(
     located: &(Option<HeadFrame>, Vec<Landmark>),
     rec: &mut Recorder,
 ) -> Result<Option<Anatomical>> {
+    if case.surgery.is_empty() && case.head.is_none() {
+        rec.skip(
+            Stage::Anatomy,
+            "the plan has no [[surgery]] and the case no [head]: no cut to find",
+        );
+        return Ok(None);
+    }
     let (Some(midsagittal), soft) = located else {
         if case.surgery.is_empty() {
             return Ok(None);
