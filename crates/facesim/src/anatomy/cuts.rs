@@ -13,8 +13,8 @@
 //!   the ramus' anterior border (30 mm in front of gonion; without gonion, 20 mm behind the
 //!   upper first molars), where the split leaves the body for the ramus. The proximal
 //!   segments, with the condyles, stay.
-//! - **Genioplasty**: below a plane 3 mm under the lower incisor apex on the midline and 4 mm
-//!   under each mental foramen, in front of a coronal plane 12 mm behind the foramina.
+//! - **Genioplasty**: below a plane 3 mm under the lower canines' apices (6 mm below the incisor's)
+//!   on the midline and 4 mm under each mental foramen, in front of a coronal plane 12 mm behind the foramina.
 //! - **Autorotation** (a Le Fort I impaction's option): the whole mandible, below the occlusal
 //!   plane in front of the rami and 3 mm below the condylion behind.
 
@@ -36,8 +36,11 @@ const LE_FORT_LATERAL_MM: f64 = 8.0;
 /// upper first molars' cusps (mm).
 const RAMUS_BREADTH_MM: f64 = 30.0;
 const SPLIT_BEHIND_MOLAR_MM: f64 = 20.0;
-/// The genioplasty cut under the lower incisor apex and under the mental foramina (mm).
+/// The genioplasty cut under the lower canines' apices and under the mental foramina (mm). The
+/// canine's root ends about 6 mm deeper than the central incisor's (whole tooth about 27 mm
+/// against 21 mm), so its apex is taken that far below L1-apex.
 const CHIN_BELOW_APEX_MM: f64 = 3.0;
+const CANINE_APEX_BELOW_INCISOR_MM: f64 = 6.0;
 const CHIN_BELOW_FORAMEN_MM: f64 = 4.0;
 /// The genioplasty cut exits the lower border this far behind the foramina (mm).
 const CHIN_BEHIND_FORAMEN_MM: f64 = 12.0;
@@ -304,10 +307,11 @@ pub fn bsso(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
 pub fn genioplasty(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     let [apex, pog, me] = mandible_needed(f, ["L1-apex", "Pog", "Me"], "genioplasty")?;
     let a = frame.coords(apex);
-    let mid = frame.point([a[0], a[1] - CHIN_BELOW_APEX_MM, frame.coords(pog)[2]]);
+    let below = CANINE_APEX_BELOW_INCISOR_MM + CHIN_BELOW_APEX_MM;
+    let mid = frame.point([a[0], a[1] - below, frame.coords(pog)[2]]);
     if frame.coords(mid)[1] - frame.coords(me)[1] < CHIN_MIN_HEIGHT_MM {
         return Err(format!(
-            "a genioplasty cut {CHIN_BELOW_APEX_MM} mm below the lower incisor apex would leave {:.1} mm of chin above menton (at least {CHIN_MIN_HEIGHT_MM}): it would pass through the roots",
+            "a genioplasty cut {CHIN_BELOW_APEX_MM} mm below the lower canines' apices ({below} mm below the incisor's) would leave {:.1} mm of chin above menton (at least {CHIN_MIN_HEIGHT_MM}): it would pass through the roots",
             frame.coords(mid)[1] - frame.coords(me)[1]
         ));
     }

@@ -525,13 +525,17 @@ mod tests {
         // The rami (y −8..18) stay: the split is at their anterior border.
         assert_eq!(share(mandible, |p| p[1] > -8.0), 0.0, "no ramus or condyle");
         assert_eq!(
-            share(mandible, |p| p[2] < -56.0 && p[1] < -50.0),
+            share(mandible, |p| p[2] < -61.0 && p[1] < -50.0),
             0.0,
             "no chin"
         );
         // The chin: below the cut under the apices and foramina.
-        assert!(share(chin, |p| p[2] < -54.0 && p[1] < -50.0) > 0.98);
-        assert_eq!(share(chin, |p| p[2] > -47.0), 0.0);
+        assert!(share(chin, |p| p[2] < -59.0 && p[1] < -50.0) > 0.98);
+        assert_eq!(
+            share(chin, |p| p[2] > -45.0),
+            0.0,
+            "nothing at the foramina's level or above"
+        );
     }
 
     /// The moved position of p under the plan of `all`.
@@ -574,7 +578,8 @@ mod tests {
         let l1 = f.at("L1").unwrap();
         close(moved(&all, l1), sub(l1, scale(fr.anterior, 4.0)));
         // The chin rides on the distal segment's setback, then moves by its own.
-        let pog = f.at("Pog").unwrap();
+        // Menton: in the chin (pogonion sits at this phantom's cut, under the canine apices).
+        let pog = f.at("Me").unwrap();
         let bsso_turn = Rigid::of(&fr, &all[1].stated, l1);
         let expect = add(
             bsso_turn.apply(pog),
