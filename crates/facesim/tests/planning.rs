@@ -127,7 +127,7 @@ fn the_le_fort_i_cut_on_the_promed_ct_takes_the_hand_placed_maxilla() {
     // The hand box is 90 mm wide and reaches 9 mm behind the posterior nasal spine: it takes
     // the pterygoid plates and the bone lateral to the tuberosities (|s| 35-50 mm), which a Le
     // Fort I leaves; the cut stops at PNS (its pterygomaxillary junction, not traced on the
-    // CT). Measured: 83.2 % (docs/planning.md "Measured").
+    // CT). Measured: 85.0 % (docs/planning.md "Measured").
     for (seg, share, _) in coverage(&samples("real"), &[SurgeryKind::LeFortI], &[&PROMED[0]]) {
         assert!(share >= 0.8, "{seg}: {share}");
     }
