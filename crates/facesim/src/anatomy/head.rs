@@ -675,7 +675,6 @@ fn fit_frankfort(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::{Recorder, face, inputs, surfaces, tissues};
     use crate::vec3::{dot, sub};
     use crate::volume::Volume;
     use std::path::Path;
@@ -704,25 +703,12 @@ mod tests {
     /// A real sample read as the pipeline reads it (its stages up to the face); None, with a
     /// line saying so, when its CT has not been fetched.
     fn real(dir: &str) -> Option<Head3> {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../data-samples")
-            .join(dir);
-        let (case, _) = crate::case::Case::load(&dir).unwrap();
-        if !case.ct.path.exists() {
-            println!("{} is not fetched: skipped", case.ct.path.display());
-            return None;
-        }
-        let mut rec = Recorder::new(&crate::observe::Quiet);
-        let inp = inputs::read_case(case, &mut rec).unwrap();
-        let seg = tissues(&inp.ct, &inp.case, &mut rec).unwrap();
-        let field = seg.bone_field(&inp.ct);
-        let surf = surfaces::extract(&inp.ct, &seg, &field, &inp.case, &mut rec).unwrap();
-        let face = face::place(surf, None, &inp.ct, &inp.case, &mut rec).unwrap();
-        let mid = crate::landmarks::head_frame(&face.skin).unwrap();
-        let soft = crate::landmarks::detect::detect(&face.skin, Some(&face.skull), &mid);
+        let s = crate::anatomy::sample::read(dir)?;
+        let mid = crate::landmarks::head_frame(&s.skin).unwrap();
+        let soft = crate::landmarks::detect::detect(&s.skin, Some(&s.skull), &mid);
         Some(Head3 {
-            vol: inp.ct,
-            labels: seg.labels,
+            vol: s.vol,
+            labels: s.labels,
             mid,
             soft,
         })

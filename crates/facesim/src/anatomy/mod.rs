@@ -15,6 +15,8 @@ pub mod head;
 pub mod jaws;
 pub mod moves;
 pub mod readback;
+#[cfg(test)]
+mod sample;
 pub mod surgery;
 
 pub use bone::{Bone, LANDMARKS, turned};

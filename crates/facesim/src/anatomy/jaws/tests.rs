@@ -48,25 +48,11 @@ fn phantom() -> &'static Case {
 /// way the pipeline reads them (its stages up to the face). None, with a line saying so, when
 /// its CT has not been fetched.
 fn real_case(dir: &str, pitch_deg: f64) -> Option<Case> {
-    use crate::pipeline::{Recorder, face, inputs, surfaces, tissues};
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../data-samples")
-        .join(dir);
-    let (case, _) = crate::case::Case::load(&dir).unwrap();
-    if !case.ct.path.exists() {
-        println!("{} is not fetched: skipped", case.ct.path.display());
-        return None;
-    }
-    let mut rec = Recorder::new(&crate::observe::Quiet);
-    let inp = inputs::read_case(case, &mut rec).unwrap();
-    let seg = tissues(&inp.ct, &inp.case, &mut rec).unwrap();
-    let field = seg.bone_field(&inp.ct);
-    let surf = surfaces::extract(&inp.ct, &seg, &field, &inp.case, &mut rec).unwrap();
-    let face = face::place(surf, None, &inp.ct, &inp.case, &mut rec).unwrap();
-    let frame = crate::landmarks::head_frame(&face.skin).unwrap();
+    let s = crate::anatomy::sample::read(dir)?;
+    let frame = crate::landmarks::head_frame(&s.skin).unwrap();
     Some(Case {
-        vol: inp.ct,
-        labels: seg.labels,
+        vol: s.vol,
+        labels: s.labels,
         frame: crate::anatomy::bone::turned(&frame, pitch_deg),
     })
 }
