@@ -91,10 +91,6 @@ pub fn default_name(kind: SurgeryKind) -> &'static str {
     }
 }
 
-fn key(kind: SurgeryKind) -> &'static str {
-    kind.key()
-}
-
 /// The landmark a pivot name means: a label of `LANDMARKS`, or one of the spoken names.
 fn pivot_label(name: &str) -> &str {
     match name {
@@ -167,7 +163,7 @@ pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
             return Err(format!(
                 "[[surgery]] {} ({}): pivot \"{n}\" is not a landmark (one of {}, upper-incisor, lower-incisor, pogonion, menton, gnathion, a-point, b-point, anterior-nasal-spine, posterior-nasal-spine, condyles) or a point [x, y, z]",
                 i + 1,
-                key(s.kind),
+                s.kind.key(),
                 LANDMARKS.join(", ")
             ));
         }
@@ -255,7 +251,7 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
     let mut carrier: Option<(usize, Rigid)> = None;
     let mut chin: Option<Move> = None;
     for (i, s) in surgeries.iter().enumerate() {
-        let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, key(s.kind));
+        let at = |e: String| format!("[[surgery]] {} ({}): {e}", i + 1, s.kind.key());
         let m = stated(s);
         let cut = cuts::cut(s.kind, f, frame).map_err(at)?;
         let turns = [m.pitch_deg, m.roll_deg, m.yaw_deg]
@@ -275,7 +271,7 @@ pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<V
         };
         let rigid = Rigid::of(frame, &m, pivot);
         let mv = Move {
-            what: key(s.kind),
+            what: s.kind.key(),
             name: s
                 .name
                 .clone()

@@ -17,6 +17,11 @@ pub struct Anatomical {
     pub planned: Vec<Planned>,
 }
 
+/// Whether the case asks for the anatomy: a plan in clinical terms or a `[head]` table.
+pub fn wanted(case: &Case) -> bool {
+    !case.surgery.is_empty() || case.head.is_some()
+}
+
 /// The anatomy of the head, and the case's `[[surgery]]` entries as osteotomies placed before its
 /// `[[osteotomy]]` entries. None (the stage skipped) when the case has no `[[surgery]]` and no
 /// `[head]`: a plan of `[[osteotomy]]` regions needs no landmark of the bone.
@@ -24,17 +29,17 @@ pub fn find(
     case: &mut Case,
     ct: &Volume,
     seg: &Segmentation,
-    located: &(Option<HeadFrame>, Vec<Landmark>),
+    located: Option<&(Option<HeadFrame>, Vec<Landmark>)>,
     rec: &mut Recorder,
 ) -> Result<Option<Anatomical>> {
-    if case.surgery.is_empty() && case.head.is_none() {
+    let Some((frame, soft)) = located.filter(|_| wanted(case)) else {
         rec.skip(
             Stage::Anatomy,
             "the plan has no [[surgery]] and the case no [head]: no cut to find",
         );
         return Ok(None);
-    }
-    let (Some(midsagittal), soft) = located else {
+    };
+    let Some(midsagittal) = frame else {
         if case.surgery.is_empty() {
             return Ok(None);
         }

@@ -103,19 +103,30 @@ pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scen
     let bone_field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &bone_field, &case, rec)?;
     let face = face::place(surf, scan, &ct, &case, rec)?;
-    // The pre-operative landmarks: the midsagittal frame and soft landmarks the anatomy needs.
-    let user = inputs::user_landmarks(&case)?;
-    let located =
-        crate::landmarks::locate(&face.skin, Some(&face.skull), &user, Path::new("case.toml"))?;
-    let anatomy = anatomy::find(&mut case, &ct, &seg, &located, rec)?;
+    // The pre-operative landmarks, here only when the anatomy needs them (its midsagittal frame
+    // and soft landmarks); else the landmark stage locates them (`Scene::landmarks_pre`).
+    let located = if anatomy::wanted(&case) {
+        let user = inputs::user_landmarks(&case)?;
+        Some(crate::landmarks::locate(
+            &face.skin,
+            Some(&face.skull),
+            &user,
+            Path::new("case.toml"),
+        )?)
+    } else {
+        None
+    };
+    let anatomy = anatomy::find(&mut case, &ct, &seg, located.as_ref(), rec)?;
     let model = model::build(&face, &ct, &seg, &bone_field, &case, rec)?;
     drop(bone_field);
     let kept = std::sync::OnceLock::new();
-    let _ = kept.set(Some(Located {
-        key: crate::mesh::checksum(&face.skin.vertices),
-        frame: located.0,
-        landmarks: located.1,
-    }));
+    if let Some((frame, landmarks)) = located {
+        let _ = kept.set(Some(Located {
+            key: crate::mesh::checksum(&face.skin.vertices),
+            frame,
+            landmarks,
+        }));
+    }
     Ok(Scene {
         case,
         vol: ct,
