@@ -36,16 +36,10 @@ fn phantom_case() -> Case {
     case
 }
 
-const TET_SKIPS_WITHOUT_MOVE: [&str; 6] = [
-    "coarsen",
-    "anatomy",
-    "tet_mesh",
-    "solve",
-    "embed",
-    "plan_basis",
-];
-// A plan of [[osteotomy]] regions needs no bony landmark: no anatomy stage.
-const TET_SKIPS: [&str; 2] = ["coarsen", "anatomy"];
+const TET_SKIPS_WITHOUT_MOVE: [&str; 5] = ["coarsen", "tet_mesh", "solve", "embed", "plan_basis"];
+// The phantom's CT holds the clinical frame: the anatomy stage runs for a plan of
+// [[osteotomy]] regions too (the report's frame and the page's views), and cuts nothing.
+const TET_SKIPS: [&str; 1] = ["coarsen"];
 
 const MOVABLE: ([f64; 3], f64) = ([0.0, -60.0, -45.0], 70.0);
 
@@ -139,7 +133,7 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
         .iter()
         .map(|s| s.stage.as_str())
         .collect();
-    assert_eq!(skipped, ["coarsen", "anatomy", "solve", "embed"]);
+    assert_eq!(skipped, ["coarsen", "solve", "embed"]);
     assert!(displacement(&o).iter().all(|d| *d == 0.0));
     let o = run(c1()).unwrap();
     let skipped: Vec<&str> = o
@@ -148,7 +142,7 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
         .iter()
         .map(|s| s.stage.as_str())
         .collect();
-    assert_eq!(skipped, ["coarsen", "anatomy", "embed"]);
+    assert_eq!(skipped, ["coarsen", "embed"]);
     // The volumetric model (the default) carries the scan whole: it never coarsens, and with
     // no bone move it neither meshes nor solves.
     let mut case = phantom_case();
@@ -170,6 +164,14 @@ fn stages_not_run_says_which_optional_stages_a_case_skipped() {
         .map(|s| s.stage.as_str())
         .collect();
     assert_eq!(skipped, TET_SKIPS);
+    let frame = o
+        .report
+        .clinical_frame
+        .as_ref()
+        .expect("the phantom's clinical frame");
+    // The one [[osteotomy]] step read back in the clinical frame.
+    assert_eq!(o.report.plan.as_ref().map(|p| p.segments.len()), Some(1));
+    assert!(!frame.why.is_empty());
 }
 
 #[test]

@@ -17,14 +17,17 @@ pub struct Anatomical {
     pub planned: Vec<Planned>,
 }
 
-/// Whether the case asks for the anatomy: a plan in clinical terms or a `[head]` table.
+/// Whether the case asks for the anatomy: a plan in clinical terms or a `[head]` table. Such a
+/// case fails when the anatomy cannot be found; any other case gets it when the CT holds it (the
+/// report's clinical frame and the page's views), and a note when not.
 pub fn wanted(case: &Case) -> bool {
     !case.surgery.is_empty() || case.head.is_some()
 }
 
 /// The anatomy of the head, and the case's `[[surgery]]` entries as osteotomies placed before its
-/// `[[osteotomy]]` entries. None (the stage skipped) when the case has no `[[surgery]]` and no
-/// `[head]`: a plan of `[[osteotomy]]` regions needs no landmark of the bone.
+/// `[[osteotomy]]` entries. `located` is the skin's midsagittal frame and soft landmarks (None:
+/// the skin gave none). None (the stage skipped, with the reason): a case that did not ask for
+/// the anatomy ([`wanted`]) and whose CT does not hold it.
 pub fn find(
     case: &mut Case,
     ct: &Volume,
@@ -32,20 +35,18 @@ pub fn find(
     located: Option<&(Option<HeadFrame>, Vec<Landmark>)>,
     rec: &mut Recorder,
 ) -> Result<Option<Anatomical>> {
-    let Some((frame, soft)) = located.filter(|_| wanted(case)) else {
+    let asked = wanted(case);
+    let Some((Some(midsagittal), soft)) = located else {
+        if !case.surgery.is_empty() {
+            return Err(Error::config(
+                "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
+            ));
+        }
         rec.skip(
             Stage::Anatomy,
-            "the plan has no [[surgery]] and the case no [head]: no cut to find",
+            "the skin gave no midsagittal plane (an empty or partial face): no clinical frame",
         );
         return Ok(None);
-    };
-    let Some(midsagittal) = frame else {
-        if case.surgery.is_empty() {
-            return Ok(None);
-        }
-        return Err(Error::config(
-            "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
-        ));
     };
     let found = rec.time(
         Stage::Anatomy,
@@ -69,7 +70,15 @@ pub fn find(
             .map_err(|e| Error::config(format!("case.toml: {e}")))?;
             Ok(Anatomical { anatomy, planned })
         },
-    )?;
+    );
+    let found = match found {
+        Ok(f) => f,
+        Err(e) if !asked => {
+            rec.skip(Stage::Anatomy, format!("no clinical frame: {e}"));
+            return Ok(None);
+        }
+        Err(e) => return Err(e),
+    };
     for note in found.planned.iter().flat_map(|p| &p.notes) {
         rec.warn(note.clone());
     }

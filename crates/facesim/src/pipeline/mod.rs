@@ -103,18 +103,19 @@ pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scen
     let bone_field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &bone_field, &case, rec)?;
     let face = face::place(surf, scan, &ct, &case, rec)?;
-    // The pre-operative landmarks, here only when the anatomy needs them (its midsagittal frame
-    // and soft landmarks); else the landmark stage locates them (`Scene::landmarks_pre`).
-    let located = if anatomy::wanted(&case) {
-        let user = inputs::user_landmarks(&case)?;
-        Some(crate::landmarks::locate(
-            &face.skin,
-            Some(&face.skull),
-            &user,
-            Path::new("case.toml"),
-        )?)
-    } else {
-        None
+    // The pre-operative landmarks (the anatomy's midsagittal frame and soft landmarks), located
+    // once and kept for the landmark stage (`Scene::landmarks_pre`). A case that did not ask for
+    // the anatomy keeps running when they cannot be located: the landmark stage reports why.
+    let user = inputs::user_landmarks(&case)?;
+    let located = match crate::landmarks::locate(
+        &face.skin,
+        Some(&face.skull),
+        &user,
+        Path::new("case.toml"),
+    ) {
+        Ok(l) => Some(l),
+        Err(e) if anatomy::wanted(&case) => return Err(e),
+        Err(_) => None,
     };
     let anatomy = anatomy::find(&mut case, &ct, &seg, located.as_ref(), rec)?;
     let model = model::build(&face, &ct, &seg, &bone_field, &case, rec)?;
