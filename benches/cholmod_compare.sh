@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Benchmark-only: faer vs CHOLMOD on the same C1 surface matrix (docs/fem.md).
+# Benchmark-only: faer vs CHOLMOD on the same C1 surface matrix (docs/design/fem.md).
 # Installs Debian's libsuitesparse-dev if needed; not part of the tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."

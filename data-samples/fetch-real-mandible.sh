@@ -4,7 +4,7 @@
 # it is shipped as a vtk.js dataset folder: Data/volume/headsq.vti/{index.json, data/<md5>.gz}.
 # Later versions (>= 6.4.24, and @kitware/vtk.js) dropped it. Fetched, never committed: only that
 # folder is copied into data-samples/real-mandible/headsq.vti/ (facesim reads it as it is,
-# docs/real-ct.md). Idempotent: does nothing when the dataset is already there.
+# docs/guide/real-ct.md). Idempotent: does nothing when the dataset is already there.
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 dest="$here/real-mandible/headsq.vti"

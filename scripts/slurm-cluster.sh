@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A throw-away one-node Slurm cluster on this machine (docs/cohort.md, "A real Slurm on one
+# A throw-away one-node Slurm cluster on this machine (docs/guide/cohort.md, "A real Slurm on one
 # machine"): munged, slurmctld and slurmd of Debian's slurm-wlm, run as root, every file —
 # configuration, munge key, state, spool, logs, sockets — under DIR, nothing in /etc.
 #

@@ -28,12 +28,12 @@ apt_install() {
   echo "test-setup: installed ${missing[*]}"
 }
 
-# CalculiX, the independent engine the volumetric model is checked against (docs/crosscheck.md).
+# CalculiX, the independent engine the volumetric model is checked against (docs/design/crosscheck.md).
 need_calculix() {
   command -v ccx >/dev/null 2>&1 || apt_install calculix-ccx
 }
 
-# Encoders for the compressed-DICOM fixtures (docs/dicom.md): dcmtk's dcmcjpeg, dcmcrle,
+# Encoders for the compressed-DICOM fixtures (docs/guide/dicom.md): dcmtk's dcmcjpeg, dcmcrle,
 # dcmcjpls and gdcm's gdcmconv (JPEG 2000).
 need_dicom_tools() {
   command -v dcmcjpeg >/dev/null 2>&1 || apt_install dcmtk
@@ -52,13 +52,13 @@ need_real_mandible() {
 }
 
 # A real 3D face scan with human-placed landmarks (menpo3d's "james", BSD-3, from PyPI; fetched,
-# never committed) for the face-mesh landmark test (docs/landmarks.md).
+# never committed) for the face-mesh landmark test (docs/guide/landmarks.md).
 need_face_scan() {
   "$root/data-samples/fetch-face-scan.sh"
 }
 
 # Headless Chromium for report.html's browser test (Debian's chromium, never a downloaded
-# browser), and node/npm to drive it (docs/report-page.md).
+# browser), and node/npm to drive it (docs/guide/report-page.md).
 need_browser() {
   command -v chromium >/dev/null 2>&1 || apt_install chromium
   command -v node >/dev/null 2>&1 || apt_install nodejs
@@ -76,7 +76,7 @@ need_npm() {
 }
 
 # A Python venv for the tests' Python tools (target/slicer-venv): ctk-cli, the CommonTK parser
-# of Slicer Execution Model XML, reads FaceSimPredict --xml (docs/slicer.md). Pinned; more
+# of Slicer Execution Model XML, reads FaceSimPredict --xml (docs/guide/slicer.md). Pinned; more
 # packages go in the pip line.
 need_python_venv() {
   python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || apt_install python3-venv
@@ -86,7 +86,7 @@ need_python_venv() {
     "$venv/bin/pip" install -q "ctk-cli==1.5"
     echo "test-setup: venv $venv with ctk-cli"
   }
-  # The facesim Python package (docs/python.md): maturin builds its wheel, pytest and numpy test
+  # The facesim Python package (docs/guide/python.md): maturin builds its wheel, pytest and numpy test
   # it (crates/facesim-cli/tests/python_package.rs). Pinned.
   "$venv/bin/python" -c 'import maturin, pytest, numpy' >/dev/null 2>&1 || {
     "$venv/bin/pip" install -q "maturin==1.16.0" "pytest==9.2.0" "numpy==2.4.6"
@@ -112,7 +112,7 @@ need_python_venv() {
   }
 }
 
-# The cohort workflow's tools in the same venv (docs/cohort.md): Snakemake runs workflow/Snakefile,
+# The cohort workflow's tools in the same venv (docs/guide/cohort.md): Snakemake runs workflow/Snakefile,
 # its Slurm executor plugin reads workflow/profiles/slurm (dry runs in the test), matplotlib
 # draws the charts. Pinned.
 need_cohort_tools() {
@@ -125,7 +125,7 @@ need_cohort_tools() {
 }
 
 # A real Slurm for the cohort workflow's cluster test (crates/facesim-cli/tests/slurm.rs,
-# docs/cohort.md "A real Slurm on one machine"): Debian's slurm-wlm 22.05 controller, node
+# docs/guide/cohort.md "A real Slurm on one machine"): Debian's slurm-wlm 22.05 controller, node
 # daemon and client commands, and munge. scripts/slurm-cluster.sh runs them from a temporary
 # directory; nothing here configures or starts a service (a container's policy-rc.d keeps apt
 # from starting them; elsewhere stop the packaged services: systemctl disable --now slurmctld

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Cohort throughput (docs/cohort.md, docs/performance.md): N jaws phantoms run one after the
+# Cohort throughput (docs/guide/cohort.md, docs/lab/performance.md): N jaws phantoms run one after the
 # other with `facesim run`, then through workflow/Snakefile with --cores 1 and --cores 2 (one
 # 2-thread job at a time, or two 1-thread jobs side by side). Prints one line per setting:
 # seconds, cases per hour, and the overhead against the single runs.

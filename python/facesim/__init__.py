@@ -1,4 +1,4 @@
-"""facesim: predict a patient's face after jaw surgery from a CT (docs/python.md).
+"""facesim: predict a patient's face after jaw surgery from a CT (docs/guide/python.md).
 
 ``run`` runs the pipeline on a case (a case directory, a case.toml, or the case as a dict),
 ``replan`` predicts the face for a new plan from a run's plan basis without re-solving, and

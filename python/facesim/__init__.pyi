@@ -1,4 +1,4 @@
-"""Type stubs of the facesim package (docs/python.md). Lengths in mm, LPS frame."""
+"""Type stubs of the facesim package (docs/guide/python.md). Lengths in mm, LPS frame."""
 
 import os
 from typing import Any, Dict, List, Mapping, Optional, TypedDict, Union

@@ -1,4 +1,4 @@
-"""Fixtures for the facesim package's tests (docs/python.md "Tests").
+"""Fixtures for the facesim package's tests (docs/guide/python.md "Tests").
 
 The command line is the independent path: a small phantom case is run by the `facesim` binary
 (FACESIM_BIN, set by crates/facesim-cli/tests/python_package.rs; default `facesim` on PATH) and by
@@ -57,7 +57,7 @@ class Ticker:
 
 @pytest.fixture(scope="session")
 def case_dir(tmp_path_factory) -> Path:
-    """The capsule phantom (a 6 mm mandibular advance, docs/phantom.md)."""
+    """The capsule phantom (a 6 mm mandibular advance, docs/design/phantom.md)."""
     d = tmp_path_factory.mktemp("phantom")
     cli("phantom", d)
     return d

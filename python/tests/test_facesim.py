@@ -1,4 +1,4 @@
-"""The installed facesim package against the command line's files (docs/python.md)."""
+"""The installed facesim package against the command line's files (docs/guide/python.md)."""
 
 import ast
 import csv

@@ -1,4 +1,4 @@
-// The update rate of report.html (docs/performance.md): setPlan + re-render per second in
+// The update rate of report.html (docs/lab/performance.md): setPlan + re-render per second in
 // headless Chromium (Debian's chromium, SwiftShader WebGL).
 //   node bench/rate.mjs REPORT.html [SECONDS]
 // Each update is setPlan followed by a 1-pixel read-back, which waits until the GPU process has
@@ -83,7 +83,7 @@ try {
         }
         return { updates: i, wall_ms: performance.now() - t0, canvas: [gl.drawingBufferWidth, gl.drawingBufferHeight] };
       },
-      // A tissue slider drag (docs/report-page.md "Tissue sliders"): an input event on the
+      // A tissue slider drag (docs/guide/report-page.md "Tissue sliders"): an input event on the
       // muscle/fat slider, then what the page's animation frame does (setTissue({}) applies
       // it and draws at the dragging resolution); pages without a reduced model: null.
       tissueRate(ms) {

@@ -1,4 +1,4 @@
-// Landmarks and facial regions in the page (docs/report-page.md, docs/landmarks.md): the run's
+// Landmarks and facial regions in the page (docs/guide/report-page.md, docs/guide/landmarks.md): the run's
 // landmarks carried with a plan exactly as `facesim replan` carries them — a soft-tissue one as a
 // material point of the face (barycentric weights on a face_pre triangle plus its offset), a bony
 // one by its segment's rigid move — and per-region displacement statistics with report.json's

@@ -1,4 +1,4 @@
-// A plan in the page (docs/report-page.md): a segment's rigid map x ↦ R (x − pivot) + pivot + t
+// A plan in the page (docs/guide/report-page.md): a segment's rigid map x ↦ R (x − pivot) + pivot + t
 // with R = Rz·Ry·Rx (rotate about x, then y, then z; degrees), as crates/facesim/src/osteotomy.rs.
 // Written as x ↦ x + M·[x; 1] with M = [R − I | (I − R)·pivot + t], the face displacement of a
 // linear model is d = Σ_k m_k · column_k (k = 4·i + j, row-major), so the basis columns give the
@@ -43,7 +43,7 @@ function mul(a, b) {
   return r;
 }
 
-/** The six clinical moves (docs/planning.md "Signs") as the page's move in LPS: R = R_yaw·R_roll·
+/** The six clinical moves (docs/guide/planning.md "Signs") as the page's move in LPS: R = R_yaw·R_roll·
  *  R_pitch, right-handed about the frame's left, forward and up axes, t = advance·forward +
  *  up·up + left·left (p' = R (p − pivot) + pivot + t). `frame`: {forward, up, left} (LPS units);
  *  a key left out is 0. */

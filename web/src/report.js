@@ -1,4 +1,4 @@
-// report.html's page logic (docs/report-page.md): the face before and after, lit and opaque, in
+// report.html's page logic (docs/guide/report-page.md): the face before and after, lit and opaque, in
 // the head's views (profile by default); the midsagittal profile tracing; landmark labels; the
 // displacement colour map with its legend in mm; per-segment sliders that re-plan live from the
 // plan basis; tables; PNG export and a one-page print layout. Data come from the
@@ -68,7 +68,7 @@ const VIEW_TEXT = {
   "profile-left": "in profile from the patient's left",
   "three-quarter": "in three-quarter view from the patient's front right",
 };
-// The plan's sliders per segment: [key, label, unit, tooltip]. Clinical: docs/planning.md
+// The plan's sliders per segment: [key, label, unit, tooltip]. Clinical: docs/guide/planning.md
 // "Signs"; LPS: [translate | rotate_deg, axis index].
 const SLIDER_KEYS = {
   clinical: [
@@ -893,7 +893,7 @@ function main() {
   if (!tissue) {
     tissueBox.appendChild(
       el("p", { class: "hint" }, data.model === "tet"
-        ? "Tissue sliders need the run's certified reduced model: run with [uncertainty] samples ≥ 64 (or method = \"reduced\") and the linear tet model (docs/reduced.md)."
+        ? "Tissue sliders need the run's certified reduced model: run with [uncertainty] samples ≥ 64 (or method = \"reduced\") and the linear tet model (docs/design/reduced.md)."
         : "Tissue sliders need the linear volumetric model (\"tet\") with its certified reduced model."),
     );
   } else {
@@ -1186,7 +1186,7 @@ function main() {
     for (const [k, b] of Object.entries(u.landmarks || {})) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
     for (const [k, b] of Object.entries(u.regions || {})) if (b) row(ut, [k, fmt(b.mean, 2), fmt(b.p05, 2), fmt(b.p95, 2)]);
     side.appendChild(ut);
-    // The reduced model's certificate: each sample within these of the full model (docs/reduced.md).
+    // The reduced model's certificate: each sample within these of the full model (docs/design/reduced.md).
     if (u.method === "reduced" && u.largest_bound_mm !== undefined) {
       const bounds = Object.entries(u.landmark_bounds_mm || {}).filter(([, b]) => b > 0);
       const worst = bounds.reduce((m, [, b]) => Math.max(m, b), 0);
@@ -1272,7 +1272,7 @@ function main() {
     return out.toDataURL("image/png");
   }
 
-  // ---- automation API (docs/report-page.md) ----
+  // ---- automation API (docs/guide/report-page.md) ----
   window.facesim = {
     /** Re-plan: segment name → {translate: [x,y,z] mm, rotate_deg: [rx,ry,rz]}; a segment left out
      *  does not move. Applied and drawn before it returns, as a slider move is: at the dragging
@@ -1287,7 +1287,7 @@ function main() {
       dragFrame(true);
     },
     /** Re-plan in the clinical frame: segment name → {advance_mm, up_mm, left_mm, pitch_deg,
-     *  roll_deg, yaw_deg} (a key left out: 0; docs/planning.md "Signs", about the segment's
+     *  roll_deg, yaw_deg} (a key left out: 0; docs/guide/planning.md "Signs", about the segment's
      *  pivot); a segment left out does not move. Drawn before it returns, as setPlan. */
     setPlanClinical(p) {
       if (!basis) throw new Error(data.no_basis_reason || "report.html: no plan basis");

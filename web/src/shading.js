@@ -4,7 +4,7 @@
 // little past the terminator, as it does through skin), and a broad, weak, Fresnel-weighted
 // Blinn-Phong highlight (energy-normalised; F0 0.028, skin's). Hand-written rather than
 // MeshStandardMaterial: with software WebGL (SwiftShader) three.js' generic PBR shader cost most
-// of a frame (docs/performance.md); this one is a few dozen operations per fragment.
+// of a frame (docs/lab/performance.md); this one is a few dozen operations per fragment.
 import * as THREE from "three";
 
 // The lighting, in view space (the lights move with the camera): n the unit normal, v the unit

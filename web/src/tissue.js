@@ -1,5 +1,5 @@
-// The tissue sliders' maths (docs/report-page.md "Tissue sliders"): the run's certified reduced
-// model (docs/reduced.md) solved in the page, as crates/facesim/src/reduced/basis.rs
+// The tissue sliders' maths (docs/guide/report-page.md "Tissue sliders"): the run's certified reduced
+// model (docs/design/reduced.md) solved in the page, as crates/facesim/src/reduced/basis.rs
 // `OnlineForm::solve` solves it, with its certified bound; the sampled tissue parameters mapped
 // to materials as crates/facesim/src/uncertainty/run.rs `Draw::apply` maps them. Pure functions
 // over plain arrays (no DOM, no three.js): web/test/tissue.test.mjs tests them with node.

@@ -1,4 +1,4 @@
-// Screenshots of a report.html for docs/report-page.md (docs/img/report-*.png):
+// Screenshots of a report.html for docs/guide/report-page.md (docs/img/report-*.png):
 //   node test/shots.mjs REPORT.html OUT_PREFIX
 // writes OUT_PREFIX-profile.png (the page as it opens), OUT_PREFIX-three-quarter-both.png and
 // OUT_PREFIX-front-before.png, 1000 × 700 CSS px; with tissue sliders (a run with the reduced

@@ -160,7 +160,7 @@ try {
     };
   });
   const pdf = await page.pdf({ format: "A4", printBackground: true });
-  // The print layout as a picture (A4's printable width at 96 dpi) for docs/report-page.md.
+  // The print layout as a picture (A4's printable width at 96 dpi) for docs/guide/report-page.md.
   await page.setViewport({ width: 726, height: 1047 });
   await page.screenshot({ path: join(shots, "print.png") });
   await page.emulateMediaType("screen");

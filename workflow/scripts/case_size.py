@@ -1,4 +1,4 @@
-"""A case's size as the cohort workflow sizes its jobs (docs/cohort.md, "Resources from the
+"""A case's size as the cohort workflow sizes its jobs (docs/guide/cohort.md, "Resources from the
 model", its fallback formula): the CT's voxel count and the skin scan's vertex count, read from the files' headers
 without loading them, and the resources a `facesim run` of that size needs. Standard library
 only; imported by workflow/Snakefile and workflow/scripts/size_figures.py.
@@ -109,8 +109,8 @@ def case_size(plan):
     return (ct_voxels(ct) if ct else None), (mesh_vertices(skin) if skin else None)
 
 
-# The formula (docs/cohort.md gives the measurements behind it, from size_figures.py and
-# docs/performance.md). Peak memory of the default (tet) model, the most expensive one, is
+# The formula (docs/guide/cohort.md gives the measurements behind it, from size_figures.py and
+# docs/lab/performance.md). Peak memory of the default (tet) model, the most expensive one, is
 # about 1.35–1.45 GB on every jaws phantom from 0.26 to 2 M voxels and 1.68 GB on the 106 M-voxel
 # phantom: a fixed 1 400 MB plus the CT's float copy (4 bytes a voxel) plus the skin scan; times
 # MEM_MARGIN. Wall time: 9 s on a quiet core for the 2 mm phantom and 9.3 s for 106 M voxels,
@@ -141,10 +141,10 @@ def resources_for(voxels, vertices):
     return int(math.ceil(mem / 100.0) * 100), max(MIN_RUNTIME_MIN, int(math.ceil(sec / 60.0)))
 
 
-# Resources from the model itself (docs/cohort.md "Resources from the model"): `facesim estimate`
+# Resources from the model itself (docs/guide/cohort.md "Resources from the model"): `facesim estimate`
 # builds the run's mesh and analyses its factor symbolically, and predicts the run's peak memory
 # and wall time. A job holds more than facesim (the job script, Snakemake's job step): JOB_MB on
-# top. Its time is the prediction for a quiet machine like docs/cohort.md's, times
+# top. Its time is the prediction for a quiet machine like docs/guide/cohort.md's, times
 # ESTIMATE_RUNTIME_MARGIN for a loaded or slower node, at least MIN_RUNTIME_MIN.
 JOB_MB = 300
 ESTIMATE_RUNTIME_MARGIN = 4

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The cohort's charts from cohort.csv (docs/cohort.md), PNG, with matplotlib:
+"""The cohort's charts from cohort.csv (docs/guide/cohort.md), PNG, with matplotlib:
 region_mean_mm.png — mean displacement per facial region, one dot per run, per variant;
 soft_hard_ratios.png — soft/hard tissue ratios per case and variant;
 seconds.png — wall time and peak memory of each run.

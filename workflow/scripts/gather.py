@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The cohort table (docs/cohort.md): one row per case, plan, variant and region of the
+"""The cohort table (docs/guide/cohort.md): one row per case, plan, variant and region of the
 result.json files given (run_case.py) and their runs' report.json — region "face" for the whole
 face, then report.json's facial regions. A failed run has one row, region "face", its status
 facesim's one-line error (or Slurm's reason, "slurm: job N OUT_OF_MEMORY (…)") and the figures

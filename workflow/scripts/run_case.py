@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""One cohort run (docs/cohort.md): `facesim run PLAN --out OUT [--set K=V ...]`, timed, and its
+"""One cohort run (docs/guide/cohort.md): `facesim run PLAN --out OUT [--set K=V ...]`, timed, and its
 result.json — status "ok" or facesim's one-line error, wall seconds, peak memory of the
 facesim process, and its provenance (facesim's version and binary hash, the case's hash).
 Exits 0 whether facesim succeeded or not, so one broken case does not stop the cohort; only a
@@ -11,7 +11,7 @@ time Slurm granted, facesim's peak memory so far, kept up to date while facesim 
 attempt Slurm kills still leaves what it asked for and what it used. A retry (--attempt 2, 3, …)
 asks Slurm how each earlier attempt's job ended and lists them in result.json
 ("earlier_attempts"). The Snakefile asks Slurm too, and gives a retry after OUT_OF_MEMORY or
-TIMEOUT more memory or time (docs/cohort.md, "Retries that grow"); a retry whose request did not
+TIMEOUT more memory or time (docs/guide/cohort.md, "Retries that grow"); a retry whose request did not
 grow (at the configured maximum) would be killed again, so it records Slurm's reason as the run's
 status instead of running facesim. Standard library only."""
 

@@ -1,4 +1,4 @@
-"""Is a path on storage a cluster's nodes share? (docs/cohort.md, "Shared storage".) The
+"""Is a path on storage a cluster's nodes share? (docs/guide/cohort.md, "Shared storage".) The
 Snakefile asks before it submits anything: the facesim binary, the cohort, OUT, the workflow's
 scripts and the Python that runs them must all be visible on the compute nodes. A path counts as
 shared when it lies under one of the directories the configuration's `shared_storage` lists
@@ -64,6 +64,6 @@ def check_shared(paths, shared_dirs):
             return (
                 f"{name} {path} is on a local file system ({fstype} at {point}), which the "
                 "compute nodes do not see: put it on shared storage, or list the directories "
-                "every node mounts in shared_storage (docs/cohort.md)"
+                "every node mounts in shared_storage (docs/guide/cohort.md)"
             )
     return None

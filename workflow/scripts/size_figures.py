@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The figures behind the workflow's resource formula (docs/cohort.md, "Resources from the
+"""The figures behind the workflow's resource formula (docs/guide/cohort.md, "Resources from the
 model", its fallback formula): one jaws phantom per voxel size, each run with the models given, one after the other;
 prints CT voxels, skin-scan vertices, wall seconds and peak resident memory per run as CSV.
 

@@ -1,4 +1,4 @@
-//! The command line's observer: a spinner on a terminal only (docs/case.md: quiet when not one),
+//! The command line's observer: a spinner on a terminal only (docs/reference/case.md: quiet when not one),
 //! through indicatif, and the counting allocator's heap figures for report.json.
 
 use facesim::meter::HeapProbe;

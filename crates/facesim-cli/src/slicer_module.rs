@@ -1,4 +1,4 @@
-//! `FaceSimPredict`: facesim as a 3D Slicer CLI module (docs/slicer.md).
+//! `FaceSimPredict`: facesim as a 3D Slicer CLI module (docs/guide/slicer.md).
 //!
 //! `FaceSimPredict --xml` prints the module's Slicer Execution Model description; called with
 //! the flags it declares (as Slicer calls it: volumes as temporary .nrrd files, models as .vtk,
@@ -22,7 +22,7 @@ fn xml() -> String {
   <title>FaceSim Predict</title>
   <description><![CDATA[Predicts the patient's face after jaw surgery (e.g. a maxillary or mandibular advancement) from a CT: the soft tissue is modelled between skin and bone, the bone segments are moved as planned, and the predicted face is written as a model with the displacement (mm, LPS) as point data.]]></description>
   <version>{version}</version>
-  <documentation-url>https://github.com/facesim/facesim/blob/main/docs/slicer.md</documentation-url>
+  <documentation-url>https://github.com/facesim/facesim/blob/main/docs/guide/slicer.md</documentation-url>
   <license>See the facesim repository</license>
   <contributor>The facesim project</contributor>
   <acknowledgements><![CDATA[After Koch, Gross et al., Simulating Facial Surgery Using Finite Element Models (SIGGRAPH 1996).]]></acknowledgements>
@@ -61,7 +61,7 @@ fn xml() -> String {
       <name>surgery</name>
       <label>Surgery (clinical terms)</label>
       <longflag>surgery</longflag>
-      <description><![CDATA[Instead of segment models: one entry per osteotomy as a surgeon states it, "KIND key=value ...", e.g. "le-fort-i advance_mm=5 up_mm=2" or "bsso advance_mm=-4"; KIND is le-fort-i, bsso or genioplasty; keys advance_mm, up_mm, left_mm, pitch_deg, roll_deg, yaw_deg, pivot, autorotate, name (docs/planning.md). The cuts are found from the CT.]]></description>
+      <description><![CDATA[Instead of segment models: one entry per osteotomy as a surgeon states it, "KIND key=value ...", e.g. "le-fort-i advance_mm=5 up_mm=2" or "bsso advance_mm=-4"; KIND is le-fort-i, bsso or genioplasty; keys advance_mm, up_mm, left_mm, pitch_deg, roll_deg, yaw_deg, pivot, autorotate, name (docs/guide/planning.md). The cuts are found from the CT.]]></description>
     </string>
     <geometry fileExtensions=".vtk">
       <name>movable</name>
@@ -354,7 +354,7 @@ fn main() {
     }
     if argv.is_empty() || argv.iter().any(|a| a == "--help" || a == "-h") {
         println!(
-            "{NAME}: facesim as a 3D Slicer CLI module.\n  {NAME} --xml    print the Slicer Execution Model description\n  {NAME} --ct CT.nrrd --segments SEG.vtk --transforms SEG.tfm --predictedFace FACE.vtp [--face F.vtk] [--movable M.vtk] [--model tet|equilibrium] [--landmarks L.mrk.json]\nSee docs/slicer.md."
+            "{NAME}: facesim as a 3D Slicer CLI module.\n  {NAME} --xml    print the Slicer Execution Model description\n  {NAME} --ct CT.nrrd --segments SEG.vtk --transforms SEG.tfm --predictedFace FACE.vtp [--face F.vtk] [--movable M.vtk] [--model tet|equilibrium] [--landmarks L.mrk.json]\nSee docs/guide/slicer.md."
         );
         return;
     }

@@ -96,7 +96,7 @@ fn phantom_case_runs_and_writes_every_output() {
             "timing {stage}"
         );
     }
-    // The given face scan is the face, vertex for vertex (docs/case.md: same vertices, same order).
+    // The given face scan is the face, vertex for vertex (docs/reference/case.md: same vertices, same order).
     let scan = facesim::mesh::read_mesh(&phantom_dir().join("face.ply")).unwrap();
     let pre = facesim::mesh::read_mesh(&out.join("face_pre.ply")).unwrap();
     assert!(

@@ -1,4 +1,4 @@
-//! The cohort workflow end to end (docs/cohort.md): `facesim phantom-cohort` writes shaped
+//! The cohort workflow end to end (docs/guide/cohort.md): `facesim phantom-cohort` writes shaped
 //! jaws phantoms whose written CT shows the analytic chin; `workflow/Snakefile` (Snakemake from
 //! the venv scripts/test-setup.sh makes) plans the runs (`-n`), then runs two cases × two
 //! variants plus a broken case on two cores; cohort.csv is checked row by row against each

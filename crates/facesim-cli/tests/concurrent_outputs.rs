@@ -1,4 +1,4 @@
-//! Runs beside each other lose no output (docs/case.md "Outputs"): eight `facesim replan`
+//! Runs beside each other lose no output (docs/reference/case.md "Outputs"): eight `facesim replan`
 //! processes at a time, each into its own folder of one shared parent, round after round; every
 //! output must hold exactly the files of a replan run alone, byte for byte, and every process
 //! must succeed. The output unit's protocol itself is tested with pauses injected at each of
@@ -13,7 +13,7 @@ use std::process::Command;
 const AT_ONCE: usize = 8;
 
 /// Rounds of them: 25 in the suite (200 outputs); `FACESIM_STRESS_ROUNDS=100` gives the 800 of
-/// docs/case.md's measurement.
+/// docs/reference/case.md's measurement.
 fn rounds() -> usize {
     std::env::var("FACESIM_STRESS_ROUNDS")
         .ok()

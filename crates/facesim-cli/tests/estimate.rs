@@ -1,4 +1,4 @@
-//! `facesim estimate` (docs/cohort.md "Resources from the model"): the factor it analyses
+//! `facesim estimate` (docs/guide/cohort.md "Resources from the model"): the factor it analyses
 //! before any numeric work is the run's or larger (it counts every node the plan leaves to solve,
 //! where the run holds some more), on the same mesh; a plan that moves no bone needs no system;
 //! a broken case is one line and a non-zero exit.

@@ -2,7 +2,7 @@
 //! random overwrites, insertions, deletions, "interesting" bytes and truncation, then read. A
 //! reader may refuse the file — with one line naming it — but must never panic or hang.
 //!
-//! Cases per target: FACESIM_FUZZ_CASES (default 200, what CI runs). docs/reliability.md records
+//! Cases per target: FACESIM_FUZZ_CASES (default 200, what CI runs). docs/lab/reliability.md records
 //! the long runs (`FACESIM_FUZZ_CASES=20000 cargo test --release --test fuzz -- --nocapture`).
 //! Inputs that once crashed a reader are kept in tests/fuzz-regressions/ and replayed below.
 
@@ -323,7 +323,7 @@ fn appended_zlib_vtp() -> Vec<u8> {
 
 #[test]
 fn fuzz_model_files() {
-    // The formats a region surface or a skin from another program comes in (docs/slicer.md).
+    // The formats a region surface or a skin from another program comes in (docs/guide/slicer.md).
     let d = tempfile::tempdir().unwrap();
     let m = tetrahedron();
     let read_model = |p: &Path| -> Result<(), TestCaseError> {

@@ -1,4 +1,4 @@
-//! A run's outputs are one unit (docs/case.md "Outputs"): `facesim run` killed with SIGKILL at
+//! A run's outputs are one unit (docs/reference/case.md "Outputs"): `facesim run` killed with SIGKILL at
 //! random points of its write stage leaves the previous complete run or the new complete run
 //! (or, off Linux, which swaps the two in one step, no output), never a mix, and the next run
 //! removes the temporaries the killed one left.

@@ -137,7 +137,7 @@ fn setback_rotation_and_le_fort_move_the_face_their_way() {
 /// Issue 27 item 3: README's first command (`facesim run data-samples/jaws`) on a face: every
 /// soft-tissue landmark found, no warning, no inverted element; the upper face stays where
 /// it was, and the BSSO advance moves the lower face inside the published soft/hard ranges
-/// (docs/validation.md) with the defaults; the page is written.
+/// (docs/guide/validation.md) with the defaults; the page is written.
 #[test]
 fn the_first_sample_shows_a_face_with_every_soft_landmark() {
     let case = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
@@ -172,7 +172,7 @@ fn the_first_sample_shows_a_face_with_every_soft_landmark() {
 
 #[test]
 fn a_hollow_nose_is_asked_for_by_name_and_only_the_jaws_head_has_one() {
-    // `--nose hollow` (docs/phantom.md "Nasal passages"), of `phantom` and `phantom-cohort`:
+    // `--nose hollow` (docs/design/phantom.md "Nasal passages"), of `phantom` and `phantom-cohort`:
     // the case's phantom.toml says so and
     // its CT is air inside the nose beside the septum, where the standard head's is tissue;
     // the capsule head refuses it in one line.

@@ -1,4 +1,4 @@
-//! Plans in the surgeon's words through `facesim run` (docs/planning.md): on both real CTs a
+//! Plans in the surgeon's words through `facesim run` (docs/guide/planning.md): on both real CTs a
 //! case.toml holding only the CT and `[[surgery]]` entries predicts the face, every bony
 //! landmark moves exactly as stated in the head frame, and a plan the CT cannot carry is one
 //! line naming case.toml with nothing written.

@@ -1,4 +1,4 @@
-//! The Python package (docs/python.md): the wheel built by maturin from python/pyproject.toml
+//! The Python package (docs/guide/python.md): the wheel built by maturin from python/pyproject.toml
 //! (into target/wheels, on the workspace's target dir, so a warm build only compiles the module
 //! crate), installed into the venv scripts/test-setup.sh makes (target/slicer-venv), and tested
 //! by pytest (python/tests) against this build's `facesim` binary: run, replan and sweep equal

@@ -59,7 +59,7 @@ fn bsso_advance_runs_and_moves_the_lower_lip() {
     assert!(ls0[2] > sto[2] && sto[2] > li0[2]);
 }
 
-/// The nose tip on a head pitched face-down (docs/landmarks.md, Prn): headsq's dorsum runs
+/// The nose tip on a head pitched face-down (docs/guide/landmarks.md, Prn): headsq's dorsum runs
 /// within 2.3 mm of the CT's vertical for 60 mm, so its most anterior skin point lies on the
 /// dorsum, 30 mm above the tip. Pronasale must be the most protruded point of the nose: checked
 /// here on the run's face_pre.ply itself, as the midsagittal skin vertex (within 2 mm of the
@@ -121,7 +121,7 @@ fn the_nose_tip_of_a_head_pitched_face_down_is_its_tip() {
         front(prn)
     );
     // The alae of this coarse, pitched nose: the grooves its horizontal sections find are not a
-    // nose's width apart (docs/landmarks.md, Al), so both are missing, saying why, not placed.
+    // nose's width apart (docs/guide/landmarks.md, Al), so both are missing, saying why, not placed.
     for side in ["Al-R", "Al-L"] {
         let why = r["landmarks"][side]["missing"].as_str().unwrap_or_default();
         assert!(
@@ -132,10 +132,10 @@ fn the_nose_tip_of_a_head_pitched_face_down_is_its_tip() {
     }
 }
 
-/// The chin landmarks found where they belong (docs/landmarks.md "The chin": chord definitions
+/// The chin landmarks found where they belong (docs/guide/landmarks.md "The chin": chord definitions
 /// that hold on this head, which lies some 25° face-down), and the soft/hard ratio at the chin
 /// within a broad physical range. Soft menton is not in this scan: the CT's last slice is 4.5 mm
-/// under bony menton, and the soft tissue under the chin runs on past it (docs/real-ct.md); it
+/// under bony menton, and the soft tissue under the chin runs on past it (docs/guide/real-ct.md); it
 /// must be reported missing with that reason, never placed at the scan's edge.
 #[test]
 fn chin_landmarks_and_ratios() {
@@ -201,7 +201,7 @@ fn chin_landmarks_and_ratios() {
 /// −y) read as a BSSO advancement, and each of its four published rows recomputed here from the
 /// report's own landmarks and head frame: the soft landmark's move along the anterior axis over
 /// the translation's (a pure translation moves every bone point alike), beside the range
-/// docs/validation.md publishes; soft menton, not in this scan, reported missing. The page
+/// docs/guide/validation.md publishes; soft menton, not in this scan, reported missing. The page
 /// carries the same section.
 fn published_ratios_are_the_runs_moves_over_the_plans(r: &Value, out: &Path) {
     let c = &r["published_ratios"];

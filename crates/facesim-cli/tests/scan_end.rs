@@ -3,7 +3,7 @@
 //! the upper incisors' crowns. The jaws phantom's CT cut there is the same head with the same
 //! Le Fort I advance, so the uncut phantom's answer is what the cut one should give: with the
 //! tissue sliding on the scan's end plane (the default) the nose and lip must come much nearer
-//! it than with a free end (docs/validation-notes.md "Where the scan ends: a truncation study").
+//! it than with a free end (docs/lab/validation-notes.md "Where the scan ends: a truncation study").
 
 mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
@@ -11,7 +11,7 @@ mod common;
 
 use std::path::Path;
 
-/// The landmarks compared: the Le Fort I advance's soft rows (docs/validation.md).
+/// The landmarks compared: the Le Fort I advance's soft rows (docs/guide/validation.md).
 const SOFT: [&str; 3] = ["Prn", "Sn", "Ls"];
 
 /// A Le Fort I advance of 5 mm on the phantom's maxilla box (`Shape::boxes`), the skin from the

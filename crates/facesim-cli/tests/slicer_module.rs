@@ -1,4 +1,4 @@
-//! `FaceSimPredict`, the 3D Slicer CLI module (docs/slicer.md): its Execution Model XML read by
+//! `FaceSimPredict`, the 3D Slicer CLI module (docs/guide/slicer.md): its Execution Model XML read by
 //! an independent parser (ctk-cli, the CommonTK CLI parser from PyPI, in the venv
 //! scripts/test-setup.sh makes), and the executable called the way Slicer calls it — the CT as a
 //! temporary .nrrd, segments as .vtk, transforms as .tfm, flags as the XML declares them.

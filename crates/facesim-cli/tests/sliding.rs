@@ -84,6 +84,6 @@ fn lips_slide_on_the_teeth_of_the_real_ct() {
     // lip–tooth contact itself is 0.018 mm mean within 15 mm of labrale superius (against the build
     // without it); the rest is the saw line's release, which `sliding = false` also attaches. The
     // Le Fort I advance is nearly normal to the incisors' labial faces, so sliding releases little
-    // there: only the tangential part of the move is not passed on (docs/pipeline.md).
+    // there: only the tangential part of the move is not passed on (docs/design/pipeline.md).
     assert!(upper.1 >= 0.05, "upper lip on vs off: {upper:?}");
 }

@@ -1,4 +1,4 @@
-//! The cohort workflow on a real Slurm (docs/cohort.md, "A real Slurm on one machine"; issue 29).
+//! The cohort workflow on a real Slurm (docs/guide/cohort.md, "A real Slurm on one machine"; issue 29).
 //! scripts/slurm-cluster.sh starts a throw-away one-node cluster — munged, slurmctld, slurmd of
 //! Debian's slurm-wlm 22.05, run as root, configuration, munge key and state in a temporary
 //! directory — and workflow/Snakefile runs through snakemake-executor-plugin-slurm with the
@@ -1100,7 +1100,7 @@ fn stop_ends_running_jobs_and_their_cgroups() {
 
 /// The default (volumetric) model on the cluster with `auto` resources: two phantoms of a seed
 /// no fit saw, each with its translation and its rotation plan, every job sized by `facesim
-/// estimate` (docs/cohort.md "Resources from the model"). No job may end OUT_OF_MEMORY, every
+/// estimate` (docs/guide/cohort.md "Resources from the model"). No job may end OUT_OF_MEMORY, every
 /// run completes on its first attempt, and each asked for more memory than it peaked at.
 #[test]
 fn the_default_model_on_auto_resources_loses_no_job_to_memory() {

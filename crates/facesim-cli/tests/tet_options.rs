@@ -295,7 +295,7 @@ fn neo_hookean_converges_on_the_real_ct_near_the_linear_face() {
 /// count. Tearing tissue behind the maxilla must barely change the face: the kept solve's face
 /// (written for inspection) and the torn one agree within 0.35 mm at every vertex and 0.01 mm on
 /// average (measured 0.28 and 0.004 mm, with the face moving 23.6 mm; 0.06 mm worst while the
-/// scan's end was free, before session 63; docs/pipeline.md "Large moves").
+/// scan's end was free, before session 63; docs/design/pipeline.md "Large moves").
 #[test]
 fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");
@@ -362,7 +362,7 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
         .unwrap();
     assert!((0.8..=1.0).contains(&ls), "Ls/A {ls}");
     // The face follows the 25 mm advance (the face at small y) and no further. The lip's edge
-    // where the scan ends, 5 mm below labrale superius, is free (docs/pipeline.md "Region") and
+    // where the scan ends, 5 mm below labrale superius, is free (docs/design/pipeline.md "Region") and
     // rises 6–8 mm as the teeth carry it forward, so the largest move's length is up to a tenth
     // over the advance.
     let forward = face
@@ -379,7 +379,7 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
     );
 }
 
-/// `[tet] nose_youngs_kpa` (docs/validation-notes.md "A structural candidate: the nasal
+/// `[tet] nose_youngs_kpa` (docs/lab/validation-notes.md "A structural candidate: the nasal
 /// framework"): the external nose, found from the pre-operative landmarks, takes one stiffer
 /// modulus. On the real CT (5 mm Le Fort I advance) the framework's tetrahedra must lie where the
 /// run's own landmarks put the nose — between the alae, above subnasale, below soft nasion, in
@@ -580,7 +580,7 @@ fn a_stiff_nasal_framework_lies_in_the_nose_and_holds_its_base_back() {
     );
 }
 
-/// `[tet] septum_detached` (docs/validation-notes.md "The septum off the maxilla"): on the real
+/// `[tet] septum_detached` (docs/lab/validation-notes.md "The septum off the maxilla"): on the real
 /// CT's 5 mm Le Fort I advance the option holds still, and only there, tissue on the maxilla's
 /// nasal floor behind the piriform aperture: the same mesh as the default's, with exactly the
 /// report's count of nodes more held and not moved (but those the advance's shear lifts off),
@@ -648,7 +648,7 @@ fn a_detached_septum_holds_the_nasal_floor_still_and_subnasale_follows_less() {
     // Every other held node is held as by default.
     assert!(both.is_empty(), "held otherwise than by default: {both:?}");
     // A held node whose element the advance shears inside out lifts off like any bone node
-    // of an inverted element (docs/pipeline.md "Large moves"): most stay held.
+    // of an inverted element (docs/design/pipeline.md "Large moves"): most stay held.
     assert!(
         newly <= held && 4 * newly >= 3 * held,
         "{newly} of the {held} nodes the report holds are held and still"

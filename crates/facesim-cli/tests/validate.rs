@@ -1,6 +1,6 @@
 //! `facesim validate` through the real binary (issue 26 item 2): one coarse phantom and one
 //! surgery, its ratios recomputed from the run's own report.json and its ranges held against
-//! docs/validation.md's table; a Le Fort I's region holding the whole nose; the real headsq's
+//! docs/guide/validation.md's table; a Le Fort I's region holding the whole nose; the real headsq's
 //! BSSO advance against the published chin ratio; the tissue the Le Fort I's and the
 //! genioplasty's approaches raise; bad input as one line.
 
@@ -17,9 +17,9 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
-/// docs/validation.md's published table: (surgery, soft) → (low, high).
+/// docs/guide/validation.md's published table: (surgery, soft) → (low, high).
 fn documented_ranges() -> HashMap<(String, String), (f64, f64)> {
-    let text = std::fs::read_to_string(root().join("docs/validation.md")).unwrap();
+    let text = std::fs::read_to_string(root().join("docs/guide/validation.md")).unwrap();
     let mut out = HashMap::new();
     for line in text.lines() {
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
@@ -42,7 +42,7 @@ fn documented_ranges() -> HashMap<(String, String), (f64, f64)> {
             out.insert((cells[1].to_string(), cells[2].to_string()), (lo, hi));
         }
     }
-    assert!(out.len() >= 20, "docs/validation.md's table: {out:?}");
+    assert!(out.len() >= 20, "docs/guide/validation.md's table: {out:?}");
     out
 }
 
@@ -153,7 +153,7 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
         assert_eq!(
             (num(&row["published_low"]), num(&row["published_high"])),
             (Some(lo), Some(hi)),
-            "{key:?}: validation.csv's range is not docs/validation.md's"
+            "{key:?}: validation.csv's range is not docs/guide/validation.md's"
         );
         match num(&row["predicted_ratio"]) {
             Some(ratio) => {
@@ -301,7 +301,7 @@ fn a_le_fort_advance_takes_in_the_whole_nose() {
     let out = validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]);
     let run = run_report(&out, "phantom01", "lefort-advance");
     // A Le Fort I advance treats Class III: its phantom is built with the mandible ahead
-    // (docs/validation.md "What was compared"), and validation.md says so.
+    // (docs/guide/validation.md "What was compared"), and validation.md says so.
     let built: Vec<PathBuf> = std::fs::read_dir(out.join("phantoms"))
         .unwrap()
         .map(|e| e.unwrap().path())
@@ -341,7 +341,7 @@ fn a_le_fort_advance_takes_in_the_whole_nose() {
     assert!(row["note"].is_empty(), "{row:?}");
     let ratio = num(&row["predicted_ratio"]).expect("Prn not measured");
     assert!((ratio - recompute(&run, row)).abs() < 1.5e-3, "{row:?}");
-    // Evidence, not a pass mark (docs/validation.md): with the cut and frame found from the CT
+    // Evidence, not a pass mark (docs/guide/validation.md): with the cut and frame found from the CT
     // this phantom's Prn follows by 0.49, above the published 0.17-0.36; what is required is
     // that the nose tip follows the maxilla, by less than it moves.
     let (lo, hi) = documented_ranges()[&("lefort-advance".to_string(), "Prn".to_string())];
@@ -371,7 +371,7 @@ fn a_le_fort_advance_takes_in_the_whole_nose() {
 #[test]
 fn hollow_phantom_noses_are_asked_for_and_the_segmentation_finds_their_passages() {
     // The validation's phantoms have hollow noses by default, `--phantom-noses solid` the
-    // standard head's (docs/phantom.md "Nasal passages"): the phantom written says which, and
+    // standard head's (docs/design/phantom.md "Nasal passages"): the phantom written says which, and
     // a hollow nose's CT holds the passages as a cavity the solid nose does not have: the
     // segmentation's enclosed air grows by more than a millilitre.
     let cavity = |out: &Path| {
@@ -389,7 +389,7 @@ fn hollow_phantom_noses_are_asked_for_and_the_segmentation_finds_their_passages(
     };
     assert!(shape(&hollow).contains("\nnasal_passages = true\n"));
     assert!(!shape(&solid).contains("nasal_passages"));
-    // 3 mm voxels: 27 mm^3 each; the passages hold about 8 ml (docs/phantom.md), of which the
+    // 3 mm voxels: 27 mm^3 each; the passages hold about 8 ml (docs/design/phantom.md), of which the
     // voxels wholly inside, with 4 mm walls, are well over 1 ml.
     let (h, s) = (cavity(&hollow), cavity(&solid));
     assert!(h - s > 1000.0 / 27.0, "cavity voxels {h} hollow, {s} solid");
@@ -459,14 +459,14 @@ fn the_real_headsq_bsso_advance_keeps_the_soft_chin_inside_the_published_range()
     assert!((10.0..25.0).contains(&pitch), "{}", run["clinical_frame"]);
 }
 
-/// `[tet] degloved_maxilla` (docs/validation-notes.md "The degloved maxilla") on the real CT's Le
+/// `[tet] degloved_maxilla` (docs/lab/validation-notes.md "The degloved maxilla") on the real CT's Le
 /// Fort I advance and setback: the tissue raised off the anterior maxilla rests on it one way only.
 /// Signorini's conditions where the rounds end: every raised node still on the bone is pushed by
 /// it (the rounds settled), every lifted one lies clear of the bone's move (within 0.01 mm).
 /// The bone pulls the tissue after it in a setback and pushes it in an advance, so the model is
 /// no longer odd in the move (bonded, a setback's ratios are the advance's to round-off): the
 /// setback leaves subnasale and the upper lip behind, subnasale inside the range the clinic
-/// measures for a setback (docs/validation.md's table). A BSSO moves no maxilla: nothing is
+/// measures for a setback (docs/guide/validation.md's table). A BSSO moves no maxilla: nothing is
 /// raised, nothing lifts off. Without sliding or on the 10-node element the option is refused.
 #[test]
 fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_behind() {
@@ -531,7 +531,7 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
         ls_setback < ls_advance - 0.05,
         "Ls {ls_advance} / {ls_setback}"
     );
-    // Evidence, not a pass mark (docs/validation.md): with the Le Fort I cut found from the CT
+    // Evidence, not a pass mark (docs/guide/validation.md): with the Le Fort I cut found from the CT
     // (3 mm above ANS, back to PNS) subnasale follows the setback by 0.52, above the published
     // 0.25-0.41; the one-sided contact above is what this test holds.
     let ranges = documented_ranges();
@@ -636,7 +636,7 @@ fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_
     assert!(warned, "{}", run["warnings"]);
 }
 
-/// `[tet] degloved_chin = "auto"`, the default (docs/validation-notes.md "The degloved chin"): a
+/// `[tet] degloved_chin = "auto"`, the default (docs/lab/validation-notes.md "The degloved chin"): a
 /// coarse phantom's advancement genioplasty raises the tissue over the anterior mandible, from
 /// the lower teeth down, and rests it on the bone one way: the rounds settle, lifted nodes lie
 /// clear of the bone, nothing inverts, `true` gives the same face. Resting one way, the soft
@@ -715,7 +715,7 @@ fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() 
         &["--set", "tet.degloved_chin=false"],
     );
     println!("headsq genioplasty Pog'/Pog: {raised:.3} raised, {attached:.3} attached");
-    // Published 0.57–1.0 (docs/validation.md); bonded, headsq's soft chin falls below it.
+    // Published 0.57–1.0 (docs/guide/validation.md); bonded, headsq's soft chin falls below it.
     assert!(raised > attached + 0.1, "{raised} vs {attached}");
     println!("headsq genioplasty Pog'/Pog {raised:.3} (published 0.57–1.0)");
     assert!(raised > 0.3 && raised < 1.2, "{raised}");

@@ -1,5 +1,5 @@
 //! `facesim bench dicom`: how long reading a CT series takes in each compressed transfer syntax
-//! against the uncompressed series (docs/performance.md, docs/dicom.md).
+//! against the uncompressed series (docs/lab/performance.md, docs/guide/dicom.md).
 //!
 //! The CT (by default the real sample) is written as an uncompressed DICOM series, each file is
 //! compressed with Debian's dcmtk and gdcm (scripts/test-setup.sh installs them), and every

@@ -1,5 +1,5 @@
 //! `facesim bench fem`: assembly + factorisation + three solves of the C1 surface system on a
-//! planar mesh of a given size (the numbers in docs/fem.md).
+//! planar mesh of a given size (the numbers in docs/design/fem.md).
 
 use facesim::error::{Error, NumericalKind, Result};
 use facesim::fem::assembly::{FemMesh, System, rigid_dofs};

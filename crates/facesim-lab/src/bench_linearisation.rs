@@ -1,5 +1,5 @@
 //! `facesim bench linearisation`: the C1 models' plan basis (their linearisation at the
-//! pre-operative state, docs/plan-basis.md "C1 models") against full nonlinear solves of the
+//! pre-operative state, docs/design/plan-basis.md "C1 models") against full nonlinear solves of the
 //! same plans, as a function of the move's size: the first segment translated 1, 2, 5, 10 mm
 //! along its planned translation (or −y, forward in LPS, when it has none) and rotated 1, 2, 5°
 //! about x (the sagittal plane) about its pivot; the other segments still.

@@ -1,5 +1,5 @@
 //! `facesim bench reduced [--case DIR] --out DIR [--quick]` (issue 28 item 7): what the certified
-//! reduced model (docs/reduced.md) costs and how close it is, on one case.
+//! reduced model (docs/design/reduced.md) costs and how close it is, on one case.
 //!
 //! - **One full solve**: `Prediction::resolve` at the case's own parameters (assembly,
 //!   ordering, factorisation, one solve, the carry to the face), median of 3; and the run's own

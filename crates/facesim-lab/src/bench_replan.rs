@@ -1,6 +1,6 @@
 //! `facesim bench replan`: the cost of `PlanBasis::predict` (one plan's face from the stored basis)
 //! on the real CT face with the volumetric model, against a bare pass over the basis's memory and
-//! against the full run that built it (docs/performance.md "Re-planning").
+//! against the full run that built it (docs/lab/performance.md "Re-planning").
 
 use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::error::{Error, Result};

@@ -1,5 +1,5 @@
 //! CalculiX (`ccx`, Debian's calculix-ccx, installed by scripts/test-setup.sh) as an independent
-//! engine for the volumetric model (docs/crosscheck.md): the same nodes, tetrahedra, materials,
+//! engine for the volumetric model (docs/design/crosscheck.md): the same nodes, tetrahedra, materials,
 //! prescribed displacements and nodal forces written as a CalculiX input deck, solved by `ccx` in
 //! a scratch directory, and the nodal displacements and forces read back from its .dat file.
 //!

@@ -140,7 +140,7 @@ fn ct_size(work_dir: &Path, s: f64, progress: &dyn Observer) -> Result<CtSize> {
         &dir.join("face.ply"),
         facesim::mesh::ply::Encoding::BinaryLittleEndian,
     )?;
-    // The C1 model's scaling (docs/performance.md); the volumetric model's is measured apart.
+    // The C1 model's scaling (docs/lab/performance.md); the volumetric model's is measured apart.
     let text =
         facesim::phantom::case_toml("ct.nii.gz", true) + "\n[solve]\nmodel = \"equilibrium\"\n";
     write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;

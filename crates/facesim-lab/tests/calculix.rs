@@ -1,7 +1,7 @@
-//! facesim's volumetric model against an independent engine, CalculiX (docs/crosscheck.md):
+//! facesim's volumetric model against an independent engine, CalculiX (docs/design/crosscheck.md):
 //! linear tetrahedra on a sheared two-material cube agree to 1e-6 relative (ν = 0.45/0.3 and
 //! ν = 0.49); a tets.vtu read back and handed to CalculiX (cells, materials, the displacements
-//! of its fixed and moved nodes) reproduces the file's free-node displacements (the docs/case.md
+//! of its fixed and moved nodes) reproduces the file's free-node displacements (the docs/reference/case.md
 //! property); CalculiX's own NLGEOM neo-Hooke matches the closed-form uniaxial stretch and its
 //! C3D10 reproduces a quadratic solution, so both are references; facesim's quadratic
 //! tetrahedra agree with C3D10 (held move, nodal forces), face pressures with `*DLOAD` on C3D4

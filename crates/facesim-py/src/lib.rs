@@ -1,4 +1,4 @@
-//! `facesim._facesim`, the native module of the Python package `facesim` (docs/python.md).
+//! `facesim._facesim`, the native module of the Python package `facesim` (docs/guide/python.md).
 //!
 //! A thin layer over the library, like the command line: `run`, `replan` and `sweep` call the
 //! same functions `facesim run`, `facesim replan` and `facesim sweep` call, so the arrays equal
@@ -68,7 +68,7 @@ fn path_of(obj: &Bound<'_, PyAny>) -> PyResult<PathBuf> {
     obj.extract::<PathBuf>()
 }
 
-/// Run the pipeline on a case and return its outputs as arrays (docs/python.md).
+/// Run the pipeline on a case and return its outputs as arrays (docs/guide/python.md).
 ///
 /// `case`: a case directory or .toml file (str or os.PathLike), or the case.toml as a dict.
 /// A dict behaves as a case.toml in `base_dir` (default: the working directory): its relative
@@ -130,7 +130,7 @@ fn plan_of(plan: &Bound<'_, PyAny>) -> PyResult<(PathBuf, Option<String>)> {
 /// The face outputs for a new plan from the plan basis of the run in `out_dir`, without
 /// re-solving (as `facesim replan`, and writing the same files into `out`, default
 /// OUT_DIR/replan). `plan`: a PLAN.toml path or a dict `{"osteotomy": [...]}` or
-/// `{"surgery": [...]}` (docs/planning.md).
+/// `{"surgery": [...]}` (docs/guide/planning.md).
 #[pyfunction]
 #[pyo3(signature = (out_dir, plan, out = None))]
 fn replan(

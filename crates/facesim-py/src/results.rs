@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use std::path::Path;
 use std::time::SystemTime;
 
-/// What `facesim.run` and `facesim.replan` return (docs/python.md).
+/// What `facesim.run` and `facesim.replan` return (docs/guide/python.md).
 #[pyclass(frozen, module = "facesim", name = "Result")]
 pub struct Result {
     /// The output directory the files were written to (str).

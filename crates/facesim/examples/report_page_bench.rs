@@ -1,4 +1,4 @@
-//! The page for web/bench/rate.mjs (docs/performance.md, "report.html update rate"): the real CT
+//! The page for web/bench/rate.mjs (docs/lab/performance.md, "report.html update rate"): the real CT
 //! run (data-samples/real), its report.html rewritten with two segments — the maxilla split at
 //! the mid-sagittal plane into left and right halves — whose 12 columns each carry the face
 //! rigidly with a smooth fall-off. The columns are not a solved basis: they have the size and

@@ -1,4 +1,4 @@
-//! Mesh-to-mesh distances (docs/study.md, docs/case.md `facesim compare`): every vertex of one mesh
+//! Mesh-to-mesh distances (docs/lab/study.md, docs/reference/case.md `facesim compare`): every vertex of one mesh
 //! to the closest point on the other's surface, both directions; with equal vertex counts also
 //! the per-vertex (same index) distances.
 
@@ -218,7 +218,7 @@ pub fn stats(d: &[f64]) -> DistanceStats {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Comparison {
-    /// Both directions pooled (docs/case.md: mean, rms, max = Hausdorff, % within 1 / 2 mm).
+    /// Both directions pooled (docs/reference/case.md: mean, rms, max = Hausdorff, % within 1 / 2 mm).
     pub mean: f64,
     pub rms: f64,
     pub max: f64,

@@ -374,7 +374,7 @@ impl Shell {
 
     /// The derivative of the carried points with respect to the base vertices at `base`, in the
     /// direction `delta` (one per base vertex): the plan basis's carry of a coarse solve's
-    /// linearised response (docs/plan-basis.md). The offset fit's targets depend on the deformed
+    /// linearised response (docs/design/plan-basis.md). The offset fit's targets depend on the deformed
     /// triangles' normals and areas, so the carry is not linear in the base; its derivative is
     /// taken by central differences with the largest step 1e-3 mm (truncation O(step²),
     /// rounding ~1e-13 mm per unit).

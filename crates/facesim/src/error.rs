@@ -127,7 +127,7 @@ pub fn in_guard() -> bool {
 /// Run a reader that leans on third-party parsers (NIfTI, DICOM, PLY, tar, plist). Should one of
 /// them panic on malformed bytes, the panic is caught and reported as a one-line error about the
 /// file — a hostile input must never crash the tool. Our own code is held to no panics by the
-/// fuzz tests (docs/reliability.md); this is the second line of defence.
+/// fuzz tests (docs/lab/reliability.md); this is the second line of defence.
 pub fn guard<T>(path: &Path, f: impl FnOnce() -> Result<T>) -> Result<T> {
     let was = GUARDED.with(|g| g.replace(true));
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));

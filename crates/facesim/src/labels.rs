@@ -1,4 +1,4 @@
-//! The tissue labels of the segmentation (labels.nii.gz, docs/pipeline.md §1): here, below both
+//! The tissue labels of the segmentation (labels.nii.gz, docs/design/pipeline.md §1): here, below both
 //! `segment` (which assigns them) and `case` (whose `[tet]` materials are per label), so that
 //! neither imports the other for them.
 

@@ -2,7 +2,7 @@
 //! a Le Fort I, a genioplasty) from a CT, an optional face scan and a plan of bone moves, after
 //! Koch, Gross et al. 1996 ("Simulating Facial Surgery Using Finite Element Models").
 //!
-//! The library is built in layers (docs/architecture.md), each importing only from below:
+//! The library is built in layers (docs/design/architecture.md), each importing only from below:
 //!
 //! - **formats**: [`mesh`] (OBJ, PLY, STL, VTK, VTP), [`volume`] (NIfTI, NRRD, DICOM, InVesalius),
 //!   [`slicer`] (3D Slicer's plan files), [`output`] (atomic files; a run's directory as one unit);

@@ -1,4 +1,4 @@
-//! Bone moves (docs/case.md `[[osteotomy]]`, Koch §4.4): each segment moves the skull points
+//! Bone moves (docs/reference/case.md `[[osteotomy]]`, Koch §4.4): each segment moves the skull points
 //! inside its region by a rigid transform p' = R (p − pivot) + pivot + translate, with
 //! R = Rz·Ry·Rx (rotate about x, then y, then z; degrees). Segments apply in order, each to the
 //! points inside its region at their current position; a segment a `[[surgery]]` cut

@@ -1,4 +1,4 @@
-//! Atomic outputs (docs/case.md "Outputs").
+//! Atomic outputs (docs/reference/case.md "Outputs").
 //!
 //! A run's output directory is one unit ([`RunDir`]): its files are written into a private
 //! directory beside it and swapped in at the end, so a killed run leaves the previous complete

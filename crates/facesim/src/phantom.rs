@@ -1,4 +1,4 @@
-//! The synthetic head: analytic geometry, our ground truth (docs/phantom.md).
+//! The synthetic head: analytic geometry, our ground truth (docs/design/phantom.md).
 //!
 //! A vertical capsule (axis segment from z = −Z_HALF to +Z_HALF on the LPS z axis) carries
 //! concentric layers at exact radial distances ρ from the axis segment:
@@ -394,7 +394,7 @@ pub fn case_toml(ct_name: &str, with_scan: bool) -> String {
         ""
     };
     format!(
-        r#"# facesim phantom case: a synthetic head whose geometry is known exactly (docs/phantom.md).
+        r#"# facesim phantom case: a synthetic head whose geometry is known exactly (docs/design/phantom.md).
 name = "phantom-mandible-advance-6mm"
 
 [ct]

@@ -1,6 +1,6 @@
 //! Cohorts of synthetic patients: jaws phantoms whose shape parameters (head size, soft-tissue
 //! thickness, prognathism, chin, midline shift) are drawn from documented ranges by a seed
-//! (docs/phantom.md, "Cohort parameters"; docs/cohort.md).
+//! (docs/design/phantom.md, "Cohort parameters"; docs/guide/cohort.md).
 
 use crate::error::{Error, Result};
 use crate::phantom_jaws::{JawsOptions, SHAPE_RANGES, Shape, write_shaped_case};

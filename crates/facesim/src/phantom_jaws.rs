@@ -1,5 +1,5 @@
 //! A synthetic head with jaws: cranium, maxilla, mandible, teeth, lips over a vestibule, chin
-//! and nose, every tissue an analytic function of the point (docs/phantom.md, "Jaws").
+//! and nose, every tissue an analytic function of the point (docs/design/phantom.md, "Jaws").
 //!
 //! Frame: LPS mm, origin on the head axis (the capsule head's z axis), face towards −y. Three
 //! coordinate systems build it:
@@ -12,7 +12,7 @@
 //!   (q = √((x/a)² + ((y + 24)/b)²), n > 0 outside, towards the lips);
 //! - plain boxes, segments and ellipsoids for the rami and condyles.
 //!
-//! Dimensions (mm; on the midline unless said otherwise; docs/phantom.md has the measured
+//! Dimensions (mm; on the midline unless said otherwise; docs/design/phantom.md has the measured
 //! proportions):
 //!
 //! | part | geometry |
@@ -119,7 +119,7 @@ const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
 pub(crate) const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
 pub const FOV_HI: [f64; 3] = [92.0, 90.0, 80.0];
 
-/// One synthetic patient: how a jaws phantom differs from the standard head (docs/phantom.md,
+/// One synthetic patient: how a jaws phantom differs from the standard head (docs/design/phantom.md,
 /// "Cohort parameters"). `Shape::default()` is the standard head. Lengths are mm of the
 /// standard head, before `scale`. The geometry below is written for the standard frame; a
 /// shaped head evaluates it at p / scale with the mandible's parts moved by
@@ -165,7 +165,7 @@ impl Default for Shape {
 
 /// The accepted range of each shape parameter: (name as in phantom.toml and the CLI, min, max).
 /// Inside them the three bone pieces stay separate, every plan's boxes still select exactly
-/// their segment and the skin stays inside the field of view (docs/phantom.md).
+/// their segment and the skin stays inside the field of view (docs/design/phantom.md).
 pub(crate) const SHAPE_RANGES: [(&str, f64, f64); 5] = [
     ("scale", 0.8, 1.2),
     ("soft_mm", -3.0, 5.0),
@@ -295,7 +295,7 @@ const MOUTH_HALF_ANGLE: (f64, f64) = (0.31, 0.29); // w of the lips, of the crea
 const ALAE: (f64, f64, f64, f64, f64) = (6.0, 4.5, 3.5, 0.19, 0.07); // amp, z, σ_z, w (power 12), midline gap σ_φ
 /// The brow: a ridge across the forehead whose midline crest is the glabella; with the nose's
 /// dorsum below it, the soft nasion is the hollow between (45 mm above subnasale, 5 mm behind
-/// the glabella; docs/phantom.md compares adult proportions).
+/// the glabella; docs/design/phantom.md compares adult proportions).
 const BROW: (f64, f64, f64, f64) = (7.0, 66.0, 9.0, 0.45); // amp, z, σ_z, σ_φ
 /// The eye hollows: radial depressions either side of the nose's root (φ = ±EYES.2).
 const EYES: (f64, f64, f64, f64, f64) = (5.0, 45.0, 7.0, 0.42, 0.13); // depth, z, σ_z, φ, σ_φ
@@ -974,7 +974,7 @@ fn case_text(
     let c = shape.world_of([0.0, -30.0, -35.0]);
     let radius = 85.0 * shape.scale;
     let mut s = format!(
-        r#"# facesim phantom case with jaws: {what} (docs/phantom.md, "Jaws").
+        r#"# facesim phantom case with jaws: {what} (docs/design/phantom.md, "Jaws").
 name = "{name}"
 
 [ct]
@@ -1111,7 +1111,7 @@ impl Shape {
     /// landmarks (world mm, LPS), so a cohort's known geometry travels with each case.
     pub(crate) fn phantom_toml(&self) -> String {
         let mut s = String::from(
-            "# The jaws phantom's shape and analytic landmarks (LPS mm; docs/phantom.md, \"Cohort parameters\").\n[shape]\n",
+            "# The jaws phantom's shape and analytic landmarks (LPS mm; docs/design/phantom.md, \"Cohort parameters\").\n[shape]\n",
         );
         for ((name, _, _), v) in SHAPE_RANGES.iter().zip(self.values()) {
             s.push_str(&format!("{name} = {v:?}\n"));

@@ -1,4 +1,4 @@
-//! report.json as types, both ways (docs/case.md: parameters, per-stage `timings`, counts, the
+//! report.json as types, both ways (docs/reference/case.md: parameters, per-stage `timings`, counts, the
 //! displacement summary, warnings): every section is a struct, `assemble` is the one place a
 //! report is built (for a run and for `facesim replan`), [`Report::read`] the one place a report
 //! is read back. Stage costs are kept in pipeline order (`pipeline::stage`).
@@ -65,20 +65,20 @@ pub struct Report {
     /// The volumetric model (`[solve] model = "tet"`).
     pub tet: Option<TetReport>,
     pub displacement: Displacement,
-    /// The plan basis written with the outputs (docs/plan-basis.md).
+    /// The plan basis written with the outputs (docs/design/plan-basis.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub plan_basis: Option<BasisReport>,
     /// Set by `facesim replan`: where the basis came from.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub replan: Option<ReplanReport>,
-    /// The head frame the landmarks were found in (docs/landmarks.md).
+    /// The head frame the landmarks were found in (docs/guide/landmarks.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub head_frame: Option<HeadFrame>,
-    /// The clinical head frame the plan is read in: how it was found (docs/planning.md).
+    /// The clinical head frame the plan is read in: how it was found (docs/guide/planning.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clinical_frame: Option<crate::anatomy::readback::FrameReport>,
     /// The plan in the surgeon's terms: per segment its six moves in the clinical frame, per
-    /// bony landmark its move forward, up and left (docs/planning.md).
+    /// bony landmark its move forward, up and left (docs/guide/planning.md).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plan: Option<crate::anatomy::readback::PlanReport>,
     /// Label → pre, post (LPS mm), change_mm; a missing landmark says why.
@@ -93,7 +93,7 @@ pub struct Report {
     pub published_ratios: Option<Clinic>,
     /// Region → vertices, mean, p90, max of the displacement (mm).
     pub regions: Ordered<RegionStats>,
-    /// `[uncertainty] samples > 0`: the band per landmark and region (docs/uncertainty.md).
+    /// `[uncertainty] samples > 0`: the band per landmark and region (docs/guide/uncertainty.md).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub uncertainty: Option<UncertaintyReport>,
     /// The volumetric model's estimated discretisation error on the face, per region
@@ -155,7 +155,7 @@ pub struct ReplanReport {
 }
 
 /// report.json `replan.tissue`: new tissue parameters answered by the stored reduced model at the
-/// run's plan (docs/reduced.md "Re-solving from the stored model").
+/// run's plan (docs/design/reduced.md "Re-solving from the stored model").
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct TissueReplan {
     /// Per tissue (`[tet.skin]` …) the material used.

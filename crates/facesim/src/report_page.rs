@@ -1,4 +1,4 @@
-//! report.html (docs/report-page.md): one self-contained page per run that opens from disk with
+//! report.html (docs/guide/report-page.md): one self-contained page per run that opens from disk with
 //! no server and no network. The page logic is the three.js bundle built from `web/` and
 //! committed as `assets/report.bundle.js`; it is embedded here, so writing the page needs no npm.
 //! The run's data go in a JSON block: meshes and basis columns as base64 little-endian float32 /
@@ -31,7 +31,7 @@ pub struct PageSegment {
     pub columns: Vec<Vec<[f64; 3]>>,
 }
 
-/// A landmark as the page carries it with a plan (docs/landmarks.md): a soft one as a material
+/// A landmark as the page carries it with a plan (docs/guide/landmarks.md): a soft one as a material
 /// point of the face, a bony one with its segment's rigid move.
 pub struct PageLandmark {
     pub label: String,
@@ -44,7 +44,7 @@ pub struct PageLandmark {
     pub segment: u8,
 }
 
-/// The head's axes (report.json `head_frame`, docs/landmarks.md "Frame"), for the page's views
+/// The head's axes (report.json `head_frame`, docs/guide/landmarks.md "Frame"), for the page's views
 /// (front, profiles, three-quarter) and the midsagittal profile tracing. LPS mm, unit vectors.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PageFrame {
@@ -67,7 +67,7 @@ impl From<&crate::landmarks::HeadFrame> for PageFrame {
     }
 }
 
-/// The clinical head frame (report.json `clinical_frame`, docs/planning.md "The head frame"): the
+/// The clinical head frame (report.json `clinical_frame`, docs/guide/planning.md "The head frame"): the
 /// plan's sliders are advance, up, left, pitch, roll and yaw in it, and the views are set in it.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PageClinicalFrame {
@@ -104,7 +104,7 @@ impl PageClinicalFrame {
     }
 }
 
-/// The tissue sliders' data (issue 28 item 5; docs/report-page.md "Tissue sliders"): the run's
+/// The tissue sliders' data (issue 28 item 5; docs/guide/report-page.md "Tissue sliders"): the run's
 /// certified reduced models, one per sliding state, re-solved live in the page.
 pub struct PageTissue<'a> {
     /// The run's materials in `Tet::TISSUES` order (the reference θ̄ and the sliders' start).

@@ -1,4 +1,4 @@
-//! Tissue springs from skin to skull (Koch 1996 §2.5–2.6, docs/pipeline.md §4).
+//! Tissue springs from skin to skull (Koch 1996 §2.5–2.6, docs/design/pipeline.md §4).
 //!
 //! Main spring of skin vertex i: march from x_s along the inward normal −n_i (step half the
 //! smallest voxel spacing) until bone; the attachment x_b is refined by bisection on the bone
@@ -409,7 +409,7 @@ impl SpringSet {
         regions.into_iter().map(|(r, _)| r).collect()
     }
 
-    /// springs.ply (docs/case.md): skin vertices then attachments; edges (skin, skull) with
+    /// springs.ply (docs/reference/case.md): skin vertices then attachments; edges (skin, skull) with
     /// `stiffness` and `kind` (0 main, 1 strut).
     pub(crate) fn to_mesh(&self, skin: &Mesh) -> Mesh {
         let nv = skin.vertices.len();

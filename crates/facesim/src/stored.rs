@@ -1,5 +1,5 @@
-//! The framing of facesim's binary files (plan_basis.bin, reduced_model.bin; docs/plan-basis.md
-//! "File format", docs/reduced.md "The stored model"), little-endian:
+//! The framing of facesim's binary files (plan_basis.bin, reduced_model.bin; docs/design/plan-basis.md
+//! "File format", docs/design/reduced.md "The stored model"), little-endian:
 //!
 //! ```text
 //! magic        8 bytes

@@ -1,4 +1,4 @@
-//! DICOM as clinics send it (docs/dicom.md): compressed transfer syntaxes decode to the HU of the
+//! DICOM as clinics send it (docs/guide/dicom.md): compressed transfer syntaxes decode to the HU of the
 //! uncompressed series, and a PACS export's habits (DICOMDIR, names without `.dcm`, a CD's
 //! folder tree, several series, a tilted gantry) are read or refused clearly.
 //!
@@ -322,7 +322,7 @@ fn jpeg_2000_lossless_decodes_exactly() {
 #[test]
 fn jpeg_2000_lossy_stays_within_the_stated_error() {
     // gdcmconv's irreversible (9/7 wavelet) coding at 80 dB PSNR (of the 16-bit range), about
-    // 12:1 as clinics use it: measured max |ΔHU| 45, rms 6.6 HU on this slab (docs/dicom.md).
+    // 12:1 as clinics use it: measured max |ΔHU| 45, rms 6.6 HU on this slab (docs/guide/dicom.md).
     // The bounds are far inside what the segmentation thresholds (hundreds of HU apart)
     // tolerate.
     let raw = uncompressed(Stored::Signed16);
@@ -350,7 +350,7 @@ fn jpeg_2000_lossy_stays_within_the_stated_error() {
 }
 
 /// Largest and root-mean-square HU error accepted from lossy JPEG 2000 in the test above
-/// (docs/dicom.md).
+/// (docs/guide/dicom.md).
 const LOSSY_J2K_MAX_HU: f32 = 100.0;
 const LOSSY_J2K_RMS_HU: f64 = 10.0;
 
@@ -647,7 +647,7 @@ fn a_gantry_tilted_series_is_resampled_onto_the_orthogonal_grid() {
 #[test]
 fn jpeg_extended_12_bit_is_one_clear_error() {
     // jpeg-decoder has no 12-bit sample precision: JPEG Extended (process 4) of a 12-bit CT
-    // fails in the decoder, reported with the file and the syntax (docs/dicom.md).
+    // fails in the decoder, reported with the file and the syntax (docs/guide/dicom.md).
     let ext = encode(
         uncompressed(Stored::Unsigned12),
         "jpeg-extended",

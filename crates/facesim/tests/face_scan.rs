@@ -1,4 +1,4 @@
-//! Landmarks on a face mesh alone, no CT (issue 27 item 1; docs/landmarks.md "A face mesh
+//! Landmarks on a face mesh alone, no CT (issue 27 item 1; docs/guide/landmarks.md "A face mesh
 //! alone"): a real head's skin made by another program (scikit-image's marching cubes of
 //! VTK's headsq CT, tests/python/isosurface.py), cut to its outer face, and the same mesh as a
 //! scanner would hand it over — turned into a y-up frame, yawed, in metres. The landmarks must
@@ -279,7 +279,7 @@ fn two_faces_of_one_person_are_registered_on_what_surgery_leaves_and_measured_pe
 /// the frame and unit from the mesh alone, lie where the people put theirs. The pairs are the
 /// same anatomical points (nose tip, subnasale, the upper lip's vermilion top, the lower lip's
 /// bottom, the lips' meeting point); the bound allows for where a person clicks on a 1–2 mm
-/// facet and for the definitions' differences (docs/landmarks.md gives the distances).
+/// facet and for the definitions' differences (docs/guide/landmarks.md gives the distances).
 #[test]
 fn a_real_scanners_face_has_its_landmarks_where_people_put_them() {
     let dir = common::face_scan();

@@ -2,7 +2,7 @@
 //! scikit-image's marching cubes (tests/python/isosurface.py, in the venv target/slicer-venv),
 //! with the airway and sinuses joined to the face, internal surfaces and islands, given as the
 //! case's `[skin]`. facesim keeps its outer face — what a cylindrical range scan of it sees — and
-//! reports what it dropped (docs/pipeline.md "A skin from another program").
+//! reports what it dropped (docs/design/pipeline.md "A skin from another program").
 
 mod common;
 
@@ -192,7 +192,7 @@ fn a_c1_model_runs_on_the_cut_skin_like_on_its_own_scan() {
     // The displacement at each soft landmark of the own-skin run: there directly; on the cut
     // skin at the same place in space (its closest point on the cut face, carried). They agree
     // to within the C1 model's own mesh dependence (Koch's struts: on this cut skin solved at
-    // 30 k, 40 k and 60 k triangles, Sn moves 4.57, 4.16 and 3.93 mm; docs/pipeline.md), under
+    // 30 k, 40 k and 60 k triangles, Sn moves 4.57, 4.16 and 3.93 mm; docs/design/pipeline.md), under
     // the 2 mm clinicians accept.
     let (face, post) = (&foreign.skin, &foreign.face_post);
     assert_eq!(face.vertices.len(), post.vertices.len());

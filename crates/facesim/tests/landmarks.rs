@@ -1,4 +1,4 @@
-//! Landmarks, measurements and regions (docs/landmarks.md): on the jaws phantom against its
+//! Landmarks, measurements and regions (docs/guide/landmarks.md): on the jaws phantom against its
 //! analytic landmarks and angles, on the real CT where they are plausible and where the scan
 //! lacks the mandible; user landmarks override; the markups files follow Slicer's schema; a
 //! zero move leaves every landmark in place.
@@ -58,7 +58,7 @@ fn argmax(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64) -> f64 {
     0.5 * (a + b)
 }
 
-/// Subnasale by its definition (docs/landmarks.md) on the analytic midline profile: the point
+/// Subnasale by its definition (docs/guide/landmarks.md) on the analytic midline profile: the point
 /// between pronasale and labrale superius farthest behind their chord.
 fn analytic_subnasale() -> [f64; 3] {
     let r = |z: f64| pj::skin_radius(0.0, z);
@@ -211,7 +211,7 @@ fn real_ct_soft_landmarks_are_plausible_and_the_mandibular_ones_missing() {
         assert!(a[2] < ls[2] - 5.0 && ans[1] > a[1], "A {a:?} ANS {ans:?}");
     }
 
-    // The same skin as a face mesh alone (`facesim landmarks`, docs/landmarks.md "A face mesh
+    // The same skin as a face mesh alone (`facesim landmarks`, docs/guide/landmarks.md "A face mesh
     // alone"). It ends 36 mm below the nose tip, and this nose's columella lies ahead of its
     // dorsum 10 mm from the tip: read upside down it once passed as a face, with the soft
     // nasion as "subnasale" and the glabella as "labrale superius". Every landmark found from
@@ -357,11 +357,11 @@ fn markups_files_follow_the_slicer_schema_and_a_zero_move_keeps_every_landmark()
     }
 }
 
-/// How much the head's pitch in the scanner moves the landmarks (docs/landmarks.md "Head
+/// How much the head's pitch in the scanner moves the landmarks (docs/guide/landmarks.md "Head
 /// pitch"): the frame's vertical is the CT's superior axis, so "most anterior" and "lowest"
 /// depend on how the head lay. Face and skull are pitched by ±5° about the lateral axis
 /// through Prn, the landmarks found, turned back and compared with the unpitched ones. The
-/// bounds are the sensitivity docs/landmarks.md states (extremum landmarks such as Li and the
+/// bounds are the sensitivity docs/guide/landmarks.md states (extremum landmarks such as Li and the
 /// concavity B' slide along their curves; the mentolabial angle follows B'), not zero.
 #[test]
 fn head_pitch_of_five_degrees_moves_landmarks_and_angles_within_the_stated_bounds() {

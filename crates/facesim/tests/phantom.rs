@@ -1,5 +1,5 @@
 //! The phantom is the ground truth: segmentation volumes and extracted surfaces are checked
-//! against its analytic geometry (docs/phantom.md).
+//! against its analytic geometry (docs/design/phantom.md).
 
 mod common;
 

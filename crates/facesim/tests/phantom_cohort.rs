@@ -1,4 +1,4 @@
-//! Shaped jaws phantoms keep their geometry known (docs/phantom.md, "Cohort parameters"): the
+//! Shaped jaws phantoms keep their geometry known (docs/design/phantom.md, "Cohort parameters"): the
 //! landmarks move by what the parameters say (exact arithmetic on the standard head's
 //! numbers), the CT shows the bone and skin edges and the soft-tissue thickness where the
 //! analytic surfaces are, the face scan follows the skin, and the plans' boxes still select

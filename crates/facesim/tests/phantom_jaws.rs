@@ -1,4 +1,4 @@
-//! The jaws phantom against its own analytic definition (docs/phantom.md, "Jaws"): the CT's
+//! The jaws phantom against its own analytic definition (docs/design/phantom.md, "Jaws"): the CT's
 //! segmentation finds the bone pieces and the vestibule where `tissue_at` puts them, with the
 //! volumes quadrature gives; landmarks lie where their definitions say; the osteotomy boxes
 //! move exactly their segment; the capsule head is unchanged.
@@ -696,7 +696,7 @@ fn the_capsule_phantom_is_unchanged() {
 fn the_first_samples_face_has_all_fourteen_soft_landmarks_its_corners_where_built() {
     // Issue 27 item 3: the bundled face scan, read as any 3D photo (frame from its shape). The
     // mouth's corners where the lips and crease end (26 mm either side of stomion by
-    // construction, docs/phantom.md) and the alae where the wings meet the cheek (17 mm).
+    // construction, docs/design/phantom.md) and the alae where the wings meet the cheek (17 mm).
     use facesim::landmarks::scan::{FrameFrom, landmarks_of};
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
     let face = facesim::mesh::read_mesh(&dir.join("face.ply")).unwrap();

@@ -1,4 +1,4 @@
-//! Plans in clinical terms on the sample CTs (docs/planning.md): the segments `[[surgery]]` cuts
+//! Plans in clinical terms on the sample CTs (docs/guide/planning.md): the segments `[[surgery]]` cuts
 //! from the landmarks it finds hold at least 90 % of the bone voxels of the segments a person
 //! placed by hand on the same CTs.
 //!
@@ -127,7 +127,7 @@ fn the_le_fort_i_cut_on_the_promed_ct_takes_the_hand_placed_maxilla() {
     // The hand box is 90 mm wide and reaches 9 mm behind the posterior nasal spine: it takes
     // the pterygoid plates and the bone lateral to the tuberosities (|s| 35-50 mm), which a Le
     // Fort I leaves; the cut stops at PNS (its pterygomaxillary junction, not traced on the
-    // CT). Measured: 85.0 % (docs/planning.md "Measured").
+    // CT). Measured: 85.0 % (docs/guide/planning.md "Measured").
     for (seg, share, _) in coverage(&samples("real"), &[SurgeryKind::LeFortI], &[&PROMED[0]]) {
         assert!(share >= 0.8, "{seg}: {share}");
     }

@@ -216,7 +216,7 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         dy(tip)
     );
     assert!(dy(forehead).abs() < 1e-6);
-    // Two boxes (docs/pipeline.md "Region"): the face region, inside the CT, and the tissue
+    // Two boxes (docs/design/pipeline.md "Region"): the face region, inside the CT, and the tissue
     // mesh's, the region grown by margin_mm once more, which holds every node. The scan ends
     // through the upper lip (z = 0): there the tissue ends in a surface half a voxel past the
     // last slice that slides on the scan's end plane (`[tet] scan_end = "slides"`), not in a

@@ -1,4 +1,4 @@
-//! The certified reduced model (issue 28 items 1–2; docs/reduced.md) on the first sample (the
+//! The certified reduced model (issue 28 items 1–2; docs/design/reduced.md) on the first sample (the
 //! jaws phantom, 5 mm BSSO advance): built by the greedy on the run's mesh, it gives the full
 //! model's face within its certified bound at parameters it was not trained on (the full
 //! solve on the run's own path, `Prediction::resolve`, is the truth), the bound is not vacuous,
@@ -34,7 +34,7 @@ fn draws(case: &Case, samples: usize, seed: u64, sliding: bool) -> Vec<Case> {
 }
 
 /// The first sample's case, meshed coarser than its default to keep the tests short (the
-/// figures at the default size are in docs/reduced.md).
+/// figures at the default size are in docs/design/reduced.md).
 /// Δ: the reduced model's bound on the energy norm of the error at `c`.
 fn energy_bound(r: &facesim::model::reduced::ReducedTet, c: &Case) -> f64 {
     r.form.solve(&r.theta(&c.tet)).unwrap().energy_bound

@@ -1,6 +1,6 @@
 //! The code cites only what the repository holds: every `docs/…`, `benches/…`, `pipeline/…` or
 //! `data-samples/…` path named in a source file exists, and no source cites design notes outside
-//! the repository (their content the code relies on is in docs/case.md and docs/pipeline.md).
+//! the repository (their content the code relies on is in docs/reference/case.md and docs/design/pipeline.md).
 
 use std::path::{Path, PathBuf};
 
@@ -91,8 +91,8 @@ fn cited_repository_files_exist_and_no_design_notes_outside_are_cited() {
 fn the_reference_finder_finds_paths_and_skips_folders() {
     assert_eq!(
         cited_paths(
-            "see docs/pipeline.md §1 and (benches/cholmod_compare.sh), docs/ and ../x/docs/a.md"
+            "see docs/design/pipeline.md §1 and (benches/cholmod_compare.sh), docs/ and ../x/docs/a.md"
         ),
-        ["docs/pipeline.md", "benches/cholmod_compare.sh"]
+        ["docs/design/pipeline.md", "benches/cholmod_compare.sh"]
     );
 }

@@ -1,4 +1,4 @@
-//! The plan basis (docs/plan-basis.md) on the phantom with jaws and the volumetric model: a
+//! The plan basis (docs/design/plan-basis.md) on the phantom with jaws and the volumetric model: a
 //! replanned face equals a full `run` of the same plan (two segments, translation and rotation),
 //! the run's own plan comes back, bad plans, bad basis files and a missing or corrupt report.json
 //! are refused naming the file with nothing written, a sweep writes one row per plan, and
@@ -37,14 +37,14 @@ fn jaws_case() -> Case {
     assert_eq!(case.solve.model, SolveModel::Tet);
     case.tet.skin_size_mm = 6.0;
     case.tet.deep_size_mm = 12.0;
-    // Tissue lifting off the bone at a saw line (the lift-off rounds, docs/pipeline.md) is a
+    // Tissue lifting off the bone at a saw line (the lift-off rounds, docs/design/pipeline.md) is a
     // contact state the plan chooses: the face is linear in the plan, and the basis exact, within
     // one state. With nothing sliding every released node is free, one state for every plan.
     case.tet.sliding = false;
     // The re-plans turn the maxilla 4° into the phantom's 3 mm nasal floor, which 6 mm elements
     // cannot follow without a few turning inside out; these tests are of the basis, not the mesh.
     case.tet.accept_inverted = true;
-    // Tearing the tissue such a plan inverts is a state the plan chooses too (docs/pipeline.md
+    // Tearing the tissue such a plan inverts is a state the plan chooses too (docs/design/pipeline.md
     // "Large moves"): kept off, so that every plan is in the run's state.
     case.tet.tear_gap = false;
     case

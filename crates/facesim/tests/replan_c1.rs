@@ -1,4 +1,4 @@
-//! The plan basis of the C1 models (docs/plan-basis.md, "C1 models"): their linearisation at
+//! The plan basis of the C1 models (docs/design/plan-basis.md, "C1 models"): their linearisation at
 //! the pre-operative state. Against full nonlinear solves of the same plans on the phantom, its
 //! error shrinks with the square of the move (the basis is the solve's derivative at rest: a
 //! wrong derivative would leave an error of first order), it is exact for no move, and a C1 run's

@@ -1,4 +1,4 @@
-//! report.html in a real browser (docs/report-page.md): Debian's chromium, driven by
+//! report.html in a real browser (docs/guide/report-page.md): Debian's chromium, driven by
 //! puppeteer-core from web/ (web/test/page.test.mjs), opens the page from disk. Checked: no
 //! console or page errors, no request leaving the file, a drawn canvas, and `setPlan` → the face
 //! against two independent paths: the rigid motion of the osteotomy module (an analytic basis), and
@@ -1003,7 +1003,7 @@ fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_
         shots.display()
     );
 
-    // Screenshots for docs/report-page.md: FACESIM_DOC_SHOTS=1 copies them into docs/img.
+    // Screenshots for docs/guide/report-page.md: FACESIM_DOC_SHOTS=1 copies them into docs/img.
     if std::env::var_os("FACESIM_DOC_SHOTS").is_some() {
         let docs = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/img");
         std::fs::create_dir_all(&docs).unwrap();
@@ -1050,7 +1050,7 @@ fn drive_clinical(html: &Path, steps: &serde_json::Value, shot: &str) -> serde_j
 }
 
 /// The right-handed rotation by `deg` about the unit axis `u` (Rodrigues), written here from
-/// docs/planning.md "Signs", not taken from the crate.
+/// docs/guide/planning.md "Signs", not taken from the crate.
 fn rodrigues(u: [f64; 3], deg: f64) -> [[f64; 3]; 3] {
     let (s, c) = deg.to_radians().sin_cos();
     let mut r = [[0.0; 3]; 3];
@@ -1063,7 +1063,7 @@ fn rodrigues(u: [f64; 3], deg: f64) -> [[f64; 3]; 3] {
     r
 }
 
-/// `rotate_deg` [rx, ry, rz] with R = Rz·Ry·Rx (setPlan's convention, docs/report-page.md).
+/// `rotate_deg` [rx, ry, rz] with R = Rz·Ry·Rx (setPlan's convention, docs/guide/report-page.md).
 fn zyx_degrees(r: [[f64; 3]; 3]) -> [f64; 3] {
     [
         r[2][1].atan2(r[2][2]).to_degrees(),
@@ -1650,7 +1650,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
         ),
         "{aria}"
     );
-    // The update rate of a tissue slider drag (docs/report-page.md): reported; a floor catches
+    // The update rate of a tissue slider drag (docs/guide/report-page.md): reported; a floor catches
     // a page that re-solves or redraws far too much per update.
     let rate = r["rate"]["per_s"].as_f64().unwrap();
     println!(

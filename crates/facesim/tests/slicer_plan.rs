@@ -1,4 +1,4 @@
-//! Plans the way 3D Slicer users make them (docs/slicer.md): an osteotomy's move as an ITK
+//! Plans the way 3D Slicer users make them (docs/guide/slicer.md): an osteotomy's move as an ITK
 //! transform file, its region as a closed surface or a markups plane; and the face written as
 //! VTK PolyData and STL.
 

@@ -1,4 +1,4 @@
-//! The volumetric model on the phantom with jaws (docs/phantom.md, "Jaws"): mandibular advance and
+//! The volumetric model on the phantom with jaws (docs/design/phantom.md, "Jaws"): mandibular advance and
 //! setback move the soft-tissue chin with the bone, a counter-clockwise rotation brings it up and
 //! forward, and the inner lip across the vestibule slides on the teeth (or, attached, moves with
 //! them). The real CT has no mandible, so these moves are shown here.
@@ -165,7 +165,7 @@ fn inward(v: &vtu::TetsVtuOwned) -> Vec<[f64; 3]> {
         .collect()
 }
 
-/// The bone surface's normal a node slides on (docs/pipeline.md "Lip–tooth contact"): the
+/// The bone surface's normal a node slides on (docs/design/pipeline.md "Lip–tooth contact"): the
 /// area-weighted mean normal of the skull's facets within `r` of p that face the side `toward`
 /// points to, written out here again by brute force.
 fn bone_normal(skull: &facesim::mesh::Mesh, p: [f64; 3], toward: [f64; 3], r: f64) -> [f64; 3] {

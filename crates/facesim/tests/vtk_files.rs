@@ -1,4 +1,4 @@
-//! Models as VTK itself saves them (docs/slicer.md "Model files"): facesim's `.vtp` is read by
+//! Models as VTK itself saves them (docs/guide/slicer.md "Model files"): facesim's `.vtp` is read by
 //! VTK (the PyPI wheel in the test venv, the library 3D Slicer and ParaView save models with),
 //! which re-saves it in every encoding its writers have (tests/python/vtk_variants.py); facesim
 //! reads each back to the same mesh, point data and frame.

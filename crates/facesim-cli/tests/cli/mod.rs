@@ -24,7 +24,7 @@ pub fn facesim(args: &[&str]) -> CliResult {
 }
 
 /// `facesim phantom DIR --anatomy jaws --nose hollow --spacing 2` and `more` options: the jaws
-/// head with a CT's hollow nose (docs/phantom.md "Nasal passages"); asserts it was written.
+/// head with a CT's hollow nose (docs/design/phantom.md "Nasal passages"); asserts it was written.
 pub fn hollow_jaws_phantom(dir: &Path, more: &[&str]) {
     let head = [
         "phantom",

@@ -1,4 +1,4 @@
-//! The paper's benchmarks (Alterovitz & Goldberg 2003; docs/study.md) run through every
+//! The paper's benchmarks (Alterovitz & Goldberg 2003; docs/lab/study.md) run through every
 //! integrator, with the three error metrics per step against the implicit reference, and the
 //! stability table (critical steps, explicit at 0.9 and 1.1 h_crit).
 
@@ -14,7 +14,7 @@ use std::time::Instant;
 
 pub const H: f64 = 1.0 / 30.0;
 pub const RAYLEIGH: (f64, f64) = (1.0, 0.1);
-/// Rod gravity (docs/study.md: 5 cm/s²).
+/// Rod gravity (docs/lab/study.md: 5 cm/s²).
 pub const ROD_G: f64 = 0.05;
 /// Rays per side for the 3-D surface error.
 const RAY_GRID: usize = 96;

@@ -1,4 +1,4 @@
-//! Surface mass-spring baseline (after Punak, docs/study.md): the skin mesh's vertices are masses,
+//! Surface mass-spring baseline (after Punak, docs/lab/study.md): the skin mesh's vertices are masses,
 //! its edges are linear springs, and each vertex keeps the same skull springs as the C1 models
 //! (same attachments, rest lengths and stiffness k_c k_i c). Rest lengths are the pre-operative
 //! ones, so the pre-operative face is an equilibrium (the mass-spring form of preloading).

@@ -1,4 +1,4 @@
-//! Error metrics of Alterovitz & Goldberg (2003, §III; docs/study.md) beyond the energy norm
+//! Error metrics of Alterovitz & Goldberg (2003, §III; docs/lab/study.md) beyond the energy norm
 //! (which lives with the benchmarks in `dynamics`): the surface error |Int(M) ⊕ Int(M')| / |Int(M)|
 //! and the interior error.
 //!

@@ -1,4 +1,4 @@
-//! `facesim study [--quick] OUT_DIR`: speed against accuracy (issue 5; docs/study.md).
+//! `facesim study [--quick] OUT_DIR`: speed against accuracy (issue 5; docs/lab/study.md).
 //!
 //! 1. The benchmarks of Alterovitz & Goldberg (2003) — the 2-D block and needle with MP1 and MP2,
 //!    the 3-D rod with MP3 — through four integrators, with the relative energy norm, surface and
@@ -463,7 +463,7 @@ fn summary(s: &Study, charts: &[String]) -> String {
     }
     line("\n## Per facial region (mean / p90 distance to the volumetric reference, mm)\n".into());
     line(
-        "Regions: `crates/facesim/src/landmarks/face_regions/profile.rs` (docs/study.md §2).\n"
+        "Regions: `crates/facesim/src/landmarks/face_regions/profile.rs` (docs/lab/study.md §2).\n"
             .into(),
     );
     for cs in &s.face_cases {

@@ -1,4 +1,4 @@
-//! Osteotomies from the bony landmarks (docs/planning.md "The cuts").
+//! Osteotomies from the bony landmarks (docs/guide/planning.md "The cuts").
 //!
 //! Each cut is a set of planes in the clinical head frame; its segment is the bone on the freed
 //! side of every plane that is connected to the segment's own landmarks (the incisors, the

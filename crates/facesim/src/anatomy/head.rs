@@ -1,4 +1,4 @@
-//! The clinical head frame (docs/planning.md "The head frame").
+//! The clinical head frame (docs/guide/planning.md "The head frame").
 
 use super::bone::{Bone, turned};
 use crate::case::{FrameChoice, Head};

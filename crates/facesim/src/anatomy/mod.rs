@@ -1,4 +1,4 @@
-//! The bony anatomy a plan in clinical terms needs, found from the CT (docs/planning.md):
+//! The bony anatomy a plan in clinical terms needs, found from the CT (docs/guide/planning.md):
 //!
 //! - `head`: the clinical head frame — Frankfort horizontal (porion and orbitale, both sides)
 //!   and the midsagittal plane, or where the CT does not hold them the soft-tissue facial plane

@@ -1,4 +1,4 @@
-//! Moves in the clinical head frame, and their LPS osteotomy (docs/planning.md "Signs").
+//! Moves in the clinical head frame, and their LPS osteotomy (docs/guide/planning.md "Signs").
 //!
 //! Translations: `advance` along the frame's anterior axis, `up` along its vertical, `left`
 //! toward the patient's left. Rotations, each right-handed about a frame axis through the

@@ -1,5 +1,5 @@
 //! The plan read back in the surgeon's terms (report.json `clinical_frame` and `plan`;
-//! docs/planning.md "The plan read back"): each segment's six moves in the clinical head frame,
+//! docs/guide/planning.md "The plan read back"): each segment's six moves in the clinical head frame,
 //! and each bony landmark's move forward, up and toward the patient's left.
 
 use super::find::Anatomy;

@@ -1,4 +1,4 @@
-//! `[[surgery]]` entries as osteotomies (docs/planning.md): each entry's segment cut from the
+//! `[[surgery]]` entries as osteotomies (docs/guide/planning.md): each entry's segment cut from the
 //! CT (`cuts`), its moves read in the clinical head frame (`moves`), its pivot a landmark.
 //!
 //! Segments are disjoint, each with the whole move of its bone: a chin cut from a mandible that
@@ -407,7 +407,7 @@ mod tests {
 
     /// The landmarks the cuts need, on the phantom: its analytic incisor tips, A, B, pogonion,
     /// menton and condyles (`phantom_jaws::landmarks`), and the rest placed on its geometry
-    /// (docs/phantom.md "Jaws"): apices 23.5 and 21 mm from the edges (the phantom has crowns
+    /// (docs/design/phantom.md "Jaws"): apices 23.5 and 21 mm from the edges (the phantom has crowns
     /// and no roots), the piriform rim and ANS at the maxilla's top (z 1, under the Le Fort I
     /// gap at 1.5–4.5), the pterygomaxillary junctions behind the maxilla (y −12), the first
     /// molars on the upper arch at z −23, the mental foramina on the lower arch's labial face.

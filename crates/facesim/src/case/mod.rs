@@ -1,4 +1,4 @@
-//! The case directory (docs/case.md): case.toml merged over pipeline/defaults.toml, validated.
+//! The case directory (docs/reference/case.md): case.toml merged over pipeline/defaults.toml, validated.
 //!
 //! Unknown keys and wrong types are errors that name case.toml and the key; relative paths are
 //! resolved against the case directory.
@@ -32,7 +32,7 @@ pub(crate) fn merge(base: &mut toml::Table, over: toml::Table) {
     }
 }
 
-/// `KEY=VALUE` overrides (the CLI's `run --set tet.sliding=false`, docs/case.md) as a table to
+/// `KEY=VALUE` overrides (the CLI's `run --set tet.sliding=false`, docs/reference/case.md) as a table to
 /// lay over a case file: a dotted key names nested tables; the value is TOML, and a bare word
 /// that is not TOML is a string (`solve.model=tet`).
 pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
@@ -70,7 +70,7 @@ pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
 }
 
 impl Case {
-    /// Whether the case's model has the certified reduced form (docs/reduced.md): the
+    /// Whether the case's model has the certified reduced form (docs/design/reduced.md): the
     /// volumetric model with the linear material and the 4-node element, whose stiffness is
     /// affine in the tissues' Lamé parameters (the nose framework's tetrahedra, under
     /// `[tet] nose_youngs_kpa`, are terms of their own).

@@ -1,11 +1,11 @@
-//! Region shapes (docs/case.md) and whether a point is inside one. Mask and surface regions
+//! Region shapes (docs/reference/case.md) and whether a point is inside one. Mask and surface regions
 //! hold their file's content once the input stage has read it
 //! (`pipeline::inputs::read_region_files`); no file is read here.
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
-/// Region shapes (docs/case.md), used by `movable` and `osteotomy.region`.
+/// Region shapes (docs/reference/case.md), used by `movable` and `osteotomy.region`.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(rename_all = "snake_case", deny_unknown_fields)]
 pub enum Region {
@@ -22,7 +22,7 @@ pub enum Region {
         normal: [f64; 3],
     },
     Mask(Mask),
-    /// Inside a closed surface (`surface = "maxilla.stl"`: STL, PLY, OBJ, VTK; docs/slicer.md).
+    /// Inside a closed surface (`surface = "maxilla.stl"`: STL, PLY, OBJ, VTK; docs/guide/slicer.md).
     Surface(SurfaceFile),
 }
 

@@ -1,4 +1,4 @@
-//! The serde types of case.toml (docs/case.md): what each section holds. Defaults are in
+//! The serde types of case.toml (docs/reference/case.md): what each section holds. Defaults are in
 //! `defaults.rs`, checks in `validate.rs`, region shapes in `region.rs`.
 
 use super::region::Region;
@@ -25,7 +25,7 @@ pub struct Case {
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
     /// `[[surgery]]`: osteotomies in clinical terms, their cuts found from the CT
-    /// (docs/planning.md).
+    /// (docs/guide/planning.md).
     #[serde(default)]
     pub surgery: Vec<Surgery>,
     /// `[head]`: how the clinical head frame is found, and a pitch correction.
@@ -34,11 +34,11 @@ pub struct Case {
     pub solve: Solve,
     pub tet: Tet,
     pub output: Output,
-    /// `[uncertainty]`: sampling the tissue parameters (docs/uncertainty.md).
+    /// `[uncertainty]`: sampling the tissue parameters (docs/guide/uncertainty.md).
     #[serde(default)]
     pub uncertainty: Uncertainty,
     /// User landmarks (`[[landmark]]` label and LPS position), overriding detection
-    /// (docs/landmarks.md).
+    /// (docs/guide/landmarks.md).
     #[serde(default, rename = "landmark")]
     pub landmark: Vec<UserLandmark>,
     /// Which series of a DICOM directory holding several is the CT (`[dicom] series`).
@@ -50,7 +50,7 @@ pub struct Case {
 }
 
 /// `[dicom]`: `series` is a SeriesInstanceUID, or a SeriesNumber, of the series to read from a
-/// `[ct] path` directory holding several (docs/dicom.md). Without it the largest CT series is
+/// `[ct] path` directory holding several (docs/guide/dicom.md). Without it the largest CT series is
 /// read, with a warning.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -58,7 +58,7 @@ pub struct Dicom {
     pub series: String,
 }
 
-/// One `[[landmark]]`: a label (docs/landmarks.md) and its position (LPS mm).
+/// One `[[landmark]]`: a label (docs/guide/landmarks.md) and its position (LPS mm).
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct UserLandmark {
@@ -66,7 +66,7 @@ pub struct UserLandmark {
     pub position: [f64; 3],
 }
 
-/// `[ct]`: the CT file, and what a file that does not say it needs stated (docs/case.md): the
+/// `[ct]`: the CT file, and what a file that does not say it needs stated (docs/reference/case.md): the
 /// patient directions of its voxel axes and the offset from its numbers to HU.
 #[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -228,7 +228,7 @@ pub enum Pivot {
 
 /// `[[surgery]]`: one osteotomy in the surgeon's words. Moves are in the clinical head frame:
 /// forward, up and toward the patient's left; rotations in degrees about the frame's axes
-/// through the pivot (docs/planning.md "Signs").
+/// through the pivot (docs/guide/planning.md "Signs").
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct Surgery {
@@ -304,7 +304,7 @@ pub enum ScanEndHold {
     #[default]
     Free,
     /// It slides on the plane the scan ends in: no motion across it, free along it. The mirror
-    /// condition of tissue that goes on past the scan (docs/validation-notes.md "Where the scan
+    /// condition of tissue that goes on past the scan (docs/lab/validation-notes.md "Where the scan
     /// ends: a truncation study").
     Slides,
 }
@@ -423,23 +423,23 @@ pub struct Tet {
     pub margin_mm: f64,
     /// Young's modulus (kPa) of the external nose as one framework (cartilage with its skin and
     /// fat, an effective modulus): 0, the default, leaves the nose to its tissues. The region is
-    /// found from the pre-operative landmarks (`tet::nose`; docs/validation-notes.md "A structural
+    /// found from the pre-operative landmarks (`tet::nose`; docs/lab/validation-notes.md "A structural
     /// candidate: the nasal framework").
     pub nose_youngs_kpa: f64,
     /// Where the framework's base starts, above subnasale (mm): the columella's base and the lip
-    /// below it stay tissue (`model::nose`; docs/validation-notes.md "The framework's base").
+    /// below it stay tissue (`model::nose`; docs/lab/validation-notes.md "The framework's base").
     /// Defaulted when absent, so a report.json written before the key existed reads back.
     #[serde(default = "nose_base_default")]
     pub nose_base_above_sn_mm: f64,
     /// The tissue a Le Fort I approach raises off the anterior maxilla rests on the bone in
     /// one-sided contact: it slides, and lifts off where the bone would pull it (`model::degloved`;
-    /// docs/validation-notes.md "The degloved maxilla"). `"auto"`, the default: on where it can
+    /// docs/lab/validation-notes.md "The degloved maxilla"). `"auto"`, the default: on where it can
     /// serve, stepping aside with a warning where it cannot; `true`: on, refusing a case it cannot
     /// serve; `false`: off.
     #[serde(default)]
     pub degloved_maxilla: Degloved,
     /// The tissue a genioplasty's approach raises off the anterior mandible rests on the bone the
-    /// same way, on a plan that moves a chin segment (`model::degloved`; docs/validation-notes.md
+    /// same way, on a plan that moves a chin segment (`model::degloved`; docs/lab/validation-notes.md
     /// "The degloved chin").
     /// `"auto"`, `true` and `false` as `degloved_maxilla`.
     #[serde(default)]
@@ -447,7 +447,7 @@ pub struct Tet {
     /// A Le Fort I's down-fracture separates the nasal septum from the maxilla's nasal crest, and
     /// the septum stays with the skull base: true holds the tissue on the Le Fort I segment's
     /// nasal surface still instead of moving it with the maxilla (`model::septum`;
-    /// docs/validation-notes.md "The septum off the maxilla"). false, the default: it moves with
+    /// docs/lab/validation-notes.md "The septum off the maxilla"). false, the default: it moves with
     /// its bone.
     #[serde(default)]
     pub septum_detached: bool,
@@ -526,7 +526,7 @@ pub struct Solve {
     /// Spring stiffness per unit relative stiffness c per mm² (equilibrium model).
     pub k_c: f64,
     /// Force scale k_c of eq. 20 for the koch1996 model (forces are loads there, not springs,
-    /// so the scale is a different quantity; docs/pipeline.md).
+    /// so the scale is a different quantity; docs/design/pipeline.md).
     pub koch_k_c: f64,
     /// Solve only on the movable skin and its ring of rigid neighbours (exact: elements whose
     /// DOFs are all fixed add nothing). Off solves on the whole skin.

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 pub enum SolveModel {
     Equilibrium,
     Koch1996,
-    /// The volumetric soft-tissue model (`[tet]`, docs/pipeline.md "Volumetric soft tissue").
+    /// The volumetric soft-tissue model (`[tet]`, docs/design/pipeline.md "Volumetric soft tissue").
     Tet,
 }
 

@@ -1,4 +1,4 @@
-//! What `[[surgery]]` entries (docs/planning.md) can be told wrong at load, before the CT is
+//! What `[[surgery]]` entries (docs/guide/planning.md) can be told wrong at load, before the CT is
 //! read: one entry of each kind, `autorotate` on a Le Fort I without a BSSO, moves within the
 //! limits a plan in millimetres and degrees keeps.
 

@@ -1,4 +1,4 @@
-//! `[uncertainty]` in case.toml (docs/uncertainty.md), with the case schema (the sampling is
+//! `[uncertainty]` in case.toml (docs/guide/uncertainty.md), with the case schema (the sampling is
 //! `crate::uncertainty`): how many samples, the seed, and a
 //! distribution per tissue parameter. A parameter left out takes its literature default for the
 //! case's model; one given that the model does not have is refused, naming the key.
@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// More samples than this would hold `8 · samples · face vertices` bytes of magnitudes in memory
-/// for the percentiles (docs/uncertainty.md): beyond it the band needs streaming quantiles.
+/// for the percentiles (docs/guide/uncertainty.md): beyond it the band needs streaming quantiles.
 pub(crate) const MAX_SAMPLES: usize = 4096;
 
 /// The reduced model's samples are reduced in chunks of vertices (`uncertainty::reduced`), so
@@ -17,7 +17,7 @@ pub(crate) const MAX_SAMPLES: usize = 4096;
 pub(crate) const MAX_REDUCED_SAMPLES: usize = 100_000;
 
 /// Below this many samples `method = "auto"` solves each in full: the reduced model's greedy
-/// costs about 12 factorisations per sliding state (docs/reduced.md).
+/// costs about 12 factorisations per sliding state (docs/design/reduced.md).
 pub(crate) const AUTO_REDUCED_FROM: usize = 64;
 
 /// How the samples are solved (`[uncertainty] method`).
@@ -27,7 +27,7 @@ pub enum Method {
     /// The reduced model when the case's model has one and samples >= 64, else full solves.
     #[default]
     Auto,
-    /// The certified reduced model (docs/reduced.md); refused for models without one.
+    /// The certified reduced model (docs/design/reduced.md); refused for models without one.
     Reduced,
     /// A full solve per distinct sample.
     Full,
@@ -156,7 +156,7 @@ impl Default for Uncertainty {
     }
 }
 
-/// The literature defaults (docs/uncertainty.md gives the sources).
+/// The literature defaults (docs/guide/uncertainty.md gives the sources).
 pub mod defaults {
     use super::{Chance, Range};
     /// Soft tissue ν 0.45–0.49.
@@ -276,7 +276,7 @@ impl Uncertainty {
         let bad = |msg: String| Err(Error::input(path, msg));
         if self.method == Method::Reduced && !reduced_form {
             return bad(
-                "[uncertainty] method = \"reduced\": the reduced model needs [solve] model = \"tet\" with [tet] material = \"linear\" and element = \"linear\" (docs/reduced.md)".into(),
+                "[uncertainty] method = \"reduced\": the reduced model needs [solve] model = \"tet\" with [tet] material = \"linear\" and element = \"linear\" (docs/design/reduced.md)".into(),
             );
         }
         let cap = if self.reduced(reduced_form) {

@@ -1,4 +1,4 @@
-//! `facesim estimate` (docs/cohort.md "Resources from the model"): a run's peak memory and wall
+//! `facesim estimate` (docs/guide/cohort.md "Resources from the model"): a run's peak memory and wall
 //! time, predicted before it runs from what sets them. For the volumetric model that is the
 //! Cholesky factor: the run's own mesh is built and its stiffness analysed symbolically (no
 //! value is computed), giving the factor's nonzeros and operations. The C1 models' cost is small
@@ -6,7 +6,7 @@
 //!
 //! The coefficients below were fitted to measured peaks (resident set, `/usr/bin/time`) and wall
 //! times of `facesim run` on the bundled samples and 2.5 mm phantom cohorts, then raised so
-//! that no fitted case is under-predicted; docs/cohort.md has the table of predicted against
+//! that no fitted case is under-predicted; docs/guide/cohort.md has the table of predicted against
 //! measured, on cases the fit did not see too.
 
 use crate::error::Result;
@@ -29,7 +29,7 @@ pub struct Estimate {
     pub system: Option<System>,
     /// Predicted peak resident memory of the run (MB, 10⁶ bytes).
     pub peak_mem_mb: f64,
-    /// Predicted wall time of the run (s) on a machine like docs/cohort.md's.
+    /// Predicted wall time of the run (s) on a machine like docs/guide/cohort.md's.
     pub wall_s: f64,
     /// What the estimate itself took (s).
     pub seconds: f64,
@@ -49,19 +49,19 @@ pub struct System {
 /// The fitted memory model, times [`MEMORY_MARGIN`]: a fixed part (the program, the landmarks, the
 /// face), the CT (its HU as f32, the labels and masks: bytes per voxel) and the factor (its
 /// values, 8 bytes per nonzero of the run's factor, which the estimate's slightly larger system
-/// over-counts, and the workspace beside it). Fitted by least squares on 16 runs (docs/cohort.md
+/// over-counts, and the workspace beside it). Fitted by least squares on 16 runs (docs/guide/cohort.md
 /// "Resources from the model"): 239 MB + 9.28 bytes per estimated nonzero, the CT at 8 bytes a
 /// voxel; measured / fitted from 0.85 to 1.12.
 const BASE_MB: f64 = 239.0;
 const BYTES_PER_VOXEL: f64 = 8.0;
 const BYTES_PER_FACTOR_NONZERO: f64 = 9.28;
 /// The C1 models: their factor is the face's (tens of MB), their peak 100–330 MB on every
-/// sample and phantom measured (docs/cohort.md): the largest per model, with no size term.
+/// sample and phantom measured (docs/guide/cohort.md): the largest per model, with no size term.
 const EQUILIBRIUM_MB: f64 = 290.0;
 const KOCH1996_MB: f64 = 200.0;
 /// Wall time: a fixed part and the factorisation's operations (one factorisation and the solves
 /// and plan basis around it), fitted on the same runs: 3.4 s + 0.0334 s per 10⁹ operations
-/// on the 2-core machine of docs/cohort.md.
+/// on the 2-core machine of docs/guide/cohort.md.
 const SECONDS_BASE: f64 = 3.4;
 const SECONDS_PER_GFLOP: f64 = 0.0334;
 /// The C1 models' wall time: 1.9–3.6 s (equilibrium) and 0.7–1.9 s (koch1996) measured.
@@ -69,7 +69,7 @@ const EQUILIBRIUM_S: f64 = 3.2;
 const KOCH1996_S: f64 = 1.7;
 /// The predictions are the fit times these, so that no run measured is under-predicted: the
 /// memory fit's largest measured / fitted was 1.12 on the runs it was fitted to, and 1.15 left a
-/// held-out 2 mm phantom's Le Fort I 4 % under (docs/cohort.md), so memory has 1.2.
+/// held-out 2 mm phantom's Le Fort I 4 % under (docs/guide/cohort.md), so memory has 1.2.
 const MEMORY_MARGIN: f64 = 1.2;
 const TIME_MARGIN: f64 = 1.15;
 

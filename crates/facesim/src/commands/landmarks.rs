@@ -1,4 +1,4 @@
-//! `facesim landmarks MESH [--out DIR] [--frame auto|lps]` (docs/landmarks.md "A face mesh
+//! `facesim landmarks MESH [--out DIR] [--frame auto|lps]` (docs/guide/landmarks.md "A face mesh
 //! alone"): the soft-tissue landmarks and measurements of any face mesh — a 3D photo, no CT —
 //! written as `DIR/landmarks.mrk.json` (Slicer markups in the mesh file's own coordinates) and
 //! `DIR/measurements.json`, as one unit (`output::RunDir`): a mesh that is not a face writes

@@ -5,7 +5,7 @@
 //!   report.json, written by [`outputs`]);
 //! - [`estimate`]: `facesim estimate` (a run's peak memory and time predicted from its mesh and
 //!   the symbolic analysis of its factor, before any numeric work);
-//! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/plan-basis.md);
+//! - [`replan`]: `facesim replan` (a run's face outputs for a new plan, docs/design/plan-basis.md);
 //! - [`sweep`]: `facesim sweep` (many plans, a table; per facial region). Its chart,
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
 //!   library carries no chart crate;

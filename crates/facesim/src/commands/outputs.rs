@@ -1,4 +1,4 @@
-//! The one module that writes a run's files (docs/case.md "Outputs"): each to a temporary name and
+//! The one module that writes a run's files (docs/reference/case.md "Outputs"): each to a temporary name and
 //! renamed, independent files in parallel, report.json last.
 
 use crate::case::Case;
@@ -211,7 +211,7 @@ pub(crate) fn page_basis(p: &Prediction, case: &Case) -> Option<crate::report_pa
     })
 }
 
-/// report.html (docs/report-page.md): the face and skull before and after, report.json's key
+/// report.html (docs/guide/report-page.md): the face and skull before and after, report.json's key
 /// figures and warnings; re-planning sliders once the run has a plan basis.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn write_page(
@@ -337,7 +337,7 @@ pub(crate) fn write_page(
     crate::report_page::write_report_html(dir, &data)
 }
 
-/// The tissue sliders' data from the run's reduced models (docs/report-page.md "Tissue
+/// The tissue sliders' data from the run's reduced models (docs/guide/report-page.md "Tissue
 /// sliders"): the models, the run's materials and the `[uncertainty]` ranges they were trained
 /// on (the sliders' ranges), and the soft landmarks their output gains belong to.
 fn page_tissue<'a>(

@@ -1,7 +1,7 @@
-//! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/case.md): the face outputs of `run` for
+//! `facesim replan OUT_DIR PLAN.toml [--out DIR]` (docs/reference/case.md): the face outputs of `run` for
 //! a new plan, from the plan basis a run stored in OUT_DIR, without re-solving; or, with `[tet]`
 //! tissue parameters in PLAN.toml, for new tissues at the run's plan from the reduced model it
-//! stored (docs/reduced.md "Re-solving from the stored model").
+//! stored (docs/design/reduced.md "Re-solving from the stored model").
 
 use super::outputs;
 use crate::case::uncertainty::Method;
@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 pub struct NewPlan {
     #[serde(default)]
     pub osteotomy: Vec<Osteotomy>,
-    /// `[[surgery]]` entries (docs/planning.md): read in the run's clinical frame, about its
+    /// `[[surgery]]` entries (docs/guide/planning.md): read in the run's clinical frame, about its
     /// landmarks, over the segments the run cut; they lead the plan, as in a run.
     #[serde(default)]
     pub surgery: Vec<crate::case::Surgery>,

@@ -1,4 +1,4 @@
-//! `facesim run` (docs/case.md): read the case, run the stages (`crate::pipeline`), predict the
+//! `facesim run` (docs/reference/case.md): read the case, run the stages (`crate::pipeline`), predict the
 //! face with the case's model (`crate::model`), find the landmarks, sample the tissue parameters
 //! when asked, and write every output as one unit (`outputs`, `crate::output::RunDir`) with
 //! report.json assembled once (`crate::report`).
@@ -88,7 +88,7 @@ fn finish(
     mut rec: Recorder,
 ) -> Result<Outcome> {
     let obs = rec.obs;
-    // The outputs are one unit (docs/case.md "Outputs"): written into `unit.path()` and
+    // The outputs are one unit (docs/reference/case.md "Outputs"): written into `unit.path()` and
     // swapped in for `out_dir` at the end; an error before then leaves `out_dir` as it was.
     let unit = crate::output::RunDir::create(out_dir)?;
     let dir = unit.path();
@@ -141,7 +141,7 @@ fn finish(
         };
         let resolve = |c: &Case| prediction.resolve(&scene, c);
         let (band, reduced) = rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
-            // The certified reduced model when the case asks for it (docs/reduced.md).
+            // The certified reduced model when the case asks for it (docs/design/reduced.md).
             let progress = |m: &str| obs.started(m);
             let outputs =
                 crate::uncertainty::reduced::landmark_outputs(&analysis, &prediction.skin);
@@ -169,7 +169,7 @@ fn finish(
         })?;
         (Some(band), reduced)
     };
-    // Stored beside plan_basis.bin (docs/reduced.md "The stored model").
+    // Stored beside plan_basis.bin (docs/design/reduced.md "The stored model").
     let reduced = reduced.map(|m| crate::model::reduced::file::StoredReduced {
         face_checksum: crate::mesh::checksum(&prediction.skin.vertices),
         tissues: case.tet.tissues(),

@@ -1,9 +1,9 @@
-//! `facesim sweep OUT_DIR SWEEP.toml --out DIR` (docs/case.md "SWEEP.toml"): many plans from one
+//! `facesim sweep OUT_DIR SWEEP.toml --out DIR` (docs/reference/case.md "SWEEP.toml"): many plans from one
 //! plan basis, written as `sweep.csv` (per plan: its moves, the face displacement's max, mean and
 //! 90th percentile, the same per facial region, each landmark's move and the measurements) and
 //! a chart `sweep.svg` (drawn by the caller from the returned rows: crates/facesim-lab
 //! `sweep_chart`). Regions and landmarks are the run's (its report.json, which must be there:
-//! the landmarks as it found them and the regions derived from them, docs/landmarks.md); a run
+//! the landmarks as it found them and the regions derived from them, docs/guide/landmarks.md); a run
 //! without landmarks falls back to the profile regions of `landmarks::face_regions::profile`.
 //!
 //! ```toml

@@ -1,4 +1,4 @@
-//! `facesim validate` (docs/validation.md): every surgery type of the published table
+//! `facesim validate` (docs/guide/validation.md): every surgery type of the published table
 //! (`landmarks::published`) run with the product's defaults on every real sample that has the
 //! bone and on a seeded cohort of jaws phantoms; per soft landmark the predicted ratio beside the
 //! published range. Writes validation.csv and validation.md as one unit (`output::RunDir`), with
@@ -48,7 +48,7 @@ pub struct Options {
 }
 
 /// The moves, in the head's directions: advance and setback along its forward axis, impaction
-/// along its up axis. Sizes are those of common plans (docs/validation.md, "What was compared").
+/// along its up axis. Sizes are those of common plans (docs/guide/validation.md, "What was compared").
 /// The output's validation.md lists them under "The moves".
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Toward {
@@ -198,7 +198,7 @@ pub struct Validation {
     pub out_dir: PathBuf,
 }
 
-/// validation.toml beside a sample's case.toml (docs/validation.md, "What was compared"; the
+/// validation.toml beside a sample's case.toml (docs/guide/validation.md, "What was compared"; the
 /// output's validation.md lists each case under "The cases").
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -548,7 +548,7 @@ fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, Possible) {
             format!("[[surgery]] kind = \"{what}\""),
             match &r {
                 Ok(()) => {
-                    "cut from the bony landmarks found on the CT (docs/planning.md \"The cuts\")"
+                    "cut from the bony landmarks found on the CT (docs/guide/planning.md \"The cuts\")"
                         .to_string()
                 }
                 Err(why) => format!("not possible on this CT: {why}"),

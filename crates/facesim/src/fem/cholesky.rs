@@ -5,7 +5,7 @@
 //! Sequential except for large factors: faer's own multithreading of the sparse factorisation
 //! and triangular solves costs more than it gains on the surface models on 2 cores (40k
 //! triangles: factor 0.48 s sequential vs 0.59–0.66 s threaded, three solves 0.05 s vs 0.15 s;
-//! docs/fem.md), where rayon parallelises the element work instead; a volumetric head's factor
+//! docs/design/fem.md), where rayon parallelises the element work instead; a volumetric head's factor
 //! (tens of millions of nonzeros) is factored on all cores (`PARALLEL_FACTOR_NNZ`).
 
 use super::ordering::NodeOrder;
@@ -229,7 +229,7 @@ impl Pattern {
 /// are large enough for faer's parallel kernels to pay (a volumetric head of 142 k unknowns,
 /// 98 M nonzeros: 9.9 s sequential, 8.2 s on 2 cores; one of 23 k unknowns, 7.4 M nonzeros:
 /// 0.27 s sequential, 0.39 s on 2 cores; the surface models' largest, 41 M at 80 k triangles,
-/// stays sequential as measured in docs/fem.md).
+/// stays sequential as measured in docs/design/fem.md).
 pub(crate) const PARALLEL_FACTOR_NNZ: usize = 50_000_000;
 
 /// How many factorisations of `nnz` nonzeros to run side by side (full re-solves, the

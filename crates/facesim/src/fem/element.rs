@@ -9,7 +9,7 @@
 //! pattern of φ3 and φ9). We do not transcribe them: the φᵢ are *defined* as the basis of
 //! span{N1…N12} dual to the twelve DOFs, φ = N·D⁻¹ with Dₖⱼ = DOFₖ(Nⱼ), computed per element.
 //! That is the same construction eq. 8–9 performs by hand (subtracting N10…N12 multiples so the
-//! cross-boundary derivatives match, then rotating corner derivatives into u, v); docs/fem.md
+//! cross-boundary derivatives match, then rotating corner derivatives into u, v); docs/design/fem.md
 //! derives why the resulting surface is C1:
 //! - along an edge, every Nᵢ is a cubic whose end values and end tangential derivatives are
 //!   DOFs of that edge (N10…N12 vanish on all edges), so the value along the edge is the cubic

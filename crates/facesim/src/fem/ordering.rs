@@ -149,7 +149,7 @@ fn metis_node_nd(
     // METIS seeds its random generator per call, but the generator's state is process-global
     // (GKlib): two calls on different threads (tests, a library caller running cases in
     // parallel) would perturb each other's orderings and so the rounding of every solve. One call
-    // at a time keeps each ordering a function of its graph alone (docs/uncertainty.md: the same
+    // at a time keeps each ordering a function of its graph alone (docs/guide/uncertainty.md: the same
     // seed writes the same bytes). A poisoned lock only means another call panicked.
     static METIS: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one_at_a_time = METIS.lock().unwrap_or_else(|p| p.into_inner());

@@ -1,4 +1,4 @@
-//! Preloading (Koch §4.3; docs/fem.md, "Preloading") and sampling the C1 surface (Koch Fig. 12).
+//! Preloading (Koch §4.3; docs/design/fem.md, "Preloading") and sampling the C1 surface (Koch Fig. 12).
 //!
 //! a_init: corner values are the mesh vertices; corner gradients and edge cross-boundary
 //! derivatives come from least-squares quadratic fits in (u, v) over the neighbourhood, so a

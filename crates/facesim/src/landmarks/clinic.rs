@@ -5,7 +5,7 @@
 //!
 //! The surgery type comes from the `[[surgery]]` entries that cut the segments (their kinds), or
 //! for `[[osteotomy]]` segments from their names, and their moves in the head frame
-//! (docs/validation.md, "In every run"): a segment named for the maxilla (maxilla, Le Fort), the
+//! (docs/guide/validation.md, "In every run"): a segment named for the maxilla (maxilla, Le Fort), the
 //! mandible (mandible, BSSO, sagittal split) or the chin (chin, genioplasty), moving forward, back
 //! or up at the jaw's bony landmark (A or ANS for the maxilla, B or Pog for the mandible, Pog for
 //! the chin; the pivot when none is located), so a rotation reads as the move it gives the jaw. An

@@ -1,4 +1,4 @@
-//! Landmark detection on the midsagittal profiles (docs/landmarks.md "Definitions").
+//! Landmark detection on the midsagittal profiles (docs/guide/landmarks.md "Definitions").
 //!
 //! The soft-tissue profile is the most anterior point of the skin's midsagittal section per
 //! height (0.25 mm steps). Walking down from pronasale (its most anterior point) the profile's
@@ -238,7 +238,7 @@ fn in_order(f: &Found, frame: &HeadFrame) -> Vec<Landmark> {
         .collect()
 }
 
-/// The soft chin without bone (docs/landmarks.md "A face mesh alone"): B' the first concavity
+/// The soft chin without bone (docs/guide/landmarks.md "A face mesh alone"): B' the first concavity
 /// of the profile below Li, Pog' the first convexity below B', Me' the lowest point of the
 /// midsagittal section within 20 mm behind Pog' — only where the skin goes on behind it (the
 /// underside of the chin), not where the scan simply ends.
@@ -530,7 +530,7 @@ fn off_chord(p: &Profile, top: [f64; 2], bottom: [f64; 2], e: Ext) -> Option<(us
         .max_by(|x, y| x.1.total_cmp(&y.1))
 }
 
-/// Below labrale inferius, the chin (docs/landmarks.md "The chin"): defined by chords between
+/// Below labrale inferius, the chin (docs/guide/landmarks.md "The chin"): defined by chords between
 /// neighbouring landmarks, not by the frame's vertical, so that a head pitched in the scanner
 /// (VTK's headsq lies some 25° face-down) keeps them. Bone: infradentale Id (the top of the
 /// bony run at the lower lip, at most 5 mm above Li) and menton Me (the lowest bone of that

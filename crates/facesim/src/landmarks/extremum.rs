@@ -1,4 +1,4 @@
-//! Extrema of a profile (docs/landmarks.md "Profiles"): a convexity or concavity counts when the
+//! Extrema of a profile (docs/guide/landmarks.md "Profiles"): a convexity or concavity counts when the
 //! profile rises and falls by PROMINENCE_MM on both sides within REACH_MM, with no gap of more
 //! than GAP_MM — where a scan or section stops there is an end, never an extremum. Shared by the
 //! midline landmarks (`detect`) and the paired ones (`lateral`).

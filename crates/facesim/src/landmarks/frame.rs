@@ -1,4 +1,4 @@
-//! The head frame (docs/landmarks.md "Frame"): the midsagittal plane from the face's mirror
+//! The head frame (docs/guide/landmarks.md "Frame"): the midsagittal plane from the face's mirror
 //! symmetry, the facial vertical and anterior axes, and the midsagittal section of a mesh.
 //!
 //! All in LPS mm. `lateral` is the plane's unit normal (towards the patient's left, +x-ish),

@@ -1,4 +1,4 @@
-//! The paired soft-tissue landmarks beside the midline (docs/landmarks.md "Alare and
+//! The paired soft-tissue landmarks beside the midline (docs/guide/landmarks.md "Alare and
 //! cheilion"): alare, the most lateral point of each ala where it meets the cheek, and
 //! cheilion, each corner of the mouth. Both are found on plane sections of the skin in the head
 //! frame, starting from the midline landmarks (Sn, Prn; Sto), so they follow the face in any

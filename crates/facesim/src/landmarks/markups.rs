@@ -1,5 +1,5 @@
 //! 3D Slicer markups files (.mrk.json, Slicer's markups schema v1.0.3): one `Fiducial` markup
-//! in LPS mm, one control point per landmark (docs/landmarks.md "Files").
+//! in LPS mm, one control point per landmark (docs/guide/landmarks.md "Files").
 
 use super::Carried;
 use crate::error::{Error, Result};

@@ -1,4 +1,4 @@
-//! Soft-tissue measurements before and after (docs/landmarks.md "Measurements"), in the head
+//! Soft-tissue measurements before and after (docs/guide/landmarks.md "Measurements"), in the head
 //! frame's midsagittal projection (height v, anteriority a; the lateral offset dropped).
 
 use super::frame::HeadFrame;

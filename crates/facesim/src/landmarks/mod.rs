@@ -1,4 +1,4 @@
-//! Cephalometric landmarks, measurements and facial regions (docs/landmarks.md).
+//! Cephalometric landmarks, measurements and facial regions (docs/guide/landmarks.md).
 //!
 //! - `frame`: the head frame (midsagittal plane by mirror symmetry) and midsagittal profiles;
 //! - `detect`: soft-tissue and bony landmarks on the profiles, or why each is missing;

@@ -1,4 +1,4 @@
-//! Outcomes measured the clinic's way (`facesim compare A B --landmarks`, docs/landmarks.md
+//! Outcomes measured the clinic's way (`facesim compare A B --landmarks`, docs/guide/landmarks.md
 //! "Two faces of one person"): two face meshes of one person — a prediction and the
 //! post-operative 3D photo, or two photos — each in its own frame and unit, registered rigidly
 //! on what surgery does not move, then compared per landmark and per facial region (mean, p90,

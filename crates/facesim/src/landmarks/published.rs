@@ -1,5 +1,5 @@
 //! The clinic's measured soft-to-hard movement ratios per surgery type and soft landmark, with
-//! their sources (docs/validation.md, "The published ratios"): what `facesim validate` holds each
+//! their sources (docs/guide/validation.md, "The published ratios"): what `facesim validate` holds each
 //! prediction against. Encoded once, here.
 //!
 //! Ratio = the soft landmark's displacement along the bone's move ÷ the move: a pure translation
@@ -143,7 +143,7 @@ const fn row(
 use Axis::{Horizontal as H, Vertical as V};
 use Surgery::*;
 
-/// The published table (docs/validation.md, "The published ratios").
+/// The published table (docs/guide/validation.md, "The published ratios").
 pub const PUBLISHED: [Published; 23] = [
     row(
         LeFortAdvance,

@@ -1,5 +1,5 @@
 //! Landmarks of a face mesh alone — a 3D photo (3dMD, Vectra, a phone scan) or any program's
-//! skin — with no CT (docs/landmarks.md "A face mesh alone", `facesim landmarks`).
+//! skin — with no CT (docs/guide/landmarks.md "A face mesh alone", `facesim landmarks`).
 //!
 //! A scan comes in its scanner's frame (often y up, z forward), tilted, in millimetres or
 //! metres, with neck, ears and holes. Its unit is read from its size (a head is 0.1–1 m
@@ -104,7 +104,7 @@ pub struct FaceLandmarks {
     pub frame: FoundFrame,
     /// In the file's own unit and axes; missing ones say why.
     pub landmarks: Vec<Landmark>,
-    /// Measurements (mm, degrees) of docs/landmarks.md, one value each (`before`).
+    /// Measurements (mm, degrees) of docs/guide/landmarks.md, one value each (`before`).
     pub measurements: Ordered<Measure>,
 }
 

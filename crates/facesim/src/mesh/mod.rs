@@ -197,7 +197,7 @@ impl Mesh {
             .sum()
     }
 
-    /// Area-weighted vertex normals (docs/pipeline.md §4), unit length; zero for isolated vertices.
+    /// Area-weighted vertex normals (docs/design/pipeline.md §4), unit length; zero for isolated vertices.
     pub fn vertex_normals(&self) -> Vec<[f64; 3]> {
         let mut n = vec![[0.0; 3]; self.vertices.len()];
         for (t, tri) in self.triangles.iter().enumerate() {

@@ -2,7 +2,7 @@
 //! polygons fanned into triangles). Other statements are ignored.
 //!
 //! Read by hand rather than with tobj: tobj renumbers vertices in the order faces first use
-//! them, drops unreferenced ones and stores f32, but docs/case.md requires `face_pre` to keep the
+//! them, drops unreferenced ones and stores f32, but docs/reference/case.md requires `face_pre` to keep the
 //! file's vertices in the file's order, and predicted displacements are compared at the
 //! micrometre level. The writer prints shortest-round-trip f64, so OBJ round trips exactly.
 

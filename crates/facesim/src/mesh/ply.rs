@@ -212,7 +212,7 @@ fn def(name: &str, t: ScalarType) -> PropertyDef {
     PropertyDef::new(name.to_string(), PropertyType::Scalar(t))
 }
 
-/// Columns named `kind`/`label` are written as uchar (docs/case.md springs.ply), others as float.
+/// Columns named `kind`/`label` are written as uchar (docs/reference/case.md springs.ply), others as float.
 fn column_type(name: &str) -> ScalarType {
     if name == "kind" || name == "label" {
         ScalarType::UChar

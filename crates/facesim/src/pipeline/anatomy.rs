@@ -1,4 +1,4 @@
-//! The anatomy stage (docs/planning.md): the clinical head frame and the bony landmarks from the
+//! The anatomy stage (docs/guide/planning.md): the clinical head frame and the bony landmarks from the
 //! CT, and the `[[surgery]]` entries turned into osteotomies over the segments their cuts free.
 
 use super::stage::{Recorder, Stage};

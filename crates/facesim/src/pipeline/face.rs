@@ -1,6 +1,6 @@
 //! The skin the model is built on: the extracted skin, or a given face scan registered into the
 //! CT frame, checked against the CT's skin and parameterised like it; a dense skin is solved on a
-//! coarse (u, v)-grid copy and carried along afterwards (docs/pipeline.md §5, paper 002).
+//! coarse (u, v)-grid copy and carried along afterwards (docs/design/pipeline.md §5, paper 002).
 
 use super::stage::Recorder;
 use super::stage::Stage;
@@ -153,7 +153,7 @@ fn place_scan(
 /// `coarse_triangles` unset, is solved at the resolution of the skin facesim makes from the CT
 /// itself (its triangle count). The C1 models are defined on that range-scan grid: Koch's struts
 /// stiffen tangential motion in proportion to the mesh, and on a voxel-fine iso-surface (0.5 mm
-/// edges, ragged rims) the equilibrium Newton solve does not converge (docs/pipeline.md "A skin
+/// edges, ragged rims) the equilibrium Newton solve does not converge (docs/design/pipeline.md "A skin
 /// from another program").
 fn coarsen(
     skin: Mesh,

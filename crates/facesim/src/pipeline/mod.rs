@@ -1,4 +1,4 @@
-//! The pipeline as typed stages (docs/architecture.md):
+//! The pipeline as typed stages (docs/design/architecture.md):
 //!
 //! ```text
 //! case.toml ─ inputs::read ─▶ Inputs { case, ct, scan }              (the only file reads)
@@ -33,7 +33,7 @@ use crate::volume::Volume;
 pub use stage::{Recorder, Stage};
 use std::path::Path;
 
-/// Tissues from the CT (Koch §2.3; docs/pipeline.md §1).
+/// Tissues from the CT (Koch §2.3; docs/design/pipeline.md §1).
 pub fn tissues(ct: &Volume, case: &Case, rec: &mut Recorder) -> Result<Segmentation> {
     rec.time(Stage::Segment, "segmenting tissues", || {
         crate::segment::segment(ct, &case.tissue, &case.ct.path)

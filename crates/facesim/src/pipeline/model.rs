@@ -1,5 +1,5 @@
 //! The model on the skin — which skin is rigid (`[surface] movable`), the tissue springs
-//! to the skull (Koch §2.5–2.6; docs/pipeline.md §3), the bone-move plan, and the parameters of
+//! to the skull (Koch §2.5–2.6; docs/design/pipeline.md §3), the bone-move plan, and the parameters of
 //! the C1 solve.
 
 use super::face::Face;
@@ -71,7 +71,7 @@ pub fn build(
             skin.vertices.len()
         )));
     }
-    // Bone driven into bone that stays: said for either model (docs/pipeline.md "Large moves").
+    // Bone driven into bone that stays: said for either model (docs/design/pipeline.md "Large moves").
     let plan = Plan::new(&case.osteotomy);
     for o in super::bone_overlap::bone_overlap(&plan, &face.skull, ct, &seg.labels) {
         rec.warn(super::bone_overlap::warning(&o));

@@ -19,17 +19,17 @@ pub enum Stage {
     ReadScan,
     PlaceScan,
     Coarsen,
-    /// The clinical frame, the bony landmarks and the cuts of `[[surgery]]` (docs/planning.md).
+    /// The clinical frame, the bony landmarks and the cuts of `[[surgery]]` (docs/guide/planning.md).
     Anatomy,
     Springs,
     TetMesh,
     Solve,
     Embed,
-    /// The plan basis: 12 solves per segment on the run's factor (docs/plan-basis.md).
+    /// The plan basis: 12 solves per segment on the run's factor (docs/design/plan-basis.md).
     PlanBasis,
-    /// Landmarks, measurements and regions (docs/landmarks.md).
+    /// Landmarks, measurements and regions (docs/guide/landmarks.md).
     Landmarks,
-    /// Sampling the tissue parameters (docs/uncertainty.md).
+    /// Sampling the tissue parameters (docs/guide/uncertainty.md).
     Uncertainty,
     Write,
     Total,

@@ -1,4 +1,4 @@
-//! Skin and skull surfaces from the tissues (Koch §2.4; docs/pipeline.md §2) — the
+//! Skin and skull surfaces from the tissues (Koch §2.4; docs/design/pipeline.md §2) — the
 //! cylindrical range scan with its (u, v) grid, or marching tetrahedra — then islands dropped,
 //! optional smoothing and decimation, and the (u, v) parameterisation the C1 model needs.
 

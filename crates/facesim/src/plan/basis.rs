@@ -1,4 +1,4 @@
-//! The plan basis (docs/plan-basis.md): per segment s and entry k of M = [R − I | t′] (row-major,
+//! The plan basis (docs/design/plan-basis.md): per segment s and entry k of M = [R − I | t′] (row-major,
 //! k = 4·row + column, column 3 = t′), the face displacement B_{s,k} when segment s's bone moves
 //! by the unit matrix E_k and the other segments stay. A plan's face displacement is
 //! B_0 + Σ_s Σ_k m_{s,k} B_{s,k} (B_0 = 0 without loads).

@@ -1,4 +1,4 @@
-//! The plan basis of the C1 models (docs/plan-basis.md, "C1 models"): their linearisation at the
+//! The plan basis of the C1 models (docs/design/plan-basis.md, "C1 models"): their linearisation at the
 //! pre-operative state. The solver (solve/linearised.rs) answers unit moves of the spring
 //! attachments; here are those moves, one per segment s and entry k of M = [R − I | t′], and the
 //! basis assembled from the face's answers.
@@ -94,7 +94,7 @@ pub fn basis(b: C1Basis, osteotomies: &[Osteotomy]) -> Result<PlanBasis> {
         .map(|(a, r)| crate::vec3::norm(crate::vec3::sub(*a, *r)))
         .fold(0.0, f64::max);
     basis.warnings.push(format!(
-        "linear preview: the plan basis is the {} model linearised at the pre-operative state (its springs are nonlinear); at the run's own plan it is {:.3} mm from the solved face, and the error grows with the square of the move (docs/plan-basis.md)",
+        "linear preview: the plan basis is the {} model linearised at the pre-operative state (its springs are nonlinear); at the run's own plan it is {:.3} mm from the solved face, and the error grows with the square of the move (docs/design/plan-basis.md)",
         if b.model.starts_with("koch") { "koch1996" } else { "C1 equilibrium" },
         basis.run_plan_error_mm
     ));

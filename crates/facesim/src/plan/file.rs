@@ -1,4 +1,4 @@
-//! `plan_basis.bin` (docs/plan-basis.md "File format"), little-endian:
+//! `plan_basis.bin` (docs/design/plan-basis.md "File format"), little-endian:
 //!
 //! ```text
 //! magic        8 bytes  "FSPLANB\0"

@@ -1,4 +1,4 @@
-//! Re-planning without re-solving (docs/plan-basis.md).
+//! Re-planning without re-solving (docs/design/plan-basis.md).
 //!
 //! A segment's rigid move x ↦ R x + t′ (t′ = (I − R)·pivot + translate) displaces its bone by
 //! M·[x; 1] with M = [R − I | t′], linear in M's 12 entries. In a linear model whose moved bone

@@ -64,7 +64,7 @@ pub struct Basis {
 }
 
 /// The online data of a reduced model: N×N and N-sized arrays, independent of the mesh size
-/// (docs/reduced.md "The stored model"). Serialised into `reduced_model.bin` and the page.
+/// (docs/design/reduced.md "The stored model"). Serialised into `reduced_model.bin` and the page.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OnlineForm {
     /// θ̄: the reference parameters, X = A(θ̄).
@@ -588,7 +588,7 @@ fn sweep(
 
 /// A snapshot's certified error, relative to the reduced model's bound at its point, at which
 /// its conjugate gradients stop. The bound overestimates the basis's true error 10–50×
-/// (docs/reduced.md), so this keeps the snapshot's error well below it.
+/// (docs/design/reduced.md), so this keeps the snapshot's error well below it.
 const SNAPSHOT_ACCURACY: f64 = 1e-3;
 
 /// Conjugate-gradient iterations before a snapshot falls back to its own factorisation. The

@@ -1,4 +1,4 @@
-//! The certified reduced-basis model of the linear tetrahedral model (issue 28; docs/reduced.md):
+//! The certified reduced-basis model of the linear tetrahedral model (issue 28; docs/design/reduced.md):
 //! its stiffness is affine in the tissues' Lamé parameters, so a greedy over the parameter box
 //! picks a few full solves as a basis, and any parameter set is then solved in microseconds with
 //! a certified bound on its error.
@@ -91,7 +91,7 @@ impl LinearFace {
 }
 
 /// The certified bound (mm) on a linear output's error y = C e, through the residual's Riesz
-/// representer ρ = X⁻¹ r (docs/reduced.md "The face, in mm"): e = T⁻¹ ρ with T = X⁻¹ A(θ),
+/// representer ρ = X⁻¹ r (docs/design/reduced.md "The face, in mm"): e = T⁻¹ ρ with T = X⁻¹ A(θ),
 /// whose spectrum lies in [α_LB, γ_UB] (every A_q positive semi-definite), so with
 /// c = (1/α_LB + 1/γ_UB)/2
 ///
@@ -179,7 +179,7 @@ impl OutputBound {
     }
 }
 
-/// report.json `uncertainty.reduced[]`: how one reduced model was built (docs/reduced.md).
+/// report.json `uncertainty.reduced[]`: how one reduced model was built (docs/design/reduced.md).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ReducedReport {
     /// The sliding state it was built for.

@@ -1,4 +1,4 @@
-//! Tissue segmentation by intensity (docs/pipeline.md §1, Koch 1996 §2.3 and Table 1).
+//! Tissue segmentation by intensity (docs/design/pipeline.md §1, Koch 1996 §2.3 and Table 1).
 //!
 //! 1. Head = the largest 6-connected component of HU > `head_threshold` (drops the CT table and
 //!    head rest, which touch the head only through air).
@@ -368,7 +368,7 @@ fn fitted_windows(
     // the mean of the two, so the midpoint is the unbiased partial-volume threshold. The
     // crossing is Bayes-optimal only for pure voxels; with a narrow, heavy soft-tissue
     // peak beside a broad bone component it sits near the soft peak and thickens bone
-    // (docs/pipeline.md §1). The crossings are reported for comparison.
+    // (docs/design/pipeline.md §1). The crossings are reported for comparison.
     let w = Windows {
         head_threshold: t.head_threshold,
         fat_dark: (g[0].mean - 3.0 * g[0].sigma).max(t.head_threshold + 1.0),

@@ -1,5 +1,5 @@
 //! ITK transform files (`.tfm`, `.txt`) as 3D Slicer's Transforms module saves them
-//! (docs/slicer.md "Transform files").
+//! (docs/guide/slicer.md "Transform files").
 //!
 //! Conventions, from Slicer's developer guide (Transforms, "Transform files"):
 //! - the file is in LPS (ITK's frame), so its numbers are facesim's frame as they stand;
@@ -66,7 +66,7 @@ impl RigidMove {
         }
     }
 
-    /// The plan's form (docs/case.md `[[osteotomy]]`): `rotate_deg` (R = Rz·Ry·Rx) and
+    /// The plan's form (docs/reference/case.md `[[osteotomy]]`): `rotate_deg` (R = Rz·Ry·Rx) and
     /// `translate` about `pivot` = the centre, so that R (p − pivot) + pivot + translate is
     /// this move.
     pub fn plan_form(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {

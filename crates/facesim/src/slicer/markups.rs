@@ -1,5 +1,5 @@
 //! A cutting plane from a 3D Slicer markups file (`.mrk.json` holding a `Plane` markup;
-//! docs/slicer.md "Cutting planes").
+//! docs/guide/slicer.md "Cutting planes").
 //!
 //! A `pointNormal` plane is its one control point and the z axis of `baseToNode` (the plane's
 //! normal; `objectToBase`, when present, rotates it further); a `threePoints` plane is its three

@@ -1,4 +1,4 @@
-//! 3D Slicer's files in a plan (docs/slicer.md): osteotomy moves as ITK transform files,
+//! 3D Slicer's files in a plan (docs/guide/slicer.md): osteotomy moves as ITK transform files,
 //! cutting planes from markups, and the substitution that turns both into the plan's own keys
 //! when case.toml (or a replan PLAN.toml) is read.
 //!

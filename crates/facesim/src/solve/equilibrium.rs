@@ -332,7 +332,7 @@ impl<'a> Newton<'a> {
     /// The linearisation at rest (linearised.rs): (I₃ ⊗ K + Σ H_s) δa = Σ H_s δx_b per move.
     /// The coupled tangent at rest is factored once and solves every move at once: on the real
     /// CT 0.16 s for 12 moves, where conjugate gradients on the run's preconditioner (no new
-    /// factor, ~65 iterations per move to 1e-11) took 0.86 s (docs/plan-basis.md). Should that
+    /// factor, ~65 iterations per move to 1e-11) took 0.86 s (docs/design/plan-basis.md). Should that
     /// factorisation fail, conjugate gradients are the fallback.
     fn responses(&self, moves: &[Vec<[f64; 3]>]) -> Result<DofResponses> {
         let start = std::time::Instant::now();

@@ -1,5 +1,5 @@
 //! The C1 models linearised at the pre-operative state, for the plan basis
-//! (docs/plan-basis.md, "C1 models").
+//! (docs/design/plan-basis.md, "C1 models").
 //!
 //! At rest (a = a_init, attachments x_b where they were traced) every spring has its rest length,
 //! so the preloaded skin is an equilibrium. A small move δx_b of the attachments changes spring
@@ -13,7 +13,7 @@
 //! Both are linear in δx_b, and a segment's δx_b = M·[x_b; 1] is linear in M's entries, so the
 //! responses to the unit matrices E_k are the basis's columns. Neither model is linear in the
 //! plan (the springs turn and stretch), so the basis is a linear preview whose error grows with
-//! the square of the move (measured in docs/plan-basis.md).
+//! the square of the move (measured in docs/design/plan-basis.md).
 
 use super::problem::Problem;
 use crate::vec3::{norm, sub};

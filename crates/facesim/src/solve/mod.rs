@@ -1,4 +1,4 @@
-//! The predicted face (Koch §4.4–4.5, docs/pipeline.md §5).
+//! The predicted face (Koch §4.4–4.5, docs/design/pipeline.md §5).
 //!
 //! Both models start from the preloaded C1 skin (a_init, F_init = K a_init) with rigid nodes
 //! outside `[surface] movable`, and move the spring attachments by the plan in `steps` load
@@ -64,7 +64,7 @@ pub fn solve(
 }
 
 /// The model's response to small attachment moves, linearised at the pre-operative state
-/// (linearised.rs, docs/plan-basis.md): per requested move, the skin vertices' displacement.
+/// (linearised.rs, docs/design/plan-basis.md): per requested move, the skin vertices' displacement.
 pub(crate) struct Responses {
     /// Per move, one displacement (mm per unit move) per skin vertex (`skin`'s order).
     pub columns: Vec<Vec<[f64; 3]>>,

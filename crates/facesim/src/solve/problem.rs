@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 /// How the C1 model is solved (the case's `[solve] model`, `crate::case::SolveModel::c1_method`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Method {
-    /// Newton's method on the equilibrium equations (docs/pipeline.md §5).
+    /// Newton's method on the equilibrium equations (docs/design/pipeline.md §5).
     Equilibrium,
     /// Koch's load steps, eq. 20–23.
     Koch1996,
@@ -33,7 +33,7 @@ impl Method {
     }
 
     /// The spring force scale k_c (Koch eq. 20) of `[solve]`: Koch's own iteration was
-    /// calibrated with its own constant (docs/pipeline.md).
+    /// calibrated with its own constant (docs/design/pipeline.md).
     pub fn k_c(self, solve: &crate::case::Solve) -> f64 {
         match self {
             Method::Koch1996 => solve.koch_k_c,

@@ -1,4 +1,4 @@
-//! Skin and skull surfaces (docs/pipeline.md §2): the range scan (with its (u, v)
+//! Skin and skull surfaces (docs/design/pipeline.md §2): the range scan (with its (u, v)
 //! parameterisation) or marching tetrahedra, then optional Taubin smoothing and adaptive
 //! decimation; a given face scan replaces the extracted skin after landmark registration.
 
@@ -364,7 +364,7 @@ fn set_uv(mesh: &mut Mesh, u: Vec<f64>, v: Vec<f64>) {
 }
 
 /// Cylindrical (u, v) = (R0·φ, z) about the vertical axis through `axis`, φ from −y towards +x
-/// (the parameterisation a given face scan gets, docs/pipeline.md §2).
+/// (the parameterisation a given face scan gets, docs/design/pipeline.md §2).
 pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
     let (mut u, mut v) = (Vec::new(), Vec::new());
     for p in &mesh.vertices {
@@ -375,7 +375,7 @@ pub fn cylindrical_uv(mesh: &mut Mesh, axis: [f64; 2], r0: f64) {
 }
 
 /// Planar (u, v): orthogonal projection on the least-squares plane of the vertices (for
-/// patch-like surfaces, docs/case.md `parameterization = "planar"`). u runs along the direction of
+/// patch-like surfaces, docs/reference/case.md `parameterization = "planar"`). u runs along the direction of
 /// largest spread, v completes a right-handed frame with the plane normal pointing to the side
 /// the triangles face on average.
 pub fn planar_uv(mesh: &mut Mesh) {

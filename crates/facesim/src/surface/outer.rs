@@ -1,4 +1,4 @@
-//! The outer face of a skin exported by another program (issue 16 item 6; docs/pipeline.md
+//! The outer face of a skin exported by another program (issue 16 item 6; docs/design/pipeline.md
 //! "A skin from another program").
 //!
 //! An iso-surface of a CT made elsewhere (3D Slicer, a segmentation program) is the whole
@@ -11,7 +11,7 @@
 //!    and repeated triangles dropped;
 //! 2. only the largest vertex-connected piece is scanned (a scanner sees the patient, not the
 //!    table; closed internal surfaces are separate pieces);
-//! 3. the cylindrical range scan of the product's own skin (docs/pipeline.md §2) is cast at the
+//! 3. the cylindrical range scan of the product's own skin (docs/design/pipeline.md §2) is cast at the
 //!    mesh: horizontal rays (constant LPS z) from outside towards the vertical axis, one every
 //!    half median edge length in z and along the outermost circumference; the first triangle
 //!    each ray meets is seen;

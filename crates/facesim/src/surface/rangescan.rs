@@ -1,4 +1,4 @@
-//! The paper's simulated cylindrical range scan (Koch 1996 §2.4, docs/pipeline.md §2).
+//! The paper's simulated cylindrical range scan (Koch 1996 §2.4, docs/design/pipeline.md §2).
 //!
 //! Rays in horizontal planes (constant LPS z) run from outside the head towards a vertical
 //! axis through the head's centroid, at angles φ_k = −π + (k + ½)Δφ measured from the anterior

@@ -1,4 +1,4 @@
-//! Uncertainty of the prediction (docs/uncertainty.md): the tissue parameters are known only as
+//! Uncertainty of the prediction (docs/guide/uncertainty.md): the tissue parameters are known only as
 //! ranges, so `[uncertainty] samples = N` draws N parameter sets from a seeded quasi-random
 //! sequence, solves each on the run's mesh and face embedding, and reports the mean and 5–95 %
 //! band of the displacement magnitude per face vertex (face_band.ply), landmark and region
@@ -10,7 +10,7 @@
 //! - `band`: mean and percentiles, face_band.ply;
 //! - `run`: drawing, solving and reducing the samples;
 //! - `sensitivity`: Sobol indices (Saltelli / Jansen estimators) on the reduced model;
-//! - `reduced`: the same with the certified reduced model (docs/reduced.md), the band reduced in
+//! - `reduced`: the same with the certified reduced model (docs/design/reduced.md), the band reduced in
 //!   chunks of vertices.
 
 pub mod band;

@@ -1,4 +1,4 @@
-//! Sampling with the certified reduced model (docs/reduced.md, docs/uncertainty.md): each
+//! Sampling with the certified reduced model (docs/design/reduced.md, docs/guide/uncertainty.md): each
 //! sample is a reduced solve (coefficients and a bound, microseconds), the face linear in the
 //! coefficients; the band per vertex is reduced in chunks of vertices, so memory grows with the
 //! samples × a chunk, not × the face, and 10 000 samples of a real head's face fit.

@@ -1,4 +1,4 @@
-//! Sampling a run's tissue parameters (docs/uncertainty.md): draw N parameter sets from the
+//! Sampling a run's tissue parameters (docs/guide/uncertainty.md): draw N parameter sets from the
 //! scrambled Halton sequence, solve each on what the run already built, and reduce the face's
 //! displacement magnitudes to the band per vertex, landmark and region.
 
@@ -91,7 +91,7 @@ pub(super) fn draw_at(
 }
 
 /// Points the reduced model's greedy trains on: 128 draws of the case's `[uncertainty]` box
-/// from another seed than the samples' (so the samples test it; docs/reduced.md), and the box's
+/// from another seed than the samples' (so the samples test it; docs/design/reduced.md), and the box's
 /// corners. Every Lamé parameter is monotone in each sampled parameter, so the corners span the
 /// box's image in θ: the trained box the reduced model answers in.
 pub fn training(case: &Case) -> Vec<Case> {
@@ -125,7 +125,7 @@ pub(super) fn solve_key(c: &Case, sliding_matters: bool) -> Vec<u64> {
     k
 }
 
-/// report.json `uncertainty` (docs/uncertainty.md).
+/// report.json `uncertainty` (docs/guide/uncertainty.md).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct UncertaintyReport {
     pub samples: usize,

@@ -1,5 +1,5 @@
 //! Sobol sensitivity indices of the prediction to the tissue parameters (issue 28 item 4;
-//! docs/uncertainty.md "Sensitivity"): which parameter a landmark's or a region's displacement
+//! docs/guide/uncertainty.md "Sensitivity"): which parameter a landmark's or a region's displacement
 //! depends on, alone (first-order S_i) and with its interactions (total S_Ti).
 //!
 //! Estimators on two independent quasi-random matrices A and B (N rows, one column per sampled

@@ -5,7 +5,7 @@
 //! not matter (no `.dcm` needed). A directory with no image of its own is searched below (a CD's
 //! `DICOM/…` tree); more than one series found is refused with every series listed, never
 //! guessed (two reconstructions of one scan, bone and soft-tissue kernel, have the same size).
-//! Compressed pixel data is decoded by the codecs in `dicom_syntax` (docs/dicom.md).
+//! Compressed pixel data is decoded by the codecs in `dicom_syntax` (docs/guide/dicom.md).
 //!
 //! Geometry straight from the standard: ImageOrientationPatient gives the row direction (the
 //! direction of increasing column index i) and the column direction (increasing row index j),
@@ -375,7 +375,7 @@ fn assemble(
     debug_assert!(per_slice * nz <= MAX_VOXELS);
 
     // Files decode in parallel, and the frames of a multi-frame file too (a compressed series is
-    // codec-bound: docs/performance.md); each file in its own guard, so a parser panic on one
+    // codec-bound: docs/lab/performance.md); each file in its own guard, so a parser panic on one
     // damaged file names that file.
     let mut data = vec![0.0f32; per_slice * nz];
     let mut by_file: BTreeMap<&Path, Vec<(&SliceHeader, &mut [f32])>> = BTreeMap::new();

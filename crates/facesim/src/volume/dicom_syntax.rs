@@ -4,7 +4,7 @@
 //! baseline and lossless process 14 / SV1), `rle` (RLE Lossless), `openjpeg-sys` (OpenJPEG,
 //! built from C: JPEG 2000 and HTJ2K), `deflate`, and, with facesim's feature `jpeg-ls`, CharLS
 //! (JPEG-LS). A syntax the registry only knows by name (a stub) is refused before any pixel is
-//! read. The table of syntaxes, decoders, licences and tests is docs/dicom.md.
+//! read. The table of syntaxes, decoders, licences and tests is docs/guide/dicom.md.
 
 use dicom_encoding::TransferSyntaxIndex;
 use dicom_transfer_syntax_registry::TransferSyntaxRegistry;
@@ -24,7 +24,7 @@ pub(crate) fn check_decodable(uid: &str) -> std::result::Result<(), String> {
     match TransferSyntaxRegistry.get(uid) {
         Some(ts) if ts.can_decode_all() => Ok(()),
         _ => Err(format!(
-            "transfer syntax {} is not decoded by facesim (docs/dicom.md lists those that are); \
+            "transfer syntax {} is not decoded by facesim (docs/guide/dicom.md lists those that are); \
              convert the series first, e.g. `gdcmconv --raw IN OUT`",
             describe(uid)
         )),

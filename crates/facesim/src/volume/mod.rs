@@ -1,7 +1,7 @@
 //! The CT volume: voxels in Hounsfield units with a voxel-to-LPS affine (mm).
 //!
 //! Readers for NIfTI, NRRD, DICOM series, InVesalius projects and vtk.js dataset folders all produce a [`Volume`]; everything
-//! downstream works in the LPS world frame (docs/case.md "Frames and units").
+//! downstream works in the LPS world frame (docs/reference/case.md "Frames and units").
 
 pub mod dicom_io;
 pub(crate) mod dicom_syntax;
@@ -33,7 +33,7 @@ pub struct Volume {
     pub data: Vec<f32>,
 }
 
-/// `facesim inspect` output (docs/case.md).
+/// `facesim inspect` output (docs/reference/case.md).
 #[derive(Serialize, Debug, PartialEq)]
 pub struct Inspect {
     pub dims: [usize; 3],

@@ -10,7 +10,7 @@ use crate::output::write_atomic;
 use nifti::{IntoNdArray, NiftiHeader, NiftiObject, NiftiType, NiftiVolume, ReaderOptions};
 use std::path::Path;
 
-/// Voxel→RAS affine (3×4, rows) of a header, by the docs/case.md precedence.
+/// Voxel→RAS affine (3×4, rows) of a header, by the docs/reference/case.md precedence.
 pub(crate) fn header_affine(h: &NiftiHeader) -> [[f64; 4]; 3] {
     if h.sform_code > 0 {
         let r = |row: [f32; 4]| row.map(|x| x as f64);

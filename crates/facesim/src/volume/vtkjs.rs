@@ -8,7 +8,7 @@
 //! vtkImageData's `indexToWorld` columns); world = origin + direction · (spacing ∘ index), the
 //! index counted from extent 0 (so a non-zero extent start shifts the first voxel). VTK's world
 //! has no patient meaning: facesim takes it as LPS mm, and a case whose data lie otherwise says
-//! so with `[ct] axes` (docs/case.md; the headsq case does). Values are taken as they are (no
+//! so with `[ct] axes` (docs/reference/case.md; the headsq case does). Values are taken as they are (no
 //! rescale is stored): `[ct] intercept` turns stored numbers into HU.
 
 use super::Volume;

@@ -1,4 +1,4 @@
-//! The bony landmarks of the maxilla and the mandible (docs/planning.md "Landmarks").
+//! The bony landmarks of the maxilla and the mandible (docs/guide/planning.md "Landmarks").
 //!
 //! The CT is resampled on a 1 mm grid of the clinical frame (`grid`): lateral s, up v,
 //! forward a. Each detector then reads sections of that grid: the midsagittal slab for the

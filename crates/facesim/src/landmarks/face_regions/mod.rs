@@ -3,7 +3,7 @@
 //! A vertex belongs to at most one region (the first that claims it); a region whose bounding
 //! landmarks are missing is absent, with the reason.
 //!
-//! - [`regions`]: from the run's landmarks (docs/landmarks.md "Regions"), by height v, lateral
+//! - [`regions`]: from the run's landmarks (docs/guide/landmarks.md "Regions"), by height v, lateral
 //!   offset s and anteriority a in the head frame. Every run with landmarks uses these: the
 //!   report's per-region statistics, the uncertainty study, the sweep, `compare --regions`.
 //! - [`profile::regions`]: the fallback for a face without landmarks (the solver study's meshes,
