@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The neo-Hookean material against the linear default on the same case, alternating runs on the
-# same machine (issue 25 item 4's target: at most 5x the linear run). Usage:
+# same machine (the target: at most 5x the linear run). Usage:
 #   benches/nonlinear.sh [CASE_DIR] [RUNS]     (default data-samples/real, 2)
 # Prints wall and user seconds per run, the Newton and CG iterations, and the ratio of the means.
 set -euo pipefail

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The comparison set for a refactor that must not change behaviour (issue 24 item 8): every
+# The comparison set for a refactor that must not change behaviour: every
 # output of `facesim run` on the bundled and the real sample with each model, with uncertainty
 # sampling, a replan and a sweep.
 #   scripts/outputs-set.sh BIN DEST      e.g. a build from before the change, then after it

@@ -332,7 +332,7 @@ fn run(a: &Args) -> Result<()> {
         let outcome = facesim::commands::run(&dir, None, &obs)?;
         write_face(&outcome, dest)?;
         if let Some(l) = &a.landmarks {
-            // Landmarks exist once facesim detects them (issue 16 item 1); without them the
+            // Landmarks exist once facesim detects them; without them the
             // output is left unwritten and Slicer shows none.
             let src = outcome.out_dir.join("landmarks_post.mrk.json");
             if src.is_file() {

@@ -1,4 +1,4 @@
-//! `facesim bench reduced --quick` (issue 28 item 7; docs/lab/performance.md) through the real CLI on
+//! `facesim bench reduced --quick` (docs/lab/performance.md) through the real CLI on
 //! the first sample (the jaws phantom, coarse mesh): it writes bench_reduced.json and .md, and
 //! what the JSON says is consistent — every certified bound at least the true error it bounds,
 //! positive times, the sample counts asked for, each band run by the method asked for, and the

@@ -1,4 +1,4 @@
-//! `facesim calibrate` through the real binary (issue 26 item 3, issue 28 item 6): one coarse
+//! `facesim calibrate` through the real binary: one coarse
 //! phantom, the Le Fort I advance fitted and the BSSO advance held out. The reduced models'
 //! ratios are held against the full runs — the defaults' (the first pass) and the optimum's
 //! (the confirming pass, an independent full solve at other tissue parameters) — within their

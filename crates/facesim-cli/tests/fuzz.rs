@@ -1,6 +1,6 @@
-//! Mutation fuzzing of every reader with proptest (issue 7): a valid seed file is damaged by
-//! random overwrites, insertions, deletions, "interesting" bytes and truncation, then read. A
-//! reader may refuse the file — with one line naming it — but must never panic or hang.
+//! Mutation fuzzing of every reader with proptest (docs/lab/reliability.md): a valid seed file is
+//! damaged by random overwrites, insertions, deletions, "interesting" bytes and truncation, then
+//! read. A reader may refuse the file — with one line naming it — but must never panic or hang.
 //!
 //! Cases per target: FACESIM_FUZZ_CASES (default 200, what CI runs). docs/lab/reliability.md records
 //! the long runs (`FACESIM_FUZZ_CASES=20000 cargo test --release --test fuzz -- --nocapture`).

@@ -45,9 +45,9 @@ fn run_plan(file: &str, landmarks: &[&str]) -> Vec<[f64; 3]> {
     if file == "case_rotation.toml" {
         // Turning the mandible 5° about the condyles without moving the maxilla drives the lower
         // incisors about 6 mm up into the upper ones: the lip tissue caught between the teeth is
-        // crushed. Until session 41 a few elements turned inside out and the run was refused;
-        // now that tissue tears (`[tet] tear_gap`; 3 tetrahedra between the incisors, 2 at the
-        // volume's bottom) and the run says so. Since session 42 it also says that the plan
+        // crushed. Rather than a few elements turning inside out and the run refused, that tissue
+        // tears (`[tet] tear_gap`; 3 tetrahedra between the incisors, 2 at the
+        // volume's bottom) and the run says so. It also says that the plan
         // drives the mandible's teeth into the maxilla's (`pipeline::bone_overlap`: 2 mm deep
         // along the move, in the incisors' region, y < -55).
         assert_eq!(r.code, 0, "{file}: {}", r.stderr);
@@ -134,7 +134,7 @@ fn setback_rotation_and_le_fort_move_the_face_their_way() {
     assert!(d[1][1].abs() < 0.5, "{d:?}");
 }
 
-/// Issue 27 item 3: README's first command (`facesim run data-samples/jaws`) on a face: every
+/// README's first command (`facesim run data-samples/jaws`) on a face: every
 /// soft-tissue landmark found, no warning, no inverted element; the upper face stays where
 /// it was, and the BSSO advance moves the lower face inside the published soft/hard ranges
 /// (docs/guide/validation.md) with the defaults; the page is written.

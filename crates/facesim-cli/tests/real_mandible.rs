@@ -1,6 +1,6 @@
 //! The second real sample (data-samples/real-mandible: VTK's headsq, with the mandible) through
 //! the real `facesim run`: a 5 mm BSSO advancement must run with the defaults, invert nothing,
-//! and carry the chin and lower lip forward (issue 26 item 1).
+//! and carry the chin and lower lip forward.
 
 mod cli;
 #[path = "../../facesim/tests/common/mod.rs"]
@@ -197,7 +197,7 @@ fn chin_landmarks_and_ratios() {
     published_ratios_are_the_runs_moves_over_the_plans(&r, &out);
 }
 
-/// report.json's `published_ratios` (issue 26 item 4): the plan (segment "mandible", 5 mm along
+/// report.json's `published_ratios`: the plan (segment "mandible", 5 mm along
 /// −y) read as a BSSO advancement, and each of its four published rows recomputed here from the
 /// report's own landmarks and head frame: the soft landmark's move along the anterior axis over
 /// the translation's (a pure translation moves every bone point alike), beside the range

@@ -1,4 +1,4 @@
-//! Issue 25 item 5: lip and cheek slide where they rest on the teeth, found by contact (no air
+//! Lip and cheek slide where they rest on the teeth, found by contact (no air
 //! between), through the real `facesim run` on the real CT (a 5 mm Le Fort I advance).
 
 mod cli;

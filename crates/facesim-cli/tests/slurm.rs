@@ -1,4 +1,4 @@
-//! The cohort workflow on a real Slurm (docs/guide/cohort.md, "A real Slurm on one machine"; issue 29).
+//! The cohort workflow on a real Slurm (docs/guide/cohort.md, "A real Slurm on one machine").
 //! scripts/slurm-cluster.sh starts a throw-away one-node cluster — munged, slurmctld, slurmd of
 //! Debian's slurm-wlm 22.05, run as root, configuration, munge key and state in a temporary
 //! directory — and workflow/Snakefile runs through snakemake-executor-plugin-slurm with the

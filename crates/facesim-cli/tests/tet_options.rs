@@ -1,4 +1,4 @@
-//! `[tet]` options through the real `facesim run` on the bundled sample (issue 25): the face
+//! `[tet]` options through the real `facesim run` on the bundled sample: the face
 //! must follow the bone whatever element is chosen.
 
 mod cli;
@@ -79,13 +79,13 @@ pivot = {pivot:?}
     dir
 }
 
-/// Issue 25 item 2: a rigid move of all bone on the real CT gives the rigid face. The tissue
-/// mesher leaves pieces hinged by a node or an edge; they were held still, and the face of a
-/// translated skull came out 23.6 % of the move off the rigid translation. Now each follows its
+/// A rigid move of all bone on the real CT gives the rigid face. The tissue
+/// mesher leaves pieces hinged by a node or an edge; held still, they put the face of a
+/// translated skull 23.6 % of the move off the rigid translation, so each follows its
 /// bone. Translation: every element and material is exact (0 strain). Rotation: the linear
 /// material's small-strain error is of order θ × the move (3° ≈ 5 %; 1.2 % measured); the
-/// neo-Hookean material is exact for it (it failed after 14 minutes before the Newton–Krylov
-/// solve and the stable energy: issue 25).
+/// neo-Hookean material is exact for it (through the Newton–Krylov solve and the stable energy;
+/// without them it failed after 14 minutes).
 #[test]
 fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
     let pivot = [125.0, 60.0, 20.0];
@@ -159,7 +159,7 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
     }
 }
 
-/// Issue 25 item 1: every [tet] option through `facesim run` on both bundled samples (8/16 mm
+/// Every [tet] option through `facesim run` on both bundled samples (8/16 mm
 /// mesh, so the 10-node system fits): the capsule with its 6 mm advance and the jaws phantom
 /// (README's first command) with its 5 mm BSSO advance. Each option follows the move (the face
 /// moves 5/6–13/12 of it at most), exits 0, turns no element inside out, and agrees with the
@@ -256,7 +256,7 @@ fn quadratic_element_follows_the_bone_like_the_linear_one() {
     }
 }
 
-/// Issue 25 item 4: the neo-Hookean material converges through `facesim run` on the real CT at
+/// The neo-Hookean material converges through `facesim run` on the real CT at
 /// the full 5 mm Le Fort I advance with the default mesh, turns no element inside out, and its
 /// face lies within the issue's bound of the linear one (0.5 mm mean; 0.09 mm measured, which
 /// report.json's `nonlinear_vs_linear` states per region and this test recomputes).
@@ -286,7 +286,7 @@ fn neo_hookean_converges_on_the_real_ct_near_the_linear_face() {
     assert!((4.0..=6.0).contains(&max), "the face moves {max} mm");
 }
 
-/// Issue 25 item 3: the largest orthognathic move, the real CT's maxilla advanced 25 mm (five
+/// The largest orthognathic move, the real CT's maxilla advanced 25 mm (five
 /// times the sample's plan). Where it would drag tissue through bone, the tissue lifts off its
 /// bone; what is still turned inside out after that is free tissue in the osteotomy gap behind and
 /// above the segment (34 of 207 475 elements, stretched several-fold), and it tears (`[tet]
@@ -294,8 +294,8 @@ fn neo_hookean_converges_on_the_real_ct_near_the_linear_face() {
 /// the run succeeds with no inverted element; with every element kept it is refused, naming the
 /// count. Tearing tissue behind the maxilla must barely change the face: the kept solve's face
 /// (written for inspection) and the torn one agree within 0.35 mm at every vertex and 0.01 mm on
-/// average (measured 0.28 and 0.004 mm, with the face moving 23.6 mm; 0.06 mm worst while the
-/// scan's end was free, before session 63; docs/design/pipeline.md "Large moves").
+/// average (measured 0.28 and 0.004 mm, with the face moving 23.6 mm; 0.06 mm worst with the
+/// scan's end free; docs/design/pipeline.md "Large moves").
 #[test]
 fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/real");
@@ -384,7 +384,7 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
 /// modulus. On the real CT (5 mm Le Fort I advance) the framework's tetrahedra must lie where the
 /// run's own landmarks put the nose — between the alae, above subnasale, below soft nasion, in
 /// front of the anterior nasal spine — and none on the bone the plan moves (the down-fracture
-/// frees the septum from the maxillary crest): with the two tetrahedra there that session 56's
+/// frees the septum from the maxillary crest): with the two tetrahedra there that an earlier
 /// region kept, the maxilla carried the whole framework (Sn/ANS 0.51 at 3 MPa; 0.25 without them,
 /// 0.57 as tissue). A stiff nose must follow the maxilla less at its base while the default leaves
 /// every element its tissue's. The nose's tetrahedra are terms of their own in the reduced model: its

@@ -1,4 +1,4 @@
-//! `facesim validate` through the real binary (issue 26 item 2): one coarse phantom and one
+//! `facesim validate` through the real binary: one coarse phantom and one
 //! surgery, its ratios recomputed from the run's own report.json and its ranges held against
 //! docs/guide/validation.md's table; a Le Fort I's region holding the whole nose; the real headsq's
 //! BSSO advance against the published chin ratio; the tissue the Le Fort I's and the
@@ -644,7 +644,7 @@ fn the_degloved_maxilla_by_default_serves_where_it_can_and_steps_aside_where_it_
 /// soft chin follows the bony chin further than bonded to it (`false`): measured on headsq,
 /// where much of the soft chin lies over the symphysis above the cut (on the coarse phantom,
 /// whose chin lies over the segment, the two differ by 0.005 since the tissue slides on the bone
-/// surface's own normal, session 61). A BSSO moves the chin with the teeth: nothing is raised.
+/// surface's own normal). A BSSO moves the chin with the teeth: nothing is raised.
 #[test]
 fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() {
     let by_default = validate_one_phantom("facesim-degloved-chin", "genioplasty", &[]);

@@ -1,4 +1,4 @@
-//! `facesim bench reduced [--case DIR] --out DIR [--quick]` (issue 28 item 7): what the certified
+//! `facesim bench reduced [--case DIR] --out DIR [--quick]` : what the certified
 //! reduced model (docs/design/reduced.md) costs and how close it is, on one case.
 //!
 //! - **One full solve**: `Prediction::resolve` at the case's own parameters (assembly,
@@ -675,7 +675,7 @@ fn errors(
     Ok(rows)
 }
 
-/// Issue 28 item 7's targets against what was measured.
+/// The reduced model's targets (docs/lab/performance.md) against what was measured.
 fn targets(b: &ReducedBench) -> Vec<Target> {
     // Over the online θ, the error θ and the many-sample band's samples (its report.json).
     let largest_bound = b

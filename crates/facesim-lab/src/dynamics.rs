@@ -1,5 +1,5 @@
-//! Linear elastodynamics for the solver study (Alterovitz & Goldberg 2003, docs/lab/study.md; issue 5,
-//! first part): small-strain FEM of the 2-D block benchmark on bilinear quads in **plane strain**,
+//! Linear elastodynamics for the solver study (Alterovitz & Goldberg 2003, docs/lab/study.md):
+//! small-strain FEM of the 2-D block benchmark on bilinear quads in **plane strain**,
 //! consistent and lumped mass, Rayleigh damping C = αM + βK, and four integrators — implicit
 //! Newmark (average acceleration), explicit Newmark (central difference) with consistent mass,
 //! explicit with lumped mass, and quasi-static. Explicit integration that blows up is detected

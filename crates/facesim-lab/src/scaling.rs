@@ -1,4 +1,4 @@
-//! `facesim bench scaling [--quick] OUT_DIR` (issue 6): how each stage's cost grows.
+//! `facesim bench scaling [--quick] OUT_DIR` : how each stage's cost grows.
 //!
 //! - CT series: the analytic phantom head at growing resolution (2 mm → 0.45 mm voxels, 1.2 M →
 //!   108 M voxels; the last is the size of a 512×512×400 clinical CT), each with a 1.5 mm face scan

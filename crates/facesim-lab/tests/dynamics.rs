@@ -1,4 +1,4 @@
-//! The block-and-needle benchmark of Alterovitz & Goldberg 2003 (issue 5, first part).
+//! The block-and-needle benchmark of Alterovitz & Goldberg 2003.
 
 use facesim_lab::dynamics::{
     Block, Integrator, MP1, MP2, critical_step, integrate, relative_energy_error,

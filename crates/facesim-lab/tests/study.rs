@@ -1,4 +1,4 @@
-//! `facesim study --quick` end to end (issue 5), and exact invariants of the face baselines.
+//! `facesim study --quick` end to end, and exact invariants of the face baselines.
 
 use facesim::case::{Case, Osteotomy, Region};
 use facesim::pipeline::prepare_case;

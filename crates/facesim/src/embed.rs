@@ -1,4 +1,4 @@
-//! The full-resolution skin carried along a coarse solve (issue 6), after Chen et
+//! The full-resolution skin carried along a coarse solve, after Chen et
 //! al., "Embedding geometric textures in a shell space" (§1.2 and §2).
 //!
 //! The solve runs on a coarse copy of the skin (the *base* mesh M_b). A shell S is built

@@ -46,7 +46,8 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 // Numerics index arrays by axis and node; iterator rewrites would hide the maths.
 #![allow(clippy::needless_range_loop)]
-// No unwrap/expect outside tests: input-dependent failures are errors, not panics (issue 7).
+// No unwrap/expect outside tests: input-dependent failures are errors, not panics
+// (docs/lab/reliability.md).
 #![cfg_attr(not(test), deny(clippy::unwrap_used, clippy::expect_used))]
 
 pub mod anatomy;

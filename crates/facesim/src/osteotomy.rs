@@ -63,7 +63,7 @@ impl Plan {
 
     /// Move each point with the segments that move its anchor (a step moves both when its
     /// region holds the anchor's current position): tissue off the bone is carried rigidly
-    /// as the bone point under it is, so a rigid plan moves it rigidly (issue 25: the mucosa
+    /// as the bone point under it is, so a rigid plan moves it rigidly (the mucosa
     /// held with its bone point's displacement made a rotated skull's face 0.3 % non-rigid).
     /// Returns the moved points and whether any segment moved each.
     pub(crate) fn carry(

@@ -140,7 +140,8 @@ pub struct Shape {
     pub asymmetry_mm: f64,
     /// Lips and cheeks closed on the teeth: the vestibule is a potential space (soft tissue, no
     /// air), as in most CTs, so the lip's inner surface lies on the crowns and the alveolar bone
-    /// (the lip–tooth contact of issue 25 item 5). Not a cohort parameter (`values` leaves it out).
+    /// (the lip–tooth contact the volumetric model finds). Not a cohort parameter (`values`
+    /// leaves it out).
     pub closed_lips: bool,
     /// The nose is a shell over two nasal passages (air either side of a septum, under walls of
     /// skin and fat; `nasal_passage`), as in a CT, instead of a solid bump. Off in the standard

@@ -104,7 +104,7 @@ impl PageClinicalFrame {
     }
 }
 
-/// The tissue sliders' data (issue 28 item 5; docs/guide/report-page.md "Tissue sliders"): the run's
+/// The tissue sliders' data (docs/guide/report-page.md "Tissue sliders"): the run's
 /// certified reduced models, one per sliding state, re-solved live in the page.
 pub struct PageTissue<'a> {
     /// The run's materials in `Tet::TISSUES` order (the reference θ̄ and the sliders' start).

@@ -210,7 +210,7 @@ pub fn trace(
     }
 }
 
-/// `want`: the vertices whose springs the solve will use (issue 6: only the skin the bone
+/// `want`: the vertices whose springs the solve will use (only the skin the bone
 /// moves can reach). Their struts end at their neighbours' attachments, so those are traced
 /// too; every other vertex gets no spring and is not counted as a miss.
 fn traced_vertices(nb: &[Vec<u32>], want: Option<&[bool]>, n: usize) -> Vec<bool> {

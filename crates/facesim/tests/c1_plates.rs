@@ -1,5 +1,5 @@
 //! Verification of the C1 triangular element against exact invariants and analytic plates
-//! (issue 3). Plates: planar (u, v) = (x, y), bending only unless stated, β11 = β12 = β22 = D.
+//! Plates: planar (u, v) = (x, y), bending only unless stated, β11 = β12 = β22 = D.
 
 use facesim::fem::assembly::{FemMesh, System, multiply};
 use facesim::fem::element::Material;

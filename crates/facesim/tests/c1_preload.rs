@@ -1,5 +1,5 @@
 //! Preloading (a_init, F_init = K a_init), rigid-node boundary conditions, symbolic reuse and
-//! C1 surface sampling (issue 3).
+//! C1 surface sampling.
 
 mod common;
 

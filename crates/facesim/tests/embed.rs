@@ -1,4 +1,4 @@
-//! The shell embedding (paper 002) that carries a fine skin along a coarse solve (issue 6):
+//! The shell embedding (paper 002) that carries a fine skin along a coarse solve:
 //! exact invariants — rest shape, rigid motions, the Poisson thickness rule (eq. 2).
 
 mod common;

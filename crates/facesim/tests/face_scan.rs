@@ -1,4 +1,4 @@
-//! Landmarks on a face mesh alone, no CT (issue 27 item 1; docs/guide/landmarks.md "A face mesh
+//! Landmarks on a face mesh alone, no CT (docs/guide/landmarks.md "A face mesh
 //! alone"): a real head's skin made by another program (scikit-image's marching cubes of
 //! VTK's headsq CT, tests/python/isosurface.py), cut to its outer face, and the same mesh as a
 //! scanner would hand it over — turned into a y-up frame, yawed, in metres. The landmarks must
@@ -205,7 +205,7 @@ fn the_command_writes_markups_in_the_files_units_and_refuses_a_sphere() {
     assert!(!none.exists());
 }
 
-/// `compare --landmarks` (issue 27 item 2): B is A after a known "operation" — the skin below
+/// `compare --landmarks`: B is A after a known "operation" — the skin below
 /// subnasale moved 4 mm forward, fading out over the 10 mm above it — then turned into a
 /// scanner's frame and written in metres. Registered on the skin surgery leaves, the forehead
 /// and nose come back where they were (the known motion recovered, the nose tip < 1 mm), the lips
@@ -385,8 +385,8 @@ fn a_real_scanners_face_has_its_landmarks_where_people_put_them() {
 /// The real CT's (data-samples/real) whole iso-surface at −500 HU by scikit-image, cut to its
 /// outer face as a range scan sees it, handed over as a scanner would: turned into a y-up,
 /// z-forward frame and in metres. The face ends at the upper lip, its nose droops (the columella
-/// lies ahead of the dorsum 10 mm from the tip), and read upside down it passed as a face until
-/// session 40. The nose and upper lip must come back the right way up, and move with the mesh.
+/// lies ahead of the dorsum 10 mm from the tip), and read upside down it still looks like a
+/// face. The nose and upper lip must come back the right way up, and move with the mesh.
 #[test]
 fn the_real_cts_face_by_another_program_is_read_the_right_way_up_in_any_frame() {
     let ct = facesim::volume::read_volume(&common::real_ct()).unwrap();

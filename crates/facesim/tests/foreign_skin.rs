@@ -1,4 +1,4 @@
-//! A skin exported by another program (issue 16 item 6): an iso-surface of the whole CT made by
+//! A skin exported by another program: an iso-surface of the whole CT made by
 //! scikit-image's marching cubes (tests/python/isosurface.py, in the venv target/slicer-venv),
 //! with the airway and sinuses joined to the face, internal surfaces and islands, given as the
 //! case's `[skin]`. facesim keeps its outer face — what a cylindrical range scan of it sees — and

@@ -1,4 +1,4 @@
-//! The import-cycle check (issue 24 item 4; docs/design/architecture.md "Import cycles"): reads
+//! The import-cycle check (docs/design/architecture.md "Import cycles"): reads
 //! crates/facesim/src/**/*.rs, builds the graph of which module file uses which, and fails
 //! naming the cycle when (a) top-level modules form a cycle or (b) files do, unless the cycle
 //! is in [`ALLOWED_MODULE_CYCLES`] / [`ALLOWED_FILE_CYCLES`]. An allowed cycle that no longer

@@ -694,7 +694,7 @@ fn the_capsule_phantom_is_unchanged() {
 
 #[test]
 fn the_first_samples_face_has_all_fourteen_soft_landmarks_its_corners_where_built() {
-    // Issue 27 item 3: the bundled face scan, read as any 3D photo (frame from its shape). The
+    // The bundled face scan, read as any 3D photo (frame from its shape). The
     // mouth's corners where the lips and crease end (26 mm either side of stomion by
     // construction, docs/design/phantom.md) and the alae where the wings meet the cheek (17 mm).
     use facesim::landmarks::scan::{FrameFrom, landmarks_of};

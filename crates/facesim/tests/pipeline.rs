@@ -1,5 +1,5 @@
 //! The pipeline as a library: cases built in memory, the stages' typed outputs, structured errors,
-//! and the defects issue 13 fixed (each of these tests failed before the fix).
+//! and defects once found in it (each of these tests failed before its fix).
 
 mod common;
 

@@ -1,4 +1,4 @@
-//! A flat skin plate over a bone slab (issue 4): planar parameterisation, struts off, edges rigid,
+//! A flat skin plate over a bone slab: planar parameterisation, struts off, edges rigid,
 //! bone lifted uniformly. koch1996 turns the lift into a uniform load on the skin — a clamped plate
 //! (w_centre = 0.00126532 q a⁴ / D); equilibrium adds the springs to the system — a clamped plate
 //! on an elastic foundation, whose reference is the verified C1 plate solver with a Winkler term

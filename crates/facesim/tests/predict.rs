@@ -1,5 +1,5 @@
-//! Springs, bone moves and the predicted face of the C1 model on the phantom (issue 4, first
-//! part): the cases name `model = "equilibrium"` unless they choose a model themselves.
+//! Springs, bone moves and the predicted face of the C1 model on the phantom:
+//! the cases name `model = "equilibrium"` unless they choose a model themselves.
 
 mod common;
 
@@ -275,7 +275,7 @@ fn two_mesh_densities_give_the_same_displacement_field() {
 #[test]
 fn the_restricted_solve_equals_the_whole_mesh_solve() {
     // [solve] restrict solves only the movable skin plus a rigid ring and traces springs only
-    // from the movable vertices (issue 6). Triangles and springs whose DOFs are all fixed add
+    // from the movable vertices. Triangles and springs whose DOFs are all fixed add
     // nothing to the free equations, so both must give the same face — to the Newton tolerance.
     let plan = "[surface]\nmovable = { sphere = { center = [0.0, -60.0, -45.0], radius = 70.0 } }\n\
                 [[osteotomy]]\nname = \"m\"\nregion = { box = { min = [-70.0, -75.0, -125.0], max = [70.0, -1.5, -26.5] } }\n\

@@ -1,4 +1,4 @@
-//! The certified reduced model (issue 28 items 1–2; docs/design/reduced.md) on the first sample (the
+//! The certified reduced model (docs/design/reduced.md) on the first sample (the
 //! jaws phantom, 5 mm BSSO advance): built by the greedy on the run's mesh, it gives the full
 //! model's face within its certified bound at parameters it was not trained on (the full
 //! solve on the run's own path, `Prediction::resolve`, is the truth), the bound is not vacuous,
@@ -196,7 +196,7 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
     // error here (σ Δ alone was 11–22×).
     assert!(worst < 15.0, "bound / true l2 error {worst:.1}");
 
-    // Solve at θ (issue 28 item 1): the reduced model answers within its bound when the bound
+    // Solve at θ: the reduced model answers within its bound when the bound
     // allows; a tolerance it cannot meet, or θ outside the trained box, gets the full solve and
     // says why.
     use facesim::model::Answer;
@@ -234,7 +234,7 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
     assert_eq!(face, p.resolve(&scene, &outside).unwrap());
 }
 
-/// Issue 28 item 3: the same draws solved by the certified reduced model agree with full
+/// The band: the same draws solved by the certified reduced model agree with full
 /// solves within the bounds it reports — per vertex within `largest_bound_mm` (a bound on every
 /// sample's face error carries over to each order statistic, so to p05, p95 and the mean), per
 /// landmark within its `landmark_bounds_mm`.
@@ -290,7 +290,7 @@ fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
         checked += 1;
     }
     assert!(checked >= 3, "{lb}");
-    // Issue 28 item 4: Sobol indices per landmark and region, each parameter's first-order
+    // Sensitivity: Sobol indices per landmark and region, each parameter's first-order
     // index at most its total, the first-order ones summing to at most 1 (estimator noise
     // allowed: 0.05), every landmark that moves has them.
     let sens = &ub["sensitivity"];
@@ -322,7 +322,7 @@ fn the_reduced_model_samples_within_its_bounds_of_full_solves() {
     );
 }
 
-/// Issue 28 item 1: the run stores its reduced models beside plan_basis.bin, and `replan` with
+/// Stored and reused: the run stores its reduced models beside plan_basis.bin, and `replan` with
 /// new tissue parameters answers from the stored file within its certified bound of a full run
 /// with those parameters; a θ outside the trained box, a new plan with new tissues, a file of
 /// another face, version or length are refused in one line naming the file.
@@ -430,7 +430,7 @@ fn the_stored_model_re_solves_new_tissues_within_its_bound_of_a_full_run() {
     assert!(e.contains("written by facesim") && !e.contains('\n'), "{e}");
 }
 
-/// Issue 28 item 3: `replan` with `[uncertainty]` samples the run's stored reduced model (no
+/// The band re-sampled: `replan` with `[uncertainty]` samples the run's stored reduced model (no
 /// mesh, no factorisation): with the run's own `[uncertainty]` it gives the run's band, every
 /// landmark's, region's and vertex's figure and the Sobol indices equal to the bit; a box
 /// wider than the one the model was trained on, full solves and a new plan are refused in one

@@ -172,7 +172,7 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
                  "missing": "Prn not found"}
             ]
         }),
-        // The reduced method's report (issue 28 items 3-4): the certificate and the Sobol table.
+        // The reduced method's report: the certificate and the Sobol table.
         uncertainty: json!({
             "samples": 100, "method": "reduced", "largest_bound_mm": 7.24,
             "landmark_bounds_mm": {"Prn": 0.0, "Sn": 1.25},
@@ -1345,7 +1345,7 @@ fn the_real_ct_pages_open_in_profile_with_the_nose_and_lips_inside_the_picture()
     }
 }
 
-// ---- the tissue sliders (issue 28 item 5): the reduced model re-solved in the page ----
+// ---- the tissue sliders: the reduced model re-solved in the page ----
 
 /// The page's online solve (web/src/tissue.js) against Rust's `OnlineForm::solve` for the same
 /// forms and θ: synthetic forms (SPD and semi-definite terms, ragged Riesz columns, the

@@ -1,4 +1,4 @@
-//! The linear tetrahedral element of the volumetric model (issue 14, first increment), on a
+//! The linear tetrahedral element of the volumetric model , on a
 //! cube meshed into Kuhn tetrahedra: the patch test, exact rigid motions in heterogeneous
 //! material, exact linearity in the prescribed move, and a refused inverted element.
 

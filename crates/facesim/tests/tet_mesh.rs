@@ -516,8 +516,8 @@ fn real_ct_soft_tissue_around_the_maxilla_meshes_with_bounded_angles() {
 /// The box reaches below the CT, whose last slice cuts through the upper lip and the teeth
 /// (z = 0). A bone node is on bone: where the scan ends, only where the bone field of the last
 /// slice reaches the bone window (the lip's cut face, tissue at 0–100 HU, is the tissue's free
-/// surface, skin-kind). Until session 58 the cut face's nodes took whichever field lay nearer
-/// its iso-value, and deep tissue's was the bone's: on this CT ~1 400 bone nodes under the lip,
+/// surface, skin-kind). Were the cut face's nodes to take whichever field lay nearer
+/// its iso-value, deep tissue's would be the bone's: on this CT ~1 400 bone nodes under the lip,
 /// bonded to the maxilla's segment.
 fn scan_end_is_bone_only_where_the_last_slice_is(
     vol: &Volume,

@@ -1,4 +1,4 @@
-//! Physics of the volumetric model (issue 14): holds (fixed, sliding, rails) and loads, the
+//! Physics of the volumetric model: holds (fixed, sliding, rails) and loads, the
 //! neo-Hookean option against exact rigid motion, the linear model and a closed-form uniaxial
 //! stretch, reported non-convergence, and volumetric locking of linear tetrahedra shown and cured
 //! by quadratic ones on Lamé's thick-walled sphere.

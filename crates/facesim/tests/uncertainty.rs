@@ -1,4 +1,4 @@
-//! `[uncertainty]` (issue 17 item 1; docs/guide/uncertainty.md) on the phantom with the volumetric
+//! `[uncertainty]` (docs/guide/uncertainty.md) on the phantom with the volumetric
 //! model: zero spread gives a zero band at exactly the deterministic prediction, and a point away
 //! from the nominal parameters equals a full run with those parameters (an independent path);
 //! nested ranges widen the band; the same seed writes the same bytes; impossible ranges and

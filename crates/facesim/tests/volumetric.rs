@@ -1,4 +1,4 @@
-//! The volumetric model through the pipeline (`[solve] model = "tet"`, issue 14) on the phantom:
+//! The volumetric model through the pipeline (`[solve] model = "tet"`) on the phantom:
 //! every output written, and the invariants of linear elasticity with the bone as the only load —
 //! no move, no change; all bone translated, the face translates exactly; the face exactly linear
 //! in the move.

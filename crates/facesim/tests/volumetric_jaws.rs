@@ -114,7 +114,7 @@ fn the_inner_lip_slides_on_the_teeth_or_moves_with_them() {
     assert_eq!((s.degloved_nodes, s.degloved_chin_nodes), (0, 0), "{s:?}");
     // (a piece of tissue held by fewer than three nodes follows its bone, mucosa and all); the
     // bone at the saw lines slides too (released, not lifted off), and so does the bone where
-    // lip or cheek lies on a tooth with no air between (issue 25 item 5: `contact_nodes`, here the
+    // lip or cheek lies on a tooth with no air between (`contact_nodes`, here the
     // cheeks on the molars behind the vestibule's ends); so does the tissue where the scan ends
     // (`[tet] scan_end = "slides"`, counted apart in `scan_end`).
     let on_scan_end = s.scan_end.as_ref().map_or(0, |e| e.sliding_nodes);
@@ -198,7 +198,7 @@ fn near_tooth(p: [f64; 3], r: f64) -> bool {
     })
 }
 
-/// Issue 25 item 5: lips closed on the teeth (no vestibule air, `Shape::closed_lips`) under a
+/// Lips closed on the teeth (no vestibule air, `Shape::closed_lips`) under a
 /// 5 mm mandibular advance (−y). The lip–tooth contact is found from the anatomy
 /// (`tet::conditions::contact`: bone ≥ 1450 HU 3 mm deep, the face's air reached through soft
 /// tissue) and slides with `[tet] sliding`, is attached without.

@@ -1,4 +1,4 @@
-//! Every model on a face case (issue 5 item 5), measured against the volumetric reference: the
+//! Every model on a face case, measured against the volumetric reference: the
 //! product's tetrahedral model (`[solve] model = "tet"`, `facesim::model::volumetric::predict`) at the
 //! finest affordable skin element size, with the case's `[tet]` material and element. Rows: that
 //! model at coarser sizes (its own convergence), neo-Hookean against linear material and
@@ -185,7 +185,7 @@ fn tet_ladder(quick: bool, case: &Case) -> Vec<(f64, TetMaterial, TetElement)> {
     }
 }
 
-/// The full study's reference (issue 25 item 6: converged in size and element order) is the
+/// The full study's reference (converged in size and element order) is the
 /// 10-node model at the finest of these sizes whose 4-node mesh has at most [`REFERENCE_TETS`]
 /// tetrahedra. Measured on the study's 24 GB machine: the real CT at 4 mm (212 856 tetrahedra)
 /// takes 9.8 GB; the phantom at 6 mm (123 533) 7.4 GB and 41 s, at 5 mm (213 403) more than

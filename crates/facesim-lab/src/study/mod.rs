@@ -1,4 +1,4 @@
-//! `facesim study [--quick] OUT_DIR`: speed against accuracy (issue 5; docs/lab/study.md).
+//! `facesim study [--quick] OUT_DIR`: speed against accuracy (docs/lab/study.md).
 //!
 //! 1. The benchmarks of Alterovitz & Goldberg (2003) — the 2-D block and needle with MP1 and MP2,
 //!    the 3-D rod with MP3 — through four integrators, with the relative energy norm, surface and

@@ -299,8 +299,8 @@ pub enum TetElement {
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum ScanEndHold {
-    /// A traction-free surface: nothing beyond the scan holds the tissue (the model until
-    /// session 63, and what a report.json written before the key existed ran).
+    /// A traction-free surface: nothing beyond the scan holds the tissue (the older model's
+    /// hold, and what a report.json written before the key existed ran).
     #[default]
     Free,
     /// It slides on the plane the scan ends in: no motion across it, free along it. The mirror
@@ -402,11 +402,11 @@ pub struct Tet {
     /// (`tet::conditions::release_at_cuts`).
     pub cut_release_mm: f64,
     /// Release the tissue at the saw lines (`cut_release_mm`) and free sliding nodes of inverted
-    /// elements (issue 25; default true).
+    /// elements (default true).
     pub release_cuts: bool,
     /// Tissue off the face that a move still turns inside out after lift-off (the osteotomy
     /// gap, stretched or squeezed by a large move) tears: its stiffness falls to a trace and the
-    /// model is solved again (issue 25; default true; linear element).
+    /// model is solved again (default true; linear element).
     pub tear_gap: bool,
     /// A solved displacement that turns elements inside out is a numerical failure (outputs
     /// written, non-zero exit) unless this is true.

@@ -1,4 +1,4 @@
-//! Where the plan drives moved bone into bone that stays (issue 25 item 3's colliding teeth):
+//! Where the plan drives moved bone into bone that stays (colliding teeth, say):
 //! the moved skull surface is tested against the segmentation's bone at rest. facesim moves bone
 //! pieces rigidly and removes none, so such a plan has either bone the surgeon would remove (an
 //! impaction or a setback against the bone above or behind the segment) or teeth driven into

@@ -147,7 +147,7 @@ fn place_scan(
 }
 
 /// A skin with more than twice `[solve] coarse_triangles` triangles is solved on a (u, v)-grid
-/// resampling of it (issue 6); returns (the skin to model, the full skin when coarsened).
+/// resampling of it; returns (the skin to model, the full skin when coarsened).
 ///
 /// `c1_target`: a C1 model on a skin cut from another program's iso-surface, with
 /// `coarse_triangles` unset, is solved at the resolution of the skin facesim makes from the CT

@@ -1,4 +1,4 @@
-//! The certified reduced-basis model of the linear tetrahedral model (issue 28; docs/design/reduced.md):
+//! The certified reduced-basis model of the linear tetrahedral model (docs/design/reduced.md):
 //! its stiffness is affine in the tissues' Lamé parameters, so a greedy over the parameter box
 //! picks a few full solves as a basis, and any parameter set is then solved in microseconds with
 //! a certified bound on its error.

@@ -10,7 +10,7 @@ use std::collections::HashMap;
 /// The skin the bone moves can reach: the movable vertices, their rigid neighbours (so every free
 /// DOF keeps its whole fitting neighbourhood) and every triangle touching them. Triangles whose
 /// twelve DOFs are all fixed add nothing to the equilibrium of the free ones, so solving on this
-/// piece is exact; on the real CT it is a fraction of the face (docs/design/pipeline.md §5, issue 6).
+/// piece is exact; on the real CT it is a fraction of the face (docs/design/pipeline.md §5).
 pub(super) struct Restriction {
     pub(super) skin: Mesh,
     pub(super) springs: SpringSet,

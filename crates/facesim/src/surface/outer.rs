@@ -1,4 +1,4 @@
-//! The outer face of a skin exported by another program (issue 16 item 6; docs/design/pipeline.md
+//! The outer face of a skin exported by another program (docs/design/pipeline.md
 //! "A skin from another program").
 //!
 //! An iso-surface of a CT made elsewhere (3D Slicer, a segmentation program) is the whole

@@ -1,4 +1,4 @@
-//! Sobol sensitivity indices of the prediction to the tissue parameters (issue 28 item 4;
+//! Sobol sensitivity indices of the prediction to the tissue parameters (
 //! docs/guide/uncertainty.md "Sensitivity"): which parameter a landmark's or a region's displacement
 //! depends on, alone (first-order S_i) and with its interactions (total S_Ti).
 //!

@@ -1,4 +1,4 @@
-//! `facesim calibrate` (issue 26 item 3, issue 28 item 6; docs/lab/validation-notes.md "Calibration
+//! `facesim calibrate` (docs/lab/validation-notes.md "Calibration
 //! on the reduced model"): the tissue parameters fitted to the published soft/hard ratios on one
 //! half of the table and checked on the other, the search answered by the certified reduced
 //! model and its optimum confirmed by full runs.

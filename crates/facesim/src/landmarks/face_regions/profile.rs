@@ -1,4 +1,4 @@
-//! The facial regions of a face without landmarks (the fallback of [`super`]; issue 5 item 5),
+//! The facial regions of a face without landmarks (the fallback of [`super`]),
 //! found on the skin itself: the solver study's and the landmark-less sweep's per-region
 //! statistics.
 //!
