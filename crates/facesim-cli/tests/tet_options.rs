@@ -164,7 +164,7 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
 /// (README's first command) with its 5 mm BSSO advance. Each option follows the move (the face
 /// moves 5/6–13/12 of it at most), exits 0, turns no element inside out, and agrees with the
 /// default combination within what the model difference explains — element order and material
-/// (0.5 mm mean at a 6 mm move, the bound), and sliding (a few tenths of a millimetre on
+/// (0.5 mm mean at a 6 mm move, the required bound), and sliding (a few tenths of a millimetre on
 /// the face: only the inner lips slide).
 #[test]
 fn every_tet_option_follows_the_bone_on_the_bundled_samples() {
@@ -258,7 +258,7 @@ fn quadratic_element_follows_the_bone_like_the_linear_one() {
 
 /// The neo-Hookean material converges through `facesim run` on the real CT at
 /// the full 5 mm Le Fort I advance with the default mesh, turns no element inside out, and its
-/// face lies within the bound of the linear one (0.5 mm mean; 0.09 mm measured, which
+/// face lies within the required bound of the linear one (0.5 mm mean; 0.09 mm measured, which
 /// report.json's `nonlinear_vs_linear` states per region and this test recomputes).
 #[test]
 fn neo_hookean_converges_on_the_real_ct_near_the_linear_face() {
