@@ -9,6 +9,6 @@ work="$(mktemp -d)"; trap 'rm -rf "$work"' EXIT
 gcc -O2 -I/usr/include/suitesparse benches/cholmod_compare.c -lcholmod -o "$work/cholmod_compare"
 cargo build --release -q
 echo "faer:"
-./target/release/facesim bench fem --triangles "$tri" --export "$work/K.mtx"
+./target/release/facesim-lab bench fem --triangles "$tri" --export "$work/K.mtx"
 echo "CHOLMOD (SuiteSparse $(dpkg-query -W -f='${Version}' libsuitesparse-dev 2>/dev/null || echo '?')):"
 "$work/cholmod_compare" "$work/K.mtx"

@@ -1,4 +1,4 @@
-//! The `facesim` command line (docs/case.md "Commands").
+//! The `facesim` command line (docs/reference/case.md "Commands").
 
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
@@ -14,7 +14,7 @@ mod render;
 // Counts heap bytes for report.json's and the study's peak-memory figures (two relaxed atomics
 // per allocation).
 #[global_allocator]
-static ALLOC: facesim_lab::memory::Counting = facesim_lab::memory::Counting;
+static ALLOC: facesim::meter::CountingAllocator = facesim::meter::CountingAllocator;
 
 #[derive(Parser)]
 #[command(
@@ -32,7 +32,11 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Run the whole pipeline on a case directory (outputs in CASE_DIR/out by default).
+    /// Predict the face for a case directory (outputs in CASE_DIR/out by default).
+    ///
+    /// The whole pipeline: the CT's tissues, the skin and skull, the clinical frame and the cuts
+    /// of `[[surgery]]`, the model and its solve, the landmarks, report.json and report.html
+    /// (docs/reference/case.md "Outputs").
     Run {
         case_dir: PathBuf,
         #[arg(long)]
@@ -42,20 +46,22 @@ enum Cmd {
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },
-    /// Predict a run's peak memory and wall time before running it (JSON on stdout): the
-    /// volumetric model's mesh and the symbolic analysis of its factor, no numeric work
-    /// (docs/cohort.md "Resources from the model").
+    /// Predict a run's peak memory and wall time before running it (JSON on stdout).
+    ///
+    /// The volumetric model's mesh and the symbolic analysis of its factor, no numeric work
+    /// (docs/guide/cohort.md "Resources from the model").
     Estimate {
         case_dir: PathBuf,
         /// Override a case key as `run --set` does (repeatable).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         set: Vec<String>,
     },
-    /// The face outputs of `run` for a new plan (PLAN.toml: `[[osteotomy]]` entries with the
-    /// run's segment names and regions) from the plan basis in a run's OUT_DIR, without
-    /// re-solving (docs/plan-basis.md); or, from the run's reduced_model.bin at its plan, for new
-    /// tissues (`[tet]`) and/or with a band over tissue parameters (`[uncertainty]`:
-    /// face_band.ply; docs/reduced.md).
+    /// Another plan's face from a run's plan basis, without solving again.
+    ///
+    /// PLAN.toml holds `[[surgery]]` entries (in the run's clinical frame) or `[[osteotomy]]`
+    /// entries with the run's segment names and regions (docs/design/plan-basis.md); or, from
+    /// the run's reduced_model.bin at its plan, new tissues (`[tet]`) and/or a band over tissue
+    /// parameters (`[uncertainty]`: face_band.ply; docs/design/reduced.md).
     Replan {
         /// A `facesim run` output directory (plan_basis.bin, report.json).
         out_dir: PathBuf,
@@ -65,17 +71,19 @@ enum Cmd {
         #[arg(long)]
         out: Option<PathBuf>,
     },
-    /// Many plans (SWEEP.toml: `[[plan]]` entries and/or a `[grid]`, docs/case.md) from the plan
-    /// basis in a run's OUT_DIR: sweep.csv and sweep.svg in --out.
+    /// Many plans from a run's plan basis: sweep.csv and sweep.svg in --out.
+    ///
+    /// SWEEP.toml: `[[plan]]` entries and/or a `[grid]` (docs/reference/case.md).
     Sweep {
         out_dir: PathBuf,
         sweep: PathBuf,
         #[arg(long)]
         out: PathBuf,
     },
-    /// The soft-tissue landmarks and measurements of a face mesh alone — a 3D photo, any format
-    /// facesim reads, no CT (docs/landmarks.md "A face mesh alone"): landmarks.mrk.json (the
-    /// mesh file's own coordinates) and measurements.json in --out.
+    /// The soft-tissue landmarks and measurements of a face mesh alone (a 3D photo).
+    ///
+    /// Any mesh format facesim reads, no CT (docs/guide/landmarks.md "A face mesh alone"):
+    /// landmarks.mrk.json (the mesh file's own coordinates) and measurements.json in --out.
     Landmarks {
         mesh: PathBuf,
         /// Output directory (default: MESH's stem + `_landmarks`, beside it).
@@ -86,9 +94,11 @@ enum Cmd {
         #[arg(long, value_parser = ["auto", "lps"], default_value = "auto")]
         frame: String,
     },
-    /// Every surgery type of the published soft/hard ratio table (docs/validation.md) on every
-    /// real sample that has the bone and on a phantom cohort, with the product's defaults:
-    /// validation.md, validation.csv and validation.svg in --out.
+    /// Every surgery type against the published soft/hard tissue ratios.
+    ///
+    /// Runs every real sample that has the bone and a phantom cohort with the product's
+    /// defaults (docs/guide/validation.md): validation.md, validation.csv and validation.svg in
+    /// --out.
     Validate {
         /// Output directory.
         #[arg(long, default_value = "validation")]
@@ -99,11 +109,12 @@ enum Cmd {
         #[command(flatten)]
         table: TableArgs,
     },
-    /// The tissue parameters fitted to the published ratios on one half of the table and
-    /// checked on the other (docs/validation-notes.md "Calibration on the reduced model"): every
-    /// validation run at the defaults storing its reduced model, a grid over the
-    /// `[uncertainty]` box answered by the reduced models, the optimum confirmed by full runs.
-    /// calibration.md, calibration.csv, calibration_grid.csv, defaults/ and optimum/ in --out.
+    /// Fit the tissue parameters to one half of the published ratios; check on the other.
+    ///
+    /// Every validation run at the defaults stores its reduced model; a grid over the
+    /// `[uncertainty]` box is answered by the reduced models and the optimum confirmed by full
+    /// runs (docs/lab/validation-notes.md "Calibration on the reduced model"). calibration.md,
+    /// calibration.csv, calibration_grid.csv, defaults/ and optimum/ in --out.
     Calibrate {
         /// Output directory.
         #[arg(long, default_value = "calibration")]
@@ -137,19 +148,20 @@ enum Cmd {
         #[arg(long, default_value_t = 3.0)]
         scan_step: f64,
         /// `capsule`: the layered capsule head; `jaws`: a head with mandible, maxilla, teeth,
-        /// lips over a vestibule, chin and nose, and four jaw plans (docs/phantom.md).
+        /// lips over a vestibule, chin and nose, and four jaw plans (docs/design/phantom.md).
         #[arg(long, value_parser = ["capsule", "jaws"], default_value = "capsule")]
         anatomy: String,
         /// The jaws phantom's nose: `solid` (the standard head and the bundled sample) or
         /// `hollow`, two nasal passages beside a septum as a CT shows a nose, as `facesim
-        /// validate` builds its phantoms (docs/phantom.md "Nasal passages").
+        /// validate` builds its phantoms (docs/design/phantom.md "Nasal passages").
         #[arg(long, value_parser = ["solid", "hollow"], default_value = "solid")]
         nose: String,
         #[command(flatten)]
         shape: ShapeArgs,
     },
-    /// Write N distinct jaws phantoms (DIR/case001, …; shapes drawn from --seed) and
-    /// DIR/phantoms.csv: a synthetic cohort for workflow/Snakefile (docs/cohort.md).
+    /// Write a cohort of N distinct jaws phantoms for workflow/Snakefile.
+    ///
+    /// DIR/case001, …, shapes drawn from --seed, and DIR/phantoms.csv (docs/guide/cohort.md).
     PhantomCohort {
         dir: PathBuf,
         /// Number of cases.
@@ -176,38 +188,8 @@ enum Cmd {
         #[command(flatten)]
         shape: ShapeArgs,
     },
-    /// Print JSON about a volume (NIfTI file, DICOM series directory or .inv3 project).
+    /// A volume's geometry and HU as JSON (NIfTI, NRRD, DICOM folder, .inv3, vtk.js).
     Inspect { path: PathBuf },
-    /// Benchmarks: `fem` = C1 assembly + factorisation + three solves on a planar mesh;
-    /// `scaling` = every stage's cost against CT and mesh size (tables and charts in --out);
-    /// `embed` = a dense face scan solved whole against coarse models + shell embedding;
-    /// `replan` = PlanBasis::predict on the real CT face with the volumetric model (--out: the
-    /// run's output directory; --case: the case.toml, default data-samples/real/case.toml);
-    /// `dicom` = reading the real CT in each compressed DICOM transfer syntax (docs/dicom.md);
-    /// `linearisation` = the C1 models' plan basis against full solves, per move size (--case);
-    /// `reduced` = the certified reduced model's offline and online costs, the many-sample band
-    /// against the full one and its error against full solves (--case: the case directory,
-    /// default data-samples/real; --out: where bench_reduced.json and .md go; docs/performance.md).
-    Bench {
-        #[arg(value_parser = ["fem", "scaling", "embed", "replan", "dicom", "linearisation", "reduced"])]
-        what: String,
-        /// Output directory for `scaling`, `embed`, `dicom` and `reduced`.
-        #[arg(long)]
-        out: Option<PathBuf>,
-        /// `scaling`, `embed`: small sizes only; `dicom`: one read per syntax; `reduced`: a
-        /// coarse mesh and fewer samples (< 3 min on data-samples/jaws).
-        #[arg(long)]
-        quick: bool,
-        /// Triangles in the mesh.
-        #[arg(long, default_value_t = 40000)]
-        triangles: usize,
-        /// Also write the factored matrix as Matrix Market (for benches/cholmod_compare.sh).
-        #[arg(long)]
-        export: Option<PathBuf>,
-        /// `replan`: the case whose run builds the basis; `reduced`: the case measured.
-        #[arg(long)]
-        case: Option<PathBuf>,
-    },
     /// Render meshes (OBJ, PLY, STL, VTK or VTP; drawn together) to a PNG picture.
     Render {
         #[arg(required = true)]
@@ -220,17 +202,6 @@ enum Cmd {
         #[arg(long, default_value_t = 800)]
         size: usize,
     },
-    /// Speed against accuracy: the integrator benchmarks, stability, and the face baselines
-    /// (tables, charts and summary.md in OUT_DIR).
-    Study {
-        out_dir: PathBuf,
-        /// A reduced study (coarser benchmarks, the phantom only, fewer resolutions): < 2 min.
-        #[arg(long)]
-        quick: bool,
-        /// Face cases (default: data-samples/phantom, plus data-samples/real when fetched).
-        #[arg(long = "case")]
-        cases: Vec<PathBuf>,
-    },
     /// Distances between two meshes (OBJ, PLY, STL, VTK or VTP).
     Compare {
         a: PathBuf,
@@ -239,12 +210,12 @@ enum Cmd {
         #[arg(long)]
         json: bool,
         /// A run's output directory: also the figures per facial region (from its face_pre.ply
-        /// and landmarks_pre.mrk.json; docs/landmarks.md).
+        /// and landmarks_pre.mrk.json; docs/guide/landmarks.md).
         #[arg(long, value_name = "OUT_DIR")]
         regions: Option<PathBuf>,
         /// Two faces of one person (any frames and units): register A onto B on the skin
         /// surgery leaves (forehead, eyes, nasal bridge), then per landmark the distance and per
-        /// facial region mean / p90 / % within 2 mm (docs/landmarks.md "Two faces of one person").
+        /// facial region mean / p90 / % within 2 mm (docs/guide/landmarks.md "Two faces of one person").
         #[arg(long, conflicts_with = "regions")]
         landmarks: bool,
         /// With --landmarks: a PNG of A (registered) coloured by its distance to B, from the front.
@@ -253,7 +224,7 @@ enum Cmd {
     },
 }
 
-/// The jaws phantom's cohort parameters (docs/phantom.md, "Cohort parameters"): each given one
+/// The jaws phantom's cohort parameters (docs/design/phantom.md, "Cohort parameters"): each given one
 /// is used as is; with --seed the others are drawn from their documented ranges, without it
 /// they keep the standard head's values.
 #[derive(clap::Args)]
@@ -336,11 +307,9 @@ fn main() -> ExitCode {
         Cmd::Estimate { case_dir, .. } => Some(case_dir.display().to_string()),
         Cmd::PhantomCohort { dir, .. } => Some(dir.display().to_string()),
         Cmd::Inspect { path } => Some(path.display().to_string()),
-        Cmd::Study { out_dir, .. } => Some(format!("the study into {}", out_dir.display())),
         Cmd::Compare { a, b, .. } => Some(format!("{} and {}", a.display(), b.display())),
         Cmd::Render { meshes, .. } => meshes.first().map(|m| m.display().to_string()),
         Cmd::Phantom { dir, .. } => Some(dir.display().to_string()),
-        Cmd::Bench { .. } => None,
         Cmd::Replan { plan, .. } => Some(plan.display().to_string()),
         Cmd::Sweep { sweep, .. } => Some(sweep.display().to_string()),
         Cmd::Validate { out, .. } => Some(format!("the validation into {}", out.display())),
@@ -379,7 +348,7 @@ struct TableArgs {
     #[arg(long, default_value_t = 2.0)]
     phantom_spacing: f64,
     /// The phantoms' noses: `hollow`, two nasal passages beside a septum under 4 mm walls, as a
-    /// CT shows a nose; `solid`, soft tissue throughout, as the standard head (docs/phantom.md
+    /// CT shows a nose; `solid`, soft tissue throughout, as the standard head (docs/design/phantom.md
     /// "Nasal passages").
     #[arg(long, value_parser = ["hollow", "solid"], default_value = "hollow")]
     phantom_noses: String,
@@ -513,7 +482,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
         } => {
             let opts = table.options("validate", out, phantoms)?;
             let v = facesim::commands::validate::validate(&opts, &Progress::auto())?;
-            facesim_lab::validation_chart::write(&v.out_dir.join("validation.svg"), &v)?;
+            facesim_charts::validation::write(&v.out_dir.join("validation.svg"), &v)?;
             let outside = v.rows.iter().filter(|r| r.inside() == Some(false)).count();
             let inside = v.rows.iter().filter(|r| r.inside() == Some(true)).count();
             for k in &v.skipped {
@@ -545,7 +514,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             };
             let c = calibrate::calibrate(&opts, &Progress::auto())?;
             for v in [&c.defaults, &c.optimum_validation] {
-                facesim_lab::validation_chart::write(&v.out_dir.join("validation.svg"), v)?;
+                facesim_charts::validation::write(&v.out_dir.join("validation.svg"), v)?;
             }
             let fitted = c.full(opts.fit, true);
             let k = c.confirmation();
@@ -592,37 +561,16 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             out,
         } => {
             let rows = facesim::commands::sweep::sweep(&out_dir, &sweep, &out)?;
-            facesim_lab::sweep_chart::write(&out.join("sweep.svg"), &rows)?;
+            facesim_charts::sweep::write(&out.join("sweep.svg"), &rows)?;
             eprintln!("{} plans: {}", rows.len(), out.join("sweep.csv").display());
             Ok(())
         }
-        Cmd::Bench {
-            what,
-            out,
-            quick,
-            triangles,
-            export,
-            case,
-        } => match what.as_str() {
-            "scaling" => cmd_bench_scaling(out, quick),
-            "replan" => cmd_bench_replan(case, out),
-            "linearisation" => cmd_bench_linearisation(case),
-            "embed" => cmd_bench_embed(out, quick),
-            "dicom" => cmd_bench_dicom(out, quick),
-            "reduced" => cmd_bench_reduced(case, out, quick),
-            _ => cmd_bench_fem(triangles, export.as_deref()),
-        },
         Cmd::Render {
             meshes,
             out,
             view,
             size,
         } => cmd_render(&meshes, &out, view, size),
-        Cmd::Study {
-            out_dir,
-            quick,
-            cases,
-        } => cmd_study(&out_dir, quick, cases),
         Cmd::Compare {
             a,
             b,
@@ -733,120 +681,6 @@ fn cmd_inspect(path: &Path) -> Result<()> {
     Ok(())
 }
 
-fn cmd_bench_scaling(out: Option<PathBuf>, quick: bool) -> Result<()> {
-    let out = out.ok_or_else(|| Error::config("bench scaling: --out DIR is required"))?;
-    let s = facesim_lab::scaling::run(&out, quick, &Progress::auto())?;
-    for f in &s.fits {
-        println!(
-            "{:5} {:18} exponent {:5.2}  largest {:.3} s",
-            f.series, f.stage, f.exponent, f.largest_wall_s
-        );
-    }
-    Ok(())
-}
-
-fn cmd_bench_embed(out: Option<PathBuf>, quick: bool) -> Result<()> {
-    let out = out.ok_or_else(|| Error::config("bench embed: --out DIR is required"))?;
-    let b = facesim_lab::bench_embed::run(&out, quick, &Progress::auto())?;
-    for r in &b.rows {
-        let d = r.distance.as_ref();
-        println!(
-            "{:42} {:>10} {:8.2} s  mean {:.3} mm  p90 {:.3} mm  max {:.3} mm",
-            r.method,
-            r.resolution,
-            r.wall_s,
-            d.map_or(f64::NAN, |d| d.mean),
-            d.map_or(f64::NAN, |d| d.p90),
-            d.map_or(f64::NAN, |d| d.max)
-        );
-    }
-    Ok(())
-}
-
-fn cmd_bench_replan(case: Option<PathBuf>, out: Option<PathBuf>) -> Result<()> {
-    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/real/case.toml"));
-    let out = out.ok_or_else(|| Error::config("bench replan: --out DIR is required"))?;
-    let b = facesim_lab::bench_replan::run(&case, &out, 200)?;
-    println!(
-        "face {} vertices, {} segments: predict {:.3} ms (median of {}), one pass over the basis {:.3} ms, run {:.1} s (plan basis {:.2} s) = {:.0}x predict",
-        b.face_vertices,
-        b.segments,
-        b.predict_ms,
-        b.repeats,
-        b.memory_pass_ms,
-        b.run_s,
-        b.basis_s,
-        b.run_s * 1e3 / b.predict_ms
-    );
-    Ok(())
-}
-
-fn cmd_bench_reduced(case: Option<PathBuf>, out: Option<PathBuf>, quick: bool) -> Result<()> {
-    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/real"));
-    let out = out.ok_or_else(|| Error::config("bench reduced: --out DIR is required"))?;
-    let b = facesim_lab::bench_reduced::run(&case, &out, quick, &Progress::auto())?;
-    print!("{}", facesim_lab::bench_reduced::summary(&b));
-    println!(
-        "written: {}, {}",
-        out.join("bench_reduced.json").display(),
-        out.join("bench_reduced.md").display()
-    );
-    Ok(())
-}
-
-fn cmd_bench_dicom(out: Option<PathBuf>, quick: bool) -> Result<()> {
-    let out = out.ok_or_else(|| Error::config("bench dicom: --out DIR is required"))?;
-    let ct = Path::new("data-samples/real/Cranium.inv3");
-    let b = facesim_lab::bench_dicom::run(ct, &out, if quick { 1 } else { 5 })?;
-    println!("{} {:?}, best of {} reads", b.ct, b.dims, b.repeats);
-    for r in &b.rows {
-        match &r.error {
-            None => println!(
-                "{:42} {:24} {:8.1} MB {:7.3} s  max |dHU| {}",
-                r.syntax,
-                r.uid,
-                r.bytes as f64 / 1e6,
-                r.read_s,
-                r.max_abs_hu
-            ),
-            Some(e) => println!("{:42} {:24} not measured: {e}", r.syntax, r.uid),
-        }
-    }
-    Ok(())
-}
-
-fn cmd_bench_linearisation(case: Option<PathBuf>) -> Result<()> {
-    let case = case.unwrap_or_else(|| PathBuf::from("data-samples/phantom/case.toml"));
-    use facesim::case::SolveModel;
-    let rows = facesim_lab::bench_linearisation::run(
-        &case,
-        &[SolveModel::Equilibrium, SolveModel::Koch1996],
-    )?;
-    println!("| model | move | max displacement (mm) | max error (mm) | mean error (mm) |");
-    println!("|---|---|---|---|---|");
-    for r in rows {
-        println!(
-            "| {} | {} | {:.3} | {:.3e} | {:.3e} |",
-            r.model, r.mv, r.max_displacement_mm, r.max_error_mm, r.mean_error_mm
-        );
-    }
-    Ok(())
-}
-
-fn cmd_bench_fem(triangles: usize, export: Option<&Path>) -> Result<()> {
-    if !(2..=20_000_000).contains(&triangles) {
-        return Err(Error::config(
-            "bench: --triangles must be between 2 and 20000000",
-        ));
-    }
-    let b = facesim_lab::bench_fem::run(triangles, export)?;
-    println!(
-        "{}",
-        serde_json::to_string_pretty(&b).map_err(Error::config)?
-    );
-    Ok(())
-}
-
 fn cmd_render(meshes: &[PathBuf], out: &Path, view: render::View, size: usize) -> Result<()> {
     if !(16..=8192).contains(&size) {
         return Err(Error::config("render: --size must be between 16 and 8192"));
@@ -858,22 +692,6 @@ fn cmd_render(meshes: &[PathBuf], out: &Path, view: render::View, size: usize) -
     let refs: Vec<&facesim::mesh::Mesh> = loaded.iter().collect();
     let img = render::render(&refs, view, size);
     render::write_png(&img, size, out)?;
-    Ok(())
-}
-
-fn cmd_study(out_dir: &Path, quick: bool, cases: Vec<PathBuf>) -> Result<()> {
-    let cases = if cases.is_empty() {
-        facesim_lab::study::default_cases(quick)
-    } else {
-        cases
-    };
-    let s = facesim_lab::study::run(out_dir, quick, &cases, &Progress::auto())?;
-    println!(
-        "study written to {} in {:.1} s ({} face rows); see summary.md",
-        out_dir.display(),
-        s.wall_s,
-        s.face.len()
-    );
     Ok(())
 }
 

@@ -42,7 +42,7 @@ impl Observer for Progress {
     }
 
     fn heap(&self) -> Option<&dyn HeapProbe> {
-        facesim_lab::memory::Probe::if_installed()
+        facesim::meter::counted_heap()
     }
 
     fn warn(&self, msg: &str) {

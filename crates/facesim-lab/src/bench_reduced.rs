@@ -290,7 +290,7 @@ pub fn run(
     };
     // The child runs first, before this process holds the scene (their memory is their own, but
     // the machine is not).
-    let exe = std::env::current_exe().map_err(|e| Error::config(format!("bench reduced: {e}")))?;
+    let exe = facesim_beside_me()?;
     let runs = out.join(format!(".facesim-bench-reduced-{}", std::process::id()));
     std::fs::create_dir_all(&runs).map_err(|e| Error::output(&runs, e))?;
     let child = |label: &str, sets: &[String]| -> Result<BandRun> {
@@ -428,6 +428,20 @@ fn machine(load_start: [f64; 3]) -> Machine {
         load_start,
         load_end: load_average(),
     }
+}
+
+/// The `facesim` command built beside this program (target/release/facesim beside
+/// target/release/facesim-lab): the children are the product's own runs.
+fn facesim_beside_me() -> Result<PathBuf> {
+    let me = std::env::current_exe().map_err(|e| Error::config(format!("bench reduced: {e}")))?;
+    let exe = me.with_file_name(format!("facesim{}", std::env::consts::EXE_SUFFIX));
+    if !exe.is_file() {
+        return Err(Error::config(format!(
+            "bench reduced: no facesim command at {} (build it: cargo build --release -p facesim-cli)",
+            exe.display()
+        )));
+    }
+    Ok(exe)
 }
 
 /// `exe run DIR --out OUT --set …` (the quick overrides, then `sets`), its wall time and peak

@@ -1,7 +1,6 @@
 //! The facesim laboratory: what measures the product rather than being it — the solver study
 //! (integrators, stability, face baselines, charts), the benchmarks (`bench fem`, `scaling`,
-//! `embed`), linear elastodynamics, and the counting allocator behind the peak-memory figures.
-//! The `facesim` command line forwards `study` and `bench` here.
+//! `embed`, …) and linear elastodynamics. Its own command, `facesim-lab`, runs them.
 
 // `!(x > 0.0)` is deliberate: it rejects NaN, which `x <= 0.0` would let through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -16,8 +15,5 @@ pub mod bench_reduced;
 pub mod bench_replan;
 pub mod calculix;
 pub mod dynamics;
-pub mod memory;
 pub mod scaling;
 pub mod study;
-pub mod sweep_chart;
-pub mod validation_chart;

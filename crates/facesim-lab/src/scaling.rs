@@ -184,7 +184,7 @@ fn stage_points(o: &facesim::commands::Outcome, voxels: f64) -> Vec<Point> {
 /// The C1 FEM benchmark on about n triangles: a point per phase (CPU and heap for the total).
 fn mesh_size(n: usize, progress: &dyn Observer) -> Result<Vec<Point>> {
     progress.started(&format!("scaling: C1 FEM on {n} triangles"));
-    let m = facesim::meter::Meter::start(crate::memory::Probe::if_installed());
+    let m = facesim::meter::Meter::start(facesim::meter::counted_heap());
     let b = crate::bench_fem::run(n, None)?;
     let c = m.stop();
     let mut points = Vec::new();

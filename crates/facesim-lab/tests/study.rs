@@ -8,7 +8,7 @@ use std::path::Path;
 
 // Counts heap bytes for the peak-memory column, as the facesim binary does.
 #[global_allocator]
-static ALLOC: facesim_lab::memory::Counting = facesim_lab::memory::Counting;
+static ALLOC: facesim::meter::CountingAllocator = facesim::meter::CountingAllocator;
 
 fn phantom_case() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/phantom")

@@ -184,7 +184,7 @@ fn sweep<'py>(
         let rows = sw::evaluate(&basis, plans, &file, sw::run_landmarks(&out_dir)?.as_ref())?;
         if let Some(o) = &out {
             sw::write(o, &basis, &rows)?;
-            facesim_lab::sweep_chart::write(&o.join("sweep.svg"), &rows)?;
+            facesim_charts::sweep::write(&o.join("sweep.svg"), &rows)?;
         }
         let names = sw::value_columns(&basis, &rows);
         let mut columns = vec![Vec::with_capacity(rows.len()); names.len()];

@@ -11,7 +11,7 @@ use plotters::prelude::*;
 use std::path::Path;
 use std::sync::Once;
 
-use crate::sweep_chart::{DrawResult, FONT, PALETTE};
+use facesim_charts::sweep::{DrawResult, FONT, PALETTE};
 
 fn register_font() {
     static ONCE: Once = Once::new();

@@ -150,7 +150,7 @@ fn with_uv(mut m: Mesh, case: &Case, scene: &Scene) -> Mesh {
 
 /// (result, wall seconds, peak heap MB) of `f`, by the same meter as the pipeline's stages.
 fn timed<T>(f: impl FnOnce() -> T) -> (T, f64, Option<f64>) {
-    let m = facesim::meter::Meter::start(crate::memory::Probe::if_installed());
+    let m = facesim::meter::Meter::start(facesim::meter::counted_heap());
     let r = f();
     let c = m.stop();
     (r, c.wall_s, c.peak_heap_mb)

@@ -2,7 +2,7 @@
 //! grey bar and each case's predicted ratio as a point over it (a cross when outside the range).
 //! `facesim validate` draws it from the rows `facesim::commands::validate` returns.
 
-use crate::sweep_chart::{DrawResult, FONT, PALETTE};
+use crate::sweep::{DrawResult, FONT, PALETTE};
 use facesim::commands::validate::Validation;
 use facesim::error::{Error, Result};
 use facesim::output::write_atomic;

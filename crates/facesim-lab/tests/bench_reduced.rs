@@ -1,14 +1,32 @@
-//! `facesim bench reduced --quick` (docs/lab/performance.md) through the real CLI on
+//! `facesim-lab bench reduced --quick` (docs/lab/performance.md) through the real command on
 //! the first sample (the jaws phantom, coarse mesh): it writes bench_reduced.json and .md, and
 //! what the JSON says is consistent — every certified bound at least the true error it bounds,
 //! positive times, the sample counts asked for, each band run by the method asked for, and the
 //! ratios equal to the quotients of the times they are made of.
 
-mod cli;
-
-use cli::facesim;
 use serde_json::Value;
 use std::path::Path;
+use std::process::Command;
+
+struct Ran {
+    code: i32,
+    stdout: String,
+    stderr: String,
+}
+
+/// `facesim-lab ARGS`; its children are the `facesim` command built beside it (a workspace
+/// `cargo test` builds both).
+fn facesim_lab(args: &[&str]) -> Ran {
+    let out = Command::new(env!("CARGO_BIN_EXE_facesim-lab"))
+        .args(args)
+        .output()
+        .unwrap();
+    Ran {
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
 
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
@@ -23,7 +41,7 @@ fn bench_reduced_quick_writes_a_consistent_report() {
     let jaws = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
     let out = tempfile::tempdir().unwrap();
     let t = std::time::Instant::now();
-    let r = facesim(&[
+    let r = facesim_lab(&[
         "bench",
         "reduced",
         "--case",

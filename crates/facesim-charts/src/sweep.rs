@@ -1,7 +1,7 @@
 //! sweep.svg: per plan, the face displacement's mean, 90th percentile and max, and each present
 //! facial region's mean (mm). `facesim sweep` and the Python module's `sweep(out=…)` draw it
-//! from the rows `facesim::commands::sweep` returns; the product library has no chart crate.
-//! The font and palette are the lab's study charts' too.
+//! from the rows `facesim::commands::sweep` returns. The font and palette are the other charts'
+//! too.
 
 use facesim::commands::sweep::{REGION_NAMES, SweepRow};
 use facesim::error::{Error, Result};
@@ -9,7 +9,7 @@ use facesim::output::write_atomic;
 use plotters::prelude::*;
 use std::path::Path;
 
-/// The charts' font and colours, shared with the lab's study charts.
+/// The charts' font and colours, shared with validation.svg and the lab's study charts.
 pub static FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 
 pub const PALETTE: [RGBColor; 8] = [
