@@ -1,4 +1,4 @@
-//! `facesim bench dicom`: how long reading a CT series takes in each compressed transfer syntax
+//! `facesim-lab bench dicom`: how long reading a CT series takes in each compressed transfer syntax
 //! against the uncompressed series (docs/lab/performance.md, docs/guide/dicom.md).
 //!
 //! The CT (by default the real sample) is written as an uncompressed DICOM series, each file is

@@ -1,4 +1,4 @@
-//! `facesim bench embed [--quick] --out DIR`: what solving a coarse model and
+//! `facesim-lab bench embed [--quick] --out DIR`: what solving a coarse model and
 //! carrying a dense face scan along by shell embedding costs in accuracy, and what it saves.
 //!
 //! The phantom head with a dense face scan (0.75 mm vertex spacing, ~160 k triangles; 1.5 mm,

@@ -1,4 +1,4 @@
-//! `facesim bench fem`: assembly + factorisation + three solves of the C1 surface system on a
+//! `facesim-lab bench fem`: assembly + factorisation + three solves of the C1 surface system on a
 //! planar mesh of a given size (the numbers in docs/design/fem.md).
 
 use facesim::error::{Error, NumericalKind, Result};

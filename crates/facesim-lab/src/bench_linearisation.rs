@@ -1,4 +1,4 @@
-//! `facesim bench linearisation`: the C1 models' plan basis (their linearisation at the
+//! `facesim-lab bench linearisation`: the C1 models' plan basis (their linearisation at the
 //! pre-operative state, docs/design/plan-basis.md "C1 models") against full nonlinear solves of the
 //! same plans, as a function of the move's size: the first segment translated 1, 2, 5, 10 mm
 //! along its planned translation (or −y, forward in LPS, when it has none) and rotated 1, 2, 5°

@@ -1,4 +1,4 @@
-//! `facesim bench reduced [--case DIR] --out DIR [--quick]` : what the certified
+//! `facesim-lab bench reduced [--case DIR] --out DIR [--quick]` : what the certified
 //! reduced model (docs/design/reduced.md) costs and how close it is, on one case.
 //!
 //! - **One full solve**: `Prediction::resolve` at the case's own parameters (assembly,
@@ -775,7 +775,7 @@ fn write(out: &Path, b: &ReducedBench) -> Result<()> {
 pub fn summary(b: &ReducedBench) -> String {
     let m = &b.machine;
     let mut md = format!(
-        "# `facesim bench reduced` — {}{}\n\nMachine: {} ({} cores, {} threads, {:.0} GB); load average {:.2} {:.2} {:.2} at the start, {:.2} {:.2} {:.2} at the end. Whole bench {:.0} s.\n\n",
+        "# `facesim-lab bench reduced` — {}{}\n\nMachine: {} ({} cores, {} threads, {:.0} GB); load average {:.2} {:.2} {:.2} at the start, {:.2} {:.2} {:.2} at the end. Whole bench {:.0} s.\n\n",
         b.case,
         if b.quick { " (--quick)" } else { "" },
         m.cpu,

@@ -1,4 +1,4 @@
-//! `facesim bench replan`: the cost of `PlanBasis::predict` (one plan's face from the stored basis)
+//! `facesim-lab bench replan`: the cost of `PlanBasis::predict` (one plan's face from the stored basis)
 //! on the real CT face with the volumetric model, against a bare pass over the basis's memory and
 //! against the full run that built it (docs/lab/performance.md "Re-planning").
 

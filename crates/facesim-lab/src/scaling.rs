@@ -1,4 +1,4 @@
-//! `facesim bench scaling [--quick] OUT_DIR` : how each stage's cost grows.
+//! `facesim-lab bench scaling [--quick] OUT_DIR` : how each stage's cost grows.
 //!
 //! - CT series: the analytic phantom head at growing resolution (2 mm → 0.45 mm voxels, 1.2 M →
 //!   108 M voxels; the last is the size of a 512×512×400 clinical CT), each with a 1.5 mm face scan
@@ -288,7 +288,7 @@ fn write(out: &Path, s: &Scaling) -> Result<()> {
         )?;
     }
     let mut md = format!(
-        "# facesim bench scaling\n\nMachine: {} ({} cores, {} threads, {:.0} GB).\n\n| series | stage | exponent | wall at the largest size (s) |\n|---|---|---|---|\n",
+        "# facesim-lab bench scaling\n\nMachine: {} ({} cores, {} threads, {:.0} GB).\n\n| series | stage | exponent | wall at the largest size (s) |\n|---|---|---|---|\n",
         s.machine.cpu, s.machine.cores, s.machine.threads, s.machine.memory_gb
     );
     for f in &s.fits {

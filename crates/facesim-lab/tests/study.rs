@@ -1,4 +1,4 @@
-//! `facesim study --quick` end to end, and exact invariants of the face baselines.
+//! `facesim-lab study --quick` end to end, and exact invariants of the face baselines.
 
 use facesim::case::{Case, Osteotomy, Region};
 use facesim::pipeline::prepare_case;
@@ -18,7 +18,7 @@ fn phantom_case() -> std::path::PathBuf {
 fn quick_study_writes_tables_and_charts_and_reproduces_the_papers_findings() {
     let out = tempfile::tempdir().unwrap();
     let dir = out.path().join("study");
-    // What `facesim study --quick DIR --case data-samples/phantom` runs.
+    // What `facesim-lab study --quick DIR --case data-samples/phantom` runs.
     facesim_lab::study::run(&dir, true, &[phantom_case()], &facesim::observe::Quiet).unwrap();
     for f in [
         "results.json",

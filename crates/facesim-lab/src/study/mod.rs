@@ -1,4 +1,4 @@
-//! `facesim study [--quick] OUT_DIR`: speed against accuracy (docs/lab/study.md).
+//! `facesim-lab study [--quick] OUT_DIR`: speed against accuracy (docs/lab/study.md).
 //!
 //! 1. The benchmarks of Alterovitz & Goldberg (2003) — the 2-D block and needle with MP1 and MP2,
 //!    the 3-D rod with MP3 — through four integrators, with the relative energy norm, surface and
@@ -374,7 +374,7 @@ fn summary(s: &Study, charts: &[String]) -> String {
         m_.push('\n');
     };
     line(format!(
-        "# facesim study{}\n\nMachine: {} ({} cores, {} threads, {:.0} GB). Whole study: {:.1} s. Command: `facesim study{} OUT_DIR`.\n",
+        "# facesim-lab study{}\n\nMachine: {} ({} cores, {} threads, {:.0} GB). Whole study: {:.1} s. Command: `facesim-lab study{} OUT_DIR`.\n",
         if s.quick { " (quick)" } else { "" },
         s.machine.cpu,
         s.machine.cores,
