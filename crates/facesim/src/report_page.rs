@@ -125,11 +125,8 @@ pub struct PageTissue<'a> {
 pub struct PageReduced<'a> {
     pub sliding: bool,
     pub form: &'a crate::reduced::OnlineForm,
-    /// Per term: the tissue slot (`Tet::TISSUES`; 4 + slot for the external nose's part of
-    /// that tissue) and whether θ_q is λ (else μ).
+    /// Per term: the tissue slot (`Tet::TISSUES`) and whether θ_q is λ (else μ).
     pub terms: &'a [(usize, bool)],
-    /// The nose's modulus (kPa) its terms take (`[tet] nose_youngs_kpa`; 0: none).
-    pub nose_youngs_kpa: f64,
     /// The trained box of θ: lowest and highest per term; outside it the page answers nothing.
     pub theta_box: &'a [Vec<f64>; 2],
     /// The certified bound on the face's error (mm) and on each soft landmark's
@@ -402,7 +399,6 @@ fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Valu
                 "sliding": m.sliding,
                 "form": m.form,
                 "terms": m.terms,
-                "nose_youngs_kpa": m.nose_youngs_kpa,
                 "theta_box": m.theta_box,
                 "face_bound": m.face_bound,
                 "output_bounds": m.output_bounds,

@@ -99,16 +99,16 @@ impl Default for Tet {
             skin_size_mm: 4.0,
             deep_size_mm: 8.0,
             margin_mm: 30.0,
-            nose_youngs_kpa: 0.0,
-            nose_base_above_sn_mm: 2.5,
             degloved_maxilla: Degloved::Auto,
             degloved_chin: Degloved::Auto,
-            septum_detached: false,
             scan_end: ScanEndHold::Slides,
             skin: e(30.0, 0.45),
             muscle: e(10.0, 0.45),
             fat_dark: e(2.0, 0.45),
             fat_bright: e(3.0, 0.45),
+            retired_nose_youngs_kpa: serde::de::IgnoredAny,
+            retired_nose_base_above_sn_mm: serde::de::IgnoredAny,
+            retired_septum_detached: serde::de::IgnoredAny,
         }
     }
 }

@@ -69,11 +69,29 @@ pub fn overrides_table(sets: &[String]) -> Result<toml::Table> {
     Ok(out)
 }
 
+/// A case (`table`: case.toml's, or the `--set` overrides) that sets a key of a retired `[tet]`
+/// mechanism ([`RETIRED_TET_KEYS`]) is refused in one line naming `path` and the key: serde's
+/// unknown-field message would list every `[tet]` key instead, and a report.json's parameters
+/// (which still carry them from before) must read back, so `Tet` itself ignores them.
+fn refuse_retired(table: &toml::Table, path: &Path) -> Result<()> {
+    let Some(toml::Value::Table(tet)) = table.get("tet") else {
+        return Ok(());
+    };
+    match RETIRED_TET_KEYS.iter().find(|k| tet.contains_key(**k)) {
+        Some(key) => Err(Error::input(
+            path,
+            format!(
+                "[tet] {key} is no longer a key: the mechanism failed the validation gate and was retired (docs/lab/retired-mechanisms.md); remove it"
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
 impl Case {
     /// Whether the case's model has the certified reduced form (docs/design/reduced.md): the
     /// volumetric model with the linear material and the 4-node element, whose stiffness is
-    /// affine in the tissues' Lamé parameters (the nose framework's tetrahedra, under
-    /// `[tet] nose_youngs_kpa`, are terms of their own).
+    /// affine in the tissues' Lamé parameters.
     pub fn reduced_form(&self) -> bool {
         !self.solve.model.on_springs()
             && self.tet.material == TetMaterial::Linear
@@ -94,6 +112,8 @@ impl Case {
         // Slicer's files in the plan (transform files, markups planes) become plan keys.
         let dir = path.parent().unwrap_or(Path::new(""));
         crate::slicer::resolve_plan_files(&mut over, dir, path)?;
+        refuse_retired(&over, path)?;
+        refuse_retired(overrides, path)?;
         merge(&mut base, over);
         merge(&mut base, overrides.clone());
         let case: Case = toml::Value::Table(base)
@@ -253,24 +273,43 @@ mod tests {
         assert!(c.is_ok());
     }
 
+    /// The retired mechanisms' keys (docs/lab/retired-mechanisms.md) are refused in one line
+    /// naming case.toml and the key, from the file and from `--set`; a report.json's parameters
+    /// written while they existed still read back.
     #[test]
-    fn the_nose_frameworks_base_lies_0_to_30_mm_above_subnasale() {
-        let parse = |v: &str| with_set(&format!("tet.nose_base_above_sn_mm={v}"));
-        let default = Case::parse(MIN, Path::new("case.toml")).unwrap();
-        assert_eq!(default.tet.nose_base_above_sn_mm, 2.5);
-        assert_eq!(parse("10.0").unwrap().tet.nose_base_above_sn_mm, 10.0);
-        // A report.json written before the key existed reads back with the default.
-        let mut tet = serde_json::to_value(&default.tet).unwrap();
-        tet.as_object_mut().unwrap().remove("nose_base_above_sn_mm");
-        let old: Tet = serde_json::from_value(tet).unwrap();
-        assert_eq!(old.nose_base_above_sn_mm, 2.5);
-        for bad in ["-1.0", "31.0", "nan"] {
-            let e = parse(bad).unwrap_err().to_string();
+    fn retired_keys_are_refused_naming_case_toml_and_the_key() {
+        for (key, value) in [
+            ("nose_youngs_kpa", "3000.0"),
+            ("nose_base_above_sn_mm", "2.5"),
+            ("septum_detached", "false"),
+        ] {
+            let e = Case::parse(
+                &format!("{MIN}[tet]\n{key} = {value}\n"),
+                Path::new("case.toml"),
+            )
+            .unwrap_err()
+            .to_string();
             assert!(
-                e.contains("case.toml") && e.contains("nose_base_above_sn_mm must be 0 to 30"),
-                "{bad}: {e}"
+                e.starts_with("case.toml")
+                    && e.contains(&format!("[tet] {key} is no longer a key"))
+                    && e.contains("retired-mechanisms.md"),
+                "{e}"
             );
+            assert!(!e.contains('\n') && !e.contains("expected one of"), "{e}");
+            let e = with_set(&format!("tet.{key}={value}"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("case.toml") && e.contains(key), "{e}");
         }
+        let default = Case::parse(MIN, Path::new("case.toml")).unwrap();
+        let mut tet = serde_json::to_value(&default.tet).unwrap();
+        assert!(RETIRED_TET_KEYS.iter().all(|k| tet.get(k).is_none()));
+        let old = tet.as_object_mut().unwrap();
+        old.insert("nose_youngs_kpa".into(), 0.0.into());
+        old.insert("nose_base_above_sn_mm".into(), 2.5.into());
+        old.insert("septum_detached".into(), false.into());
+        let old: Tet = serde_json::from_value(tet).unwrap();
+        assert_eq!(old.skin, default.tet.skin);
     }
 
     #[test]

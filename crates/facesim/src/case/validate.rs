@@ -5,10 +5,6 @@ use super::schema::*;
 use crate::error::{Error, Result};
 use std::path::Path;
 
-/// The highest base `[tet] nose_base_above_sn_mm` takes (mm): the adult nose tip stands about
-/// 18-20 mm above subnasale (ProMED 0051: 18 mm), so a base above 30 mm leaves no nose.
-const MAX_NOSE_BASE_MM: f64 = 30.0;
-
 impl Case {
     /// Check every value's range; errors name `path` (case.toml) and the key.
     pub fn validate(&self, path: &Path) -> Result<()> {
@@ -95,18 +91,6 @@ impl Case {
             return bad(
                 "[tet] needs 0 < skin_size_mm <= deep_size_mm (finite) and margin_mm >= 0".into(),
             );
-        }
-        if !(t.nose_youngs_kpa >= 0.0 && t.nose_youngs_kpa.is_finite()) {
-            return bad(format!(
-                "[tet] nose_youngs_kpa must be 0 (the nose is its tissues) or a modulus in kPa, got {}",
-                t.nose_youngs_kpa
-            ));
-        }
-        if !(0.0..=MAX_NOSE_BASE_MM).contains(&t.nose_base_above_sn_mm) {
-            return bad(format!(
-                "[tet] nose_base_above_sn_mm must be 0 to {MAX_NOSE_BASE_MM} mm above subnasale (the nose's tip lies about 20 mm above it), got {}",
-                t.nose_base_above_sn_mm
-            ));
         }
         for (option, asked) in [
             ("degloved_maxilla", t.degloved_maxilla),

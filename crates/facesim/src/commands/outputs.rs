@@ -369,7 +369,6 @@ fn page_tissue<'a>(
                 sliding: m.sliding,
                 form: &m.form,
                 terms: &m.terms,
-                nose_youngs_kpa: m.nose_youngs_kpa,
                 theta_box: &m.theta_box,
                 face_bound: &m.face_bound,
                 output_bounds: &m.output_bounds,

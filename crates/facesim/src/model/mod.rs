@@ -12,10 +12,8 @@
 pub mod c1;
 mod degloved;
 pub mod discretisation;
-mod nose;
 pub mod predicted;
 pub mod reduced;
-mod septum;
 pub mod volumetric;
 
 use crate::case::Case;

@@ -18,53 +18,27 @@ use crate::segment::runs::Runs;
 use crate::volume::Volume;
 use std::sync::OnceLock;
 
-/// The role of each node (`kind`, at `nodes`) and its hold: bone nodes inside a segment move
-/// with it (any rotation, exactly: the displacement is p' − p of the plan's rigid move), other
-/// bone and the cut faces stay, skin outside `[surface] movable` stays, mucosa slides along or
-/// moves with the bone it faces (`mucosa`), the rest is free. With `rest_normals` (the linear
-/// models) mucosa slides along the bone's normal at rest, the small-strain form of the condition,
-/// which keeps the factor independent of the plan (the plan basis). Also returns each hold as a
-/// linear function of the segments' matrices (docs/plan-basis.md) and the nodes that lie in more
-/// than one segment (their moves compose).
-pub(crate) fn holds(
+/// The role of each node (`kind`, at `nodes`) and its hold, the tissue bonded to its bone: bone
+/// nodes inside a segment move with it (any rotation, exactly: the displacement is p' − p of the
+/// plan's rigid move), other bone and the cut faces stay, skin outside `[surface] movable`
+/// (`rigid`) stays, mucosa moves with the bone it faces (`mucosa`), the rest is free. Also each
+/// hold as a linear function of the segments' matrices (docs/plan-basis.md) and, per moved bone
+/// node, the segments it lies in together with its own (their moves compose). [`slide_on_bone`]
+/// then lets mucosa and contact slide.
+pub(crate) fn bone_moves(
     nodes: &[[f64; 3]],
     kind: &[NodeKind],
     mucosa: &[Option<Mucosa>],
     rigid: &[bool],
     bone: &Bone,
-    sliding: bool,
-    rest_normals: bool,
 ) -> Holds {
     let (moved_to, moved) = bone.plan.apply(nodes, 1.0);
-    let mut overlaps = Vec::new();
     let mut out = Holds::default();
-    // n · u = n · u_bone, tangential free.
-    let slide = |m: &Mucosa| {
-        let normal = if rest_normals {
-            m.rest_normal
-        } else {
-            m.normal
-        };
-        (
-            SLIDING,
-            Hold::Slide {
-                normal,
-                value: (0..3).map(|c| normal[c] * m.node_move[c]).sum(),
-            },
-            LinearHold::Slides {
-                normal: m.rest_normal,
-                segment: m.segment,
-                at: m.at,
-            },
-        )
-    };
     for (n, k) in kind.iter().enumerate() {
         let (c, h, l) = match (k, mucosa.get(n).copied().flatten()) {
-            // Lip or cheek on a tooth (`contact`): slides on it, or is attached like other bone.
-            (NodeKind::Bone, Some(m)) if sliding => slide(&m),
             (NodeKind::Bone, _) if moved[n] => {
                 let (s, over) = segment_at(bone.osteotomy, nodes[n]);
-                overlaps.extend(over);
+                out.overlaps.extend(over.into_iter().map(|s| (n, s)));
                 (
                     MOVED,
                     Hold::Fixed([0, 1, 2].map(|c| moved_to[n][c] - nodes[n][c])),
@@ -78,7 +52,6 @@ pub(crate) fn holds(
                 (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still)
             }
             (NodeKind::Skin, _) if rigid[n] => (FIXED, Hold::Fixed([0.0; 3]), LinearHold::Still),
-            (NodeKind::Skin, Some(m)) if sliding => slide(&m),
             (NodeKind::Skin, Some(m)) => (
                 if m.node_move == [0.0; 3] {
                     FIXED
@@ -98,20 +71,70 @@ pub(crate) fn holds(
         out.hold.push(h);
         out.linear.push(l);
     }
-    overlaps.sort_unstable();
-    overlaps.dedup();
-    out.overlapping_segments = overlaps;
     out
 }
 
-/// Per node: the constraint code, the hold, the hold as a function of the plan; and the segments
-/// some node lies in together.
+/// `[tet] sliding`: the mucosa and the bone lip or cheek rests on (`mucosa`; bone-kind nodes on
+/// the teeth or raised by a degloving approach) slide along the bone they face instead of moving
+/// with it: n · u = n · u_bone, tangential free. Skin held by `[surface] movable` (`rigid`) stays
+/// held. With `rest_normals` (the linear models) along the bone's normal at rest, the
+/// small-strain form of the condition, which keeps the factor independent of the plan (the plan
+/// basis). A bone node that slides no longer composes its segments' moves. How many nodes slide.
+pub(crate) fn slide_on_bone(
+    h: &mut Holds,
+    kind: &[NodeKind],
+    mucosa: &[Option<Mucosa>],
+    rigid: &[bool],
+    rest_normals: bool,
+) -> usize {
+    let mut slid = vec![false; kind.len()];
+    for (n, k) in kind.iter().enumerate() {
+        let Some(m) = mucosa.get(n).copied().flatten() else {
+            continue;
+        };
+        if !(*k == NodeKind::Bone || (*k == NodeKind::Skin && !rigid[n])) {
+            continue;
+        }
+        let normal = if rest_normals {
+            m.rest_normal
+        } else {
+            m.normal
+        };
+        h.constraint[n] = SLIDING;
+        h.hold[n] = Hold::Slide {
+            normal,
+            value: (0..3).map(|c| normal[c] * m.node_move[c]).sum(),
+        };
+        h.linear[n] = LinearHold::Slides {
+            normal: m.rest_normal,
+            segment: m.segment,
+            at: m.at,
+        };
+        slid[n] = true;
+    }
+    h.overlaps.retain(|(n, _)| !slid[*n]);
+    slid.iter().filter(|s| **s).count()
+}
+
+/// Per node: the constraint code, the hold, the hold as a function of the plan; and, per moved
+/// bone node, the other segments it lies in.
 #[derive(Default)]
 pub(crate) struct Holds {
     pub constraint: Vec<u8>,
     pub hold: Vec<Hold>,
     pub linear: Vec<LinearHold>,
-    pub overlapping_segments: Vec<usize>,
+    /// (node, segment): a bone node moved with its segment lies in this one too.
+    pub overlaps: Vec<(usize, usize)>,
+}
+
+impl Holds {
+    /// The segments some moved bone node lies in together with another (ascending).
+    pub(crate) fn overlapping_segments(&self) -> Vec<usize> {
+        let mut s: Vec<usize> = self.overlaps.iter().map(|(_, s)| *s).collect();
+        s.sort_unstable();
+        s.dedup();
+        s
+    }
 }
 
 /// `[tet] scan_end = "slides"`: every free node past the CT's outermost voxel centres `bounds`

@@ -65,17 +65,10 @@ struct Header {
     models: Vec<ModelHeader>,
 }
 
-fn is_zero(x: &f64) -> bool {
-    *x == 0.0
-}
-
 #[derive(Serialize, Deserialize)]
 struct ModelHeader {
     sliding: bool,
     terms: Vec<(usize, bool)>,
-    /// The nose's modulus (kPa) for its terms (slots 4–7); absent: none.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    nose_youngs_kpa: f64,
     form: OnlineForm,
     theta_box: [Vec<f64>; 2],
     face_bound: OutputBound,
@@ -108,7 +101,6 @@ pub fn write(path: &Path, stored: &StoredReduced) -> Result<()> {
             .map(|m| ModelHeader {
                 sliding: m.sliding,
                 terms: m.terms.clone(),
-                nose_youngs_kpa: m.nose_youngs_kpa,
                 form: m.form.clone(),
                 theta_box: m.theta_box.clone(),
                 face_bound: m.face_bound.clone(),
@@ -163,9 +155,9 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
         let q = m.form.terms();
         if !m.form.consistent()
             || m.terms.len() != q
-            || m.terms.iter().any(|(s, _)| *s >= 2 * super::NOSE_SLOTS)
-            || (m.terms.iter().any(|(s, _)| *s >= super::NOSE_SLOTS)
-                && !(m.nose_youngs_kpa > 0.0 && m.nose_youngs_kpa.is_finite()))
+            || m.terms
+                .iter()
+                .any(|(s, _)| *s >= crate::case::Tet::TISSUES.len())
             || m.theta_box.iter().any(|b| b.len() != q)
             || std::iter::once(&m.face_bound)
                 .chain(&m.output_bounds)
@@ -186,7 +178,6 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             sliding: m.sliding,
             form: m.form,
             terms: m.terms,
-            nose_youngs_kpa: m.nose_youngs_kpa,
             theta_box: m.theta_box,
             face: LinearFace::new(lift, columns),
             face_bound: m.face_bound,

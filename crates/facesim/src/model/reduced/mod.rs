@@ -17,11 +17,8 @@ pub struct ReducedTet {
     pub sliding: bool,
     /// The online solve and its bound.
     pub form: OnlineForm,
-    /// Per term: the tissue slot (`Tet::slot`; [`NOSE_SLOTS`] + slot for the external nose's
-    /// tetrahedra of that tissue under `[tet] nose_youngs_kpa`) and whether it is λ (else μ).
+    /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
     pub terms: Vec<(usize, bool)>,
-    /// The external nose's modulus the nose's terms take (`[tet] nose_youngs_kpa`; 0: none).
-    pub nose_youngs_kpa: f64,
     /// The trained box of θ (lowest and highest per term, θ̄ included): a θ outside it is not
     /// answered (no extrapolation; docs/reduced.md).
     pub theta_box: [Vec<f64>; 2],
@@ -63,14 +60,14 @@ pub struct ReducedFace {
 }
 
 impl ReducedTet {
-    /// The parameter vector θ of `tet`'s materials (and nose modulus), in the terms' order.
+    /// The parameter vector θ of `tet`'s materials, in the terms' order.
     pub fn theta(&self, tet: &Tet) -> Vec<f64> {
-        theta_of(&self.terms, &tet.tissues(), tet.nose_youngs_kpa)
+        theta_of(&self.terms, &tet.tissues())
     }
 
-    /// θ of the tissues' materials (`Tet::tissues` order), the nose at the model's modulus.
+    /// θ of the tissues' materials (`Tet::tissues` order).
     pub fn theta_of(&self, tissues: &[TissueElastic; 4]) -> Vec<f64> {
-        theta_of(&self.terms, tissues, self.nose_youngs_kpa)
+        theta_of(&self.terms, tissues)
     }
 
     /// The reduced coefficients with `case`'s tissue parameters (its `[tet] sliding` must be
@@ -250,40 +247,20 @@ pub(crate) fn solve_in(
     Ok((i, coefficients, bound))
 }
 
-/// The first slot of the external nose's terms: its tetrahedra of tissue slot s are slot
-/// `NOSE_SLOTS + s`, Young's modulus `[tet] nose_youngs_kpa` with that tissue's ν (as
-/// `Volumetric`'s materials give them).
-pub(crate) const NOSE_SLOTS: usize = 4;
-
-/// θ for `terms` (tissue slot, λ or μ) of the tissues' materials (`Tet::tissues` order), the
-/// nose's slots at `nose_kpa`.
-pub(crate) fn theta_of(
-    terms: &[(usize, bool)],
-    tissues: &[TissueElastic; 4],
-    nose_kpa: f64,
-) -> Vec<f64> {
+/// θ for `terms` (tissue slot, λ or μ) of the tissues' materials (`Tet::tissues` order).
+pub(crate) fn theta_of(terms: &[(usize, bool)], tissues: &[TissueElastic; 4]) -> Vec<f64> {
     terms
         .iter()
         .map(|(s, is_lambda)| {
-            let m = match s.checked_sub(NOSE_SLOTS) {
-                None => tissues[*s],
-                Some(t) => super::nose::material(tissues[t], nose_kpa),
-            };
-            let (l, mu) = m.lame();
+            let (l, mu) = tissues[*s].lame();
             if *is_lambda { l } else { mu }
         })
         .collect()
 }
 
-/// The case key of a term's slot, for messages: `[tet.skin]`, or the nose's part of it.
+/// The case key of a term's slot, for messages: `[tet.skin]`.
 pub(crate) fn slot_name(s: usize) -> String {
-    match s.checked_sub(NOSE_SLOTS) {
-        None => format!("[tet.{}]", Tet::TISSUES[s]),
-        Some(t) => format!(
-            "[tet.{}] in the nose ([tet] nose_youngs_kpa)",
-            Tet::TISSUES[t]
-        ),
-    }
+    format!("[tet.{}]", Tet::TISSUES[s])
 }
 
 /// The index in `models` of the model for the sliding state `sliding`: the one built for it,

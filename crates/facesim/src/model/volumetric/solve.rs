@@ -1,0 +1,271 @@
+//! The solve stage: K u = 0 under the holds on the linear mesh's node ordering, the rounds of
+//! the holds that read the solution (`rounds`), then for the neo-Hookean material Newton from the
+//! linear answer (`tet::newton_krylov`; load steps when it cannot start there). The linear models
+//! keep their factor for the plan basis (no second factorisation).
+
+use super::mesh::ordering;
+use super::report::NewtonStep;
+use super::rounds::{LiftOff, OneSidedContact, OneSidedOutcome, Round, Tearing};
+use crate::case::Tet;
+use crate::error::Result;
+use crate::fem::cholesky::MeshAnalyses;
+use crate::fem::ordering::NodeOrder;
+use crate::tet::conditions::Holds;
+use crate::tet::from_ct::NodeKind;
+use crate::tet::newton_krylov;
+use crate::tet::nonlinear::{self, Newton};
+use crate::tet::plan_holds::LinearHold;
+use crate::tet::quadratic::Tet10Mesh;
+use crate::tet::vtu::FREE;
+use crate::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
+
+/// The stiffness of the solved mesh: the 10-node one when there is one, else `linear`.
+pub(super) fn stiffness(
+    quadratic: Option<&Tet10Mesh>,
+    linear: &TetMesh,
+) -> Result<Vec<(usize, usize, f64)>> {
+    match quadratic {
+        Some(q) => q.assemble(),
+        None => linear.assemble(),
+    }
+}
+
+/// A solve in progress: the holds, the factor and the displacement the rounds change.
+pub(super) struct Solving<'a> {
+    /// Solved nodes, and their kinds.
+    pub nodes: usize,
+    pub kind: &'a [NodeKind],
+    quadratic: Option<&'a Tet10Mesh>,
+    order: Option<MeshAnalyses>,
+    f: Vec<f64>,
+    /// The 4-node mesh and its materials (torn tetrahedra a trace).
+    pub linear: TetMesh,
+    pub constraint: Vec<u8>,
+    pub hold: Vec<Hold>,
+    pub linear_hold: Vec<LinearHold>,
+    /// None only while a new factor is made (the old one goes first).
+    c: Option<Constrained>,
+    pub u: Vec<[f64; 3]>,
+    /// The nodes lifted off the bone so far, and the tetrahedra torn.
+    pub lifted: Vec<usize>,
+    pub torn: Vec<bool>,
+    pub one_sided: OneSidedOutcome,
+}
+
+impl Solving<'_> {
+    /// Solve again on the current factor and holds.
+    pub fn solve(&mut self) -> Result<()> {
+        let c = self
+            .c
+            .as_ref()
+            .expect("a solve keeps its factor between rounds");
+        self.u = c.solve(&[(&self.hold, &self.f)])?.remove(0);
+        Ok(())
+    }
+
+    pub fn factor_mut(&mut self) -> &mut Constrained {
+        self.c
+            .as_mut()
+            .expect("a solve keeps its factor between rounds")
+    }
+
+    /// Factor the stiffness again (after a material changed); the old factor goes before the
+    /// new one is made.
+    pub fn refactor(&mut self) -> Result<()> {
+        self.c = None;
+        let k = stiffness(self.quadratic, &self.linear)?;
+        self.c = Some(Constrained::ordered(
+            &k,
+            &self.hold,
+            self.nodes,
+            ordering(&self.order),
+        )?);
+        Ok(())
+    }
+
+    /// Free `nodes` (the tissue lifts off there): held nowhere, in the run and the plan basis.
+    pub fn free(&mut self, nodes: &[usize]) {
+        for &n in nodes {
+            self.constraint[n] = FREE;
+            self.hold[n] = Hold::Free;
+            self.linear_hold[n] = LinearHold::Free;
+        }
+        self.lifted.extend(nodes);
+    }
+
+    /// The solved elements the current displacement turns inside out.
+    pub fn inverted(&self) -> Vec<usize> {
+        match self.quadratic {
+            Some(q) => q.inverted_after(&self.u),
+            None => self.linear.inverted_after(&self.u),
+        }
+    }
+
+    /// The nodes of solved element `e`.
+    pub fn cell(&self, e: usize) -> Vec<u32> {
+        match self.quadratic {
+            Some(q) => q.tets[e].to_vec(),
+            None => self.linear.tets[e].to_vec(),
+        }
+    }
+}
+
+/// What the solve stage hands on.
+pub(super) struct Solution {
+    pub displacement: Vec<[f64; 3]>,
+    /// Nonlinear material: the load steps.
+    pub newton: Option<Vec<NewtonStep>>,
+    /// The last factor, for the plan basis.
+    pub factor: Option<Constrained>,
+    /// Nonlinear material: the linear answer Newton started from.
+    pub linear_start: Option<Vec<[f64; 3]>>,
+    pub order: Option<MeshAnalyses>,
+    pub linear: TetMesh,
+    pub constraint: Vec<u8>,
+    pub linear_hold: Vec<LinearHold>,
+    pub lifted: Vec<usize>,
+    pub torn: Vec<bool>,
+    pub one_sided: OneSidedOutcome,
+    /// Why Newton fell back to load steps (a warning).
+    pub fallback: Option<String>,
+}
+
+/// What the solve reads beside the holds.
+pub(super) struct Inputs<'a> {
+    pub quadratic: Option<&'a Tet10Mesh>,
+    pub kind: &'a [NodeKind],
+    /// The tissues' materials before tearing.
+    pub material: &'a [TissueElastic],
+    pub raised: &'a [bool],
+    pub carries_face: &'a [bool],
+    /// The linear models (any quadratic element, or the linear material) solve K u = f once.
+    pub linear_solve: bool,
+    /// The tissue may tear (`[tet] tear_gap`, the 4-node element, an orthognathic move).
+    pub tears: bool,
+}
+
+/// Solve the model under `holds`: the first solve, the rounds, Newton for the neo-Hookean
+/// material.
+pub(super) fn solve(inp: &Inputs, linear: TetMesh, holds: Holds, t: &Tet) -> Result<Solution> {
+    let nodes = inp.kind.len();
+    // The linear mesh's node ordering, once for every factor of this run and its re-solves (the
+    // 10-node element orders its own DOFs).
+    let order = match inp.quadratic {
+        None => {
+            let solved: Vec<bool> = holds
+                .hold
+                .iter()
+                .map(|h| !matches!(h, Hold::Fixed(_)))
+                .collect();
+            NodeOrder::of_tets(&solved, &linear.tets).map(MeshAnalyses::new)
+        }
+        Some(_) => None,
+    };
+    let k = stiffness(inp.quadratic, &linear)?;
+    let f = Loads::none().nodal_vector(nodes)?;
+    let c = Constrained::ordered(&k, &holds.hold, nodes, ordering(&order))?;
+    let u = c.solve(&[(&holds.hold, &f)])?.remove(0);
+    let mut s = Solving {
+        nodes,
+        kind: inp.kind,
+        quadratic: inp.quadratic,
+        order,
+        f,
+        torn: vec![false; linear.tets.len()],
+        linear,
+        constraint: holds.constraint,
+        hold: holds.hold,
+        linear_hold: holds.linear,
+        c: Some(c),
+        u,
+        lifted: Vec::new(),
+        one_sided: OneSidedOutcome {
+            settled: true,
+            lifted_in_tension: 0,
+            penetration_mm: 0.0,
+        },
+    };
+    let contact = OneSidedContact {
+        raised: inp.raised,
+        k: &k,
+    };
+    contact.run(&mut s)?;
+    drop(k);
+    if t.release_cuts && t.sliding {
+        LiftOff.run(&mut s)?;
+    }
+    if inp.tears {
+        Tearing {
+            carries_face: inp.carries_face,
+            material: inp.material,
+        }
+        .run(&mut s)?;
+    }
+    let (displacement, newton, linear_start, fallback) = if inp.linear_solve {
+        (std::mem::take(&mut s.u), None, None, None)
+    } else {
+        newton(&mut s, t)?
+    };
+    Ok(Solution {
+        displacement,
+        newton,
+        factor: s.c,
+        linear_start,
+        order: s.order,
+        linear: s.linear,
+        constraint: s.constraint,
+        linear_hold: s.linear_hold,
+        lifted: s.lifted,
+        torn: s.torn,
+        one_sided: s.one_sided,
+        fallback,
+    })
+}
+
+/// The displacement, Newton's steps, the linear start and a fallback's warning.
+type Newtoned = (
+    Vec<[f64; 3]>,
+    Option<Vec<NewtonStep>>,
+    Option<Vec<[f64; 3]>>,
+    Option<String>,
+);
+
+/// The hyperelastic model: Newton from the linear answer, the linear factor preconditioning
+/// each Newton system (`tet::newton_krylov`); too far from the linear answer for Newton to start
+/// there, load steps, each Newton system factored (slower, more robust).
+fn newton(s: &mut Solving, t: &Tet) -> Result<Newtoned> {
+    let c =
+        s.c.as_ref()
+            .expect("a solve keeps its factor between rounds");
+    let mut fallback = None;
+    let sol = match newton_krylov::solve(&s.linear, c, &s.u, &newton_krylov::Options::default()) {
+        Ok(sol) => sol,
+        Err(e) => {
+            fallback = Some(format!(
+                "the nonlinear solve from the linear answer failed ({e}); solved again in {} load steps",
+                t.load_steps
+            ));
+            let opts = Newton {
+                load_steps: t.load_steps,
+                ..Newton::default()
+            };
+            nonlinear::solve(&s.linear, &s.hold, &Loads::none(), &opts)?
+        }
+    };
+    let steps = sol
+        .steps
+        .iter()
+        .map(|s| NewtonStep {
+            load: s.load,
+            iterations: s.iterations,
+            residual: s.residuals.last().copied().unwrap_or(0.0),
+            krylov_iterations: s.krylov_iterations,
+        })
+        .collect();
+    Ok((
+        sol.displacements,
+        Some(steps),
+        Some(std::mem::take(&mut s.u)),
+        fallback,
+    ))
+}
