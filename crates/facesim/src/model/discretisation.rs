@@ -1,4 +1,4 @@
-//! An estimate of the volumetric model's discretisation error on the face (issue 25 item 6): the
+//! An estimate of the volumetric model's discretisation error on the face: the
 //! same case solved again on a mesh of twice the element size (`[tet] skin_size_mm` and
 //! `deep_size_mm` doubled; 1/8 of the unknowns), and Richardson's extrapolation: for a method of
 //! order p in h, u_h − u ≈ (u_2h − u_h) / (2^p − 1). Linear tetrahedra converge at order 2 in the

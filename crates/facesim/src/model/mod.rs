@@ -47,8 +47,8 @@ pub struct ModelReport {
 }
 
 /// The greedy's stopping rule (docs/reduced.md "Measured"): a relative energy bound of 5e-3 over
-/// the training box, or 16 vectors (session 43; on the real CT the worst vertex's true error is
-/// then 4e-3 to 2e-2 mm). Batches of 8 were tried in session 45: offline 9.1 → 8.0 s on the real
+/// the training box, or 16 vectors (on the real CT the worst vertex's true error is
+/// then 4e-3 to 2e-2 mm). Batches of 8 were tried: offline 9.1 → 8.0 s on the real
 /// CT, the greedy's last relative bound 8.5e-3 → 9.6e-3; not kept.
 const REDUCED_TOLERANCE: f64 = 5e-3;
 const REDUCED_MAX_SIZE: usize = 16;

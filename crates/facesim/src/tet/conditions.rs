@@ -348,7 +348,7 @@ pub(crate) const TOOTH_DEPTHS_MM: [f64; 5] = [1.5, 2.25, 3.0, 3.75, 4.5];
 /// at the molars.
 pub(crate) const LIP_REACH_MM: f64 = 35.0;
 
-/// The lip–tooth and cheek–tooth contact (issue 25 item 5): `Bone`-kind nodes where lip or cheek
+/// The lip–tooth and cheek–tooth contact: `Bone`-kind nodes where lip or cheek
 /// rests on the crowns with no air between (the vestibule is a potential space: the lip is not
 /// attached to the teeth). A bone node is in contact when (1) it lies on a tooth: the median HU
 /// at [`TOOTH_DEPTHS_MM`] into the bone, along the normal, is at least [`TOOTH_HU`]; and (2) lip or cheek
@@ -541,7 +541,7 @@ pub(crate) fn midpoint_kinds(q: &Tet10Mesh, tets: &[[u32; 4]], kind: &[NodeKind]
 /// system. Each such piece moves rigidly with what holds it already (the bone of its one or two
 /// held nodes, most of them), else with the bone it lies on (`follow`, given the piece's nodes:
 /// the segment most of its nodes are nearest to, or still): in a head whose bone all
-/// moves, nothing is held still (issue 25: 36 pieces held still made a rigid move of the whole
+/// moves, nothing is held still (36 pieces held still made a rigid move of the whole
 /// skull 24 % non-rigid). `cells` are the solved elements (4-node, or 10-node with the corners
 /// first): a node no cell uses carries no stiffness and follows its bone too. Returns the pieces
 /// and nodes so held.
@@ -700,7 +700,7 @@ fn held_piece(h: &Holds, n: usize) -> Option<Option<usize>> {
     }
 }
 
-/// The saw line (issue 25 item 3): the tissue is not one continuum through an osteotomy. Where
+/// The saw line: the tissue is not one continuum through an osteotomy. Where
 /// pieces held differently meet (a segment's bone and the bone left in place, two segments, or a
 /// segment and held skin or the region's cut faces), the surgeon has raised the periosteum and
 /// the tissue over the cut is not attached: the held nodes of every element joining two pieces,

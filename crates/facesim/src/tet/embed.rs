@@ -7,7 +7,7 @@
 //! Face vertices farther than `reach` from the skin boundary (beyond the modelled region, or
 //! where a coarse mesh does not reach the scan's edge) are "unreached": they take the linear
 //! extrapolation of their nearest skin tetrahedron's corners — at rest when that tetrahedron is
-//! held still (the region's cut faces), moving with the head when everything moves (issue 25: a
+//! held still (the region's cut faces), moving with the head when everything moves (a
 //! face vertex must never stay still in a moving head), still exact for affine fields.
 
 use crate::compare::SurfaceIndex;

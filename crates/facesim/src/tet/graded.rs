@@ -380,84 +380,8 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
     }
     let mut sign: Vec<i8> = values.iter().map(|(a, b)| classify(*a, *b).0).collect();
     let mut kind: Vec<NodeKind> = values.iter().map(|(a, b)| classify(*a, *b).1).collect();
-    // Edges with strictly opposite signs, from the tetrahedra that have both.
-    let mut pairs: Vec<(u32, u32)> = bg
-        .tets
-        .par_iter()
-        .flat_map_iter(|t| {
-            let sign = &sign;
-            (0..4).flat_map(move |a| {
-                (0..4).filter_map(move |b| {
-                    (sign[t[a] as usize] < 0 && sign[t[b] as usize] > 0).then_some((t[a], t[b]))
-                })
-            })
-        })
-        .collect();
-    pairs.par_sort_unstable();
-    pairs.dedup();
-    let cuts: Vec<Cut> = pairs
-        .par_iter()
-        .map(|&(u, w)| {
-            let (t, kind) = cut_on_edge(
-                pd(u),
-                pd(w),
-                (
-                    values[u as usize].0,
-                    values[w as usize].0,
-                    values[w as usize].1,
-                ),
-                (bg.box_lo, bg.box_hi),
-                |d| f(bg.point(d)),
-            );
-            Cut {
-                neg: u,
-                pos: w,
-                t,
-                kind,
-            }
-        })
-        .collect();
-    // Warping, vertex by vertex in index order.
-    let mut per_vertex: Vec<Vec<u32>> = vec![Vec::new(); np];
-    for (i, c) in cuts.iter().enumerate() {
-        per_vertex[c.neg as usize].push(i as u32);
-        per_vertex[c.pos as usize].push(i as u32);
-    }
-    let mut alive = vec![true; cuts.len()];
-    let mut warped: Vec<Option<u32>> = vec![None; np];
-    for v in (0..np).filter(|v| !bg.transition[*v]) {
-        let mut best: Option<(f64, u32)> = None;
-        for &c in &per_vertex[v] {
-            let cut = &cuts[c as usize];
-            if !alive[c as usize] {
-                continue;
-            }
-            let e = sub(pd(cut.pos), pd(cut.neg));
-            let len = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
-            let axis_parallel = e.iter().filter(|x| **x != 0.0).count() == 1;
-            let alpha = if axis_parallel {
-                ALPHA_LONG
-            } else {
-                ALPHA_SHORT
-            };
-            let frac = if cut.neg as usize == v {
-                cut.t
-            } else {
-                1.0 - cut.t
-            };
-            if frac < alpha && best.is_none_or(|(d, _)| frac * len < d) {
-                best = Some((frac * len, c));
-            }
-        }
-        if let Some((_, c)) = best {
-            warped[v] = Some(c);
-            sign[v] = 0;
-            kind[v] = cuts[c as usize].kind;
-            for &c2 in &per_vertex[v] {
-                alive[c2 as usize] = false;
-            }
-        }
-    }
+    let cuts = cuts_of(f, bg, &values, &sign);
+    let (warped, alive) = warp(bg, &cuts, &mut sign, &mut kind);
     let cut_index: HashMap<(u32, u32), u32> = cuts
         .iter()
         .enumerate()
@@ -527,4 +451,98 @@ pub fn stuff_graded(f: Implicit, bg: &Background) -> Result<Stuffed> {
         (bg.point(bg.box_lo), bg.point(bg.box_hi)),
         "graded stuffing",
     )
+}
+
+/// The cut points of the edges with strictly opposite signs, from the tetrahedra that have both.
+fn cuts_of(f: Implicit, bg: &Background, values: &[(f64, f64)], sign: &[i8]) -> Vec<Cut> {
+    let pd = |i: u32| bg.points[i as usize].map(|x| x as f64);
+    let mut pairs: Vec<(u32, u32)> = bg
+        .tets
+        .par_iter()
+        .flat_map_iter(|t| {
+            (0..4).flat_map(move |a| {
+                (0..4).filter_map(move |b| {
+                    (sign[t[a] as usize] < 0 && sign[t[b] as usize] > 0).then_some((t[a], t[b]))
+                })
+            })
+        })
+        .collect();
+    pairs.par_sort_unstable();
+    pairs.dedup();
+    pairs
+        .par_iter()
+        .map(|&(u, w)| {
+            let (t, kind) = cut_on_edge(
+                pd(u),
+                pd(w),
+                (
+                    values[u as usize].0,
+                    values[w as usize].0,
+                    values[w as usize].1,
+                ),
+                (bg.box_lo, bg.box_hi),
+                |d| f(bg.point(d)),
+            );
+            Cut {
+                neg: u,
+                pos: w,
+                t,
+                kind,
+            }
+        })
+        .collect()
+}
+
+/// Warping, vertex by vertex in index order (transition vertices stay): a vertex with a cut
+/// point near it moves to the nearest, takes its sign (0) and kind, and its other cuts die. Per
+/// vertex: the cut it moved to; per cut: whether it survives.
+fn warp(
+    bg: &Background,
+    cuts: &[Cut],
+    sign: &mut [i8],
+    kind: &mut [NodeKind],
+) -> (Vec<Option<u32>>, Vec<bool>) {
+    let np = bg.points.len();
+    let pd = |i: u32| bg.points[i as usize].map(|x| x as f64);
+    let mut per_vertex: Vec<Vec<u32>> = vec![Vec::new(); np];
+    for (i, c) in cuts.iter().enumerate() {
+        per_vertex[c.neg as usize].push(i as u32);
+        per_vertex[c.pos as usize].push(i as u32);
+    }
+    let mut alive = vec![true; cuts.len()];
+    let mut warped: Vec<Option<u32>> = vec![None; np];
+    for v in (0..np).filter(|v| !bg.transition[*v]) {
+        let mut best: Option<(f64, u32)> = None;
+        for &c in &per_vertex[v] {
+            let cut = &cuts[c as usize];
+            if !alive[c as usize] {
+                continue;
+            }
+            let e = sub(pd(cut.pos), pd(cut.neg));
+            let len = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+            let axis_parallel = e.iter().filter(|x| **x != 0.0).count() == 1;
+            let alpha = if axis_parallel {
+                ALPHA_LONG
+            } else {
+                ALPHA_SHORT
+            };
+            let frac = if cut.neg as usize == v {
+                cut.t
+            } else {
+                1.0 - cut.t
+            };
+            if frac < alpha && best.is_none_or(|(d, _)| frac * len < d) {
+                best = Some((frac * len, c));
+            }
+        }
+        if let Some((_, c)) = best {
+            warped[v] = Some(c);
+            sign[v] = 0;
+            kind[v] = cuts[c as usize].kind;
+            for &c2 in &per_vertex[v] {
+                alive[c2 as usize] = false;
+            }
+        }
+    }
+    (warped, alive)
 }

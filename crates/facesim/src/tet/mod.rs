@@ -1,4 +1,4 @@
-//! Tetrahedral finite elements for the volumetric soft-tissue model (issue 14).
+//! Tetrahedral finite elements for the volumetric soft-tissue model.
 //!
 //! - this module: the linear tetrahedron, small-strain isotropic elasticity with a material per
 //!   element, assembly, [`TetMesh::solve`] (holds and loads), [`TetMesh::inverted_after`] (the

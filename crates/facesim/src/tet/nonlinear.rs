@@ -593,7 +593,7 @@ impl Solver<'_> {
             let mut accepted = None;
             // The held increments are applied whole: a shortened step would leave a fraction
             // of the gap for the next iteration, and halving it again and again never closes
-            // it (the failure issue 25 measured: a free residual at round-off, the gap open
+            // it (the failure measured on the saw lines: a free residual at round-off, the gap open
             // after 25 iterations). If the whole increment inverts an element, the load step
             // is cut instead.
             let tries = if held { 30 } else { 1 };

@@ -321,7 +321,77 @@ pub(super) enum Ref {
 pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed> {
     let lat = Lattice::new(lo, hi, h)?;
     let nv = lat.vertices();
-    // Values at the lattice vertices.
+    let (values, mut sign, mut kind) = lattice_values(&lat, f)?;
+    let cuts = cut_points(&lat, f, &sign, &values);
+    let (warped, alive) = warp(&lat, &cuts, &mut sign, &mut kind);
+    // The surviving cut point of each (negative vertex, slot).
+    let mut cut_at = vec![u32::MAX; nv * 14];
+    for (i, c) in cuts.iter().enumerate() {
+        if alive[i] {
+            cut_at[c.from * 14 + c.slot] = i as u32;
+        }
+    }
+
+    // Positions: lattice vertices (possibly warped) and cut points.
+    let cut_point = |c: &Cut| -> [f64; 3] {
+        let a = lat.coords(c.from).map(|x| x as f64);
+        let off = NEIGHBOURS[c.slot];
+        lat.point([0, 1, 2].map(|k| a[k] + c.t * off[k] as f64))
+    };
+    let vertex_point = |v: usize| -> [f64; 3] {
+        match warped[v] {
+            Some(c) => cut_point(&cuts[c]),
+            None => lat.point(lat.coords(v).map(|x| x as f64)),
+        }
+    };
+    let position = |r: Ref| -> [f64; 3] {
+        match r {
+            Ref::Vertex(v) => vertex_point(v),
+            Ref::Cut(c) => cut_point(&cuts[c]),
+            Ref::Centre(_) => [f64::NAN; 3],
+        }
+    };
+    // Reference positions (doubled coordinates, unwarped, cuts mid-edge) for orientation.
+    let reference = |r: Ref| -> [f64; 3] {
+        match r {
+            Ref::Vertex(v) => lat.coords(v).map(|x| x as f64),
+            Ref::Cut(c) => {
+                let a = lat.coords(cuts[c].from);
+                let off = NEIGHBOURS[cuts[c].slot];
+                [0, 1, 2].map(|k| a[k] as f64 + 0.5 * off[k] as f64)
+            }
+            Ref::Centre(_) => [f64::NAN; 3],
+        }
+    };
+    let dist2 = |a: Ref, b: Ref| {
+        let d = sub(position(a), position(b));
+        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    };
+    let filled = fill_stencils(&lat, &sign, &cut_at, &dist2);
+    compact(
+        &filled,
+        (nv, cuts.len()),
+        &|v| sign[v] == 0,
+        &|c| {
+            let d = [0, 1, 2].map(|a| (c[a] - lat.origin[a]) * 2.0 / lat.h);
+            f(c) < 0.0 && lat.g(d) < 0.0
+        },
+        &Places {
+            position: &position,
+            reference: &reference,
+            vertex: &|v| (vertex_point(v), kind[v]),
+            cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
+        },
+        (lat.point(lat.box_lo), lat.point(lat.box_hi)),
+        "stuffing",
+    )
+}
+
+/// Per lattice vertex: the implicit function and the box's distance function there, and the
+/// vertex's sign and kind (`classify`); an error where the function is not finite.
+#[allow(clippy::type_complexity)]
+fn lattice_values(lat: &Lattice, f: Implicit) -> Result<(Vec<(f64, f64)>, Vec<i8>, Vec<NodeKind>)> {
+    let nv = lat.vertices();
     let values: Vec<(f64, f64)> = (0..nv)
         .into_par_iter()
         .map(|v| {
@@ -343,14 +413,16 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
         sign.push(s);
         kind.push(k);
     }
+    Ok((values, sign, kind))
+}
 
-    // Cut points on the edges from each negative vertex to its positive neighbours.
-    let cuts: Vec<Cut> = (0..nv)
+/// Cut points on the edges from each negative vertex to its positive neighbours.
+fn cut_points(lat: &Lattice, f: Implicit, sign: &[i8], values: &[(f64, f64)]) -> Vec<Cut> {
+    (0..lat.vertices())
         .into_par_iter()
         .filter(|v| sign[*v] < 0)
         .flat_map_iter(|u| {
             let du = lat.coords(u);
-            let (sign, lat, values) = (&sign, &lat, &values);
             NEIGHBOURS
                 .iter()
                 .enumerate()
@@ -375,9 +447,20 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
                     })
                 })
         })
-        .collect();
+        .collect()
+}
 
-    // Warping: each vertex's cut edges (as the negative or the positive end).
+/// Warping: a vertex with a cut point near it (within `ALPHA_LONG` or `ALPHA_SHORT` of the
+/// edge) moves to the nearest, takes its sign (0) and kind, and its other cuts die. Per vertex:
+/// the cut it moved to; per cut: whether it survives.
+fn warp(
+    lat: &Lattice,
+    cuts: &[Cut],
+    sign: &mut [i8],
+    kind: &mut [NodeKind],
+) -> (Vec<Option<usize>>, Vec<bool>) {
+    let nv = lat.vertices();
+    // Each vertex's cut edges (as the negative or the positive end).
     let mut per_vertex: Vec<Vec<(usize, bool)>> = vec![Vec::new(); nv];
     let to_of = |c: &Cut| -> usize {
         let d = lat.coords(c.from);
@@ -426,54 +509,21 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
             }
         }
     }
-    // The surviving cut point of each (negative vertex, slot).
-    let mut cut_at = vec![u32::MAX; nv * 14];
-    for (i, c) in cuts.iter().enumerate() {
-        if alive[i] {
-            cut_at[c.from * 14 + c.slot] = i as u32;
-        }
-    }
+    (warped, alive)
+}
 
-    // Positions: lattice vertices (possibly warped) and cut points.
-    let cut_point = |c: &Cut| -> [f64; 3] {
-        let a = lat.coords(c.from).map(|x| x as f64);
-        let off = NEIGHBOURS[c.slot];
-        lat.point([0, 1, 2].map(|k| a[k] + c.t * off[k] as f64))
-    };
-    let vertex_point = |v: usize| -> [f64; 3] {
-        match warped[v] {
-            Some(c) => cut_point(&cuts[c]),
-            None => lat.point(lat.coords(v).map(|x| x as f64)),
-        }
-    };
-    let position = |r: Ref| -> [f64; 3] {
-        match r {
-            Ref::Vertex(v) => vertex_point(v),
-            Ref::Cut(c) => cut_point(&cuts[c]),
-            Ref::Centre(_) => [f64::NAN; 3],
-        }
-    };
-    // Reference positions (doubled coordinates, unwarped, cuts mid-edge) for orientation.
-    let reference = |r: Ref| -> [f64; 3] {
-        match r {
-            Ref::Vertex(v) => lat.coords(v).map(|x| x as f64),
-            Ref::Cut(c) => {
-                let a = lat.coords(cuts[c].from);
-                let off = NEIGHBOURS[cuts[c].slot];
-                [0, 1, 2].map(|k| a[k] as f64 + 0.5 * off[k] as f64)
-            }
-            Ref::Centre(_) => [f64::NAN; 3],
-        }
-    };
-    let dist2 = |a: Ref, b: Ref| {
-        let d = sub(position(a), position(b));
-        d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    };
+/// Per corner-grid vertex: its stencil tetrahedra and the prisms that needed a centre point
+/// (`Ref::Centre(k)` is the k-th of that list). `cut_at`: the surviving cut point of each
+/// (negative vertex, slot); `dist2`: squared distance between two references.
+fn fill_stencils(
+    lat: &Lattice,
+    sign: &[i8],
+    cut_at: &[u32],
+    dist2: &(dyn Fn(Ref, Ref) -> f64 + Sync),
+) -> Vec<Filled> {
     let patterns = bcc_patterns();
     let n = lat.n;
-    // Per corner-grid vertex: its stencil tetrahedra and the prisms that needed a centre point
-    // (`Ref::Centre(k)` is the k-th of that list).
-    let filled: Vec<Filled> = (0..lat.corners())
+    (0..lat.corners())
         .into_par_iter()
         .map(|p| {
             let dp = lat.coords(p);
@@ -506,29 +556,11 @@ pub fn stuff(f: Implicit, lo: [f64; 3], hi: [f64; 3], h: f64) -> Result<Stuffed>
                 };
                 // Every mixed sign pattern has its cut points (they survive warping exactly
                 // when both ends keep their signs), so a None here cannot happen.
-                let _ = fill(&ids, &s, &cut, &dist2, &mut out);
+                let _ = fill(&ids, &s, &cut, dist2, &mut out);
             }
             out
         })
-        .collect();
-
-    compact(
-        &filled,
-        (nv, cuts.len()),
-        &|v| sign[v] == 0,
-        &|c| {
-            let d = [0, 1, 2].map(|a| (c[a] - lat.origin[a]) * 2.0 / lat.h);
-            f(c) < 0.0 && lat.g(d) < 0.0
-        },
-        &Places {
-            position: &position,
-            reference: &reference,
-            vertex: &|v| (vertex_point(v), kind[v]),
-            cut: &|c| (cut_point(&cuts[c]), cuts[c].kind),
-        },
-        (lat.point(lat.box_lo), lat.point(lat.box_hi)),
-        "stuffing",
-    )
+        .collect()
 }
 
 /// Where the references of the filled stencils lie: their positions, their reference positions

@@ -1,4 +1,4 @@
-//! The volumetric model's certified reduced model (issue 28; docs/reduced.md): built on what a
+//! The volumetric model's certified reduced model (docs/reduced.md): built on what a
 //! run's linear tetrahedral model holds (`Volumetric::reduced`), it gives the face for any
 //! tissue parameters in microseconds, each answer with a bound in mm on its difference from the
 //! full model's.
