@@ -1,11 +1,11 @@
 //! validation.svg: per surgery and soft landmark, the published range of the soft/hard ratio as a
 //! grey bar and each case's predicted ratio as a point over it (a cross when outside the range).
-//! `facesim validate` draws it from the rows `facesim::commands::validate` returns.
+//! `facesim validate` draws it from the rows `facesim_validate::validate` returns.
 
 use crate::sweep::{DrawResult, FONT, PALETTE};
-use facesim::commands::validate::Validation;
 use facesim::error::{Error, Result};
 use facesim::output::write_atomic;
+use facesim_validate::validate::Validation;
 use plotters::prelude::*;
 use std::path::Path;
 

@@ -264,10 +264,10 @@ impl ShapeArgs {
         self.seed.is_some() || self.given().iter().any(Option::is_some)
     }
 
-    fn shape(&self) -> facesim::phantom_jaws::Shape {
+    fn shape(&self) -> facesim_validate::phantom_jaws::Shape {
         match self.seed {
-            Some(s) => facesim::phantom_cohort::draw(s, self.given()),
-            None => facesim::phantom_cohort::given_or_default(self.given()),
+            Some(s) => facesim_validate::phantom_cohort::draw(s, self.given()),
+            None => facesim_validate::phantom_cohort::given_or_default(self.given()),
         }
     }
 }
@@ -377,9 +377,9 @@ impl TableArgs {
         command: &str,
         out: PathBuf,
         phantoms: usize,
-    ) -> Result<facesim::commands::validate::Options> {
+    ) -> Result<facesim_validate::validate::Options> {
         let overrides = facesim::case::overrides_table(&self.set)?;
-        Ok(facesim::commands::validate::Options {
+        Ok(facesim_validate::validate::Options {
             out,
             samples: self.samples,
             phantoms,
@@ -424,12 +424,12 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             nose,
             shape,
         } => {
-            let jaws = facesim::phantom_jaws::JawsOptions {
+            let jaws = facesim_validate::phantom_jaws::JawsOptions {
                 phantom: phantom_options(spacing, slice, noise, scan_step)?,
                 solve_model: model,
             };
             let seed = shape.seed.unwrap_or(1);
-            let written = facesim::phantom_cohort::write_cohort(
+            let written = facesim_validate::phantom_cohort::write_cohort(
                 &dir,
                 cases,
                 seed,
@@ -481,7 +481,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             table,
         } => {
             let opts = table.options("validate", out, phantoms)?;
-            let v = facesim::commands::validate::validate(&opts, &Progress::auto())?;
+            let v = facesim_validate::validate::validate(&opts, &Progress::auto())?;
             facesim_charts::validation::write(&v.out_dir.join("validation.svg"), &v)?;
             let outside = v.rows.iter().filter(|r| r.inside() == Some(false)).count();
             let inside = v.rows.iter().filter(|r| r.inside() == Some(true)).count();
@@ -506,7 +506,7 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             fit,
             grid,
         } => {
-            use facesim::commands::validate::calibrate::{self, CalibrateOptions, Half};
+            use facesim_validate::validate::calibrate::{self, CalibrateOptions, Half};
             let opts = CalibrateOptions {
                 validate: table.options("calibrate", out, phantoms)?,
                 fit: Half::from_key(&fit).unwrap_or(Half::Maxillary),
@@ -622,13 +622,13 @@ fn phantom_options(
     slice: f64,
     noise: f64,
     scan_step: f64,
-) -> Result<facesim::phantom::PhantomOptions> {
+) -> Result<facesim_validate::phantom::PhantomOptions> {
     if !(spacing > 0.0 && spacing <= 10.0 && slice > 0.0 && slice <= 10.0 && noise >= 0.0) {
         return Err(Error::config(
             "phantom: spacing and slice must be in (0, 10] mm, noise >= 0",
         ));
     }
-    Ok(facesim::phantom::PhantomOptions {
+    Ok(facesim_validate::phantom::PhantomOptions {
         spacing: [spacing, spacing, slice],
         noise_hu: noise,
         scan_step_mm: scan_step,
@@ -638,21 +638,21 @@ fn phantom_options(
 
 fn cmd_phantom(
     dir: &Path,
-    opts: facesim::phantom::PhantomOptions,
+    opts: facesim_validate::phantom::PhantomOptions,
     anatomy: &str,
     nose: &str,
     shape: &ShapeArgs,
 ) -> Result<()> {
     if anatomy == "jaws" {
-        let jaws = facesim::phantom_jaws::JawsOptions {
+        let jaws = facesim_validate::phantom_jaws::JawsOptions {
             phantom: opts,
             solve_model: None,
         };
-        let shape = facesim::phantom_jaws::Shape {
+        let shape = facesim_validate::phantom_jaws::Shape {
             nasal_passages: nose == "hollow",
             ..shape.shape()
         };
-        facesim::phantom_jaws::write_shaped_case(dir, &jaws, &shape)?;
+        facesim_validate::phantom_jaws::write_shaped_case(dir, &jaws, &shape)?;
     } else if nose != "solid" {
         return Err(Error::config(
             "phantom: --nose hollow needs --anatomy jaws (the capsule head has no nose passages to hollow)",
@@ -662,7 +662,7 @@ fn cmd_phantom(
             "phantom: the cohort parameters (--scale, --soft-mm, --mandible-mm, --chin-mm, --asymmetry-mm, --seed) need --anatomy jaws",
         ));
     } else {
-        facesim::phantom::write_case(dir, &opts)?;
+        facesim_validate::phantom::write_case(dir, &opts)?;
     }
     println!("phantom case written to {}", dir.display());
     Ok(())

@@ -8,7 +8,7 @@
 #[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
-use facesim::phantom_jaws::Shape;
+use facesim_validate::phantom_jaws::Shape;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;

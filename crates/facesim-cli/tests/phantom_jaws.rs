@@ -6,7 +6,7 @@ mod cli;
 mod common;
 
 use cli::facesim;
-use facesim::phantom_jaws as pj;
+use facesim_validate::phantom_jaws as pj;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 

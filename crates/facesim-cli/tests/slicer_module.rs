@@ -88,13 +88,13 @@ fn called_as_slicer_calls_it_the_module_predicts_the_face_of_the_same_plan() {
     let flag = |name: &str| param(&spec, name)["longflag"].as_str().unwrap().to_string();
     // Slicer's temporary files: the CT as NRRD, the segment as .vtk, the transform as .tfm.
     let dir = common::kept_dir("facesim-slicer-module");
-    let opts = facesim::phantom::PhantomOptions {
+    let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [3.0; 3],
         supersample: 1,
         ..Default::default()
     };
     let ct = dir.join("ct.nrrd");
-    facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
+    facesim::volume::nrrd::write(&facesim_validate::phantom::ct(&opts), &ct).unwrap();
     let (min, max) = ([-70.05, -75.05, -125.05], [70.05, -1.45, -26.45]);
     let seg = dir.join("mandible.vtk");
     mesh::vtk::write_legacy(&Mesh::cuboid(min, max), &[], &seg).unwrap();
@@ -198,13 +198,13 @@ fn called_as_slicer_calls_it_the_module_predicts_the_face_of_the_same_plan() {
 #[test]
 fn a_non_rigid_transform_is_one_line_naming_the_file_and_nothing_is_written() {
     let dir = common::kept_dir("facesim-slicer-bad");
-    let opts = facesim::phantom::PhantomOptions {
+    let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [6.0; 3],
         supersample: 1,
         ..Default::default()
     };
     let ct = dir.join("ct.nrrd");
-    facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
+    facesim::volume::nrrd::write(&facesim_validate::phantom::ct(&opts), &ct).unwrap();
     let seg = dir.join("seg.vtk");
     mesh::vtk::write_legacy(&Mesh::cuboid([-10.0; 3], [10.0; 3]), &[], &seg).unwrap();
     let tfm = dir.join("sheared.tfm");
@@ -244,13 +244,13 @@ fn a_surgery_in_clinical_terms_is_checked_like_case_toml() {
     assert_eq!(p["typ"], "string");
     assert_eq!(p["multiple"].as_bool(), Some(true));
     let dir = common::kept_dir("facesim-slicer-surgery");
-    let opts = facesim::phantom::PhantomOptions {
+    let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [6.0; 3],
         supersample: 1,
         ..Default::default()
     };
     let ct = dir.join("ct.nrrd");
-    facesim::volume::nrrd::write(&facesim::phantom::ct(&opts), &ct).unwrap();
+    facesim::volume::nrrd::write(&facesim_validate::phantom::ct(&opts), &ct).unwrap();
     let face_out = dir.join("predicted.vtp");
     for (entry, problem) in [
         ("bsso advance_mm", "is not key=value"),

@@ -74,7 +74,7 @@ impl<'a> Workspace<'a> {
         let work = std::path::absolute(&work).map_err(|e| Error::output(&work, e))?;
         let ct = work.join("ct.nii.gz");
         facesim::volume::nifti_io::write(
-            &facesim::phantom::ct(&facesim::phantom::PhantomOptions::default()),
+            &facesim_validate::phantom::ct(&facesim_validate::phantom::PhantomOptions::default()),
             &ct,
         )?;
         Ok(Workspace { work, ct, progress })
@@ -90,7 +90,7 @@ impl<'a> Workspace<'a> {
         let scan = self.work.join(format!("face_{scan_step}.ply"));
         if !scan.is_file() {
             facesim::mesh::ply::write(
-                &facesim::phantom::face_scan(scan_step),
+                &facesim_validate::phantom::face_scan(scan_step),
                 &scan,
                 facesim::mesh::ply::Encoding::BinaryLittleEndian,
             )?;

@@ -121,7 +121,7 @@ fn ct_size(work_dir: &Path, s: f64, progress: &dyn Observer) -> Result<CtSize> {
     progress.started(&format!("scaling: phantom CT at {s} mm"));
     let dir = work_dir.join(format!("ct_{s}"));
     std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
-    let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions {
+    let vol = facesim_validate::phantom::ct(&facesim_validate::phantom::PhantomOptions {
         spacing: [s; 3],
         // Partial-volume supersampling is for accuracy tests; it would dominate here.
         supersample: 1,
@@ -136,13 +136,13 @@ fn ct_size(work_dir: &Path, s: f64, progress: &dyn Observer) -> Result<CtSize> {
     facesim::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
     drop(vol);
     facesim::mesh::ply::write(
-        &facesim::phantom::face_scan(1.5),
+        &facesim_validate::phantom::face_scan(1.5),
         &dir.join("face.ply"),
         facesim::mesh::ply::Encoding::BinaryLittleEndian,
     )?;
     // The C1 model's scaling (docs/lab/performance.md); the volumetric model's is measured apart.
-    let text =
-        facesim::phantom::case_toml("ct.nii.gz", true) + "\n[solve]\nmodel = \"equilibrium\"\n";
+    let text = facesim_validate::phantom::case_toml("ct.nii.gz", true)
+        + "\n[solve]\nmodel = \"equilibrium\"\n";
     write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;
     progress.started(&format!(
         "scaling: facesim run at {s} mm ({voxels:.0} voxels)"

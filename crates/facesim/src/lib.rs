@@ -65,9 +65,6 @@ pub mod model;
 pub mod observe;
 pub mod osteotomy;
 pub mod output;
-pub mod phantom;
-pub mod phantom_cohort;
-pub mod phantom_jaws;
 pub mod pipeline;
 pub mod plan;
 pub mod reduced;
@@ -79,6 +76,8 @@ pub mod solve;
 pub mod springs;
 mod stored;
 pub mod surface;
+#[cfg(test)]
+mod test_phantoms;
 pub mod tet;
 pub mod uncertainty;
 pub mod union_find;

@@ -65,7 +65,7 @@ const TMP_TAG: &str = ".facesim-tmp-";
 /// Create `dir` and any missing parents, but never a unit's own directory (its
 /// `.…facesim-run-…` directory or the `new/` in it): those are made once, by
 /// [`RunDir::create`], and one that vanished is an error naming it, not something to recreate.
-pub(crate) fn create_dir_guarded(dir: &Path) -> Result<()> {
+pub fn create_dir_guarded(dir: &Path) -> Result<()> {
     if dir.as_os_str().is_empty() || dir.is_dir() {
         return Ok(());
     }
@@ -187,7 +187,7 @@ impl RunDir {
     /// Start writing the unit that will become `dest`: remove dead units beside it, check
     /// `dest` is absent, empty or a previous facesim output, and prepare and publish the unit's
     /// directory (same parent, so the swap is a rename on one filesystem).
-    pub(crate) fn create(dest: &Path) -> Result<RunDir> {
+    pub fn create(dest: &Path) -> Result<RunDir> {
         let name = dest
             .file_name()
             .ok_or_else(|| Error::output(dest, "not a directory name"))?
@@ -263,7 +263,7 @@ impl RunDir {
 
     /// Swap the written directory in for `dest` and remove the previous output. A unit whose
     /// directory vanished is an error naming it, and `dest` stays as it was.
-    pub(crate) fn commit(mut self) -> Result<PathBuf> {
+    pub fn commit(mut self) -> Result<PathBuf> {
         pause("commit");
         if !self.new.is_dir() {
             return Err(Error::output(

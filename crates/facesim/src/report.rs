@@ -289,7 +289,7 @@ impl Report {
 
     /// [`Report::located_landmarks`] in the run's order (report.json's): the order of the
     /// landmarks the run carried and of the reduced model's landmark bounds.
-    pub(crate) fn located_in_run_order(&self) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
+    pub fn located_in_run_order(&self) -> Option<(Option<HeadFrame>, Vec<Landmark>)> {
         let (frame, mut lms) = self.located_landmarks()?;
         let order: Vec<&String> = self.landmarks.0.iter().map(|(l, _)| l).collect();
         lms.sort_by_key(|l| order.iter().position(|x| **x == l.label));

@@ -104,7 +104,7 @@ fn preloaded_phantom_face_returns_its_own_shape() {
     // the case's movable sphere: with no load change the solve must return a_init.
     let scan = facesim::mesh::read_mesh(&common::phantom_dir().join("face.ply")).unwrap();
     let mut mesh = scan.clone();
-    facesim::surface::cylindrical_uv(&mut mesh, [0.0, 0.0], facesim::phantom::R_SKIN);
+    facesim::surface::cylindrical_uv(&mut mesh, [0.0, 0.0], facesim_validate::phantom::R_SKIN);
     let col = |n: &str| {
         mesh.vertex_columns
             .iter()

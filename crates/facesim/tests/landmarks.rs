@@ -10,10 +10,10 @@ use facesim::case::Case;
 use facesim::landmarks::{self, Kind, Source, measure};
 use facesim::observe::Quiet;
 use facesim::osteotomy::Plan;
-use facesim::phantom::PhantomOptions;
-use facesim::phantom_jaws::{self as pj};
 use facesim::pipeline::{self, Scene};
 use facesim::vec3::{norm, sub};
+use facesim_validate::phantom::PhantomOptions;
+use facesim_validate::phantom_jaws::{self as pj};
 use std::path::Path;
 use std::sync::OnceLock;
 

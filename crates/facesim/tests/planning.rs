@@ -163,7 +163,7 @@ fn the_cuts_on_headsq_take_the_hand_placed_maxilla_mandible_and_chin() {
 
 #[test]
 fn the_cuts_on_the_jaws_phantom_take_its_maxilla_and_mandible_boxes() {
-    let [front, _back, maxilla] = facesim::phantom_jaws::Shape::default().boxes();
+    let [front, _back, maxilla] = facesim_validate::phantom_jaws::Shape::default().boxes();
     let hands = [
         Hand {
             segment: "maxilla",

@@ -12,10 +12,10 @@ use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::commands::{self, Outcome};
 use facesim::commands::{replan, sweep};
 use facesim::observe::Quiet;
-use facesim::phantom::PhantomOptions;
-use facesim::phantom_jaws::{self, JawsOptions};
 use facesim::plan::file;
 use facesim::report::Report;
+use facesim_validate::phantom::PhantomOptions;
+use facesim_validate::phantom_jaws::{self, JawsOptions};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 

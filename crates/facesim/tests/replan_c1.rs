@@ -10,9 +10,9 @@ use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::commands;
 use facesim::commands::replan;
 use facesim::observe::Quiet;
-use facesim::phantom::PhantomOptions;
 use facesim::pipeline::{self, Recorder, Scene, inputs::CaseFiles};
 use facesim::plan::{PlanBasis, file};
+use facesim_validate::phantom::PhantomOptions;
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
@@ -26,7 +26,7 @@ fn phantom_case(model: SolveModel) -> Case {
             scan_step_mm: 4.0,
             ..PhantomOptions::default()
         };
-        facesim::phantom::write_case(&d, &opts).unwrap();
+        facesim_validate::phantom::write_case(&d, &opts).unwrap();
         d
     });
     let (mut case, _) = Case::load(&dir.join("case.toml")).unwrap();

@@ -614,9 +614,9 @@ fn drive_views(html: &Path, plan: &serde_json::Value, shots: &Path) -> serde_jso
 
 #[test]
 fn the_page_shows_the_jaws_phantom_in_every_view_with_tracing_labels_export_and_print() {
-    use facesim::phantom::PhantomOptions;
-    use facesim::phantom_jaws::{JawsOptions, write_case};
     use facesim::vec3::{add, dot, norm, scale, sub};
+    use facesim_validate::phantom::PhantomOptions;
+    use facesim_validate::phantom_jaws::{JawsOptions, write_case};
     // The jaws phantom (a face with nose, lips and chin; the mandible advanced 5 mm), run by the
     // pipeline, which writes report.html with the head frame and a plan basis.
     let dir = common::kept_dir("facesim-page-views");

@@ -240,13 +240,13 @@ fn surface_and_plane_regions_select_what_a_box_and_a_half_space_select() {
 fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
     // A coarse phantom (3 mm voxels) keeps the two runs short; the comparison is exact anyway.
     let phantom = common::kept_dir("facesim-slicer-phantom");
-    let opts = facesim::phantom::PhantomOptions {
+    let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [3.0; 3],
         supersample: 1,
         scan_step_mm: 5.0,
         ..Default::default()
     };
-    facesim::phantom::write_case(&phantom, &opts).unwrap();
+    facesim_validate::phantom::write_case(&phantom, &opts).unwrap();
     let (min, max) = ([-70.05, -75.05, -125.05], [70.05, -1.45, -26.45]);
     let head = format!(
         "[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n[surface]\nmovable = {{ sphere = {{ center = [0.0, -60.0, -45.0], radius = 70.0 }} }}\n",

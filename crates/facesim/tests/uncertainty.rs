@@ -83,8 +83,8 @@ fn zero_spread_gives_a_zero_band_at_exactly_the_deterministic_prediction() {
 /// slides on the teeth).
 #[test]
 fn zero_spread_landmark_and_region_bands_are_the_runs_own_figures() {
-    use facesim::phantom::PhantomOptions;
-    use facesim::phantom_jaws::{self, JawsOptions};
+    use facesim_validate::phantom::PhantomOptions;
+    use facesim_validate::phantom_jaws::{self, JawsOptions};
     let dir = common::kept_dir("facesim-unc-jaws");
     let opts = JawsOptions {
         phantom: PhantomOptions {

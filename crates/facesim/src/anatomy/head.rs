@@ -720,7 +720,7 @@ mod tests {
     fn phantom(pitch_deg: f64) -> Head3 {
         static CT: OnceLock<(Volume, Vec<u8>)> = OnceLock::new();
         let (vol, labels) = CT.get_or_init(|| {
-            let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
+            let vol = crate::test_phantoms::jaws_ct();
             let seg = crate::segment::segment(
                 &vol,
                 &crate::case::Case::default().tissue,
@@ -729,7 +729,7 @@ mod tests {
             .unwrap();
             (vol, seg.labels)
         });
-        let mut skin = crate::phantom_jaws::face_scan(2.0);
+        let mut skin = crate::test_phantoms::jaws_face_scan(2.0);
         let (s, c) = pitch_deg.to_radians().sin_cos();
         for p in &mut skin.vertices {
             // Face-down: forward (−y) tips down (−z).
@@ -904,8 +904,8 @@ mod tests {
             assert!(l.position.is_none() && l.missing.as_ref().is_some_and(|m| !m.is_empty()));
         }
         // Its known upright frame: N'–Pog' of the analytic skin.
-        let n = crate::phantom_jaws::landmark("soft tissue nasion").unwrap();
-        let pog = crate::phantom_jaws::landmark("soft tissue pogonion").unwrap();
+        let n = facesim_validate::phantom_jaws::landmark("soft tissue nasion").unwrap();
+        let pog = facesim_validate::phantom_jaws::landmark("soft tissue pogonion").unwrap();
         let upright = (pog[1] - n[1]).atan2(n[2] - pog[2]).to_degrees();
         println!("  analytic facial plane {upright:.2}°");
         assert!((cf.pitch_deg - upright).abs() < 1.0);

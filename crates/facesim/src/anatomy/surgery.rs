@@ -390,7 +390,7 @@ mod tests {
     fn phantom() -> &'static Phantom {
         static P: OnceLock<Phantom> = OnceLock::new();
         P.get_or_init(|| {
-            let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
+            let vol = crate::test_phantoms::jaws_ct();
             let seg = crate::segment::segment(&vol, &Case::default().tissue, Path::new("phantom"))
                 .unwrap();
             Phantom {
@@ -412,7 +412,7 @@ mod tests {
     /// gap at 1.5–4.5), the pterygomaxillary junctions behind the maxilla (y −12), the first
     /// molars on the upper arch at z −23, the mental foramina on the lower arch's labial face.
     fn fixture() -> Vec<Landmark> {
-        let at = |n: &str| crate::phantom_jaws::landmark(n).unwrap();
+        let at = |n: &str| facesim_validate::phantom_jaws::landmark(n).unwrap();
         let up = |p: [f64; 3], d: f64| [p[0], p[1], p[2] + d];
         let u1 = at("upper incisor tip");
         let l1 = at("lower incisor tip");

@@ -10,9 +10,10 @@
 //!   sweep.svg, is drawn by the caller (crates/facesim-lab `sweep_chart`), so the product
 //!   library carries no chart crate;
 //! - [`landmarks`]: `facesim landmarks` (the soft landmarks and measurements of a face mesh
-//!   alone, a 3D photo with no CT);
-//! - [`validate`]: `facesim validate` (every surgery type on the real samples and a phantom
-//!   cohort against the published soft/hard ratios; its chart is the caller's too).
+//!   alone, a 3D photo with no CT).
+//!
+//! `facesim validate` and `facesim calibrate` are not product commands: they live in
+//! crates/facesim-validate, above this library.
 
 pub mod estimate;
 pub mod landmarks;
@@ -20,6 +21,5 @@ pub mod outputs;
 pub mod replan;
 pub mod run;
 pub mod sweep;
-pub mod validate;
 
 pub use run::{Outcome, run, run_case, run_parsed, run_with};

@@ -209,7 +209,7 @@ impl SurfaceAnchor {
 }
 
 /// The surface anchors of the soft landmarks of `lms` on `face_pre` (None: bony or missing).
-pub(crate) fn anchors(lms: &[Landmark], face_pre: &Mesh) -> Vec<Option<SurfaceAnchor>> {
+pub fn anchors(lms: &[Landmark], face_pre: &Mesh) -> Vec<Option<SurfaceAnchor>> {
     let index = SurfaceIndex::new(face_pre);
     lms.iter()
         .map(|l| match (l.kind, l.position) {
@@ -331,7 +331,7 @@ pub fn analyse(
 }
 
 /// [`analyse`] of landmarks already located (a run's, read back from its report.json).
-pub(crate) fn analyse_located(
+pub fn analyse_located(
     face_pre: &Mesh,
     face_post: &Mesh,
     frame: Option<HeadFrame>,

@@ -330,7 +330,7 @@ impl Mesh {
     }
 
     /// Drop vertices no triangle uses (keeping the order of the rest).
-    pub(crate) fn compact(&mut self) {
+    pub fn compact(&mut self) {
         let mut map = vec![u32::MAX; self.vertices.len()];
         for tri in &self.triangles {
             for &v in tri {

@@ -49,7 +49,7 @@ pub fn read(case_path: &Path, rec: &mut Recorder) -> Result<(Inputs, CaseFiles)>
 }
 
 /// `read` with `overrides` (`case::overrides_table`) laid over the case file.
-pub(crate) fn read_with(
+pub fn read_with(
     case_path: &Path,
     overrides: &toml::Table,
     rec: &mut Recorder,

@@ -73,7 +73,11 @@ pub fn phantom_dir() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
         let d = kept_dir("facesim-phantom");
-        facesim::phantom::write_case(&d, &facesim::phantom::PhantomOptions::default()).unwrap();
+        facesim_validate::phantom::write_case(
+            &d,
+            &facesim_validate::phantom::PhantomOptions::default(),
+        )
+        .unwrap();
         d
     })
 }

@@ -31,10 +31,10 @@ impl Case {
 fn phantom() -> &'static Case {
     static C: OnceLock<Case> = OnceLock::new();
     C.get_or_init(|| {
-        let vol = crate::phantom_jaws::ct(&crate::phantom::PhantomOptions::default());
+        let vol = crate::test_phantoms::jaws_ct();
         let case = crate::case::Case::default();
         let seg = crate::segment::segment(&vol, &case.tissue, Path::new("phantom")).unwrap();
-        let prn = crate::phantom_jaws::landmark("pronasale").unwrap();
+        let prn = facesim_validate::phantom_jaws::landmark("pronasale").unwrap();
         let frame = HeadFrame::from_plane([0.0, prn[1], prn[2]], [1.0, 0.0, 0.0], 0.0);
         Case {
             vol,
@@ -128,7 +128,7 @@ fn phantom_jaw_landmarks_lie_on_its_analytic_anatomy() {
     for x in &l {
         println!("phantom {} {:?} {:?}", x.label, x.position, x.missing);
     }
-    let truth = |n: &str| crate::phantom_jaws::landmark(n).unwrap();
+    let truth = |n: &str| facesim_validate::phantom_jaws::landmark(n).unwrap();
     let mirror = |p: [f64; 3]| [-p[0], p[1], p[2]];
     // Either central incisor: the phantom's are mirror images (its tip is the right one's).
     let either = |got: [f64; 3], p: [f64; 3]| dist(got, p).min(dist(got, mirror(p)));
@@ -221,7 +221,7 @@ fn phantom_jaw_landmarks_lie_on_its_analytic_anatomy() {
     let (gn, pog, me) = (position(&l, "Gn"), position(&l, "Pog"), position(&l, "Me"));
     assert!(gn[2] < pog[2] && gn[2] > me[2] - 1.0, "Gn {gn:?}");
     assert!(gn[1] > pog[1] - 1.0 && gn[1] < me[1] + 1.0, "Gn {gn:?}");
-    let bone = |p: [f64; 3]| crate::phantom_jaws::piece_at(p).is_some();
+    let bone = |p: [f64; 3]| facesim_validate::phantom_jaws::piece_at(p).is_some();
     let near = |p: [f64; 3], want: bool| {
         (-3..=3).any(|i| {
             (-3..=3).any(|k| bone([p[0], p[1] + i as f64 * 0.5, p[2] + k as f64 * 0.5]) == want)
@@ -250,8 +250,8 @@ fn phantom_jaw_landmarks_lie_on_its_analytic_anatomy() {
         assert!((p[2] + 23.0).abs() < 1.5, "{label} {p:?}");
         assert!((24.0..=36.0).contains(&(p[1] - u1[1])), "{label} {p:?}");
         let tooth = (0..=4).any(|k| {
-            crate::phantom_jaws::tissue_at([p[0], p[1], p[2] + 0.5 * k as f64])
-                == crate::phantom_jaws::Tissue::Tooth
+            facesim_validate::phantom_jaws::tissue_at([p[0], p[1], p[2] + 0.5 * k as f64])
+                == facesim_validate::phantom_jaws::Tissue::Tooth
         });
         assert!(tooth, "{label} {p:?} is not on an upper crown");
     }

@@ -1,13 +1,14 @@
 //! The phantom is the ground truth: segmentation volumes and extracted surfaces are checked
 //! against its analytic geometry (docs/design/phantom.md).
 
+#[path = "../../facesim/tests/common/mod.rs"]
 mod common;
 
 use common::phantom_dir;
 use facesim::case::{Case, ExtractMethod, TissueMethod};
-use facesim::phantom::{self, analytic_volumes};
 use facesim::segment::{self, BONE, FAT_BRIGHT, FAT_DARK, MUSCLE, SKIN};
 use facesim::volume::read_volume;
+use facesim_validate::phantom::{self, analytic_volumes};
 use std::path::Path;
 
 fn defaults() -> Case {

@@ -17,9 +17,9 @@
 //! (Le Fort I level) on the anterior half, and at y = 0 below z = 6, so that the mandible
 //! (z < −25, y < 0) and the maxilla (−25 < z < 5, y < 0) are separate bone pieces.
 
-use crate::error::Result;
-use crate::mesh::Mesh;
-use crate::volume::Volume;
+use facesim::error::Result;
+use facesim::mesh::Mesh;
+use facesim::volume::Volume;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -377,9 +377,9 @@ pub(crate) fn grid_mesh(verts: Vec<[f64; 3]>, nphi: usize, nz: usize) -> Mesh {
     let diag = m.diagonal();
     m.triangles.retain(|t| {
         let [a, b, c] = t.map(|i| m.vertices[i as usize]);
-        crate::vec3::norm(crate::vec3::cross(
-            crate::vec3::sub(b, a),
-            crate::vec3::sub(c, a),
+        facesim::vec3::norm(facesim::vec3::cross(
+            facesim::vec3::sub(b, a),
+            facesim::vec3::sub(c, a),
         )) > 1e-9 * diag * diag
     });
     m.compact();
@@ -415,26 +415,26 @@ translate = [0.0, -6.0, 0.0]
 
 /// Write a complete phantom case into `dir`.
 pub fn write_case(dir: &std::path::Path, opts: &PhantomOptions) -> Result<()> {
-    use crate::error::Error;
-    crate::output::create_dir_guarded(dir)?;
+    use facesim::error::Error;
+    facesim::output::create_dir_guarded(dir)?;
     let vol = ct(opts);
-    crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
-    crate::volume::dicom_io::write_series(&vol, &dir.join("ct_dicom"), "1")?;
+    facesim::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
+    facesim::volume::dicom_io::write_series(&vol, &dir.join("ct_dicom"), "1")?;
     let step = opts.scan_step_mm;
     if !(step >= 0.1) {
         return Err(Error::config(format!(
             "phantom face scan step {step} mm must be at least 0.1 mm"
         )));
     }
-    crate::mesh::ply::write(
+    facesim::mesh::ply::write(
         &face_scan(step),
         &dir.join("face.ply"),
-        crate::mesh::ply::Encoding::BinaryLittleEndian,
+        facesim::mesh::ply::Encoding::BinaryLittleEndian,
     )?;
     let text = case_toml("ct.nii.gz", true);
-    crate::output::write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;
+    facesim::output::write_bytes_atomic(&dir.join("case.toml"), |w| w.write_all(text.as_bytes()))?;
     let text = case_toml("ct_dicom", false);
-    crate::output::write_bytes_atomic(&dir.join("case_dicom_extracted.toml"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("case_dicom_extracted.toml"), |w| {
         w.write_all(text.as_bytes())
     })?;
     Ok(())

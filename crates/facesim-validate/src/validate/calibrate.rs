@@ -13,13 +13,13 @@
 //!    only if the held-out half improves.
 
 use super::{CaseInfo, Options, Row, RunLandmarks, Validation, rows_of_run, validate_with};
-use crate::case::uncertainty::{Distribution, Parameter};
-use crate::case::{Case, Tet, TissueElastic};
-use crate::error::{Error, Result};
-use crate::landmarks::published::{Published, Surgery};
-use crate::landmarks::{Carried, Kind, SurfaceAnchor};
-use crate::model::reduced::file::{self as stored, StoredReduced};
-use crate::observe::Observer;
+use facesim::case::uncertainty::{Distribution, Parameter};
+use facesim::case::{Case, Tet, TissueElastic};
+use facesim::error::{Error, Result};
+use facesim::landmarks::published::{Published, Surgery};
+use facesim::landmarks::{Carried, Kind, SurfaceAnchor};
+use facesim::model::reduced::file::{self as stored, StoredReduced};
+use facesim::observe::Observer;
 use rayon::prelude::*;
 use std::path::PathBuf;
 
@@ -241,7 +241,7 @@ struct TissueState {
     sliding: bool,
 }
 
-fn tissue_state(o: &super::super::Outcome) -> TissueState {
+fn tissue_state(o: &facesim::commands::Outcome) -> TissueState {
     let (torn, lifted_off) = o
         .report
         .tet
@@ -255,7 +255,7 @@ fn tissue_state(o: &super::super::Outcome) -> TissueState {
 }
 
 impl Calibrand {
-    fn of(info: &CaseInfo, surgery: Surgery, o: &super::super::Outcome) -> Result<Calibrand> {
+    fn of(info: &CaseInfo, surgery: Surgery, o: &facesim::commands::Outcome) -> Result<Calibrand> {
         let path = o.out_dir.join(stored::FILE_NAME);
         let models = stored::read(&path, &o.skin.vertices)?;
         let base =
@@ -267,15 +267,15 @@ impl Calibrand {
             .report
             .located_in_run_order()
             .ok_or_else(|| Error::config("calibrate: the run found no landmarks"))?;
-        let anchors = crate::landmarks::anchors(&lms, &o.skin);
-        let analysis = crate::landmarks::analyse_located(
+        let anchors = facesim::landmarks::anchors(&lms, &o.skin);
+        let analysis = facesim::landmarks::analyse_located(
             &o.skin,
             &o.face_post,
             frame,
             lms,
-            &crate::osteotomy::Plan::new(&[]),
+            &facesim::osteotomy::Plan::new(&[]),
         );
-        let labels = crate::uncertainty::reduced::landmark_output_labels(&analysis);
+        let labels = facesim::uncertainty::reduced::landmark_output_labels(&analysis);
         let outputs = labels
             .into_iter()
             .enumerate()
@@ -320,9 +320,9 @@ impl Calibrand {
                     d[k] += w * u[k];
                 }
             }
-            let post = crate::vec3::add(pre, d);
+            let post = facesim::vec3::add(pre, d);
             c.post = Some(post);
-            c.change_mm = Some(crate::vec3::norm(d));
+            c.change_mm = Some(facesim::vec3::norm(d));
             let b = self
                 .outputs
                 .iter()
@@ -367,7 +367,7 @@ fn rows_at(calibrands: &[Calibrand], p: &Point) -> Result<Vec<(Row, Option<f64>)
 
 /// The nominal case at point `p` of the box (as `[uncertainty]` applies a draw).
 fn apply(base: &Case, p: &Point) -> Case {
-    crate::uncertainty::run::Draw {
+    facesim::uncertainty::run::Draw {
         poisson: Some(p.poisson),
         muscle_fat: Some(p.muscle_fat),
         skin_fat: Some(p.skin_fat),
@@ -380,7 +380,7 @@ fn apply(base: &Case, p: &Point) -> Case {
 /// The box's grid: `k` points per continuous parameter (its ends included; log-uniform ranges
 /// spaced evenly in the log), both sliding states when the box draws sliding.
 fn grid(base: &Case, k: usize) -> Result<Vec<Point>> {
-    let params = base.uncertainty.parameters(crate::case::SolveModel::Tet);
+    let params = base.uncertainty.parameters(facesim::case::SolveModel::Tet);
     let mut values: [Vec<f64>; 3] = Default::default();
     let mut sliding = vec![base.tet.sliding];
     for (p, d) in &params {
@@ -474,7 +474,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
     if opts.grid < 2 {
         return Err(Error::config("calibrate: --grid must be at least 2"));
     }
-    let unit = crate::output::RunDir::create(&opts.validate.out)?;
+    let unit = facesim::output::RunDir::create(&opts.validate.out)?;
     let dir = unit.path().to_path_buf();
     let t0 = std::time::Instant::now();
     // Pass 1: the defaults, each run storing its reduced model over the box.
@@ -482,7 +482,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
     let reduced: toml::Table =
         toml::from_str("[uncertainty]\nsamples = 64\nmethod = \"reduced\"\n")
             .map_err(|e| Error::config(e.to_string()))?;
-    crate::case::merge(&mut first, reduced);
+    super::merge(&mut first, reduced);
     let mut calibrands: Vec<Calibrand> = Vec::new();
     let defaults = validate_with(
         &Options {
@@ -566,7 +566,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
         .ok_or_else(|| Error::config("calibrate: the grid has no points"))?;
     // Pass 3: every run in full at the optimum.
     let mut over = opts.validate.overrides.clone();
-    crate::case::merge(&mut over, overrides_at(&base, &best));
+    super::merge(&mut over, overrides_at(&base, &best));
     let t2 = std::time::Instant::now();
     let mut states = std::collections::HashMap::new();
     let optimum_validation = validate_with(
@@ -630,13 +630,13 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
         ],
     };
     obs.started("writing calibration.md and calibration.csv");
-    crate::output::write_bytes_atomic(&dir.join("calibration.csv"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("calibration.csv"), |w| {
         w.write_all(rows_csv(&c).as_bytes())
     })?;
-    crate::output::write_bytes_atomic(&dir.join("calibration_grid.csv"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("calibration_grid.csv"), |w| {
         w.write_all(grid_csv(&c).as_bytes())
     })?;
-    crate::output::write_bytes_atomic(&dir.join("calibration.md"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("calibration.md"), |w| {
         w.write_all(markdown(&c, opts).as_bytes())
     })?;
     let out_dir = unit.commit()?;
@@ -902,7 +902,7 @@ mod tests {
 
     #[test]
     fn the_distance_outside_is_zero_inside_and_grows_outside() {
-        let p = crate::landmarks::published::rows_of(Surgery::LeFortAdvance)
+        let p = facesim::landmarks::published::rows_of(Surgery::LeFortAdvance)
             .next()
             .unwrap();
         assert_eq!(outside_by(p, (p.low + p.high) / 2.0), 0.0);

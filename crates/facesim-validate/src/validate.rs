@@ -5,15 +5,15 @@
 //! each run's report.json, landmarks and faces under `runs/`; the chart (validation.svg) is the
 //! caller's (crates/facesim-lab `validation_chart`).
 
-use crate::anatomy::Anatomy;
-use crate::error::{Error, Result};
-use crate::landmarks::Carried;
-use crate::landmarks::measure::along;
-use crate::landmarks::published::{PUBLISHED, Published, Surgery};
-use crate::observe::Observer;
 use crate::phantom_jaws::{JawsOptions, Shape};
-use crate::pipeline::{Recorder, inputs, surfaces, tissues};
-use crate::vec3::scale;
+use facesim::anatomy::Anatomy;
+use facesim::error::{Error, Result};
+use facesim::landmarks::Carried;
+use facesim::landmarks::measure::along;
+use facesim::landmarks::published::{PUBLISHED, Published, Surgery};
+use facesim::observe::Observer;
+use facesim::pipeline::{Recorder, inputs, surfaces, tissues};
+use facesim::vec3::scale;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -235,7 +235,7 @@ impl Observer for Prefixed<'_> {
     fn warn(&self, msg: &str) {
         self.inner.warn(&format!("{} {msg}", self.prefix));
     }
-    fn heap(&self) -> Option<&dyn crate::meter::HeapProbe> {
+    fn heap(&self) -> Option<&dyn facesim::meter::HeapProbe> {
         self.inner.heap()
     }
 }
@@ -244,7 +244,7 @@ pub mod calibrate;
 
 /// Called with each run's outcome before its files are pruned ([`calibrate`] reads the reduced
 /// model the run stored); its error is the run's.
-type OnRun<'a> = dyn FnMut(&CaseInfo, Surgery, &super::Outcome) -> Result<()> + 'a;
+type OnRun<'a> = dyn FnMut(&CaseInfo, Surgery, &facesim::commands::Outcome) -> Result<()> + 'a;
 
 /// `facesim validate`.
 pub fn validate(opts: &Options, obs: &dyn Observer) -> Result<Validation> {
@@ -265,7 +265,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
         opts.surgeries.clone()
     };
     let wanted = |name: &str| opts.cases.is_empty() || opts.cases.iter().any(|c| c == name);
-    let unit = crate::output::RunDir::create(&opts.out)?;
+    let unit = facesim::output::RunDir::create(&opts.out)?;
     let dir = unit.path().to_path_buf();
     let mut skipped = Vec::new();
     let mut todo: Vec<Todo> = Vec::new();
@@ -401,10 +401,10 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
         out_dir: opts.out.clone(),
     };
     obs.started("writing validation.csv and validation.md");
-    crate::output::write_bytes_atomic(&dir.join("validation.csv"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("validation.csv"), |w| {
         w.write_all(csv(&v).as_bytes())
     })?;
-    crate::output::write_bytes_atomic(&dir.join("validation.md"), |w| {
+    facesim::output::write_bytes_atomic(&dir.join("validation.md"), |w| {
         w.write_all(markdown(&v, opts).as_bytes())
     })?;
     let out_dir = unit.commit()?;
@@ -435,7 +435,7 @@ fn samples(dir: &Path) -> Result<Vec<(String, PathBuf)>> {
 
 /// Whether the CT a sample's case.toml names is there.
 fn fetched(case_dir: &Path) -> std::result::Result<(), String> {
-    let (case, _) = crate::case::Case::load(case_dir).map_err(|e| e.to_string())?;
+    let (case, _) = facesim::case::Case::load(case_dir).map_err(|e| e.to_string())?;
     if case.ct.path.exists() {
         Ok(())
     } else {
@@ -506,20 +506,20 @@ fn anatomy_of(case_dir: &Path, obs: &dyn Observer) -> Result<Anatomy> {
     let seg = tissues(&ct, &case, &mut rec)?;
     let field = seg.bone_field(&ct);
     let surf = surfaces::extract(&ct, &seg, &field, &case, &mut rec)?;
-    let face = crate::pipeline::face::place(surf, scan, &ct, &case, &mut rec)?;
+    let face = facesim::pipeline::face::place(surf, scan, &ct, &case, &mut rec)?;
     let (frame, soft) =
-        crate::landmarks::locate(&face.skin, Some(&face.skull), &[], &files.case_file)?;
+        facesim::landmarks::locate(&face.skin, Some(&face.skull), &[], &files.case_file)?;
     let frame = frame.ok_or_else(|| {
         Error::input(
             &files.case_file,
             "validate: no head frame (the skin is empty)",
         )
     })?;
-    let bone = crate::anatomy::Bone {
+    let bone = facesim::anatomy::Bone {
         vol: &ct,
         labels: &seg.labels,
     };
-    crate::anatomy::find(&bone, &frame, &soft, &case.head.clone().unwrap_or_default())
+    facesim::anatomy::find(&bone, &frame, &soft, &case.head.clone().unwrap_or_default())
         .map_err(|e| Error::input(&files.case_file, format!("[head]: {e}")))
 }
 
@@ -529,8 +529,8 @@ type Possible = BTreeMap<String, std::result::Result<(), String>>;
 /// The segments `[[surgery]]` would cut on this anatomy: (name, cut, how) for the case's
 /// description, and per segment whether the CT can have it.
 fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, Possible) {
-    use crate::anatomy::cuts::{Found, cut};
-    use crate::case::SurgeryKind;
+    use facesim::anatomy::cuts::{Found, cut};
+    use facesim::case::SurgeryKind;
     let f = Found {
         landmarks: &a.landmarks,
     };
@@ -541,7 +541,7 @@ fn segments_of(a: &Anatomy) -> (Vec<(String, String, String)>, Possible) {
         (SurgeryKind::Bsso, "bsso"),
         (SurgeryKind::Genioplasty, "genioplasty"),
     ] {
-        let name = crate::anatomy::surgery::default_name(kind).to_string();
+        let name = facesim::anatomy::surgery::default_name(kind).to_string();
         let r = cut(kind, &f, &a.frame.frame).map(|_| ());
         described.push((
             name.clone(),
@@ -565,10 +565,10 @@ fn region_text(v: &toml::Value) -> String {
 
 /// The mandible's autorotation as the CT allows it: Ok, or why not.
 fn autorotation_of(a: &Anatomy) -> std::result::Result<(), String> {
-    let f = crate::anatomy::cuts::Found {
+    let f = facesim::anatomy::cuts::Found {
         landmarks: &a.landmarks,
     };
-    crate::anatomy::cuts::mandible(&f, &a.frame.frame).map(|_| ())
+    facesim::anatomy::cuts::mandible(&f, &a.frame.frame).map(|_| ())
 }
 
 fn sample_case(name: &str, dir: &Path, anatomy: &Anatomy) -> Result<Prepared> {
@@ -739,8 +739,8 @@ fn run_one(
     let mut tet = toml::Table::new();
     tet.insert("error_estimate".into(), toml::Value::Boolean(false));
     over.insert("tet".into(), toml::Value::Table(tet));
-    crate::case::merge(&mut over, overrides.clone());
-    let outcome = super::run_with(&case.dir, Some(run_dir), &over, obs)?;
+    merge(&mut over, overrides.clone());
+    let outcome = facesim::commands::run_with(&case.dir, Some(run_dir), &over, obs)?;
     on_run(&case.info, s, &outcome)?;
     if !keep_runs {
         prune(&outcome.out_dir);
@@ -800,7 +800,7 @@ fn prune(dir: &Path) {
 
 /// The published rows of a surgery measured on a run (or each saying why not).
 fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Row> {
-    crate::landmarks::published::rows_of(s)
+    facesim::landmarks::published::rows_of(s)
         .map(|p| {
             let (_, toward, mm) = moves(s)
                 .iter()
@@ -866,9 +866,9 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
             }
             // A width (lateral row) across the face, over the move; else along the move.
             let soft_dir = match p.axis {
-                crate::landmarks::published::Axis::Lateral => {
-                    let l = crate::vec3::cross(info.up, info.forward);
-                    scale(l, 1.0 / crate::vec3::norm(l))
+                facesim::landmarks::published::Axis::Lateral => {
+                    let l = facesim::vec3::cross(info.up, info.forward);
+                    scale(l, 1.0 / facesim::vec3::norm(l))
                 }
                 _ => unit_of(info, toward),
             };
@@ -1116,6 +1116,20 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
         ));
     }
     s
+}
+
+/// Lay `over` on top of `base`, recursively (tables merge, everything else replaces): how a
+/// case file takes `--set` overrides (the product library's own `case::merge`, which it keeps
+/// to itself).
+fn merge(base: &mut toml::Table, over: toml::Table) {
+    for (k, v) in over {
+        match (base.get_mut(&k), v) {
+            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
+            (_, v) => {
+                base.insert(k, v);
+            }
+        }
+    }
 }
 
 #[cfg(test)]

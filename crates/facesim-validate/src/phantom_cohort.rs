@@ -2,8 +2,8 @@
 //! thickness, prognathism, chin, midline shift) are drawn from documented ranges by a seed
 //! (docs/design/phantom.md, "Cohort parameters"; docs/guide/cohort.md).
 
-use crate::error::{Error, Result};
 use crate::phantom_jaws::{JawsOptions, SHAPE_RANGES, Shape, write_shaped_case};
+use facesim::error::{Error, Result};
 use std::path::Path;
 
 /// The ranges a seed draws each parameter from, uniformly (SHAPE_RANGES order): adult
@@ -98,7 +98,7 @@ pub fn write_cohort(
     for c in &cases {
         c.shape.validate()?;
     }
-    crate::output::create_dir_guarded(dir)?;
+    facesim::output::create_dir_guarded(dir)?;
     for c in &cases {
         write_shaped_case(&dir.join(&c.name), opts, &c.shape)?;
     }
@@ -115,7 +115,9 @@ pub fn write_cohort(
         }
         csv.push('\n');
     }
-    crate::output::write_bytes_atomic(&dir.join("phantoms.csv"), |w| w.write_all(csv.as_bytes()))?;
+    facesim::output::write_bytes_atomic(&dir.join("phantoms.csv"), |w| {
+        w.write_all(csv.as_bytes())
+    })?;
     Ok(cases)
 }
 

@@ -40,10 +40,10 @@
 //! z ∈ [−100, 80]: the capsule's cap is left out, and the head leaves the volume through the
 //! neck and the top of the cranium, as a clinical CT does.
 
-use crate::error::{Error, Result};
-use crate::mesh::Mesh;
 use crate::phantom::{PhantomOptions, grid_mesh, sample_ct};
-use crate::volume::Volume;
+use facesim::error::{Error, Result};
+use facesim::mesh::Mesh;
+use facesim::volume::Volume;
 use std::f64::consts::PI;
 use std::sync::OnceLock;
 
@@ -1092,19 +1092,19 @@ pub fn write_shaped_case(dir: &std::path::Path, opts: &JawsOptions, shape: &Shap
             "phantom face scan step {step} mm must be at least 0.1 mm"
         )));
     }
-    crate::output::create_dir_guarded(dir)?;
+    facesim::output::create_dir_guarded(dir)?;
     let vol = shape.ct(&opts.phantom);
-    crate::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
-    crate::mesh::ply::write(
+    facesim::volume::nifti_io::write(&vol, &dir.join("ct.nii.gz"))?;
+    facesim::mesh::ply::write(
         &shape.face_scan(step),
         &dir.join("face.ply"),
-        crate::mesh::ply::Encoding::BinaryLittleEndian,
+        facesim::mesh::ply::Encoding::BinaryLittleEndian,
     )?;
     for (name, text) in shape.case_files(opts.solve_model.as_deref()) {
-        crate::output::write_bytes_atomic(&dir.join(name), |w| w.write_all(text.as_bytes()))?;
+        facesim::output::write_bytes_atomic(&dir.join(name), |w| w.write_all(text.as_bytes()))?;
     }
     let text = shape.phantom_toml();
-    crate::output::write_bytes_atomic(&dir.join("phantom.toml"), |w| w.write_all(text.as_bytes()))
+    facesim::output::write_bytes_atomic(&dir.join("phantom.toml"), |w| w.write_all(text.as_bytes()))
 }
 
 impl Shape {

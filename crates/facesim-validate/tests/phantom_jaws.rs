@@ -5,10 +5,10 @@
 
 use facesim::case::Case;
 use facesim::osteotomy::Plan;
-use facesim::phantom::PhantomOptions;
-use facesim::phantom_jaws::{self as pj, Piece, Tissue};
 use facesim::segment::{self, AIR, BONE, FAT_BRIGHT, FAT_DARK, MUSCLE, SKIN, Segmentation};
 use facesim::volume::Volume;
+use facesim_validate::phantom::PhantomOptions;
+use facesim_validate::phantom_jaws::{self as pj, Piece, Tissue};
 use rayon::prelude::*;
 use std::path::Path;
 use std::sync::OnceLock;
@@ -689,7 +689,11 @@ fn the_first_sample_is_the_jaws_phantom() {
 #[test]
 fn the_capsule_phantom_is_unchanged() {
     // The previous bundled sample (data-samples/phantom) regenerated.
-    regenerates("phantom", facesim::phantom::ct, facesim::phantom::face_scan);
+    regenerates(
+        "phantom",
+        facesim_validate::phantom::ct,
+        facesim_validate::phantom::face_scan,
+    );
 }
 
 #[test]

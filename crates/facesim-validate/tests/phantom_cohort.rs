@@ -4,9 +4,9 @@
 //! analytic surfaces are, the face scan follows the skin, and the plans' boxes still select
 //! exactly their segment at the extremes of the accepted ranges.
 
-use facesim::phantom::PhantomOptions;
-use facesim::phantom_jaws::{self as pj, Piece, Shape};
 use facesim::volume::Volume;
+use facesim_validate::phantom::PhantomOptions;
+use facesim_validate::phantom_jaws::{self as pj, Piece, Shape};
 use rayon::prelude::*;
 
 fn shape(v: [f64; 5]) -> Shape {
