@@ -27,12 +27,22 @@ fn help_gives_one_short_line_per_command_and_details_under_each_command() {
     let listed = commands(&r.stdout);
     let names: Vec<&str> = listed.iter().map(|(n, _)| n.as_str()).collect();
     for expected in [
-        "run", "estimate", "replan", "sweep", "landmarks", "validate", "phantom", "inspect",
+        "run",
+        "estimate",
+        "replan",
+        "sweep",
+        "landmarks",
+        "validate",
+        "phantom",
+        "inspect",
     ] {
         assert!(names.contains(&expected), "{expected} missing: {names:?}");
     }
     for lab in ["bench", "study"] {
-        assert!(!names.contains(&lab), "the lab's {lab} is listed: {names:?}");
+        assert!(
+            !names.contains(&lab),
+            "the lab's {lab} is listed: {names:?}"
+        );
     }
     for line in r.stdout.lines() {
         assert!(
