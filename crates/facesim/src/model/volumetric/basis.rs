@@ -10,14 +10,14 @@ use crate::tet::{Constrained, Hold};
 
 /// What the plan basis is built from.
 pub(super) struct BasisInputs<'a> {
-    pub factor: &'a Constrained,
-    pub linear_hold: &'a [LinearHold],
-    pub overlapping_segments: &'a [usize],
+    pub(super) factor: &'a Constrained,
+    pub(super) linear_hold: &'a [LinearHold],
+    pub(super) overlapping_segments: &'a [usize],
     /// The run solved the nonlinear material: the basis is its linearisation at rest.
-    pub nonlinear: bool,
-    pub skin: &'a Mesh,
+    pub(super) nonlinear: bool,
+    pub(super) skin: &'a Mesh,
     /// The run's own face displacement, to check the basis against.
-    pub run_face_displacement: &'a [[f64; 3]],
+    pub(super) run_face_displacement: &'a [[f64; 3]],
 }
 
 /// 12 solves per segment on the run's factor (only the held values change: segment s's bone

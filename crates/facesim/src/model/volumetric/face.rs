@@ -9,17 +9,17 @@ use crate::tet::quadratic::Tet10Mesh;
 
 /// How the run's face is carried: its embedding, the rigid skin and the region.
 pub(super) struct Carrier<'a> {
-    pub embedding: &'a SkinEmbedding,
-    pub quadratic: Option<&'a Tet10Mesh>,
-    pub tets: &'a [[u32; 4]],
-    pub skin: &'a Mesh,
-    pub face_rigid: &'a [bool],
-    pub roi: Box3,
+    pub(super) embedding: &'a SkinEmbedding,
+    pub(super) quadratic: Option<&'a Tet10Mesh>,
+    pub(super) tets: &'a [[u32; 4]],
+    pub(super) skin: &'a Mesh,
+    pub(super) face_rigid: &'a [bool],
+    pub(super) roi: Box3,
 }
 
 impl Carrier<'_> {
     /// Node displacements `u` to face displacements ([`carry_face`]).
-    pub fn carry(&self, u: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    pub(super) fn carry(&self, u: &[[f64; 3]]) -> Vec<[f64; 3]> {
         carry_face(
             self.embedding,
             self.quadratic,

@@ -33,24 +33,24 @@ pub(super) enum Cells<'a> {
 /// What a hold reads: the solved nodes and cells, their roles, the moved bone, and the skin
 /// `[surface] movable` holds.
 pub(super) struct Site<'a> {
-    pub nodes: &'a [[f64; 3]],
-    pub cells: Cells<'a>,
-    pub roles: Roles<'a>,
-    pub bone: &'a Bone<'a>,
+    pub(super) nodes: &'a [[f64; 3]],
+    pub(super) cells: Cells<'a>,
+    pub(super) roles: Roles<'a>,
+    pub(super) bone: &'a Bone<'a>,
     /// Per solved node: skin on the face outside `[surface] movable` (held still).
-    pub rigid: Vec<bool>,
+    pub(super) rigid: Vec<bool>,
 }
 
 /// How many nodes the holds took, for the report.
 #[derive(Default)]
 pub(super) struct Held {
     /// Bone nodes at the saw lines that slide instead (`[tet] release_cuts`).
-    pub released_at_cuts: usize,
+    pub(super) released_at_cuts: usize,
     /// Pieces of the mesh held by too few nodes, held rigidly, and their nodes.
-    pub pieces: usize,
-    pub piece_nodes: usize,
+    pub(super) pieces: usize,
+    pub(super) piece_nodes: usize,
     /// Free nodes where the scan ends that slide on its end plane (`[tet] scan_end`).
-    pub on_scan_end: usize,
+    pub(super) on_scan_end: usize,
 }
 
 /// One hold: built from the case, it sets the holds of the nodes it takes.

@@ -21,22 +21,22 @@ pub(super) type Box3 = ([f64; 3], [f64; 3]);
 /// The mesh stage's result.
 pub(super) struct Meshed {
     /// The face region ([`region`]) and pronasale when it was grown to hold it.
-    pub roi: Box3,
-    pub nose_tip: Option<[f64; 3]>,
-    pub mesh: SoftTissueMesh,
+    pub(super) roi: Box3,
+    pub(super) nose_tip: Option<[f64; 3]>,
+    pub(super) mesh: SoftTissueMesh,
     /// Per tetrahedron, its tissue's material (`[tet]`), before any tearing.
-    pub material: Vec<TissueElastic>,
+    pub(super) material: Vec<TissueElastic>,
     /// The 4-node mesh with those materials (what the rounds re-assemble).
-    pub linear: TetMesh,
+    pub(super) linear: TetMesh,
     /// The 10-node mesh solved instead (`[tet] element = "quadratic"`).
-    pub quadratic: Option<Tet10Mesh>,
+    pub(super) quadratic: Option<Tet10Mesh>,
     /// Per solved node (the corners, then the midpoints when quadratic): its kind.
-    pub kind: Vec<NodeKind>,
+    pub(super) kind: Vec<NodeKind>,
 }
 
 impl Meshed {
     /// The solved nodes: the corners, then the midpoints when quadratic.
-    pub fn nodes(&self) -> &[[f64; 3]] {
+    pub(super) fn nodes(&self) -> &[[f64; 3]] {
         self.quadratic
             .as_ref()
             .map_or(&self.mesh.nodes, |q| &q.nodes)
@@ -173,11 +173,11 @@ pub(super) fn ordering(order: &Option<MeshAnalyses>) -> Ordering<'_> {
 /// plan does not move is held; moved, sliding and soft nodes are counted as solved, so the
 /// factor is the run's or a little larger), analysed symbolically in the run's ordering.
 pub(crate) struct SystemSize {
-    pub nodes: usize,
-    pub elements: usize,
-    pub unknowns: usize,
-    pub factor_nonzeros: usize,
-    pub factor_flops: f64,
+    pub(crate) nodes: usize,
+    pub(crate) elements: usize,
+    pub(crate) unknowns: usize,
+    pub(crate) factor_nonzeros: usize,
+    pub(crate) factor_flops: f64,
 }
 
 /// [`SystemSize`] of `case` on `scene`; None when the plan moves no bone.

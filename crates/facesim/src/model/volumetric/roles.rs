@@ -29,37 +29,37 @@ pub(super) fn bone<'a>(scene: &'a Scene, case: &'a Case) -> Bone<'a> {
 /// and where the scan ends. What the holds read of the anatomy.
 #[derive(Clone, Copy)]
 pub(super) struct Roles<'a> {
-    pub kind: &'a [NodeKind],
-    pub mucosa: &'a [Option<Mucosa>],
-    pub on_face: &'a [bool],
+    pub(super) kind: &'a [NodeKind],
+    pub(super) mucosa: &'a [Option<Mucosa>],
+    pub(super) on_face: &'a [bool],
     /// The CT's outermost voxel centres (`Volume::bounds`): where the scan ends.
-    pub scan: ([f64; 3], [f64; 3]),
+    pub(super) scan: ([f64; 3], [f64; 3]),
 }
 
 /// The anatomy a run finds on its mesh.
 pub(super) struct Anatomy {
     /// Per corner node: the mucosa it faces, or (bone-kind) the contact or raised bone it slides
     /// on; one list.
-    pub mucosa: Vec<Option<Mucosa>>,
+    pub(super) mucosa: Vec<Option<Mucosa>>,
     /// Per corner node: the bone lip or cheek covers ([`covered_bone`]).
-    pub covered: Vec<Option<Covered>>,
+    pub(super) covered: Vec<Option<Covered>>,
     /// Per corner node: raised by a degloving approach (rests on its bone one-sidedly).
-    pub raised: Vec<bool>,
+    pub(super) raised: Vec<bool>,
     /// Per solved node: a skin node on the face (`tet::conditions::on_face`).
-    pub on_face: Vec<bool>,
+    pub(super) on_face: Vec<bool>,
     /// Report counts: mucosa nodes, contact (tooth) nodes.
-    pub mucosa_nodes: usize,
-    pub contact_nodes: usize,
-    pub deglove: Deglove,
+    pub(super) mucosa_nodes: usize,
+    pub(super) contact_nodes: usize,
+    pub(super) deglove: Deglove,
 }
 
 /// What the degloving approaches raised, and why `"auto"` stepped aside where it did.
 #[derive(Default)]
 pub(super) struct Deglove {
-    pub nodes: usize,
-    pub chin_nodes: usize,
-    pub not_applied: Option<String>,
-    pub chin_not_applied: Option<String>,
+    pub(super) nodes: usize,
+    pub(super) chin_nodes: usize,
+    pub(super) not_applied: Option<String>,
+    pub(super) chin_not_applied: Option<String>,
 }
 
 /// Find the anatomy on the run's mesh; the warnings of a degloving approach that stepped aside.

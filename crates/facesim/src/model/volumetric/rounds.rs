@@ -61,10 +61,10 @@ fn rows_times(k: &[(usize, usize, f64)], watched: &[bool], u: &[[f64; 3]]) -> Ve
 /// How the one-sided contact ended (report.json `tet.lifted_in_tension`, …).
 pub(super) struct OneSidedOutcome {
     /// Every raised node still on its bone pushed by it, every lifted one clear of it.
-    pub settled: bool,
-    pub lifted_in_tension: usize,
+    pub(super) settled: bool,
+    pub(super) lifted_in_tension: usize,
     /// The deepest a lifted node lies inside its bone's move (mm).
-    pub penetration_mm: f64,
+    pub(super) penetration_mm: f64,
 }
 
 /// `[tet] degloved_maxilla` and `degloved_chin`: the raised tissue's sliding nodes rest on the
@@ -73,9 +73,9 @@ pub(super) struct OneSidedOutcome {
 /// bone's normal move) rests on it again. Rounds until the set settles, none factoring anew.
 pub(super) struct OneSidedContact<'a> {
     /// Per corner node: raised by an approach (`roles::Anatomy::raised`).
-    pub raised: &'a [bool],
+    pub(super) raised: &'a [bool],
     /// The run's stiffness (lower triangle), whose rows give the hold forces.
-    pub k: &'a [(usize, usize, f64)],
+    pub(super) k: &'a [(usize, usize, f64)],
 }
 
 impl OneSidedContact<'_> {
@@ -238,9 +238,9 @@ pub(super) fn torn_trace(mut material: Vec<TissueElastic>, torn: &[bool]) -> Vec
 /// (centimetres typed as millimetres?): the inverted elements then refuse the plan.
 pub(super) struct Tearing<'a> {
     /// Per tetrahedron: carries a face vertex (the face itself, which never tears).
-    pub carries_face: &'a [bool],
+    pub(super) carries_face: &'a [bool],
     /// The tissues' materials before tearing.
-    pub material: &'a [TissueElastic],
+    pub(super) material: &'a [TissueElastic],
 }
 
 impl Round for Tearing<'_> {

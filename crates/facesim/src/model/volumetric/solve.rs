@@ -33,28 +33,28 @@ pub(super) fn stiffness(
 /// A solve in progress: the holds, the factor and the displacement the rounds change.
 pub(super) struct Solving<'a> {
     /// Solved nodes, and their kinds.
-    pub nodes: usize,
-    pub kind: &'a [NodeKind],
+    pub(super) nodes: usize,
+    pub(super) kind: &'a [NodeKind],
     quadratic: Option<&'a Tet10Mesh>,
     order: Option<MeshAnalyses>,
     f: Vec<f64>,
     /// The 4-node mesh and its materials (torn tetrahedra a trace).
-    pub linear: TetMesh,
-    pub constraint: Vec<u8>,
-    pub hold: Vec<Hold>,
-    pub linear_hold: Vec<LinearHold>,
+    pub(super) linear: TetMesh,
+    pub(super) constraint: Vec<u8>,
+    pub(super) hold: Vec<Hold>,
+    pub(super) linear_hold: Vec<LinearHold>,
     /// None only while a new factor is made (the old one goes first).
     c: Option<Constrained>,
-    pub u: Vec<[f64; 3]>,
+    pub(super) u: Vec<[f64; 3]>,
     /// The nodes lifted off the bone so far, and the tetrahedra torn.
-    pub lifted: Vec<usize>,
-    pub torn: Vec<bool>,
-    pub one_sided: OneSidedOutcome,
+    pub(super) lifted: Vec<usize>,
+    pub(super) torn: Vec<bool>,
+    pub(super) one_sided: OneSidedOutcome,
 }
 
 impl Solving<'_> {
     /// Solve again on the current factor and holds.
-    pub fn solve(&mut self) -> Result<()> {
+    pub(super) fn solve(&mut self) -> Result<()> {
         let c = self
             .c
             .as_ref()
@@ -63,7 +63,7 @@ impl Solving<'_> {
         Ok(())
     }
 
-    pub fn factor_mut(&mut self) -> &mut Constrained {
+    pub(super) fn factor_mut(&mut self) -> &mut Constrained {
         self.c
             .as_mut()
             .expect("a solve keeps its factor between rounds")
@@ -71,7 +71,7 @@ impl Solving<'_> {
 
     /// Factor the stiffness again (after a material changed); the old factor goes before the
     /// new one is made.
-    pub fn refactor(&mut self) -> Result<()> {
+    pub(super) fn refactor(&mut self) -> Result<()> {
         self.c = None;
         let k = stiffness(self.quadratic, &self.linear)?;
         self.c = Some(Constrained::ordered(
@@ -84,7 +84,7 @@ impl Solving<'_> {
     }
 
     /// Free `nodes` (the tissue lifts off there): held nowhere, in the run and the plan basis.
-    pub fn free(&mut self, nodes: &[usize]) {
+    pub(super) fn free(&mut self, nodes: &[usize]) {
         for &n in nodes {
             self.constraint[n] = FREE;
             self.hold[n] = Hold::Free;
@@ -94,7 +94,7 @@ impl Solving<'_> {
     }
 
     /// The solved elements the current displacement turns inside out.
-    pub fn inverted(&self) -> Vec<usize> {
+    pub(super) fn inverted(&self) -> Vec<usize> {
         match self.quadratic {
             Some(q) => q.inverted_after(&self.u),
             None => self.linear.inverted_after(&self.u),
@@ -102,7 +102,7 @@ impl Solving<'_> {
     }
 
     /// The nodes of solved element `e`.
-    pub fn cell(&self, e: usize) -> Vec<u32> {
+    pub(super) fn cell(&self, e: usize) -> Vec<u32> {
         match self.quadratic {
             Some(q) => q.tets[e].to_vec(),
             None => self.linear.tets[e].to_vec(),
@@ -112,36 +112,36 @@ impl Solving<'_> {
 
 /// What the solve stage hands on.
 pub(super) struct Solution {
-    pub displacement: Vec<[f64; 3]>,
+    pub(super) displacement: Vec<[f64; 3]>,
     /// Nonlinear material: the load steps.
-    pub newton: Option<Vec<NewtonStep>>,
+    pub(super) newton: Option<Vec<NewtonStep>>,
     /// The last factor, for the plan basis.
-    pub factor: Option<Constrained>,
+    pub(super) factor: Option<Constrained>,
     /// Nonlinear material: the linear answer Newton started from.
-    pub linear_start: Option<Vec<[f64; 3]>>,
-    pub order: Option<MeshAnalyses>,
-    pub linear: TetMesh,
-    pub constraint: Vec<u8>,
-    pub linear_hold: Vec<LinearHold>,
-    pub lifted: Vec<usize>,
-    pub torn: Vec<bool>,
-    pub one_sided: OneSidedOutcome,
+    pub(super) linear_start: Option<Vec<[f64; 3]>>,
+    pub(super) order: Option<MeshAnalyses>,
+    pub(super) linear: TetMesh,
+    pub(super) constraint: Vec<u8>,
+    pub(super) linear_hold: Vec<LinearHold>,
+    pub(super) lifted: Vec<usize>,
+    pub(super) torn: Vec<bool>,
+    pub(super) one_sided: OneSidedOutcome,
     /// Why Newton fell back to load steps (a warning).
-    pub fallback: Option<String>,
+    pub(super) fallback: Option<String>,
 }
 
 /// What the solve reads beside the holds.
 pub(super) struct Inputs<'a> {
-    pub quadratic: Option<&'a Tet10Mesh>,
-    pub kind: &'a [NodeKind],
+    pub(super) quadratic: Option<&'a Tet10Mesh>,
+    pub(super) kind: &'a [NodeKind],
     /// The tissues' materials before tearing.
-    pub material: &'a [TissueElastic],
-    pub raised: &'a [bool],
-    pub carries_face: &'a [bool],
+    pub(super) material: &'a [TissueElastic],
+    pub(super) raised: &'a [bool],
+    pub(super) carries_face: &'a [bool],
     /// The linear models (any quadratic element, or the linear material) solve K u = f once.
-    pub linear_solve: bool,
+    pub(super) linear_solve: bool,
     /// The tissue may tear (`[tet] tear_gap`, the 4-node element, an orthognathic move).
-    pub tears: bool,
+    pub(super) tears: bool,
 }
 
 /// Solve the model under `holds`: the first solve, the rounds, Newton for the neo-Hookean
