@@ -237,7 +237,7 @@ impl Prediction {
     /// The face solved again at twice the element size, for the discretisation-error estimate
     /// ([`discretisation`]); None for the C1 models (their surface is the skin's own mesh) and
     /// when nothing moves. Inverted elements in the coarse solve are accepted: it is a yardstick.
-    pub fn coarse_face(&self, scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
+    pub(crate) fn coarse_face(&self, scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
         let Solved::Tet(Some(_)) = &self.solved else {
             return None;
         };
@@ -256,7 +256,7 @@ impl Prediction {
     }
 
     /// The hyperelastic run's linear face under the same holds (None for linear models).
-    pub fn linear_face(&self) -> Option<&[[f64; 3]]> {
+    pub(crate) fn linear_face(&self) -> Option<&[[f64; 3]]> {
         match &self.solved {
             Solved::Tet(Some(v)) => v.linear_face.as_deref(),
             _ => None,

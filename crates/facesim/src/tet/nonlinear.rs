@@ -260,7 +260,7 @@ pub(crate) fn element_state_of(
 }
 
 /// As [`internal_state`], with the chosen energy.
-pub fn internal_state_of(
+pub(crate) fn internal_state_of(
     mesh: &TetMesh,
     u: &[[f64; 3]],
     with_tangent: bool,

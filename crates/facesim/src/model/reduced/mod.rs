@@ -66,7 +66,7 @@ impl ReducedTet {
     }
 
     /// θ of the tissues' materials (`Tet::tissues` order).
-    pub fn theta_of(&self, tissues: &[TissueElastic; 4]) -> Vec<f64> {
+    pub(crate) fn theta_of(&self, tissues: &[TissueElastic; 4]) -> Vec<f64> {
         theta_of(&self.terms, tissues)
     }
 
@@ -140,7 +140,7 @@ impl ReducedTet {
     }
 
     /// The face displacement for the tissues' materials (`Tet::tissues` order) and its bound.
-    pub fn face_of(&self, tissues: &[TissueElastic; 4]) -> Result<ReducedFace> {
+    pub(crate) fn face_of(&self, tissues: &[TissueElastic; 4]) -> Result<ReducedFace> {
         let o = self.solve_theta(&self.theta_of(tissues))?;
         let c: Vec<f64> = o.coefficients.iter().copied().collect();
         let b = self.bounds(&o);
@@ -188,7 +188,7 @@ impl FaceMap {
     }
 
     /// The transpose of `carry`: face vectors to node vectors on `nodes` nodes.
-    pub fn carry_transpose(&self, y: &[[f64; 3]], nodes: usize) -> Vec<[f64; 3]> {
+    pub(crate) fn carry_transpose(&self, y: &[[f64; 3]], nodes: usize) -> Vec<[f64; 3]> {
         let mut out = vec![[0.0; 3]; nodes];
         for (((c, w), still), y) in self.cell.iter().zip(&self.weights).zip(&self.still).zip(y) {
             if let (Some(t), false) = (c, still) {
