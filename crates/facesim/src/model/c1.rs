@@ -1,4 +1,4 @@
-//! Koch's C1 surface models (`[solve] model = "equilibrium"` or `"koch1996"`; docs/pipeline.md
+//! Koch's C1 surface models (`[solve] model = "equilibrium"` or `"koch1996"`; docs/design/pipeline.md
 //! §5): the skin on tissue springs, solved by `crate::solve`, and — when the model ran on a coarse
 //! copy of the skin — the full skin carried along by shell embedding (paper 002).
 
@@ -230,7 +230,7 @@ fn solve(
 
 impl C1Solved {
     /// The face (the run's face's vertex order) solved again with `case`'s spring constants on
-    /// the run's skin, springs and shell (docs/uncertainty.md).
+    /// the run's skin, springs and shell (docs/guide/uncertainty.md).
     pub(super) fn resolve(&self, scene: &Scene, case: &Case, skin: &Mesh) -> Result<Vec<[f64; 3]>> {
         let (face, model) = (&scene.face, &scene.model);
         let params = crate::pipeline::model::solve_params(case);

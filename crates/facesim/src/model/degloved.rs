@@ -1,5 +1,5 @@
 //! The tissue an operation's approach raises off the bone (`[tet] degloved_maxilla` and
-//! `[tet] degloved_chin`, docs/validation-notes.md "The degloved maxilla" and "The degloved chin").
+//! `[tet] degloved_chin`, docs/lab/validation-notes.md "The degloved maxilla" and "The degloved chin").
 //! Until it heals that tissue rests on the bone: pushed where the bone moves into it, left behind
 //! where the bone moves away. With the options, the bone nodes that lip or cheek cover over the
 //! raised region slide on their bone and lift off where the bone would pull them

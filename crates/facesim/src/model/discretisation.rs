@@ -3,7 +3,7 @@
 //! `deep_size_mm` doubled; 1/8 of the unknowns), and Richardson's extrapolation: for a method of
 //! order p in h, u_h − u ≈ (u_2h − u_h) / (2^p − 1). Linear tetrahedra converge at order 2 in the
 //! displacement where the solution is smooth (Ciarlet 1978, ch. 3); near the saw lines it is
-//! rougher, so the figure is an estimate, not a bound (docs/crosscheck.md measures it against
+//! rougher, so the figure is an estimate, not a bound (docs/design/crosscheck.md measures it against
 //! the 10-node and finer answers).
 
 use crate::landmarks::Ordered;
@@ -23,7 +23,7 @@ pub struct DiscretisationError {
     pub coarse_skin_size_mm: f64,
     /// Over the face vertices that move (> 0.1 mm in either solve).
     pub moving_face: RegionStats,
-    /// Per facial region (docs/landmarks.md), as report.json `regions`.
+    /// Per facial region (docs/guide/landmarks.md), as report.json `regions`.
     pub regions: Ordered<RegionStats>,
     /// The second solve's wall time (s).
     pub seconds: f64,
@@ -43,7 +43,7 @@ pub struct ModelDifference {
     pub method: String,
     /// Over the face vertices that move (> 0.1 mm in either solve).
     pub moving_face: RegionStats,
-    /// Per facial region (docs/landmarks.md), as report.json `regions`.
+    /// Per facial region (docs/guide/landmarks.md), as report.json `regions`.
     pub regions: Ordered<RegionStats>,
 }
 

@@ -1,4 +1,4 @@
-//! The soft-tissue models behind one type (docs/architecture.md "The model seam").
+//! The soft-tissue models behind one type (docs/design/architecture.md "The model seam").
 //!
 //! A case names its model in `[solve] model`: Koch's C1 surface model on tissue springs, solved
 //! to equilibrium (`equilibrium`) or by Koch's eq. 20–23 (`koch1996`) — [`c1`]; or the volumetric
@@ -46,14 +46,14 @@ pub struct ModelReport {
     pub tet: Option<TetReport>,
 }
 
-/// The greedy's stopping rule (docs/reduced.md "Measured"): a relative energy bound of 5e-3 over
+/// The greedy's stopping rule (docs/design/reduced.md "Measured"): a relative energy bound of 5e-3 over
 /// the training box, or 16 vectors (on the real CT the worst vertex's true error is
 /// then 4e-3 to 2e-2 mm). Batches of 8 were tried: offline 9.1 → 8.0 s on the real
 /// CT, the greedy's last relative bound 8.5e-3 → 9.6e-3; not kept.
 const REDUCED_TOLERANCE: f64 = 5e-3;
 const REDUCED_MAX_SIZE: usize = 16;
 /// Snapshots per greedy step: their conjugate-gradient solves share the preconditioner's
-/// solves, which cost about a quarter per column in a block of four (docs/reduced.md).
+/// solves, which cost about a quarter per column in a block of four (docs/design/reduced.md).
 const REDUCED_BATCH: usize = 4;
 
 /// The predicted face and the model that predicted it.
@@ -102,7 +102,7 @@ impl Prediction {
     /// The face with `case`'s tissue parameters (as [`Prediction::resolve`]; the plan and mesh
     /// settings must be this run's): from `reduced` when its θ is inside the trained box and the
     /// certified bound is within `tolerance_mm`, else by a full solve, with the reason
-    /// (docs/reduced.md "Solve at θ"). Never extrapolated.
+    /// (docs/design/reduced.md "Solve at θ"). Never extrapolated.
     pub fn solve_at(
         &self,
         scene: &Scene,
@@ -133,7 +133,7 @@ impl Prediction {
     }
 
     /// The certified reduced models of this prediction for `case`'s tissue-parameter ranges
-    /// (docs/reduced.md): one per sliding state `[uncertainty]` draws (both when it samples
+    /// (docs/design/reduced.md): one per sliding state `[uncertainty]` draws (both when it samples
     /// sliding and the mesh has nodes to slide), trained on `train` draws of its box, with a
     /// bound for each of `outputs` (weights on face vertices: the landmarks). None when
     /// the model has no reduced form (the C1 models, the neo-Hookean material, the 10-node
@@ -237,7 +237,11 @@ impl Prediction {
     /// The face solved again at twice the element size, for the discretisation-error estimate
     /// ([`discretisation`]); None for the C1 models (their surface is the skin's own mesh) and
     /// when nothing moves. Inverted elements in the coarse solve are accepted: it is a yardstick.
-    pub(crate) fn coarse_face(&self, scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
+    pub(crate) fn coarse_face(
+        &self,
+        scene: &Scene,
+        case: &Case,
+    ) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
         let Solved::Tet(Some(_)) = &self.solved else {
             return None;
         };
@@ -301,7 +305,7 @@ impl Prediction {
         }
     }
 
-    /// report.json's model sections (docs/case.md).
+    /// report.json's model sections (docs/reference/case.md).
     pub fn report(&self, scene: &Scene) -> ModelReport {
         match &self.solved {
             Solved::C1(c) => ModelReport {

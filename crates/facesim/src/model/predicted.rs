@@ -9,7 +9,7 @@ pub struct Predicted<S> {
     pub skin: Mesh,
     /// The predicted face, same vertices in the same order as `skin`, without colours.
     pub face_post: Mesh,
-    /// The plan basis (docs/plan-basis.md), when the model built one.
+    /// The plan basis (docs/design/plan-basis.md), when the model built one.
     pub basis: Option<PlanBasis>,
     /// What the model built and solved.
     pub solved: S,

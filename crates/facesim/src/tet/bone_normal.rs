@@ -8,7 +8,7 @@
 //! the bone that lip and cheek cover in the Le Fort I impaction of the real CTs the two differ by
 //! a median 17° (ProMED 0051) and 9° (headsq), by more than 40° at a tenth of the nodes, and a
 //! 4 mm impaction, tangential to the maxilla's front, pushed the lip and nose up through the
-//! tilted ones (docs/validation-notes.md "The bone's normal where tissue slides"). Over a
+//! tilted ones (docs/lab/validation-notes.md "The bone's normal where tissue slides"). Over a
 //! surface that is flat within the radius the mean of the facets' area vectors is exactly its
 //! normal (the facets' area vectors sum to the area vector of the patch they tile).
 

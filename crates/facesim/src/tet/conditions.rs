@@ -1,4 +1,4 @@
-//! The volumetric model's boundary conditions (docs/pipeline.md "Volumetric soft tissue"):
+//! The volumetric model's boundary conditions (docs/design/pipeline.md "Volumetric soft tissue"):
 //! which node moves with which bone, which is held, which mucosa node slides on the bone it faces
 //! (`[tet] sliding`), the pieces of the mesh too loosely held to solve, and each element's
 //! material. Everything here is a function of the mesh, the bone and the plan; the model stage
@@ -22,7 +22,7 @@ use std::sync::OnceLock;
 /// nodes inside a segment move with it (any rotation, exactly: the displacement is p' − p of the
 /// plan's rigid move), other bone and the cut faces stay, skin outside `[surface] movable`
 /// (`rigid`) stays, mucosa moves with the bone it faces (`mucosa`), the rest is free. Also each
-/// hold as a linear function of the segments' matrices (docs/plan-basis.md) and, per moved bone
+/// hold as a linear function of the segments' matrices (docs/design/plan-basis.md) and, per moved bone
 /// node, the segments it lies in together with its own (their moves compose). [`slide_on_bone`]
 /// then lets mucosa and contact slide.
 pub(crate) fn bone_moves(
@@ -141,7 +141,7 @@ impl Holds {
 /// (the tissue's surface where the scan ends, `volume::past_scan_end`) slides on the plane the
 /// scan ends in: n · u = 0 with n that plane's outward normal, the motion along it free. Tissue
 /// that goes on past a plane and is moved mirror-symmetrically about it moves so; a free surface
-/// instead lets the cut lip or neck swing as if nothing lay beyond (docs/validation-notes.md
+/// instead lets the cut lip or neck swing as if nothing lay beyond (docs/lab/validation-notes.md
 /// "Where the scan ends: a truncation study"). A node past two planes (an edge of the field of
 /// view) slides on the one it lies furthest past. The plane is held by the rest of the head, the
 /// bone the plan leaves in place: a plan that moves every bone node of the mesh (the whole head

@@ -1,5 +1,5 @@
 //! The volumetric model's boundary conditions as linear functions of the segments' matrices
-//! M_s (docs/plan-basis.md): evaluated at the unit matrices they give the plan basis's right-hand
+//! M_s (docs/design/plan-basis.md): evaluated at the unit matrices they give the plan basis's right-hand
 //! sides; the held directions (and so the factor) do not depend on the plan.
 
 use super::Hold;

@@ -1,4 +1,4 @@
-//! tets.vtu (docs/case.md outputs): the volumetric model as a VTK XML UnstructuredGrid, ASCII, in LPS
+//! tets.vtu (docs/reference/case.md outputs): the volumetric model as a VTK XML UnstructuredGrid, ASCII, in LPS
 //! mm. Cells are linear tetrahedra (VTK type 10) or quadratic tetrahedra (VTK type 24, nodes: the
 //! four corners, then the mid-edge nodes of edges 0-1, 1-2, 2-0, 0-3, 1-3, 2-3). Point data
 //! `displacement` (mm) and `constraint` (0 free, 1 fixed, 2 moved with a bone segment, 3

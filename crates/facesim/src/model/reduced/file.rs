@@ -1,4 +1,4 @@
-//! `reduced_model.bin` (docs/reduced.md "The stored model"): the run's reduced models beside
+//! `reduced_model.bin` (docs/design/reduced.md "The stored model"): the run's reduced models beside
 //! plan_basis.bin, in the framing of `crate::stored`:
 //!
 //! ```text

@@ -1,4 +1,4 @@
-//! The volumetric model's certified reduced model (docs/reduced.md): built on what a
+//! The volumetric model's certified reduced model (docs/design/reduced.md): built on what a
 //! run's linear tetrahedral model holds (`Volumetric::reduced`), it gives the face for any
 //! tissue parameters in microseconds, each answer with a bound in mm on its difference from the
 //! full model's.
@@ -20,7 +20,7 @@ pub struct ReducedTet {
     /// Per term: the tissue slot (`Tet::slot`) and whether it is λ (else μ).
     pub terms: Vec<(usize, bool)>,
     /// The trained box of θ (lowest and highest per term, θ̄ included): a θ outside it is not
-    /// answered (no extrapolation; docs/reduced.md).
+    /// answered (no extrapolation; docs/design/reduced.md).
     pub theta_box: [Vec<f64>; 2],
     /// The face displacement of the held values with every free unknown zero (the lift) and
     /// of each basis vector (held values zero): the face is linear in the reduced coefficients.

@@ -1,4 +1,4 @@
-//! The plan basis (docs/plan-basis.md): the face's response to each segment's 12 affine
+//! The plan basis (docs/design/plan-basis.md): the face's response to each segment's 12 affine
 //! columns, solved on the run's factor, so that a re-plan is a sum instead of a solve.
 
 use crate::case::Case;

@@ -89,7 +89,7 @@ pub(super) fn build(
 /// faces are held. That second margin reaches past the CT wherever the first was clipped, so
 /// where the scan ends the tissue ends in a free surface, not a held one: the anatomy beyond the
 /// scan is not modelled, and holding the scan's end instead pinned the real CT's upper lip, cut
-/// by the scan 4.5 mm below labrale superius (docs/pipeline.md "Region").
+/// by the scan 4.5 mm below labrale superius (docs/design/pipeline.md "Region").
 fn region(scene: &Scene, skin: &Mesh, margin: f64) -> Option<(Box3, Option<[f64; 3]>)> {
     let skull = &scene.face.skull.vertices;
     let (_, moved) = scene.model.plan.apply(skull, 1.0);

@@ -1,4 +1,4 @@
-//! The volumetric model (`[solve] model = "tet"`; docs/pipeline.md "Volumetric soft tissue"):
+//! The volumetric model (`[solve] model = "tet"`; docs/design/pipeline.md "Volumetric soft tissue"):
 //! the soft tissue between skin and bone is meshed with tetrahedra inside the region the plan
 //! reaches, bone nodes follow their segment rigidly, the region's cut faces are held, the skin is
 //! free; the solved displacement carries the face (the extracted skin or the given scan, at full
@@ -59,7 +59,7 @@ pub struct Volumetric {
     /// Per solved node (mm).
     pub displacement: Vec<[f64; 3]>,
     pub report: TetReport,
-    /// The plan basis of this solve (docs/plan-basis.md).
+    /// The plan basis of this solve (docs/design/plan-basis.md).
     pub basis: Option<PlanBasis>,
     /// What a solve with other tissue parameters reuses ([`Volumetric::resolve`]).
     pub reuse: Reuse,
@@ -69,7 +69,7 @@ pub struct Volumetric {
 }
 
 /// The parts of a run that do not depend on the tissue parameters: the node roles, the mucosa
-/// and its bone, the face's embedding in the mesh (docs/uncertainty.md).
+/// and its bone, the face's embedding in the mesh (docs/guide/uncertainty.md).
 pub struct Reuse {
     kind: Vec<NodeKind>,
     mucosa: Vec<Option<Mucosa>>,
@@ -126,7 +126,7 @@ impl Volumetric {
             .map_or(&self.mesh.nodes, |q| &q.nodes)
     }
 
-    /// Write tets.vtu (docs/case.md): the solved mesh, displacement, constraint codes, cell
+    /// Write tets.vtu (docs/reference/case.md): the solved mesh, displacement, constraint codes, cell
     /// materials and tissue labels.
     pub(crate) fn write_vtu(&self, path: &std::path::Path) -> Result<()> {
         use crate::tet::vtu::{Cells, TetsVtu};
@@ -226,7 +226,7 @@ pub fn predict(
         holds::hold_tissue(&mesh, quadratic.as_ref(), roles, &bone, case, linear_solve);
     let overlapping_segments = holds.overlapping_segments();
     // Not a warning: the bundled jaws phantom and both real CTs end in tissue within 3 mm of
-    // moved bone (docs/pipeline.md "Region").
+    // moved bone (docs/design/pipeline.md "Region").
     let scan_end = report::scan_end(
         &mesh.nodes,
         &holds.constraint,

@@ -1,4 +1,4 @@
-//! The certified reduced model of a run's linear model (docs/reduced.md): the stiffness split
+//! The certified reduced model of a run's linear model (docs/design/reduced.md): the stiffness split
 //! by tissue and Lamé parameter on the run's mesh, holds and face embedding, a greedy basis over
 //! the training cases, and the gains that turn its energy-norm bound into bounds in mm on the
 //! face and each output.
@@ -16,7 +16,7 @@ use crate::reduced::{Affine, Basis, OutputBound, affine::solve_columns, norm::la
 
 impl Volumetric {
     /// The certified reduced model of this linear model for `case`'s sliding state
-    /// (docs/reduced.md): the stiffness split by tissue and Lamé parameter on the run's mesh,
+    /// (docs/design/reduced.md): the stiffness split by tissue and Lamé parameter on the run's mesh,
     /// node roles, mucosa and face embedding; a greedy over `train` (cases differing in tissue
     /// parameters only) from the reference `case`. The linear element and material only: the
     /// neo-Hookean tangent is not affine in the parameters, the 10-node element is not yet split.

@@ -132,7 +132,7 @@ pub struct ScanEnd {
 }
 
 /// The tissue past the CT's outermost voxel centres (`bounds`), where the scan ends (beyond the
-/// CT the fields read air, docs/pipeline.md "Region"): its free nodes, the `sliding` nodes
+/// CT the fields read air, docs/design/pipeline.md "Region"): its free nodes, the `sliding` nodes
 /// `[tet] scan_end` slides on the end plane, and the distance from the nearest free or sliding
 /// node there to moved bone; None when there are none or nothing moves.
 pub(super) fn scan_end(
@@ -213,7 +213,7 @@ pub(super) fn damage(
         .fold(0.0, |a, v| a + v);
     if torn_elements > 0 {
         rec.warn(format!(
-            "the move tears {torn_elements} tetrahedra ({torn_volume_mm3:.0} mm³) of tissue off the face that it would turn inside out (the osteotomy gap): their stiffness is a trace of their tissue's ([tet] tear_gap; docs/pipeline.md \"Large moves\")"
+            "the move tears {torn_elements} tetrahedra ({torn_volume_mm3:.0} mm³) of tissue off the face that it would turn inside out (the osteotomy gap): their stiffness is a trace of their tissue's ([tet] tear_gap; docs/design/pipeline.md \"Large moves\")"
         ));
     }
     // Tetrahedra spanning moved and held bone (the osteotomy's gap, where the plan shears the

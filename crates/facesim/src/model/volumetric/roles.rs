@@ -1,4 +1,4 @@
-//! The tissue's anatomy at rest that the holds read (docs/pipeline.md "Volumetric soft
+//! The tissue's anatomy at rest that the holds read (docs/design/pipeline.md "Volumetric soft
 //! tissue"): the bone and its moves, the mucosa facing a cavity near the skull, the bone lip or
 //! cheek covers (on the teeth: contact), the bone a Le Fort I's or a genioplasty's approach raises
 //! (`[tet] degloved_maxilla`, `degloved_chin`; `model::degloved`), and the skin on the face. A run

@@ -229,7 +229,7 @@ pub(super) fn torn_trace(mut material: Vec<TissueElastic>, torn: &[bool]) -> Vec
 
 /// `[tet] tear_gap`: what lift-off leaves inverted is tissue in the osteotomy gap that the move
 /// stretches or squeezes beyond what a continuum can follow: the mobilisation tears it
-/// (docs/pipeline.md "Large moves"). It is released: its stiffness falls to a trace, the model is
+/// (docs/design/pipeline.md "Large moves"). It is released: its stiffness falls to a trace, the model is
 /// factored and solved again, [`TEAR_ROUNDS`] at most. Tissue on the face never tears: an
 /// inverted element there stays a failure. A round that inverts more than the first, and more
 /// than [`SPREAD_FLOOR`], spreads instead of settling (tissue sheared against a held face, or
