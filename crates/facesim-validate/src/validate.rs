@@ -3,7 +3,7 @@
 //! bone and on a seeded cohort of jaws phantoms; per soft landmark the predicted ratio beside the
 //! published range. Writes validation.csv and validation.md as one unit (`output::RunDir`), with
 //! each run's report.json, landmarks and faces under `runs/`; the chart (validation.svg) is the
-//! caller's (crates/facesim-lab `validation_chart`).
+//! caller's (crates/facesim-charts `validation.rs`).
 
 use crate::phantom_jaws::{JawsOptions, Shape};
 use facesim::anatomy::Anatomy;
