@@ -7,7 +7,7 @@
 //! tie-breaking rule on the projected edges (an edge belongs to the triangle on its one side
 //! only), so a ray through a shared edge or vertex is counted once, not twice or never.
 
-use super::Mesh;
+use super::surface::Mesh;
 use crate::error::{Error, Result};
 use std::collections::HashMap;
 use std::path::Path;

@@ -6,7 +6,8 @@
 //! string in .vtp. A file saying RAS has x and y negated; a file saying nothing is LPS (Slicer's
 //! default since 4.11, and facesim's frame).
 
-use super::{Mesh, obj, ply, stl, vtk, vtp};
+use super::surface::Mesh;
+use super::{obj, ply, stl, vtk, vtp};
 use crate::error::{Error, Result};
 use std::path::Path;
 

@@ -6,7 +6,7 @@
 //! file's vertices in the file's order, and predicted displacements are compared at the
 //! micrometre level. The writer prints shortest-round-trip f64, so OBJ round trips exactly.
 
-use super::Mesh;
+use super::surface::Mesh;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use std::path::Path;

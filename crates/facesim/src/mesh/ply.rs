@@ -1,7 +1,7 @@
 //! PLY (ascii, binary little- and big-endian) through ply-rs-bw, with vertex colours, extra
 //! per-vertex scalar properties and an optional `edge` element with its own properties.
 
-use super::{Column, Edges, Mesh};
+use super::surface::{Column, Edges, Mesh};
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use ply_rs_bw::parser::Parser;

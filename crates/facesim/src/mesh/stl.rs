@@ -2,7 +2,7 @@
 //! when exactly equal (as every STL writer repeats them). The header (binary) or `solid` line
 //! (ASCII) is returned: 3D Slicer writes its frame there ("SPACE=RAS" or "SPACE=LPS").
 
-use super::Mesh;
+use super::surface::Mesh;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use std::collections::HashMap;

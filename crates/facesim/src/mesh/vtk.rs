@@ -2,7 +2,7 @@
 //! 5.1's OFFSETS/CONNECTIVITY) with per-point data arrays; VTK XML PolyData is `vtp`. 3D Slicer
 //! marks the frame in the legacy header line ("SPACE=LPS"); the writer here marks LPS.
 
-use super::Mesh;
+use super::surface::Mesh;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use std::path::Path;

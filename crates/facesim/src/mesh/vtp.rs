@@ -17,7 +17,7 @@
 //! The XML tags are found by plain text search, not an XML parser: a VTK file is written by a
 //! machine, with one tag per element and its attributes in double quotes.
 
-use super::Mesh;
+use super::surface::Mesh;
 use super::vtk::PointArray;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;

@@ -20,7 +20,7 @@
 //! PerFrameFunctionalGroupsSequence, else from SharedFunctionalGroupsSequence. Each frame is then
 //! one slice like a single-frame file's, so sorting, spacing and tilt checks are the same.
 
-use super::{MAX_VOXELS, Volume};
+use super::grid::{MAX_VOXELS, Volume};
 use crate::error::{Error, Result};
 use dicom_core::{DataElement, PrimitiveValue, VR, dicom_value};
 use dicom_dictionary_std::{tags, uids};

@@ -7,7 +7,7 @@
 //! (i, j, k) to LPS (i·sx, (ny−1−j)·sy, k·sz). This is checked on the real sample: the CT
 //! head-rest arc (behind the head) lies at small row indices, the face at large ones.
 
-use super::Volume;
+use super::grid::Volume;
 use crate::error::{Error, Result};
 use std::collections::HashMap;
 use std::io::Read;
@@ -72,7 +72,7 @@ pub fn read(path: &Path) -> Result<Volume> {
         spacing,
         origin,
         direction,
-        data: super::decode_samples(raw, kind, width, false),
+        data: super::samples::decode_samples(raw, kind, width, false),
     })
 }
 

@@ -4,7 +4,7 @@
 //! diagonal from pixdim. NIfTI world coordinates are RAS, so x and y are negated to get LPS.
 //! Values: scl_slope/scl_inter applied (slope 0 means 1), giving HU.
 
-use super::Volume;
+use super::grid::Volume;
 use crate::error::{Context, Error, Result};
 use crate::output::write_atomic;
 use nifti::{IntoNdArray, NiftiHeader, NiftiObject, NiftiType, NiftiVolume, ReaderOptions};

@@ -5,7 +5,7 @@
 //! centre of voxel 0) in the header's `space`; RAS (right-anterior-superior) has x and y
 //! negated to LPS. Values are taken as they are: Slicer stores a CT in HU.
 
-use super::Volume;
+use super::grid::Volume;
 use crate::error::{Error, Result};
 use std::io::{Read, Write};
 use std::path::Path;
@@ -201,7 +201,7 @@ fn parse(bytes: &[u8], path: &Path) -> Result<Volume> {
         spacing,
         origin,
         direction,
-        data: super::decode_samples(data, kind, size, big),
+        data: super::samples::decode_samples(data, kind, size, big),
     })
 }
 

@@ -11,7 +11,7 @@
 //! so with `[ct] axes` (docs/reference/case.md; the headsq case does). Values are taken as they are (no
 //! rescale is stored): `[ct] intercept` turns stored numbers into HU.
 
-use super::Volume;
+use super::grid::Volume;
 use crate::error::{Error, Result};
 use serde::Deserialize;
 use std::io::Read;
@@ -198,7 +198,7 @@ pub fn read(path: &Path) -> Result<Volume> {
         spacing,
         origin,
         direction,
-        data: super::decode_samples(&raw.1, kind, width, false),
+        data: super::samples::decode_samples(&raw.1, kind, width, false),
     })
 }
 
