@@ -20,8 +20,8 @@
 //! incisors, "impaction") at the soft landmark itself; for a pure translation both are the
 //! translation, as in `facesim validate`.
 
-use super::Carried;
 use super::frame::HeadFrame;
+use super::landmark::Carried;
 use super::measure::along;
 use super::published::{Axis, Published, Surgery, rows_of};
 use crate::case::Osteotomy;

@@ -12,7 +12,7 @@
 
 use super::extremum::{Ext, GAP_MM, PROMINENCE_MM, is_extremum};
 use super::frame::{HeadFrame, Profile, STEP_MM, profile, section};
-use super::{Kind, Landmark, Source};
+use super::landmark::{Kind, Landmark, Source};
 use crate::mesh::Mesh;
 
 /// Bone farther behind the soft profile than this is not facial bone.

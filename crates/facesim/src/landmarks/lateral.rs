@@ -6,6 +6,7 @@
 
 use super::extremum::{Ext, is_extremum};
 use super::frame::{HeadFrame, Profile, plane_cut as cut, profile};
+use super::landmark::{Kind, Landmark, Source};
 use crate::mesh::Mesh;
 
 /// Patient's right (−lateral) and left, alare then cheilion.
@@ -184,4 +185,27 @@ fn alare(
             "the nose meets the cheek without an alar groove (no turn of the skin's outline of {MIN_GROOVE_DEG}° between subnasale and pronasale)"
         )
     })
+}
+
+/// The paired landmarks (alare, cheilion) of `skin` beside the midline ones in `found`.
+pub(crate) fn with_paired(skin: &Mesh, frame: &HeadFrame, found: &[Landmark]) -> Vec<Landmark> {
+    let at = |label: &str| {
+        found
+            .iter()
+            .find(|l| l.label == label)
+            .and_then(|l| l.position)
+    };
+    paired(skin, frame, at)
+        .into_iter()
+        .map(|(label, spot)| match spot {
+            Ok(p) => Landmark {
+                label: label.into(),
+                kind: Kind::Soft,
+                position: Some(p),
+                source: Source::Detected,
+                missing: None,
+            },
+            Err(why) => Landmark::missing(label, Kind::Soft, why),
+        })
+        .collect()
 }

@@ -1,7 +1,7 @@
 //! 3D Slicer markups files (.mrk.json, Slicer's markups schema v1.0.3): one `Fiducial` markup
 //! in LPS mm, one control point per landmark (docs/guide/landmarks.md "Files").
 
-use super::Carried;
+use super::landmark::Carried;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
 use serde_json::{Value, json};

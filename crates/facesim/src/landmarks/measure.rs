@@ -2,7 +2,7 @@
 //! frame's midsagittal projection (height v, anteriority a; the lateral offset dropped).
 
 use super::frame::HeadFrame;
-use super::{Carried, Ordered};
+use super::landmark::{Carried, Ordered};
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -15,6 +15,7 @@ pub mod detect;
 mod extremum;
 pub mod face_regions;
 pub mod frame;
+mod landmark;
 mod lateral;
 pub mod markups;
 pub mod measure;
@@ -22,90 +23,21 @@ pub mod outcome;
 pub mod published;
 pub mod scan;
 
-use crate::compare::{SurfaceIndex, barycentric};
+use crate::compare::SurfaceIndex;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::osteotomy::Plan;
 use crate::vec3::{norm, sub};
-use serde::de::{Deserializer, MapAccess, Visitor};
-use serde::ser::{SerializeMap, Serializer};
-use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 pub use detect::{BONE, SOFT};
 pub use frame::{HeadFrame, head_frame};
+pub(crate) use landmark::kind_of;
+pub use landmark::{Carried, Kind, Landmark, Ordered, Source, SurfaceAnchor, positions};
 pub use lateral::PAIRED;
-
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum Kind {
-    Soft,
-    Bone,
-}
-
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum Source {
-    Detected,
-    User,
-}
-
-/// One landmark on the pre-operative anatomy (LPS mm), or why it is missing.
-#[derive(Clone, Debug, Serialize)]
-pub struct Landmark {
-    pub label: String,
-    pub kind: Kind,
-    pub position: Option<[f64; 3]>,
-    pub source: Source,
-    pub missing: Option<String>,
-}
-
-impl Landmark {
-    pub fn missing(label: &str, kind: Kind, why: String) -> Landmark {
-        Landmark {
-            label: label.into(),
-            kind,
-            position: None,
-            source: Source::Detected,
-            missing: Some(why),
-        }
-    }
-}
 
 /// A user landmark farther than this from the face (soft) is an input error.
 pub(crate) const USER_MAX_OFF_FACE_MM: f64 = 10.0;
-
-/// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
-/// The paired landmarks (alare, cheilion) of `skin` beside the midline ones in `found`.
-pub(crate) fn with_paired(skin: &Mesh, frame: &HeadFrame, found: &[Landmark]) -> Vec<Landmark> {
-    let at = |label: &str| {
-        found
-            .iter()
-            .find(|l| l.label == label)
-            .and_then(|l| l.position)
-    };
-    lateral::paired(skin, frame, at)
-        .into_iter()
-        .map(|(label, spot)| match spot {
-            Ok(p) => Landmark {
-                label: label.into(),
-                kind: Kind::Soft,
-                position: Some(p),
-                source: Source::Detected,
-                missing: None,
-            },
-            Err(why) => Landmark::missing(label, Kind::Soft, why),
-        })
-        .collect()
-}
-
-pub(crate) fn kind_of(label: &str) -> Kind {
-    if BONE.contains(&label) {
-        Kind::Bone
-    } else {
-        Kind::Soft
-    }
-}
 
 /// The landmarks of a pre-operative face: detected on `skin` and `skull` in the head frame,
 /// then each user landmark (`[[landmark]]`, or a markups file read into them) replaces the
@@ -121,7 +53,7 @@ pub fn locate(
     let mut lms = match &frame {
         Some(f) => {
             let mut lms = detect::detect(skin, skull, f);
-            let paired = with_paired(skin, f, &lms);
+            let paired = lateral::with_paired(skin, f, &lms);
             lms.extend(paired);
             lms
         }
@@ -162,50 +94,6 @@ pub fn locate(
         }
     }
     Ok((frame, lms))
-}
-
-/// A landmark before and after.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Carried {
-    pub label: String,
-    pub kind: Kind,
-    pub source: Source,
-    pub pre: Option<[f64; 3]>,
-    pub post: Option<[f64; 3]>,
-    pub change_mm: Option<f64>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub missing: Option<String>,
-}
-
-/// Where a soft-tissue landmark sits on the face: a triangle of `face_pre`, barycentric weights
-/// of its closest point there, and the landmark's offset from that point (0 for a detected
-/// one). The same material point on any face with face_pre's triangles is
-/// Σ wᵢ·vᵢ + offset.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SurfaceAnchor {
-    pub triangle: u32,
-    pub weights: [f64; 3],
-    pub offset: [f64; 3],
-}
-
-impl SurfaceAnchor {
-    /// The anchor of `p` on `face` (`index` built on `face`).
-    pub fn new(index: &SurfaceIndex, face: &Mesh, p: [f64; 3]) -> SurfaceAnchor {
-        let (_, q, t) = index.closest_triangle(p);
-        let [a, b, c] = face.triangles[t].map(|i| face.vertices[i as usize]);
-        SurfaceAnchor {
-            triangle: t as u32,
-            weights: barycentric(q, a, b, c),
-            offset: sub(p, q),
-        }
-    }
-
-    /// The anchored point on vertices with face_pre's order.
-    pub fn place(&self, triangles: &[[u32; 3]], vertices: &[[f64; 3]]) -> [f64; 3] {
-        let [a, b, c] = triangles[self.triangle as usize].map(|i| vertices[i as usize]);
-        let w = self.weights;
-        [0, 1, 2].map(|k| w[0] * a[k] + w[1] * b[k] + w[2] * c[k] + self.offset[k])
-    }
 }
 
 /// The surface anchors of the soft landmarks of `lms` on `face_pre` (None: bony or missing).
@@ -252,51 +140,6 @@ pub(crate) fn carry_anchored(
             }
         })
         .collect()
-}
-
-/// A map that keeps its insertion order in JSON (report.json's `landmarks`, `measurements`,
-/// `regions`).
-#[derive(Clone, Debug)]
-pub struct Ordered<T>(pub Vec<(String, T)>);
-
-impl<T> Default for Ordered<T> {
-    fn default() -> Self {
-        Ordered(Vec::new())
-    }
-}
-
-impl<T: Serialize> Serialize for Ordered<T> {
-    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        let mut m = s.serialize_map(Some(self.0.len()))?;
-        for (k, v) in &self.0 {
-            m.serialize_entry(k, v)?;
-        }
-        m.end()
-    }
-}
-
-/// Read in the file's order (a map's keys once each, as written).
-impl<'de, T: Deserialize<'de>> Deserialize<'de> for Ordered<T> {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        struct V<T>(std::marker::PhantomData<T>);
-        impl<'de, T: Deserialize<'de>> Visitor<'de> for V<T> {
-            type Value = Ordered<T>;
-            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a map")
-            }
-            fn visit_map<A: MapAccess<'de>>(
-                self,
-                mut a: A,
-            ) -> std::result::Result<Self::Value, A::Error> {
-                let mut v = Vec::with_capacity(a.size_hint().unwrap_or(0));
-                while let Some(e) = a.next_entry()? {
-                    v.push(e);
-                }
-                Ok(Ordered(v))
-            }
-        }
-        d.deserialize_map(V(std::marker::PhantomData))
-    }
 }
 
 /// Everything the landmark stage reports (report.json `landmarks`, `measurements`,
@@ -377,11 +220,4 @@ pub fn analyse_located(
         regions,
         region_of,
     }
-}
-
-/// (label, position) of the landmarks that have one.
-pub fn positions(lms: &[Landmark]) -> Vec<(String, [f64; 3])> {
-    lms.iter()
-        .filter_map(|l| l.position.map(|p| (l.label.clone(), p)))
-        .collect()
 }

@@ -5,8 +5,8 @@
 //! % within 2 mm: the measures of Liebregts et al. 2015 and the studies of VALIDATION.md).
 
 use super::face_regions::{self, RegionDistance};
+use super::landmark::{Landmark, Ordered, positions};
 use super::scan::{FaceLandmarks, FrameFrom, landmarks_of};
-use super::{Landmark, Ordered, positions};
 use crate::compare::{SurfaceIndex, point_to_surface};
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;

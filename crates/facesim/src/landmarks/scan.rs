@@ -19,9 +19,9 @@
 
 use super::detect::{self, SOFT};
 use super::frame::{HeadFrame, head_frame, profile, section, unit};
+use super::landmark::{Carried, Kind, Landmark, Ordered};
 use super::lateral::PAIRED;
 use super::measure::{self, Measure};
-use super::{Carried, Kind, Landmark, Ordered};
 use crate::mesh::Mesh;
 use crate::vec3::{add, cross, dot, norm, scale, sub};
 use rayon::prelude::*;
@@ -660,7 +660,7 @@ pub fn landmarks_of(mesh: &Mesh, from: FrameFrom) -> Result<FaceLandmarks, Strin
         }
     };
     let mut lms = lms;
-    let paired = super::with_paired(&mm, &frame, &lms);
+    let paired = super::lateral::with_paired(&mm, &frame, &lms);
     lms.extend(paired);
     let carried: Vec<Carried> = lms
         .iter()
