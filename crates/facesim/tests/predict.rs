@@ -57,7 +57,8 @@ fn main_springs_span_the_analytic_soft_tissue_thickness() {
             let p = o.skin.vertices[s.skin];
             p[2] > 10.0
                 && p[2] < 35.0
-                && facesim::phantom::nose(facesim::phantom::phi_of(p), p[2]) < 0.01
+                && facesim_validate::phantom::nose(facesim_validate::phantom::phi_of(p), p[2])
+                    < 0.01
         })
         .map(|s| s.rest)
         .collect();
@@ -159,12 +160,12 @@ fn small_moves_give_displacements_linear_in_the_move() {
 fn the_mirror_symmetric_phantom_gives_a_mirror_symmetric_prediction() {
     // A noise-free phantom on a grid symmetric about x = 0 (2 mm: x from −92 to 92).
     let dir = common::kept_dir("facesim-sym");
-    let opts = facesim::phantom::PhantomOptions {
+    let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [2.0, 2.0, 2.0],
         noise_hu: 0.0,
         ..Default::default()
     };
-    facesim::phantom::write_case(&dir, &opts).unwrap();
+    facesim_validate::phantom::write_case(&dir, &opts).unwrap();
     for model in ["equilibrium", "koch1996"] {
         let text = std::fs::read_to_string(dir.join("case.toml")).unwrap();
         let case_dir = dir.join(model);
@@ -222,7 +223,7 @@ fn two_mesh_densities_give_the_same_displacement_field() {
         let run_scan = |step: f64| {
             let d = common::kept_dir("facesim-density");
             facesim::mesh::ply::write(
-                &facesim::phantom::face_scan(step),
+                &facesim_validate::phantom::face_scan(step),
                 &d.join("scan.ply"),
                 facesim::mesh::ply::Encoding::BinaryLittleEndian,
             )
@@ -349,7 +350,7 @@ fn the_predicted_face_does_not_depend_on_the_load_increments() {
 fn dense_case(extra: &str) -> PathBuf {
     let d = common::kept_dir("facesim-dense");
     facesim::mesh::ply::write(
-        &facesim::phantom::face_scan(1.5),
+        &facesim_validate::phantom::face_scan(1.5),
         &d.join("face.ply"),
         facesim::mesh::ply::Encoding::BinaryLittleEndian,
     )

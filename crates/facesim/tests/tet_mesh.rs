@@ -365,7 +365,7 @@ fn assert_ct_mesh(m: &SoftTissueMesh) {
 
 #[test]
 fn phantom_soft_tissue_conforms_to_the_skin_and_bone_iso_surfaces() {
-    let vol = facesim::phantom::ct(&facesim::phantom::PhantomOptions::default());
+    let vol = facesim_validate::phantom::ct(&facesim_validate::phantom::PhantomOptions::default());
     let seg = segmented(&vol);
     let roi = ([-50.0, -100.0, -45.0], [50.0, -30.0, 35.0]);
     let p = MeshParams {

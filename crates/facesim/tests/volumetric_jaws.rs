@@ -8,10 +8,10 @@ mod common;
 use facesim::case::{Case, SolveModel};
 use facesim::commands::{self, Outcome};
 use facesim::observe::Quiet;
-use facesim::phantom::PhantomOptions;
-use facesim::phantom_jaws::{self, JawsOptions, Shape, Tissue};
 use facesim::tet::vtu;
 use facesim::vec3::{dot, norm, sub};
+use facesim_validate::phantom::PhantomOptions;
+use facesim_validate::phantom_jaws::{self, JawsOptions, Shape, Tissue};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
