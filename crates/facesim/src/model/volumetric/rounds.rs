@@ -148,10 +148,10 @@ impl Round for OneSidedContact<'_> {
             // solve each, the first time), and a node that rests again is held on the border:
             // no round factors anew.
             if !freed.is_empty() {
-                s.factor_mut().free_nodes(&freed)?;
+                s.factor_mut()?.free_nodes(&freed)?;
             }
             if !rested.is_empty() {
-                s.factor_mut().rest_nodes(&rested)?;
+                s.factor_mut()?.rest_nodes(&rested)?;
             }
             s.solve()?;
         }
@@ -201,7 +201,7 @@ impl Round for LiftOff {
                 break;
             }
             // The factor bordered by the freed components: no second factorisation.
-            s.factor_mut().free_nodes(&freed)?;
+            s.factor_mut()?.free_nodes(&freed)?;
             s.solve()?;
         }
         Ok(())

@@ -7,7 +7,7 @@ use super::mesh::ordering;
 use super::report::NewtonStep;
 use super::rounds::{LiftOff, OneSidedContact, OneSidedOutcome, Round, Tearing};
 use crate::case::Tet;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::fem::cholesky::MeshAnalyses;
 use crate::fem::ordering::NodeOrder;
 use crate::tet::conditions::Holds;
@@ -52,21 +52,23 @@ pub(super) struct Solving<'a> {
     pub(super) one_sided: OneSidedOutcome,
 }
 
+/// The factor of a solve between rounds: always there but while [`Solving::refactor`] makes a
+/// new one.
+fn no_factor() -> Error {
+    Error::config("the volumetric solve lost its factor between rounds")
+}
+
 impl Solving<'_> {
     /// Solve again on the current factor and holds.
     pub(super) fn solve(&mut self) -> Result<()> {
-        let c = self
-            .c
-            .as_ref()
-            .expect("a solve keeps its factor between rounds");
+        let c = self.c.as_ref().ok_or_else(no_factor)?;
         self.u = c.solve(&[(&self.hold, &self.f)])?.remove(0);
         Ok(())
     }
 
-    pub(super) fn factor_mut(&mut self) -> &mut Constrained {
-        self.c
-            .as_mut()
-            .expect("a solve keeps its factor between rounds")
+    /// The current factor, to border it with freed or rested nodes.
+    pub(super) fn factor_mut(&mut self) -> Result<&mut Constrained> {
+        self.c.as_mut().ok_or_else(no_factor)
     }
 
     /// Factor the stiffness again (after a material changed); the old factor goes before the
@@ -234,9 +236,7 @@ type Newtoned = (
 /// each Newton system (`tet::newton_krylov`); too far from the linear answer for Newton to start
 /// there, load steps, each Newton system factored (slower, more robust).
 fn newton(s: &mut Solving, t: &Tet) -> Result<Newtoned> {
-    let c =
-        s.c.as_ref()
-            .expect("a solve keeps its factor between rounds");
+    let c = s.c.as_ref().ok_or_else(no_factor)?;
     let mut fallback = None;
     let sol = match newton_krylov::solve(&s.linear, c, &s.u, &newton_krylov::Options::default()) {
         Ok(sol) => sol,
