@@ -19,43 +19,12 @@ use std::path::{Path, PathBuf};
 /// the work it names lands (the test says when one no longer exists).
 const ALLOWED_MODULE_CYCLES: &[&[&str]] = &[];
 
-/// Files still in a cycle, each a strongly connected set (module paths). Remove an entry when
-/// the work it names lands. What is left is a folder's mod.rs that defines the types its
-/// children use (through `super::`) and also calls those children: item 4 removes each by
-/// moving the shared types into a child file both take them from (as `crates/facesim/src/model/predicted.rs` did
-/// for the model seam, `crates/facesim/src/pipeline/stage.rs` for the stages and
-/// `crates/facesim/src/solve/problem.rs` for the C1 solve).
-const ALLOWED_FILE_CYCLES: &[&[&str]] = &[
-    // landmarks/mod.rs: Landmark, Kind, Source, Carried, Ordered; calls clinic, detect,
-    // measure, markups, face_regions.
-    &[
-        "landmarks",
-        "landmarks::clinic",
-        "landmarks::detect",
-        "landmarks::face_regions",
-        "landmarks::markups",
-        "landmarks::measure",
-    ],
-    // mesh/mod.rs: Mesh; read_mesh/write_mesh dispatch to the format files.
-    &[
-        "mesh",
-        "mesh::model_file",
-        "mesh::obj",
-        "mesh::ply",
-        "mesh::stl",
-        "mesh::vtk",
-        "mesh::vtp",
-    ],
-    // volume/mod.rs: Volume; read_ct dispatches to the format readers.
-    &[
-        "volume",
-        "volume::dicom_io",
-        "volume::inv3",
-        "volume::nifti_io",
-        "volume::nrrd",
-        "volume::vtkjs",
-    ],
-];
+/// Files still in a cycle, each a strongly connected set (module paths). None: a folder's
+/// shared types live in a child file its siblings take them from (`mesh/surface.rs`,
+/// `volume/grid.rs`, `landmarks/landmark.rs`, `model/predicted.rs`, `model/volumetric/state.rs`,
+/// `pipeline/stage.rs`, `solve/problem.rs`), and its mod.rs only declares, re-exports and
+/// dispatches.
+const ALLOWED_FILE_CYCLES: &[&[&str]] = &[];
 
 /// Module path (`pipeline::inputs`; `crate` for lib.rs) → file, for every file under `src`.
 fn module_files(src: &Path) -> BTreeMap<String, PathBuf> {

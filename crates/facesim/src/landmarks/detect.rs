@@ -714,3 +714,12 @@ fn bone_chin(
     };
     Ok((b, pog, Ok(me), id))
 }
+
+/// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
+pub(crate) fn kind_of(label: &str) -> Kind {
+    if BONE.contains(&label) {
+        Kind::Bone
+    } else {
+        Kind::Soft
+    }
+}

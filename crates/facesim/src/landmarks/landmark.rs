@@ -2,7 +2,6 @@
 //! its anchor on the face, its place before and after, and the ordered maps report.json keeps
 //! them in. Every other module of `landmarks/` builds or reads these types.
 
-use super::detect::BONE;
 use crate::compare::{SurfaceIndex, barycentric};
 use crate::mesh::Mesh;
 use crate::vec3::sub;
@@ -43,15 +42,6 @@ impl Landmark {
             source: Source::Detected,
             missing: Some(why),
         }
-    }
-}
-
-/// The kind of a label: the bony labels of [`BONE`], every other label soft tissue.
-pub(crate) fn kind_of(label: &str) -> Kind {
-    if BONE.contains(&label) {
-        Kind::Bone
-    } else {
-        Kind::Soft
     }
 }
 

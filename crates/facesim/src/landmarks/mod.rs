@@ -30,9 +30,9 @@ use crate::osteotomy::Plan;
 use crate::vec3::{norm, sub};
 use std::path::Path;
 
+pub(crate) use detect::kind_of;
 pub use detect::{BONE, SOFT};
 pub use frame::{HeadFrame, head_frame};
-pub(crate) use landmark::kind_of;
 pub use landmark::{Carried, Kind, Landmark, Ordered, Source, SurfaceAnchor, positions};
 pub use lateral::PAIRED;
 

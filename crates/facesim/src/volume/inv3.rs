@@ -98,7 +98,7 @@ fn read_members(path: &Path) -> Result<HashMap<String, Vec<u8>>> {
             continue;
         }
         let size = entry.size();
-        if size > (super::MAX_VOXELS as u64) * 8 {
+        if size > (super::grid::MAX_VOXELS as u64) * 8 {
             return Err(Error::input(
                 path,
                 format!("member {name} is {size} bytes: too large"),

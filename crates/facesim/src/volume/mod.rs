@@ -13,8 +13,8 @@ mod samples;
 pub mod tilt;
 pub mod vtkjs;
 
+pub(crate) use grid::det3;
 pub use grid::{Inspect, Volume, VoxelMap, axes_code, inv3, past_scan_end, sample_field};
-pub(crate) use grid::{MAX_VOXELS, det3};
 
 use crate::error::{Error, Result};
 use std::path::Path;

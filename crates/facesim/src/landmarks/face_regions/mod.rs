@@ -12,8 +12,8 @@
 
 pub mod profile;
 
-use super::Ordered;
 use super::frame::HeadFrame;
+use super::landmark::Ordered;
 use serde::{Deserialize, Serialize};
 
 pub const NAMES: [&str; 5] = ["nose", "upper lip", "lower lip", "chin", "cheeks"];

@@ -26,6 +26,7 @@ mod resolve;
 mod roles;
 mod rounds;
 mod solve;
+mod state;
 
 pub(crate) use mesh::system_size;
 pub use report::{NewtonStep, ScanEnd, TetReport};
@@ -356,7 +357,7 @@ fn finish(
                 // The run's factor goes before the basis's is made: two at once would set the
                 // run's peak memory.
                 drop(run_factor);
-                let k = solve::stiffness(run.quadratic.as_ref(), &solved.linear)?;
+                let k = state::stiffness(run.quadratic.as_ref(), &solved.linear)?;
                 Constrained::ordered(&k, &rest, nodes, mesh::ordering(&solved.order))?
             }
         };

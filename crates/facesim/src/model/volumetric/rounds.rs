@@ -5,7 +5,7 @@
 //! ([`OneSidedContact`]), lift-off where a move inverts tissue next to bone ([`LiftOff`]), and
 //! tearing of the osteotomy gap's tissue ([`Tearing`]).
 
-use super::solve::Solving;
+use super::state::{OneSidedOutcome, Solving};
 use crate::error::Result;
 use crate::tet::Hold;
 use crate::tet::TissueElastic;
@@ -56,15 +56,6 @@ fn rows_times(k: &[(usize, usize, f64)], watched: &[bool], u: &[[f64; 3]]) -> Ve
         }
     }
     ku
-}
-
-/// How the one-sided contact ended (report.json `tet.lifted_in_tension`, …).
-pub(super) struct OneSidedOutcome {
-    /// Every raised node still on its bone pushed by it, every lifted one clear of it.
-    pub(super) settled: bool,
-    pub(super) lifted_in_tension: usize,
-    /// The deepest a lifted node lies inside its bone's move (mm).
-    pub(super) penetration_mm: f64,
 }
 
 /// `[tet] degloved_maxilla` and `degloved_chin`: the raised tissue's sliding nodes rest on the
