@@ -20,10 +20,10 @@ use std::path::{Path, PathBuf};
 const ALLOWED_MODULE_CYCLES: &[&[&str]] = &[];
 
 /// Files still in a cycle, each a strongly connected set (module paths). None: a folder's
-/// shared types live in a child file its siblings take them from (`mesh/surface.rs`,
-/// `volume/grid.rs`, `landmarks/landmark.rs`, `model/predicted.rs`, `model/volumetric/state.rs`,
-/// `pipeline/stage.rs`, `solve/problem.rs`), and its mod.rs only declares, re-exports and
-/// dispatches.
+/// shared types live in a child file its siblings take them from (mesh's `surface.rs`,
+/// volume's `grid.rs`, landmarks' `landmark.rs`, model's `predicted.rs`, the volumetric model's
+/// `state.rs`, the pipeline's `stage.rs`, the C1 solve's `problem.rs`), and its mod.rs only
+/// declares, re-exports and dispatches.
 const ALLOWED_FILE_CYCLES: &[&[&str]] = &[];
 
 /// Module path (`pipeline::inputs`; `crate` for lib.rs) → file, for every file under `src`.
