@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Cohort throughput locally and through a real Slurm (docs/guide/cohort.md "Throughput on Slurm",
+# Cohort throughput locally and through a real Slurm (docs/lab/cohort-measured.md "Throughput on Slurm",
 # docs/lab/performance.md "Cohorts on Slurm"): N jaws phantoms (2 mm, seed 11, plan case.toml,
 # one variant of MODEL, one thread a run) through workflow/Snakefile with --cores $(nproc), then
 # on a throw-away one-node cluster (scripts/slurm-cluster.sh) one Slurm job per run, then in job
