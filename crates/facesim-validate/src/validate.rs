@@ -739,7 +739,7 @@ fn run_one(
     let mut tet = toml::Table::new();
     tet.insert("error_estimate".into(), toml::Value::Boolean(false));
     over.insert("tet".into(), toml::Value::Table(tet));
-    merge(&mut over, overrides.clone());
+    facesim::case::merge(&mut over, overrides.clone());
     let outcome = facesim::commands::run_with(&case.dir, Some(run_dir), &over, obs)?;
     on_run(&case.info, s, &outcome)?;
     if !keep_runs {
@@ -1116,20 +1116,6 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
         ));
     }
     s
-}
-
-/// Lay `over` on top of `base`, recursively (tables merge, everything else replaces): how a
-/// case file takes `--set` overrides (the product library's own `case::merge`, which it keeps
-/// to itself).
-fn merge(base: &mut toml::Table, over: toml::Table) {
-    for (k, v) in over {
-        match (base.get_mut(&k), v) {
-            (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
-            (_, v) => {
-                base.insert(k, v);
-            }
-        }
-    }
 }
 
 #[cfg(test)]

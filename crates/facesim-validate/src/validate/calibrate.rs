@@ -482,7 +482,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
     let reduced: toml::Table =
         toml::from_str("[uncertainty]\nsamples = 64\nmethod = \"reduced\"\n")
             .map_err(|e| Error::config(e.to_string()))?;
-    super::merge(&mut first, reduced);
+    facesim::case::merge(&mut first, reduced);
     let mut calibrands: Vec<Calibrand> = Vec::new();
     let defaults = validate_with(
         &Options {
@@ -566,7 +566,7 @@ pub fn calibrate(opts: &CalibrateOptions, obs: &dyn Observer) -> Result<Calibrat
         .ok_or_else(|| Error::config("calibrate: the grid has no points"))?;
     // Pass 3: every run in full at the optimum.
     let mut over = opts.validate.overrides.clone();
-    super::merge(&mut over, overrides_at(&base, &best));
+    facesim::case::merge(&mut over, overrides_at(&base, &best));
     let t2 = std::time::Instant::now();
     let mut states = std::collections::HashMap::new();
     let optimum_validation = validate_with(

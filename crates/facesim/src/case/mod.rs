@@ -20,8 +20,9 @@ pub use schema::*;
 pub use surgery::{MAX_MOVE_MM, MAX_TURN_DEG, check_surgeries};
 pub use uncertainty::Uncertainty;
 
-/// Recursively lay `over` on top of `base` (tables merge, everything else replaces).
-pub(crate) fn merge(base: &mut toml::Table, over: toml::Table) {
+/// Recursively lay `over` on top of `base` (tables merge, everything else replaces): how a case
+/// file lies over the defaults and `--set` overrides over a case file.
+pub fn merge(base: &mut toml::Table, over: toml::Table) {
     for (k, v) in over {
         match (base.get_mut(&k), v) {
             (Some(toml::Value::Table(b)), toml::Value::Table(o)) => merge(b, o),
