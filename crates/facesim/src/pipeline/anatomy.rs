@@ -18,16 +18,17 @@ pub struct Anatomical {
 }
 
 /// Whether the case asks for the anatomy: a plan in clinical terms or a `[head]` table. Such a
-/// case fails when the anatomy cannot be found; any other case gets it when the CT holds it (the
-/// report's clinical frame and the page's views), and a note when not.
+/// case fails when its landmarks cannot be located; any other case runs on, and the landmark stage
+/// reports why.
 pub fn wanted(case: &Case) -> bool {
     !case.surgery.is_empty() || case.head.is_some()
 }
 
 /// The anatomy of the head, and the case's `[[surgery]]` entries as osteotomies placed before its
-/// `[[osteotomy]]` entries. `located` is the skin's midsagittal frame and soft landmarks (None:
-/// the skin gave none). None (the stage skipped, with the reason): a case that did not ask for
-/// the anatomy ([`wanted`]) and whose CT does not hold it.
+/// `[[osteotomy]]` entries. Every CT case gets it (the report's clinical frame, the page's views).
+/// `located` is the skin's midsagittal frame and soft landmarks (None: they could not be
+/// located). None (the stage skipped, with the reason) when there is no midsagittal frame and no
+/// surgery asks for one.
 pub fn find(
     case: &mut Case,
     ct: &Volume,
@@ -35,19 +36,20 @@ pub fn find(
     located: Option<&(Option<HeadFrame>, Vec<Landmark>)>,
     rec: &mut Recorder,
 ) -> Result<Option<Anatomical>> {
-    let asked = wanted(case);
     let Some((Some(midsagittal), soft)) = located else {
-        if !case.surgery.is_empty() {
-            return Err(Error::config(
-                "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
-            ));
+        if case.surgery.is_empty() {
+            rec.skip(
+                Stage::Anatomy,
+                "the skin gave no midsagittal plane (an empty or partial face): no clinical frame",
+            );
+            return Ok(None);
         }
-        rec.skip(
-            Stage::Anatomy,
-            "the skin gave no midsagittal plane (an empty or partial face): no clinical frame",
-        );
-        return Ok(None);
+        return Err(Error::config(
+            "case.toml: [[surgery]] needs the head's midsagittal plane, and the skin gave none (an empty or partial face)",
+        ));
     };
+    // Err only for what the case asked: a `[head] frame` the CT cannot give, a `[[surgery]]` it
+    // cannot cut.
     let found = rec.time(
         Stage::Anatomy,
         "finding the head frame, bony landmarks and cuts",
@@ -70,15 +72,7 @@ pub fn find(
             .map_err(|e| Error::config(format!("case.toml: {e}")))?;
             Ok(Anatomical { anatomy, planned })
         },
-    );
-    let found = match found {
-        Ok(f) => f,
-        Err(e) if !asked => {
-            rec.skip(Stage::Anatomy, format!("no clinical frame: {e}"));
-            return Ok(None);
-        }
-        Err(e) => return Err(e),
-    };
+    )?;
     for note in found.planned.iter().flat_map(|p| &p.notes) {
         rec.warn(note.clone());
     }

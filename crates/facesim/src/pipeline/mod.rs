@@ -105,7 +105,8 @@ pub(crate) fn prepare(inputs: inputs::Inputs, rec: &mut Recorder) -> Result<Scen
     let face = face::place(surf, scan, &ct, &case, rec)?;
     // The pre-operative landmarks (the anatomy's midsagittal frame and soft landmarks), located
     // once and kept for the landmark stage (`Scene::landmarks_pre`). A case that did not ask for
-    // the anatomy keeps running when they cannot be located: the landmark stage reports why.
+    // the anatomy runs on when they cannot be located: the landmark stage locates again and
+    // reports why, naming the case file.
     let user = inputs::user_landmarks(&case)?;
     let located = match crate::landmarks::locate(
         &face.skin,
