@@ -187,6 +187,85 @@ def slurm_job_end(job_id: str):
     return state, details, None
 
 
+def memory_cgroup_dirs(pid: str = "self"):
+    """The memory cgroup directories whose limit can end this process: its own and, under
+    Slurm, each ancestor up to the job's (job_N), not the node's or the user's, which other
+    jobs share. cgroup v1 (the memory controller's mount) and v2 (the unified mount)."""
+    mounts = {}
+    try:
+        with open("/proc/mounts") as f:
+            for line in f:
+                field = line.split()
+                if len(field) > 3 and field[2] == "cgroup2":
+                    mounts.setdefault("", field[1])
+                elif len(field) > 3 and field[2] == "cgroup" and "memory" in field[3].split(","):
+                    mounts["memory"] = field[1]
+        with open(f"/proc/{pid}/cgroup") as f:
+            lines = [l.rstrip("\n").split(":", 2) for l in f]
+    except OSError:
+        return []
+    rel = next((l[2] for l in lines if len(l) == 3 and "memory" in l[1].split(",")), None)
+    root = mounts.get("memory")
+    if rel is None or root is None:
+        rel = next((l[2] for l in lines if len(l) == 3 and l[0] == "0" and l[1] == ""), None)
+        root = mounts.get("")
+    if rel is None or root is None:
+        return []
+    parts = [p for p in rel.split("/") if p]
+    job = next((i for i, p in enumerate(parts) if p.startswith("job_")), None)
+    first = job if job is not None else len(parts)
+    return [os.path.join(root, *parts[:n]) for n in range(len(parts), first - 1, -1)
+            if n > 0 or job is None]
+
+
+def oom_kill_counts(dirs):
+    """Each directory's count of processes its out-of-memory killer ended (v1:
+    memory.oom_control, v2: memory.events, "oom_kill N"); directories without one left out."""
+    counts = {}
+    for d in dirs:
+        for name in ("memory.events", "memory.oom_control"):
+            try:
+                with open(os.path.join(d, name)) as f:
+                    n = next((int(l.split()[1]) for l in f if l.startswith("oom_kill ")), None)
+            except (OSError, ValueError, IndexError):
+                continue
+            if n is not None:
+                counts[d] = n
+                break
+    return counts
+
+
+def oom_killed(before, after, code: int):
+    """Why facesim's end was its memory limit's out-of-memory killer, or None. Evidence: an
+    oom_kill counter of its cgroups that grew while it ran. A cgroup that holds the wrapper too
+    may kill only its largest process, facesim, and leave this script to report a plain
+    SIGKILL; that is a memory limit, which a retry with more memory can pass."""
+    if code != -9:
+        return None
+    grew = [f"{d}: oom_kill {before.get(d, 0)} -> {n}" for d, n in after.items()
+            if n > before.get(d, 0)]
+    if grew:
+        return "facesim killed by the cgroup's out-of-memory killer (oom-kill event; " + \
+            "; ".join(grew) + ")"
+    if os.environ.get("SLURM_JOB_ID") and not after:
+        return ("facesim killed by SIGKILL under Slurm, its cgroup's oom-kill counters "
+                "unreadable: taken as its memory limit (oom-kill event assumed)")
+    return None
+
+
+def attempt_end(jobs_file: str, attempt: int, job_id: str):
+    """How an attempt's Slurm job ended (slurm_job_end), with the attempt's own record: a job
+    whose facesim the cgroup's out-of-memory killer ended, while this script lived on and
+    exited non-zero, ended OUT_OF_MEMORY even where Slurm calls it FAILED."""
+    end = slurm_job_end(job_id) if job_id else None
+    rec = read_json(attempt_record_path(jobs_file, attempt)) or {}
+    why = rec.get("oom_kill")
+    if why and (end is None or end[0] not in LIMIT_STATES):
+        slurm = f"; Slurm: {end[0]}, {end[1]}" if end else ""
+        return "OUT_OF_MEMORY", f"{why}{slurm}", end[2] if end else None
+    return end
+
+
 def slurm_request(job_id: str):
     """The memory (MB) and time limit (minutes) Slurm gave this job, from scontrol (MinMemoryNode,
     or MinMemoryCPU × NumCPUs; TimeLimit), else SLURM_MEM_PER_NODE; None for what neither says.
@@ -229,7 +308,7 @@ def earlier_attempts(jobs_file: str, attempt: int):
     for n in range(1, attempt):
         rec = read_json(attempt_record_path(jobs_file, n)) or {}
         job = rec.get("slurm_job") or ""
-        end = slurm_job_end(job) if job else None
+        end = attempt_end(jobs_file, n, job) if job else None
         peak = end[2] if end and end[2] is not None else rec.get("peak_mem_mb")
         state = end[0] if end else ""
         if end:
@@ -393,6 +472,8 @@ def main() -> int:
         cmd += ["--set", s]
     print("$", " ".join(cmd), flush=True)
     start = time.monotonic()
+    cgroups = memory_cgroup_dirs() if job else []
+    oom_before = oom_kill_counts(cgroups)
     try:
         p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         watch = PeakWatch(record_path, record, p.pid) if record_path else None
@@ -410,9 +491,17 @@ def main() -> int:
         peak_mb = report_peak_heap(a.out) or 0.0
     sys.stdout.write(stdout)
     sys.stdout.write(stderr)
+    oom = oom_killed(oom_before, oom_kill_counts(cgroups), code) if job else None
     if record_path:
         record["peak_mem_mb"] = peak_mb
+        if oom:
+            record["oom_kill"] = oom
         write_json(record_path, record)
+    if oom:
+        # Over its memory: no result, and a failed job, so Snakemake retries with more memory
+        # (the Snakefile reads this attempt's record through attempt_end).
+        print(f"run_case: {oom}", file=sys.stderr, flush=True)
+        return 1
     result.update(
         status="ok" if code == 0 else one_line_error(stderr, code),
         exit_code=code,

@@ -367,3 +367,76 @@ fn phantom_refuses_shapes_out_of_range_or_without_jaws() {
         "{err}"
     );
 }
+
+/// A Slurm attempt whose facesim the cgroup's out-of-memory killer ended while run_case.py
+/// lived on (the killer takes the largest process, not the whole job step) counts as
+/// OUT_OF_MEMORY, so the retry gets more memory: run_case.py's own decision functions, with a
+/// fake cgroup tree and a fake `scontrol` that calls the job FAILED.
+#[test]
+fn an_attempt_whose_facesim_the_oom_killer_ended_is_out_of_memory() {
+    let dir = tmp("cohort-oom-attempt");
+    let bin = dir.join("bin");
+    std::fs::create_dir_all(&bin).unwrap();
+    let scontrol = bin.join("scontrol");
+    std::fs::write(
+        &scontrol,
+        "#!/bin/sh\necho \"JobId=$4 JobState=FAILED Reason=NonZeroExitCode ExitCode=1:0 \
+         RunTime=00:00:03 TimeLimit=00:05:00 MinMemoryNode=300M\"\n",
+    )
+    .unwrap();
+    std::fs::write(bin.join("sacct"), "#!/bin/sh\nexit 1\n").unwrap();
+    for f in ["scontrol", "sacct"] {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(bin.join(f), std::fs::Permissions::from_mode(0o755)).unwrap();
+    }
+    let script = r#"
+import json, os, sys
+sys.path.insert(0, sys.argv[1])
+import run_case as rc
+d = sys.argv[2]
+job = os.path.join(d, "job_7"); step = os.path.join(job, "step_0")
+os.makedirs(step, exist_ok=True)
+def counts(jn, sn):
+    with open(os.path.join(job, "memory.oom_control"), "w") as f:
+        f.write(f"oom_kill_disable 0\nunder_oom 0\noom_kill {jn}\n")
+    with open(os.path.join(step, "memory.events"), "w") as f:
+        f.write(f"low 0\nhigh 0\nmax 4\noom 1\noom_kill {sn}\n")
+    return rc.oom_kill_counts([step, job, os.path.join(d, "none")])
+before = counts(0, 0)
+assert before == {step: 0, job: 0}, before
+after = counts(1, 0)
+why = rc.oom_killed(before, after, -9)
+assert why and "oom-kill event" in why and "job_7: oom_kill 0 -> 1" in why, why
+# No counter grew: a SIGKILL from elsewhere (scancel) is not a memory limit; nor is an exit.
+assert rc.oom_killed(before, before, -9) is None
+assert rc.oom_killed(before, after, 1) is None
+# The attempt's record decides where Slurm only says FAILED.
+jobs = os.path.join(d, "v.jobs")
+rc.write_json(rc.attempt_record_path(jobs, 1), {"slurm_job": "7", "oom_kill": why})
+end = rc.attempt_end(jobs, 1, "7")
+assert end[0] == "OUT_OF_MEMORY" and "oom-kill" in end[1] and "FAILED" in end[1], end
+rc.write_json(rc.attempt_record_path(jobs, 2), {"slurm_job": "8"})
+assert rc.attempt_end(jobs, 2, "8")[0] == "FAILED"
+# The status a retry records for the killed attempt.
+ea = rc.earlier_attempts(jobs, 2)[0]
+assert ea["slurm_state"] == "OUT_OF_MEMORY" and ea["status"].startswith("slurm: job 7 OUT_OF_MEMORY ("), ea
+# This process's own memory cgroups: each one a directory, at most the job's under Slurm.
+for c in rc.memory_cgroup_dirs():
+    assert os.path.isdir(c), c
+print("ok")
+"#;
+    let path = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let out = run_ok(
+        Command::new("python3")
+            .arg("-c")
+            .arg(script)
+            .arg(root().join("workflow/scripts"))
+            .arg(&dir)
+            .env("PATH", path),
+    );
+    assert!(out.trim().ends_with("ok"), "{out}");
+}

@@ -680,7 +680,9 @@ fn cohort_on_a_real_slurm_with_faults() {
     }
 
     // case005: over its 300 MB on both plans; each retry asks for twice the memory until one
-    // is enough. Every attempt has its row: the killed ones with Slurm's state and words, their
+    // is enough. The cgroup's OOM killer ends either the whole job step (Slurm: OUT_OF_MEMORY)
+    // or only its largest process, facesim (run_case.py sees the oom-kill event and fails the
+    // job); both are an attempt over its memory. Every attempt has its row: the killed ones with Slurm's state and words, their
     // request and peak, and a row in failures.csv; the last one the local run's figures (below).
     let rows = read_csv(&out.join("cohort.csv"));
     let failures = read_csv(&out.join("failures.csv"));
@@ -815,11 +817,10 @@ fn cohort_on_a_real_slurm_with_faults() {
         assert_eq!(r["facesim_sha256"].len(), 64);
         assert_eq!(r["case_sha256"].len(), 64);
         assert_eq!(r["parameters_sha256"].len(), 64);
-        assert!(
-            out.join("parameters")
-                .join(format!("{}.json", r["parameters_sha256"]))
-                .is_file()
-        );
+        assert!(out
+            .join("parameters")
+            .join(format!("{}.json", r["parameters_sha256"]))
+            .is_file());
         assert!(!r["slurm_job"].is_empty(), "{r:?}");
     }
 
@@ -845,13 +846,11 @@ fn cohort_on_a_real_slurm_with_faults() {
     // Each run ran inside one of those jobs, several to a job.
     let mut per_job = BTreeMap::<String, usize>::new();
     for case in same {
-        assert!(
-            !grouped
-                .join("runs")
-                .join(case)
-                .join("case_setback")
-                .exists()
-        );
+        assert!(!grouped
+            .join("runs")
+            .join(case)
+            .join("case_setback")
+            .exists());
         let r = grouped.join("runs").join(case).join("case/c1/result.json");
         let result: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&r).unwrap()).unwrap();
