@@ -92,83 +92,13 @@ fn finish(
     // swapped in for `out_dir` at the end; an error before then leaves `out_dir` as it was.
     let unit = crate::output::RunDir::create(out_dir)?;
     let dir = unit.path();
-    let name = inputs.case.name.clone().unwrap_or_else(|| {
-        files
-            .dir
-            .file_name()
-            .map(|n| n.to_string_lossy().to_string())
-            .unwrap_or_default()
-    });
+    let name = run_name(&inputs, files);
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
     let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
     let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
-    // Landmarks before any file is written: a user landmark off the face is bad input.
-    // Located once: the tet model's region may have needed them already.
-    let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
-        let (frame, lms) = scene.landmarks_pre(&prediction.skin, &files.case_file)?;
-        Ok(crate::landmarks::analyse_located(
-            &prediction.skin,
-            &prediction.face_post,
-            frame,
-            lms,
-            &scene.model.plan,
-        ))
-    })?;
-    // The published ratios of a plan in clinical terms: its surgery type from its entries'
-    // kinds, its moves in the clinical frame.
-    let mut analysis = analysis;
-    if let Some(a) = scene.anatomy.as_ref().filter(|a| !a.planned.is_empty()) {
-        let kinds: Vec<(String, &str)> =
-            a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
-        analysis.clinic = Some(crate::landmarks::clinic::against_published_planned(
-            scene.model.plan.segments(),
-            &analysis.carried,
-            &a.anatomy.frame.frame,
-            &kinds,
-        ));
-    }
-    // The band before any file is written: a failed sample leaves no outputs half-written.
-    let (band, reduced) = if case.uncertainty.samples == 0 {
-        (None, None)
-    } else {
-        let nominal = crate::uncertainty::Nominal {
-            skin: &prediction.skin,
-            face_post: &prediction.face_post.vertices,
-            moves: prediction.moves(),
-            sliding_matters: prediction.sliding_matters(),
-            solves_at_once: prediction.solves_at_once(),
-        };
-        let resolve = |c: &Case| prediction.resolve(&scene, c);
-        let (band, reduced) = rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
-            // The certified reduced model when the case asks for it (docs/design/reduced.md).
-            let progress = |m: &str| obs.started(m);
-            let outputs =
-                crate::uncertainty::reduced::landmark_outputs(&analysis, &prediction.skin);
-            let reduced = if case.uncertainty.reduced(case.reduced_form()) {
-                let train = crate::uncertainty::run::training(case);
-                prediction
-                    .reduced(&scene, case, &train, &outputs, &progress)
-                    .transpose()?
-            } else {
-                None
-            };
-            let band = match &reduced {
-                Some(m) => {
-                    let solve = |c: &Case| m.solve(c);
-                    let r = crate::uncertainty::reduced::Reduced {
-                        faces: m.models.iter().map(|x| &x.face).collect(),
-                        solve: &solve,
-                        reports: m.models.iter().map(|x| x.report()).collect(),
-                    };
-                    crate::uncertainty::reduced::sample_reduced(&nominal, &r, &analysis, case, obs)
-                }
-                None => crate::uncertainty::sample(&nominal, &resolve, &analysis, case, obs),
-            }?;
-            Ok((band, reduced))
-        })?;
-        (Some(band), reduced)
-    };
+    let analysis = locate_landmarks(&scene, &prediction, files, &mut rec)?;
+    let (band, reduced) = sample_band(&scene, &prediction, &analysis, &mut rec)?;
     // Stored beside plan_basis.bin (docs/design/reduced.md "The stored model").
     let reduced = reduced.map(|m| crate::model::reduced::file::StoredReduced {
         face_checksum: crate::mesh::checksum(&prediction.skin.vertices),
@@ -177,30 +107,7 @@ fn finish(
         sliding_matters: m.sliding_matters,
         models: m.models,
     });
-    // The discretisation error: the case again at twice the element size (Richardson).
-    let discretisation = if case.tet.error_estimate {
-        let started = std::time::Instant::now();
-        obs.started("estimating the discretisation error");
-        match prediction.coarse_face(&scene, case) {
-            Some(Ok((size, coarse))) => Some(crate::model::discretisation::estimate(
-                &prediction.skin.vertices,
-                &prediction.face_post.vertices,
-                &coarse,
-                &analysis.region_of,
-                size,
-                started.elapsed().as_secs_f64(),
-            )),
-            Some(Err(e)) => {
-                rec.warn(format!(
-                    "no discretisation-error estimate: the solve at twice the element size failed ({e})"
-                ));
-                None
-            }
-            None => None,
-        }
-    } else {
-        None
-    };
+    let discretisation = discretisation_error(&scene, &prediction, &analysis, &mut rec);
     outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
     if let Some(r) = &reduced {
         crate::model::reduced::file::write(&dir.join(crate::model::reduced::file::FILE_NAME), r)?;
@@ -232,23 +139,7 @@ fn finish(
         None,
         warnings,
     );
-    if let Some(a) = &scene.anatomy {
-        report.clinical_frame = Some(crate::anatomy::readback::FrameReport::of(&a.anatomy));
-        report.plan = Some(crate::anatomy::readback::plan_report(
-            &a.anatomy,
-            &a.planned,
-            &scene.model.plan,
-        ));
-    }
-    report.discretisation_error = discretisation;
-    report.nonlinear_vs_linear = prediction.linear_face().map(|linear| {
-        crate::model::discretisation::nonlinear_vs_linear(
-            &prediction.skin.vertices,
-            &prediction.face_post.vertices,
-            linear,
-            &analysis.region_of,
-        )
-    });
+    complete_report(&mut report, &scene, &prediction, &analysis, discretisation);
     // Elements turned inside out make the prediction no valid solution: a reported numerical
     // result (the outputs are written for inspection), not a success, unless asked for.
     let inverted = prediction.inverted_elements();
@@ -268,16 +159,191 @@ fn finish(
     obs.done();
     if inverted > 0 && !case.tet.accept_inverted {
         report.warnings.iter().for_each(|w| obs.warn(w));
-        return Err(crate::error::Error::numerical(
-            crate::error::NumericalKind::DegenerateElement,
-            format!(
-                "the solved displacement turns {inverted} tetrahedra inside out: not a valid prediction (the outputs in {} are written for inspection; [tet] accept_inverted = true accepts them)",
-                out_dir.display()
-            ),
+        return Err(inverted_error(inverted, &out_dir));
+    }
+    Ok(outcome(scene, prediction, report, out_dir))
+}
+
+/// The run's name: the case's `name`, else its directory's.
+fn run_name(inputs: &inputs::Inputs, files: &inputs::CaseFiles) -> String {
+    inputs.case.name.clone().unwrap_or_else(|| {
+        files
+            .dir
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default()
+    })
+}
+
+/// The landmarks of the face before and after, and the plan's published ratios.
+fn locate_landmarks(
+    scene: &Scene,
+    prediction: &crate::model::Prediction,
+    files: &inputs::CaseFiles,
+    rec: &mut Recorder,
+) -> Result<crate::landmarks::Analysis> {
+    // Landmarks before any file is written: a user landmark off the face is bad input.
+    // Located once: the tet model's region may have needed them already.
+    let analysis = rec.time(Stage::Landmarks, "finding landmarks", || {
+        let (frame, lms) = scene.landmarks_pre(&prediction.skin, &files.case_file)?;
+        Ok(crate::landmarks::analyse_located(
+            &prediction.skin,
+            &prediction.face_post,
+            frame,
+            lms,
+            &scene.model.plan,
+        ))
+    })?;
+    // The published ratios of a plan in clinical terms: its surgery type from its entries'
+    // kinds, its moves in the clinical frame.
+    let mut analysis = analysis;
+    if let Some(a) = scene.anatomy.as_ref().filter(|a| !a.planned.is_empty()) {
+        let kinds: Vec<(String, &str)> =
+            a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
+        analysis.clinic = Some(crate::landmarks::clinic::against_published_planned(
+            scene.model.plan.segments(),
+            &analysis.carried,
+            &a.anatomy.frame.frame,
+            &kinds,
         ));
     }
+    Ok(analysis)
+}
+
+/// The band of the sampled tissue parameters, and the certified reduced models it was sampled
+/// on when the case asks for them; none without `[uncertainty] samples`.
+fn sample_band(
+    scene: &Scene,
+    prediction: &crate::model::Prediction,
+    analysis: &crate::landmarks::Analysis,
+    rec: &mut Recorder,
+) -> Result<(
+    Option<crate::uncertainty::Sampled>,
+    Option<crate::model::reduced::ReducedModels>,
+)> {
+    let (obs, case) = (rec.obs, &scene.case);
+    // The band before any file is written: a failed sample leaves no outputs half-written.
+    if case.uncertainty.samples == 0 {
+        return Ok((None, None));
+    }
+    let nominal = crate::uncertainty::Nominal {
+        skin: &prediction.skin,
+        face_post: &prediction.face_post.vertices,
+        moves: prediction.moves(),
+        sliding_matters: prediction.sliding_matters(),
+        solves_at_once: prediction.solves_at_once(),
+    };
+    let resolve = |c: &Case| prediction.resolve(scene, c);
+    let (band, reduced) = rec.time(Stage::Uncertainty, "sampling tissue parameters", || {
+        // The certified reduced model when the case asks for it (docs/design/reduced.md).
+        let progress = |m: &str| obs.started(m);
+        let outputs = crate::uncertainty::reduced::landmark_outputs(analysis, &prediction.skin);
+        let reduced = if case.uncertainty.reduced(case.reduced_form()) {
+            let train = crate::uncertainty::run::training(case);
+            prediction
+                .reduced(scene, case, &train, &outputs, &progress)
+                .transpose()?
+        } else {
+            None
+        };
+        let band = match &reduced {
+            Some(m) => {
+                let solve = |c: &Case| m.solve(c);
+                let r = crate::uncertainty::reduced::Reduced {
+                    faces: m.models.iter().map(|x| &x.face).collect(),
+                    solve: &solve,
+                    reports: m.models.iter().map(|x| x.report()).collect(),
+                };
+                crate::uncertainty::reduced::sample_reduced(&nominal, &r, analysis, case, obs)
+            }
+            None => crate::uncertainty::sample(&nominal, &resolve, analysis, case, obs),
+        }?;
+        Ok((band, reduced))
+    })?;
+    Ok((Some(band), reduced))
+}
+
+/// The discretisation error: the case again at twice the element size (Richardson); none
+/// unless `[tet] error_estimate`, a failed coarse solve a warning.
+fn discretisation_error(
+    scene: &Scene,
+    prediction: &crate::model::Prediction,
+    analysis: &crate::landmarks::Analysis,
+    rec: &mut Recorder,
+) -> Option<crate::model::discretisation::DiscretisationError> {
+    if !scene.case.tet.error_estimate {
+        return None;
+    }
+    let started = std::time::Instant::now();
+    rec.obs.started("estimating the discretisation error");
+    match prediction.coarse_face(scene, &scene.case) {
+        Some(Ok((size, coarse))) => Some(crate::model::discretisation::estimate(
+            &prediction.skin.vertices,
+            &prediction.face_post.vertices,
+            &coarse,
+            &analysis.region_of,
+            size,
+            started.elapsed().as_secs_f64(),
+        )),
+        Some(Err(e)) => {
+            rec.warn(format!(
+                "no discretisation-error estimate: the solve at twice the element size failed ({e})"
+            ));
+            None
+        }
+        None => None,
+    }
+}
+
+/// report.json's clinical frame and plan (with an anatomy), its discretisation error and the
+/// neo-Hookean model's difference from the linear one.
+fn complete_report(
+    report: &mut Report,
+    scene: &Scene,
+    prediction: &crate::model::Prediction,
+    analysis: &crate::landmarks::Analysis,
+    discretisation: Option<crate::model::discretisation::DiscretisationError>,
+) {
+    if let Some(a) = &scene.anatomy {
+        report.clinical_frame = Some(crate::anatomy::readback::FrameReport::of(&a.anatomy));
+        report.plan = Some(crate::anatomy::readback::plan_report(
+            &a.anatomy,
+            &a.planned,
+            &scene.model.plan,
+        ));
+    }
+    report.discretisation_error = discretisation;
+    report.nonlinear_vs_linear = prediction.linear_face().map(|linear| {
+        crate::model::discretisation::nonlinear_vs_linear(
+            &prediction.skin.vertices,
+            &prediction.face_post.vertices,
+            linear,
+            &analysis.region_of,
+        )
+    });
+}
+
+/// The error of a prediction that turns `inverted` tetrahedra inside out, its outputs in
+/// `out_dir`.
+fn inverted_error(inverted: usize, out_dir: &Path) -> crate::error::Error {
+    crate::error::Error::numerical(
+        crate::error::NumericalKind::DegenerateElement,
+        format!(
+            "the solved displacement turns {inverted} tetrahedra inside out: not a valid prediction (the outputs in {} are written for inspection; [tet] accept_inverted = true accepts them)",
+            out_dir.display()
+        ),
+    )
+}
+
+/// What the run keeps in memory for its caller.
+fn outcome(
+    scene: Scene,
+    prediction: crate::model::Prediction,
+    report: Report,
+    out_dir: PathBuf,
+) -> Outcome {
     let Scene { vol, seg, face, .. } = scene;
-    Ok(Outcome {
+    Outcome {
         report,
         face_post: prediction.face_post,
         volume: vol,
@@ -285,7 +351,7 @@ fn finish(
         skin: prediction.skin,
         skull: face.skull,
         out_dir,
-    })
+    }
 }
 
 /// The report sections of a run's stages, and its warnings (the stages', then the dropped
