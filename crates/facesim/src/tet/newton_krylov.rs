@@ -30,7 +30,7 @@
 //! [`NumericalKind::NotConverged`] with the residual history.
 
 use super::TetMesh;
-use super::holds::{Constrained, to_global, to_local};
+use super::holds::{Constrained, Frame, to_global, to_local};
 use super::nonlinear::{ElementState, Energy, Solution, Step, element_state_of, scales};
 use super::tangent::BlockMatrix;
 use crate::error::{Error, NumericalKind, Result};
@@ -85,50 +85,137 @@ pub fn solve(
             frames.len()
         )));
     }
-    let fixed: Vec<bool> = frames
-        .iter()
-        .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
-        .collect();
-    let (f0, energy_noise) = scales(mesh);
+    let p = Problem::new(mesh, linear, opts);
     let mut tangent = BlockMatrix::new(n, &mesh.tets);
-    let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let to_free_local = |g: &[f64]| -> Vec<f64> {
-        let mut out = vec![0.0; 3 * n];
-        for (v, f) in frames.iter().enumerate() {
-            let l = to_local(&f.axes, [g[3 * v], g[3 * v + 1], g[3 * v + 2]]);
-            for c in f.held..3 {
-                out[3 * v + c] = l[c];
-            }
-        }
-        out
-    };
-    let energy_at = |u: &[[f64; 3]]| -> Option<f64> {
-        (0..mesh.tets.len())
-            .into_par_iter()
-            .map(|e| element_state_of(mesh, e, u, false, false, opts.energy).map(|s| s.0))
-            .sum::<Option<f64>>()
-            .filter(|e| e.is_finite())
-    };
     let mut u = start.to_vec();
-    // The max nodal length of each accepted correction (mm), the last residual and forcing term.
-    let mut corrections: Vec<f64> = Vec::new();
-    let (mut last_rn, mut last_eta) = (None::<f64>, ETA_MAX);
-    let mut residuals = Vec::new();
-    let (mut r0, mut krylov) = (None::<f64>, 0);
-    let (mut first_work, mut last_work) = (None::<f64>, None::<f64>);
+    let mut h = History::default();
     // The tangent is projected to positive semi-definite per element (globalisation: every
     // direction a descent direction) until Newton takes full steps near the solution, where the
     // exact tangent gives back quadratic convergence (the projected one converges linearly
     // where nearly incompressible elements are compressed at equilibrium).
     let mut project = true;
     for it in 0..=opts.max_iterations {
-        let states: Vec<Option<ElementState>> = (0..mesh.tets.len())
-            .into_par_iter()
-            .map(|e| element_state_of(mesh, e, &u, true, project, opts.energy))
+        let states = p.element_states(&u, project);
+        let (energy, f_int) = p.internal_force(&states)?;
+        let r = p.to_free_local(&f_int);
+        let rn = norm(&r);
+        let r0v = *h.r0.get_or_insert(rn);
+        let rel = rn / norm(&f_int).max(r0v).max(p.f0);
+        h.residuals.push(rel);
+        if !rel.is_finite() {
+            return Err(not_converged("the residual is not finite", &h.residuals));
+        }
+        if h.converged(rel, opts) {
+            return Ok(done(u, it, h.residuals, h.krylov));
+        }
+        if it == opts.max_iterations {
+            break;
+        }
+        tangent.assemble(&mesh.tets, frames, |e| {
+            states[e].as_ref().and_then(|s| s.2.clone())
+        });
+        drop(states);
+        let eta = h.forcing_term(rn);
+        let (d, its) = p.direction(&tangent, &r, eta);
+        h.krylov += its;
+        let slope = dot(&r, &d);
+        if !(slope < 0.0) {
+            return Err(not_converged(
+                "the Newton direction does not lower the energy",
+                &h.residuals,
+            ));
+        }
+        h.first_work.get_or_insert(slope.abs());
+        let Some((trial, alpha)) = p.line_search(&u, &d, energy, slope) else {
+            return Err(not_converged(
+                "the line search found no step that lowers the energy",
+                &h.residuals,
+            ));
+        };
+        u = trial;
+        h.last_work = Some((alpha * slope).abs());
+        project = !(alpha == 1.0 && rel <= EXACT_BELOW);
+        h.record_correction(alpha, &d);
+    }
+    Err(not_converged(
+        &format!(
+            "no convergence in {} Newton iterations",
+            opts.max_iterations
+        ),
+        &h.residuals,
+    ))
+}
+
+/// What the iterations solve: the mesh, the linear model (its factor and hold frames), which
+/// components are held, the force and energy scales and the settings.
+struct Problem<'a> {
+    mesh: &'a TetMesh,
+    linear: &'a Constrained,
+    frames: &'a [Frame],
+    /// Per component (3 per node): held.
+    fixed: Vec<bool>,
+    /// The out-of-balance force of a 10⁻⁴ strain, and the energy's round-off allowance.
+    f0: f64,
+    energy_noise: f64,
+    opts: &'a Options,
+}
+
+impl<'a> Problem<'a> {
+    fn new(mesh: &'a TetMesh, linear: &'a Constrained, opts: &'a Options) -> Problem<'a> {
+        let frames = linear.frames();
+        let fixed: Vec<bool> = frames
+            .iter()
+            .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
+        let (f0, energy_noise) = scales(mesh);
+        Problem {
+            mesh,
+            linear,
+            frames,
+            fixed,
+            f0,
+            energy_noise,
+            opts,
+        }
+    }
+
+    /// The free components of a global vector, in the nodes' hold frames (held ones zero).
+    fn to_free_local(&self, g: &[f64]) -> Vec<f64> {
+        let mut out = vec![0.0; 3 * self.mesh.nodes.len()];
+        for (v, f) in self.frames.iter().enumerate() {
+            let l = to_local(&f.axes, [g[3 * v], g[3 * v + 1], g[3 * v + 2]]);
+            for c in f.held..3 {
+                out[3 * v + c] = l[c];
+            }
+        }
+        out
+    }
+
+    /// The potential energy at `u`; None where an element has none or it is not finite.
+    fn energy_at(&self, u: &[[f64; 3]]) -> Option<f64> {
+        let (mesh, energy) = (self.mesh, self.opts.energy);
+        (0..mesh.tets.len())
+            .into_par_iter()
+            .map(|e| element_state_of(mesh, e, u, false, false, energy).map(|s| s.0))
+            .sum::<Option<f64>>()
+            .filter(|e| e.is_finite())
+    }
+
+    /// Each element's energy, force and tangent (projected when `project`) at `u`.
+    fn element_states(&self, u: &[[f64; 3]], project: bool) -> Vec<Option<ElementState>> {
+        let (mesh, energy) = (self.mesh, self.opts.energy);
+        (0..mesh.tets.len())
+            .into_par_iter()
+            .map(|e| element_state_of(mesh, e, u, true, project, energy))
+            .collect()
+    }
+
+    /// The potential energy and the internal force f_int (global components) of the element
+    /// states; an element without energy is a degenerate element.
+    fn internal_force(&self, states: &[Option<ElementState>]) -> Result<(f64, Vec<f64>)> {
+        let mesh = self.mesh;
         let mut energy = 0.0;
-        let mut f_int = vec![0.0; 3 * n];
+        let mut f_int = vec![0.0; 3 * mesh.nodes.len()];
         for (e, s) in states.iter().enumerate() {
             let (w, fe, _) = s.as_ref().ok_or_else(|| {
                 Error::numerical(
@@ -144,35 +231,15 @@ pub fn solve(
                 f_int[3 * mesh.tets[e][a / 3] as usize + a % 3] += fe[a];
             }
         }
-        let r = to_free_local(&f_int);
-        let rn = norm(&r);
-        let r0v = *r0.get_or_insert(rn);
-        let rel = rn / norm(&f_int).max(r0v).max(f0);
-        residuals.push(rel);
-        if !rel.is_finite() {
-            return Err(not_converged("the residual is not finite", &residuals));
-        }
-        let energy_converged =
-            matches!((first_work, last_work), (Some(a), Some(b)) if b <= ENERGY_TOLERANCE * a);
-        // The increment criterion: after two full Newton steps, the error left is about
-        // |d_k| q / (1 − q) with q = |d_k| / |d_{k−1}| the observed contraction.
-        let increment_converged = match corrections[..] {
-            [.., a, b] if b < a => b * (b / a) / (1.0 - b / a) <= opts.displacement_tolerance_mm,
-            _ => false,
-        };
-        if rel <= opts.tolerance || energy_converged || increment_converged {
-            return Ok(done(u, it, residuals, krylov));
-        }
-        if it == opts.max_iterations {
-            break;
-        }
-        tangent.assemble(&mesh.tets, frames, |e| {
-            states[e].as_ref().and_then(|s| s.2.clone())
-        });
-        drop(states);
+        Ok((energy, f_int))
+    }
+
+    /// The Newton direction: K_T d = −r by CG preconditioned with the linear factor, to the
+    /// relative tolerance `eta`, held components kept at zero; and the CG iterations taken.
+    fn direction(&self, tangent: &BlockMatrix, r: &[f64], eta: f64) -> (Vec<f64>, usize) {
         let apply = |x: &[f64]| -> Vec<f64> {
             let mut y = tangent.apply(x);
-            for (v, h) in y.iter_mut().zip(&fixed) {
+            for (v, h) in y.iter_mut().zip(&self.fixed) {
                 if *h {
                     *v = 0.0;
                 }
@@ -180,8 +247,8 @@ pub fn solve(
             y
         };
         let precondition = |x: &[f64]| -> Vec<f64> {
-            let mut y = linear.solve_local(x);
-            for (v, h) in y.iter_mut().zip(&fixed) {
+            let mut y = self.linear.solve_local(x);
+            for (v, h) in y.iter_mut().zip(&self.fixed) {
                 if *h {
                     *v = 0.0;
                 }
@@ -189,79 +256,116 @@ pub fn solve(
             y
         };
         let b: Vec<f64> = r.iter().map(|v| -v).collect();
+        truncated_pcg(apply, precondition, &b, eta, self.opts.max_krylov)
+    }
+
+    /// `u` moved by `alpha` times the direction `d` (in the hold frames).
+    fn step(&self, u: &[[f64; 3]], d: &[f64], alpha: f64) -> Vec<[f64; 3]> {
+        u.iter()
+            .zip(self.frames)
+            .enumerate()
+            .map(|(v, (p, f))| {
+                let g = to_global(&f.axes, [d[3 * v], d[3 * v + 1], d[3 * v + 2]]);
+                [0, 1, 2].map(|c| p[c] + alpha * g[c])
+            })
+            .collect()
+    }
+
+    /// The line search along `d` from `u` (energy `energy`, slope `slope` = r · d): the step
+    /// halved until the energy falls by the Armijo amount (with a round-off allowance); the
+    /// state reached and its step length, or None in 30 halvings.
+    fn line_search(
+        &self,
+        u: &[[f64; 3]],
+        d: &[f64],
+        energy: f64,
+        slope: f64,
+    ) -> Option<(Vec<[f64; 3]>, f64)> {
+        let mut alpha = 1.0;
+        for _ in 0..30 {
+            let trial = self.step(u, d, alpha);
+            if let Some(e) = self.energy_at(&trial)
+                && e <= energy + 1e-4 * alpha * slope + self.energy_noise + 1e-13 * energy.abs()
+            {
+                return Some((trial, alpha));
+            }
+            alpha /= 2.0;
+        }
+        None
+    }
+}
+
+/// What the iterations have seen so far.
+#[derive(Default)]
+struct History {
+    /// The max nodal length of each accepted full correction (mm).
+    corrections: Vec<f64>,
+    /// The last residual norm and forcing term (None: no Newton step yet).
+    last_rn: Option<f64>,
+    last_eta: Option<f64>,
+    /// The relative residual of each iterate.
+    residuals: Vec<f64>,
+    /// The first residual norm (the linear answer's own out-of-balance force).
+    r0: Option<f64>,
+    krylov: usize,
+    /// The work |α d · r| of the first and of the last correction.
+    first_work: Option<f64>,
+    last_work: Option<f64>,
+}
+
+impl History {
+    /// Whether the iterate of relative residual `rel` is converged: `rel` within the
+    /// tolerance, the energy criterion or the increment criterion.
+    fn converged(&self, rel: f64, opts: &Options) -> bool {
+        let energy_converged = matches!((self.first_work, self.last_work), (Some(a), Some(b)) if b <= ENERGY_TOLERANCE * a);
+        // The increment criterion: after two full Newton steps, the error left is about
+        // |d_k| q / (1 − q) with q = |d_k| / |d_{k−1}| the observed contraction.
+        let increment_converged = match self.corrections[..] {
+            [.., a, b] if b < a => b * (b / a) / (1.0 - b / a) <= opts.displacement_tolerance_mm,
+            _ => false,
+        };
+        rel <= opts.tolerance || energy_converged || increment_converged
+    }
+
+    /// The forcing term of the Newton system at residual norm `rn`, recorded for the next.
+    fn forcing_term(&mut self, rn: f64) -> f64 {
         // Eisenstat & Walker's (1996) forcing term, choice 2 (γ = 0.9, exponent 2) with their
         // safeguard: accurate linear solves only as Newton closes in.
-        let eta = match last_rn {
+        let eta = match self.last_rn {
             None => ETA_MAX,
             Some(prev) => {
+                let last_eta = self.last_eta.unwrap_or(ETA_MAX);
                 let e = 0.9 * (rn / prev).powi(2);
                 let guard = 0.9 * last_eta * last_eta;
                 (if guard > 0.1 { e.max(guard) } else { e }).clamp(1e-12, ETA_MAX)
             }
         };
-        last_rn = Some(rn);
-        last_eta = eta;
-        let (d, its) = truncated_pcg(apply, precondition, &b, eta, opts.max_krylov);
-        krylov += its;
-        let slope = dot(&r, &d);
-        if !(slope < 0.0) {
-            return Err(not_converged(
-                "the Newton direction does not lower the energy",
-                &residuals,
-            ));
-        }
-        first_work.get_or_insert(slope.abs());
-        let step = |alpha: f64| -> Vec<[f64; 3]> {
-            u.iter()
-                .zip(frames)
-                .enumerate()
-                .map(|(v, (p, f))| {
-                    let g = to_global(&f.axes, [d[3 * v], d[3 * v + 1], d[3 * v + 2]]);
-                    [0, 1, 2].map(|c| p[c] + alpha * g[c])
-                })
-                .collect()
-        };
-        let mut alpha = 1.0;
-        let mut accepted = None;
-        for _ in 0..30 {
-            let trial = step(alpha);
-            if let Some(e) = energy_at(&trial)
-                && e <= energy + 1e-4 * alpha * slope + energy_noise + 1e-13 * energy.abs()
-            {
-                accepted = Some(trial);
-                break;
-            }
-            alpha /= 2.0;
-        }
-        match accepted {
-            Some(t) => u = t,
-            None => {
-                return Err(not_converged(
-                    "the line search found no step that lowers the energy",
-                    &residuals,
-                ));
-            }
-        }
-        last_work = Some((alpha * slope).abs());
-        project = !(alpha == 1.0 && rel <= EXACT_BELOW);
+        self.last_rn = Some(rn);
+        self.last_eta = Some(eta);
+        eta
+    }
+
+    /// Record the correction `d` taken with step length `alpha`.
+    fn record_correction(&mut self, alpha: f64, d: &[f64]) {
         // Only full steps show Newton's contraction; a damped one restarts the record.
         if alpha == 1.0 {
             let dmax = d
                 .chunks(3)
                 .map(|c| (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt())
                 .fold(0.0, f64::max);
-            corrections.push(dmax);
+            self.corrections.push(dmax);
         } else {
-            corrections.clear();
+            self.corrections.clear();
         }
     }
-    Err(not_converged(
-        &format!(
-            "no convergence in {} Newton iterations",
-            opts.max_iterations
-        ),
-        &residuals,
-    ))
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>()
 }
 
 fn done(u: Vec<[f64; 3]>, iterations: usize, residuals: Vec<f64>, krylov: usize) -> Solution {
