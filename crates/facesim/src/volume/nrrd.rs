@@ -25,184 +25,263 @@ fn vector(s: &str) -> Option<[f64; 3]> {
 }
 
 fn parse(bytes: &[u8], path: &Path) -> Result<Volume> {
-    let bad = |m: String| Error::input(path, m);
     if !bytes.starts_with(b"NRRD000") {
-        return Err(bad("not a NRRD file (no NRRD000x magic)".into()));
+        return Err(Error::input(path, "not a NRRD file (no NRRD000x magic)"));
     }
-    // The header ends at the first empty line.
-    let mut end = None;
-    for i in 0..bytes.len().saturating_sub(1) {
-        if bytes[i] == b'\n' && bytes[i + 1] == b'\n' {
-            end = Some((i, i + 2));
-            break;
-        }
-        if bytes[i] == b'\n' && bytes.get(i + 1..i + 3) == Some(b"\r\n") {
-            end = Some((i, i + 3));
-            break;
-        }
-    }
-    let (hend, dstart) = match end {
-        Some(e) => e,
-        None => (bytes.len(), bytes.len()),
-    };
-    let header =
-        std::str::from_utf8(&bytes[..hend]).map_err(|_| bad("the header is not text".into()))?;
-    let mut field = std::collections::HashMap::new();
-    for line in header.lines().skip(1) {
-        let line = line.trim_end_matches('\r');
-        if line.starts_with('#') || line.contains(":=") {
-            continue; // comments and key/value pairs
-        }
-        if let Some((k, v)) = line.split_once(": ") {
-            field.insert(k.trim().to_ascii_lowercase(), v.trim().to_string());
-        }
-    }
-    let get = |k: &str| field.get(k).map(String::as_str);
-    let dim: usize = get("dimension")
-        .and_then(|d| d.parse().ok())
-        .ok_or_else(|| bad("no dimension field".into()))?;
-    if dim != 3 {
-        return Err(bad(format!(
-            "dimension {dim}: a CT volume is a 3-D scalar image"
-        )));
-    }
-    let sizes: Vec<usize> = get("sizes")
-        .map(|s| {
-            s.split_whitespace()
-                .filter_map(|x| x.parse().ok())
-                .collect()
-        })
-        .unwrap_or_default();
-    let dims: [usize; 3] =
-        <[usize; 3]>::try_from(sizes).map_err(|_| bad("sizes must be 3 numbers".into()))?;
-    let ty = get("type").ok_or_else(|| bad("no type field".into()))?;
-    let (size, kind) = match ty {
-        "signed char" | "int8" | "int8_t" | "char" => (1, 'i'),
-        "uchar" | "unsigned char" | "uint8" | "uint8_t" => (1, 'u'),
-        "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
-            (2, 'i')
-        }
-        "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => (2, 'u'),
-        "int" | "signed int" | "int32" | "int32_t" => (4, 'i'),
-        "uint" | "unsigned int" | "uint32" | "uint32_t" => (4, 'u'),
-        "float" => (4, 'f'),
-        "double" => (8, 'f'),
-        other => return Err(bad(format!("voxel type '{other}' is not supported"))),
-    };
-    let ras = match get("space").map(|s| s.to_ascii_lowercase()) {
-        None => false,
-        Some(s) if s == "left-posterior-superior" || s == "lps" => false,
-        Some(s) if s == "right-anterior-superior" || s == "ras" => true,
-        Some(s) => {
-            return Err(bad(format!(
-                "space '{s}' (expected left-posterior-superior or right-anterior-superior)"
-            )));
-        }
-    };
-    let (spacing, direction) = match get("space directions") {
-        Some(d) => {
-            let v: Vec<[f64; 3]> = d
-                .split(')')
-                .filter(|s| !s.trim().is_empty())
-                .map(|s| vector(&format!("{})", s.trim())))
-                .collect::<Option<_>>()
-                .ok_or_else(|| bad(format!("space directions '{d}' are not 3 vectors")))?;
-            let v = <[[f64; 3]; 3]>::try_from(v)
-                .map_err(|_| bad("space directions must be 3 vectors".into()))?;
-            let sp = v.map(crate::vec3::norm);
-            if sp.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
-                return Err(bad("a space direction is zero or not finite".into()));
-            }
-            (sp, std::array::from_fn(|a| v[a].map(|c| c / sp[a])))
-        }
-        None => {
-            let sp: Vec<f64> = get("spacings")
-                .map(|s| {
-                    s.split_whitespace()
-                        .filter_map(|x| x.parse().ok())
-                        .collect()
-                })
-                .unwrap_or_else(|| vec![1.0; 3]);
-            let sp =
-                <[f64; 3]>::try_from(sp).map_err(|_| bad("spacings must be 3 numbers".into()))?;
-            (
-                sp,
-                std::array::from_fn(|a| std::array::from_fn(|c| if a == c { 1.0 } else { 0.0 })),
-            )
-        }
-    };
-    let origin = match get("space origin") {
-        Some(o) => vector(o).ok_or_else(|| bad(format!("space origin '{o}' is not a vector")))?,
-        None => [0.0; 3],
-    };
-    let flip = |v: [f64; 3]| if ras { [-v[0], -v[1], v[2]] } else { v };
-    let direction = direction.map(flip);
-    let origin = flip(origin);
-    Volume::check_geometry(path, dims, spacing, origin, direction)?;
+    let (header, dstart) = Header::read(bytes, path)?;
+    let dims = header.sizes()?;
+    let sample = header.sample()?;
+    let Geometry {
+        spacing,
+        origin,
+        direction,
+    } = header.geometry(dims)?;
     let n = dims[0] * dims[1] * dims[2];
-    // The voxels: after the header, or in a detached data file.
-    let detached;
-    let raw_bytes: &[u8] = match get("data file").or(get("datafile")) {
-        Some(f) => {
-            let p = path.parent().unwrap_or(Path::new("")).join(f);
-            detached = std::fs::read(&p).map_err(|e| Error::input(&p, e))?;
-            &detached
-        }
-        None => &bytes[dstart..],
-    };
-    let encoding = get("encoding").unwrap_or("raw");
-    let data: Vec<u8> = match encoding {
-        "raw" => raw_bytes.to_vec(),
-        "gzip" | "gz" => {
-            let mut out = Vec::with_capacity(n * size);
-            flate2::read::MultiGzDecoder::new(raw_bytes)
-                .take((n * size) as u64 + 1)
-                .read_to_end(&mut out)
-                .map_err(|e| bad(format!("gzip data: {e}")))?;
-            out
-        }
-        "ascii" | "text" | "txt" => {
-            let text =
-                std::str::from_utf8(raw_bytes).map_err(|_| bad("ascii data is not text".into()))?;
-            let v: Vec<f32> = text
-                .split_whitespace()
-                .map(|w| w.parse::<f64>().map(|x| x as f32))
-                .collect::<std::result::Result<_, _>>()
-                .map_err(|_| bad("ascii data holds a non-number".into()))?;
-            if v.len() < n {
-                return Err(bad(format!("{} values for {n} voxels", v.len())));
-            }
-            return Ok(Volume {
-                dims,
-                spacing,
-                origin,
-                direction,
-                data: v[..n].to_vec(),
-            });
-        }
-        other => {
-            return Err(bad(format!(
-                "encoding '{other}' is not supported (raw, gzip, ascii)"
-            )));
-        }
-    };
-    if data.len() < n * size {
-        return Err(bad(format!(
-            "{} bytes of voxel data, {} expected",
-            data.len(),
-            n * size
-        )));
-    }
-    // Raw data sits at the end of the file (NRRD allows a skipped prefix).
-    let data = &data[data.len() - n * size..];
-    let big = get("endian") == Some("big");
     Ok(Volume {
         dims,
         spacing,
         origin,
         direction,
-        data: super::samples::decode_samples(data, kind, size, big),
+        data: header.voxels(&bytes[dstart..], n, sample)?,
     })
+}
+
+/// A NRRD header's fields (keys lower case), read from `path`.
+struct Header<'a> {
+    path: &'a Path,
+    field: std::collections::HashMap<String, String>,
+}
+
+/// How one voxel is stored: its width in bytes and its kind ('i' signed, 'u' unsigned, 'f'
+/// floating point).
+#[derive(Clone, Copy)]
+struct Sample {
+    size: usize,
+    kind: char,
+}
+
+/// Where the voxels lie, in LPS: as `Volume`'s fields of the same names.
+struct Geometry {
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    direction: [[f64; 3]; 3],
+}
+
+impl<'a> Header<'a> {
+    /// The header of `bytes` (a NRRD file's, magic checked) and where the data after it start.
+    fn read(bytes: &[u8], path: &'a Path) -> Result<(Header<'a>, usize)> {
+        // The header ends at the first empty line.
+        let mut end = None;
+        for i in 0..bytes.len().saturating_sub(1) {
+            if bytes[i] == b'\n' && bytes[i + 1] == b'\n' {
+                end = Some((i, i + 2));
+                break;
+            }
+            if bytes[i] == b'\n' && bytes.get(i + 1..i + 3) == Some(b"\r\n") {
+                end = Some((i, i + 3));
+                break;
+            }
+        }
+        let (hend, dstart) = match end {
+            Some(e) => e,
+            None => (bytes.len(), bytes.len()),
+        };
+        let header = std::str::from_utf8(&bytes[..hend])
+            .map_err(|_| Error::input(path, "the header is not text"))?;
+        let mut field = std::collections::HashMap::new();
+        for line in header.lines().skip(1) {
+            let line = line.trim_end_matches('\r');
+            if line.starts_with('#') || line.contains(":=") {
+                continue; // comments and key/value pairs
+            }
+            if let Some((k, v)) = line.split_once(": ") {
+                field.insert(k.trim().to_ascii_lowercase(), v.trim().to_string());
+            }
+        }
+        Ok((Header { path, field }, dstart))
+    }
+
+    fn get(&self, k: &str) -> Option<&str> {
+        self.field.get(k).map(String::as_str)
+    }
+
+    /// An error naming the file.
+    fn bad(&self, m: String) -> Error {
+        Error::input(self.path, m)
+    }
+
+    /// The three sizes of a 3-D image.
+    fn sizes(&self) -> Result<[usize; 3]> {
+        let dim: usize = self
+            .get("dimension")
+            .and_then(|d| d.parse().ok())
+            .ok_or_else(|| self.bad("no dimension field".into()))?;
+        if dim != 3 {
+            return Err(self.bad(format!(
+                "dimension {dim}: a CT volume is a 3-D scalar image"
+            )));
+        }
+        let sizes: Vec<usize> = self
+            .get("sizes")
+            .map(|s| {
+                s.split_whitespace()
+                    .filter_map(|x| x.parse().ok())
+                    .collect()
+            })
+            .unwrap_or_default();
+        <[usize; 3]>::try_from(sizes).map_err(|_| self.bad("sizes must be 3 numbers".into()))
+    }
+
+    /// The voxel type.
+    fn sample(&self) -> Result<Sample> {
+        let ty = self
+            .get("type")
+            .ok_or_else(|| self.bad("no type field".into()))?;
+        let (size, kind) = match ty {
+            "signed char" | "int8" | "int8_t" | "char" => (1, 'i'),
+            "uchar" | "unsigned char" | "uint8" | "uint8_t" => (1, 'u'),
+            "short" | "short int" | "signed short" | "signed short int" | "int16" | "int16_t" => {
+                (2, 'i')
+            }
+            "ushort" | "unsigned short" | "unsigned short int" | "uint16" | "uint16_t" => (2, 'u'),
+            "int" | "signed int" | "int32" | "int32_t" => (4, 'i'),
+            "uint" | "unsigned int" | "uint32" | "uint32_t" => (4, 'u'),
+            "float" => (4, 'f'),
+            "double" => (8, 'f'),
+            other => return Err(self.bad(format!("voxel type '{other}' is not supported"))),
+        };
+        Ok(Sample { size, kind })
+    }
+
+    /// Spacing, origin and axis directions in LPS, checked for an image of `dims`.
+    fn geometry(&self, dims: [usize; 3]) -> Result<Geometry> {
+        let ras = match self.get("space").map(|s| s.to_ascii_lowercase()) {
+            None => false,
+            Some(s) if s == "left-posterior-superior" || s == "lps" => false,
+            Some(s) if s == "right-anterior-superior" || s == "ras" => true,
+            Some(s) => {
+                return Err(self.bad(format!(
+                    "space '{s}' (expected left-posterior-superior or right-anterior-superior)"
+                )));
+            }
+        };
+        let (spacing, direction) = self.axes()?;
+        let origin = match self.get("space origin") {
+            Some(o) => {
+                vector(o).ok_or_else(|| self.bad(format!("space origin '{o}' is not a vector")))?
+            }
+            None => [0.0; 3],
+        };
+        let flip = |v: [f64; 3]| if ras { [-v[0], -v[1], v[2]] } else { v };
+        let direction = direction.map(flip);
+        let origin = flip(origin);
+        Volume::check_geometry(self.path, dims, spacing, origin, direction)?;
+        Ok(Geometry {
+            spacing,
+            origin,
+            direction,
+        })
+    }
+
+    /// The spacing and unit direction of each axis in the header's space: from `space
+    /// directions`, else `spacings` along the space's axes (1 mm without them).
+    fn axes(&self) -> Result<([f64; 3], [[f64; 3]; 3])> {
+        match self.get("space directions") {
+            Some(d) => {
+                let v: Vec<[f64; 3]> = d
+                    .split(')')
+                    .filter(|s| !s.trim().is_empty())
+                    .map(|s| vector(&format!("{})", s.trim())))
+                    .collect::<Option<_>>()
+                    .ok_or_else(|| self.bad(format!("space directions '{d}' are not 3 vectors")))?;
+                let v = <[[f64; 3]; 3]>::try_from(v)
+                    .map_err(|_| self.bad("space directions must be 3 vectors".into()))?;
+                let sp = v.map(crate::vec3::norm);
+                if sp.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
+                    return Err(self.bad("a space direction is zero or not finite".into()));
+                }
+                Ok((sp, std::array::from_fn(|a| v[a].map(|c| c / sp[a]))))
+            }
+            None => {
+                let sp: Vec<f64> = self
+                    .get("spacings")
+                    .map(|s| {
+                        s.split_whitespace()
+                            .filter_map(|x| x.parse().ok())
+                            .collect()
+                    })
+                    .unwrap_or_else(|| vec![1.0; 3]);
+                let sp = <[f64; 3]>::try_from(sp)
+                    .map_err(|_| self.bad("spacings must be 3 numbers".into()))?;
+                Ok((
+                    sp,
+                    std::array::from_fn(|a| {
+                        std::array::from_fn(|c| if a == c { 1.0 } else { 0.0 })
+                    }),
+                ))
+            }
+        }
+    }
+
+    /// The `n` voxel values: after the header (`inline`, the bytes after its blank line), or
+    /// in a detached data file; raw, gzip-compressed or ASCII numbers.
+    fn voxels(&self, inline: &[u8], n: usize, sample: Sample) -> Result<Vec<f32>> {
+        let Sample { size, kind } = sample;
+        // The voxels: after the header, or in a detached data file.
+        let detached;
+        let raw_bytes: &[u8] = match self.get("data file").or(self.get("datafile")) {
+            Some(f) => {
+                let p = self.path.parent().unwrap_or(Path::new("")).join(f);
+                detached = std::fs::read(&p).map_err(|e| Error::input(&p, e))?;
+                &detached
+            }
+            None => inline,
+        };
+        let encoding = self.get("encoding").unwrap_or("raw");
+        let data: Vec<u8> = match encoding {
+            "raw" => raw_bytes.to_vec(),
+            "gzip" | "gz" => {
+                let mut out = Vec::with_capacity(n * size);
+                flate2::read::MultiGzDecoder::new(raw_bytes)
+                    .take((n * size) as u64 + 1)
+                    .read_to_end(&mut out)
+                    .map_err(|e| self.bad(format!("gzip data: {e}")))?;
+                out
+            }
+            "ascii" | "text" | "txt" => return self.ascii(raw_bytes, n),
+            other => {
+                return Err(self.bad(format!(
+                    "encoding '{other}' is not supported (raw, gzip, ascii)"
+                )));
+            }
+        };
+        if data.len() < n * size {
+            return Err(self.bad(format!(
+                "{} bytes of voxel data, {} expected",
+                data.len(),
+                n * size
+            )));
+        }
+        // Raw data sits at the end of the file (NRRD allows a skipped prefix).
+        let data = &data[data.len() - n * size..];
+        let big = self.get("endian") == Some("big");
+        Ok(super::samples::decode_samples(data, kind, size, big))
+    }
+
+    /// The first `n` of the ASCII numbers `raw_bytes` hold.
+    fn ascii(&self, raw_bytes: &[u8], n: usize) -> Result<Vec<f32>> {
+        let text = std::str::from_utf8(raw_bytes)
+            .map_err(|_| self.bad("ascii data is not text".into()))?;
+        let v: Vec<f32> = text
+            .split_whitespace()
+            .map(|w| w.parse::<f64>().map(|x| x as f32))
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|_| self.bad("ascii data holds a non-number".into()))?;
+        if v.len() < n {
+            return Err(self.bad(format!("{} values for {n} voxels", v.len())));
+        }
+        Ok(v[..n].to_vec())
+    }
 }
 
 /// Write `vol` as a gzip NRRD (int16 HU, LPS), as Slicer writes a CT for a CLI module (used by
