@@ -8,6 +8,19 @@ use std::path::Path;
 impl Case {
     /// Check every value's range; errors name `path` (case.toml) and the key.
     pub fn validate(&self, path: &Path) -> Result<()> {
+        self.validate_inputs(path)?;
+        self.validate_tissue(path)?;
+        self.validate_surface_model(path)?;
+        self.validate_tet(path)?;
+        self.uncertainty
+            .validate(self.solve.model, self.reduced_form(), path)?;
+        self.validate_registration(path)?;
+        self.validate_surface_regions(path)?;
+        self.validate_plan(path)
+    }
+
+    /// `[[landmark]]` and `[ct]`.
+    fn validate_inputs(&self, path: &Path) -> Result<()> {
         let bad = |msg: String| Err(Error::input(path, msg));
         for l in &self.landmark {
             if l.label.trim().is_empty() || l.position.iter().any(|x| !x.is_finite()) {
@@ -27,6 +40,12 @@ impl Case {
         if self.ct.intercept.is_some_and(|b| !b.is_finite()) {
             return bad("[ct] intercept must be finite".into());
         }
+        Ok(())
+    }
+
+    /// `[tissue]` and `[tissue.stiffness]`.
+    fn validate_tissue(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         let t = &self.tissue;
         let bounds = [t.head_threshold, t.fat_dark, t.fat_bright, t.soft, t.bone];
         if bounds.iter().any(|b| !b.is_finite()) || bounds.windows(2).any(|w| w[0] >= w[1]) {
@@ -44,6 +63,12 @@ impl Case {
         {
             return bad("[tissue.stiffness] values must be finite and positive".into());
         }
+        Ok(())
+    }
+
+    /// The surface models' settings: `[extract]`, `[springs]`, `[surface]` and `[solve]`.
+    fn validate_surface_model(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         let e = &self.extract;
         let ok = e.angle_step_deg > 0.0
             && e.angle_step_deg <= 30.0
@@ -81,6 +106,12 @@ impl Case {
         if self.solve.steps == 0 {
             return bad("[solve] steps must be at least 1".into());
         }
+        Ok(())
+    }
+
+    /// `[tet]` and its materials.
+    fn validate_tet(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         let t = &self.tet;
         if !(t.skin_size_mm > 0.0
             && t.deep_size_mm >= t.skin_size_mm
@@ -134,8 +165,12 @@ impl Case {
                 ));
             }
         }
-        self.uncertainty
-            .validate(self.solve.model, self.reduced_form(), path)?;
+        Ok(())
+    }
+
+    /// `[registration]`.
+    fn validate_registration(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         if let Some(r) = &self.registration {
             if r.scan.len() != r.ct.len() || r.scan.len() < 3 {
                 return bad(format!(
@@ -148,6 +183,12 @@ impl Case {
                 return bad("[registration] landmarks must be finite".into());
             }
         }
+        Ok(())
+    }
+
+    /// `[surface] movable` and `[[surface.region]]`.
+    fn validate_surface_regions(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         if let Some(m) = &self.surface.movable {
             m.validate("[surface] movable")?;
         }
@@ -160,6 +201,12 @@ impl Case {
                 return bad("[[surface.region]] takes box, sphere or half_space shapes".into());
             }
         }
+        Ok(())
+    }
+
+    /// The plan: `[[surgery]]`, `[head]` and `[[osteotomy]]`.
+    fn validate_plan(&self, path: &Path) -> Result<()> {
+        let bad = |msg: String| Err(Error::input(path, msg));
         super::check_surgeries(&self.surgery).or_else(bad)?;
         if let Some(h) = &self.head
             && !(h.pitch_deg.is_finite() && h.pitch_deg.abs() <= 45.0)
