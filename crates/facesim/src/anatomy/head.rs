@@ -441,107 +441,157 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
             100.0 * g.coverage()
         ));
     }
-    let [ns, nv, na] = g.n;
-    // Per (s, v): Some(bone hit index along a) or None (unknown); deep when the soft path is long.
-    let mut hit = vec![None::<usize>; ns * nv];
-    let mut deep = vec![false; ns * nv];
-    // Rays that leave the CT before bone: what lies behind them is unknown.
-    let mut open = vec![false; ns * nv];
-    // Rays that cross air inside the head (a sinus, the nose) before bone.
-    let mut cavity = vec![false; ns * nv];
-    let depth = (ORBIT_DEPTH_MM / STEP).round() as usize;
-    for iv in 0..nv {
-        for is in 0..ns {
-            // Soft tissue crossed before bone; air inside (a sinus) does not count.
-            let mut soft = 0;
-            let mut entered = false;
-            let mut known = true;
-            for ia in (0..na).rev() {
-                let k = g.idx([is, iv, ia]);
-                let h = g.hu[k];
-                // In front of the face the CT may end: air until the skin; within, unknown.
-                if h.is_nan() {
-                    if entered {
-                        known = false;
-                        break;
-                    }
-                    continue;
-                }
-                if g.bone[k] {
-                    hit[is + ns * iv] = Some(ia);
-                    break;
-                }
-                if h >= AIR_HU {
-                    entered = true;
-                    soft += 1;
-                } else if entered {
-                    cavity[is + ns * iv] = true;
-                }
-            }
-            deep[is + ns * iv] = known && soft >= depth;
-            // A ray wholly outside the CT (beyond its last slice) is unknown too.
-            let inside = (0..na).any(|ia| !g.hu[g.idx([is, iv, ia])].is_nan());
-            open[is + ns * iv] = !known || !inside;
-        }
-    }
-    // The opening: 4-connected regions of deep rays; the one with most rays 22–45 mm out.
-    let mut comp = vec![usize::MAX; ns * nv];
-    let mut best: Option<(usize, usize, usize)> = None; // (id, score, size)
-    let mut id = 0;
-    for start in 0..ns * nv {
-        if !deep[start] || comp[start] != usize::MAX {
-            continue;
-        }
-        let mut stack = vec![start];
-        comp[start] = id;
-        let (mut size, mut score, mut floored) = (0, 0, true);
-        while let Some(k) = stack.pop() {
-            size += 1;
-            let (is, iv) = (k % ns, k / ns);
-            // An orbit has bone under its opening: not the grid's end nor the CT's.
-            if iv == 0 || open[k - ns] {
-                floored = false;
-            }
-            let s = (g.lo[0] + is as f64 * STEP).abs();
-            if (22.0..=45.0).contains(&s) {
-                score += 1;
-            }
-            let mut nb = Vec::with_capacity(4);
-            if is > 0 {
-                nb.push(k - 1);
-            }
-            if is + 1 < ns {
-                nb.push(k + 1);
-            }
-            if iv > 0 {
-                nb.push(k - ns);
-            }
-            if iv + 1 < nv {
-                nb.push(k + ns);
-            }
-            for j in nb {
-                if deep[j] && comp[j] == usize::MAX {
-                    comp[j] = id;
-                    stack.push(j);
-                }
-            }
-        }
-        if floored && best.is_none_or(|b| score > b.1) {
-            best = Some((id, score, size));
-        }
-        id += 1;
-    }
-    let min_area = (300.0 / (STEP * STEP)) as usize;
-    let Some((orbit, _, _)) = best.filter(|b| b.1 > 0 && b.2 >= min_area) else {
+    let rays = Rays::cast(&g);
+    let Some(opening) = Opening::find(&g, &rays) else {
         return Err(format!(
             "no {name} orbit found: no region where {ORBIT_DEPTH_MM:.0} mm of soft tissue lies in front of bone, 22–45 mm from the midline"
         ));
     };
+    let rim = inferior_rim(&g, &rays, &opening);
+    if rim.len() < 3 {
+        return Err(format!(
+            "the {name} orbit's opening has no inferior rim in the CT (the bone under it is missing)"
+        ));
+    }
+    Ok(rim_crest(&g, &rays, &rim))
+}
+
+/// The rays of an orbit search grid, one per (s, v), run backwards from in front of the face.
+struct Rays {
+    /// Per (s, v): Some(bone hit index along a) or None (unknown).
+    hit: Vec<Option<usize>>,
+    /// Deep when the soft path is long.
+    deep: Vec<bool>,
+    /// Rays that leave the CT before bone: what lies behind them is unknown.
+    open: Vec<bool>,
+    /// Rays that cross air inside the head (a sinus, the nose) before bone.
+    cavity: Vec<bool>,
+}
+
+impl Rays {
+    fn cast(g: &Grid) -> Rays {
+        let [ns, nv, na] = g.n;
+        let mut rays = Rays {
+            hit: vec![None; ns * nv],
+            deep: vec![false; ns * nv],
+            open: vec![false; ns * nv],
+            cavity: vec![false; ns * nv],
+        };
+        let depth = (ORBIT_DEPTH_MM / STEP).round() as usize;
+        for iv in 0..nv {
+            for is in 0..ns {
+                // Soft tissue crossed before bone; air inside (a sinus) does not count.
+                let mut soft = 0;
+                let mut entered = false;
+                let mut known = true;
+                for ia in (0..na).rev() {
+                    let k = g.idx([is, iv, ia]);
+                    let h = g.hu[k];
+                    // In front of the face the CT may end: air until the skin; within, unknown.
+                    if h.is_nan() {
+                        if entered {
+                            known = false;
+                            break;
+                        }
+                        continue;
+                    }
+                    if g.bone[k] {
+                        rays.hit[is + ns * iv] = Some(ia);
+                        break;
+                    }
+                    if h >= AIR_HU {
+                        entered = true;
+                        soft += 1;
+                    } else if entered {
+                        rays.cavity[is + ns * iv] = true;
+                    }
+                }
+                rays.deep[is + ns * iv] = known && soft >= depth;
+                // A ray wholly outside the CT (beyond its last slice) is unknown too.
+                let inside = (0..na).any(|ia| !g.hu[g.idx([is, iv, ia])].is_nan());
+                rays.open[is + ns * iv] = !known || !inside;
+            }
+        }
+        rays
+    }
+}
+
+/// The orbit's opening: the 4-connected regions of deep rays (`comp`, per (s, v); `usize::MAX`
+/// where not deep) and the one that is the orbit.
+struct Opening {
+    comp: Vec<usize>,
+    orbit: usize,
+}
+
+impl Opening {
+    /// The region with most rays 22–45 mm out among those with bone under them, if it has some
+    /// such rays and the area of an orbit.
+    fn find(g: &Grid, rays: &Rays) -> Option<Opening> {
+        let [ns, nv, _] = g.n;
+        let (deep, open) = (&rays.deep, &rays.open);
+        // The opening: 4-connected regions of deep rays; the one with most rays 22–45 mm out.
+        let mut comp = vec![usize::MAX; ns * nv];
+        let mut best: Option<(usize, usize, usize)> = None; // (id, score, size)
+        let mut id = 0;
+        for start in 0..ns * nv {
+            if !deep[start] || comp[start] != usize::MAX {
+                continue;
+            }
+            let mut stack = vec![start];
+            comp[start] = id;
+            let (mut size, mut score, mut floored) = (0, 0, true);
+            while let Some(k) = stack.pop() {
+                size += 1;
+                let (is, iv) = (k % ns, k / ns);
+                // An orbit has bone under its opening: not the grid's end nor the CT's.
+                if iv == 0 || open[k - ns] {
+                    floored = false;
+                }
+                let s = (g.lo[0] + is as f64 * STEP).abs();
+                if (22.0..=45.0).contains(&s) {
+                    score += 1;
+                }
+                let mut nb = Vec::with_capacity(4);
+                if is > 0 {
+                    nb.push(k - 1);
+                }
+                if is + 1 < ns {
+                    nb.push(k + 1);
+                }
+                if iv > 0 {
+                    nb.push(k - ns);
+                }
+                if iv + 1 < nv {
+                    nb.push(k + ns);
+                }
+                for j in nb {
+                    if deep[j] && comp[j] == usize::MAX {
+                        comp[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+            if floored && best.is_none_or(|b| score > b.1) {
+                best = Some((id, score, size));
+            }
+            id += 1;
+        }
+        let min_area = (300.0 / (STEP * STEP)) as usize;
+        let (orbit, _, _) = best.filter(|b| b.1 > 0 && b.2 >= min_area)?;
+        Some(Opening { comp, orbit })
+    }
+}
+
+/// The inferior rim under `opening`: (is, iv) of the rim ray of each column that has one.
+fn inferior_rim(g: &Grid, rays: &Rays, opening: &Opening) -> Vec<(usize, usize)> {
+    let [ns, nv, _] = g.n;
     // Rim top per column: the lowest ray of the opening whose ray below stops at bone.
     let min_height = (10.0 / STEP) as usize;
     let mut rim: Vec<(usize, usize)> = Vec::new(); // (is, iv of the rim ray)
     for is in 0..ns {
-        let rows: Vec<usize> = (0..nv).filter(|iv| comp[is + ns * iv] == orbit).collect();
+        let rows: Vec<usize> = (0..nv)
+            .filter(|iv| opening.comp[is + ns * iv] == opening.orbit)
+            .collect();
         let (Some(&low), Some(&high)) = (rows.first(), rows.last()) else {
             continue;
         };
@@ -550,15 +600,17 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
         }
         // The rim is solid bone under the skin: its ray meets no sinus before it.
         let below = is + ns * (low - 1);
-        if hit[below].is_some() && !cavity[below] {
+        if rays.hit[below].is_some() && !rays.cavity[below] {
             rim.push((is, low - 1));
         }
     }
-    if rim.len() < 3 {
-        return Err(format!(
-            "the {name} orbit's opening has no inferior rim in the CT (the bone under it is missing)"
-        ));
-    }
+    rim
+}
+
+/// Orbitale on the inferior rim `rim` (at least one column): the lowest rim top, at the HU
+/// crossing `BONE_HU` above the rim's bone, in frame coordinates.
+fn rim_crest(g: &Grid, rays: &Rays, rim: &[(usize, usize)]) -> [f64; 3] {
+    let ns = g.n[0];
     // The lowest rim top, its height a median of 3 columns against single-ray noise.
     let heights: Vec<usize> = (0..rim.len())
         .map(|k| {
@@ -573,7 +625,7 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
     let lowest = heights.iter().copied().min().unwrap_or(0);
     let cols: Vec<usize> = (0..rim.len()).filter(|k| heights[*k] == lowest).collect();
     let (is, iv) = rim[cols[cols.len() / 2]];
-    let front = hit[is + ns * iv].unwrap_or(0);
+    let front = rays.hit[is + ns * iv].unwrap_or(0);
     // The crest lies on the rim's bone a little behind its front: the middle of the bone run of
     // the rim ray, at most 8 mm deep.
     let run_end = (0..=front)
@@ -590,7 +642,7 @@ fn orbitale(bone: &Bone, f: &HeadFrame, side: f64) -> Result<[f64; 3], String> {
     } else {
         0.5
     };
-    Ok(g.coords([is as f64, iv as f64 + frac, ia as f64]))
+    g.coords([is as f64, iv as f64 + frac, ia as f64])
 }
 
 /// The Frankfort plane fitted to the found points, in the midsagittal frame.
