@@ -12,6 +12,7 @@ use crate::model::reduced::file::{self as stored, StoredReduced};
 use crate::plan::{PlanBasis, file};
 use crate::report::{self, ReplanReport, Report, TissueReplan};
 use serde::Deserialize;
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 /// A PLAN.toml: the `[[osteotomy]]` list (case.toml's form) and, optionally, new tissue
@@ -323,17 +324,8 @@ pub fn replan_with(
     plan_file: &Path,
     dest: Option<&Path>,
 ) -> Result<Replanned> {
-    let surgeries;
-    let new = if new.surgery.is_empty() {
-        new
-    } else {
-        surgeries = NewPlan {
-            osteotomy: surgery_plan(run_dir, basis, new, plan_file)?,
-            surgery: Vec::new(),
-            ..new.clone()
-        };
-        &surgeries
-    };
+    let new = with_surgeries(run_dir, basis, new, plan_file)?;
+    let new: &NewPlan = &new;
     let wants_band = new.uncertainty.as_ref().is_some_and(|u| u.samples > 0);
     let what = if new.tet.is_some() {
         "[tet]"
@@ -343,22 +335,11 @@ pub fn replan_with(
     let models = (new.tet.is_some() || wants_band)
         .then(|| stored_at_run_plan(run_dir, basis, new, plan_file, what))
         .transpose()?;
-    let (face_post, tissue, plan) = match (&new.tet, &models) {
-        (Some(change), Some(models)) => {
-            let (face, t) = tissue_face(models, basis, change, plan_file)?;
-            (face, Some(t), basis.run_plan.clone())
-        }
-        (None, Some(_)) => (
-            predict_plan(basis, &basis.run_plan, plan_file)?,
-            None,
-            basis.run_plan.clone(),
-        ),
-        (_, None) => (
-            predict_plan(basis, &new.osteotomy, plan_file)?,
-            None,
-            new.osteotomy.clone(),
-        ),
-    };
+    let NewFace {
+        face_post,
+        tissue,
+        plan,
+    } = new_face(basis, new, models.as_ref(), plan_file)?;
     let plan = plan.as_slice();
     let out_dir = dest
         .map(Path::to_path_buf)
@@ -366,28 +347,7 @@ pub fn replan_with(
     let skin = Mesh::new(basis.face_pre.clone(), basis.triangles.clone());
     let mut post = skin.clone();
     post.vertices = face_post.clone();
-    let skull_pre = run_dir.join("skull_pre.ply");
-    let skull_post = if skull_pre.exists() {
-        // The bone each segment moves: mask and surface regions read as the run read them, the
-        // segments the run cut from its own output.
-        let mut plan = plan.to_vec();
-        for o in &mut plan {
-            if let Region::Mask(m) = &mut o.region
-                && m.path.is_relative()
-                && m.path.to_string_lossy().starts_with("segment_")
-                && run_dir.join(&m.path).is_file()
-            {
-                m.path = run_dir.join(&m.path);
-                m.found = true;
-            }
-        }
-        crate::pipeline::inputs::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
-        let mut s = mesh::read_mesh(&skull_pre)?;
-        s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
-        Some(s)
-    } else {
-        None
-    };
+    let skull_post = skull_post(run_dir, plan)?;
     let dist = outputs::displacement(&skin, &post);
     let run_report = Report::read(&run_dir.join("report.json"))?;
     // The run's landmarks (as it found them, not detected again) carried with the new plan.
@@ -400,26 +360,7 @@ pub fn replan_with(
             &crate::osteotomy::Plan::new(plan),
         )
     });
-    let mut warnings = basis.warnings.clone();
-    if skull_post.is_none() {
-        warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
-    }
-    // Tissue lifted off the bone, or torn in the gap, is a state the run's plan chose: the
-    // basis is exact for plans in that state, and one that changes it needs a full run.
-    if let Some(t) = &run_report.tet {
-        if t.lifted_off > 0 {
-            warnings.push(format!(
-                "the run lifted {} tissue nodes off the bone ({} of them raised by the approach, where the bone pulled it): the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`",
-                t.lifted_off, t.lifted_in_tension
-            ));
-        }
-        if t.torn_elements > 0 {
-            warnings.push(format!(
-                "the run's move tore {} tetrahedra of gap tissue ([tet] tear_gap): the basis is exact for plans that tear the same tissue; a plan that would invert other tissue needs a full `facesim run`",
-                t.torn_elements
-            ));
-        }
-    }
+    let warnings = replan_warnings(basis, &run_report, skull_post.is_some());
     // The band before any file is written (a sample outside the trained box is refused).
     let band = match (&new.uncertainty, &models) {
         (Some(u), Some(m)) if wants_band => Some(stored_band(
@@ -450,29 +391,176 @@ pub fn replan_with(
         warnings,
     );
     report.uncertainty = band.as_ref().map(|b| b.report.clone());
-    // The writes, as one unit swapped in for `out_dir` (`output::RunDir`).
-    let unit = crate::output::RunDir::create(&out_dir)?;
-    let o = unit.path();
-    mesh::write_mesh(&post, &o.join("face_post.obj"))?;
-    mesh::write_mesh(&post, &o.join("face_post.ply"))?;
-    mesh::write_mesh(
-        &outputs::coloured_face(&post, &dist),
-        &o.join("face_displacement.ply"),
+    let out_dir = write_replan(
+        &out_dir,
+        &ReplanFiles {
+            skin: &skin,
+            post: &post,
+            dist: &dist,
+            skull_post: skull_post.as_ref(),
+            analysis: analysis.as_ref(),
+            band: band.as_ref(),
+            report: &report,
+        },
     )?;
-    outputs::displacement_csv(&o.join("displacement.csv"), &skin, &post, &dist)?;
-    if let Some(s) = &skull_post {
-        mesh::write_mesh(s, &o.join("skull_post.ply"))?;
-    }
-    if let Some(a) = &analysis {
-        crate::landmarks::markups::write_pre_post(o, &a.carried)?;
-    }
-    if let Some(b) = &band {
-        crate::uncertainty::write_band(o, &post, b)?;
-    }
-    outputs::write_report(o, &report)?;
     Ok(Replanned {
-        out_dir: unit.commit()?,
+        out_dir,
         face_post,
         report,
     })
+}
+
+/// PLAN.toml with its `[[surgery]]` entries turned into osteotomies over the run's segments,
+/// leading its `[[osteotomy]]` entries (`surgery_plan`); as it is without any.
+fn with_surgeries<'a>(
+    run_dir: &Path,
+    basis: &PlanBasis,
+    new: &'a NewPlan,
+    plan_file: &Path,
+) -> Result<Cow<'a, NewPlan>> {
+    if new.surgery.is_empty() {
+        return Ok(Cow::Borrowed(new));
+    }
+    Ok(Cow::Owned(NewPlan {
+        osteotomy: surgery_plan(run_dir, basis, new, plan_file)?,
+        surgery: Vec::new(),
+        ..new.clone()
+    }))
+}
+
+/// The replanned face, what report.json says of a tissue change, and the plan it is at.
+struct NewFace {
+    face_post: Vec<[f64; 3]>,
+    tissue: Option<TissueReplan>,
+    plan: Vec<Osteotomy>,
+}
+
+/// The face for PLAN.toml `new`: with `models` (the run's stored reduced models, read for
+/// `[tet]` or a band) at the run's plan, for `[tet]`'s tissues from them, else from the basis;
+/// without, the basis's prediction for its `[[osteotomy]]` plan.
+fn new_face(
+    basis: &PlanBasis,
+    new: &NewPlan,
+    models: Option<&StoredReduced>,
+    plan_file: &Path,
+) -> Result<NewFace> {
+    let (face_post, tissue, plan) = match (&new.tet, models) {
+        (Some(change), Some(models)) => {
+            let (face, t) = tissue_face(models, basis, change, plan_file)?;
+            (face, Some(t), basis.run_plan.clone())
+        }
+        (None, Some(_)) => (
+            predict_plan(basis, &basis.run_plan, plan_file)?,
+            None,
+            basis.run_plan.clone(),
+        ),
+        (_, None) => (
+            predict_plan(basis, &new.osteotomy, plan_file)?,
+            None,
+            new.osteotomy.clone(),
+        ),
+    };
+    Ok(NewFace {
+        face_post,
+        tissue,
+        plan,
+    })
+}
+
+/// The run's skull_pre.ply moved by `plan`; None when the run wrote no skull_pre.ply.
+fn skull_post(run_dir: &Path, plan: &[Osteotomy]) -> Result<Option<Mesh>> {
+    let skull_pre = run_dir.join("skull_pre.ply");
+    if !skull_pre.exists() {
+        return Ok(None);
+    }
+    // The bone each segment moves: mask and surface regions read as the run read them, the
+    // segments the run cut from its own output.
+    let mut plan = plan.to_vec();
+    for o in &mut plan {
+        if let Region::Mask(m) = &mut o.region
+            && m.path.is_relative()
+            && m.path.to_string_lossy().starts_with("segment_")
+            && run_dir.join(&m.path).is_file()
+        {
+            m.path = run_dir.join(&m.path);
+            m.found = true;
+        }
+    }
+    crate::pipeline::inputs::read_region_files(plan.iter_mut().map(|o| &mut o.region))?;
+    let mut s = mesh::read_mesh(&skull_pre)?;
+    s.vertices = crate::osteotomy::Plan::new(&plan).apply(&s.vertices, 1.0).0;
+    Ok(Some(s))
+}
+
+/// The replan's warnings: the basis's, a skull not written (`skull_written` false), and the
+/// run's tissue states the basis is exact for only.
+fn replan_warnings(basis: &PlanBasis, run_report: &Report, skull_written: bool) -> Vec<String> {
+    let mut warnings = basis.warnings.clone();
+    if !skull_written {
+        warnings.push("skull_post.ply not written (no skull_pre.ply in the run's outputs)".into());
+    }
+    // Tissue lifted off the bone, or torn in the gap, is a state the run's plan chose: the
+    // basis is exact for plans in that state, and one that changes it needs a full run.
+    if let Some(t) = &run_report.tet {
+        if t.lifted_off > 0 {
+            warnings.push(format!(
+                "the run lifted {} tissue nodes off the bone ({} of them raised by the approach, where the bone pulled it): the basis is exact for plans that lift off the same tissue; check a plan far from the run's with a full `facesim run`",
+                t.lifted_off, t.lifted_in_tension
+            ));
+        }
+        if t.torn_elements > 0 {
+            warnings.push(format!(
+                "the run's move tore {} tetrahedra of gap tissue ([tet] tear_gap): the basis is exact for plans that tear the same tissue; a plan that would invert other tissue needs a full `facesim run`",
+                t.torn_elements
+            ));
+        }
+    }
+    warnings
+}
+
+/// What a replan writes.
+struct ReplanFiles<'a> {
+    skin: &'a Mesh,
+    post: &'a Mesh,
+    /// Per face vertex, its displacement's length (mm).
+    dist: &'a [f64],
+    skull_post: Option<&'a Mesh>,
+    analysis: Option<&'a crate::landmarks::Analysis>,
+    band: Option<&'a crate::uncertainty::Sampled>,
+    report: &'a Report,
+}
+
+/// Write `files` into `out_dir`, as one unit swapped in for it (`output::RunDir`); the
+/// directory they are in.
+fn write_replan(out_dir: &Path, files: &ReplanFiles) -> Result<PathBuf> {
+    let ReplanFiles {
+        skin,
+        post,
+        dist,
+        skull_post,
+        analysis,
+        band,
+        report,
+    } = *files;
+    // The writes, as one unit swapped in for `out_dir` (`output::RunDir`).
+    let unit = crate::output::RunDir::create(out_dir)?;
+    let o = unit.path();
+    mesh::write_mesh(post, &o.join("face_post.obj"))?;
+    mesh::write_mesh(post, &o.join("face_post.ply"))?;
+    mesh::write_mesh(
+        &outputs::coloured_face(post, dist),
+        &o.join("face_displacement.ply"),
+    )?;
+    outputs::displacement_csv(&o.join("displacement.csv"), skin, post, dist)?;
+    if let Some(s) = skull_post {
+        mesh::write_mesh(s, &o.join("skull_post.ply"))?;
+    }
+    if let Some(a) = analysis {
+        crate::landmarks::markups::write_pre_post(o, &a.carried)?;
+    }
+    if let Some(b) = band {
+        crate::uncertainty::write_band(o, post, b)?;
+    }
+    outputs::write_report(o, report)?;
+    unit.commit()
 }
