@@ -199,92 +199,11 @@ pub fn write_report_html(dir: &Path, data: &PageData) -> Result<()> {
 /// The whole page as text; an error names what is inconsistent in `data`.
 pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> {
     let n = data.face_pre.len();
-    if data.face_post.len() != n {
-        return Err(format!(
-            "face_post has {} vertices, face_pre {n}",
-            data.face_post.len()
-        ));
-    }
-    if data.skull_post.len() != data.skull_pre.len()
-        || data.skull_segment.len() != data.skull_pre.len()
-    {
-        return Err("skull_pre, skull_post and skull_segment differ in length".into());
-    }
-    if !data.region_of.is_empty() && data.region_of.len() != n {
-        return Err(format!(
-            "{} region indices for {n} face vertices",
-            data.region_of.len()
-        ));
-    }
-    if data.band_width.as_ref().is_some_and(|b| b.len() != n) {
-        return Err(format!("band widths for other than {n} face vertices"));
-    }
-    let mut landmarks = Vec::new();
-    for l in &data.landmarks {
-        let anchor = match &l.anchor {
-            Some(a) => {
-                if a.triangle as usize >= data.face_triangles.len() {
-                    return Err(format!("landmark '{}' anchored off the face", l.label));
-                }
-                serde_json::json!({
-                    "triangle": a.triangle,
-                    "weights": a.weights,
-                    "offset": a.offset,
-                })
-            }
-            None => serde_json::Value::Null,
-        };
-        landmarks.push(serde_json::json!({
-            "label": l.label,
-            "pre": l.pre,
-            "post": l.post,
-            "anchor": anchor,
-            "segment": l.segment,
-        }));
-    }
+    check_lengths(data)?;
+    let landmarks = landmarks_json(data)?;
     let basis = match &data.basis {
         None => serde_json::Value::Null,
-        Some(b) => {
-            let mut segs = Vec::new();
-            for s in &b.segments {
-                if s.columns.len() != 12 || s.columns.iter().any(|c| c.len() != n) {
-                    return Err(format!(
-                        "plan basis segment '{}': expected 12 columns of {n} vertices",
-                        s.name
-                    ));
-                }
-                let flat: Vec<f32> = s
-                    .columns
-                    .iter()
-                    .flat_map(|c| c.iter().flat_map(|p| p.map(|x| x as f32)))
-                    .collect();
-                // The run's move read in the clinical frame: the clinical sliders' start.
-                let moves = data.clinical_frame.as_ref().map(|c| {
-                    let m = crate::anatomy::moves::read_back(
-                        &c.head_frame(),
-                        crate::osteotomy::rotation(s.rotate_deg),
-                        s.translate,
-                    );
-                    serde_json::json!({
-                        "advance_mm": m.advance_mm,
-                        "up_mm": m.up_mm,
-                        "left_mm": m.left_mm,
-                        "pitch_deg": m.pitch_deg,
-                        "roll_deg": m.roll_deg,
-                        "yaw_deg": m.yaw_deg,
-                    })
-                });
-                segs.push(serde_json::json!({
-                    "name": s.name,
-                    "pivot": s.pivot,
-                    "translate": s.translate,
-                    "rotate_deg": s.rotate_deg,
-                    "moves": moves,
-                    "columns": base64(&f32_bytes(&flat)),
-                }));
-            }
-            serde_json::json!({ "label": b.label, "segments": segs })
-        }
+        Some(b) => basis_json(b, data.clinical_frame.as_ref(), n)?,
     };
     let tissue = match &data.tissue {
         None => serde_json::Value::Null,
@@ -352,6 +271,109 @@ pub(crate) fn page_html(data: &PageData) -> std::result::Result<String, String> 
          <script>{BUNDLE}</script>\n</body>\n</html>\n",
         title = escape_html(&data.title),
     ))
+}
+
+/// That the face's, the skull's, the regions' and the band's per-vertex arrays match their
+/// meshes.
+fn check_lengths(data: &PageData) -> std::result::Result<(), String> {
+    let n = data.face_pre.len();
+    if data.face_post.len() != n {
+        return Err(format!(
+            "face_post has {} vertices, face_pre {n}",
+            data.face_post.len()
+        ));
+    }
+    if data.skull_post.len() != data.skull_pre.len()
+        || data.skull_segment.len() != data.skull_pre.len()
+    {
+        return Err("skull_pre, skull_post and skull_segment differ in length".into());
+    }
+    if !data.region_of.is_empty() && data.region_of.len() != n {
+        return Err(format!(
+            "{} region indices for {n} face vertices",
+            data.region_of.len()
+        ));
+    }
+    if data.band_width.as_ref().is_some_and(|b| b.len() != n) {
+        return Err(format!("band widths for other than {n} face vertices"));
+    }
+    Ok(())
+}
+
+/// The landmarks' block: each with its anchor on the face (a soft one) or its segment.
+fn landmarks_json(data: &PageData) -> std::result::Result<Vec<serde_json::Value>, String> {
+    let mut landmarks = Vec::new();
+    for l in &data.landmarks {
+        let anchor = match &l.anchor {
+            Some(a) => {
+                if a.triangle as usize >= data.face_triangles.len() {
+                    return Err(format!("landmark '{}' anchored off the face", l.label));
+                }
+                serde_json::json!({
+                    "triangle": a.triangle,
+                    "weights": a.weights,
+                    "offset": a.offset,
+                })
+            }
+            None => serde_json::Value::Null,
+        };
+        landmarks.push(serde_json::json!({
+            "label": l.label,
+            "pre": l.pre,
+            "post": l.post,
+            "anchor": anchor,
+            "segment": l.segment,
+        }));
+    }
+    Ok(landmarks)
+}
+
+/// The plan basis's block: per segment its run's move (also read in the clinical frame, when
+/// there is one) and its 12 columns of `n` face vertices as float32.
+fn basis_json(
+    b: &PageBasis,
+    clinical_frame: Option<&PageClinicalFrame>,
+    n: usize,
+) -> std::result::Result<serde_json::Value, String> {
+    let mut segs = Vec::new();
+    for s in &b.segments {
+        if s.columns.len() != 12 || s.columns.iter().any(|c| c.len() != n) {
+            return Err(format!(
+                "plan basis segment '{}': expected 12 columns of {n} vertices",
+                s.name
+            ));
+        }
+        let flat: Vec<f32> = s
+            .columns
+            .iter()
+            .flat_map(|c| c.iter().flat_map(|p| p.map(|x| x as f32)))
+            .collect();
+        // The run's move read in the clinical frame: the clinical sliders' start.
+        let moves = clinical_frame.map(|c| {
+            let m = crate::anatomy::moves::read_back(
+                &c.head_frame(),
+                crate::osteotomy::rotation(s.rotate_deg),
+                s.translate,
+            );
+            serde_json::json!({
+                "advance_mm": m.advance_mm,
+                "up_mm": m.up_mm,
+                "left_mm": m.left_mm,
+                "pitch_deg": m.pitch_deg,
+                "roll_deg": m.roll_deg,
+                "yaw_deg": m.yaw_deg,
+            })
+        });
+        segs.push(serde_json::json!({
+            "name": s.name,
+            "pivot": s.pivot,
+            "translate": s.translate,
+            "rotate_deg": s.rotate_deg,
+            "moves": moves,
+            "columns": base64(&f32_bytes(&flat)),
+        }));
+    }
+    Ok(serde_json::json!({ "label": b.label, "segments": segs }))
 }
 
 /// The tissue sliders' block: per model the online form as JSON numbers (f64, exact), the face
