@@ -1,122 +1,48 @@
-//! The Rust defaults of every case.toml key, equal to pipeline/defaults.toml (tested below): a
-//! caller builds a case in memory with `Case { ct: CtSection::new(path), ..Case::default() }`
-//! and no case.toml.
+//! The defaults of every case.toml key, read from pipeline/defaults.toml (compiled in): a caller
+//! builds a case in memory with `Case { ct: CtSection::new(path), ..Case::default() }` and no
+//! case.toml.
 
 use super::schema::*;
 
 /// The documented defaults, compiled in so the binary works from any directory.
 pub const DEFAULTS_TOML: &str = include_str!("../../../../pipeline/defaults.toml");
 
-// `Case::default()` is derived: every section's default below, no lists, no optional parts.
+// `Case::default()` is derived: every section's default is pipeline/defaults.toml's section,
+// so a default is written once, in the file users read.
 
-impl Default for Tissue {
-    fn default() -> Tissue {
-        Tissue {
-            method: TissueMethod::Windows,
-            head_threshold: -500.0,
-            skin_thickness_mm: 2.0,
-            min_bone_component_mm3: 500.0,
-            fat_dark: -190.0,
-            fat_bright: -100.0,
-            soft: -30.0,
-            bone: 300.0,
-            stiffness: Stiffness {
-                skin: 200.0,
-                muscle: 100.0,
-                fat_dark: 10.0,
-                fat_bright: 20.0,
-            },
-        }
-    }
+/// The documented section `name` of pipeline/defaults.toml as its schema type. The file is
+/// compiled in and held to the schema by the test below, so a failure here is a build defect.
+fn documented<T: serde::de::DeserializeOwned>(name: &str) -> T {
+    let table: toml::Table = toml::from_str(DEFAULTS_TOML)
+        .unwrap_or_else(|e| panic!("pipeline/defaults.toml (compiled in): {e}"));
+    let section = table
+        .get(name)
+        .cloned()
+        .unwrap_or_else(|| panic!("pipeline/defaults.toml (compiled in) has no [{name}]"));
+    section
+        .try_into()
+        .unwrap_or_else(|e| panic!("pipeline/defaults.toml (compiled in), [{name}]: {e}"))
 }
 
-impl Default for Extract {
-    fn default() -> Extract {
-        Extract {
-            method: ExtractMethod::Rangescan,
-            angle_step_deg: 2.0,
-            z_step_mm: 0.0,
-            smooth_iterations: 0,
-            decimate_target: 0,
-            decimate_max_error_mm: 0.5,
+macro_rules! documented_default {
+    ($($ty:ty => $section:literal),* $(,)?) => {$(
+        impl Default for $ty {
+            fn default() -> $ty {
+                documented($section)
+            }
         }
-    }
+    )*};
 }
 
-impl Default for Springs {
-    fn default() -> Springs {
-        Springs {
-            max_length_mm: 40.0,
-            struts: true,
-        }
-    }
-}
-
-impl Default for Surface {
-    fn default() -> Surface {
-        Surface {
-            alpha: 0.01,
-            beta: 0.02,
-            parameterization: Parameterization::Cylindrical,
-            movable: None,
-            regions: Vec::new(),
-        }
-    }
-}
-
-impl Default for Solve {
-    fn default() -> Solve {
-        Solve {
-            model: SolveModel::Tet,
-            steps: 4,
-            k_c: 2.5e-6,
-            koch_k_c: 1e-8,
-            restrict: true,
-            coarse_triangles: 0,
-            shell_mm: 3.0,
-            shell_poisson: 0.45,
-        }
-    }
-}
-
-impl Default for Tet {
-    fn default() -> Tet {
-        let e = |youngs_kpa, poisson| TissueElastic {
-            youngs_kpa,
-            poisson,
-        };
-        Tet {
-            material: TetMaterial::Linear,
-            element: TetElement::Linear,
-            load_steps: 4,
-            sliding: true,
-            mucosa_gap_mm: 3.0,
-            cut_release_mm: 8.0,
-            release_cuts: true,
-            tear_gap: true,
-            accept_inverted: false,
-            error_estimate: true,
-            skin_size_mm: 4.0,
-            deep_size_mm: 8.0,
-            margin_mm: 30.0,
-            degloved_maxilla: Degloved::Auto,
-            degloved_chin: Degloved::Auto,
-            scan_end: ScanEndHold::Slides,
-            skin: e(30.0, 0.45),
-            muscle: e(10.0, 0.45),
-            fat_dark: e(2.0, 0.45),
-            fat_bright: e(3.0, 0.45),
-            retired_nose_youngs_kpa: serde::de::IgnoredAny,
-            retired_nose_base_above_sn_mm: serde::de::IgnoredAny,
-            retired_septum_detached: serde::de::IgnoredAny,
-        }
-    }
-}
-
-impl Default for Output {
-    fn default() -> Output {
-        Output { subdivide: 2 }
-    }
+documented_default! {
+    Tissue => "tissue",
+    Extract => "extract",
+    Springs => "springs",
+    Surface => "surface",
+    Solve => "solve",
+    Tet => "tet",
+    Output => "output",
+    super::uncertainty::Uncertainty => "uncertainty",
 }
 
 #[cfg(test)]

@@ -141,21 +141,6 @@ fn one() -> u64 {
     1
 }
 
-impl Default for Uncertainty {
-    fn default() -> Uncertainty {
-        Uncertainty {
-            samples: 0,
-            method: Method::Auto,
-            seed: 1,
-            poisson: None,
-            muscle_fat: None,
-            skin_fat: None,
-            sliding: None,
-            spring_scale: None,
-        }
-    }
-}
-
 /// The literature defaults (docs/guide/uncertainty.md gives the sources).
 pub mod defaults {
     use super::{Chance, Range};
