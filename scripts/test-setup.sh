@@ -87,7 +87,7 @@ need_python_venv() {
     echo "test-setup: venv $venv with ctk-cli"
   }
   # The facesim Python package (docs/guide/python.md): maturin builds its wheel, pytest and numpy test
-  # it (crates/facesim-cli/tests/python_package.rs). Pinned.
+  # it (crates/facesim-cli/tests/e2e/python_package.rs). Pinned.
   "$venv/bin/python" -c 'import maturin, pytest, numpy' >/dev/null 2>&1 || {
     "$venv/bin/pip" install -q "maturin==1.16.0" "pytest==9.2.0" "numpy==2.4.6"
     echo "test-setup: venv $venv with maturin, pytest, numpy"
@@ -124,7 +124,7 @@ need_cohort_tools() {
   }
 }
 
-# A real Slurm for the cohort workflow's cluster test (crates/facesim-cli/tests/slurm.rs,
+# A real Slurm for the cohort workflow's cluster test (crates/facesim-cli/tests/e2e/cluster.rs,
 # docs/guide/cohort.md "A real Slurm on one machine"): Debian's slurm-wlm 22.05 controller, node
 # daemon and client commands, and munge. scripts/slurm-cluster.sh runs them from a temporary
 # directory; nothing here configures or starts a service (a container's policy-rc.d keeps apt

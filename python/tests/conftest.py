@@ -1,7 +1,7 @@
 """Fixtures for the facesim package's tests (docs/guide/python.md "Tests").
 
 The command line is the independent path: a small phantom case is run by the `facesim` binary
-(FACESIM_BIN, set by crates/facesim-cli/tests/python_package.rs; default `facesim` on PATH) and by
+(FACESIM_BIN, set by crates/facesim-cli/tests/e2e/python_package.rs; default `facesim` on PATH) and by
 the installed package, and the package's arrays are compared with the files the binary wrote.
 """
 

@@ -85,3 +85,49 @@ pub mod vec3;
 pub mod volume;
 
 pub use error::{Error, Result};
+
+// What a library user needs, at the crate root: a case, a run, a prediction and the formats.
+// The modules above stay reachable for facesim's own crates (the command line, validation,
+// the lab, the Python package) and for tests of the numerics.
+
+/// A case: case.toml as types, over pipeline/defaults.toml.
+///
+/// ```
+/// use facesim::Case;
+/// use std::path::Path;
+///
+/// let text = "[ct]\npath = \"ct.nii.gz\"\n[[surgery]]\nkind = \"bsso\"\nadvance_mm = 5\n";
+/// let case = Case::parse(text, Path::new("case.toml"))?;
+/// assert_eq!(case.surgery.len(), 1);
+/// assert_eq!(case.tet.skin_size_mm, 4.0); // the documented default
+/// # Ok::<(), facesim::Error>(())
+/// ```
+pub use case::Case;
+/// `facesim run` from Rust: every stage, every output written as one unit, and what the run
+/// produced ([`Outcome`]); [`run_case`] for a [`Case`] built in memory.
+pub use commands::{Outcome, run, run_case};
+/// Surface meshes (OBJ, PLY, STL, VTK, VTP in; OBJ, PLY out), in millimetres.
+///
+/// ```
+/// use facesim::{Mesh, read_mesh, write_mesh};
+///
+/// let dir = std::env::temp_dir().join(format!("facesim-doc-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir)?;
+/// let path = dir.join("triangle.ply");
+/// let mesh = Mesh::new(vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], vec![[0, 1, 2]]);
+/// write_mesh(&mesh, &path)?;
+/// let back = read_mesh(&path)?;
+/// assert_eq!((back.vertices, back.triangles), (mesh.vertices, mesh.triangles));
+/// std::fs::remove_dir_all(&dir)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub use mesh::{Mesh, read_mesh, write_mesh};
+/// The stages alone: the scene a case prepares, and the soft-tissue model's prediction on it.
+pub use model::{Prediction, predict};
+/// Progress reports: [`Quiet`] says nothing; implement [`Observer`] to show them.
+pub use observe::{Observer, Quiet};
+pub use pipeline::{Scene, prepare_case};
+/// report.json as types, both ways.
+pub use report::Report;
+/// CT volumes (NIfTI, NRRD, DICOM, InVesalius, vtk.js) in HU on the LPS frame.
+pub use volume::{Volume, read_ct, read_volume};

@@ -95,7 +95,9 @@ impl LinearFace {
 /// whose spectrum lies in [α_LB, γ_UB] (every A_q positive semi-definite), so with
 /// c = (1/α_LB + 1/γ_UB)/2
 ///
-///     ‖C e‖ ≤ c ‖C ρ‖ + g (1/α_LB − 1/γ_UB)/2 ‖ρ‖_X,
+/// ```text
+/// ‖C e‖ ≤ c ‖C ρ‖ + g (1/α_LB − 1/γ_UB)/2 ‖ρ‖_X,
+/// ```
 ///
 /// g the output's gain (‖C v‖ ≤ g ‖v‖_X). Never above g Δ, which it falls back to.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

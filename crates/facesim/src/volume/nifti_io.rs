@@ -216,7 +216,7 @@ pub fn read(path: &Path) -> Result<Volume> {
         ReaderOptions::new().read_file(path).map_err(unreadable)?
     };
     // A .nii.gz whose stream ends early decompresses to fewer bytes than the header promises;
-    // the nifti crate would panic converting it (found by tests/fuzz.rs), so check first.
+    // the nifti crate would panic converting it (found by crates/facesim-cli/tests/e2e/fuzz.rs), so check first.
     let shape: Vec<u64> = obj.volume().dim().iter().map(|&d| d as u64).collect();
     let n_crate = shape.iter().try_fold(1u64, |a, &d| a.checked_mul(d));
     if n_crate != Some(dims.iter().product::<usize>() as u64) {

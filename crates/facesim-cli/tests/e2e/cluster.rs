@@ -33,12 +33,7 @@ use std::collections::BTreeMap;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
-use std::sync::Mutex;
 use std::time::{Duration, Instant};
-
-/// One cluster at a time: the tests of this file run in parallel threads, and a second node
-/// daemon on this host would share the node's cgroups (slurm-cluster.sh refuses to start one).
-static ONE_CLUSTER: Mutex<()> = Mutex::new(());
 
 fn exe() -> PathBuf {
     PathBuf::from(env!("CARGO_BIN_EXE_facesim"))
@@ -332,9 +327,7 @@ fn submitted_jobs(log: &Path) -> Vec<(String, String)> {
         .collect()
 }
 
-#[test]
 fn cohort_on_a_real_slurm_with_faults() {
-    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
     preconditions();
     let t0 = Instant::now();
     let work = root().join("target/tmp/slurm-cohort");
@@ -817,10 +810,11 @@ fn cohort_on_a_real_slurm_with_faults() {
         assert_eq!(r["facesim_sha256"].len(), 64);
         assert_eq!(r["case_sha256"].len(), 64);
         assert_eq!(r["parameters_sha256"].len(), 64);
-        assert!(out
-            .join("parameters")
-            .join(format!("{}.json", r["parameters_sha256"]))
-            .is_file());
+        assert!(
+            out.join("parameters")
+                .join(format!("{}.json", r["parameters_sha256"]))
+                .is_file()
+        );
         assert!(!r["slurm_job"].is_empty(), "{r:?}");
     }
 
@@ -846,11 +840,13 @@ fn cohort_on_a_real_slurm_with_faults() {
     // Each run ran inside one of those jobs, several to a job.
     let mut per_job = BTreeMap::<String, usize>::new();
     for case in same {
-        assert!(!grouped
-            .join("runs")
-            .join(case)
-            .join("case_setback")
-            .exists());
+        assert!(
+            !grouped
+                .join("runs")
+                .join(case)
+                .join("case_setback")
+                .exists()
+        );
         let r = grouped.join("runs").join(case).join("case/c1/result.json");
         let result: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(&r).unwrap()).unwrap();
@@ -968,9 +964,7 @@ fn cgroup_dirs(pid: u32) -> Vec<PathBuf> {
 /// step (`srun`) of its own — then `slurm-cluster.sh stop` mid-run: no slurmstepd, no job
 /// process and none of the node's Slurm cgroups may be left, checked by the PIDs and cgroup
 /// directories recorded before the stop. `start` must print nothing on stderr.
-#[test]
 fn stop_ends_running_jobs_and_their_cgroups() {
-    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
     preconditions();
     let work = root().join("target/tmp/slurm-stop");
     let _ = std::fs::remove_dir_all(&work);
@@ -1101,9 +1095,7 @@ fn stop_ends_running_jobs_and_their_cgroups() {
 /// no fit saw, each with its translation and its rotation plan, every job sized by `facesim
 /// estimate` (docs/guide/cohort.md "Resources from the model"). No job may end OUT_OF_MEMORY, every
 /// run completes on its first attempt, and each asked for more memory than it peaked at.
-#[test]
 fn the_default_model_on_auto_resources_loses_no_job_to_memory() {
-    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
     preconditions();
     let work = root().join("target/tmp/slurm-default-model");
     let _ = std::fs::remove_dir_all(&work);
@@ -1187,4 +1179,31 @@ fn the_default_model_on_auto_resources_loses_no_job_to_memory() {
         }
     }
     drop(cluster);
+}
+
+/// The three scenarios on a real Slurm, one after the other in one test (one cluster at a time
+/// on a host): the binary's other threads run the other tests meanwhile. Each scenario runs even
+/// when one before it failed; the test fails naming every one that did.
+#[test]
+fn on_a_real_slurm_cluster() {
+    let scenarios: [(&str, fn()); 3] = [
+        (
+            "cohort_on_a_real_slurm_with_faults",
+            cohort_on_a_real_slurm_with_faults,
+        ),
+        (
+            "the_default_model_on_auto_resources_loses_no_job_to_memory",
+            the_default_model_on_auto_resources_loses_no_job_to_memory,
+        ),
+        (
+            "stop_ends_running_jobs_and_their_cgroups",
+            stop_ends_running_jobs_and_their_cgroups,
+        ),
+    ];
+    let failed: Vec<&str> = scenarios
+        .into_iter()
+        .filter(|(_, run)| std::panic::catch_unwind(run).is_err())
+        .map(|(name, _)| name)
+        .collect();
+    assert!(failed.is_empty(), "failed on the cluster: {failed:?}");
 }

@@ -1,9 +1,8 @@
 //! `facesim phantom DIR --anatomy jaws` through the real CLI: the case it writes runs with the
 //! default (C1) model, and each plan moves the face the way its bone moves.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::facesim;
 use facesim_validate::phantom_jaws as pj;

@@ -3,8 +3,7 @@
 //! scripts/test-setup.sh makes), and the executable called the way Slicer calls it — the CT as a
 //! temporary .nrrd, segments as .vtk, transforms as .tfm, flags as the XML declares them.
 
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::common;
 
 use facesim::mesh::{self, Mesh};
 use std::path::PathBuf;

@@ -3,9 +3,8 @@
 //! landmark moves exactly as stated in the head frame, and a plan the CT cannot carry is one
 //! line naming case.toml with nothing written.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::{assert_clean_failure, facesim};
 use serde_json::Value;

@@ -1,9 +1,8 @@
 //! Volume readers: the same CT as NIfTI and as a DICOM series inspects the same, geometry
 //! round-trips through both writers, and broken files give one clear line.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::{assert_clean_failure, facesim};
 use common::phantom_dir;

@@ -2,9 +2,8 @@
 //! the real `facesim run`: a 5 mm BSSO advancement must run with the defaults, invert nothing,
 //! and carry the chin and lower lip forward.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::facesim;
 use serde_json::Value;

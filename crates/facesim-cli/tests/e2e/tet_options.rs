@@ -1,9 +1,8 @@
 //! `[tet]` options through the real `facesim run` on the bundled sample: the face
 //! must follow the bone whatever element is chosen.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use std::path::Path;
 

@@ -4,9 +4,8 @@
 //! BSSO advance against the published chin ratio; the tissue the Le Fort I's and the
 //! genioplasty's approaches raise; bad input as one line.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::{CliResult, assert_clean_failure, facesim, read_csv};
 use serde_json::Value;

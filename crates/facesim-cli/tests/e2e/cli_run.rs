@@ -1,9 +1,8 @@
 //! `facesim run`, `facesim compare` and `facesim render` through the real CLI: good runs write every output,
 //! bad inputs fail with one line naming the file, and nothing is written or changed.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::{assert_clean_failure, facesim};
 use common::{phantom_dir, snapshot};

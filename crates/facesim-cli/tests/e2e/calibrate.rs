@@ -4,9 +4,8 @@
 //! (the confirming pass, an independent full solve at other tissue parameters) — within their
 //! certified bounds; the optimum is the grid's least distance; the verdict follows the numbers.
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use cli::{assert_clean_failure, facesim, read_csv};
 use serde_json::Value;

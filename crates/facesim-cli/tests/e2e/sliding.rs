@@ -1,9 +1,8 @@
 //! Lip and cheek slide where they rest on the teeth, found by contact (no air
 //! between), through the real `facesim run` on the real CT (a 5 mm Le Fort I advance).
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use facesim::landmarks::face_regions::{NAMES, regions};
 use std::path::PathBuf;

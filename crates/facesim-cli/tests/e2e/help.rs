@@ -2,7 +2,7 @@
 //! 100-column terminal; the details are under `facesim CMD --help`. The lab's commands are not
 //! the product's.
 
-mod cli;
+use crate::cli;
 
 use cli::facesim;
 

@@ -3,7 +3,7 @@
 //! read. A reader may refuse the file — with one line naming it — but must never panic or hang.
 //!
 //! Cases per target: FACESIM_FUZZ_CASES (default 200, what CI runs). docs/lab/reliability.md records
-//! the long runs (`FACESIM_FUZZ_CASES=20000 cargo test --release --test fuzz -- --nocapture`).
+//! the long runs (`FACESIM_FUZZ_CASES=20000 cargo test --release -p facesim-cli --test e2e fuzz:: -- --nocapture`).
 //! Inputs that once crashed a reader are kept in tests/fuzz-regressions/ and replayed below.
 
 use facesim::case::Case;

@@ -5,8 +5,7 @@
 //! run's report.json and displacement.csv, the broken case's rows carry facesim's one-line
 //! error, and the charts exist. Also `run --set` and the phantom's refusals.
 
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::common;
 
 use facesim_validate::phantom_jaws::Shape;
 use std::collections::BTreeMap;
@@ -199,7 +198,7 @@ fn cohort_workflow_runs_cases_variants_and_a_broken_case() {
     assert_eq!(count("run"), Some(6), "{plan}");
     assert_eq!(count("gather"), Some(1), "{plan}");
     assert!(!out.exists(), "a dry run wrote {}", out.display());
-    // The same workflow through the Slurm profile (dry run; tests/slurm.rs runs it on a real
+    // The same workflow through the Slurm profile (dry run; crates/facesim-cli/tests/e2e/cluster.rs runs it on a real
     // cluster): each run asks for what `facesim estimate` predicts for its plan and variant
     // (its peak memory plus the job's own 300 MB, rounded up to 100 MB; four times its time, at
     // least 5 minutes), the profile's partition reaches the jobs.

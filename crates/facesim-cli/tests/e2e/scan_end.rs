@@ -5,9 +5,8 @@
 //! tissue sliding on the scan's end plane (the default) the nose and lip must come much nearer
 //! it than with a free end (docs/lab/validation-notes.md "Where the scan ends: a truncation study").
 
-mod cli;
-#[path = "../../facesim/tests/common/mod.rs"]
-mod common;
+use crate::cli;
+use crate::common;
 
 use std::path::Path;
 
