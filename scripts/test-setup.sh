@@ -93,15 +93,15 @@ need_python_venv() {
     echo "test-setup: venv $venv with maturin, pytest, numpy"
   }
   # scikit-image's marching cubes makes the "skin from another program" fixture
-  # (crates/facesim/tests/foreign_skin.rs).
+  # (crates/facesim/tests/library/foreign_skin.rs).
   "$venv/bin/python" -c 'import skimage' >/dev/null 2>&1 || {
     "$venv/bin/pip" install -q "scikit-image==0.26.0"
     echo "test-setup: scikit-image in $venv"
   }
   # highdicom converts a single-frame series into a multi-frame Legacy Converted Enhanced CT
-  # object (crates/facesim/tests/dicom_codecs.rs, tests/python/legacy_enhanced.py).
+  # object (crates/facesim/tests/library/dicom_codecs.rs, tests/python/legacy_enhanced.py).
   # VTK itself re-saves a model in every encoding its writers have
-  # (crates/facesim/tests/vtk_files.rs, tests/python/vtk_variants.py).
+  # (crates/facesim/tests/library/vtk_files.rs, tests/python/vtk_variants.py).
   "$venv/bin/python" -c 'import vtkmodules.vtkIOXML' >/dev/null 2>&1 || {
     "$venv/bin/pip" install -q "vtk==9.7.2"
     echo "test-setup: vtk in $venv"

@@ -10,7 +10,7 @@ use crate::mesh::Mesh;
 use crate::volume::Volume;
 
 /// The jaws phantom's CT with the default options (1.5 mm voxels).
-pub fn jaws_ct() -> Volume {
+pub(crate) fn jaws_ct() -> Volume {
     let v =
         facesim_validate::phantom_jaws::ct(&facesim_validate::phantom::PhantomOptions::default());
     Volume {
@@ -24,7 +24,7 @@ pub fn jaws_ct() -> Volume {
 
 /// The jaws phantom's analytic skin sampled every `step` mm (`phantom_jaws::face_scan`): its
 /// vertices and triangles.
-pub fn jaws_face_scan(step: f64) -> Mesh {
+pub(crate) fn jaws_face_scan(step: f64) -> Mesh {
     let m = facesim_validate::phantom_jaws::face_scan(step);
     Mesh {
         vertices: m.vertices,

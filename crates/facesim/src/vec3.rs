@@ -13,7 +13,7 @@ pub fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 }
 
 /// Each point moved by its displacement (`points` and `d` in the same order).
-pub fn displaced(points: &[[f64; 3]], d: &[[f64; 3]]) -> Vec<[f64; 3]> {
+pub(crate) fn displaced(points: &[[f64; 3]], d: &[[f64; 3]]) -> Vec<[f64; 3]> {
     points.iter().zip(d).map(|(p, d)| add(*p, *d)).collect()
 }
 

@@ -164,7 +164,7 @@ fn higher(frame: &HeadFrame, a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 
 /// The Le Fort I cut.
-pub fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
+pub(crate) fn le_fort_i(f: &Found, frame: &HeadFrame) -> Result<Cut, String> {
     let rim = f
         .mean(&["Pir-R", "Pir-L"])
         .or_else(|| f.at("ANS"))

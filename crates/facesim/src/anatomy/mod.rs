@@ -14,7 +14,7 @@ mod find;
 pub mod head;
 pub mod jaws;
 pub mod moves;
-pub mod readback;
+pub(crate) mod readback;
 #[cfg(test)]
 mod sample;
 pub mod surgery;

@@ -48,7 +48,7 @@ fn transpose(a: M3) -> M3 {
 }
 
 /// The right-handed rotation by `deg` about the unit axis `u` (Rodrigues).
-pub fn about_axis(u: [f64; 3], deg: f64) -> M3 {
+pub(crate) fn about_axis(u: [f64; 3], deg: f64) -> M3 {
     let (s, c) = deg.to_radians().sin_cos();
     let k = [[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]];
     let mut r = [[0.0; 3]; 3];
@@ -89,7 +89,7 @@ pub fn translation(frame: &HeadFrame, m: &Moves) -> [f64; 3] {
 /// `rotate_deg` of an osteotomy (R = Rz·Ry·Rx about LPS axes, `crate::osteotomy::rotation`)
 /// equal to the rotation `r`; exact away from a 90° turn about y, which a plan of ≤ 30° never
 /// reaches.
-pub fn lps_angles(r: M3) -> [f64; 3] {
+pub(crate) fn lps_angles(r: M3) -> [f64; 3] {
     let b = (-r[2][0]).clamp(-1.0, 1.0).asin();
     let a = r[2][1].atan2(r[2][2]);
     let c = r[1][0].atan2(r[0][0]);
@@ -97,7 +97,7 @@ pub fn lps_angles(r: M3) -> [f64; 3] {
 }
 
 /// The moves of a rigid transform p' = R (p − pivot) + pivot + t, read in the head frame.
-pub fn read_back(frame: &HeadFrame, r: M3, t: [f64; 3]) -> Moves {
+pub(crate) fn read_back(frame: &HeadFrame, r: M3, t: [f64; 3]) -> Moves {
     // R in the frame's basis: Ry(yaw) Rz(roll) Rx(pitch) with x left, y up, z anterior.
     let f = basis(frame);
     let m = mul(transpose(f), mul(r, f));

@@ -110,7 +110,7 @@ pub struct PlanReport {
 
 /// The plan `plan` (every step; the first `planned.len()` are the surgeries) read in `a`'s
 /// frame.
-pub fn plan_report(a: &Anatomy, planned: &[Planned], plan: &Plan) -> PlanReport {
+pub(crate) fn plan_report(a: &Anatomy, planned: &[Planned], plan: &Plan) -> PlanReport {
     let frame = &a.frame.frame;
     let segments = plan
         .segments()

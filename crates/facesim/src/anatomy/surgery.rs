@@ -153,7 +153,7 @@ fn stated(s: &Surgery) -> Moves {
 
 /// What `[[surgery]]` entries can be told wrong without the CT (`crate::case`'s checks, at
 /// load) and pivot names that are no landmark. Err: one line naming the entry (1-based).
-pub fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
+pub(crate) fn check_entries(surgeries: &[Surgery]) -> Result<(), String> {
     crate::case::check_surgeries(surgeries)?;
     for (i, s) in surgeries.iter().enumerate() {
         if let Some(Pivot::Landmark(n)) = &s.pivot
@@ -230,7 +230,7 @@ pub struct Move {
 
 impl Move {
     /// The osteotomy of this move over `region` (a run's segment, for `replan`).
-    pub fn osteotomy_over(&self, region: crate::case::Region) -> Osteotomy {
+    pub(crate) fn osteotomy_over(&self, region: crate::case::Region) -> Osteotomy {
         Osteotomy {
             name: self.name.clone(),
             region,
@@ -244,7 +244,11 @@ impl Move {
 /// The moves of `surgeries` in the frame, in order (the autorotation's mandible after its Le
 /// Fort I, a chin last), each with its cut. Err: one line naming the entry (1-based) and the
 /// problem.
-pub fn moves_of(surgeries: &[Surgery], f: &Found, frame: &HeadFrame) -> Result<Vec<Move>, String> {
+pub(crate) fn moves_of(
+    surgeries: &[Surgery],
+    f: &Found,
+    frame: &HeadFrame,
+) -> Result<Vec<Move>, String> {
     check_entries(surgeries)?;
     let mut out: Vec<Move> = Vec::new();
     // The mandible's move a genioplasty's chin follows.

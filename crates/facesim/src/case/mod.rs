@@ -93,7 +93,7 @@ impl Case {
     /// Whether the case's model has the certified reduced form (docs/design/reduced.md): the
     /// volumetric model with the linear material and the 4-node element, whose stiffness is
     /// affine in the tissues' Lamé parameters.
-    pub fn reduced_form(&self) -> bool {
+    pub(crate) fn reduced_form(&self) -> bool {
         !self.solve.model.on_springs()
             && self.tet.material == TetMaterial::Linear
             && self.tet.element == TetElement::Linear

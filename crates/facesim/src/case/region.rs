@@ -130,7 +130,7 @@ impl Mask {
 impl Region {
     /// Whether the region selects points at their pre-operative position (a segment cut by a
     /// `[[surgery]]`), not at their position after the plan's earlier steps.
-    pub fn selects_pre_operative(&self) -> bool {
+    pub(crate) fn selects_pre_operative(&self) -> bool {
         matches!(self, Region::Mask(m) if m.found)
     }
 

@@ -462,7 +462,7 @@ pub struct Tet {
 /// `[tet]` keys of mechanisms that failed the validation gate and left the product
 /// (docs/lab/retired-mechanisms.md): the external nose as one stiff framework and the septum
 /// detached from the maxilla. A case that sets one is refused in one line naming the key.
-pub const RETIRED_TET_KEYS: [&str; 3] = [
+pub(crate) const RETIRED_TET_KEYS: [&str; 3] = [
     "nose_youngs_kpa",
     "nose_base_above_sn_mm",
     "septum_detached",

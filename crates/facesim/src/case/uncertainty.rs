@@ -241,7 +241,7 @@ impl Uncertainty {
     }
 
     /// The probability that a sample's mucosa slides (given, else the default).
-    pub fn sliding_probability(&self) -> f64 {
+    pub(crate) fn sliding_probability(&self) -> f64 {
         self.sliding.unwrap_or(defaults::SLIDING).probability
     }
 

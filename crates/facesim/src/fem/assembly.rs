@@ -443,7 +443,7 @@ impl System {
     /// bordered (see [`Border`]). The DOFs bordered for the first time cost a forward sweep
     /// over the factor's reach of their neighbours; one bordered before and held again since is
     /// an unknown again at no sweep.
-    pub fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
+    pub(crate) fn free_more(&mut self, dofs: &[usize]) -> Result<()> {
         let (mut added, mut held, before) = match self.border.take() {
             Some(b) => (b.added, b.held, Some((b.schur, b.g_at, b.g))),
             None => (Vec::new(), Vec::new(), None),
@@ -577,7 +577,7 @@ impl System {
 
     /// Hold the bordered DOFs `dofs` again, at the values a solve prescribes for them, without
     /// refactoring (a DOF that was never bordered is refused: it needs no hold).
-    pub fn hold_border(&mut self, dofs: &[usize]) -> Result<()> {
+    pub(crate) fn hold_border(&mut self, dofs: &[usize]) -> Result<()> {
         let Some(border) = self.border.as_mut() else {
             return Err(Error::config(
                 "hold_border: no DOF has been freed by bordering",

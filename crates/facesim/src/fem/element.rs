@@ -25,7 +25,7 @@ use super::quadrature::triangle_rule;
 use crate::error::{Error, Result};
 use nalgebra::SMatrix;
 
-pub const NDOF: usize = 12;
+pub(crate) const NDOF: usize = 12;
 
 /// Stretching tensor (α11, α12, α22), bending tensor (β11, β12, β22) (eq. 3–4) and an optional
 /// elastic foundation c (energy ∫ c w²; the springs of the equilibrium model, and Winkler plates).
@@ -47,7 +47,7 @@ impl Material {
 }
 
 /// Value and (u, v) derivatives of one shape function at one point: w, wu, wv, wuu, wuv, wvv.
-pub type Derivs = [f64; 6];
+pub(crate) type Derivs = [f64; 6];
 
 /// The global normal of an edge from a to b (eq. 11): the unit normal with a positive v
 /// component, or +u when the edge is parallel to v… i.e. normal to u = const lines.
@@ -108,7 +108,7 @@ fn basis(xi: Jet, eta: Jet) -> [Jet; NDOF] {
 
 /// Quadrature order (per sub-triangle, per axis) of the reference moments: 10 → 600 points,
 /// element stiffness exact to ~1e-12 relative (the convergence test shows 8 → 1.6e-11).
-pub const REFERENCE_ORDER: usize = 10;
+pub(crate) const REFERENCE_ORDER: usize = 10;
 
 /// Integrals over the reference triangle of products of the raw shape functions N1…N12 and
 /// their (ξ, η) derivatives. The Nᵢ depend on barycentrics only, so these are the same for
@@ -269,7 +269,7 @@ impl Element {
     #[cfg(test)]
     /// Element stiffness (eq. 15) and load vector for a uniform load q (eq. 16), with an
     /// `n`×`n` Gauss rule on each of the six Duffy sub-triangles. E = aᵀKa − 2Fᵀa.
-    pub fn stiffness_and_load(
+    pub(crate) fn stiffness_and_load(
         &self,
         m: &Material,
         q: f64,
@@ -282,7 +282,11 @@ impl Element {
     /// path used by assembly. With A = J⁻ᵀ, (∂u, ∂v) = A (∂ξ, ∂η) and
     /// (∂uu, ∂uv, ∂vv) = T (∂ξξ, ∂ξη, ∂ηη), the stretching weights are G1 = Aᵀ S A with
     /// S = [[α11, α12/2], [α12/2, α22]], the bending weights G2 = Tᵀ diag(β11, 2β12, β22) T.
-    pub fn stiffness_fast(&self, m: &Material, q: f64) -> ([[f64; NDOF]; NDOF], [f64; NDOF]) {
+    pub(crate) fn stiffness_fast(
+        &self,
+        m: &Material,
+        q: f64,
+    ) -> ([[f64; NDOF]; NDOF], [f64; NDOF]) {
         let mo = moments();
         let a = self.a;
         let [a11, a12, a22] = m.alpha;

@@ -185,7 +185,7 @@ fn metis_node_nd(
 /// differ little: a node they hold whole drops out (a nested-dissection ordering stays one
 /// when vertices are removed), and one they free that the run held (tissue lifted off the
 /// bone) goes last, as a separator would.
-pub struct NodeOrder {
+pub(crate) struct NodeOrder {
     /// Per node, its place in the ordering; u32::MAX for a node outside the graph.
     rank: Vec<u32>,
 }

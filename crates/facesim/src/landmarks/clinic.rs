@@ -286,14 +286,18 @@ fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) 
 }
 
 /// The plan's surgery type and its published rows as this run predicts them.
-pub fn against_published(plan: &[Osteotomy], carried: &[Carried], frame: &HeadFrame) -> Clinic {
+pub(crate) fn against_published(
+    plan: &[Osteotomy],
+    carried: &[Carried],
+    frame: &HeadFrame,
+) -> Clinic {
     against_published_as(plan, carried, frame, &|o| jaw_by_name(&o.name))
 }
 
 /// [`against_published`] of a plan whose `[[surgery]]` entries say which jaw each of their
 /// segments is (`surgeries`: segment name and kind — "le-fort-i", "bsso", "genioplasty",
 /// "autorotation"), read in the clinical frame; its other segments by name.
-pub fn against_published_planned(
+pub(crate) fn against_published_planned(
     plan: &[Osteotomy],
     carried: &[Carried],
     frame: &HeadFrame,

@@ -130,7 +130,7 @@ impl Found {
 
 /// Detect the soft-tissue landmarks of the midsagittal profile of `skin` and the bony ones on
 /// `skull` (None: no skull); `lateral` adds the paired ones beside them (`super::locate`).
-pub fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
+pub(crate) fn detect(skin: &Mesh, skull: Option<&Mesh>, frame: &HeadFrame) -> Vec<Landmark> {
     let mut f = Found { list: Vec::new() };
     let seg = section(skin, frame);
     // A face mesh alone may be a whole head: its profile is the face's, not the back of the head

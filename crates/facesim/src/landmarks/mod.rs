@@ -11,7 +11,7 @@
 //! [`carry`] takes them to the predicted face as the same material points.
 
 pub mod clinic;
-pub mod detect;
+pub(crate) mod detect;
 mod extremum;
 pub mod face_regions;
 pub mod frame;

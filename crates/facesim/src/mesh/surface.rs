@@ -121,7 +121,7 @@ impl Mesh {
     /// The closed axis-aligned box [min, max] as 12 triangles wound outwards (a region, a test
     /// body).
     /// The triangles whose three vertices are kept, with only the vertices they use.
-    pub fn sub_mesh(&self, keep: &[bool]) -> Mesh {
+    pub(crate) fn sub_mesh(&self, keep: &[bool]) -> Mesh {
         let mut index = vec![u32::MAX; self.vertices.len()];
         let mut vertices = Vec::new();
         let mut triangles = Vec::new();

@@ -23,7 +23,7 @@ pub struct Overlap {
 }
 
 /// Shallower overlaps are the voxel's own tolerance (a moved vertex grazing a wall).
-pub const REPORTED_DEPTH_MM: f64 = 1.0;
+pub(crate) const REPORTED_DEPTH_MM: f64 = 1.0;
 
 /// The overlaps of `plan` on `skull` (the bone surface at rest), bone at rest from `labels` on
 /// `vol`'s grid. A moved surface vertex inside bone that no segment moves is marched back along

@@ -220,12 +220,12 @@ impl Affine {
 
     /// The values of A(θ) = Σ θ_q A_q on the pattern of [`Self::apply_values`]: one pass applies
     /// it where Q passes would apply the terms one by one.
-    pub fn values_at(&self, theta: &[f64]) -> Vec<f64> {
+    pub(crate) fn values_at(&self, theta: &[f64]) -> Vec<f64> {
         values_of(&self.terms, self.cols.len(), theta)
     }
 
     /// The matrix with values `v` (from [`Self::values_at`]) times x.
-    pub fn apply_values(&self, v: &[f64], x: &[f64]) -> Vec<f64> {
+    pub(crate) fn apply_values(&self, v: &[f64], x: &[f64]) -> Vec<f64> {
         use rayon::prelude::*;
         (0..self.free.len())
             .into_par_iter()
@@ -267,7 +267,7 @@ impl Affine {
 
     /// Node displacements (global frame) of free values `u` with the held components at their
     /// values (`lift`) or at zero (a basis vector: the homogeneous part).
-    pub fn expand(&self, u: &[f64], lift: bool) -> Vec<[f64; 3]> {
+    pub(crate) fn expand(&self, u: &[f64], lift: bool) -> Vec<[f64; 3]> {
         let mut local: Vec<f64> = self
             .frames
             .iter()
@@ -322,7 +322,7 @@ fn lower_matrix(
 }
 
 /// Solve with a factor for each column of `b` (free values), in place.
-pub fn solve_columns(factor: &Cholesky<f64>, b: &[Vec<f64>]) -> Vec<Vec<f64>> {
+pub(crate) fn solve_columns(factor: &Cholesky<f64>, b: &[Vec<f64>]) -> Vec<Vec<f64>> {
     if b.is_empty() {
         return Vec::new();
     }

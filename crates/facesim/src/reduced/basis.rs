@@ -382,7 +382,7 @@ impl Basis {
     }
 
     /// The free values V c.
-    pub fn expand(&self, c: &DVector<f64>) -> Vec<f64> {
+    pub(crate) fn expand(&self, c: &DVector<f64>) -> Vec<f64> {
         let mut u = vec![0.0; self.vectors.first().map_or(0, Vec::len)];
         for (v, w) in self.vectors.iter().zip(c.iter()) {
             for (a, b) in u.iter_mut().zip(v) {

@@ -8,7 +8,11 @@ use nalgebra::{DMatrix, SymmetricEigen};
 
 /// An upper estimate of λ_max of the symmetric positive semi-definite operator `apply` on
 /// vectors of length `n`, with at most `steps` Lanczos steps from a fixed start.
-pub fn largest_eigenvalue(n: usize, steps: usize, apply: &dyn Fn(&[f64]) -> Vec<f64>) -> f64 {
+pub(crate) fn largest_eigenvalue(
+    n: usize,
+    steps: usize,
+    apply: &dyn Fn(&[f64]) -> Vec<f64>,
+) -> f64 {
     if n == 0 {
         return 0.0;
     }

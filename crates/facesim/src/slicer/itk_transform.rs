@@ -17,7 +17,7 @@ use std::path::Path;
 
 /// A rigid move x ↦ R (x − centre) + centre + translation (LPS mm).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RigidMove {
+pub(crate) struct RigidMove {
     pub rotation: [[f64; 3]; 3],
     pub translation: [f64; 3],
     pub centre: [f64; 3],
@@ -25,7 +25,7 @@ pub struct RigidMove {
 
 /// Which way the file's transform maps points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Direction {
+pub(crate) enum Direction {
     /// Fixed → moving (what ITK and Slicer write): the plan move is its inverse.
     Resampling,
     /// Moving → fixed: the plan move itself.
@@ -69,7 +69,7 @@ impl RigidMove {
     /// The plan's form (docs/reference/case.md `[[osteotomy]]`): `rotate_deg` (R = Rz·Ry·Rx) and
     /// `translate` about `pivot` = the centre, so that R (p − pivot) + pivot + translate is
     /// this move.
-    pub fn plan_form(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {
+    pub(crate) fn plan_form(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {
         (self.translation, euler_xyz_deg(self.rotation), self.centre)
     }
 }
@@ -79,7 +79,7 @@ fn transpose(m: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
 }
 
 /// Angles (degrees) about x, then y, then z with R = Rz·Ry·Rx (`osteotomy::rotation`'s order).
-pub fn euler_xyz_deg(r: [[f64; 3]; 3]) -> [f64; 3] {
+pub(crate) fn euler_xyz_deg(r: [[f64; 3]; 3]) -> [f64; 3] {
     // R[2][0] = −sin(b); R[2][1] = cos(b) sin(a); R[2][2] = cos(b) cos(a);
     // R[1][0] = cos(b) sin(c); R[0][0] = cos(b) cos(c).
     let sb = (-r[2][0]).clamp(-1.0, 1.0);

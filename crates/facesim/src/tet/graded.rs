@@ -20,7 +20,7 @@
 //! never move: warping the flatter cones at a size change inverted elements on the real CT
 //! (a big cube's centre and a small face's centre both pulled towards the face). The uniform
 //! lattice's angle bounds are not proven there; `Quality` reports what was reached and
-//! `tests/tet_mesh.rs` checks it.
+//! `crates/facesim/tests/library/tet_mesh.rs` checks it.
 
 use super::stuffing::{
     ALPHA_LONG, ALPHA_SHORT, Filled, Implicit, NodeKind, Places, Ref, Stuffed, classify, compact,

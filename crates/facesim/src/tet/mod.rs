@@ -34,7 +34,7 @@ pub mod nonlinear;
 pub(crate) mod plan_holds;
 pub mod quadratic;
 pub mod quality;
-pub mod stable_neo_hooke;
+pub(crate) mod stable_neo_hooke;
 pub mod stuffing;
 pub(crate) mod tangent;
 pub mod vtu;

@@ -15,7 +15,7 @@
 //!   of the mixed P2–P0 element (displacement quadratic, pressure constant per element,
 //!   p = λ mean(div u)) with the pressure condensed — the mean-dilatation idea of Nagtegaal,
 //!   Parks & Rice (1974) and Hughes' B̄ (1980). At most one constraint per element instead of
-//!   four: tests/tet_physics.rs measures that it does not lock (Lamé's sphere at ν = 0.4999).
+//!   four: crates/facesim/tests/library/tet_physics.rs measures that it does not lock (Lamé's sphere at ν = 0.4999).
 
 use super::holds::{Constrained, Hold, Loads};
 use super::{TetMesh, TissueElastic, gradients};

@@ -35,7 +35,7 @@
 //!
 //! The paper proves dihedral angles within [10.7°, 164.8°] for these α with its own stencils.
 //! Ours differ in the quadrilateral rule (5) and in leaving out flattened all-zero tetrahedra
-//! (6), so here the bound is checked rather than proven: `tests/tet_mesh.rs` asserts it on
+//! (6), so here the bound is checked rather than proven: `crates/facesim/tests/library/tet_mesh.rs` asserts it on
 //! spheres, shells, a cut shell, the phantom and the real CT. Orientation is decided on the
 //! unwarped lattice (cut points at edge midpoints), where every stencil tetrahedron is non-degenerate; a tetrahedron
 //! the warp flattened or inverted would be a reported numerical failure, never a silent one.

@@ -21,7 +21,7 @@ use rayon::prelude::*;
 
 /// A case's reduced answer: which linear face, its coefficients, and the certified bounds (mm)
 /// on the face's and each soft landmark's error ([`landmark_outputs`] order).
-pub type SolveReduced<'a> = dyn Fn(&Case) -> Result<(usize, Vec<f64>, Bounds)> + Sync + 'a;
+pub(crate) type SolveReduced<'a> = dyn Fn(&Case) -> Result<(usize, Vec<f64>, Bounds)> + Sync + 'a;
 
 /// A reduced model for the sampling: the linear faces (one per sliding state) and the solve
 /// that picks one and gives its coefficients and bounds for a case.
@@ -68,7 +68,7 @@ const CHUNK: usize = 512;
 
 /// As `run::sample`, each sample solved by the reduced model (samples at the nominal
 /// parameters are the run's own face, bit for bit).
-pub fn sample_reduced(
+pub(crate) fn sample_reduced(
     run: &Nominal,
     reduced: &Reduced,
     analysis: &Analysis,
@@ -226,7 +226,7 @@ fn still(run: &Nominal, reduced: &Reduced) -> Vec<bool> {
 /// As [`sample_reduced`], from the reduced models a run stored (`reduced_model.bin`; `facesim
 /// replan` with `[uncertainty]`): no mesh, no factorisation. `analysis` must hold the run's
 /// landmarks in the run's order (the order of the models' landmark bounds).
-pub fn sample_stored(
+pub(crate) fn sample_stored(
     run: &Nominal,
     stored: &crate::model::reduced::file::StoredReduced,
     analysis: &Analysis,

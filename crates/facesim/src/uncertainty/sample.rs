@@ -7,7 +7,7 @@
 //! sequence's higher bases and makes every seed a different, equally good sample.
 
 /// The bases of the dimensions (the first primes).
-pub const BASES: [u64; 8] = [2, 3, 5, 7, 11, 13, 17, 19];
+pub(crate) const BASES: [u64; 8] = [2, 3, 5, 7, 11, 13, 17, 19];
 
 /// SplitMix64 (Steele, Lea and Flood 2014): a tiny seeded generator for the permutations.
 #[derive(Clone, Debug)]
@@ -18,7 +18,7 @@ impl SplitMix64 {
         SplitMix64(seed)
     }
 
-    pub fn next_u64(&mut self) -> u64 {
+    pub(crate) fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
@@ -34,7 +34,7 @@ impl SplitMix64 {
 
 /// The scrambled Halton sequence in `dims` dimensions.
 #[derive(Clone, Debug)]
-pub struct ScrambledHalton {
+pub(crate) struct ScrambledHalton {
     /// Per dimension, per digit position: the digit permutation.
     perms: Vec<Vec<Vec<u8>>>,
 }

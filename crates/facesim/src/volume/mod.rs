@@ -11,7 +11,7 @@ pub mod nifti_io;
 pub mod nrrd;
 mod samples;
 pub mod tilt;
-pub mod vtkjs;
+pub(crate) mod vtkjs;
 
 pub(crate) use grid::det3;
 pub use grid::{Inspect, Volume, VoxelMap, axes_code, inv3, past_scan_end, sample_field};

@@ -18,7 +18,7 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 
 /// Is `path` a vtk.js dataset folder (a directory with an `index.json`)?
-pub fn is_dataset(path: &Path) -> bool {
+pub(crate) fn is_dataset(path: &Path) -> bool {
     path.is_dir() && path.join("index.json").is_file()
 }
 
@@ -242,8 +242,9 @@ fn read_values(base: &Path, id: &str, want: usize) -> Result<(PathBuf, Vec<u8>)>
     }
 }
 
-/// Write a vtk.js dataset folder (int16 scalars, gzipped): the tests' fixtures.
-pub fn write_int16(
+/// Write a vtk.js dataset folder (int16 scalars, gzipped): the unit tests' fixtures.
+#[cfg(test)]
+fn write_int16(
     dir: &Path,
     dims: [usize; 3],
     spacing: [f64; 3],

@@ -1,4 +1,4 @@
-"""An iso-surface of a CT as another program exports it (the fixture of tests/foreign_skin.rs).
+"""An iso-surface of a CT as another program exports it (the fixture of crates/facesim/tests/library/foreign_skin.rs).
 
 scikit-image's marching cubes (Lewiner) on the whole volume at one level: the skin with the
 airway, sinuses and every other air/tissue boundary inside the head, no cleaning. Written as a

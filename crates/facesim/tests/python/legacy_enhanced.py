@@ -2,7 +2,7 @@
 
 Usage: legacy_enhanced.py SERIES_DIR OUT_FILE [--syntax UID] [--interleave]
 
-The fixture of crates/facesim/tests/dicom_codecs.rs: highdicom, an independent implementation of
+The fixture of crates/facesim/tests/library/dicom_codecs.rs: highdicom, an independent implementation of
 the DICOM multi-frame IODs, writes the functional groups (plane position and orientation, pixel
 measures, pixel value transformation: shared when every slice agrees, per frame otherwise) from
 the single-frame headers. --interleave stores the frames out of spatial order (the even slices,

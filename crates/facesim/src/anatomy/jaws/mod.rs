@@ -16,15 +16,15 @@ use crate::landmarks::{HeadFrame, Kind, Landmark, Source};
 use grid::{Grid, H, OUT, TOOTH, hard};
 
 /// Typical crown-tip-to-apex lengths of the central incisors (mm): upper 23.5, lower 21.
-pub const UPPER_INCISOR_MM: f64 = 23.5;
-pub const LOWER_INCISOR_MM: f64 = 21.0;
+pub(crate) const UPPER_INCISOR_MM: f64 = 23.5;
+pub(crate) const LOWER_INCISOR_MM: f64 = 21.0;
 
 /// A landmark in frame coordinates (s, v, a), or why it is missing.
 type Spot = Result<[f64; 3], String>;
 
 /// The jaw landmarks of `super::LANDMARKS` (all but porion and orbitale), each detected or
 /// missing with the reason, searched in the clinical frame `frame`.
-pub fn jaw_landmarks(bone: &Bone, frame: &HeadFrame) -> Vec<Landmark> {
+pub(crate) fn jaw_landmarks(bone: &Bone, frame: &HeadFrame) -> Vec<Landmark> {
     let g = Grid::new(bone, frame);
     let hu = |c: [f64; 3]| bone.vol.sample(frame.point(c), -1000.0) as f64;
     let found = detect(&g, &hu);

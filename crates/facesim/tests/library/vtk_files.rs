@@ -3,7 +3,7 @@
 //! which re-saves it in every encoding its writers have (tests/python/vtk_variants.py); facesim
 //! reads each back to the same mesh, point data and frame.
 
-mod common;
+use crate::common;
 
 use facesim::mesh::Mesh;
 use facesim::mesh::vtk::PointArray;

@@ -1,7 +1,7 @@
 //! The shell embedding (paper 002) that carries a fine skin along a coarse solve:
 //! exact invariants — rest shape, rigid motions, the Poisson thickness rule (eq. 2).
 
-mod common;
+use crate::common;
 
 use facesim::embed::Shell;
 use facesim::mesh::Mesh;

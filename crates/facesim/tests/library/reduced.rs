@@ -4,7 +4,7 @@
 //! solve on the run's own path, `Prediction::resolve`, is the truth), the bound is not vacuous,
 //! and the greedy's bound falls with the basis size.
 
-mod common;
+use crate::common;
 
 use facesim::case::Case;
 use facesim::commands::{self, Outcome};

@@ -4,7 +4,7 @@
 //! nested ranges widen the band; the same seed writes the same bytes; impossible ranges and
 //! parameters the model lacks are refused naming the key.
 
-mod common;
+use crate::common;
 
 use facesim::case::uncertainty::{Chance, Range};
 use facesim::case::{Case, SolveModel};

@@ -2,7 +2,7 @@
 //! bone lifted uniformly. koch1996 turns the lift into a uniform load on the skin — a clamped plate
 //! (w_centre = 0.00126532 q a⁴ / D); equilibrium adds the springs to the system — a clamped plate
 //! on an elastic foundation, whose reference is the verified C1 plate solver with a Winkler term
-//! (tests/c1_plates.rs checks it against Navier's series).
+//! (crates/facesim/tests/library/c1_plates.rs checks it against Navier's series).
 
 use facesim::fem::assembly::{FemMesh, System};
 use facesim::fem::element::Material;

@@ -4,7 +4,7 @@
 //! case's `[skin]`. facesim keeps its outer face — what a cylindrical range scan of it sees — and
 //! reports what it dropped (docs/design/pipeline.md "A skin from another program").
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;

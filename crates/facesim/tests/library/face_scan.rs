@@ -4,7 +4,7 @@
 //! scanner would hand it over — turned into a y-up frame, yawed, in metres. The landmarks must
 //! come back rotated and scaled with the mesh.
 
-mod common;
+use crate::common;
 
 use facesim::landmarks::scan::{FaceLandmarks, FrameFrom, landmarks_of};
 use facesim::mesh::Mesh;

@@ -4,7 +4,7 @@
 //! wrong derivative would leave an error of first order), it is exact for no move, and a C1 run's
 //! basis re-plans end to end, saying it is not exact.
 
-mod common;
+use crate::common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::commands;

@@ -2,7 +2,7 @@
 //! transform file, its region as a closed surface or a markups plane; and the face written as
 //! VTK PolyData and STL.
 
-mod common;
+use crate::common;
 
 use facesim::case::{Case, Region};
 use facesim::osteotomy::Plan;

@@ -4,9 +4,8 @@
 //! are refused naming the file with nothing written, a sweep writes one row per plan, and
 //! report.json reads back into `Report` unchanged.
 
-#[path = "common/browser.rs"]
-mod browser;
-mod common;
+use crate::browser;
+use crate::common;
 
 use facesim::case::{Case, Osteotomy, SolveModel};
 use facesim::commands::{self, Outcome};

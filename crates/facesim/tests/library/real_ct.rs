@@ -1,7 +1,7 @@
 //! The real CT (ProMED CT 0051 from Debian's invesalius-examples): one skin, one skull, and the
 //! head rest left out.
 
-mod common;
+use crate::common;
 
 use facesim::case::Case;
 use facesim::segment;

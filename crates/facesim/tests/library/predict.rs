@@ -1,7 +1,7 @@
 //! Springs, bone moves and the predicted face of the C1 model on the phantom:
 //! the cases name `model = "equilibrium"` unless they choose a model themselves.
 
-mod common;
+use crate::common;
 
 use common::phantom_dir;
 use std::path::PathBuf;

@@ -3,7 +3,7 @@
 //! no move, no change; all bone translated, the face translates exactly; the face exactly linear
 //! in the move.
 
-mod common;
+use crate::common;
 
 use facesim::case::{Case, Region};
 use facesim::commands::{self, Outcome};

@@ -9,8 +9,7 @@ use facesim::tet::quadratic::{Rule, Tet10Mesh};
 use facesim::tet::{Constrained, Hold, Loads, TetMesh, TissueElastic};
 use facesim::vec3::dot;
 
-#[path = "common/tet_grid.rs"]
-mod tet_grid;
+use crate::tet_grid;
 use tet_grid::kuhn_cell;
 
 const FAT: TissueElastic = TissueElastic {

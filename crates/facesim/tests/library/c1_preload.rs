@@ -1,7 +1,7 @@
 //! Preloading (a_init, F_init = K a_init), rigid-node boundary conditions, symbolic reuse and
 //! C1 surface sampling.
 
-mod common;
+use crate::common;
 
 use facesim::fem::assembly::{FemMesh, System, multiply, rigid_dofs};
 use facesim::fem::element::{Material, edge_normal};

@@ -9,7 +9,7 @@
 //! independent of the codecs under test: the uncompressed series, whose values are checked
 //! against the CT it was written from.
 
-mod common;
+use crate::common;
 
 use dicom_core::{DataElement, PrimitiveValue, VR};
 use dicom_dictionary_std::tags;

@@ -1,7 +1,7 @@
 //! The pipeline as a library: cases built in memory, the stages' typed outputs, structured errors,
 //! and defects once found in it (each of these tests failed before its fix).
 
-mod common;
+use crate::common;
 
 use common::phantom_dir;
 use facesim::case::{Case, CtSection, Osteotomy, PathSection, Region, SolveModel};

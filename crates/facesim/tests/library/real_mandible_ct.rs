@@ -1,7 +1,7 @@
 //! The second real sample, VTK's headsq (data-samples/real-mandible, fetched from npm's
 //! vtk.js@6.4.1): the vtk.js dataset folder read as it is, and the frame and HU its case states.
 
-mod common;
+use crate::common;
 
 use facesim::volume::{axes_code, read_volume};
 

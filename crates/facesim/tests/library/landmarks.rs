@@ -3,7 +3,7 @@
 //! lacks the mandible; user landmarks override; the markups files follow Slicer's schema; a
 //! zero move leaves every landmark in place.
 
-mod common;
+use crate::common;
 
 use common::kept_dir;
 use facesim::case::Case;

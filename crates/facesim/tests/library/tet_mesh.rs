@@ -250,7 +250,7 @@ fn bad_input_is_a_one_line_error() {
 
 // ---- The CT layer -------------------------------------------------------------------------
 
-mod common;
+use crate::common;
 
 use facesim::case::Case;
 use facesim::segment::{self, FAT_BRIGHT, FAT_DARK, MUSCLE, SKIN, Segmentation};

@@ -4,9 +4,8 @@
 //! against two independent paths: the rigid motion of the osteotomy module (an analytic basis), and
 //! full runs of the linear volumetric model. Screenshots go to target/test-artefacts/.
 
-#[path = "common/browser.rs"]
-mod browser;
-mod common;
+use crate::browser;
+use crate::common;
 
 use browser::{drive, flat, max_diff, web_dir};
 
@@ -1456,7 +1455,7 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     use facesim::model::reduced::file;
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
     let (mut case, _) = Case::load(&sample).unwrap();
-    // As tests/reduced.rs: coarser than the default, to keep the test short.
+    // As crates/facesim/tests/library/reduced.rs: coarser than the default, to keep the test short.
     case.tet.skin_size_mm = 6.0;
     case.tet.deep_size_mm = 12.0;
     case.tet.error_estimate = false;

@@ -6,7 +6,7 @@
 //! the frame case.toml reads each CT in) placed on the CTs' bone (> 250 HU) before the cuts were
 //! automatic, each with a line on how.
 
-mod common;
+use crate::common;
 
 use facesim::case::{Case, Surgery, SurgeryKind};
 use facesim::observe::Quiet;

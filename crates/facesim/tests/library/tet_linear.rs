@@ -5,8 +5,7 @@
 use facesim::error::{Error, NumericalKind};
 use facesim::tet::{TetMesh, TissueElastic};
 
-#[path = "common/tet_grid.rs"]
-mod tet_grid;
+use crate::tet_grid;
 use tet_grid::{cube, kuhn_cell};
 
 const FAT: TissueElastic = TissueElastic {

@@ -3,7 +3,7 @@
 //! forward, and the inner lip across the vestibule slides on the teeth (or, attached, moves with
 //! them). The real CT has no mandible, so these moves are shown here.
 
-mod common;
+use crate::common;
 
 use facesim::case::{Case, SolveModel};
 use facesim::commands::{self, Outcome};
