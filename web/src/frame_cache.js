@@ -3,7 +3,7 @@
 // real CT) is drawn once into an offscreen colour + depth buffer and copied (blitFramebuffer) into
 // the canvas at the start of every slider frame; then only the moving objects are drawn over it.
 // Objects on layer STATIC_LAYER are the cached ones. A frame drawn this way equals one drawn whole
-// (test: crates/facesim/tests/report_page.rs); where the browser cannot copy the depth buffer into
+// (test: crates/facesim/tests/library/report_page.rs); where the browser cannot copy the depth buffer into
 // the canvas, the cache switches itself off and every frame is drawn whole.
 import * as THREE from "three";
 

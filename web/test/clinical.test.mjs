@@ -1,4 +1,4 @@
-// Drives report.html's plan in the clinical frame for crates/facesim/tests/report_page.rs:
+// Drives report.html's plan in the clinical frame for crates/facesim/tests/library/report_page.rs:
 //   node test/clinical.test.mjs REPORT.html STEPS.json OUT.json SCREENSHOT.png
 // First, as the page opens (the default view): info(), frame(), viewFrame(), the sliders
 // (sliders()), camera(), landmarks(), each landmark label's box and whether it is shown, and a

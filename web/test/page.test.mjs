@@ -1,4 +1,4 @@
-// Drives report.html in headless Chromium for crates/facesim/tests/report_page.rs:
+// Drives report.html in headless Chromium for crates/facesim/tests/library/report_page.rs:
 //   node test/page.test.mjs REPORT.html PLANS.json OUT.json SCREENSHOT.png
 // PLANS.json is a list of plans; OUT.json gets the problems seen (console errors, page errors,
 // requests leaving the file), canvas statistics, faceVertices() before any plan and after each

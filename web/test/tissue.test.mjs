@@ -1,7 +1,7 @@
 // Unit tests of web/src/tissue.js (the tissue sliders' online solve and bound), with node:
 //   node --test test/tissue.test.mjs
 // Analytic cases always; with FACESIM_TISSUE_FIXTURE=FILE.json also the answers of the Rust
-// `OnlineForm::solve` for the same forms and θ (crates/facesim/tests/report_page.rs writes the
+// `OnlineForm::solve` for the same forms and θ (crates/facesim/tests/library/report_page.rs writes the
 // file: {cases: [{form, theta, coefficients, residual, alpha, energy_bound, energy_norm}]}).
 import { test } from "node:test";
 import assert from "node:assert/strict";

@@ -1,4 +1,4 @@
-// Drives report.html's tissue sliders in headless Chromium for crates/facesim/tests/report_page.rs
+// Drives report.html's tissue sliders in headless Chromium for crates/facesim/tests/library/report_page.rs
 // (the Rust test judges against the Rust reduced model):
 //   node test/tissue_page.mjs REPORT.html STEPS.json OUT.json SHOT.png [RATE_SECONDS]
 // STEPS.json: {tissues: [setTissue arguments, in order], plan: a plan other than the run's}.

@@ -1,4 +1,4 @@
-// Drives report.html's views for crates/facesim/tests/report_page.rs (the Rust test judges):
+// Drives report.html's views for crates/facesim/tests/library/report_page.rs (the Rust test judges):
 //   node test/views.test.mjs REPORT.html PLAN.json OUT.json SHOT_DIR
 // For each view (front, profile right / left, three-quarter) and face (before, after, both): a
 // screenshot SHOT_DIR/VIEW-FACE.png, the camera (position, target, up, fov, CSS size), the canvas'
