@@ -986,7 +986,7 @@ function main() {
     const model = tissue.modelFor(tissueValues.sliding);
     if (same && (model === tissue.run || !td.sliding_matters)) return { nominal: true, materials: mats };
     if (!model) return { outside: "no reduced model for this sliding state", materials: mats };
-    const th = thetaOf(model.terms, mats, model.nose_youngs_kpa || 0);
+    const th = thetaOf(model.terms, mats);
     const why = outside(model.terms, model.theta_box, th);
     if (why) return { outside: why, materials: mats, theta: th };
     const o = solveOnline(model.form, th);
@@ -1171,8 +1171,10 @@ function main() {
       const ct = table("Soft/hard ratios: predicted against published", ["", "predicted", "published", ""], "clinic");
       for (const r of clinic.rows) {
         const verdict = r.inside === true ? "inside" : r.inside === false ? "outside" : "not measured";
-        const notes = [r.missing, `hard: ${r.hard}${r.hard_at ? ` (taken at ${r.hard_at})` : ""}`, r.range_note, r.source].filter(Boolean);
-        const tr = row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), `${fmt(r.low, 2)}–${fmt(r.high, 2)}`, verdict], notes.join("; "));
+        const notes = [r.missing, `hard: ${r.hard}${r.hard_at ? ` (taken at ${r.hard_at})` : ""}`, r.range_note, r.source, r.evidence && `evidence: ${r.evidence}`].filter(Boolean);
+        // One published value (one study, or "≈ x") is shown as itself, not as a range.
+        const published = r.low === r.high ? fmt(r.low, 2) : `${fmt(r.low, 2)}–${fmt(r.high, 2)}`;
+        const tr = row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), published, verdict], notes.join("; "));
         tr.classList.add(r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
       }
       side.appendChild(ct);

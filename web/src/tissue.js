@@ -22,23 +22,17 @@ export function materials(nominal, p) {
   return m;
 }
 
-/** The first slot of the external nose's terms (slot 4 + s: tissue s in the nose, at the
- *  nose's modulus and that tissue's ν), as `model::reduced::NOSE_SLOTS`. */
-const NOSE_SLOTS = 4;
-
-/** θ in a model's term order: terms[q] = [slot, isLambda]; the nose's slots at `noseKpa`. */
-export function theta(terms, mats, noseKpa = 0) {
+/** θ in a model's term order: terms[q] = [slot, isLambda], slot the tissue's index in `mats`. */
+export function theta(terms, mats) {
   return terms.map(([slot, isLambda]) => {
-    const m = slot < NOSE_SLOTS ? mats[slot] : { youngs_kpa: noseKpa, poisson: mats[slot - NOSE_SLOTS].poisson };
-    const [l, mu] = lame(m.youngs_kpa, m.poisson);
+    const [l, mu] = lame(mats[slot].youngs_kpa, mats[slot].poisson);
     return isLambda ? l : mu;
   });
 }
 
 const TISSUE_NAMES = ["skin", "muscle", "fat_dark", "fat_bright"];
 /** A slot's case key, as `model::reduced::slot_name`. */
-const slotName = (slot) =>
-  slot < NOSE_SLOTS ? `[tet.${TISSUE_NAMES[slot]}]` : `[tet.${TISSUE_NAMES[slot - NOSE_SLOTS]}] in the nose ([tet] nose_youngs_kpa)`;
+const slotName = (slot) => `[tet.${TISSUE_NAMES[slot]}]`;
 /** Relative slack of the trained box, as `ReducedTet::outside`. */
 const SLACK = 1e-9;
 

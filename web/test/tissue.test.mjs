@@ -93,9 +93,6 @@ test("materials and θ follow Draw::apply and TissueElastic::lame", () => {
   assert.equal(outside(terms, [[1, 1], [2, 2]], [1.5, 2 * (1 + 1e-10)]), null);
   assert.match(outside(terms, [[1, 1], [2, 2]], [1.5, 2.1]), /μ of \[tet.fat_dark\] = 2.1000 kPa is outside the trained range 1.0000–2.0000 kPa/);
   assert.match(outside(terms, [[1, 1], [2, 2]], [0.9, 1.5]), /λ of \[tet.skin\]/);
-  // The external nose's part of a tissue (slot 4 + s): the nose's modulus, the tissue's ν.
-  assert.deepEqual(theta([[5, true], [4, false]], mats, 500), [lame(500, 0.49)[0], lame(500, 0.49)[1]]);
-  assert.match(outside([[6, false]], [[1], [2]], [3]), /μ of \[tet.fat_dark\] in the nose \(\[tet\] nose_youngs_kpa\)/);
 });
 
 test("ranges map slider fractions as Range::at and back", () => {

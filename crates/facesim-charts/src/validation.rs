@@ -37,7 +37,7 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
     let names: Vec<String> = lines.iter().map(|l| l.0.clone()).collect();
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "Predicted soft/hard ratio per case (points; red cross: outside) over the published range (grey)",
+            "Predicted soft/hard ratio per case (points; red cross: outside) over the published range (grey; a dark tick: one published value)",
             ("sans-serif", 20),
         )
         .margin(12)
@@ -57,10 +57,17 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
         })
         .x_desc("soft displacement along the move ÷ the bone's move")
         .draw()?;
+    // A published range as a grey bar; one published value (one study, or "≈ x") as a dark
+    // tick the width of the table's printed precision (0.01), not a range it does not print.
     chart.draw_series(lines.iter().enumerate().map(|(i, (_, l, h))| {
+        let (l, h, colour) = if l == h {
+            (l - 5e-3, h + 5e-3, RGBColor(90, 90, 90))
+        } else {
+            (*l, *h, RGBColor(200, 200, 200))
+        };
         Rectangle::new(
-            [(*l, i as f64 - 0.35), (*h, i as f64 + 0.35)],
-            RGBColor(200, 200, 200).filled(),
+            [(l, i as f64 - 0.35), (h, i as f64 + 0.35)],
+            colour.filled(),
         )
     }))?;
     let cases: Vec<&str> = v.cases.iter().map(|c| c.name.as_str()).collect();

@@ -912,7 +912,7 @@ fn num(x: Option<f64>, digits: usize) -> String {
 /// validation.csv: one row per case, surgery and published row.
 pub fn csv(v: &Validation) -> String {
     let mut s = String::from(
-        "case,surgery,landmark,hard_reference,segment,axis,move_mm,soft_along_mm,soft_forward_mm,soft_up_mm,predicted_ratio,published_low,published_high,inside,range_note,source,note\n",
+        "case,surgery,landmark,hard_reference,segment,axis,move_mm,soft_along_mm,soft_forward_mm,soft_up_mm,predicted_ratio,published_low,published_high,inside,distance,range_note,source,evidence,note\n",
     );
     for r in &v.rows {
         let p = r.published;
@@ -936,8 +936,10 @@ pub fn csv(v: &Validation) -> String {
             format!("{}", p.low),
             format!("{}", p.high),
             inside.into(),
+            num(r.ratio.map(|x| p.distance(x)), 3),
             p.range_note.into(),
             p.source.into(),
+            p.evidence.into(),
             r.why.clone().unwrap_or_default(),
         ];
         let line: Vec<String> = fields.iter().map(|f| csv_field(f)).collect();
@@ -1072,10 +1074,10 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
         ));
         for r in rows {
             let p = r.published;
-            let verdict = match r.inside() {
-                Some(true) => "inside",
-                Some(false) => "**OUTSIDE**",
-                None => "not measured",
+            let verdict = match (r.inside(), r.ratio) {
+                (Some(true), _) => "inside".to_string(),
+                (Some(false), Some(x)) => format!("**OUTSIDE** by {:.2}", p.distance(x)),
+                _ => "not measured".to_string(),
             };
             let fwd_up = match (r.forward_mm, r.up_mm) {
                 (Some(f), Some(u)) => format!("{f:+.2} / {u:+.2}"),
@@ -1089,15 +1091,19 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
                 note.push_str("range: ");
                 note.push_str(p.range_note);
             }
+            if !note.is_empty() {
+                note.push_str("; ");
+            }
+            note.push_str("evidence: ");
+            note.push_str(p.evidence);
             s.push_str(&format!(
-                "| {} | {} ({}) | {} | {} | {}–{} | {verdict} | {fwd_up} | {} |\n",
+                "| {} | {} ({}) | {} | {} | {} | {verdict} | {fwd_up} | {} |\n",
                 r.case,
                 p.soft,
                 p.hard,
                 p.axis.name(),
                 num(r.ratio, 2),
-                p.low,
-                p.high,
+                p.printed(),
                 note.replace('|', "/")
             ));
         }
@@ -1106,13 +1112,13 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
     s.push_str("## Sources\n\n");
     for p in &PUBLISHED {
         s.push_str(&format!(
-            "- {} {} ({}): {}–{}: {}\n",
+            "- {} {} ({}): {}: {} ({})\n",
             p.surgery.title(),
             p.soft,
             p.hard,
-            p.low,
-            p.high,
-            p.source
+            p.printed(),
+            p.source,
+            p.evidence
         ));
     }
     s

@@ -64,6 +64,9 @@ pub struct ClinicRow {
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub range_note: String,
     pub source: String,
+    /// The source's evidence level, as it states it.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub evidence: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub missing: Option<String>,
 }
@@ -241,6 +244,7 @@ fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) 
         inside: None,
         range_note: p.range_note.into(),
         source: p.source.into(),
+        evidence: p.evidence.into(),
         missing: p.unmeasured.map(str::to_string),
     };
     if p.unmeasured.is_some() {

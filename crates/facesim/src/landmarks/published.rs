@@ -4,9 +4,11 @@
 //!
 //! Ratio = the soft landmark's displacement along the bone's move ÷ the move: a pure translation
 //! moves every bone point by the plan's translation, so the hard displacement is the plan's.
-//! The ranges are the spread of study means, not of patients. Where the literature gives one
-//! value (one study, or "≈ x") the range is x ± 25 %, about one standard deviation of a single
-//! study's mean ratio (Rosen 1988: Sn 0.51 ± 0.13, Ls 0.82 ± 0.13); each such row says so.
+//! The ranges are the spread of study means, not of patients, as the sources print them
+//! (../shared/design/VALIDATION.md): where a source gives one value (one study, or "≈ x") the row
+//! holds that value (`low == high`) and a prediction is read by its distance to it; where
+//! several ranges exist the row holds the primary one (the largest sample) and its note lists
+//! the others. Each row carries the source's evidence level.
 
 /// The surgery types of the published table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -100,15 +102,37 @@ pub struct Published {
     /// How the range was read from the literature, when not taken as printed.
     pub range_note: &'static str,
     pub source: &'static str,
+    /// The source's evidence, as it states it (how many studies or patients; "low evidence").
+    pub evidence: &'static str,
     /// Why facesim cannot measure it, when it cannot.
     pub unmeasured: Option<&'static str>,
 }
 
 impl Published {
     /// A ratio inside the published range, to the table's printed precision (0.01: a ratio
-    /// that rounds to the range's end is inside).
+    /// that rounds to the range's end is inside). A single published value is a range of
+    /// no width: only a ratio that rounds to it is inside.
     pub fn contains(&self, ratio: f64) -> bool {
         ratio >= self.low - 5e-3 && ratio <= self.high + 5e-3
+    }
+
+    /// The source printed one value (one study, or "≈ x"), not a range.
+    pub fn single_value(&self) -> bool {
+        self.low == self.high
+    }
+
+    /// How far a ratio lies from the published range (0 inside it), or from the single value.
+    pub fn distance(&self, ratio: f64) -> f64 {
+        (self.low - ratio).max(ratio - self.high).max(0.0)
+    }
+
+    /// The range as the source prints it: "0.24–0.6", or one value "0.28".
+    pub fn printed(&self) -> String {
+        if self.single_value() {
+            format!("{}", self.low)
+        } else {
+            format!("{}–{}", self.low, self.high)
+        }
     }
 }
 
@@ -124,6 +148,7 @@ const fn row(
     range: (f64, f64),
     range_note: &'static str,
     source: &'static str,
+    evidence: &'static str,
 ) -> Published {
     Published {
         surgery,
@@ -136,6 +161,7 @@ const fn row(
         high: range.1,
         range_note,
         source,
+        evidence,
         unmeasured: None,
     }
 }
@@ -155,6 +181,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.17, 0.36),
         "",
         "systematic review of Le Fort I (15 studies, 419 pts: 0.24–0.35); Dann 1976 0.28; Hack 1993 0.36; Proffit & Epker 1980 0.17; Jung 2018 (3D, n 32, Head Face Med 14:21) 0.17",
+        "systematic review: 15 studies, 419 patients",
     ),
     row(
         LeFortAdvance,
@@ -166,6 +193,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.24, 0.60),
         "",
         "Rosen 1988 Plast Reconstr Surg 81:171 (0.51 ± 0.13, n 41); Gupta & Schendel 2022 (Peterson's Principles of OMFS, 4th ed., ch. 67)",
+        "range of study means (Gupta & Schendel 2022's table); one study with n 41",
     ),
     row(
         LeFortAdvance,
@@ -177,6 +205,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.5, 0.9),
         "the 2D range; 3D studies report lower ratios (0.21–0.52)",
         "Rosen 1988 (0.82 ± 0.13); Gupta & Schendel 2022; Jung 2018; 3D meta-analysis (4 studies, 105 pts)",
+        "2D studies (Gupta & Schendel 2022's table); 3D studies lower",
     ),
     row(
         LeFortAdvance,
@@ -188,6 +217,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.6, 1.33),
         "widening ÷ advance, from 3–4 mm for a 3–5 mm advance; measured at alare (Al-R, Al-L: the alae's widest points), the published figure is the alar base's",
         "prospective and 3D studies (Jung 2018)",
+        "prospective and 3D studies; the range is the printed widening over the printed advances",
     ),
     row(
         LeFortImpaction,
@@ -199,6 +229,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.2, 0.4),
         "read as the shortening of the lip's height Sn–Sto (Sto rising more than Sn)",
         "Schendel 1976; Radney & Jacobs 1981; Rosen 1988 (without muscle re-orientation)",
+        "three 2D studies",
     ),
     row(
         LeFortImpaction,
@@ -208,8 +239,9 @@ pub const PUBLISHED: [Published; 23] = [
         "maxilla",
         V,
         (0.15, 0.2),
-        "",
+        "≈ 0.15–0.2 as printed",
         "Schendel 1976; Radney & Jacobs 1981; Rosen 1988",
+        "three 2D studies",
     ),
     row(
         LeFortImpaction,
@@ -218,9 +250,10 @@ pub const PUBLISHED: [Published; 23] = [
         "impaction",
         "maxilla",
         V,
-        (0.21, 0.35),
-        "≈ 0.28 published; ± 25 %",
+        (0.28, 0.28),
+        "one value: ≈ 0.28 as printed",
         "Schendel 1976; Radney & Jacobs 1981; Rosen 1988",
+        "three 2D studies, one value",
     ),
     row(
         LeFortSetback,
@@ -232,6 +265,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.66, 0.76),
         "published −0.66 to −0.76 on a forward-positive axis: the lip follows the bone back; 2D (3D: 0.14, Jung 2018)",
         "2D studies; Jung 2018 (3D); JKAOMS 46(6), n 50: the ratio roughly doubles beyond a 4 mm setback",
+        "2D studies",
     ),
     row(
         LeFortSetback,
@@ -240,9 +274,10 @@ pub const PUBLISHED: [Published; 23] = [
         "A",
         "maxilla",
         H,
-        (0.25, 0.41),
-        "≈ −0.33 published (forward-positive axis); ± 25 %",
+        (0.33, 0.33),
+        "one value: ≈ −0.33 as printed (forward-positive axis: the lip follows the bone back)",
         "2D studies",
+        "2D studies, one value",
     ),
     row(
         BssoAdvance,
@@ -254,6 +289,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.26, 0.85),
         "",
         "Gupta & Schendel 2022 (9 studies); Eur J Orthod 2017 (doi 10.1093/ejo/cjx003) 0.76 (n 109); Jung 2018 3D 0.66 (n 32)",
+        "9 studies",
     ),
     row(
         BssoAdvance,
@@ -265,6 +301,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.86, 1.19),
         "",
         "Gupta & Schendel 2022 (8 studies)",
+        "8 studies",
     ),
     row(
         BssoAdvance,
@@ -274,8 +311,9 @@ pub const PUBLISHED: [Published; 23] = [
         "mandible",
         H,
         (0.80, 1.33),
-        "the widest published span (20 articles); 8 studies 0.94–1.10; ≈ 1:1 (Mobarak 2001)",
+        "the primary range: 20 articles, the largest sample; others: 0.94–1.10 (8 studies), ≈ 1:1 (n 61)",
         "Hallulli & Sjöström 2026 BMC Oral Health; Gupta & Schendel 2022; Mobarak 2001 AJODO 119:353 (n 61)",
+        "systematic review: 20 articles",
     ),
     row(
         BssoAdvance,
@@ -287,6 +325,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.87, 1.04),
         "",
         "Gupta & Schendel 2022",
+        "range of study means (Gupta & Schendel 2022's table)",
     ),
     row(
         BssoSetback,
@@ -295,9 +334,10 @@ pub const PUBLISHED: [Published; 23] = [
         "lower incisor",
         "mandible",
         H,
-        (0.75, 1.05),
-        "Joss 2010's 0.75–1.02 and the 2016 meta-analysis's 0.92–1.05 together",
+        (0.75, 1.02),
+        "the primary range: Joss 2010's review of 8 studies; other: 0.92–1.05 (2016 meta-analysis)",
         "Joss et al. 2010 J Oral Maxillofac Surg 68:2792 (8 studies); J Craniomaxillofac Surg 2016 (PMID 26874555)",
+        "review: 8 studies",
     ),
     row(
         BssoSetback,
@@ -306,9 +346,10 @@ pub const PUBLISHED: [Published; 23] = [
         "B",
         "mandible",
         H,
-        (0.92, 1.09),
-        "Joss 2010's 1.0–1.09 and the 2016 meta-analysis's 0.92–1.05 together",
+        (1.0, 1.09),
+        "the primary range: Joss 2010's review of 8 studies; other: 0.92–1.05 (2016 meta-analysis)",
         "Joss et al. 2010; J Craniomaxillofac Surg 2016 (PMID 26874555)",
+        "review: 8 studies",
     ),
     row(
         BssoSetback,
@@ -317,9 +358,10 @@ pub const PUBLISHED: [Published; 23] = [
         "Pog",
         "mandible",
         H,
-        (0.83, 1.05),
-        "Joss 2010's 0.83–1.04 and the 2016 meta-analysis's 0.92–1.05 together; ≈ 1:1 short term, lower long term",
+        (0.83, 1.04),
+        "the primary range: Joss 2010's review of 8 studies; other: 0.92–1.05 (2016 meta-analysis); ≈ 1:1 short term, lower long term",
         "Joss et al. 2010; J Craniomaxillofac Surg 2016 (PMID 26874555)",
+        "review: 8 studies",
     ),
     row(
         Genioplasty,
@@ -329,8 +371,9 @@ pub const PUBLISHED: [Published; 23] = [
         "chin",
         H,
         (0.57, 1.0),
-        "2D, 8 studies; 0.77–0.91 at ≥ 2 years",
+        "the primary range: 2D, 8 studies; other: 0.77–0.91 at ≥ 2 years (systematic review)",
         "2D studies (8); systematic review doi 10.1007/s10006-021-00991-7",
+        "2D, 8 studies",
     ),
     row(
         Genioplasty,
@@ -339,9 +382,10 @@ pub const PUBLISHED: [Published; 23] = [
         "Pog",
         "chin",
         H,
-        (0.33, 0.55),
-        "≈ 0.44 published; ± 25 %",
+        (0.44, 0.44),
+        "one value: ≈ 0.44 as printed",
         "Busquets & Sassouni 1981",
+        "one study",
     ),
     row(
         Bimaxillary,
@@ -353,6 +397,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.60, 0.90),
         "",
         "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+        "systematic review: 16 studies, low evidence",
     ),
     row(
         Bimaxillary,
@@ -364,6 +409,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.60, 1.00),
         "",
         "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+        "systematic review: 16 studies, low evidence",
     ),
     row(
         Bimaxillary,
@@ -372,9 +418,10 @@ pub const PUBLISHED: [Published; 23] = [
         "lower incisor",
         "mandible",
         H,
-        (0.55, 0.91),
-        "0.73 published (one study); ± 25 %",
+        (0.73, 0.73),
+        "one value: Jensen 1992's lower lip 0.73",
         "Jensen 1992 AJODO 101:266 (lower lip 0.73, rising to 1.0 at pogonion)",
+        "one study",
     ),
     row(
         Bimaxillary,
@@ -383,9 +430,10 @@ pub const PUBLISHED: [Published; 23] = [
         "B",
         "mandible",
         H,
-        (0.75, 1.25),
-        "1.00 published (one value); ± 25 %",
+        (1.0, 1.0),
+        "one value: 1.00 as printed",
         "systematic review \"Part III: double jaw\" (16 studies, low evidence)",
+        "systematic review: 16 studies, low evidence; one value",
     ),
     row(
         Bimaxillary,
@@ -397,6 +445,7 @@ pub const PUBLISHED: [Published; 23] = [
         (0.90, 1.00),
         "",
         "systematic review \"Part III: double jaw\" (16 studies, low evidence); Jensen 1992 AJODO 101:266 ≈ 1.0 at pogonion",
+        "systematic review: 16 studies, low evidence",
     ),
 ];
 
@@ -416,7 +465,14 @@ mod tests {
             assert_eq!(Surgery::from_key(s.key()), Some(s));
         }
         for p in &PUBLISHED {
-            assert!(0.0 < p.low && p.low < p.high && p.high < 2.0, "{p:?}");
+            assert!(0.0 < p.low && p.low <= p.high && p.high < 2.0, "{p:?}");
+            assert!(!p.evidence.is_empty(), "{p:?}");
+            // A single value is shown as itself; its distance is the ratio's from it.
+            if p.single_value() {
+                assert!(p.range_note.starts_with("one value"), "{p:?}");
+                assert_eq!(p.printed(), format!("{}", p.low));
+                assert!((p.distance(p.low + 0.1) - 0.1).abs() < 1e-12);
+            }
             assert_eq!(p.terms.is_empty(), p.unmeasured.is_some(), "{p:?}");
         }
     }
