@@ -4,11 +4,11 @@
 //!
 //! Ratio = the soft landmark's displacement along the bone's move ÷ the move: a pure translation
 //! moves every bone point by the plan's translation, so the hard displacement is the plan's.
-//! The ranges are the spread of study means, not of patients, as the sources print them
-//! (../shared/design/VALIDATION.md): where a source gives one value (one study, or "≈ x") the row
-//! holds that value (`low == high`) and a prediction is read by its distance to it; where
-//! several ranges exist the row holds the primary one (the largest sample) and its note lists
-//! the others. Each row carries the source's evidence level.
+//! The ranges are the spread of study means, not of patients, as the sources print them: where
+//! a source gives one value (one study, or "≈ x") the row holds that value (`low == high`) and a
+//! prediction is read by its distance to it; where several ranges exist the row holds the
+//! primary one (the largest sample) and its note lists the others. Each row carries the
+//! source's evidence level.
 
 /// The surgery types of the published table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
