@@ -1176,7 +1176,10 @@ mod tests {
             command: "facesim validate".into(),
         };
         let md = markdown(&v, &opts);
-        assert!(md.contains("| 1.50 | 0.8–1.33 | **OUTSIDE** |"), "{md}");
+        assert!(
+            md.contains("| 1.50 | 0.8–1.33 | **OUTSIDE** by 0.17 |"),
+            "{md}"
+        );
         assert!(md.contains("1 inside their published range, 1 outside, 1 not measured"));
     }
 
