@@ -487,7 +487,8 @@ fn cohort_on_a_real_slurm_with_faults() {
                 if case002 && state == "RUNNING" && cancelled.is_empty() {
                     cancelled = id.to_string();
                 }
-                // A hold fails on a job that has just started: the next pending one is tried.
+                // A hold fails on a job that has just started, or arrives as it starts: the next
+                // pending one is tried.
                 if !case002
                     && state == "PENDING"
                     && held.is_empty()
@@ -499,7 +500,15 @@ fn cohort_on_a_real_slurm_with_faults() {
                         .status
                         .success()
                 {
-                    held = id.to_string();
+                    // A job the scheduler was starting as the hold came in takes the hold's
+                    // reason and runs anyway: only a job still pending after it counts.
+                    let after = cluster.out(
+                        "squeue",
+                        &["--noheader", "--states=all", "-j", id, "--format=%T %r"],
+                    );
+                    if after.trim().starts_with("PENDING") && after.contains("Held") {
+                        held = id.to_string();
+                    }
                 }
             }
             !cancelled.is_empty() && !held.is_empty()
