@@ -1168,14 +1168,23 @@ function main() {
       ? `Soft/hard ratios published for this surgery type (the spread of study means; hover a row for its source). The plan: ${clinic.reading}.`
       : `No published ratios for this plan: ${clinic.reading}.`));
     if ((clinic.rows || []).length > 0) {
-      const ct = table("Soft/hard ratios: predicted against published", ["", "predicted", "published", ""], "clinic");
+      // The band: the ratio over the sampled tissue parameters and on the coarse mesh
+      // (report.json published_ratios band); its verdict inside / consistent / outside.
+      const banded = clinic.rows.some((r) => r.band);
+      const ct = table("Soft/hard ratios: predicted against published", banded ? ["", "predicted", "band", "published", ""] : ["", "predicted", "published", ""], "clinic");
       for (const r of clinic.rows) {
-        const verdict = r.inside === true ? "inside" : r.inside === false ? "outside" : "not measured";
+        const verdict = r.verdict ? r.verdict : r.inside === true ? "inside" : r.inside === false ? "outside" : "not measured";
         const notes = [r.missing, `hard: ${r.hard}${r.hard_at ? ` (taken at ${r.hard_at})` : ""}`, r.range_note, r.source, r.evidence && `evidence: ${r.evidence}`].filter(Boolean);
         // One published value (one study, or "≈ x") is shown as itself, not as a range.
         const published = r.low === r.high ? fmt(r.low, 2) : `${fmt(r.low, 2)}–${fmt(r.high, 2)}`;
-        const tr = row(ct, [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), published, verdict], notes.join("; "));
-        tr.classList.add(r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
+        if (r.tissue_band) notes.push(`tissue parameters p05–p95: ${fmt(r.tissue_band[0], 2)}–${fmt(r.tissue_band[1], 2)}`);
+        if (r.coarse_mesh !== undefined && r.coarse_mesh !== null) notes.push(`at twice the element size: ${fmt(r.coarse_mesh, 2)}`);
+        const band = r.band ? `${fmt(r.band[0], 2)}–${fmt(r.band[1], 2)}` : "";
+        const cells = banded
+          ? [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), band, published, verdict]
+          : [`${r.soft}${r.axis === "vertical" ? " (vertical)" : ""}`, fmt(r.predicted, 2), published, verdict];
+        const tr = row(ct, cells, notes.join("; "));
+        tr.classList.add(r.verdict ? r.verdict : r.inside === false ? "outside" : r.inside === true ? "inside" : "unmeasured");
       }
       side.appendChild(ct);
     }

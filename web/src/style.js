@@ -33,6 +33,7 @@ tbody tr:nth-child(even){background:#f3f3f3}
 ul.warnings{padding-left:18px;color:#a40}
 table.clinic tr.outside td{color:#b00;font-weight:bold}
 table.clinic tr.inside td:last-child{color:#070}
+table.clinic tr.consistent td:last-child{color:#a60}
 table.sensitivity td.top{font-weight:bold}
 p.certified{font-size:12.5px;color:#174}
 .clinic-reading,.hint{font-size:12.5px;color:#444}

@@ -1,9 +1,11 @@
 //! validation.svg: per surgery and soft landmark, the published range of the soft/hard ratio as a
-//! grey bar and each case's predicted ratio as a point over it (a cross when outside the range).
+//! grey bar and each case's predicted ratio as a point over it, its band as a line through the
+//! point (a cross when outside the range).
 //! `facesim validate` draws it from the rows `facesim_validate::validate` returns.
 
 use crate::sweep::{DrawResult, FONT, PALETTE};
 use facesim::error::{Error, Result};
+use facesim::landmarks::published::Verdict;
 use facesim::output::write_atomic;
 use facesim_validate::validate::Validation;
 use plotters::prelude::*;
@@ -29,15 +31,20 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
     let hi = v
         .rows
         .iter()
-        .filter_map(|r| r.ratio)
+        .filter_map(|r| r.band.map(|b| b[1]).or(r.ratio))
         .chain(lines.iter().map(|l| l.2))
         .fold(1.4f64, f64::max)
         + 0.1;
-    let lo = v.rows.iter().filter_map(|r| r.ratio).fold(0.0f64, f64::min) - 0.1;
+    let lo = v
+        .rows
+        .iter()
+        .filter_map(|r| r.band.map(|b| b[0]).or(r.ratio))
+        .fold(0.0f64, f64::min)
+        - 0.1;
     let names: Vec<String> = lines.iter().map(|l| l.0.clone()).collect();
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "Predicted soft/hard ratio per case (points; red cross: outside) over the published range (grey; a dark tick: one published value)",
+            "Predicted soft/hard ratio per case (points, with the band as a line; red cross: outside) over the published range (grey; a dark tick: one published value)",
             ("sans-serif", 20),
         )
         .margin(12)
@@ -79,7 +86,9 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
         } else {
             0.0
         };
-        let pts: Vec<(f64, f64, bool)> = v
+        // (ratio, height, not outside, band)
+        type Point = (f64, f64, bool, Option<[f64; 2]>);
+        let pts: Vec<Point> = v
             .rows
             .iter()
             .filter(|r| r.case == *case)
@@ -87,20 +96,26 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
                 let p = r.published;
                 let name = format!("{}: {} ({})", p.surgery.key(), p.soft, p.axis.name());
                 let i = lines.iter().position(|l| l.0 == name)?;
-                Some((r.ratio?, i as f64 + dy, r.inside() == Some(true)))
+                let outside = r.verdict() == Some(Verdict::Outside);
+                Some((r.ratio?, i as f64 + dy, !outside, r.band))
             })
             .collect();
+        // The band: the tissue parameters' p05–p95 with the mesh's difference.
+        chart.draw_series(pts.iter().filter_map(|&(_, y, _, b)| {
+            let [l, h] = b?;
+            Some(PathElement::new(vec![(l, y), (h, y)], c.stroke_width(2)))
+        }))?;
         chart
             .draw_series(
                 pts.iter()
-                    .map(|&(x, y, _)| Circle::new((x, y), 4, c.filled())),
+                    .map(|&(x, y, _, _)| Circle::new((x, y), 4, c.filled())),
             )?
             .label(*case)
             .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
         chart.draw_series(
             pts.iter()
                 .filter(|p| !p.2)
-                .map(|&(x, y, _)| Cross::new((x, y), 7, RED.stroke_width(2))),
+                .map(|&(x, y, _, _)| Cross::new((x, y), 7, RED.stroke_width(2))),
         )?;
     }
     chart

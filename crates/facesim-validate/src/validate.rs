@@ -9,8 +9,9 @@ use crate::phantom_jaws::{JawsOptions, Shape};
 use facesim::anatomy::Anatomy;
 use facesim::error::{Error, Result};
 use facesim::landmarks::Carried;
+use facesim::landmarks::clinic::ClinicRow;
 use facesim::landmarks::measure::along;
-use facesim::landmarks::published::{PUBLISHED, Published, Surgery};
+use facesim::landmarks::published::{PUBLISHED, Published, Surgery, Verdict};
 use facesim::observe::Observer;
 use facesim::pipeline::{Recorder, inputs, surfaces, tissues};
 use facesim::vec3::scale;
@@ -43,6 +44,13 @@ pub struct Options {
     pub overrides: toml::Table,
     /// Keep every output of each run under runs/ (false: only [`KEPT`]).
     pub keep_runs: bool,
+    /// Each ratio's band: the tissue parameters sampled this many times over the
+    /// `[uncertainty]` box (the reduced model from 64 on), and the ratio on the mesh of twice
+    /// the element size (`[tet] error_estimate`). 0: the ratio alone.
+    pub band_samples: usize,
+    /// The impaction's autorotation where the CT allows it (false: the maxilla moves alone; for
+    /// judging the mechanism by the protocol's rule).
+    pub autorotation: bool,
     /// The command line, for validation.md's header.
     pub command: String,
 }
@@ -97,6 +105,13 @@ pub struct Row {
     pub forward_mm: Option<f64>,
     pub up_mm: Option<f64>,
     pub ratio: Option<f64>,
+    /// The ratio's 5th and 95th percentiles over the sampled tissue parameters.
+    pub tissue_band: Option<[f64; 2]>,
+    /// The ratio on the mesh of twice the element size.
+    pub coarse_mesh: Option<f64>,
+    /// The band: the smallest interval holding the tissue band, the ratio and the coarse mesh's
+    /// (report.json `published_ratios` `band`).
+    pub band: Option<[f64; 2]>,
     /// Why there is no ratio, or what bears on it (a landmark near the tissue mesh's held faces).
     pub why: Option<String>,
 }
@@ -105,6 +120,14 @@ impl Row {
     /// Inside the published range; None when not measured.
     pub fn inside(&self) -> Option<bool> {
         self.ratio.map(|r| self.published.contains(r))
+    }
+
+    /// The band against the range (docs/guide/validation.md "The protocol"); without a band, the
+    /// ratio alone read as a band of no width. None when not measured.
+    pub fn verdict(&self) -> Option<Verdict> {
+        let r = self.ratio?;
+        let [lo, hi] = self.band.unwrap_or([r, r]);
+        Some(self.published.verdict(lo, hi))
     }
 }
 
@@ -345,6 +368,9 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
             Some((s, class)) => phantom_case(&name, &case_dir, s, (*class, &surgeries), &anatomy),
             None => sample_case(&name, &case_dir, &anatomy)?,
         };
+        if !opts.autorotation {
+            case.info.autorotation = Err("off (--no-autorotation)".into());
+        }
         for &s in &surgeries {
             done += 1;
             let prefix = format!("[{done}/{total_runs}] {name} {}:", s.key());
@@ -369,8 +395,7 @@ fn validate_with(opts: &Options, obs: &dyn Observer, on_run: &mut OnRun) -> Resu
                 &case,
                 s,
                 &run_dir,
-                &opts.overrides,
-                opts.keep_runs,
+                opts,
                 &Prefixed { inner: obs, prefix },
                 on_run,
             );
@@ -688,8 +713,7 @@ fn run_one(
     case: &Prepared,
     s: Surgery,
     run_dir: &Path,
-    overrides: &toml::Table,
-    keep_runs: bool,
+    opts: &Options,
     obs: &dyn Observer,
     on_run: &mut OnRun,
 ) -> Result<RunLandmarks> {
@@ -736,13 +760,25 @@ fn run_one(
         surface.insert("movable".into(), m.clone());
         over.insert("surface".into(), toml::Value::Table(surface));
     }
+    // The band: the coarse mesh's solve and the sampled tissue parameters; else neither.
     let mut tet = toml::Table::new();
-    tet.insert("error_estimate".into(), toml::Value::Boolean(false));
+    tet.insert(
+        "error_estimate".into(),
+        toml::Value::Boolean(opts.band_samples > 0),
+    );
     over.insert("tet".into(), toml::Value::Table(tet));
-    facesim::case::merge(&mut over, overrides.clone());
+    if opts.band_samples > 0 {
+        let mut u = toml::Table::new();
+        u.insert(
+            "samples".into(),
+            toml::Value::Integer(opts.band_samples as i64),
+        );
+        over.insert("uncertainty".into(), toml::Value::Table(u));
+    }
+    facesim::case::merge(&mut over, opts.overrides.clone());
     let outcome = facesim::commands::run_with(&case.dir, Some(run_dir), &over, obs)?;
     on_run(&case.info, s, &outcome)?;
-    if !keep_runs {
+    if !opts.keep_runs {
         prune(&outcome.out_dir);
     }
     let face_region = outcome.report.tet.as_ref().map(|t| t.region);
@@ -755,6 +791,11 @@ fn run_one(
             .map(|(_, c)| c)
             .collect(),
         face_region,
+        published: outcome
+            .report
+            .published_ratios
+            .map(|c| c.rows)
+            .unwrap_or_default(),
     })
 }
 
@@ -764,6 +805,8 @@ fn run_one(
 struct RunLandmarks {
     carried: Vec<Carried>,
     face_region: Option<([f64; 3], [f64; 3])>,
+    /// The run's own published rows (report.json `published_ratios`), with their bands.
+    published: Vec<ClinicRow>,
 }
 
 /// A landmark nearer than this to the face region's edge is noted: the face beyond the edge
@@ -815,6 +858,9 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 forward_mm: None,
                 up_mm: None,
                 ratio: None,
+                tissue_band: None,
+                coarse_mesh: None,
+                band: None,
                 why: None,
             };
             if let Some(u) = p.unmeasured {
@@ -876,6 +922,9 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 Ok(d) => {
                     row.along_mm = Some(d);
                     row.ratio = Some(d / mm);
+                    if let Some(b) = run.as_ref().ok().and_then(|r| band_of(&r.published, p, d / mm)) {
+                        (row.tissue_band, row.coarse_mesh, row.band) = b;
+                    }
                     row.forward_mm = along(carried, p.terms, info.forward).ok();
                     row.up_mm = along(carried, p.terms, info.up).ok();
                 }
@@ -897,6 +946,28 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
         .collect()
 }
 
+/// The run's band of row `p` about `ratio` (validate's own ratio; the run's report measures the
+/// same move at the same landmarks, so the two agree but for rounding): each figure keeps its
+/// offset from the report's predicted ratio.
+#[allow(clippy::type_complexity)]
+fn band_of(
+    published: &[ClinicRow],
+    p: &Published,
+    ratio: f64,
+) -> Option<(Option<[f64; 2]>, Option<f64>, Option<[f64; 2]>)> {
+    let c = published
+        .iter()
+        .find(|c| c.soft == p.soft && c.axis == p.axis.name())?;
+    let at = c.predicted?;
+    let shift = |x: f64| ratio + (x - at);
+    let pair = |b: [f64; 2]| [shift(b[0]), shift(b[1])];
+    Some((
+        c.tissue_band.map(pair),
+        c.coarse_mesh.map(shift),
+        c.band.map(pair),
+    ))
+}
+
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
         format!("\"{}\"", s.replace('"', "\"\""))
@@ -912,7 +983,7 @@ fn num(x: Option<f64>, digits: usize) -> String {
 /// validation.csv: one row per case, surgery and published row.
 pub fn csv(v: &Validation) -> String {
     let mut s = String::from(
-        "case,surgery,landmark,hard_reference,segment,axis,move_mm,soft_along_mm,soft_forward_mm,soft_up_mm,predicted_ratio,published_low,published_high,inside,distance,range_note,source,evidence,note\n",
+        "case,surgery,landmark,hard_reference,segment,axis,move_mm,soft_along_mm,soft_forward_mm,soft_up_mm,predicted_ratio,tissue_p05,tissue_p95,coarse_mesh_ratio,band_low,band_high,published_low,published_high,inside,verdict,distance,range_note,source,evidence,note\n",
     );
     for r in &v.rows {
         let p = r.published;
@@ -933,9 +1004,15 @@ pub fn csv(v: &Validation) -> String {
             num(r.forward_mm, 3),
             num(r.up_mm, 3),
             num(r.ratio, 3),
+            num(r.tissue_band.map(|b| b[0]), 3),
+            num(r.tissue_band.map(|b| b[1]), 3),
+            num(r.coarse_mesh, 3),
+            num(r.band.map(|b| b[0]), 3),
+            num(r.band.map(|b| b[1]), 3),
             format!("{}", p.low),
             format!("{}", p.high),
             inside.into(),
+            r.verdict().map_or("", Verdict::name).into(),
             num(r.ratio.map(|x| p.distance(x)), 3),
             p.range_note.into(),
             p.source.into(),
@@ -972,6 +1049,20 @@ fn v3(a: [f64; 3]) -> String {
     format!("({:.3}, {:.3}, {:.3})", a[0], a[1], a[2])
 }
 
+/// Rows inside, consistent, outside and not measured.
+pub fn verdict_counts(rows: &[Row]) -> [usize; 4] {
+    let mut n = [0; 4];
+    for r in rows {
+        n[match r.verdict() {
+            Some(Verdict::Inside) => 0,
+            Some(Verdict::Consistent) => 1,
+            Some(Verdict::Outside) => 2,
+            None => 3,
+        }] += 1;
+    }
+    n
+}
+
 /// validation.md: the header, the moves, the cases, then per surgery the table.
 pub fn markdown(v: &Validation, opts: &Options) -> String {
     let mut s = String::from(
@@ -995,18 +1086,21 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
                 .replace('\n', "; ")
         ));
     }
-    let (inside, outside, none) = v
-        .rows
-        .iter()
-        .fold((0, 0, 0), |(a, b, c), r| match r.inside() {
-            Some(true) => (a + 1, b, c),
-            Some(false) => (a, b + 1, c),
-            None => (a, b, c + 1),
-        });
-    s.push_str(&format!(
-        "**{inside} inside their published range, {outside} outside, {none} not measured** (each below, with why).\n\n"
-    ));
-    s.push_str("Ratio = the soft landmark's displacement along the bone's move ÷ the move (a pure translation moves every bone point by the plan's translation). Every run uses the product's defaults except `[tet] error_estimate = false` (the estimate solves again at twice the element size and reports, without changing, the face). Forward and up are the head's (below, per case).\n\n## The moves\n\n| surgery | segments moved |\n|---|---|\n");
+    let [inside, consistent, outside, none] = verdict_counts(&v.rows);
+    if opts.band_samples > 0 {
+        s.push_str(&format!(
+            "**With their bands: {inside} inside their published range, {consistent} consistent with it, {outside} outside, {none} not measured** (each below, with why). The ratios alone: {} inside, {} outside.\n\n",
+            v.rows.iter().filter(|r| r.inside() == Some(true)).count(),
+            v.rows.iter().filter(|r| r.inside() == Some(false)).count(),
+        ));
+        s.push_str(&format!("Ratio = the soft landmark's displacement along the bone's move ÷ the move (a pure translation moves every bone point by the plan's translation). Every run uses the product's defaults, with `[uncertainty] samples = {}` and `[tet] error_estimate = true`. Its band: the smallest interval holding the ratio's 5th–95th percentiles over the tissue parameters sampled from the `[uncertainty]` box, the ratio itself and the ratio on the mesh of twice the element size; **inside** when the band lies within the published range (holds a single published value), **consistent** when it overlaps the range, **outside** when it is clear of it (docs/guide/validation.md, \"The protocol\"). Forward and up are the head's (below, per case).\n\n## The moves", opts.band_samples));
+    } else {
+        s.push_str(&format!(
+            "**{inside} inside their published range, {outside} outside, {none} not measured** (each below, with why; no bands: `--band-samples 0`).\n\n"
+        ));
+        s.push_str("Ratio = the soft landmark's displacement along the bone's move ÷ the move (a pure translation moves every bone point by the plan's translation). Every run uses the product's defaults except `[tet] error_estimate = false` (the estimate solves again at twice the element size and reports, without changing, the face). Forward and up are the head's (below, per case).\n\n## The moves");
+    }
+    s.push_str("\n\n| surgery | segments moved |\n|---|---|\n");
     for srg in Surgery::ALL {
         let m: Vec<String> = moves(srg)
             .iter()
@@ -1069,16 +1163,21 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
             continue;
         }
         s.push_str(&format!(
-            "## {}\n\n| case | soft (hard ref.) | axis | predicted | published | | soft fwd / up mm | note |\n|---|---|---|---|---|---|---|---|\n",
+            "## {}\n\n| case | soft (hard ref.) | axis | predicted | band | published | | soft fwd / up mm | note |\n|---|---|---|---|---|---|---|---|---|\n",
             srg.title()
         ));
         for r in rows {
             let p = r.published;
-            let verdict = match (r.inside(), r.ratio) {
-                (Some(true), _) => "inside".to_string(),
-                (Some(false), Some(x)) => format!("**OUTSIDE** by {:.2}", p.distance(x)),
+            let verdict = match (r.verdict(), r.ratio) {
+                (Some(Verdict::Outside), Some(x)) => {
+                    format!("**OUTSIDE** by {:.2}", p.distance(x))
+                }
+                (Some(v), _) => v.name().to_string(),
                 _ => "not measured".to_string(),
             };
+            let band = r
+                .band
+                .map_or(String::new(), |b| format!("{:.2}–{:.2}", b[0], b[1]));
             let fwd_up = match (r.forward_mm, r.up_mm) {
                 (Some(f), Some(u)) => format!("{f:+.2} / {u:+.2}"),
                 _ => String::new(),
@@ -1097,7 +1196,7 @@ pub fn markdown(v: &Validation, opts: &Options) -> String {
             note.push_str("evidence: ");
             note.push_str(p.evidence);
             s.push_str(&format!(
-                "| {} | {} ({}) | {} | {} | {} | {verdict} | {fwd_up} | {} |\n",
+                "| {} | {} ({}) | {} | {} | {band} | {} | {verdict} | {fwd_up} | {} |\n",
                 r.case,
                 p.soft,
                 p.hard,
@@ -1137,6 +1236,9 @@ mod tests {
             forward_mm: None,
             up_mm: None,
             ratio,
+            tissue_band: None,
+            coarse_mesh: None,
+            band: None,
             why: ratio.is_none().then(|| "Me' not found: no skin".into()),
         }
     }
@@ -1173,6 +1275,8 @@ mod tests {
             cases: vec![],
             overrides: toml::Table::new(),
             keep_runs: false,
+            band_samples: 0,
+            autorotation: true,
             command: "facesim validate".into(),
         };
         let md = markdown(&v, &opts);

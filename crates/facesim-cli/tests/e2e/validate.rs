@@ -76,7 +76,9 @@ fn recompute(run: &Value, row: &HashMap<String, String>) -> f64 {
 }
 
 /// `facesim validate --out DIR/v --samples data-samples ARGS` into a kept directory named `dir`;
-/// the output directory and what the command printed, after a successful run.
+/// the output directory and what the command printed, after a successful run. Without bands
+/// (`--band-samples 0`) unless ARGS ask for them: the band's reduced model is most of a run's
+/// time, and one test checks the bands.
 fn validate_into(dir: &str, args: &[&str]) -> (PathBuf, CliResult) {
     let out = common::kept_dir(dir).join("v");
     let samples = root().join("data-samples");
@@ -87,6 +89,9 @@ fn validate_into(dir: &str, args: &[&str]) -> (PathBuf, CliResult) {
         "--samples",
         samples.to_str().unwrap(),
     ];
+    if !args.contains(&"--band-samples") {
+        all.extend_from_slice(&["--band-samples", "0"]);
+    }
     all.extend_from_slice(args);
     let r = facesim(&all);
     assert_eq!(r.code, 0, "facesim validate failed: {}", r.stderr);
@@ -121,7 +126,13 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
     let out = validate_one_phantom(
         "facesim-validate-phantom",
         "bsso-advance",
-        &["--set", "tet.fat_dark.youngs_kpa=2.5", "--keep-runs"],
+        &[
+            "--set",
+            "tet.fat_dark.youngs_kpa=2.5",
+            "--keep-runs",
+            "--band-samples",
+            "64",
+        ],
     );
     for f in ["validation.md", "validation.csv", "validation.svg"] {
         assert!(out.join(f).is_file(), "{f} missing");
@@ -179,19 +190,67 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
                 );
                 let inside = (lo - 5e-3..=hi + 5e-3).contains(&ratio);
                 assert_eq!(row["inside"], if inside { "yes" } else { "no" }, "{key:?}");
-                if !inside {
-                    assert!(md.contains("**OUTSIDE**"), "an outside row is not shown");
-                }
+                assert_band(row, ratio, (lo, hi), &run);
             }
             None => assert!(!row["note"].is_empty(), "{key:?}: no ratio and no reason"),
         }
     }
     assert!(measured >= 3, "only {measured} rows measured: {rows:?}");
+    assert!(md.contains("With their bands"), "{md}");
+    if rows.iter().any(|r| r["verdict"] == "outside") {
+        assert!(md.contains("**OUTSIDE**"), "an outside row is not shown");
+    }
     // A mandibular move leaves the region alone: the nose rests on the maxilla, which stays.
     assert!(run["tet"].get("region_grown_for_nose_tip").is_none());
     // The chart names the case and each measured row (SVG escapes the prime as &apos;).
     let svg = std::fs::read_to_string(out.join("validation.svg")).unwrap();
     assert!(svg.contains("phantom01") && svg.contains("bsso-advance: Pog&apos; (horizontal)"));
+}
+
+/// A measured row's band in validation.csv (printed to 0.001): the tissue parameters move the
+/// ratio (a band of some width about it), the coarse mesh gives another ratio, the band is the
+/// hull of the three, its verdict the protocol's, and the run's report.json row says the same.
+fn assert_band(row: &HashMap<String, String>, ratio: f64, (lo, hi): (f64, f64), run: &Value) {
+    let key = &row["landmark"];
+    let get = |k: &str| num(&row[k]).unwrap_or_else(|| panic!("{key}: no {k}: {row:?}"));
+    let (p05, p95, coarse) = (
+        get("tissue_p05"),
+        get("tissue_p95"),
+        get("coarse_mesh_ratio"),
+    );
+    let (low, high) = (get("band_low"), get("band_high"));
+    assert!(
+        p05 < p95 && p95 - p05 < 0.5,
+        "{key}: tissue band {p05}–{p95}"
+    );
+    assert!(
+        (coarse - ratio).abs() > 1e-4,
+        "{key}: the coarse mesh gave the same ratio"
+    );
+    assert!(
+        (low - p05.min(ratio).min(coarse)).abs() < 1.5e-3
+            && (high - p95.max(ratio).max(coarse)).abs() < 1.5e-3,
+        "{key}: band {low}–{high} is not the hull of {p05}–{p95}, {ratio} and {coarse}"
+    );
+    let e = 5e-3;
+    let verdict = if high < lo - e || low > hi + e {
+        "outside"
+    } else if lo == hi || (low >= lo - e && high <= hi + e) {
+        "inside"
+    } else {
+        "consistent"
+    };
+    assert_eq!(
+        row["verdict"], verdict,
+        "{key}: band {low}–{high} against {lo}–{hi}"
+    );
+    let own = run["published_ratios"]["rows"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["soft"] == key.as_str())
+        .unwrap();
+    assert_eq!(own["verdict"], verdict, "{key}: {own}");
 }
 
 /// A Le Fort I impaction closes the mandible after it (the autorotation): the run's plan turns

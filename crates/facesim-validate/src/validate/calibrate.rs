@@ -337,6 +337,8 @@ impl Calibrand {
             Ok(RunLandmarks {
                 carried,
                 face_region: self.face_region,
+                // A grid point's face: no band.
+                published: Vec::new(),
             }),
         );
         Ok(rows

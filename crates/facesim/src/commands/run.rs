@@ -97,7 +97,7 @@ fn finish(
     let case = &scene.case;
     let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
     let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
-    let analysis = locate_landmarks(&scene, &prediction, files, &mut rec)?;
+    let mut analysis = locate_landmarks(&scene, &prediction, files, &mut rec)?;
     let (band, reduced) = sample_band(&scene, &prediction, &analysis, &mut rec)?;
     // Stored beside plan_basis.bin (docs/design/reduced.md "The stored model").
     let reduced = reduced.map(|m| crate::model::reduced::file::StoredReduced {
@@ -107,7 +107,14 @@ fn finish(
         sliding_matters: m.sliding_matters,
         models: m.models,
     });
-    let discretisation = discretisation_error(&scene, &prediction, &analysis, &mut rec);
+    let (discretisation, coarse) = discretisation_error(&scene, &prediction, &analysis, &mut rec);
+    band_published(
+        &scene,
+        &prediction,
+        &mut analysis,
+        band.as_ref(),
+        coarse.as_deref(),
+    );
     outputs::write(dir, &scene, &prediction, &dist, case, &mut rec)?;
     if let Some(r) = &reduced {
         crate::model::reduced::file::write(&dir.join(crate::model::reduced::file::FILE_NAME), r)?;
@@ -194,20 +201,87 @@ fn locate_landmarks(
             &scene.model.plan,
         ))
     })?;
-    // The published ratios of a plan in clinical terms: its surgery type from its entries'
-    // kinds, its moves in the clinical frame.
     let mut analysis = analysis;
+    analysis.clinic = clinic_of(scene, analysis.frame.as_ref(), &analysis.carried);
+    Ok(analysis)
+}
+
+/// The plan's published ratios as `carried` gives them. A plan in clinical terms: its surgery
+/// type from its entries' kinds, its moves in the clinical frame; else read from its segments'
+/// names in the head frame (none without one).
+fn clinic_of(
+    scene: &Scene,
+    frame: Option<&crate::landmarks::HeadFrame>,
+    carried: &[crate::landmarks::Carried],
+) -> Option<crate::landmarks::clinic::Clinic> {
+    use crate::landmarks::clinic;
+    let segments = scene.model.plan.segments();
     if let Some(a) = scene.anatomy.as_ref().filter(|a| !a.planned.is_empty()) {
         let kinds: Vec<(String, &str)> =
             a.planned.iter().map(|p| (p.name.clone(), p.what)).collect();
-        analysis.clinic = Some(crate::landmarks::clinic::against_published_planned(
-            scene.model.plan.segments(),
-            &analysis.carried,
+        return Some(clinic::against_published_planned(
+            segments,
+            carried,
             &a.anatomy.frame.frame,
             &kinds,
         ));
     }
-    Ok(analysis)
+    frame.map(|f| clinic::against_published(segments, carried, f))
+}
+
+/// The bands of report.json `published_ratios`: each row's ratio on every sampled tissue's face
+/// and on the coarse mesh's face, where the run has them.
+fn band_published(
+    scene: &Scene,
+    prediction: &crate::model::Prediction,
+    analysis: &mut crate::landmarks::Analysis,
+    band: Option<&crate::uncertainty::Sampled>,
+    coarse: Option<&[[f64; 3]]>,
+) {
+    use rayon::prelude::*;
+    if analysis.clinic.is_none() || (band.is_none() && coarse.is_none()) {
+        return;
+    }
+    // The run's landmarks with each soft one moved to `at(label)` (the bony ones move with
+    // their segments whatever the tissue).
+    let carried_at = |at: &dyn Fn(usize, &str) -> Option<[f64; 3]>| {
+        let mut c = analysis.carried.clone();
+        for (i, l) in c.iter_mut().enumerate() {
+            if let (crate::landmarks::Kind::Soft, Some(pre), Some(p)) =
+                (l.kind, l.pre, at(i, &l.label))
+            {
+                l.post = Some(p);
+                l.change_mm = Some(crate::vec3::norm(crate::vec3::sub(p, pre)));
+            }
+        }
+        c
+    };
+    let frame = analysis.frame.as_ref();
+    let samples: Vec<crate::landmarks::clinic::Clinic> = band
+        .map(|b| {
+            let n = b.soft_positions.first().map_or(0, |(_, p)| p.len());
+            (0..n)
+                .into_par_iter()
+                .filter_map(|s| {
+                    let at = |_: usize, label: &str| {
+                        let (_, p) = b.soft_positions.iter().find(|(l, _)| l == label)?;
+                        Some(p[s])
+                    };
+                    clinic_of(scene, frame, &carried_at(&at))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    let coarse = coarse.and_then(|face| {
+        let at = |i: usize, _: &str| {
+            let a = analysis.anchors.get(i).copied().flatten()?;
+            Some(a.place(&prediction.skin.triangles, face))
+        };
+        clinic_of(scene, frame, &carried_at(&at))
+    });
+    if let Some(c) = analysis.clinic.as_mut() {
+        crate::landmarks::clinic::with_bands(c, &samples, coarse.as_ref());
+    }
 }
 
 /// The band of the sampled tissue parameters, and the certified reduced models it was sampled
@@ -265,33 +339,40 @@ fn sample_band(
 
 /// The discretisation error: the case again at twice the element size (Richardson); none
 /// unless `[tet] error_estimate`, a failed coarse solve a warning.
+/// The estimate and the coarse mesh's face.
 fn discretisation_error(
     scene: &Scene,
     prediction: &crate::model::Prediction,
     analysis: &crate::landmarks::Analysis,
     rec: &mut Recorder,
-) -> Option<crate::model::discretisation::DiscretisationError> {
+) -> (
+    Option<crate::model::discretisation::DiscretisationError>,
+    Option<Vec<[f64; 3]>>,
+) {
     if !scene.case.tet.error_estimate {
-        return None;
+        return (None, None);
     }
     let started = std::time::Instant::now();
     rec.obs.started("estimating the discretisation error");
     match prediction.coarse_face(scene, &scene.case) {
-        Some(Ok((size, coarse))) => Some(crate::model::discretisation::estimate(
-            &prediction.skin.vertices,
-            &prediction.face_post.vertices,
-            &coarse,
-            &analysis.region_of,
-            size,
-            started.elapsed().as_secs_f64(),
-        )),
+        Some(Ok((size, coarse))) => (
+            Some(crate::model::discretisation::estimate(
+                &prediction.skin.vertices,
+                &prediction.face_post.vertices,
+                &coarse,
+                &analysis.region_of,
+                size,
+                started.elapsed().as_secs_f64(),
+            )),
+            Some(coarse),
+        ),
         Some(Err(e)) => {
             rec.warn(format!(
                 "no discretisation-error estimate: the solve at twice the element size failed ({e})"
             ));
-            None
+            (None, None)
         }
-        None => None,
+        None => (None, None),
     }
 }
 

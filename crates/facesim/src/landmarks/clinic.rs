@@ -23,7 +23,7 @@
 use super::frame::HeadFrame;
 use super::landmark::Carried;
 use super::measure::along;
-use super::published::{Axis, Published, Surgery, rows_of};
+use super::published::{Axis, Published, Surgery, Verdict, rows_of};
 use crate::case::Osteotomy;
 use crate::plan::basis::{displace, matrix};
 use crate::vec3::dot;
@@ -69,6 +69,66 @@ pub struct ClinicRow {
     pub evidence: String,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub missing: Option<String>,
+    /// With `[uncertainty] samples`: the ratio's 5th and 95th percentiles over the sampled
+    /// tissue parameters.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tissue_band: Option<[f64; 2]>,
+    /// With `[tet] error_estimate`: the ratio on the mesh of twice the element size.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub coarse_mesh: Option<f64>,
+    /// The prediction's band: the smallest interval holding the tissue band, the predicted ratio
+    /// and the coarse mesh's (docs/guide/validation.md, "The protocol"); with neither, absent.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub band: Option<[f64; 2]>,
+    /// The band against the range: inside, consistent (overlapping) or outside.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<Verdict>,
+}
+
+impl ClinicRow {
+    /// The band and verdict from the tissue band and the coarse mesh's ratio (either may be
+    /// absent); nothing without a predicted ratio.
+    fn set_band(&mut self, p: &Published) {
+        let Some(r) = self.predicted else {
+            return;
+        };
+        if self.tissue_band.is_none() && self.coarse_mesh.is_none() {
+            return;
+        }
+        let [lo, hi] = self.tissue_band.unwrap_or([r, r]);
+        let c = self.coarse_mesh.unwrap_or(r);
+        let band = [lo.min(r).min(c), hi.max(r).max(c)];
+        self.band = Some(band);
+        self.verdict = Some(p.verdict(band[0], band[1]));
+    }
+}
+
+/// The bands of a run's published rows: `samples`, the clinic as each sampled tissue's face
+/// gives it, and `coarse`, as the coarse mesh's gives it (each with the run's rows, in their
+/// order: the plan and the landmarks before are the run's).
+pub(crate) fn with_bands(clinic: &mut Clinic, samples: &[Clinic], coarse: Option<&Clinic>) {
+    let Some(surgery) = clinic.surgery.as_deref().and_then(Surgery::from_key) else {
+        return;
+    };
+    let published: Vec<&Published> = rows_of(surgery).collect();
+    for (i, row) in clinic.rows.iter_mut().enumerate() {
+        let Some(p) = published
+            .iter()
+            .find(|p| p.soft == row.soft && p.axis.name() == row.axis)
+        else {
+            continue;
+        };
+        let ratios: Vec<f64> = samples
+            .iter()
+            .filter_map(|c| c.rows.get(i)?.predicted)
+            .collect();
+        if !samples.is_empty() && ratios.len() == samples.len() {
+            let b = crate::uncertainty::Band::of(&ratios);
+            row.tissue_band = Some([b.p05, b.p95]);
+        }
+        row.coarse_mesh = coarse.and_then(|c| c.rows.get(i)?.predicted);
+        row.set_band(p);
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -246,6 +306,10 @@ fn row_of(p: &Published, o: &Osteotomy, carried: &[Carried], frame: &HeadFrame) 
         source: p.source.into(),
         evidence: p.evidence.into(),
         missing: p.unmeasured.map(str::to_string),
+        tissue_band: None,
+        coarse_mesh: None,
+        band: None,
+        verdict: None,
     };
     if p.unmeasured.is_some() {
         return row;
@@ -385,6 +449,60 @@ mod tests {
             change_mm: Some(crate::vec3::norm(sub(post, pre))),
             missing: None,
         }
+    }
+
+    /// The band of a row is the hull of the sampled ratios' p05–p95, the ratio and the coarse
+    /// mesh's ratio; its verdict reads the band against the range.
+    #[test]
+    fn a_rows_band_holds_its_samples_middle_ninety_percent_and_both_meshes() {
+        let f = frame();
+        let plan = [segment("maxilla", [0.0, -5.0, 0.0], [0.0; 3])];
+        let carried = |sn_forward: f64| {
+            vec![
+                lm("Sn", [0.0, -80.0, 0.0], [0.0, -80.0 - sn_forward, 0.3]),
+                lm("Ls", [0.0, -82.0, -15.0], [0.0, -86.8, -15.0]),
+                lm("A", [0.0, -70.0, -5.0], [0.0, -75.0, -5.0]),
+            ]
+        };
+        // Sn's ratio over 21 samples: (a..b) mm forward over 5 mm, evenly.
+        let band_of = |a: f64, b: f64, coarse: f64| {
+            let mut c = against_published(&plan, &carried(2.0), &f);
+            let samples: Vec<Clinic> = (0..21)
+                .map(|k| a + (b - a) * k as f64 / 20.0)
+                .map(|x| against_published(&plan, &carried(x), &f))
+                .collect();
+            let coarse = against_published(&plan, &carried(coarse), &f);
+            with_bands(&mut c, &samples, Some(&coarse));
+            c
+        };
+        let get = |c: &Clinic, s: &str| c.rows.iter().find(|r| r.soft == s).unwrap().clone();
+        let close =
+            |x: [f64; 2], y: [f64; 2]| (x[0] - y[0]).abs() < 1e-12 && (x[1] - y[1]).abs() < 1e-12;
+        // 0.20–0.60 in steps of 0.02: p05 and p95 at positions 1 and 19 (numpy's type 7).
+        let c = band_of(1.0, 3.0, 2.5);
+        let sn = get(&c, "Sn");
+        assert!(close(sn.tissue_band.unwrap(), [0.22, 0.58]), "{sn:?}");
+        assert!((sn.coarse_mesh.unwrap() - 0.5).abs() < 1e-12, "{sn:?}");
+        assert!(close(sn.band.unwrap(), [0.22, 0.58]), "{sn:?}");
+        // Published 0.24–0.60: the band reaches below it.
+        assert_eq!(sn.verdict, Some(Verdict::Consistent), "{sn:?}");
+        // Ls does not depend on Sn: a band of no width, clear of 0.5–0.9.
+        let ls = get(&c, "Ls");
+        assert!(close(ls.band.unwrap(), [0.96, 0.96]), "{ls:?}");
+        assert_eq!(ls.verdict, Some(Verdict::Outside), "{ls:?}");
+        // A narrower tissue band with the coarse mesh beyond it: the hull reaches the coarse.
+        let sn = get(&band_of(1.5, 2.5, 2.75), "Sn");
+        assert!(close(sn.tissue_band.unwrap(), [0.31, 0.49]), "{sn:?}");
+        assert!(close(sn.band.unwrap(), [0.31, 0.55]), "{sn:?}");
+        assert_eq!(sn.verdict, Some(Verdict::Inside), "{sn:?}");
+        // Without samples or a coarse mesh, no band.
+        let mut c = against_published(&plan, &carried(2.0), &f);
+        with_bands(&mut c, &[], None);
+        assert!(
+            c.rows
+                .iter()
+                .all(|r| r.band.is_none() && r.verdict.is_none())
+        );
     }
 
     #[test]

@@ -10,6 +10,8 @@
 //! primary one (the largest sample) and its note lists the others. Each row carries the
 //! source's evidence level.
 
+use serde::{Deserialize, Serialize};
+
 /// The surgery types of the published table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Surgery {
@@ -84,6 +86,26 @@ impl Axis {
     }
 }
 
+/// A predicted ratio's band against its published range (docs/guide/validation.md, "The
+/// protocol"): the band lies within the range, overlaps it, or is clear of it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Verdict {
+    Inside,
+    Consistent,
+    Outside,
+}
+
+impl Verdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            Verdict::Inside => "inside",
+            Verdict::Consistent => "consistent",
+            Verdict::Outside => "outside",
+        }
+    }
+}
+
 /// One row of the published table.
 #[derive(Clone, Copy, Debug)]
 pub struct Published {
@@ -124,6 +146,20 @@ impl Published {
     /// How far a ratio lies from the published range (0 inside it), or from the single value.
     pub fn distance(&self, ratio: f64) -> f64 {
         (self.low - ratio).max(ratio - self.high).max(0.0)
+    }
+
+    /// Where a prediction's band [lo, hi] lies against the range, at the table's precision as
+    /// [`Published::contains`] (docs/guide/validation.md "The protocol"): inside it, overlapping
+    /// it (consistent), or clear of it. Against a single published value: inside when the band
+    /// holds it, else outside.
+    pub fn verdict(&self, lo: f64, hi: f64) -> Verdict {
+        if hi < self.low - 5e-3 || lo > self.high + 5e-3 {
+            Verdict::Outside
+        } else if self.single_value() || (self.contains(lo) && self.contains(hi)) {
+            Verdict::Inside
+        } else {
+            Verdict::Consistent
+        }
     }
 
     /// The range as the source prints it: "0.24–0.6", or one value "0.28".
@@ -457,6 +493,30 @@ pub fn rows_of(surgery: Surgery) -> impl Iterator<Item = &'static Published> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A band within a printed range is inside, across its end consistent, beyond it outside;
+    /// a single printed value is inside a band that holds it and outside one that does not.
+    #[test]
+    fn a_band_reads_inside_consistent_or_outside() {
+        let range = PUBLISHED
+            .iter()
+            .find(|p| !p.single_value() && p.unmeasured.is_none())
+            .unwrap();
+        let (l, h) = (range.low, range.high);
+        let w = h - l;
+        assert_eq!(range.verdict(l + 0.1 * w, h - 0.1 * w), Verdict::Inside);
+        assert_eq!(range.verdict(l - 0.004, h + 0.004), Verdict::Inside);
+        assert_eq!(range.verdict(l - 0.1, l + 0.1 * w), Verdict::Consistent);
+        assert_eq!(range.verdict(l - 0.1, h + 0.1), Verdict::Consistent);
+        assert_eq!(range.verdict(h + 0.01, h + 0.2), Verdict::Outside);
+        assert_eq!(range.verdict(l - 0.2, l - 0.01), Verdict::Outside);
+        let one = PUBLISHED.iter().find(|p| p.single_value()).unwrap();
+        let v = one.low;
+        assert_eq!(one.verdict(v - 0.05, v + 0.05), Verdict::Inside);
+        assert_eq!(one.verdict(v, v), Verdict::Inside);
+        assert_eq!(one.verdict(v + 0.01, v + 0.2), Verdict::Outside);
+        assert_eq!(one.verdict(v - 0.2, v - 0.01), Verdict::Outside);
+    }
 
     #[test]
     fn every_surgery_has_rows_and_every_range_is_ordered() {

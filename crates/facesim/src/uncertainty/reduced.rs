@@ -109,14 +109,15 @@ pub(crate) fn sample_reduced(
         }
     };
     let trackers = trackers(analysis);
-    let at_landmarks: Vec<Vec<f64>> = trackers
+    // Each soft landmark's position on each sample's face.
+    let positions: Vec<Option<Vec<[f64; 3]>>> = trackers
         .iter()
-        .map(|(_, t)| {
-            (0..n)
-                .into_par_iter()
-                .map(|s| match t {
-                    Tracker::Soft(a, pre) => match &solved[s].0 {
-                        Face::Nominal => norm(sub(a.place(&skin.triangles, run.face_post), *pre)),
+        .map(|(_, t)| match t {
+            Tracker::Soft(a, _) => Some(
+                (0..n)
+                    .into_par_iter()
+                    .map(|s| match &solved[s].0 {
+                        Face::Nominal => a.place(&skin.triangles, run.face_post),
                         Face::Reduced(..) => {
                             // The anchor's triangle on this sample's face, placed as on any face.
                             let tri = skin.triangles[a.triangle as usize];
@@ -126,12 +127,21 @@ pub(crate) fn sample_reduced(
                                 [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
                             });
                             let local = crate::landmarks::SurfaceAnchor { triangle: 0, ..*a };
-                            norm(sub(local.place(&[[0, 1, 2]], &corners), *pre))
+                            local.place(&[[0, 1, 2]], &corners)
                         }
-                    },
-                    Tracker::Fixed(m) => *m,
-                })
-                .collect()
+                    })
+                    .collect(),
+            ),
+            Tracker::Fixed(_) => None,
+        })
+        .collect();
+    let at_landmarks: Vec<Vec<f64>> = trackers
+        .iter()
+        .zip(&positions)
+        .map(|((_, t), at)| match (t, at) {
+            (Tracker::Soft(_, pre), Some(at)) => at.iter().map(|p| norm(sub(*p, *pre))).collect(),
+            (Tracker::Fixed(m), _) => vec![*m; n],
+            (Tracker::Soft(..), None) => unreachable!("a soft tracker has its positions"),
         })
         .collect();
     obs.started("uncertainty: the band per vertex");
@@ -208,7 +218,12 @@ pub(crate) fn sample_reduced(
     report.reduced = Some(reduced.reports.clone());
     obs.started("uncertainty: Sobol indices");
     report.sensitivity = Some(sensitivity(run, reduced, analysis, case, &trackers));
-    Ok(Sampled { bands, report })
+    let soft_positions = super::run::soft_positions(&trackers, positions);
+    Ok(Sampled {
+        bands,
+        report,
+        soft_positions,
+    })
 }
 
 /// Per face vertex: exactly still in every sample — no face field moves it and the nominal face

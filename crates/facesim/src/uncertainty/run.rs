@@ -183,6 +183,22 @@ pub struct FaceSummary {
 pub struct Sampled {
     pub bands: Vec<Band>,
     pub report: UncertaintyReport,
+    /// Per soft landmark (label), its position on each sample's face, in the samples' order:
+    /// what report.json `published_ratios` bands are measured from.
+    pub soft_positions: Vec<(String, Vec<[f64; 3]>)>,
+}
+
+/// The soft landmarks' positions per sample, from the trackers' columns (`positions[t][s]`;
+/// None for a bony landmark's tracker).
+pub(super) fn soft_positions(
+    trackers: &[(String, Tracker)],
+    positions: Vec<Option<Vec<[f64; 3]>>>,
+) -> Vec<(String, Vec<[f64; 3]>)> {
+    trackers
+        .iter()
+        .zip(positions)
+        .filter_map(|((label, _), p)| Some((label.clone(), p?)))
+        .collect()
 }
 
 /// A landmark on the samples' faces: a soft one as the same material point as report.json
@@ -276,6 +292,10 @@ pub fn sample(
     let (solved, solve_s) = solve_side_by_side(&wanted, run.solves_at_once, resolve, obs)?;
     let mut magnitudes: Vec<Vec<f64>> = Vec::with_capacity(n);
     let mut at_landmarks: Vec<Vec<f64>> = vec![Vec::with_capacity(n); trackers.len()];
+    let mut positions: Vec<Option<Vec<[f64; 3]>>> = trackers
+        .iter()
+        .map(|(_, t)| matches!(t, Tracker::Soft(..)).then(|| Vec::with_capacity(n)))
+        .collect();
     let mut in_regions: Vec<Vec<f64>> = vec![Vec::with_capacity(n); face_regions::NAMES.len()];
     for a in &answer {
         let post: &[[f64; 3]] = a.map_or(nominal, |k| &solved[k]);
@@ -286,9 +306,15 @@ pub fn sample(
             .zip(post)
             .map(|(a, b)| norm(sub(*a, *b)))
             .collect();
-        for ((_, t), out) in trackers.iter().zip(&mut at_landmarks) {
+        for (((_, t), out), at) in trackers.iter().zip(&mut at_landmarks).zip(&mut positions) {
             out.push(match t {
-                Tracker::Soft(a, pre) => norm(sub(a.place(&skin.triangles, post), *pre)),
+                Tracker::Soft(a, pre) => {
+                    let p = a.place(&skin.triangles, post);
+                    if let Some(at) = at {
+                        at.push(p);
+                    }
+                    norm(sub(p, *pre))
+                }
                 Tracker::Fixed(m) => *m,
             });
         }
@@ -320,7 +346,12 @@ pub fn sample(
         seconds: start.elapsed().as_secs_f64(),
         solve_s,
     });
-    Ok(Sampled { bands, report })
+    let soft_positions = soft_positions(&trackers, positions);
+    Ok(Sampled {
+        bands,
+        report,
+        soft_positions,
+    })
 }
 
 /// Solve `wanted` (in order) `at_once` at a time on the thread pool: the faces, and the

@@ -165,6 +165,11 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
                 {"soft": "Ls", "axis": "horizontal", "segment": "maxilla", "hard": "U1",
                  "hard_at": "Ls", "soft_mm": 4.8, "hard_mm": 5.0, "predicted": 0.96,
                  "low": 0.5, "high": 0.9, "inside": false, "source": "a source <b>"},
+                {"soft": "Sn", "axis": "horizontal", "segment": "maxilla", "hard": "A",
+                 "hard_at": "A", "soft_mm": 4.0, "hard_mm": 5.0, "predicted": 0.8,
+                 "low": 0.5, "high": 0.9, "inside": true, "source": "a source",
+                 "tissue_band": [0.78, 0.93], "coarse_mesh": 0.79, "band": [0.77, 0.94],
+                 "verdict": "consistent"},
                 {"soft": "Prn", "axis": "horizontal", "segment": "maxilla", "hard": "A / U1",
                  "hard_at": "", "soft_mm": null, "hard_mm": null, "predicted": null,
                  "low": 0.17, "high": 0.36, "inside": null, "source": "another",
@@ -232,7 +237,8 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
         .iter()
         .map(|x| (x[0].as_str().unwrap().into(), x[1].as_str().unwrap().into()))
         .collect();
-    assert_eq!(clinic.len(), 3, "{clinic:?}");
+    // A row with a band shows it and its verdict, which overrides the ratio's own.
+    assert_eq!(clinic.len(), 4, "{clinic:?}");
     assert!(
         clinic[1].0 == "outside"
             && clinic[1].1.contains("0.96")
@@ -240,7 +246,13 @@ fn set_plan_moves_an_analytic_basis_as_the_osteotomy_module_moves_bone() {
         "{clinic:?}"
     );
     assert!(
-        clinic[2].0 == "unmeasured" && clinic[2].1.contains("not measured"),
+        clinic[2].0 == "consistent"
+            && clinic[2].1.contains("0.77–0.94")
+            && clinic[2].1.ends_with("consistent"),
+        "{clinic:?}"
+    );
+    assert!(
+        clinic[3].0 == "unmeasured" && clinic[3].1.contains("not measured"),
         "{clinic:?}"
     );
     // Before any plan: the run's face_post (float32 in the page).
