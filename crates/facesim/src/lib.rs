@@ -71,6 +71,7 @@ pub mod reduced;
 pub mod report;
 pub mod report_page;
 pub mod segment;
+pub mod skin_jump;
 pub mod slicer;
 pub mod solve;
 pub mod springs;

@@ -46,6 +46,10 @@ pub struct Displacement {
     pub mean: f64,
     pub colour_scale_mm: [f64; 2],
     pub colour_map: String,
+    /// The face's edge where the displacement changes most per mm (`skin_jump`): a crease or
+    /// tear shows here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub largest_jump: Option<crate::skin_jump::Jump>,
 }
 
 #[derive(Debug, Default, Serialize, Deserialize)]
@@ -176,6 +180,7 @@ impl Displacement {
             mean: dist.iter().sum::<f64>() / dist.len().max(1) as f64,
             colour_scale_mm: [0.0, max],
             colour_map: "viridis".into(),
+            largest_jump: None,
         }
     }
 }

@@ -147,6 +147,8 @@ fn finish(
         warnings,
     );
     complete_report(&mut report, &scene, &prediction, &analysis, discretisation);
+    report.displacement.largest_jump =
+        crate::skin_jump::largest(&prediction.skin, &prediction.face_post.vertices);
     // Elements turned inside out make the prediction no valid solution: a reported numerical
     // result (the outputs are written for inspection), not a success, unless asked for.
     let inverted = prediction.inverted_elements();

@@ -75,7 +75,6 @@ pub struct Reuse {
     kind: Vec<NodeKind>,
     mucosa: Vec<Option<Mucosa>>,
     embedding: SkinEmbedding,
-    face_rigid: Vec<bool>,
     /// Per solved node: a skin node on the face (`tet::conditions::on_face`).
     on_face: Vec<bool>,
     /// Per tetrahedron: torn by the run's move (`[tet] tear_gap`); a re-solve keeps it torn.
@@ -332,13 +331,11 @@ fn finish(
     skin: &Mesh,
     rec: &mut Recorder,
 ) -> Result<(Volumetric, Vec<[f64; 3]>)> {
-    let face_rigid = crate::pipeline::model::rigid_mask(case, &skin.vertices);
     let carrier = face::Carrier {
         embedding: &run.embedding,
         quadratic: run.quadratic.as_ref(),
         tets: &run.mesh.tets,
         skin,
-        face_rigid: &face_rigid,
         roi: run.roi,
     };
     let carried = rec.time(Stage::Embed, "carrying the face", || {
@@ -401,7 +398,6 @@ fn finish(
                 kind,
                 mucosa: anatomy.mucosa,
                 embedding,
-                face_rigid,
                 on_face: anatomy.on_face,
                 torn: solved.torn,
                 lifted: solved.lifted,

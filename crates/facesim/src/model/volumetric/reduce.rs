@@ -62,7 +62,7 @@ impl Volumetric {
             tets: self.mesh.tets.clone(),
             cell: r.embedding.tet.clone(),
             weights: r.embedding.weights.clone(),
-            still: still(&r.face_rigid, r.roi, &skin.vertices),
+            still: still(r.roi, &skin.vertices),
         };
         let zero = vec![0.0; affine.unknowns()];
         // The face of free values (held values zero): a basis vector, a Riesz vector, an error.

@@ -77,7 +77,6 @@ impl Volumetric {
             &self.mesh.tets,
             &u,
             skin,
-            &r.face_rigid,
             r.roi,
         );
         Ok(displaced(skin, &carried))
