@@ -243,11 +243,12 @@ fn published_ratios_are_the_runs_moves_over_the_plans(r: &Value, out: &Path) {
 }
 
 /// The skin does not tear where `[surface] movable` ends (its sphere crosses the cheek here,
-/// which the BSSO advance still moves): no face vertex moving beside one held exactly still, and
-/// across the sphere's edge the displacement changes by at most 0.5 mm per mm of edge. Holding
-/// the face outside the sphere still while the tissue mesh moved it gave a vertex moving 1.30 mm
-/// beside a still one 1.85 mm away (0.70 per mm). report.json `displacement.largest_jump` is the
-/// largest over every edge, as recomputed here from face_pre.ply and face_post.ply.
+/// which the BSSO advance still moves): across the sphere's edge, and wherever a face vertex
+/// moves beside one held still, the displacement changes by at most 0.5 mm per mm of edge.
+/// Holding every face vertex outside the sphere still while the tissue mesh moved it gave
+/// 0.93 per mm across the edge (a vertex moving 1.30 mm beside a still one 1.85 mm away).
+/// report.json `displacement.largest_jump` is the largest over every edge, as recomputed here
+/// from face_pre.ply and face_post.ply.
 #[test]
 fn the_skin_does_not_tear_where_the_movable_region_ends() {
     let (r, out) = run_in();
@@ -280,14 +281,14 @@ fn the_skin_does_not_tear_where_the_movable_region_ends() {
             worst_across = worst_across.max(j);
         }
         let (ma, mb) = (moved(a), moved(b));
-        if ma.max(mb) > 0.25 && ma.min(mb) < 1e-9 {
+        if j > 0.5 && ma.min(mb) < 1e-9 {
             tears.push((pre.vertices[a], ma, mb));
         }
     }
     assert!(crossing > 100, "only {crossing} edges cross the sphere");
     assert!(
         tears.is_empty(),
-        "{} torn edges, e.g. {:?}",
+        "{} edges torn from a still vertex, e.g. {:?}",
         tears.len(),
         tears.first()
     );

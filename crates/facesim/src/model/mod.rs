@@ -183,7 +183,7 @@ impl Prediction {
                 greedy,
                 outputs,
             };
-            v.reduced(scene, &c, &self.skin, &training, progress)
+            v.reduced(scene, &c, &training, progress)
         };
         // The sliding states are independent builds, each mostly sequential work (the
         // factorisation, the snapshots' preconditioner solves): the second one runs beside the

@@ -113,7 +113,7 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
         outputs: &outputs,
     };
     let r = v
-        .reduced(&scene, &case, &p.skin, &training, &|m| {
+        .reduced(&scene, &case, &training, &|m| {
             eprintln!("{:.1} s {m}", t.elapsed().as_secs_f64())
         })
         .unwrap();

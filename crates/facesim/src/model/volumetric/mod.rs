@@ -75,6 +75,8 @@ pub struct Reuse {
     kind: Vec<NodeKind>,
     mucosa: Vec<Option<Mucosa>>,
     embedding: SkinEmbedding,
+    /// Per face vertex: at rest whatever the solve (`face::still`).
+    face_still: Vec<bool>,
     /// Per solved node: a skin node on the face (`tet::conditions::on_face`).
     on_face: Vec<bool>,
     /// Per tetrahedron: torn by the run's move (`[tet] tear_gap`); a re-solve keeps it torn.
@@ -83,7 +85,6 @@ pub struct Reuse {
     /// them free, so that at the run's own parameters it is the run's face (with sliding off
     /// the tissue stays bonded and nothing lifts off, as in a run).
     lifted: Vec<usize>,
-    roi: ([f64; 3], [f64; 3]),
     linear_solve: bool,
     /// The linear mesh's node ordering and symbolic analyses for its factors
     /// (`fem::cholesky::MeshAnalyses`), made by the run; None for the 10-node element (its own
@@ -331,12 +332,20 @@ fn finish(
     skin: &Mesh,
     rec: &mut Recorder,
 ) -> Result<(Volumetric, Vec<[f64; 3]>)> {
+    let face_still = face::still(&face::Stillness {
+        roi: run.roi,
+        face: &skin.vertices,
+        face_rigid: &crate::pipeline::model::rigid_mask(case, &skin.vertices),
+        embedding: &run.embedding,
+        tets: &run.mesh.tets,
+        on_face: &run.anatomy.on_face,
+        node_rigid: &crate::pipeline::model::rigid_mask(case, &run.mesh.nodes),
+    });
     let carrier = face::Carrier {
         embedding: &run.embedding,
         quadratic: run.quadratic.as_ref(),
         tets: &run.mesh.tets,
-        skin,
-        roi: run.roi,
+        still: &face_still,
     };
     let carried = rec.time(Stage::Embed, "carrying the face", || {
         Ok(carrier.carry(&solved.displacement))
@@ -375,7 +384,6 @@ fn finish(
         .as_ref()
         .map(|u| face::displaced(skin, &carrier.carry(u)));
     let Run {
-        roi,
         mesh,
         quadratic,
         kind,
@@ -398,10 +406,10 @@ fn finish(
                 kind,
                 mucosa: anatomy.mucosa,
                 embedding,
+                face_still,
                 on_face: anatomy.on_face,
                 torn: solved.torn,
                 lifted: solved.lifted,
-                roi,
                 linear_solve,
                 order: solved.order,
                 factor_nonzeros,

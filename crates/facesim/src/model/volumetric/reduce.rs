@@ -4,12 +4,10 @@
 //! face and each output.
 
 use super::Volumetric;
-use super::face::still;
 use super::rounds::TORN_STIFFNESS;
 use crate::case::{Case, Tet};
 use crate::error::{Error, Result};
 use crate::fem::cholesky::Cholesky;
-use crate::mesh::Mesh;
 use crate::model::reduced::{FaceMap, ReducedTet, Training, theta_of};
 use crate::pipeline::Scene;
 use crate::reduced::{Affine, Basis, OutputBound, affine::solve_columns, norm::largest_eigenvalue};
@@ -24,7 +22,6 @@ impl Volumetric {
         &self,
         scene: &Scene,
         case: &Case,
-        skin: &Mesh,
         training: &Training,
         progress: &dyn Fn(&str),
     ) -> Result<ReducedTet> {
@@ -62,7 +59,7 @@ impl Volumetric {
             tets: self.mesh.tets.clone(),
             cell: r.embedding.tet.clone(),
             weights: r.embedding.weights.clone(),
-            still: still(r.roi, &skin.vertices),
+            still: r.face_still.clone(),
         };
         let zero = vec![0.0; affine.unknowns()];
         // The face of free values (held values zero): a basis vector, a Riesz vector, an error.

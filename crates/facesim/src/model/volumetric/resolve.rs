@@ -76,8 +76,7 @@ impl Volumetric {
             quadratic.as_ref(),
             &self.mesh.tets,
             &u,
-            skin,
-            r.roi,
+            &r.face_still,
         );
         Ok(displaced(skin, &carried))
     }
