@@ -282,7 +282,11 @@ fn band_published(
         clinic_of(scene, frame, &carried_at(&at))
     });
     if let Some(c) = analysis.clinic.as_mut() {
-        crate::landmarks::clinic::with_bands(c, &samples, coarse.as_ref());
+        let p05_p95 = |v: &[f64]| {
+            let b = crate::uncertainty::Band::of(v);
+            [b.p05, b.p95]
+        };
+        crate::landmarks::clinic::with_bands(c, &samples, coarse.as_ref(), &p05_p95);
     }
 }
 

@@ -105,8 +105,14 @@ impl ClinicRow {
 
 /// The bands of a run's published rows: `samples`, the clinic as each sampled tissue's face
 /// gives it, and `coarse`, as the coarse mesh's gives it (each with the run's rows, in their
-/// order: the plan and the landmarks before are the run's).
-pub(crate) fn with_bands(clinic: &mut Clinic, samples: &[Clinic], coarse: Option<&Clinic>) {
+/// order: the plan and the landmarks before are the run's); `p05_p95` reduces a row's sampled
+/// ratios to their 5th and 95th percentiles (the uncertainty band's rule).
+pub(crate) fn with_bands(
+    clinic: &mut Clinic,
+    samples: &[Clinic],
+    coarse: Option<&Clinic>,
+    p05_p95: &dyn Fn(&[f64]) -> [f64; 2],
+) {
     let Some(surgery) = clinic.surgery.as_deref().and_then(Surgery::from_key) else {
         return;
     };
@@ -123,8 +129,7 @@ pub(crate) fn with_bands(clinic: &mut Clinic, samples: &[Clinic], coarse: Option
             .filter_map(|c| c.rows.get(i)?.predicted)
             .collect();
         if !samples.is_empty() && ratios.len() == samples.len() {
-            let b = crate::uncertainty::Band::of(&ratios);
-            row.tissue_band = Some([b.p05, b.p95]);
+            row.tissue_band = Some(p05_p95(&ratios));
         }
         row.coarse_mesh = coarse.and_then(|c| c.rows.get(i)?.predicted);
         row.set_band(p);
@@ -451,6 +456,11 @@ mod tests {
         }
     }
 
+    fn p05_p95(v: &[f64]) -> [f64; 2] {
+        let b = crate::uncertainty::Band::of(v);
+        [b.p05, b.p95]
+    }
+
     /// The band of a row is the hull of the sampled ratios' p05–p95, the ratio and the coarse
     /// mesh's ratio; its verdict reads the band against the range.
     #[test]
@@ -472,7 +482,7 @@ mod tests {
                 .map(|x| against_published(&plan, &carried(x), &f))
                 .collect();
             let coarse = against_published(&plan, &carried(coarse), &f);
-            with_bands(&mut c, &samples, Some(&coarse));
+            with_bands(&mut c, &samples, Some(&coarse), &p05_p95);
             c
         };
         let get = |c: &Clinic, s: &str| c.rows.iter().find(|r| r.soft == s).unwrap().clone();
@@ -497,7 +507,7 @@ mod tests {
         assert_eq!(sn.verdict, Some(Verdict::Inside), "{sn:?}");
         // Without samples or a coarse mesh, no band.
         let mut c = against_published(&plan, &carried(2.0), &f);
-        with_bands(&mut c, &[], None);
+        with_bands(&mut c, &[], None, &p05_p95);
         assert!(
             c.rows
                 .iter()
