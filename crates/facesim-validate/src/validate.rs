@@ -1261,8 +1261,17 @@ mod tests {
         );
         let table = csv(&v);
         let lines: Vec<&str> = table.lines().collect();
-        assert!(lines[1].contains(",1.500,0.8,1.33,no,"), "{}", lines[1]);
-        assert!(lines[2].contains(",1.000,0.8,1.33,yes,"), "{}", lines[2]);
+        // Without a band: the ratio, five empty band columns, the range, inside and verdict.
+        assert!(
+            lines[1].contains(",1.500,,,,,,0.8,1.33,no,outside,"),
+            "{}",
+            lines[1]
+        );
+        assert!(
+            lines[2].contains(",1.000,,,,,,0.8,1.33,yes,inside,"),
+            "{}",
+            lines[2]
+        );
         assert!(lines[3].ends_with("Me' not found: no skin"), "{}", lines[3]);
         let opts = Options {
             out: PathBuf::new(),
@@ -1281,7 +1290,7 @@ mod tests {
         };
         let md = markdown(&v, &opts);
         assert!(
-            md.contains("| 1.50 | 0.8–1.33 | **OUTSIDE** by 0.17 |"),
+            md.contains("| 1.50 |  | 0.8–1.33 | **OUTSIDE** by 0.17 |"),
             "{md}"
         );
         assert!(md.contains("1 inside their published range, 1 outside, 1 not measured"));
