@@ -48,23 +48,21 @@ pub(crate) fn largest(pre: &Mesh, post: &[[f64; 3]]) -> Option<Jump> {
     let mut best: Option<Jump> = None;
     let mut over = 0;
     for (a, b) in edges {
-        {
-            let edge = norm(sub(pre.vertices[a], pre.vertices[b]));
-            if edge <= 1e-9 {
-                continue;
-            }
-            let per_mm = norm(sub(u[a], u[b])) / edge;
-            over += usize::from(per_mm > 0.5);
-            if best.as_ref().is_none_or(|j| per_mm > j.per_mm) {
-                best = Some(Jump {
-                    per_mm,
-                    vertices: [a, b],
-                    at: [pre.vertices[a], pre.vertices[b]],
-                    moves_mm: [norm(u[a]), norm(u[b])],
-                    edge_mm: edge,
-                    edges_over_half: 0,
-                });
-            }
+        let edge = norm(sub(pre.vertices[a], pre.vertices[b]));
+        if edge <= 1e-9 {
+            continue;
+        }
+        let per_mm = norm(sub(u[a], u[b])) / edge;
+        over += usize::from(per_mm > 0.5);
+        if best.as_ref().is_none_or(|j| per_mm > j.per_mm) {
+            best = Some(Jump {
+                per_mm,
+                vertices: [a, b],
+                at: [pre.vertices[a], pre.vertices[b]],
+                moves_mm: [norm(u[a]), norm(u[b])],
+                edge_mm: edge,
+                edges_over_half: 0,
+            });
         }
     }
     best.map(|j| Jump {

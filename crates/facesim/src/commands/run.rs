@@ -262,13 +262,19 @@ fn band_published(
     let samples: Vec<crate::landmarks::clinic::Clinic> = band
         .map(|b| {
             let n = b.soft_positions.first().map_or(0, |(_, p)| p.len());
+            // Per carried landmark, its column of the samples' positions (looked up once).
+            let column: Vec<Option<&Vec<[f64; 3]>>> = analysis
+                .carried
+                .iter()
+                .map(|c| {
+                    let (_, p) = b.soft_positions.iter().find(|(l, _)| *l == c.label)?;
+                    Some(p)
+                })
+                .collect();
             (0..n)
                 .into_par_iter()
                 .filter_map(|s| {
-                    let at = |_: usize, label: &str| {
-                        let (_, p) = b.soft_positions.iter().find(|(l, _)| l == label)?;
-                        Some(p[s])
-                    };
+                    let at = |i: usize, _: &str| Some(column[i]?[s]);
                     clinic_of(scene, frame, &carried_at(&at))
                 })
                 .collect()
@@ -343,9 +349,8 @@ fn sample_band(
     Ok((Some(band), reduced))
 }
 
-/// The discretisation error: the case again at twice the element size (Richardson); none
-/// unless `[tet] error_estimate`, a failed coarse solve a warning.
-/// The estimate and the coarse mesh's face.
+/// The discretisation error: the case again at twice the element size (Richardson), with the
+/// coarse mesh's face; none unless `[tet] error_estimate`, a failed coarse solve a warning.
 fn discretisation_error(
     scene: &Scene,
     prediction: &crate::model::Prediction,
