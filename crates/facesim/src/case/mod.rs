@@ -224,7 +224,7 @@ mod tests {
                 .unwrap()
                 .tet
                 .degloved_maxilla,
-            Degloved::Auto
+            Degloved::Off
         );
         assert_eq!(parse("auto").unwrap().tet.degloved_maxilla, Degloved::Auto);
         assert_eq!(parse("true").unwrap().tet.degloved_maxilla, Degloved::On);

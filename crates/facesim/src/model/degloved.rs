@@ -315,11 +315,12 @@ mod tests {
     }
 
     #[test]
-    fn auto_serves_where_it_can_and_steps_aside_only_where_the_upper_teeth_move() {
+    fn auto_serves_where_it_can_and_steps_aside_only_where_the_upper_teeth_move_and_off_is_the_default() {
         let nodes = || Raised::Nodes(vec![true, false]);
         let unknown = || Raised::Unknown("needs subnasale (Sn), which was not found".into());
-        let auto = tet(&[]);
-        assert_eq!(auto.degloved_maxilla, Degloved::Auto);
+        // Off by default (refused by the validation protocol's rule); `raise` skips it.
+        assert_eq!(tet(&[]).degloved_maxilla, Degloved::Off);
+        let auto = tet(&["tet.degloved_maxilla=auto"]);
         assert_eq!(
             applied(&auto, Approach::Maxilla, nodes()).unwrap(),
             (Some(vec![true, false]), None)
@@ -335,7 +336,7 @@ mod tests {
             ("tet.release_cuts=false", "sliding and release_cuts"),
             ("tet.element=quadratic", "4-node element"),
         ] {
-            let t = tet(&[set]);
+            let t = tet(&[set, "tet.degloved_maxilla=auto"]);
             let (r, why) = applied(&t, Approach::Maxilla, nodes()).unwrap();
             assert!(r.is_none(), "{set}");
             assert!(

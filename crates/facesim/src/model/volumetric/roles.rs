@@ -117,7 +117,7 @@ pub(super) fn find(
 
 /// With `[tet] degloved_maxilla` and `degloved_chin`, the bone a Le Fort I's or a genioplasty's
 /// approach raises slides too, and (with the teeth it covers) rests on its bone one-sidedly (the
-/// one-sided rounds, `rounds::OneSidedContact`). "auto" (the default) steps aside where `true`
+/// one-sided rounds, `rounds::OneSidedContact`). "auto" (the chin's default) steps aside where `true`
 /// is refused or fails, with a warning and report.json's reason (`model::degloved::applied`).
 /// Per corner node: raised; and what was raised.
 fn raise(
