@@ -315,7 +315,7 @@ mod tests {
     }
 
     #[test]
-    fn auto_serves_where_it_can_and_steps_aside_only_where_the_upper_teeth_move_and_off_is_the_default() {
+    fn off_by_default_and_auto_steps_aside_only_where_the_upper_teeth_move() {
         let nodes = || Raised::Nodes(vec![true, false]);
         let unknown = || Raised::Unknown("needs subnasale (Sn), which was not found".into());
         // Off by default (refused by the validation protocol's rule); `raise` skips it.
