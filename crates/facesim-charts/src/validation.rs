@@ -1,13 +1,15 @@
 //! validation.svg: per surgery and soft landmark, the published range of the soft/hard ratio as a
 //! grey bar and each case's predicted ratio as a point over it, its band as a line through the
-//! point (a cross when outside the range).
+//! point (a cross when outside the range). Real heads are squares, triangles and diamonds in
+//! strong colours, the phantoms circles in muted ones, each head once in the legend.
 //! `facesim validate` draws it from the rows `facesim_validate::validate` returns.
 
-use crate::sweep::{DrawResult, FONT, PALETTE};
+use crate::sweep::{DrawResult, FONT};
 use facesim::error::{Error, Result};
 use facesim::landmarks::published::Verdict;
 use facesim::output::write_atomic;
 use facesim_validate::validate::Validation;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -22,6 +24,70 @@ fn lines(v: &Validation) -> Vec<(String, f64, f64)> {
         }
     }
     out
+}
+
+/// Real heads' colours: strong, and none of them the phantoms'.
+const REAL_COLOURS: [RGBColor; 3] = [
+    RGBColor(0, 0, 0),
+    RGBColor(230, 120, 0),
+    RGBColor(150, 0, 150),
+];
+
+/// The phantoms' colours: muted blues and greens.
+const PHANTOM_COLOURS: [RGBColor; 6] = [
+    RGBColor(70, 130, 180),
+    RGBColor(60, 160, 110),
+    RGBColor(100, 110, 200),
+    RGBColor(40, 170, 170),
+    RGBColor(120, 160, 60),
+    RGBColor(90, 90, 160),
+];
+
+/// A case's marker: circles for phantoms, a square or a triangle for each real head.
+#[derive(Clone, Copy)]
+enum Marker {
+    Circle,
+    Square,
+    Triangle,
+}
+
+impl Marker {
+    /// The marker of the `k`-th real head.
+    fn real(k: usize) -> Marker {
+        [Marker::Square, Marker::Triangle][k % 2]
+    }
+}
+
+/// The chart being drawn.
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// `points` of one case in its marker and colour, once in the legend as `label`.
+fn draw_marked(
+    chart: &mut Chart,
+    marker: Marker,
+    points: &[(f64, f64)],
+    c: RGBColor,
+    label: String,
+) -> DrawResult {
+    let style = c.filled();
+    let at = points.iter().copied();
+    match marker {
+        Marker::Circle => chart
+            .draw_series(at.map(|p| Circle::new(p, 4, style)))?
+            .label(label)
+            .legend(move |(x, y)| Circle::new((x + 8, y), 4, style)),
+        Marker::Square => chart
+            .draw_series(
+                at.map(|p| EmptyElement::at(p) + Rectangle::new([(-5, -5), (5, 5)], style)),
+            )?
+            .label(label)
+            .legend(move |(x, y)| Rectangle::new([(x + 3, y - 5), (x + 13, y + 5)], style)),
+        Marker::Triangle => chart
+            .draw_series(at.map(|p| TriangleMarker::new(p, 7, style)))?
+            .label(label)
+            .legend(move |(x, y)| TriangleMarker::new((x + 8, y), 7, style)),
+    };
+    Ok(())
 }
 
 fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -> DrawResult {
@@ -77,9 +143,32 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
             colour.filled(),
         )
     }))?;
-    let cases: Vec<&str> = v.cases.iter().map(|c| c.name.as_str()).collect();
-    for (k, case) in cases.iter().enumerate() {
-        let c = PALETTE[k % PALETTE.len()];
+    // One entry per head: a phantom built in two skeletal classes is still one head.
+    let mut cases: Vec<(&str, bool)> = Vec::new();
+    for c in &v.cases {
+        if !cases.iter().any(|(n, _)| *n == c.name) {
+            cases.push((c.name.as_str(), c.real_ct));
+        }
+    }
+    let mut phantoms_seen = 0;
+    let mut reals_seen = 0;
+    for (k, &(case, real)) in cases.iter().enumerate() {
+        // Real heads: each its own marker shape in a strong colour; phantoms: circles in muted
+        // shades, so a reviewer tells the independent real evidence from the synthetic at a
+        // glance.
+        let (c, marker) = if real {
+            reals_seen += 1;
+            (
+                REAL_COLOURS[(reals_seen - 1) % REAL_COLOURS.len()],
+                Marker::real(reals_seen - 1),
+            )
+        } else {
+            phantoms_seen += 1;
+            (
+                PHANTOM_COLOURS[(phantoms_seen - 1) % PHANTOM_COLOURS.len()],
+                Marker::Circle,
+            )
+        };
         // Each case on its own height within the line, so coincident points stay visible.
         let dy = if cases.len() > 1 {
             -0.3 + 0.6 * k as f64 / (cases.len() - 1) as f64
@@ -91,7 +180,7 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
         let pts: Vec<Point> = v
             .rows
             .iter()
-            .filter(|r| r.case == *case)
+            .filter(|r| r.case == case)
             .filter_map(|r| {
                 let p = r.published;
                 let name = format!("{}: {} ({})", p.surgery.key(), p.soft, p.axis.name());
@@ -105,13 +194,13 @@ fn draw(root: DrawingArea<SVGBackend, plotters::coord::Shift>, v: &Validation) -
             let [l, h] = b?;
             Some(PathElement::new(vec![(l, y), (h, y)], c.stroke_width(2)))
         }))?;
-        chart
-            .draw_series(
-                pts.iter()
-                    .map(|&(x, y, _, _)| Circle::new((x, y), 4, c.filled())),
-            )?
-            .label(*case)
-            .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
+        let label = if real {
+            format!("{case} (real CT)")
+        } else {
+            format!("{case} (phantom)")
+        };
+        let xy: Vec<(f64, f64)> = pts.iter().map(|&(x, y, _, _)| (x, y)).collect();
+        draw_marked(&mut chart, marker, &xy, c, label)?;
         chart.draw_series(
             pts.iter()
                 .filter(|p| !p.2)
@@ -139,4 +228,81 @@ pub fn write(path: &Path, v: &Validation) -> Result<()> {
         let root = SVGBackend::new(tmp, (1100, height)).into_drawing_area();
         draw(root, v).map_err(|e| Error::output(path, e.to_string()))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use facesim::landmarks::published::PUBLISHED;
+    use facesim_validate::validate::{CaseInfo, Row, SkeletalClass};
+
+    fn case(name: &str, real_ct: bool, class: Option<SkeletalClass>) -> CaseInfo {
+        CaseInfo {
+            name: name.into(),
+            about: String::new(),
+            pitch_deg: 0.0,
+            forward: [0.0, -1.0, 0.0],
+            up: [0.0, 0.0, 1.0],
+            frame_why: String::new(),
+            segments: Vec::new(),
+            autorotation: Ok(()),
+            class,
+            real_ct,
+            seconds: 0.0,
+        }
+    }
+
+    fn row(case: &str, k: usize, ratio: f64) -> Row {
+        Row {
+            case: case.into(),
+            published: &PUBLISHED[k],
+            move_mm: 5.0,
+            along_mm: Some(5.0 * ratio),
+            forward_mm: None,
+            up_mm: None,
+            ratio: Some(ratio),
+            tissue_band: Some([ratio - 0.05, ratio + 0.05]),
+            coarse_mesh: Some(ratio + 0.01),
+            band: Some([ratio - 0.05, ratio + 0.05]),
+            why: None,
+        }
+    }
+
+    /// A reviewer tells the real heads from the phantoms at a glance: each real head has a
+    /// marker shape of its own, every head is in the legend once (a phantom built in two
+    /// skeletal classes too), and each band is a line.
+    #[test]
+    fn real_heads_have_their_own_markers_and_each_head_is_in_the_legend_once() {
+        let v = Validation {
+            rows: vec![
+                row("real", 0, 0.3),
+                row("real-mandible", 0, 0.5),
+                row("phantom01", 0, 0.4),
+                row("phantom01", 1, 0.5),
+            ],
+            skipped: Vec::new(),
+            cases: vec![
+                case("real", true, None),
+                case("real-mandible", true, None),
+                case("phantom01", false, Some(SkeletalClass::III)),
+                case("phantom01", false, Some(SkeletalClass::II)),
+            ],
+            out_dir: std::env::temp_dir(),
+        };
+        let dir = std::env::temp_dir().join(format!("facesim-chart-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("validation.svg");
+        write(&path, &v).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let count = |s: &str| svg.matches(s).count();
+        assert_eq!(count("real (real CT)"), 1, "{svg}");
+        assert_eq!(count("real-mandible (real CT)"), 1);
+        assert_eq!(count("phantom01 (phantom)"), 1);
+        // The first real head's squares (its point and its legend entry) in black, the second's
+        // triangles in orange, the phantom's circles in its muted blue.
+        assert_eq!(count(r##"height="10" opacity="1" fill="#000000""##), 2, "{svg}");
+        assert_eq!(count(r##"<polygon opacity="1" fill="#E67800""##), 2, "{svg}");
+        assert_eq!(count(r##"fill="#4682B4""##), 3, "{svg}");
+    }
 }
