@@ -253,19 +253,24 @@ struct ShapeArgs {
     /// Mandibular midline shift towards the patient's left (mm; standard 0, drawn −2..2).
     #[arg(long)]
     asymmetry_mm: Option<f64>,
+    /// Vertical facial pattern: change of the lower anterior face height, ANS to menton (mm;
+    /// + a long face, − a short one; standard 0, drawn −5..7).
+    #[arg(long)]
+    vertical_mm: Option<f64>,
     /// Draw the parameters not given from this seed.
     #[arg(long)]
     seed: Option<u64>,
 }
 
 impl ShapeArgs {
-    fn given(&self) -> [Option<f64>; 5] {
+    fn given(&self) -> [Option<f64>; 6] {
         [
             self.scale,
             self.soft_mm,
             self.mandible_mm,
             self.chin_mm,
             self.asymmetry_mm,
+            self.vertical_mm,
         ]
     }
 
@@ -680,7 +685,7 @@ fn cmd_phantom(
         ));
     } else if shape.any() {
         return Err(Error::config(
-            "phantom: the cohort parameters (--scale, --soft-mm, --mandible-mm, --chin-mm, --asymmetry-mm, --seed) need --anatomy jaws",
+            "phantom: the cohort parameters (--scale, --soft-mm, --mandible-mm, --chin-mm, --asymmetry-mm, --vertical-mm, --seed) need --anatomy jaws",
         ));
     } else {
         facesim_validate::phantom::write_case(dir, &opts)?;

@@ -1,6 +1,6 @@
 //! Cohorts of synthetic patients: jaws phantoms whose shape parameters (head size, soft-tissue
-//! thickness, prognathism, chin, midline shift) are drawn from documented ranges by a seed
-//! (docs/design/phantom.md, "Cohort parameters"; docs/guide/cohort.md).
+//! thickness, prognathism, chin, midline shift, vertical pattern) are drawn from documented
+//! ranges by a seed (docs/design/phantom.md, "Cohort parameters"; docs/guide/cohort.md).
 
 use crate::phantom_jaws::{JawsOptions, SHAPE_RANGES, Shape, write_shaped_case};
 use facesim::error::{Error, Result};
@@ -10,13 +10,17 @@ use std::path::Path;
 /// variation around the standard head, inside the accepted SHAPE_RANGES. Head size ±8 %
 /// (the spread of adult head breadth); soft tissue −2..+4 mm (thin to obese faces);
 /// prognathism ±3 mm and midline shift ±2 mm (Class II to Class III, mild laterognathia);
-/// chin −2..+3 mm.
-pub(crate) const DRAW_RANGES: [(&str, f64, f64); 5] = [
+/// chin −2..+3 mm; vertical pattern −5..+7 mm: the lower anterior face height (ANS to menton)
+/// of adults with a normal vertical pattern spans roughly 65–75 mm (the standard head has
+/// 67.5), long-face (hyperdivergent) patients have some 5–10 mm more and short-face
+/// (hypodivergent) ones several mm less, an approximate adult spread.
+pub(crate) const DRAW_RANGES: [(&str, f64, f64); 6] = [
     ("scale", 0.92, 1.08),
     ("soft_mm", -2.0, 4.0),
     ("mandible_mm", -3.0, 3.0),
     ("chin_mm", -2.0, 3.0),
     ("asymmetry_mm", -2.0, 2.0),
+    ("vertical_mm", -5.0, 7.0),
 ];
 
 /// splitmix64: a well-mixed 64-bit value of `z`.
@@ -36,8 +40,8 @@ fn uniform(seed: u64, stream: u64, index: u64) -> f64 {
 /// The shape for `seed`: each parameter `given` as is, the others drawn uniformly from
 /// DRAW_RANGES (rounded to 0.01 so files and tables show them exactly). The same seed always
 /// draws the same values, whichever parameters are given.
-pub fn draw(seed: u64, given: [Option<f64>; 5]) -> Shape {
-    let mut v = [0.0; 5];
+pub fn draw(seed: u64, given: [Option<f64>; 6]) -> Shape {
+    let mut v = [0.0; 6];
     for (k, (_, lo, hi)) in DRAW_RANGES.iter().enumerate() {
         v[k] = given[k].unwrap_or_else(|| {
             let u = uniform(seed, 0xC0_4047, k as u64);
@@ -48,9 +52,9 @@ pub fn draw(seed: u64, given: [Option<f64>; 5]) -> Shape {
 }
 
 /// The given parameters over the standard head (no seed: the others keep their defaults).
-pub fn given_or_default(given: [Option<f64>; 5]) -> Shape {
+pub fn given_or_default(given: [Option<f64>; 6]) -> Shape {
     let d = Shape::default().values();
-    Shape::from_values([0, 1, 2, 3, 4].map(|k| given[k].unwrap_or(d[k])))
+    Shape::from_values([0, 1, 2, 3, 4, 5].map(|k| given[k].unwrap_or(d[k])))
 }
 
 /// The seed of case `k` of a cohort drawn with `seed`.
@@ -75,7 +79,7 @@ pub fn write_cohort(
     n: usize,
     seed: u64,
     opts: &JawsOptions,
-    given: [Option<f64>; 5],
+    given: [Option<f64>; 6],
     nasal_passages: bool,
 ) -> Result<Vec<CohortCase>> {
     if n == 0 {
@@ -128,7 +132,7 @@ mod tests {
     #[test]
     fn draws_stay_in_their_ranges_and_keep_given_values() {
         for seed in 0..200 {
-            let s = draw(seed, [None, Some(1.5), None, None, None]);
+            let s = draw(seed, [None, Some(1.5), None, None, None, None]);
             assert_eq!(s.soft_mm, 1.5);
             for ((_, lo, hi), v) in DRAW_RANGES.iter().zip(s.values()) {
                 assert!(v >= *lo && v <= *hi, "{v} not in [{lo}, {hi}]");
@@ -136,9 +140,15 @@ mod tests {
             assert!(s.validate().is_ok());
         }
         // Distinct seeds draw distinct heads; the same seed the same one.
-        assert_ne!(draw(1, [None; 5]), draw(2, [None; 5]));
-        assert_eq!(draw(7, [None; 5]), draw(7, [None; 5]));
+        assert_ne!(draw(1, [None; 6]), draw(2, [None; 6]));
+        assert_eq!(draw(7, [None; 6]), draw(7, [None; 6]));
         assert_ne!(case_seed(1, 0), case_seed(1, 1));
+        // Giving one parameter leaves the others' draws as they are.
+        let given_vertical = draw(3, [None, None, None, None, None, Some(2.0)]);
+        assert_eq!(
+            given_vertical.values()[..5],
+            draw(3, [None; 6]).values()[..5]
+        );
     }
 
     #[test]

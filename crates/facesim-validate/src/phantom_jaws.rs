@@ -38,7 +38,8 @@
 //! HU as the capsule: air −1000, skin and soft tissue 45, fat −100, brain 35, bone 600, teeth
 //! 1500 (dentine and enamel). The field of view is x ∈ [−92, 92], y ∈ [−118, 90],
 //! z ∈ [−100, 80]: the capsule's cap is left out, and the head leaves the volume through the
-//! neck and the top of the cranium, as a clinical CT does.
+//! neck and the top of the cranium, as a clinical CT does. A shaped head (`Shape`) maps these
+//! standard-frame numbers, the field of view included, to the world through `Shape::world_of`.
 
 use crate::phantom::{PhantomOptions, grid_mesh, sample_ct};
 use facesim::error::{Error, Result};
@@ -115,6 +116,15 @@ pub(crate) const Z_SULCUS_UPPER: f64 = -3.0;
 pub(crate) const Z_SULCUS_LOWER: f64 = -45.0;
 const VESTIBULE_T_MAX: f64 = 70.0 * PI / 180.0;
 
+/// The vertical pattern (`Shape::vertical_mm`) stretches the head below this height: the
+/// maxilla's top, where its midline front is the anterior nasal spine (the Le Fort I gap is
+/// just above it; subnasale is at z ≈ 2.4). The lower anterior face (ANS to menton) is what
+/// differs between long and short faces; the cranium, the Le Fort I gap (the osteotomy's
+/// level) and the nose above it stay as they are.
+pub const Z_VERTICAL: f64 = Z_MAXILLA_TOP;
+/// The standard head's lower anterior face height, ANS (Z_VERTICAL) to menton: 67.5 mm.
+pub const LOWER_FACE_MM: f64 = Z_VERTICAL - Z_MENTON;
+
 /// Field of view of `ct`.
 pub(crate) const FOV_LO: [f64; 3] = [-92.0, -118.0, -100.0];
 pub const FOV_HI: [f64; 3] = [92.0, 90.0, 80.0];
@@ -122,8 +132,8 @@ pub const FOV_HI: [f64; 3] = [92.0, 90.0, 80.0];
 /// One synthetic patient: how a jaws phantom differs from the standard head (docs/design/phantom.md,
 /// "Cohort parameters"). `Shape::default()` is the standard head. Lengths are mm of the
 /// standard head, before `scale`. The geometry below is written for the standard frame; a
-/// shaped head evaluates it at p / scale with the mandible's parts moved by
-/// (asymmetry_mm, −mandible_mm, 0).
+/// shaped head evaluates it at `standard_of(p)` (the vertical stretch and the scale undone)
+/// with the mandible's parts moved by (asymmetry_mm, −mandible_mm, 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Shape {
     /// Head size: every point, the field of view and the plans' regions scale about the origin.
@@ -138,6 +148,11 @@ pub struct Shape {
     /// Mandibular midline shift towards the patient's left (+x): the mandible, the lower
     /// vestibule and the lower face's skin (by an angle asymmetry_mm / 85 mm about the axis).
     pub asymmetry_mm: f64,
+    /// Vertical facial pattern: the change of the lower anterior face height, ANS to menton
+    /// (+ a long, hyperdivergent face; − a short, hypodivergent one). Everything below
+    /// Z_VERTICAL (the maxilla's top) stretches vertically by 1 + vertical_mm / LOWER_FACE_MM
+    /// about it: jaws, teeth, lips, chin, skin, neck and the field of view's lower end.
+    pub vertical_mm: f64,
     /// Lips and cheeks closed on the teeth: the vestibule is a potential space (soft tissue, no
     /// air), as in most CTs, so the lip's inner surface lies on the crowns and the alveolar bone
     /// (the lip–tooth contact the volumetric model finds). Not a cohort parameter (`values`
@@ -158,6 +173,7 @@ impl Default for Shape {
             mandible_mm: 0.0,
             chin_mm: 0.0,
             asymmetry_mm: 0.0,
+            vertical_mm: 0.0,
             closed_lips: false,
             nasal_passages: false,
         }
@@ -167,12 +183,13 @@ impl Default for Shape {
 /// The accepted range of each shape parameter: (name as in phantom.toml and the CLI, min, max).
 /// Inside them the three bone pieces stay separate, every plan's boxes still select exactly
 /// their segment and the skin stays inside the field of view (docs/design/phantom.md).
-pub(crate) const SHAPE_RANGES: [(&str, f64, f64); 5] = [
+pub(crate) const SHAPE_RANGES: [(&str, f64, f64); 6] = [
     ("scale", 0.8, 1.2),
     ("soft_mm", -3.0, 5.0),
     ("mandible_mm", -4.0, 4.0),
     ("chin_mm", -3.0, 4.0),
     ("asymmetry_mm", -4.0, 4.0),
+    ("vertical_mm", -8.0, 10.0),
 ];
 
 /// The radius (mm) at which the lower face's skin features sit: asymmetry_mm / this is their
@@ -181,24 +198,26 @@ const R_LOWER_FACE: f64 = 85.0;
 
 impl Shape {
     /// The parameters in SHAPE_RANGES order.
-    pub fn values(&self) -> [f64; 5] {
+    pub fn values(&self) -> [f64; 6] {
         [
             self.scale,
             self.soft_mm,
             self.mandible_mm,
             self.chin_mm,
             self.asymmetry_mm,
+            self.vertical_mm,
         ]
     }
 
     /// The shape with the parameters in SHAPE_RANGES order.
-    pub fn from_values(v: [f64; 5]) -> Shape {
+    pub fn from_values(v: [f64; 6]) -> Shape {
         Shape {
             scale: v[0],
             soft_mm: v[1],
             mandible_mm: v[2],
             chin_mm: v[3],
             asymmetry_mm: v[4],
+            vertical_mm: v[5],
             closed_lips: false,
             nasal_passages: false,
         }
@@ -216,14 +235,55 @@ impl Shape {
         Ok(())
     }
 
-    /// A world point (LPS mm) in the standard head's frame.
-    fn standard_of(&self, p: [f64; 3]) -> [f64; 3] {
-        p.map(|c| c / self.scale)
+    /// A world point (LPS mm) in the standard head's frame: the scale undone, then the
+    /// vertical stretch. Every function of a shaped head at world points goes through this
+    /// and `world_of` (heights alone through `standard_z`).
+    pub fn standard_of(&self, p: [f64; 3]) -> [f64; 3] {
+        [
+            p[0] / self.scale,
+            p[1] / self.scale,
+            self.unstretched(p[2] / self.scale),
+        ]
     }
 
-    /// A standard-frame point in the world.
-    fn world_of(&self, p: [f64; 3]) -> [f64; 3] {
-        p.map(|c| c * self.scale)
+    /// A standard-frame point in the world: stretched vertically below Z_VERTICAL, then scaled
+    /// about the origin.
+    pub fn world_of(&self, p: [f64; 3]) -> [f64; 3] {
+        [
+            p[0] * self.scale,
+            p[1] * self.scale,
+            self.stretched(p[2]) * self.scale,
+        ]
+    }
+
+    /// A world height in the standard frame (`standard_of`'s z, which depends on z alone).
+    fn standard_z(&self, z: f64) -> f64 {
+        self.standard_of([0.0, 0.0, z])[2]
+    }
+
+    /// The vertical pattern's stretch factor below Z_VERTICAL: the standard head's lower
+    /// anterior face height LOWER_FACE_MM becomes LOWER_FACE_MM + vertical_mm.
+    fn stretch(&self) -> f64 {
+        1.0 + self.vertical_mm / LOWER_FACE_MM
+    }
+
+    /// A standard-frame height stretched by the vertical pattern (before the scale). The
+    /// identity, bit for bit, above Z_VERTICAL and when vertical_mm is 0.
+    fn stretched(&self, z: f64) -> f64 {
+        if z < Z_VERTICAL && self.vertical_mm != 0.0 {
+            Z_VERTICAL + (z - Z_VERTICAL) * self.stretch()
+        } else {
+            z
+        }
+    }
+
+    /// The inverse of `stretched`.
+    fn unstretched(&self, z: f64) -> f64 {
+        if z < Z_VERTICAL && self.vertical_mm != 0.0 {
+            Z_VERTICAL + (z - Z_VERTICAL) / self.stretch()
+        } else {
+            z
+        }
     }
 
     /// A standard-frame (x, y) in the mandible's own frame (undoing its shift).
@@ -684,15 +744,16 @@ impl Shape {
 
     /// The skin's distance from the z axis at angle φ and height z (world mm).
     pub fn skin_radius(&self, phi: f64, z: f64) -> f64 {
-        self.scale * radius(self, phi, z / self.scale)
+        self.scale * radius(self, phi, self.standard_z(z))
     }
 
     /// The skin point at (φ, z) (world mm).
     pub fn skin_point(&self, phi: f64, z: f64) -> [f64; 3] {
-        self.world_of(point_at(self, phi, z / self.scale))
+        self.world_of(point_at(self, phi, self.standard_z(z)))
     }
 
-    /// The field of view of `ct`: the standard one, scaled.
+    /// The field of view of `ct`: the standard one through `world_of` (scaled; its lower end
+    /// stretched with the vertical pattern, so the neck stays in the CT).
     pub fn fov(&self) -> [[f64; 3]; 2] {
         [self.world_of(FOV_LO), self.world_of(FOV_HI)]
     }
@@ -729,7 +790,8 @@ pub fn landmarks() -> Vec<(&'static str, [f64; 3])> {
 impl Shape {
     /// `landmarks()` of the shaped head (world mm). The soft-tissue points lie on the skin
     /// profile that follows the lower face's turn (the midline above the lip crease), the
-    /// mandible's points move with it, and everything scales.
+    /// mandible's points move with it, everything below Z_VERTICAL stretches with the vertical
+    /// pattern, and everything scales.
     pub fn landmarks(&self) -> Vec<(&'static str, [f64; 3])> {
         self.standard_landmarks()
             .into_iter()
@@ -881,7 +943,7 @@ impl Shape {
     /// The plans' boxes of the shaped head (world mm): MANDIBLE_FRONT_BOX, MANDIBLE_BACK_BOX and
     /// MAXILLA_BOX, their front/back split at y = −11 moved back to midway between the maxilla
     /// (y ≤ −13.5) and the rami when a prognathic mandible brings the rami (y ≥ −8) forward
-    /// of −10.5, then scaled.
+    /// of −10.5, then through `world_of` (a box maps to a box: the stretch is monotonic in z).
     pub fn boxes(&self) -> [[[f64; 3]; 2]; 3] {
         let split = (-11.0f64).min(0.5 * (MAXILLA_Y_MAX + RAMUS[1][0] - self.mandible_mm));
         let mut b = [MANDIBLE_FRONT_BOX, MANDIBLE_BACK_BOX, MAXILLA_BOX];
@@ -926,17 +988,18 @@ impl Shape {
         self.ct_box(opts, lo, hi)
     }
 
-    /// `face_scan` of the shaped head: the same (φ, z) grid, scaled, `step_mm` apart in the
-    /// world.
+    /// `face_scan` of the shaped head: the same (φ, z) grid, through `world_of`, `step_mm`
+    /// apart in the world (the rows evenly spaced in the stretched head, so a long face has
+    /// more of them).
     pub fn face_scan(&self, step_mm: f64) -> Mesh {
         let step = step_mm / self.scale;
         let phi_max = 100f64.to_radians();
         let nphi = ((2.0 * phi_max * 80.0) / step).round() as usize + 1;
-        let (z0, z1) = (-85.0, FOV_HI[2]);
+        let (z0, z1) = (self.stretched(-85.0), self.stretched(FOV_HI[2]));
         let nz = ((z1 - z0) / step).round() as usize + 1;
         let mut verts = Vec::with_capacity(nphi * nz);
         for j in 0..nz {
-            let z = z0 + (z1 - z0) * j as f64 / (nz - 1) as f64;
+            let z = self.unstretched(z0 + (z1 - z0) * j as f64 / (nz - 1) as f64);
             for i in 0..nphi {
                 let phi = -phi_max + 2.0 * phi_max * i as f64 / (nphi - 1) as f64;
                 verts.push(self.world_of(point_at(self, phi, z)));
@@ -1209,6 +1272,148 @@ mod tests {
         assert_eq!(hollow.landmarks(), solid.landmarks());
         assert!(hollow.phantom_toml().contains("nasal_passages = true"));
         assert!(!solid.phantom_toml().contains("nasal_passages"));
+    }
+
+    /// The vertical pattern stretches the head below the maxilla's top and nothing above it:
+    /// ANS–menton grows by exactly vertical_mm (scaled), the CT is the standard head's tissue
+    /// at the mapped points, and the field of view grows with the stretch.
+    #[test]
+    fn the_vertical_pattern_stretches_the_lower_face_only() {
+        let scale = 1.1;
+        let plain = Shape {
+            scale,
+            ..Shape::default()
+        };
+        let long = Shape {
+            vertical_mm: 6.0,
+            ..plain
+        };
+        let standard = Shape::default();
+        // ANS (the maxilla's top on the midline; the anterior nasal spine) to menton, along
+        // z, of the truth landmarks.
+        let ans_me = |s: &Shape| {
+            let ans = s.world_of([0.0, Y_ARCH - ARCH_UPPER[1], Z_MAXILLA_TOP]);
+            ans[2] - s.landmark("menton").unwrap()[2]
+        };
+        assert!((ans_me(&plain) - LOWER_FACE_MM * scale).abs() < 1e-9);
+        assert!(
+            (ans_me(&long) - ans_me(&plain) - 6.0 * scale).abs() < 1e-9,
+            "{} vs {}",
+            ans_me(&long),
+            ans_me(&plain)
+        );
+        let short = Shape {
+            vertical_mm: -5.0,
+            ..plain
+        };
+        assert!((ans_me(&short) - ans_me(&plain) + 5.0 * scale).abs() < 1e-9);
+        // Landmarks above the stretch are unchanged (the nose's and forehead's; subnasale's
+        // search bracket starts at the stretched labrale superius, hence the tolerance), those
+        // below have the same x and y and lie lower.
+        for ((name, a), (_, b)) in long.landmarks().into_iter().zip(plain.landmarks()) {
+            if b[2] >= Z_VERTICAL * scale {
+                let d = (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max);
+                assert!(d < 1e-6, "{name}: {a:?} vs {b:?}");
+            } else {
+                assert!(
+                    (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6,
+                    "{name}: {a:?} vs {b:?}"
+                );
+                assert!(a[2] < b[2], "{name}: {a:?} vs {b:?}");
+            }
+        }
+        // Points and the skin above z0 are unchanged, bit for bit.
+        for p in [[3.0, -60.0, 1.5], [-20.0, -70.0, 2.0], [0.0, -100.0, 13.0]] {
+            assert_eq!(long.world_of(p), plain.world_of(p));
+            let w = plain.world_of(p);
+            assert_eq!(long.standard_of(w), plain.standard_of(w));
+            assert_eq!(long.tissue_at(w), plain.tissue_at(w));
+            assert_eq!(long.skin_radius(0.3, w[2]), plain.skin_radius(0.3, w[2]));
+        }
+        // Below, the maps are each other's inverse and follow the stretch.
+        let p = [10.0, -50.0, -40.0];
+        let w = long.world_of(p);
+        let k = 1.0 + 6.0 / LOWER_FACE_MM;
+        assert!((w[2] - scale * (Z_VERTICAL + (p[2] - Z_VERTICAL) * k)).abs() < 1e-12);
+        let back = long.standard_of(w);
+        assert!((0..3).all(|a| (back[a] - p[a]).abs() < 1e-12), "{back:?}");
+        // The CT, the pieces and the vestibule at world_of(p) are the standard head's at p:
+        // points in the chin, the teeth, the vestibule, the lips, the fat, the neck, a condyle.
+        let points = [
+            [0.3, -73.1, -55.2],
+            [0.2, -71.7, -18.1],
+            [0.4, -73.0, -30.9],
+            [0.1, -73.3, -10.3],
+            [0.3, -84.2, -32.1],
+            [5.3, -79.5, -40.2],
+            [0.6, -37.3, -90.7],
+            [3.1, -54.2, -95.3],
+            [47.9, 7.1, -2.9],
+            [40.3, 5.2, -30.1],
+            [0.2, -60.1, -4.1],
+        ];
+        let mut seen = Vec::new();
+        for p in points {
+            let w = long.world_of(p);
+            let t = tissue_at(p);
+            assert_eq!(long.tissue_at(w), t, "{p:?}");
+            assert_eq!(long.piece_at(w), piece_at(p), "{p:?}");
+            assert_eq!(long.in_vestibule(w), in_vestibule(p), "{p:?}");
+            // The skin there: the standard head's radius, scaled.
+            let phi = p[0].atan2(-p[1]);
+            let r = long.skin_radius(phi, w[2]);
+            assert!((r - scale * skin_radius(phi, p[2])).abs() < 1e-9, "{p:?}");
+            if !seen.contains(&t) {
+                seen.push(t);
+            }
+        }
+        for t in [
+            Tissue::Bone,
+            Tissue::Tooth,
+            Tissue::Air,
+            Tissue::Soft,
+            Tissue::Fat,
+        ] {
+            assert!(seen.contains(&t), "no {t:?} among the points: {seen:?}");
+        }
+        // The field of view: its top as the plain head's, its lower end stretched with the
+        // face, so bony and soft menton and the neck below them are in the CT as far above
+        // its lower end as in the standard head, stretched and scaled.
+        let [lo, hi] = long.fov();
+        let [plo, phi_] = plain.fov();
+        assert_eq!(hi, phi_);
+        assert_eq!([lo[0], lo[1]], [plo[0], plo[1]]);
+        assert!((lo[2] - long.world_of(FOV_LO)[2]).abs() < 1e-12);
+        assert!(lo[2] < plo[2], "{lo:?} vs {plo:?}");
+        for name in ["menton", "soft tissue menton"] {
+            let (m, sm) = (
+                long.landmark(name).unwrap(),
+                standard.landmark(name).unwrap(),
+            );
+            assert!(m[2] > lo[2] && m[2] < hi[2], "{name} {m:?} outside {lo:?}");
+            let margin = (m[2] - lo[2]) / (sm[2] - FOV_LO[2]);
+            assert!((margin - k * scale).abs() < 1e-6, "{name}: {margin}");
+        }
+        // The CT's bottom slice cuts through the neck: tissue on the axis's front there.
+        let neck = [0.0, -30.0 * scale, lo[2] + 0.5];
+        assert_ne!(long.tissue_at(neck), Tissue::Air, "{neck:?}");
+        // The face scan reaches as far down (to the standard −85, stretched) with rows about
+        // step apart in the world.
+        let scan = long.face_scan(2.0);
+        let zmin = scan
+            .vertices
+            .iter()
+            .map(|v| v[2])
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            (zmin - long.world_of([0.0, 0.0, -85.0])[2]).abs() < 1e-9,
+            "{zmin}"
+        );
+        let mut zs: Vec<f64> = scan.vertices.iter().map(|v| v[2]).collect();
+        zs.sort_by(f64::total_cmp);
+        zs.dedup_by(|a, b| (*a - *b).abs() < 1e-9);
+        let gaps = zs.windows(2).map(|w| w[1] - w[0]);
+        assert!(gaps.clone().all(|g| (g - 2.0).abs() < 0.05), "{zs:?}");
     }
 
     #[test]

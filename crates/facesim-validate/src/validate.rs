@@ -481,7 +481,7 @@ fn cohort(n: usize, seed: u64) -> Vec<(String, Shape)> {
             let soft = (soft * 100.0).round() / 100.0;
             let shape = crate::phantom_cohort::draw(
                 crate::phantom_cohort::case_seed(seed, k),
-                [None, Some(soft), None, None, None],
+                [None, Some(soft), None, None, None, Some(0.0)],
             );
             (format!("phantom{:02}", k + 1), shape)
         })
@@ -638,9 +638,10 @@ fn phantom_case(
 ) -> Prepared {
     let (segments, possible) = segments_of(anatomy);
     let v = shape.values();
-    // The phantom case's movable sphere (centre (0, −30, −35) mm, radius 85 mm, scaled) has the
-    // nose tip on its edge; 10 mm more takes it in, as the Le Fort I types need.
-    let centre = [0.0, -30.0 * shape.scale, -35.0 * shape.scale];
+    // The phantom case's movable sphere (centre (0, −30, −35) mm of the standard head, through
+    // the shape's world_of; radius 85 mm, scaled) has the nose tip on its edge; 10 mm more
+    // takes it in, as the Le Fort I types need.
+    let centre = shape.world_of([0.0, -30.0, -35.0]);
     let radius = 95.0 * shape.scale;
     let movable: toml::Value = toml::from_str::<toml::Table>(&format!(
         "v = {{ sphere = {{ center = [{:.1}, {:.1}, {:.1}], radius = {radius:.1} }} }}",
@@ -653,7 +654,7 @@ fn phantom_case(
         info: CaseInfo {
             name: name.into(),
             about: format!(
-                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm; {}); built upright. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
+                "{}jaws phantom (scale {}, soft tissue {:+} mm, mandible {:+} mm, chin {:+} mm, midline {:+} mm, vertical {:+} mm; {}); built upright. Movable skin: `{}` (the case's sphere, 10 mm larger to take in the nose tip).",
                 match class {
                     Some(c) => {
                         let of: Vec<&str> = runs
@@ -675,6 +676,7 @@ fn phantom_case(
                 v[2],
                 v[3],
                 v[4],
+                v[5],
                 if shape.nasal_passages {
                     "a hollow nose: two nasal passages beside a septum"
                 } else {

@@ -1,6 +1,6 @@
 //! Shaped jaws phantoms keep their geometry known (docs/design/phantom.md, "Cohort parameters"): the
 //! landmarks move by what the parameters say (exact arithmetic on the standard head's
-//! numbers), the CT shows the bone and skin edges and the soft-tissue thickness where the
+//! numbers, the vertical pattern stretching the heights below the maxilla's top), the CT shows the bone and skin edges and the soft-tissue thickness where the
 //! analytic surfaces are, the face scan follows the skin, and the plans' boxes still select
 //! exactly their segment at the extremes of the accepted ranges.
 
@@ -9,18 +9,31 @@ use facesim_validate::phantom::PhantomOptions;
 use facesim_validate::phantom_jaws::{self as pj, Piece, Shape};
 use rayon::prelude::*;
 
-fn shape(v: [f64; 5]) -> Shape {
+fn shape(v: [f64; 6]) -> Shape {
     Shape::from_values(v)
 }
 
-/// Three patients besides the standard one: thicker and prognathic, large with a strong
-/// chin and a midline shift, small and thin with a retruded mandible.
+/// Three patients besides the standard one: thicker, prognathic and long-faced, large with a
+/// strong chin, a midline shift and a short face, small and thin with a retruded mandible and
+/// a long face.
 fn patients() -> Vec<Shape> {
     vec![
-        shape([1.0, 3.0, 2.0, 0.0, 0.0]),
-        shape([1.08, 0.0, 0.0, 2.5, 1.5]),
-        shape([0.92, -2.0, -3.0, -1.0, -2.0]),
+        shape([1.0, 3.0, 2.0, 0.0, 0.0, 4.0]),
+        shape([1.08, 0.0, 0.0, 2.5, 1.5, -5.0]),
+        shape([0.92, -2.0, -3.0, -1.0, -2.0, 7.0]),
     ]
+}
+
+/// A standard-frame height z in the world of a head with scale k and vertical pattern v: below
+/// the maxilla's top (z = 1.5) stretched so that ANS–menton (67.5 mm) grows by v, then scaled.
+fn wz(z: f64, k: f64, v: f64) -> f64 {
+    let z0 = pj::Z_MAXILLA_TOP;
+    let z = if z < z0 && v != 0.0 {
+        z0 + (z - z0) * (1.0 + v / 67.5)
+    } else {
+        z
+    };
+    z * k
 }
 
 fn lm(s: &Shape, name: &str) -> [f64; 3] {
@@ -35,34 +48,42 @@ fn close(a: [f64; 3], b: [f64; 3], tol: f64, what: &str) {
 #[test]
 fn landmarks_move_as_the_parameters_say() {
     for s in patients() {
-        let [k, soft, d, c, a] = s.values();
-        // Bony landmarks: the maxilla's only scale; the mandible's move by (a, −d) and the
-        // chin's projection by c (pogonion, 4 mm proud in the standard head, is at −73.5).
+        let [k, soft, d, c, a, v] = s.values();
+        // Bony landmarks: the maxilla's only scale (and stretch); the mandible's move by
+        // (a, −d) and the chin's projection by c (pogonion, 4 mm proud in the standard head, is
+        // at −73.5).
         close(
             lm(&s, "A point"),
-            [0.0, -70.5 * k, -4.0 * k],
+            [0.0, -70.5 * k, wz(-4.0, k, v)],
             1e-9,
             "A point",
         );
         let ui = pj::landmark("upper incisor tip").unwrap();
         close(
             lm(&s, "upper incisor tip"),
-            ui.map(|v| v * k),
+            [ui[0] * k, ui[1] * k, wz(ui[2], k, v)],
             1e-9,
             "upper incisor",
         );
         let li = pj::landmark("lower incisor tip").unwrap();
-        let li_s = [(li[0] + a) * k, (li[1] - d) * k, li[2] * k];
+        let li_s = [(li[0] + a) * k, (li[1] - d) * k, wz(li[2], k, v)];
         close(lm(&s, "lower incisor tip"), li_s, 1e-9, "lower incisor");
-        let pog = [a * k, (-73.5 - d - c) * k, -55.0 * k];
+        let pog = [a * k, (-73.5 - d - c) * k, wz(-55.0, k, v)];
         close(lm(&s, "pogonion"), pog, 1e-3, "pogonion");
         close(
             lm(&s, "menton"),
-            [a * k, (-64.5 - d) * k, -66.0 * k],
+            [a * k, (-64.5 - d) * k, wz(-66.0, k, v)],
             1e-9,
             "menton",
         );
-        let cl = [(48.0 + a) * k, (7.0 - d) * k, -3.0 * k];
+        // ANS (the maxilla's top, z = 1.5) to menton: 67.5 mm + v, scaled.
+        let me_z = lm(&s, "menton")[2];
+        assert!(
+            (1.5 * k - me_z - (67.5 + v) * k).abs() < 1e-9,
+            "{s:?}: ANS–Me {}",
+            1.5 * k - me_z
+        );
+        let cl = [(48.0 + a) * k, (7.0 - d) * k, wz(-3.0, k, v)];
         close(lm(&s, "condyle left"), cl, 1e-9, "condyle left");
         // Soft tissue above the lip line: only the thickness change and the scale.
         let prn = [0.0, (-103.5 - soft) * k, 13.0 * k];
@@ -78,7 +99,7 @@ fn landmarks_move_as_the_parameters_say() {
         );
     }
     // Prognathism alone moves the soft chin and lower lip forward by the same amount.
-    let s = shape([1.0, 0.0, 2.0, 0.0, 0.0]);
+    let s = shape([1.0, 0.0, 2.0, 0.0, 0.0, 0.0]);
     for name in [
         "soft tissue pogonion",
         "labrale inferius",
@@ -156,10 +177,10 @@ fn ct_shows_the_chin_and_nose_where_the_shape_puts_them() {
     let standard = chin(&Shape::default());
     println!("chin soft tissue at pogonion, standard head: {standard:.2} mm");
     // Thickening by 3 mm with a 2 mm advancement: the chin's soft tissue is 3 mm thicker.
-    let t = chin(&shape([1.0, 3.0, 2.0, 0.0, 0.0]));
+    let t = chin(&shape([1.0, 3.0, 2.0, 0.0, 0.0, 0.0]));
     assert!((t - standard - 3.0).abs() < 0.3, "{t} vs {standard} + 3");
     // Scaling the head by 1.08 scales the thickness.
-    let t = chin(&shape([1.08, 0.0, 0.0, 0.0, 0.0]));
+    let t = chin(&shape([1.08, 0.0, 0.0, 0.0, 0.0, 0.0]));
     assert!(
         (t - 1.08 * standard).abs() < 0.3,
         "{t} vs 1.08 × {standard}"
@@ -221,9 +242,9 @@ fn face_scan_follows_the_shaped_skin() {
 #[test]
 fn plan_boxes_select_their_segment_at_the_range_extremes() {
     let extremes = [
-        shape([0.8, -3.0, 4.0, 4.0, 4.0]),
-        shape([1.2, 5.0, -4.0, -3.0, -4.0]),
-        shape([1.0, 0.0, 4.0, -3.0, -4.0]),
+        shape([0.8, -3.0, 4.0, 4.0, 4.0, -8.0]),
+        shape([1.2, 5.0, -4.0, -3.0, -4.0, 10.0]),
+        shape([1.0, 0.0, 4.0, -3.0, -4.0, -8.0]),
     ];
     for s in extremes {
         s.validate().unwrap();
@@ -273,9 +294,15 @@ fn plan_boxes_select_their_segment_at_the_range_extremes() {
 
 #[test]
 fn out_of_range_shapes_are_refused_naming_the_parameter() {
-    let e = shape([1.0, 9.0, 0.0, 0.0, 0.0]).validate().unwrap_err();
+    let e = shape([1.0, 9.0, 0.0, 0.0, 0.0, 0.0])
+        .validate()
+        .unwrap_err();
     assert!(e.to_string().contains("soft_mm"), "{e}");
-    let e = shape([f64::NAN, 0.0, 0.0, 0.0, 0.0])
+    let e = shape([1.0, 0.0, 0.0, 0.0, 0.0, 11.0])
+        .validate()
+        .unwrap_err();
+    assert!(e.to_string().contains("vertical_mm"), "{e}");
+    let e = shape([f64::NAN, 0.0, 0.0, 0.0, 0.0, 0.0])
         .validate()
         .unwrap_err();
     assert!(e.to_string().contains("scale"), "{e}");

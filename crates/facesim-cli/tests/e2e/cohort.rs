@@ -140,7 +140,15 @@ fn cohort_workflow_runs_cases_variants_and_a_broken_case() {
         .iter()
         .map(|r| {
             Shape::from_values(
-                ["scale", "soft_mm", "mandible_mm", "chin_mm", "asymmetry_mm"].map(|c| num(r, c)),
+                [
+                    "scale",
+                    "soft_mm",
+                    "mandible_mm",
+                    "chin_mm",
+                    "asymmetry_mm",
+                    "vertical_mm",
+                ]
+                .map(|c| num(r, c)),
             )
         })
         .collect();
