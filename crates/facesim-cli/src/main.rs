@@ -103,7 +103,8 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "validation")]
         out: PathBuf,
-        /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
+        /// Jaws phantoms in the cohort (soft tissue over -2..+4 mm and the vertical pattern over
+        /// -5..+7 mm, one phantom in each of N equal strata of each).
         #[arg(long, default_value_t = 4)]
         phantoms: usize,
         /// Each ratio's band: the tissue parameters sampled this many times over the
@@ -128,7 +129,8 @@ enum Cmd {
         /// Output directory.
         #[arg(long, default_value = "calibration")]
         out: PathBuf,
-        /// Jaws phantoms in the cohort (soft tissue spread over -2..+4 mm).
+        /// Jaws phantoms in the cohort (soft tissue over -2..+4 mm and the vertical pattern over
+        /// -5..+7 mm, one phantom in each of N equal strata of each).
         #[arg(long, default_value_t = 0)]
         phantoms: usize,
         #[command(flatten)]

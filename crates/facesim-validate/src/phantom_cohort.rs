@@ -57,6 +57,25 @@ pub fn given_or_default(given: [Option<f64>; 6]) -> Shape {
     Shape::from_values([0, 1, 2, 3, 4, 5].map(|k| given[k].unwrap_or(d[k])))
 }
 
+/// The centre of stratum `i` of `n` equal strata of parameter `k`'s DRAW_RANGES range, rounded
+/// to 0.01 as `draw` rounds (n = 1: the range's centre).
+pub(crate) fn stratum_centre(k: usize, i: usize, n: usize) -> f64 {
+    let (_, lo, hi) = DRAW_RANGES[k];
+    let v = lo + (hi - lo) * (i as f64 + 0.5) / n as f64;
+    (v * 100.0).round() / 100.0
+}
+
+/// A permutation of 0..n drawn from `seed` (Fisher–Yates on the seed's own stream).
+pub(crate) fn permutation(seed: u64, n: usize) -> Vec<usize> {
+    let mut p: Vec<usize> = (0..n).collect();
+    for i in (1..n).rev() {
+        let u = uniform(seed, 0x9E4_0A7E, i as u64);
+        let j = ((u * (i + 1) as f64) as usize).min(i);
+        p.swap(i, j);
+    }
+    p
+}
+
 /// The seed of case `k` of a cohort drawn with `seed`.
 pub(crate) fn case_seed(seed: u64, k: usize) -> u64 {
     mix(seed ^ mix(k as u64 + 1))
@@ -149,6 +168,28 @@ mod tests {
             given_vertical.values()[..5],
             draw(3, [None; 6]).values()[..5]
         );
+    }
+
+    #[test]
+    fn strata_and_permutations() {
+        for n in 1..12 {
+            let mut p = permutation(5, n);
+            p.sort();
+            assert_eq!(p, (0..n).collect::<Vec<_>>());
+            for k in 0..DRAW_RANGES.len() {
+                let (_, lo, hi) = DRAW_RANGES[k];
+                let w = (hi - lo) / n as f64;
+                for i in 0..n {
+                    let c = stratum_centre(k, i, n);
+                    let mid = lo + w * (i as f64 + 0.5);
+                    assert!((c - mid).abs() <= 0.005 + 1e-12, "{k} {i} {n}: {c}");
+                }
+            }
+        }
+        assert_eq!(stratum_centre(5, 0, 1), 1.0);
+        assert_eq!(stratum_centre(1, 0, 1), 1.0);
+        // Different seeds pair the strata differently.
+        assert_ne!(permutation(1, 8), permutation(2, 8));
     }
 
     #[test]

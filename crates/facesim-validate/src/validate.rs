@@ -468,20 +468,22 @@ fn fetched(case_dir: &Path) -> std::result::Result<(), String> {
     }
 }
 
-/// The phantom cohort: soft tissue spread evenly over the cohort's −2..+4 mm, the other shape
-/// parameters drawn from the seed (`phantom_cohort`).
+/// The phantom cohort, a Latin hypercube in soft-tissue thickness and vertical pattern: each
+/// of the two ranges (`phantom_cohort` DRAW_RANGES: soft tissue −2..+4 mm, vertical −5..+7 mm)
+/// is cut into n equal strata and each stratum holds one phantom, at the stratum's centre
+/// (rounded to 0.01; n = 1: the ranges' centres). Phantom k has the k-th thinnest soft tissue;
+/// which vertical stratum goes with it is a permutation drawn from `seed`. The other shape
+/// parameters are drawn from each phantom's own case seed.
 fn cohort(n: usize, seed: u64) -> Vec<(String, Shape)> {
+    use crate::phantom_cohort::{case_seed, draw, permutation, stratum_centre};
+    let pairing = permutation(seed, n);
     (0..n)
         .map(|k| {
-            let soft = if n == 1 {
-                1.0
-            } else {
-                -2.0 + 6.0 * k as f64 / (n - 1) as f64
-            };
-            let soft = (soft * 100.0).round() / 100.0;
-            let shape = crate::phantom_cohort::draw(
-                crate::phantom_cohort::case_seed(seed, k),
-                [None, Some(soft), None, None, None, Some(0.0)],
+            let soft = stratum_centre(1, k, n);
+            let vertical = stratum_centre(5, pairing[k], n);
+            let shape = draw(
+                case_seed(seed, k),
+                [None, Some(soft), None, None, None, Some(vertical)],
             );
             (format!("phantom{:02}", k + 1), shape)
         })
@@ -1344,12 +1346,43 @@ mod tests {
         }
     }
 
+    /// Soft tissue and the vertical pattern each span their draw range, one phantom per
+    /// stratum at its centre, paired by the seed's permutation.
     #[test]
     fn the_cohort_spans_thin_to_thick_soft_tissue() {
         let c = cohort(4, 1);
         let soft: Vec<f64> = c.iter().map(|(_, s)| s.soft_mm).collect();
-        assert_eq!(soft, [-2.0, 0.0, 2.0, 4.0]);
+        // −2..+4 mm in strata of 1.5 mm: thin to thick, phantom 1 to 4.
+        assert_eq!(soft, [-1.25, 0.25, 1.75, 3.25]);
+        // −5..+7 mm in strata of 3 mm, each used once.
+        let vertical: Vec<f64> = c.iter().map(|(_, s)| s.vertical_mm).collect();
+        let mut sorted = vertical.clone();
+        sorted.sort_by(f64::total_cmp);
+        assert_eq!(sorted, [-3.5, -0.5, 2.5, 5.5]);
+        // Seed 1 pairs them other than thin with short and thick with long.
+        assert_ne!(vertical, sorted, "the pairing is the identity");
         assert!(c.iter().all(|(_, s)| s.validate().is_ok()));
         assert_ne!(c[0].1.scale, c[1].1.scale);
+        // Another seed pairs them differently; the other parameters are still drawn.
+        let other: Vec<f64> = (2..10)
+            .map(|seed| cohort(4, seed))
+            .flat_map(|c| c.into_iter().map(|(_, s)| s.vertical_mm))
+            .collect();
+        assert!(other.chunks(4).any(|v| v != vertical), "{other:?}");
+        // One phantom: the ranges' centres.
+        let one = cohort(1, 1);
+        assert_eq!((one[0].1.soft_mm, one[0].1.vertical_mm), (1.0, 1.0));
+        // Many: every stratum of each range holds exactly one phantom.
+        let n = 9;
+        let c = cohort(n, 1);
+        for (k, lo, hi) in [(1, -2.0, 4.0), (5, -5.0, 7.0)] {
+            let mut used = vec![0; n];
+            for (_, s) in &c {
+                let v = s.values()[k];
+                let i = ((v - lo) / (hi - lo) * n as f64) as usize;
+                used[i] += 1;
+            }
+            assert!(used.iter().all(|&u| u == 1), "parameter {k}: {used:?}");
+        }
     }
 }
