@@ -157,6 +157,8 @@ pub struct CaseInfo {
     /// A phantom built in the skeletal class of the patients a surgery's ratios were measured
     /// on ([`class_of`]); None: a real CT, or a phantom as its seed drew it.
     pub class: Option<SkeletalClass>,
+    /// A real CT from the samples (each one independent source of evidence); false: a phantom.
+    pub real_ct: bool,
     pub seconds: f64,
 }
 
@@ -623,6 +625,7 @@ fn sample_case(name: &str, dir: &Path, anatomy: &Anatomy) -> Result<Prepared> {
             segments,
             autorotation: autorotation_of(anatomy),
             class: None,
+            real_ct: true,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
@@ -693,6 +696,7 @@ fn phantom_case(
             segments,
             autorotation: autorotation_of(anatomy),
             class,
+            real_ct: false,
             seconds: 0.0,
         },
         dir: dir.to_path_buf(),
