@@ -364,6 +364,18 @@ fn phantom_refuses_shapes_out_of_range_or_without_jaws() {
     );
     let o = Command::new(exe())
         .arg("phantom")
+        .arg(dir.join("v"))
+        .args(["--anatomy", "jaws", "--vertical-mm", "11"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && err.contains("vertical_mm"), "{err}");
+    assert!(
+        !dir.join("v").exists(),
+        "nothing written for a refused shape"
+    );
+    let o = Command::new(exe())
+        .arg("phantom")
         .arg(dir.join("b"))
         .args(["--scale", "1.1"])
         .output()
