@@ -301,8 +301,16 @@ mod tests {
         assert_eq!(count("phantom01 (phantom)"), 1);
         // The first real head's squares (its point and its legend entry) in black, the second's
         // triangles in orange, the phantom's circles in its muted blue.
-        assert_eq!(count(r##"height="10" opacity="1" fill="#000000""##), 2, "{svg}");
-        assert_eq!(count(r##"<polygon opacity="1" fill="#E67800""##), 2, "{svg}");
+        assert_eq!(
+            count(r##"height="10" opacity="1" fill="#000000""##),
+            2,
+            "{svg}"
+        );
+        assert_eq!(
+            count(r##"<polygon opacity="1" fill="#E67800""##),
+            2,
+            "{svg}"
+        );
         assert_eq!(count(r##"fill="#4682B4""##), 3, "{svg}");
     }
 }

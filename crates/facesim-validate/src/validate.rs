@@ -26,7 +26,7 @@ pub struct Options {
     pub out: PathBuf,
     /// The samples directory: each sub-directory with a case.toml and a validation.toml is a case.
     pub samples: PathBuf,
-    /// Jaws phantoms in the cohort (soft tissue spread evenly over −2..+4 mm).
+    /// Jaws phantoms in the cohort (a Latin hypercube in soft tissue and vertical pattern; `cohort`).
     pub phantoms: usize,
     /// The cohort's seed (the other shape parameters are drawn from it).
     pub seed: u64,
