@@ -1389,4 +1389,41 @@ mod tests {
             assert!(used.iter().all(|&u| u == 1), "parameter {k}: {used:?}");
         }
     }
+
+    /// A thin Class III phantom of the cohort (phantom 1 of seed 1, as `facesim validate`
+    /// builds it for a Le Fort I advance) whose nasal floor, followed forward, climbed onto the
+    /// cranium: ANS was found 34 mm up, on the nasal bones, and the Le Fort I cut 3 mm above it
+    /// moved the nose with the maxilla (77 ml of bone against 23–34 ml on the other phantoms).
+    /// ANS lies at the nasal floor's level, below the skull base (the phantom's z 4.5 mm).
+    #[test]
+    fn ans_is_found_at_the_nasal_floor_not_on_the_nasal_bones() {
+        let shape = Shape {
+            nasal_passages: true,
+            ..Shape::from_values([0.98, -1.25, 2.53, -0.87, 0.56, -0.5])
+        };
+        let dir = std::env::temp_dir().join(format!("facesim-ans-{}", std::process::id()));
+        let jaws = JawsOptions {
+            phantom: crate::phantom::PhantomOptions {
+                spacing: [2.0; 3],
+                ..Default::default()
+            },
+            solve_model: None,
+        };
+        crate::phantom_jaws::write_shaped_case(&dir, &jaws, &shape).unwrap();
+        let anatomy = anatomy_of(&dir, &facesim::observe::Quiet).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let ans = anatomy
+            .landmarks
+            .iter()
+            .find(|l| l.label == "ANS")
+            .and_then(|l| l.position)
+            .expect("ANS found");
+        let a = shape.landmark("A point").unwrap();
+        assert!(
+            ans[2] < 4.5 && ans[2] > a[2],
+            "ANS at z {:.1} (A point at {:.1}, the skull base at 4.5)",
+            ans[2],
+            a[2]
+        );
+    }
 }

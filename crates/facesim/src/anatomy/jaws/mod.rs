@@ -497,6 +497,10 @@ const MIDLINE_HALF_MM: f64 = 1.0;
 /// The palate is sought this far behind the upper incisor's face (mm): its middle.
 const PALATE_BEHIND_MM: f64 = 25.0;
 
+/// How far the nasal floor may rise above the mid-palate's on its way forward to ANS (mm):
+/// 25 mm forward at the palatal plane's largest usual tilt to the head frame (15°), 6.7 mm.
+const FLOOR_RISE_MM: f64 = 7.0;
+
 /// The hard palate on the midline and the landmarks on it.
 ///
 /// The palate is the first bone above the upper incisor's level 25 mm behind its face (the
@@ -554,7 +558,11 @@ fn maxilla(
             }
         }
     }
-    // Forward along the nasal floor.
+    // Forward along the nasal floor. The floor runs near the palate's level (the palatal plane
+    // is within about 15° of the head frame's horizontal, so ANS lies within a few millimetres
+    // of the mid-palate's floor): a walk that climbs more than FLOOR_RISE_MM above it has left
+    // the floor up the front of the maxilla towards the nasal bones, and ends there.
+    let ceiling = top + (FLOOR_RISE_MM / H).round() as isize;
     let mut floor = top;
     let (mut ia_front, mut floor_front) = (ia_m, top);
     let mut gap = 0;
@@ -562,6 +570,7 @@ fn maxilla(
     while ia < g.n[2] as isize - 1 {
         ia += 1;
         match (floor - 3..=floor + 3).rev().find(|&iv| bone(iv, ia)) {
+            Some(t) if t > ceiling => break,
             Some(t) => {
                 floor = t;
                 ia_front = ia;
