@@ -45,7 +45,7 @@ pub fn draw(seed: u64, given: [Option<f64>; 6]) -> Shape {
     for (k, (_, lo, hi)) in DRAW_RANGES.iter().enumerate() {
         v[k] = given[k].unwrap_or_else(|| {
             let u = uniform(seed, 0xC0_4047, k as u64);
-            ((lo + (hi - lo) * u) * 100.0).round() / 100.0
+            cents(lo + (hi - lo) * u)
         });
     }
     Shape::from_values(v)
@@ -54,15 +54,19 @@ pub fn draw(seed: u64, given: [Option<f64>; 6]) -> Shape {
 /// The given parameters over the standard head (no seed: the others keep their defaults).
 pub fn given_or_default(given: [Option<f64>; 6]) -> Shape {
     let d = Shape::default().values();
-    Shape::from_values([0, 1, 2, 3, 4, 5].map(|k| given[k].unwrap_or(d[k])))
+    Shape::from_values(std::array::from_fn(|k| given[k].unwrap_or(d[k])))
+}
+
+/// `v` rounded to 0.01, so files and tables show a drawn value exactly.
+fn cents(v: f64) -> f64 {
+    (v * 100.0).round() / 100.0
 }
 
 /// The centre of stratum `i` of `n` equal strata of parameter `k`'s DRAW_RANGES range, rounded
 /// to 0.01 as `draw` rounds (n = 1: the range's centre).
 pub(crate) fn stratum_centre(k: usize, i: usize, n: usize) -> f64 {
     let (_, lo, hi) = DRAW_RANGES[k];
-    let v = lo + (hi - lo) * (i as f64 + 0.5) / n as f64;
-    (v * 100.0).round() / 100.0
+    cents(lo + (hi - lo) * (i as f64 + 0.5) / n as f64)
 }
 
 /// A permutation of 0..n drawn from `seed` (Fisher–Yates on the seed's own stream).

@@ -22,7 +22,7 @@ fn run(name: &str, sets: &[&str]) -> Face {
 /// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
 /// The discretisation-error estimate off, for tests that compare the face alone: it is a
 /// second solve on a coarser mesh and does not change the face (`model::discretisation`).
-const NO_ESTIMATE: [&str; 1] = ["tet.error_estimate=false"];
+const NO_ESTIMATE: &str = "tet.error_estimate=false";
 
 fn run_case(case: &Path, name: &str, sets: &[&str]) -> (Face, serde_json::Value) {
     let out = common::out_dir(name);
@@ -141,7 +141,7 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
         let case = whole_skull_case(&format!("facesim-{name}-case"), t, rotate, pivot);
         // The face alone is compared: the discretisation-error estimate (a second, coarse
         // solve that does not change the face) is left out.
-        let sets: Vec<&str> = sets.iter().copied().chain(NO_ESTIMATE).collect();
+        let sets: Vec<&str> = sets.iter().copied().chain([NO_ESTIMATE]).collect();
         let (face, report) = run_case(&case, &format!("facesim-{name}"), &sets);
         assert_eq!(
             report["tet"]["fixed_nodes"], 0,
@@ -179,7 +179,7 @@ fn every_tet_option_follows_the_bone_on_the_bundled_samples() {
         "tet.deep_size_mm=16",
         "tet.release_cuts=true",
         "tet.accept_inverted=false",
-        NO_ESTIMATE[0],
+        NO_ESTIMATE,
     ];
     for (sample, advance) in [("phantom", 6.0), ("jaws", 5.0)] {
         let case = Path::new(env!("CARGO_MANIFEST_DIR"))
