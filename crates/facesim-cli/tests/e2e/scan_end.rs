@@ -2,7 +2,7 @@
 //! ProMED CT 0051's field of view ends 5 mm below labrale superius, through the upper lip and
 //! the upper incisors' crowns. The jaws phantom's CT cut there is the same head with the same
 //! Le Fort I advance, so the uncut phantom's answer is what the cut one should give: with the
-//! tissue sliding on the scan's end plane (the default) the nose and lip must come much nearer
+//! tissue sliding on the scan's end plane (`"slides"`) the nose and lip must come much nearer
 //! it than with a free end (docs/lab/validation-notes.md "Where the scan ends: a truncation study").
 
 use crate::cli;
@@ -83,11 +83,11 @@ fn a_scan_cut_through_the_lip_slides_on_its_end_plane_and_comes_near_the_uncut_h
         cli::run_ok(case, &common::out_dir(name), &[&[quick], sets].concat())
     };
     let uncut = run(&full, "scan-end-uncut", &[]);
-    let slides = run(&cut, "scan-end-slides", &[]);
-    let free = run(&cut, "scan-end-free", &["tet.scan_end=\"free\""]);
+    let slides = run(&cut, "scan-end-slides", &["tet.scan_end=\"slides\""]);
+    let free = run(&cut, "scan-end-free", &[]);
 
     // The Le Fort I advance's mesh does not reach the uncut phantom's neck; the cut one ends
-    // in the lip, and there it slides by default and is free on request.
+    // in the lip, and there it is free by default and slides on request.
     assert!(uncut["tet"]["scan_end"].is_null(), "{}", uncut["tet"]);
     let end = |r: &serde_json::Value, k: &str| r["tet"]["scan_end"][k].as_u64().unwrap();
     assert!(end(&slides, "sliding_nodes") > 100, "{}", slides["tet"]);

@@ -299,8 +299,8 @@ pub enum TetElement {
 #[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum ScanEndHold {
-    /// A traction-free surface: nothing beyond the scan holds the tissue (the older model's
-    /// hold, and what a report.json written before the key existed ran).
+    /// A traction-free surface: nothing beyond the scan holds the tissue (the default, and what a
+    /// report.json written before the key existed ran).
     #[default]
     Free,
     /// It slides on the plane the scan ends in: no motion across it, free along it. The mirror
@@ -435,8 +435,8 @@ pub struct Tet {
     #[serde(default)]
     pub degloved_chin: Degloved,
     /// Where the scan ends in the tissue (the field of view cutting through a lip or the neck),
-    /// `"slides"`, the default: the tissue there slides on the scan's end plane; `"free"`: a free
-    /// surface. Defaulted to `"free"` when absent, so a report.json written before the key existed
+    /// `"free"`, the default: a free surface; `"slides"`: the tissue there slides on the scan's end
+    /// plane. Defaulted to `"free"` when absent, so a report.json written before the key existed
     /// reads back as it ran.
     #[serde(default)]
     pub scan_end: ScanEndHold,

@@ -219,8 +219,8 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
     // Two boxes (docs/design/pipeline.md "Region"): the face region, inside the CT, and the tissue
     // mesh's, the region grown by margin_mm once more, which holds every node. The scan ends
     // through the upper lip (z = 0): there the tissue ends in a surface half a voxel past the
-    // last slice that slides on the scan's end plane (`[tet] scan_end = "slides"`), not in a
-    // held face at it.
+    // last slice, free by default (`[tet] scan_end = "free"`; `"slides"` holds it on the scan's
+    // end plane), not in a held face at it.
     let tet = o.report.tet.as_ref().expect("the volumetric model ran");
     let margin = 30.0;
     let (lo, hi) = tet.mesh_box.expect("report.json tet.mesh_box");
@@ -249,19 +249,19 @@ fn real_ct_maxillary_advancement_moves_the_upper_lip_more_than_the_nose_and_not_
         .map(|(_, c)| *c)
         .collect();
     // (Held there, no node would lie past the last slice. Most of these are bone, or skin
-    // outside [surface] movable, held as anywhere else; the lip's and the mouth's slide on the
-    // end plane: constraint 3, sliding, and none free.)
+    // outside [surface] movable, held as anywhere else; the lip's and the mouth's are free:
+    // constraint 0. Those sliding there slide on the teeth, as mucosa or in contact.)
     let sliding = past_end.iter().filter(|c| **c == 3).count();
     let free = past_end.iter().filter(|c| **c == 0).count();
     assert!(
-        past_end.len() > 500 && sliding > 20 && free == 0,
+        past_end.len() > 500 && free > 20 * sliding,
         "of {} nodes past the scan's end {sliding} slide and {free} are free",
         past_end.len()
     );
     // report.json says where: the lip and the mouth at the scan's end, beside the moved teeth.
     let end = tet.scan_end.expect("report.json tet.scan_end");
     assert!(
-        end.free_nodes == 0 && end.sliding_nodes > 0 && end.sliding_nodes <= sliding,
+        end.sliding_nodes == 0 && end.free_nodes > 0 && end.free_nodes <= free,
         "{end:?}"
     );
     assert!(end.nearest_moved_bone_mm < 10.0, "{end:?}");
