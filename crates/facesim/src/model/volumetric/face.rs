@@ -49,37 +49,44 @@ pub(super) fn displaced(skin: &Mesh, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
 
 /// What decides which face vertices stay.
 pub(super) struct Stillness<'a> {
+    /// The face region, and the tissue mesh's box around it (report.json `tet.region`,
+    /// `tet.mesh_box`).
     pub(super) roi: Box3,
+    pub(super) mesh_box: Box3,
     pub(super) face: &'a [[f64; 3]],
     /// Per face vertex: outside `[surface] movable`.
     pub(super) face_rigid: &'a [bool],
-    pub(super) embedding: &'a SkinEmbedding,
+    /// Per face vertex: the tetrahedron carrying it (the face's embedding, `tet::embed`).
+    pub(super) carried_by: &'a [Option<u32>],
     pub(super) tets: &'a [[u32; 4]],
     /// Per mesh node: a skin node on the face, and outside `[surface] movable` (held if both).
     pub(super) on_face: &'a [bool],
     pub(super) node_rigid: &'a [bool],
 }
 
-/// Face vertices that stay: beyond the region's cut faces, where the tissue is held (the
-/// extrapolation from the last tetrahedron would move them); and outside `[surface] movable`
-/// unless the tetrahedron carrying the vertex has a face node the region leaves free — near the
-/// region's edge, where the vertex then follows the mesh and the face stays continuous with the
-/// face inside. (Holding every face vertex outside the region still tore the skin at its edge:
-/// on the real-mandible CT's BSSO advance 114 edges had a vertex moving beside one held exactly,
-/// the worst 1.30 mm beside 0 over 1.85 mm, 0.93 mm per mm across the edge.)
+/// Face vertices that stay: beyond the mesh's box, where the tissue is held (the extrapolation
+/// from the last tetrahedron would move them); and, outside the face region or outside
+/// `[surface] movable`, unless the tetrahedron carrying the vertex has a face node the mesh
+/// leaves free — there the mesh models the skin, and the vertex follows it so that the face
+/// fades with the mesh's field instead of stepping to rest. (Holding every face vertex outside
+/// `[surface] movable` tore the skin at its edge: on the real-mandible CT's BSSO advance 114
+/// edges had a vertex moving beside one held exactly, the worst 1.30 mm beside 0 over 1.85 mm,
+/// 0.93 mm per mm across the edge. Holding every one outside the face region did the same at
+/// the region's edge: 0.54–0.55 per mm on three phantoms' bimaxillary advance, a still vertex
+/// beside one moving 1.3–1.4 mm; docs/lab/skin-continuity.md.)
 pub(super) fn still(s: &Stillness) -> Vec<bool> {
-    let (lo, hi) = s.roi;
+    let outside = |(lo, hi): Box3, p: &[f64; 3]| (0..3).any(|c| p[c] < lo[c] || p[c] > hi[c]);
     s.face
         .iter()
         .enumerate()
         .map(|(v, p)| {
-            if (0..3).any(|c| p[c] < lo[c] || p[c] > hi[c]) {
+            if outside(s.mesh_box, p) {
                 return true;
             }
-            if !s.face_rigid[v] {
+            if !outside(s.roi, p) && !s.face_rigid[v] {
                 return false;
             }
-            match s.embedding.tet[v] {
+            match s.carried_by[v] {
                 None => true,
                 Some(t) => s.tets[t as usize].iter().all(|&n| {
                     let n = n as usize;
@@ -88,4 +95,40 @@ pub(super) fn still(s: &Stillness) -> Vec<bool> {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One tetrahedron, its first corner a free skin node on the face: a face vertex in it
+    /// follows the mesh inside the face region and outside it within the mesh's box, and stays
+    /// beyond the box; a vertex in a tetrahedron without a free face node stays outside the
+    /// region.
+    #[test]
+    fn the_face_follows_the_mesh_past_the_region_and_stays_past_the_mesh() {
+        let tets = [[0, 1, 2, 3], [4, 5, 6, 7]];
+        let on_face = [true, false, false, false, false, false, false, false];
+        let node_rigid = [false; 8];
+        let roi: Box3 = ([0.0; 3], [10.0; 3]);
+        let mesh_box: Box3 = ([-30.0; 3], [40.0; 3]);
+        let face = [
+            [5.0, 5.0, 5.0],  // inside the region
+            [15.0, 5.0, 5.0], // past the region, in the mesh's box
+            [45.0, 5.0, 5.0], // past the mesh's box
+            [15.0, 5.0, 5.0], // past the region, carried by a tetrahedron without a face node
+        ];
+        let carried_by = [Some(0), Some(0), Some(0), Some(1)];
+        let still = still(&Stillness {
+            roi,
+            mesh_box,
+            face: &face,
+            face_rigid: &[false; 4],
+            carried_by: &carried_by,
+            tets: &tets,
+            on_face: &on_face,
+            node_rigid: &node_rigid,
+        });
+        assert_eq!(still, [false, false, true, true]);
+    }
 }

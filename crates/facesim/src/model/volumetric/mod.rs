@@ -334,9 +334,10 @@ fn finish(
 ) -> Result<(Volumetric, Vec<[f64; 3]>)> {
     let face_still = face::still(&face::Stillness {
         roi: run.roi,
+        mesh_box: run.mesh.lattice_box,
         face: &skin.vertices,
         face_rigid: &crate::pipeline::model::rigid_mask(case, &skin.vertices),
-        embedding: &run.embedding,
+        carried_by: &run.embedding.tet,
         tets: &run.mesh.tets,
         on_face: &run.anatomy.on_face,
         node_rigid: &crate::pipeline::model::rigid_mask(case, &run.mesh.nodes),
