@@ -23,7 +23,7 @@
 //! Tuminaro 2003, "Parallel multigrid smoothing: polynomial versus Gauss–Seidel"): symmetric by
 //! construction, built from products alone (no sweep order, so it runs on every core, where a
 //! symmetric Gauss–Seidel sweep is sequential and needs the matrix by rows and by columns).
-//! Degree 2 measured fastest on the 10-node real CT (docs/design/fem.md "The 10-node solve").
+//! (docs/design/pipeline.md "The 10-node solve").
 //!
 //! Held DOFs: the operator is given on every DOF, and `free` marks the unknowns; the iterates
 //! are zero on the others and products are taken with them zeroed, so A below is the free–free

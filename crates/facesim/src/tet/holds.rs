@@ -17,7 +17,7 @@
 
 use super::iterative::{Iterative, IterativeSolve, NodeFrame};
 use crate::error::{Error, NumericalKind, Result};
-use crate::fem::assembly::System;
+use crate::fem::assembly::{MAX_FACTOR_BYTES, System};
 use crate::fem::cholesky::Ordering;
 use crate::vec3::{cross, dot};
 
@@ -259,6 +259,12 @@ pub fn frames(holds: &[Hold], nodes: usize) -> Result<Vec<Frame>> {
     Ok(f)
 }
 
+/// The largest Cholesky factor of a 10-node model: a larger one is solved iteratively
+/// ([`Constrained::quadratic`]), so that the run stays within 4 GB. The 10-node systems that
+/// fit are factored as before (the 8/16 mm real CT's: docs/design/pipeline.md "The 10-node
+/// solve"); the default 4/8 mm real CT's, 9 GB and more, is solved iteratively.
+pub const QUADRATIC_DIRECT_BYTES: usize = 2 << 30;
+
 /// A stiffness matrix with its holds, factored once in the nodes' local frames (or, for a
 /// 10-node model whose factor would not fit, solved by preconditioned conjugate gradients:
 /// [`Constrained::quadratic`]).
@@ -307,12 +313,23 @@ impl Constrained {
         nodes: usize,
         ordering: Ordering<'_>,
     ) -> Result<Constrained> {
+        Self::factored_within(k, holds, nodes, ordering, MAX_FACTOR_BYTES)
+    }
+
+    /// As `ordered`, refusing (`NumericalKind::TooLarge`) a factor of more than `max_bytes`.
+    fn factored_within(
+        k: &[(usize, usize, f64)],
+        holds: &[Hold],
+        nodes: usize,
+        ordering: Ordering<'_>,
+        max_bytes: usize,
+    ) -> Result<Constrained> {
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
             .iter()
             .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
-        let sys = System::with_ordering(3 * nodes, rotate_lower(k, &frames), &fixed, ordering).map_err(|e| match e {
+        let sys = System::within(3 * nodes, rotate_lower(k, &frames), &fixed, ordering, max_bytes).map_err(|e| match e {
             Error::Numerical {
                 kind: NumericalKind::Singular,
                 ..
@@ -329,9 +346,9 @@ impl Constrained {
     }
 
     /// A 10-node model's system (nodes: the `corners`, then the midpoint of `edges[e]` at node
-    /// `corners + e`): factored as [`Constrained::ordered`] where the factor fits
-    /// (`fem::assembly::MAX_FACTOR_BYTES`), else solved by conjugate gradients with the
-    /// p-multigrid preconditioner ([`Constrained::iterative`]).
+    /// `corners + e`): factored as [`Constrained::ordered`] where the factor takes at most
+    /// [`QUADRATIC_DIRECT_BYTES`], else solved by conjugate gradients with the p-multigrid
+    /// preconditioner ([`Constrained::iterative`]).
     pub(crate) fn quadratic(
         k: &[(usize, usize, f64)],
         holds: &[Hold],
@@ -339,7 +356,7 @@ impl Constrained {
         edges: &[[u32; 2]],
         ordering: Ordering<'_>,
     ) -> Result<Constrained> {
-        match Self::ordered(k, holds, holds.len(), ordering) {
+        match Self::factored_within(k, holds, holds.len(), ordering, QUADRATIC_DIRECT_BYTES) {
             Err(Error::Numerical {
                 kind: NumericalKind::TooLarge,
                 ..

@@ -182,7 +182,7 @@ mod tests {
             for j in 0..=n {
                 for i in 0..=n {
                     let (x, y, z) = (i as f64, j as f64, k as f64);
-                    nodes.push([x + 0.1 * y, y + 0.05 * z, z]);
+                    nodes.push([x + 0.1 * y + 0.05 * z, y, z]);
                 }
             }
         }
@@ -223,7 +223,7 @@ mod tests {
             .map(|p| {
                 if p[2] == 0.0 {
                     Hold::Fixed([0.3 - 0.05 * p[1], 0.05 * p[0], 0.2])
-                } else if p[1] == 0.0 && p[0] <= 1e-9 {
+                } else if p[1] == 0.0 && p[0] - 0.05 * p[2] <= 1e-9 {
                     Hold::Rail {
                         direction: [0.1, 0.2, 1.0],
                         offset: [0.0, 0.02, 0.0],
