@@ -261,8 +261,9 @@ pub fn frames(holds: &[Hold], nodes: usize) -> Result<Vec<Frame>> {
 
 /// The largest Cholesky factor of a 10-node model: a larger one is solved iteratively
 /// ([`Constrained::quadratic`]), so that the run stays within 4 GB. The 10-node systems that
-/// fit are factored as before (the 8/16 mm real CT's: docs/design/pipeline.md "The 10-node
-/// solve"); the default 4/8 mm real CT's, 9 GB and more, is solved iteratively.
+/// fit are factored as before (the bundled phantom's at 8/16 mm: 1.3 GB); the real CT's at the
+/// default 4/8 mm, 9 GB and more, is solved iteratively (docs/design/pipeline.md "The 10-node
+/// solve").
 pub const QUADRATIC_DIRECT_BYTES: usize = 2 << 30;
 
 /// A stiffness matrix with its holds, factored once in the nodes' local frames (or, for a
