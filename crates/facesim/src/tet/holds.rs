@@ -277,7 +277,7 @@ pub struct Constrained {
 /// How a [`Constrained`] system is solved.
 enum Solver {
     /// The sparse Cholesky factor.
-    Direct(System),
+    Direct(Box<System>),
     /// PCG with the p-multigrid preconditioner (tet/iterative.rs).
     Iterative(Box<Iterative>),
 }
@@ -342,7 +342,7 @@ impl Constrained {
         })?;
         Ok(Constrained {
             frames,
-            solver: Solver::Direct(sys),
+            solver: Solver::Direct(Box::new(sys)),
         })
     }
 
