@@ -392,6 +392,18 @@ impl System {
         fixed: &[bool],
         ordering: Ordering<'_>,
     ) -> Result<System> {
+        Self::within(n, k, fixed, ordering, MAX_FACTOR_BYTES)
+    }
+
+    /// As `with_ordering`, refusing (`NumericalKind::TooLarge`) a factor of more than
+    /// `max_bytes` before it is allocated.
+    pub(crate) fn within(
+        n: usize,
+        k: Vec<(usize, usize, f64)>,
+        fixed: &[bool],
+        ordering: Ordering<'_>,
+        max_bytes: usize,
+    ) -> Result<System> {
         let (free_index, free) = free_dofs(&fixed[..n]);
         // faer runs sequentially (fem/cholesky.rs says why), its dense kernels too.
         faer::set_global_parallelism(faer::Par::Seq);
@@ -403,14 +415,14 @@ impl System {
         let bytes = symbolic
             .factor_nnz()
             .saturating_mul(std::mem::size_of::<f64>());
-        if bytes > MAX_FACTOR_BYTES {
+        if bytes > max_bytes.min(MAX_FACTOR_BYTES) {
             return Err(Error::numerical(
                 NumericalKind::TooLarge,
                 format!(
-                    "the system of {} unknowns would need a {:.1} GB Cholesky factor (limit {} GB): use a coarser model",
+                    "the system of {} unknowns would need a {:.1} GB Cholesky factor (limit {:.1} GB): use a coarser model",
                     free.len(),
                     bytes as f64 / 1e9,
-                    MAX_FACTOR_BYTES >> 30
+                    max_bytes.min(MAX_FACTOR_BYTES) as f64 / f64::from(1u32 << 30)
                 ),
             ));
         }

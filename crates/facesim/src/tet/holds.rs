@@ -15,8 +15,9 @@
 //! components are held along which axes, not on the held values: [`Constrained`] factors once and
 //! solves any number of hold values and loads (the plan basis: 12 right-hand sides per segment).
 
+use super::iterative::{Iterative, IterativeSolve, NodeFrame};
 use crate::error::{Error, NumericalKind, Result};
-use crate::fem::assembly::System;
+use crate::fem::assembly::{MAX_FACTOR_BYTES, System};
 use crate::fem::cholesky::Ordering;
 use crate::vec3::{cross, dot};
 
@@ -258,10 +259,46 @@ pub fn frames(holds: &[Hold], nodes: usize) -> Result<Vec<Frame>> {
     Ok(f)
 }
 
-/// A stiffness matrix with its holds, factored once in the nodes' local frames.
+/// The largest Cholesky factor of a 10-node model: a larger one is solved iteratively
+/// ([`Constrained::quadratic`]), so that the run stays within 4 GB. The 10-node systems that
+/// fit are factored as before (the bundled phantom's at 8/16 mm: 1.3 GB); the real CT's at the
+/// default 4/8 mm, 9 GB and more, is solved iteratively (docs/design/pipeline.md "The 10-node
+/// solve").
+pub const QUADRATIC_DIRECT_BYTES: usize = 2 << 30;
+
+/// A stiffness matrix with its holds, factored once in the nodes' local frames (or, for a
+/// 10-node model whose factor would not fit, solved by preconditioned conjugate gradients:
+/// [`Constrained::quadratic`]).
 pub struct Constrained {
     frames: Vec<Frame>,
-    sys: System,
+    solver: Solver,
+}
+
+/// How a [`Constrained`] system is solved.
+enum Solver {
+    /// The sparse Cholesky factor.
+    Direct(Box<System>),
+    /// PCG with the p-multigrid preconditioner (tet/iterative.rs).
+    Iterative(Box<Iterative>),
+}
+
+/// How the solved system was solved (report.json `tet.solver`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SolverUsed {
+    Direct,
+    /// Conjugate gradients with the p-multigrid preconditioner; the last solve's figures.
+    PcgPmultigrid(Option<IterativeSolve>),
+}
+
+/// The nodes' frames as the iterative solve takes them.
+fn node_frames(frames: &[Frame]) -> Vec<NodeFrame> {
+    frames
+        .iter()
+        .map(|f| NodeFrame {
+            axes: f.axes,
+            held: f.held,
+        })
+        .collect()
 }
 
 impl Constrained {
@@ -277,12 +314,23 @@ impl Constrained {
         nodes: usize,
         ordering: Ordering<'_>,
     ) -> Result<Constrained> {
+        Self::factored_within(k, holds, nodes, ordering, MAX_FACTOR_BYTES)
+    }
+
+    /// As `ordered`, refusing (`NumericalKind::TooLarge`) a factor of more than `max_bytes`.
+    fn factored_within(
+        k: &[(usize, usize, f64)],
+        holds: &[Hold],
+        nodes: usize,
+        ordering: Ordering<'_>,
+        max_bytes: usize,
+    ) -> Result<Constrained> {
         let frames = frames(holds, nodes)?;
         let fixed: Vec<bool> = frames
             .iter()
             .flat_map(|f| std::array::from_fn::<bool, 3, _>(|i| i < f.held))
             .collect();
-        let sys = System::with_ordering(3 * nodes, rotate_lower(k, &frames), &fixed, ordering).map_err(|e| match e {
+        let sys = System::within(3 * nodes, rotate_lower(k, &frames), &fixed, ordering, max_bytes).map_err(|e| match e {
             Error::Numerical {
                 kind: NumericalKind::Singular,
                 ..
@@ -292,12 +340,91 @@ impl Constrained {
             ),
             other => other,
         })?;
-        Ok(Constrained { frames, sys })
+        Ok(Constrained {
+            frames,
+            solver: Solver::Direct(Box::new(sys)),
+        })
     }
 
-    /// Nonzeros of the factor.
+    /// A 10-node model's system (nodes: the `corners`, then the midpoint of `edges[e]` at node
+    /// `corners + e`): factored as [`Constrained::ordered`] where the factor takes at most
+    /// [`QUADRATIC_DIRECT_BYTES`], else solved by conjugate gradients with the p-multigrid
+    /// preconditioner ([`Constrained::iterative`]).
+    pub(crate) fn quadratic(
+        k: &[(usize, usize, f64)],
+        holds: &[Hold],
+        corners: usize,
+        edges: &[[u32; 2]],
+        ordering: Ordering<'_>,
+    ) -> Result<Constrained> {
+        match Self::factored_within(k, holds, holds.len(), ordering, QUADRATIC_DIRECT_BYTES) {
+            Err(Error::Numerical {
+                kind: NumericalKind::TooLarge,
+                ..
+            }) => Self::iterative(k, holds, corners, edges),
+            other => other,
+        }
+    }
+
+    /// A 10-node model's system solved by conjugate gradients with the p-multigrid
+    /// preconditioner (tet/iterative.rs), whatever its size.
+    pub(crate) fn iterative(
+        k: &[(usize, usize, f64)],
+        holds: &[Hold],
+        corners: usize,
+        edges: &[[u32; 2]],
+    ) -> Result<Constrained> {
+        let frames = frames(holds, holds.len())?;
+        if corners + edges.len() != frames.len() {
+            return Err(Error::config(format!(
+                "volumetric model: {} corners and {} edge midpoints for {} nodes",
+                corners,
+                edges.len(),
+                frames.len()
+            )));
+        }
+        let it = Iterative::new(k, &node_frames(&frames), corners, edges)?;
+        Ok(Constrained {
+            frames,
+            solver: Solver::Iterative(Box::new(it)),
+        })
+    }
+
+    /// Nonzeros of the factor (the iterative solve: of its coarse level's).
     pub(crate) fn factor_nnz(&self) -> usize {
-        self.sys.factor_nnz().unwrap_or(0)
+        match &self.solver {
+            Solver::Direct(sys) => sys.factor_nnz().unwrap_or(0),
+            Solver::Iterative(it) => it.factor_nnz(),
+        }
+    }
+
+    /// How the system is solved, with the last iterative solve's figures.
+    pub fn solver_used(&self) -> SolverUsed {
+        match &self.solver {
+            Solver::Direct(_) => SolverUsed::Direct,
+            Solver::Iterative(it) => SolverUsed::PcgPmultigrid(it.last_solve()),
+        }
+    }
+
+    /// The iterative solve's preconditioner made again for the current frames (nodes freed or
+    /// held again); nothing for the factor, which is bordered instead.
+    fn holds_changed(&mut self) -> Result<()> {
+        if let Solver::Iterative(it) = &mut self.solver {
+            it.set_holds(&node_frames(&self.frames))?;
+        }
+        Ok(())
+    }
+
+    /// K u = f in the local frames for each (loads, prescribed values) pair.
+    fn solve_frames(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+        match &self.solver {
+            Solver::Direct(sys) => Ok(sys.solve(rhs, prescribed)),
+            Solver::Iterative(it) => rhs
+                .iter()
+                .zip(prescribed)
+                .map(|(f, p)| it.solve(f, p))
+                .collect(),
+        }
     }
 
     /// Free `nodes` (held or sliding when factored) without refactoring: the factor is bordered
@@ -310,7 +437,10 @@ impl Constrained {
             f.held = 0;
             f.values = [0.0; 3];
         }
-        self.sys.free_more(&dofs)
+        match &mut self.solver {
+            Solver::Direct(sys) => sys.free_more(&dofs),
+            Solver::Iterative(_) => self.holds_changed(),
+        }
     }
 
     /// Hold nodes freed by [`Constrained::free_nodes`] again, each by its hold as when factored
@@ -330,11 +460,13 @@ impl Constrained {
             dofs.extend((0..again.held).map(|i| 3 * n + i));
             frames.push((n, again));
         }
-        self.sys.hold_border(&dofs)?;
+        if let Solver::Direct(sys) = &mut self.solver {
+            sys.hold_border(&dofs)?;
+        }
         for (n, f) in frames {
             self.frames[n] = f;
         }
-        Ok(())
+        self.holds_changed()
     }
 
     /// The node frames the factor was made in (a freed node: nothing held).
@@ -354,10 +486,10 @@ impl Constrained {
 
     /// K⁻¹ r for r in the local frames with the held components' values zero: the linear
     /// model's factor as the preconditioner of a nonlinear tangent (`tet::newton_krylov`).
+    /// (An iterative solve that fails gives non-finite values, which the caller refuses.)
     pub(crate) fn solve_local(&self, r: &[f64]) -> Vec<f64> {
-        self.sys
-            .solve(&[r.to_vec()], &[vec![0.0; r.len()]])
-            .remove(0)
+        self.solve_frames(&[r.to_vec()], &[vec![0.0; r.len()]])
+            .map_or_else(|_| vec![f64::NAN; r.len()], |mut u| u.remove(0))
     }
 
     /// The displacements for each (holds, nodal force vector of length 3 · nodes) pair. The holds
@@ -391,7 +523,7 @@ impl Constrained {
             rhs.push(b);
             prescribed.push(p);
         }
-        let solved = self.sys.solve(&rhs, &prescribed);
+        let solved = self.solve_frames(&rhs, &prescribed)?;
         solved
             .into_iter()
             .map(|u| {

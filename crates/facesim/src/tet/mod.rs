@@ -29,6 +29,7 @@ pub mod from_ct;
 pub mod graded;
 pub mod holds;
 pub mod hyperelastic;
+pub(crate) mod iterative;
 pub mod newton_krylov;
 pub mod nonlinear;
 pub(crate) mod plan_holds;

@@ -43,6 +43,7 @@ use crate::plan::PlanBasis;
 use crate::tet::conditions::Mucosa;
 use crate::tet::embed::SkinEmbedding;
 use crate::tet::from_ct::{NodeKind, SoftTissueMesh};
+use crate::tet::holds::SolverUsed;
 use crate::tet::quadratic::Tet10Mesh;
 use crate::tet::vtu::{FIXED, FREE, MOVED, SLIDING};
 use crate::tet::{Constrained, Hold, TissueElastic};
@@ -93,6 +94,9 @@ pub struct Reuse {
     /// Nonzeros of the run's factor (0 when it kept none): whether a re-solve's factorisation
     /// runs on one core (`Volumetric::solves_at_once`).
     factor_nonzeros: usize,
+    /// The run's system was solved iteratively (`Constrained::quadratic`): its re-solves run
+    /// one at a time (each holds a 10-node operator, not a small factor).
+    iterative: bool,
 }
 
 impl Reuse {
@@ -117,6 +121,9 @@ impl Volumetric {
     /// factorisations_at_once` of the run's factor; the real CT's: 8 samples in 6.4 s two at a
     /// time, 12.0 s one at a time).
     pub(crate) fn solves_at_once(&self) -> usize {
+        if self.reuse.iterative {
+            return 1;
+        }
         crate::fem::cholesky::factorisations_at_once(self.reuse.factor_nonzeros)
     }
 
@@ -352,8 +359,11 @@ fn finish(
         Ok(carrier.carry(&solved.displacement))
     })?;
     let factor_nonzeros = solved.factor.as_ref().map_or(0, Constrained::factor_nnz);
+    let solver = solved
+        .factor
+        .as_ref()
+        .map_or(SolverUsed::Direct, Constrained::solver_used);
     let run_factor = solved.factor.take();
-    let nodes = run.kind.len();
     let basis = rec.time(Stage::PlanBasis, "building the plan basis", || {
         // The nonlinear material slides on the moved bone's normals: where a rotation turned
         // them, the basis (the linear model at rest) needs its own factor.
@@ -365,7 +375,12 @@ fn finish(
                 // run's peak memory.
                 drop(run_factor);
                 let k = state::stiffness(run.quadratic.as_ref(), &solved.linear)?;
-                Constrained::ordered(&k, &rest, nodes, mesh::ordering(&solved.order))?
+                state::constrain(
+                    run.quadratic.as_ref(),
+                    &k,
+                    &rest,
+                    mesh::ordering(&solved.order),
+                )?
             }
         };
         let inputs = basis::BasisInputs {
@@ -378,7 +393,7 @@ fn finish(
         };
         basis::plan_basis(&inputs, case, |u| carrier.carry(u))
     })?;
-    let report = tet_report(&run, &solved, case, factor_nonzeros);
+    let report = tet_report(&run, &solved, case, factor_nonzeros, solver);
     let face_post = face::displaced(skin, &carried);
     let linear_face = solved
         .linear_start
@@ -414,6 +429,7 @@ fn finish(
                 linear_solve,
                 order: solved.order,
                 factor_nonzeros,
+                iterative: solver != SolverUsed::Direct,
             },
         },
         face_post,
@@ -426,6 +442,7 @@ fn tet_report(
     solved: &solve::Solution,
     case: &Case,
     factor_nonzeros: usize,
+    solver: SolverUsed,
 ) -> TetReport {
     let t = &case.tet;
     let (e, constraint, a) = (&run.embedding, &solved.constraint, &run.anatomy);
@@ -446,6 +463,7 @@ fn tet_report(
         dofs: 3 * nodes,
         free_dofs: 3 * counted(constraint, FREE),
         factor_nonzeros,
+        solver: report::SolverReport::of(solver),
         skin_nodes: run.kind.iter().filter(|k| **k == NodeKind::Skin).count(),
         mucosa_nodes: a.mucosa_nodes,
         sliding_nodes: counted(constraint, SLIDING),

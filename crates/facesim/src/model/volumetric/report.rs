@@ -3,6 +3,7 @@
 
 use crate::case::{TetElement, TetMaterial};
 use crate::compare::DistanceStats;
+use crate::tet::holds::SolverUsed;
 use crate::tet::quality::Quality;
 use crate::tet::vtu::{FREE, MOVED, SLIDING};
 use serde::{Deserialize, Serialize};
@@ -43,6 +44,12 @@ pub struct TetReport {
     /// peak memory (`facesim estimate` predicts it before the run).
     #[serde(default)]
     pub factor_nonzeros: usize,
+    /// How the system was solved: its Cholesky factor, or (a 10-node model whose factor would
+    /// not fit) conjugate gradients with the p-multigrid preconditioner, whose coarse level's
+    /// factor `factor_nonzeros` then counts. Defaulted when absent: a report.json written before
+    /// the key existed was solved directly.
+    #[serde(default)]
+    pub solver: SolverReport,
     /// Nodes per role: skin (free), bone moved with a segment, bone or cut faces held.
     pub skin_nodes: usize,
     /// Skin-kind nodes facing a cavity within `[tet] mucosa_gap_mm` of the skull, and those
@@ -116,6 +123,33 @@ pub struct TetReport {
     pub face_vertices_unreached: usize,
     /// Distance from each carried face vertex to the mesh's skin boundary (mm).
     pub face_to_mesh_mm: DistanceStats,
+}
+
+/// report.json's `tet.solver`: `method` "direct" or "pcg-pmultigrid"; for the latter the run's
+/// last solve's conjugate-gradient `iterations` and final `relative_residual` ‖b − K u‖ / ‖b‖.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct SolverReport {
+    pub method: String,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub iterations: Option<usize>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub relative_residual: Option<f64>,
+}
+
+impl SolverReport {
+    pub(crate) fn of(used: SolverUsed) -> SolverReport {
+        match used {
+            SolverUsed::Direct => SolverReport {
+                method: "direct".into(),
+                ..SolverReport::default()
+            },
+            SolverUsed::PcgPmultigrid(last) => SolverReport {
+                method: "pcg-pmultigrid".into(),
+                iterations: last.map(|l| l.iterations),
+                relative_residual: last.map(|l| l.relative_residual),
+            },
+        }
+    }
 }
 
 /// Where the scan ends in the tissue (report.json `tet.scan_end`).

@@ -8,6 +8,7 @@ use super::face::{carry_face, displaced};
 use super::holds::hold_tissue;
 use super::roles::{Roles, bone};
 use super::rounds::torn_trace;
+use super::state::{constrain, stiffness};
 use crate::case::Case;
 use crate::error::Result;
 use crate::mesh::Mesh;
@@ -56,11 +57,8 @@ impl Volumetric {
             .as_ref()
             .map(|_| Tet10Mesh::from_linear(&linear, Rule::Full));
         let u = if r.linear_solve {
-            let k = match &quadratic {
-                Some(q) => q.assemble()?,
-                None => linear.assemble()?,
-            };
-            let c = Constrained::ordered(&k, &hold, nodes.len(), r.ordering())?;
+            let k = stiffness(quadratic.as_ref(), &linear)?;
+            let c = constrain(quadratic.as_ref(), &k, &hold, r.ordering())?;
             let f = Loads::none().nodal_vector(nodes.len())?;
             c.solve(&[(&hold, &f)])?.remove(0)
         } else {

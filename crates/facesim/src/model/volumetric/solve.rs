@@ -6,7 +6,7 @@
 use super::mesh::ordering;
 use super::report::NewtonStep;
 use super::rounds::{LiftOff, OneSidedContact, Round, Tearing};
-use super::state::{OneSidedOutcome, Solving, no_factor, stiffness};
+use super::state::{OneSidedOutcome, Solving, constrain, no_factor, stiffness};
 use crate::case::Tet;
 use crate::error::Result;
 use crate::fem::cholesky::MeshAnalyses;
@@ -72,7 +72,7 @@ pub(super) fn solve(inp: &Inputs, linear: TetMesh, holds: Holds, t: &Tet) -> Res
     };
     let k = stiffness(inp.quadratic, &linear)?;
     let f = Loads::none().nodal_vector(nodes)?;
-    let c = Constrained::ordered(&k, &holds.hold, nodes, ordering(&order))?;
+    let c = constrain(inp.quadratic, &k, &holds.hold, ordering(&order))?;
     let u = c.solve(&[(&holds.hold, &f)])?.remove(0);
     let mut s = Solving {
         nodes,

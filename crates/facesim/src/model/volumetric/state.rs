@@ -3,7 +3,7 @@
 
 use super::mesh::ordering;
 use crate::error::{Error, Result};
-use crate::fem::cholesky::MeshAnalyses;
+use crate::fem::cholesky::{MeshAnalyses, Ordering};
 use crate::tet::from_ct::NodeKind;
 use crate::tet::plan_holds::LinearHold;
 use crate::tet::quadratic::Tet10Mesh;
@@ -18,6 +18,21 @@ pub(super) fn stiffness(
     match quadratic {
         Some(q) => q.assemble(),
         None => linear.assemble(),
+    }
+}
+
+/// The solved mesh's system under `hold`: the 10-node one factored where its factor fits, else
+/// solved by conjugate gradients with the p-multigrid preconditioner (`Constrained::quadratic`);
+/// the 4-node one factored.
+pub(super) fn constrain(
+    quadratic: Option<&Tet10Mesh>,
+    k: &[(usize, usize, f64)],
+    hold: &[Hold],
+    ordering: Ordering<'_>,
+) -> Result<Constrained> {
+    match quadratic {
+        Some(q) => Constrained::quadratic(k, hold, q.corners, &q.edges, ordering),
+        None => Constrained::ordered(k, hold, hold.len(), ordering),
     }
 }
 
@@ -67,10 +82,10 @@ impl Solving<'_> {
     pub(super) fn refactor(&mut self) -> Result<()> {
         self.c = None;
         let k = stiffness(self.quadratic, &self.linear)?;
-        self.c = Some(Constrained::ordered(
+        self.c = Some(constrain(
+            self.quadratic,
             &k,
             &self.hold,
-            self.nodes,
             ordering(&self.order),
         )?);
         Ok(())

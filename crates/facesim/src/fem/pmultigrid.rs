@@ -1,0 +1,449 @@
+//! Conjugate gradients preconditioned by a two-level p-multigrid cycle: the solve of a
+//! quadratic (10-node) tetrahedral model too large for its Cholesky factor
+//! (`fem::assembly::MAX_FACTOR_BYTES`).
+//!
+//! The coarse space is the linear (4-node) field on the corner nodes, embedded exactly in the
+//! quadratic one: the prolongation P carries each corner's DOFs to itself and gives each edge
+//! midpoint the mean of its two corners (a linear field is its own quadratic interpolant), in
+//! each node's own frame with its held components dropped (the caller's [`Transfer`]). The
+//! coarse operator is the Galerkin product A_c = Pᵀ A P, on the linear stiffness's pattern,
+//! factored once with the sparse Cholesky (fem/cholesky.rs): it is a tenth of the fine problem
+//! on the real CT. The fine level is smoothed by Chebyshev polynomials in the 3×3 node-block
+//! Jacobi preconditioned operator D⁻¹A.
+//!
+//! One cycle, from a residual r (symmetric, so an admissible CG preconditioner; Tatebe 1993,
+//! "The multigrid preconditioned conjugate gradient method"):
+//!   x₁ = S r, x₂ = x₁ + P A_c⁻¹ Pᵀ (r − A x₁), x = x₂ + S (r − A x₂),
+//! S the Chebyshev smoother, a fixed polynomial in D⁻¹A times D⁻¹ (symmetric). The two-level
+//! theory of the Galerkin coarse space (Hackbusch 1985, ch. 7; for p-multigrid on simplices
+//! Rønquist & Patera 1987, Helenbrook, Mavriplis & Atkins 2003) bounds the iterations
+//! independently of the mesh size.
+//!
+//! Smoother: Chebyshev of degree 2 over [λ_max/30, 1.1 λ_max] of D⁻¹A (Adams, Brezina, Hu &
+//! Tuminaro 2003, "Parallel multigrid smoothing: polynomial versus Gauss–Seidel"): symmetric by
+//! construction, built from products alone (no sweep order, so it runs on every core, where a
+//! symmetric Gauss–Seidel sweep is sequential and needs the matrix by rows and by columns,
+//! which the lower block triangle stored here gives only by columns). Degree and interval are
+//! Adams et al.'s usual ones, not tuned here; measured with them: 36 iterations to 1e-10 on
+//! the 10-node real CT (docs/design/pipeline.md "The 10-node solve").
+//!
+//! Held DOFs: the operator is given on every DOF, and `free` marks the unknowns; the iterates
+//! are zero on the others and products are taken with them zeroed, so A below is the free–free
+//! block.
+
+use super::assembly::System;
+use super::block_sparse::{Block, SymmetricBlocks, congruence, times, transposed};
+use super::cholesky::Ordering;
+use super::pcg::pcg;
+use crate::error::{Error, NumericalKind, Result};
+use rayon::prelude::*;
+
+/// PCG stops at ‖b − A x‖ ≤ TOLERANCE ‖b‖: the displacement then equals the direct solve's to
+/// about 1e-9 relative on the test meshes (fem/pmultigrid.rs tests, tet/quadratic.rs tests),
+/// below the 1e-6 a face needs.
+pub(crate) const TOLERANCE: f64 = 1e-10;
+/// Iterations before the solve is refused as not converging (the real CT takes tens).
+pub(crate) const MAX_ITERATIONS: usize = 2000;
+/// The Chebyshev smoother's degree and the lower end of its interval (a fraction of λ_max).
+const DEGREE: usize = 2;
+const SMOOTHED_FRACTION: f64 = 1.0 / 30.0;
+/// Power iterations for λ_max(D⁻¹A) and the safety factor on the estimate (from below).
+const POWER_ITERATIONS: usize = 20;
+const LAMBDA_SAFETY: f64 = 1.1;
+
+/// A fine node's coarse parents: one or two (coarse node, 3×3 map from the coarse node's DOFs
+/// to the fine node's, row-major).
+#[derive(Clone, Copy)]
+pub(crate) struct Parents {
+    count: u8,
+    of: [(u32, Block); 2],
+}
+
+impl Parents {
+    pub(crate) fn one(a: u32, s: Block) -> Parents {
+        Parents {
+            count: 1,
+            of: [(a, s), (a, [0.0; 9])],
+        }
+    }
+
+    pub(crate) fn two(a: u32, sa: Block, b: u32, sb: Block) -> Parents {
+        Parents {
+            count: 2,
+            of: [(a, sa), (b, sb)],
+        }
+    }
+
+    fn all(&self) -> &[(u32, Block)] {
+        &self.of[..self.count as usize]
+    }
+}
+
+/// The prolongation P from the coarse DOFs (3 per coarse node) to the fine ones, by fine node,
+/// and which coarse DOFs are unknowns.
+pub(crate) struct Transfer {
+    pub(crate) parents: Vec<Parents>,
+    pub(crate) coarse_free: Vec<bool>,
+}
+
+impl Transfer {
+    fn coarse_nodes(&self) -> usize {
+        self.coarse_free.len() / 3
+    }
+
+    /// P x_c.
+    pub(crate) fn prolong(&self, xc: &[f64]) -> Vec<f64> {
+        let mut x = vec![0.0; 3 * self.parents.len()];
+        x.par_chunks_mut(3)
+            .zip(self.parents.par_iter())
+            .for_each(|(xi, p)| {
+                for (a, s) in p.all() {
+                    let a = *a as usize;
+                    for r in 0..3 {
+                        xi[r] += s[3 * r] * xc[3 * a]
+                            + s[3 * r + 1] * xc[3 * a + 1]
+                            + s[3 * r + 2] * xc[3 * a + 2];
+                    }
+                }
+            });
+        x
+    }
+
+    /// Pᵀ r.
+    pub(crate) fn restrict(&self, r: &[f64]) -> Vec<f64> {
+        let mut rc = vec![0.0; self.coarse_free.len()];
+        for (i, p) in self.parents.iter().enumerate() {
+            for (a, s) in p.all() {
+                let a = *a as usize;
+                for c in 0..3 {
+                    rc[3 * a + c] +=
+                        s[c] * r[3 * i] + s[3 + c] * r[3 * i + 1] + s[6 + c] * r[3 * i + 2];
+                }
+            }
+        }
+        rc
+    }
+
+    /// Pᵀ A P on the coarse pattern `pairs` (coarse node pairs, row ≥ column, that share a fine
+    /// element; every pair a fine block's parents make must be among them).
+    pub(crate) fn galerkin<I: Iterator<Item = (usize, usize)>>(
+        &self,
+        fine: &SymmetricBlocks,
+        pairs: impl Fn() -> I,
+    ) -> Result<SymmetricBlocks> {
+        let mut coarse = SymmetricBlocks::with_pairs(self.coarse_nodes(), pairs);
+        let mut missing = None;
+        let mut add = |a: usize, b: usize, m: Block| match coarse.block_mut(a, b) {
+            Some(blk) => blk.iter_mut().zip(m).for_each(|(x, y)| *x += y),
+            None => missing = Some((a, b)),
+        };
+        fine.for_each(|i, j, aij| {
+            let (pi, pj) = (self.parents[i].all(), self.parents[j].all());
+            for (a, sa) in pi {
+                for (b, sb) in pj {
+                    let (a, b) = (*a as usize, *b as usize);
+                    let c = congruence(sa, aij, sb);
+                    if i == j {
+                        // The diagonal block holds both orders of each parent pair.
+                        if a >= b {
+                            add(a, b, c);
+                        }
+                    } else if a > b {
+                        add(a, b, c);
+                    } else if a < b {
+                        add(b, a, transposed(&c));
+                    } else {
+                        let t = transposed(&c);
+                        add(a, a, std::array::from_fn(|e| c[e] + t[e]));
+                    }
+                }
+            }
+        });
+        match missing {
+            Some((a, b)) => Err(Error::numerical(
+                NumericalKind::Singular,
+                format!("p-multigrid: coarse nodes {a} and {b} couple outside the coarse pattern"),
+            )),
+            None => Ok(coarse),
+        }
+    }
+}
+
+/// The Chebyshev smoother in D⁻¹A (D the free part of each node's diagonal block).
+struct Smoother {
+    /// Per node, the inverse of its diagonal block on its free DOFs (zero on the held ones).
+    inverse: Vec<Block>,
+    lo: f64,
+    hi: f64,
+}
+
+impl Smoother {
+    fn new(level: &Operator) -> Result<Smoother> {
+        let inverse = (0..level.a.nodes())
+            .map(|i| masked_inverse(level.a.diagonal(i), &level.free[3 * i..3 * i + 3]))
+            .collect::<Option<Vec<Block>>>()
+            .ok_or_else(|| {
+                Error::numerical(
+                    NumericalKind::Singular,
+                    "p-multigrid: a node's stiffness block is singular on its free DOFs",
+                )
+            })?;
+        let mut s = Smoother {
+            inverse,
+            lo: 0.0,
+            hi: 1.0,
+        };
+        // λ_max(D⁻¹A) by power iteration from a fixed start (estimates from below).
+        let mut v: Vec<f64> = (0..level.free.len())
+            .map(|i| {
+                if level.free[i] {
+                    1.0 + 0.5 * ((i as f64) * 0.618_033_988_7).fract()
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let mut lambda = 0.0;
+        for _ in 0..POWER_ITERATIONS {
+            let w = s.jacobi(&level.product(&v));
+            let (nw, nv) = (norm(&w), norm(&v));
+            if !(nw > 0.0 && nv > 0.0) {
+                break;
+            }
+            lambda = nw / nv;
+            v = w.iter().map(|x| x / nw).collect();
+        }
+        if !(lambda.is_finite() && lambda > 0.0) {
+            return Err(Error::numerical(
+                NumericalKind::Singular,
+                "p-multigrid: the smoother's spectrum estimate failed",
+            ));
+        }
+        s.hi = LAMBDA_SAFETY * lambda;
+        s.lo = SMOOTHED_FRACTION * s.hi;
+        Ok(s)
+    }
+
+    /// D⁻¹ r.
+    fn jacobi(&self, r: &[f64]) -> Vec<f64> {
+        let mut z = vec![0.0; r.len()];
+        z.par_chunks_mut(3)
+            .zip(r.par_chunks(3))
+            .zip(self.inverse.par_iter())
+            .for_each(|((z, r), m)| {
+                for a in 0..3 {
+                    z[a] = m[3 * a] * r[0] + m[3 * a + 1] * r[1] + m[3 * a + 2] * r[2];
+                }
+            });
+        z
+    }
+
+    /// The Chebyshev iteration for A x = r from x = 0, `DEGREE` steps (Saad, "Iterative
+    /// methods for sparse linear systems", 2nd ed., Algorithm 12.1, preconditioned by D).
+    fn smooth(&self, level: &Operator, r: &[f64]) -> Vec<f64> {
+        let theta = 0.5 * (self.hi + self.lo);
+        let delta = 0.5 * (self.hi - self.lo);
+        let sigma = theta / delta;
+        let mut rho = 1.0 / sigma;
+        let mut d: Vec<f64> = self.jacobi(r).iter().map(|z| z / theta).collect();
+        let mut x = d.clone();
+        let mut res = r.to_vec();
+        for _ in 1..DEGREE {
+            let ad = level.product(&d);
+            res.par_iter_mut().zip(&ad).for_each(|(r, a)| *r -= a);
+            let rho_next = 1.0 / (2.0 * sigma - rho);
+            let z = self.jacobi(&res);
+            d.par_iter_mut().zip(&z).for_each(|(d, z)| {
+                *d = rho_next * rho * *d + 2.0 * rho_next / delta * z;
+            });
+            x.par_iter_mut().zip(&d).for_each(|(x, d)| *x += d);
+            rho = rho_next;
+        }
+        x
+    }
+}
+
+/// The inverse of `b` on the DOFs `free` marks (zero rows and columns on the others), or None
+/// when that part is singular.
+fn masked_inverse(b: &Block, free: &[bool]) -> Option<Block> {
+    let m = nalgebra::Matrix3::from_fn(|r, c| {
+        if free[r] && free[c] {
+            b[3 * r + c]
+        } else if r == c {
+            1.0
+        } else {
+            0.0
+        }
+    });
+    let inv = m.try_inverse()?;
+    Some(std::array::from_fn(|e| {
+        let (r, c) = (e / 3, e % 3);
+        if free[r] && free[c] { inv[(r, c)] } else { 0.0 }
+    }))
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.par_iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// The fine operator and its unknowns.
+struct Operator {
+    a: SymmetricBlocks,
+    free: Vec<bool>,
+}
+
+impl Operator {
+    /// A x on the free DOFs (x's held entries ignored, the result's zero).
+    fn product(&self, x: &[f64]) -> Vec<f64> {
+        let xf: Vec<f64> = x
+            .par_iter()
+            .zip(&self.free)
+            .map(|(x, f)| if *f { *x } else { 0.0 })
+            .collect();
+        let mut y = self.a.apply(&xf);
+        y.par_iter_mut()
+            .zip(&self.free)
+            .for_each(|(y, f)| *y = if *f { *y } else { 0.0 });
+        y
+    }
+}
+
+/// One PCG solve: the unknowns, the iterations and the final relative residual ‖b − A x‖ / ‖b‖
+/// (recomputed from x, not the recurrence's).
+pub(crate) struct Solved {
+    pub(crate) x: Vec<f64>,
+    pub(crate) iterations: usize,
+    pub(crate) relative_residual: f64,
+}
+
+/// The two-level preconditioner over a fine operator, and CG with it.
+pub(crate) struct TwoLevel {
+    fine: Operator,
+    transfer: Transfer,
+    coarse: System,
+    smoother: Smoother,
+}
+
+impl TwoLevel {
+    /// Set up over the symmetric operator `a` (every DOF) with unknowns `free`, prolongation
+    /// `transfer` and the coarse pattern `pairs` (see [`Transfer::galerkin`]); the coarse
+    /// operator factored in nested-dissection order.
+    pub(crate) fn new<I: Iterator<Item = (usize, usize)>>(
+        a: SymmetricBlocks,
+        free: Vec<bool>,
+        transfer: Transfer,
+        pairs: impl Fn() -> I,
+    ) -> Result<TwoLevel> {
+        let fine = Operator { a, free };
+        let galerkin = transfer.galerkin(&fine.a, pairs)?;
+        let fixed: Vec<bool> = transfer.coarse_free.iter().map(|f| !f).collect();
+        let coarse = System::with_ordering(
+            fixed.len(),
+            galerkin.lower_triplets(),
+            &fixed,
+            Ordering::NestedDissection,
+        )?;
+        let smoother = Smoother::new(&fine)?;
+        Ok(TwoLevel {
+            fine,
+            transfer,
+            coarse,
+            smoother,
+        })
+    }
+
+    /// The same operator with other unknowns and prolongation (nodes freed or held again).
+    pub(crate) fn with_holds<I: Iterator<Item = (usize, usize)>>(
+        self,
+        free: Vec<bool>,
+        transfer: Transfer,
+        pairs: impl Fn() -> I,
+    ) -> Result<TwoLevel> {
+        let TwoLevel { fine, coarse, .. } = self;
+        // The old coarse factor goes before the new one is made.
+        drop(coarse);
+        Self::new(fine.a, free, transfer, pairs)
+    }
+
+    /// A x over every DOF (x's held entries included): the held values' part of a right-hand
+    /// side.
+    pub(crate) fn full_product(&self, x: &[f64]) -> Vec<f64> {
+        self.fine.a.apply(x)
+    }
+
+    /// Nonzeros of the coarse factor.
+    pub(crate) fn coarse_factor_nnz(&self) -> usize {
+        self.coarse.factor_nnz().unwrap_or(0)
+    }
+
+    /// The cycle applied to the residual r.
+    fn precondition(&self, r: &[f64]) -> Vec<f64> {
+        let level = &self.fine;
+        let mut x = self.smoother.smooth(level, r);
+        let ax = level.product(&x);
+        let r1: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
+        let rc = self.transfer.restrict(&r1);
+        let zeros = vec![0.0; rc.len()];
+        let ec = self.coarse.solve(&[rc], &[zeros]).remove(0);
+        let e = self.transfer.prolong(&ec);
+        x.par_iter_mut()
+            .zip(&e)
+            .zip(&level.free)
+            .for_each(|((x, e), f)| {
+                if *f {
+                    *x += e
+                }
+            });
+        let ax = level.product(&x);
+        let r2: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
+        let post = self.smoother.smooth(level, &r2);
+        x.par_iter_mut().zip(&post).for_each(|(x, p)| *x += p);
+        x
+    }
+
+    /// A x = b on the free DOFs (b's held entries ignored; x zero there), to
+    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error.
+    pub(crate) fn solve(&self, b: &[f64]) -> Result<Solved> {
+        let level = &self.fine;
+        let b: Vec<f64> = b
+            .iter()
+            .zip(&level.free)
+            .map(|(b, f)| if *f { *b } else { 0.0 })
+            .collect();
+        let (x, iterations) = pcg(
+            |v| level.product(v),
+            |r| self.precondition(r),
+            &b,
+            TOLERANCE,
+            MAX_ITERATIONS,
+        )
+        .ok_or_else(|| {
+            Error::numerical(
+                NumericalKind::NotConverged,
+                format!(
+                    "the iterative solve of {} unknowns (conjugate gradients, p-multigrid) did not reach a relative residual of {TOLERANCE:e} in {MAX_ITERATIONS} iterations",
+                    level.free.iter().filter(|f| **f).count()
+                ),
+            )
+        })?;
+        let ax = level.product(&x);
+        let rr: f64 = b.iter().zip(&ax).map(|(b, a)| (b - a) * (b - a)).sum();
+        let bb: f64 = b.iter().map(|b| b * b).sum();
+        let relative_residual = if bb > 0.0 { (rr / bb).sqrt() } else { 0.0 };
+        Ok(Solved {
+            x,
+            iterations,
+            relative_residual,
+        })
+    }
+}
+
+/// The 3×3 identity restricted to the DOFs `free` marks.
+pub(crate) fn mask(free: [bool; 3]) -> Block {
+    std::array::from_fn(|e| if e % 4 == 0 && free[e / 3] { 1.0 } else { 0.0 })
+}
+
+/// a · b (re-exported for building the prolongation's blocks).
+pub(crate) fn product(a: &Block, b: &Block) -> Block {
+    times(a, b)
+}
