@@ -56,6 +56,15 @@ const REDUCED_MAX_SIZE: usize = 16;
 /// solves, which cost about a quarter per column in a block of four (docs/design/reduced.md).
 const REDUCED_BATCH: usize = 4;
 
+/// The landmarks' dual greedy (docs/design/reduced.md "Primal–dual output bounds"): the
+/// adjoints at θ̄ and DUAL_ROUNDS rounds of three more, unless every relative dual bound is
+/// below DUAL_TOLERANCE first.
+const DUAL_GREEDY: crate::reduced::dual::DualGreedy = crate::reduced::dual::DualGreedy {
+    tolerance: 1e-3,
+    rounds: 2,
+    snapshot_accuracy: 1e-3,
+};
+
 /// The predicted face and the model that predicted it.
 pub type Prediction = Predicted<Solved>;
 
@@ -182,6 +191,7 @@ impl Prediction {
                 cases: &t,
                 greedy,
                 outputs,
+                dual: DUAL_GREEDY,
             };
             v.reduced(scene, &c, &training, progress)
         };

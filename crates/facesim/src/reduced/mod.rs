@@ -5,10 +5,13 @@
 //!
 //! - [`affine`]: A(θ) = Σ θ_q A_q, f(θ) = Σ θ_q f_q on the free unknowns (holds in node frames);
 //! - [`basis`]: the greedy, the online solve and the bound (min-θ coercivity, residual dual norm);
+//! - [`dual`]: primal–dual output bounds: a dual reduced basis per output, its corrected output
+//!   and the bound on it;
 //! - [`norm`]: the largest gain from the energy norm to the face's displacement (mm), by Lanczos.
 
 pub mod affine;
 pub mod basis;
+pub mod dual;
 pub mod norm;
 
 pub use affine::Affine;
@@ -200,6 +203,26 @@ pub struct ReducedReport {
     /// σ: ‖face error‖₂ ≤ σ ‖e‖_X.
     pub face_gain: f64,
     pub greedy: Vec<GreedyStep>,
+    /// The landmarks' dual bases (primal–dual output bounds; absent in a model stored before
+    /// them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dual: Option<DualReport>,
+}
+
+/// report.json `uncertainty.reduced[].dual`: how the outputs' dual bases were built.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DualReport {
+    /// dim W per output (three adjoints at θ̄, then three per greedy round).
+    pub sizes: Vec<usize>,
+    /// The largest relative dual bound ‖r_du‖_X' / (α_LB ‖ψ_N‖_X) over the training set and
+    /// the outputs, at the end.
+    pub largest_relative_bound: f64,
+    pub cg_iterations: usize,
+    /// Solves with X's factor (one per column): the snapshots' preconditioner and the Riesz
+    /// representers of A_q w.
+    pub reference_solves: usize,
+    pub full_factorisations: usize,
+    pub seconds: f64,
 }
 
 #[cfg(test)]
