@@ -464,7 +464,11 @@ impl RieszSpace {
     /// as matrix products, then twice against the block's own earlier columns; a direction
     /// already spanned adds no new e. The products use the current thread pool
     /// (`Prediction::reduced` gives each of several builds its own).
-    pub(super) fn push(&mut self, mut r: faer::Mat<f64>, mut gm: faer::Mat<f64>) -> Vec<(Vec<f64>, f64)> {
+    pub(super) fn push(
+        &mut self,
+        mut r: faer::Mat<f64>,
+        mut gm: faer::Mat<f64>,
+    ) -> Vec<(Vec<f64>, f64)> {
         use faer::{Mat, MatRef};
         let (n, m) = (self.n, r.ncols());
         let norm0: Vec<f64> = (0..m)

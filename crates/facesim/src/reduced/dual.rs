@@ -260,9 +260,12 @@ pub fn build(
         let (worst, rel) = bounds
             .iter()
             .enumerate()
-            .fold((0, f64::NEG_INFINITY), |a, (i, r)| {
-                if *r > a.1 { (i, *r) } else { a }
-            });
+            .fold(
+                (0, f64::NEG_INFINITY),
+                |a, (i, r)| {
+                    if *r > a.1 { (i, *r) } else { a }
+                },
+            );
         b.form.greedy.push((b.vectors.len(), rel));
         if rel <= greedy.tolerance || round == greedy.rounds || train.is_empty() {
             break;

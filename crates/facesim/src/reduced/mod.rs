@@ -528,6 +528,187 @@ mod tests {
         }
     }
 
+    /// A three-component output of the block: the displacement components of free unknowns
+    /// near the top (each column a unit functional, or a sum of two).
+    fn output_columns(sys: &Affine) -> Vec<Vec<f64>> {
+        let n = sys.unknowns();
+        let picks = [[n - 1, n - 1], [n - 5, n - 9], [n / 2, n - 14]];
+        picks
+            .iter()
+            .map(|p| {
+                let mut l = vec![0.0; n];
+                for i in p {
+                    l[*i] += 1.0;
+                }
+                l
+            })
+            .collect()
+    }
+
+    /// The block's basis (a deliberately small one, so its error is well above round-off),
+    /// its output columns, their adjoints at θ̄ and the factor of X.
+    fn dual_setup(
+        n: usize,
+    ) -> (
+        Affine,
+        Vec<f64>,
+        Basis,
+        Vec<Vec<f64>>,
+        Vec<Vec<f64>>,
+        crate::fem::cholesky::Cholesky<f64>,
+    ) {
+        let (m, slot, holds) = block(n);
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let sys = affine_of(&m, &slot, &vec![1.0; slot.len()], &holds);
+        let th = theta(&mats);
+        let train: Vec<Vec<f64>> = (0..40).map(|i| box_point(&mats, i)).collect();
+        let greedy = Greedy {
+            tolerance: 0.0,
+            max_size: 3,
+            batch: 1,
+        };
+        let (b, x) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
+        let l = output_columns(&sys);
+        let z = affine::solve_columns(&x, &l);
+        (sys, th, b, l, z, x)
+    }
+
+    /// θ at a pseudo-random point of the box: moduli 4× either way, ν 0.45–0.49.
+    fn box_point(mats: &[TissueElastic; 3], i: usize) -> Vec<f64> {
+        let x = |k: u64| ((i as u64 * 2_654_435_761 + k * 40_503) % 1000) as f64 / 999.0;
+        let nu = 0.45 + 0.04 * x(1);
+        theta(&[
+            tissue(mats[0].youngs_kpa * 4f64.powf(2.0 * x(2) - 1.0), nu),
+            tissue(mats[1].youngs_kpa * 4f64.powf(2.0 * x(3) - 1.0), nu),
+            tissue(mats[2].youngs_kpa * 4f64.powf(2.0 * x(4) - 1.0), nu),
+        ])
+    }
+
+    /// lᵀ u(θ) by factorising A(θ), and lᵀ u_N of the basis's answer `o`.
+    fn outputs_at(
+        sys: &Affine,
+        b: &Basis,
+        l: &[Vec<f64>],
+        t: &[f64],
+        o: &basis::Online,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let truth = affine::solve_columns(&sys.factor(t).unwrap(), &[sys.rhs(t)]).remove(0);
+        let un = b.expand(&o.coefficients);
+        (
+            l.iter().map(|lj| basis::dot(lj, &truth)).collect(),
+            l.iter().map(|lj| basis::dot(lj, &un)).collect(),
+        )
+    }
+
+    #[test]
+    fn with_the_exact_adjoint_in_its_space_the_corrected_output_is_exact() {
+        let (sys, th, b, l, z, x) = dual_setup(4);
+        let ctx = dual::DualContext {
+            sys: &sys,
+            x: &x,
+            theta_bar: &th,
+            primal: &b,
+        };
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let at = box_point(&mats, 777);
+        // One round at θ* with the snapshots solved to the end (accuracy 0: conjugate gradients
+        // never stop early, so each is factorised): W holds A(θ*)⁻¹ l_j exactly.
+        let greedy = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 1,
+            snapshot_accuracy: 0.0,
+        };
+        let mut cost = dual::DualCost::default();
+        let d = dual::build(&ctx, &l, &z, std::slice::from_ref(&at), greedy, &mut cost).unwrap();
+        assert_eq!(d.size(), 6);
+        assert_eq!(cost.full_factorisations, 3);
+        let o = b.solve(&at).unwrap();
+        let (truth, reduced) = outputs_at(&sys, &b, &l, &at, &o);
+        let a = d.answer(&at, &o).unwrap();
+        for j in 0..3 {
+            let before = (truth[j] - reduced[j]).abs();
+            let after = (truth[j] - reduced[j] - a.correction[j]).abs();
+            // ψᵀ r = lᵀ e exactly when ψ_N = ψ: the corrected output is the full model's to
+            // the round-off of the reduced sums.
+            assert!(
+                before > 1e-6 * truth[j].abs(),
+                "component {j}: the basis must be inexact here ({before:.3e})"
+            );
+            assert!(
+                after <= 1e-9 * before + 1e-13 * truth[j].abs(),
+                "component {j}: corrected error {after:.3e}, uncorrected {before:.3e}"
+            );
+            assert!(
+                after <= a.bound[j],
+                "{after:.3e} > bound {:.3e}",
+                a.bound[j]
+            );
+        }
+        // With no snapshot (W = the adjoints at θ̄ alone) the same point is not exact.
+        let only_theta_bar = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 0,
+            snapshot_accuracy: 0.0,
+        };
+        let mut cost0 = dual::DualCost::default();
+        let d0 = dual::build(&ctx, &l, &z, &[], only_theta_bar, &mut cost0).unwrap();
+        let a0 = d0.answer(&at, &o).unwrap();
+        let worst0 = (0..3)
+            .map(|j| (truth[j] - reduced[j] - a0.correction[j]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst0 > 1e-6 * truth.iter().map(|t| t.abs()).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn the_primal_dual_bound_holds_and_is_far_below_the_energy_norms() {
+        let (sys, th, b, l, z, x) = dual_setup(5);
+        let ctx = dual::DualContext {
+            sys: &sys,
+            x: &x,
+            theta_bar: &th,
+            primal: &b,
+        };
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let train: Vec<Vec<f64>> = (0..40).map(|i| box_point(&mats, i)).collect();
+        let greedy = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 3,
+            snapshot_accuracy: 1e-3,
+        };
+        let mut cost = dual::DualCost::default();
+        let d = dual::build(&ctx, &l, &z, &train, greedy, &mut cost).unwrap();
+        assert_eq!(d.size(), 12);
+        let g: Vec<f64> = d.greedy.iter().map(|s| s.1).collect();
+        assert!(g[3] < 0.1 * g[0], "the dual greedy's bound falls: {g:?}");
+        assert!(cost.cg_iterations > 0 && cost.full_factorisations == 0);
+        // ‖l_j‖_X' : |lᵀ e| ≤ ‖l‖_X' ‖e‖_X ≤ ‖l‖_X' Δ, the energy norm's output bound.
+        let dual_norms: Vec<f64> = l
+            .iter()
+            .zip(&z)
+            .map(|(a, b)| basis::dot(a, b).sqrt())
+            .collect();
+        for i in 200..220 {
+            let t = box_point(&mats, i);
+            let o = b.solve(&t).unwrap();
+            let (truth, reduced) = outputs_at(&sys, &b, &l, &t, &o);
+            let a = d.answer(&t, &o).unwrap();
+            for j in 0..3 {
+                let err = (truth[j] - reduced[j] - a.correction[j]).abs();
+                assert!(
+                    err <= a.bound[j],
+                    "θ {i}, component {j}: corrected error {err:.3e} > bound {:.3e}",
+                    a.bound[j]
+                );
+                let energy = dual_norms[j] * o.energy_bound;
+                assert!(
+                    a.bound[j] < 0.1 * energy,
+                    "θ {i}, component {j}: bound {:.3e} vs the energy norm's {energy:.3e}",
+                    a.bound[j]
+                );
+            }
+        }
+    }
+
     #[test]
     fn the_packed_face_is_the_sum_of_its_fields_and_skips_only_still_vertices() {
         // 7 vertices, 3 columns; vertices 1 and 4 still in every field, vertex 5 moved by a

@@ -167,8 +167,7 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
                 .chain(&m.output_bounds)
                 .any(|b| !b.consistent())
             || !(m.duals.is_empty() || m.duals.len() == m.output_bounds.len())
-            || m
-                .duals
+            || m.duals
                 .iter()
                 .any(|d| d.components() != 3 || !d.consistent(q, m.form.size()))
         {

@@ -86,24 +86,31 @@ impl ReducedTet {
     pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, Bounds)> {
         let theta = self.theta(&case.tet);
         let o = self.solve(case)?;
-        Ok((o.coefficients.iter().copied().collect(), self.bounds(&theta, &o)))
+        Ok((
+            o.coefficients.iter().copied().collect(),
+            self.bounds(&theta, &o),
+        ))
     }
 
-    /// The certified bounds of an online answer at θ (mm): per output the primal–dual bound
-    /// on its corrected displacement, the Euclidean norm of its components' bounds; without
-    /// dual bases (or where a dual system fails), the bound through the Riesz representer on
-    /// the uncorrected one.
+    /// The certified bounds of an online answer at θ (mm). Per output with a dual basis, on
+    /// its corrected displacement s_N = face value + ψ_Nᵀ r: the smaller of the primal–dual
+    /// bound (the Euclidean norm of its components' ‖r‖_X' ‖r_du‖_X' / α_LB) and the bound on
+    /// the face value through the Riesz representer plus |ψ_Nᵀ r| (the triangle inequality);
+    /// without one (or where its dual system fails), that bound on the face value alone.
     fn bounds(&self, theta: &[f64], o: &crate::reduced::Online) -> Bounds {
         let mut landmarks_mm = Vec::with_capacity(self.output_bounds.len());
         let mut corrections = Vec::with_capacity(self.output_bounds.len());
         for (k, b) in self.output_bounds.iter().enumerate() {
+            let plain = b.bound(o);
             match self.duals.get(k).map(|d| d.answer(theta, o)) {
                 Some(Ok(a)) if a.correction.len() == 3 => {
-                    landmarks_mm.push(a.bound.iter().map(|x| x * x).sum::<f64>().sqrt());
-                    corrections.push([a.correction[0], a.correction[1], a.correction[2]]);
+                    let c = [a.correction[0], a.correction[1], a.correction[2]];
+                    let dual = a.bound.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    landmarks_mm.push(dual.min(plain + crate::vec3::norm(c)));
+                    corrections.push(c);
                 }
                 _ => {
-                    landmarks_mm.push(b.bound(o));
+                    landmarks_mm.push(plain);
                     corrections.push([0.0; 3]);
                 }
             }
@@ -243,8 +250,8 @@ pub struct Training<'a> {
     /// Outputs with their own bound: weights on face vertices (a landmark's triangle), whose
     /// weighted displacement is the output.
     pub outputs: &'a [Vec<(usize, f64)>],
-    /// The outputs' dual greedy (primal–dual output bounds).
-    pub dual: DualGreedy,
+    /// The outputs' dual greedy (primal–dual output bounds); None: no dual bases.
+    pub dual: Option<DualGreedy>,
 }
 
 /// The reduced models a sampling needs: one per sliding state it draws.

@@ -10,7 +10,7 @@ use crate::error::{Error, Result};
 use crate::fem::cholesky::Cholesky;
 use crate::model::reduced::{FaceMap, ReducedTet, Training, theta_of};
 use crate::pipeline::Scene;
-use crate::reduced::dual::{self, DualContext, DualCost, DualForm};
+use crate::reduced::dual::{self, DualContext, DualCost, DualForm, DualGreedy};
 use crate::reduced::{
     Affine, Basis, DualReport, OutputBound, affine::solve_columns, norm::largest_eigenvalue,
 };
@@ -90,44 +90,34 @@ impl Volumetric {
             .collect();
         let output_bounds = output_bounds(training.outputs, output_gains, &faces);
         let face_bound = face_bound(&face_map, face_gain, faces);
-        progress("reduced model: the landmarks' dual bases");
-        let dual_start = std::time::Instant::now();
-        let ctx = DualContext {
-            sys: &affine,
-            x: &x,
-            theta_bar: &theta_bar,
-            primal: &basis,
+        let (duals, dual_report) = match training.dual {
+            Some(greedy) => {
+                progress("reduced model: the landmarks' dual bases");
+                let ctx = DualContext {
+                    sys: &affine,
+                    x: &x,
+                    theta_bar: &theta_bar,
+                    primal: &basis,
+                };
+                let (duals, report) = dual_bases(&ctx, (&columns, &adjoints), &train, greedy)?;
+                (duals, Some(report))
+            }
+            None => (Vec::new(), None),
         };
-        let mut cost = DualCost::default();
-        let duals = columns
-            .chunks(3)
-            .zip(adjoints.chunks(3))
-            .map(|(l, z)| dual::build(&ctx, l, z, &train, training.dual, &mut cost))
-            .collect::<Result<Vec<_>>>()?;
         drop((columns, adjoints));
-        let dual_report = DualReport {
-            sizes: duals.iter().map(DualForm::size).collect(),
-            largest_relative_bound: duals
-                .iter()
-                .filter_map(|d| d.greedy.last().map(|g| g.1))
-                .fold(0.0, f64::max),
-            cg_iterations: cost.cg_iterations,
-            reference_solves: cost.reference_solves,
-            full_factorisations: cost.full_factorisations,
-            seconds: dual_start.elapsed().as_secs_f64(),
-        };
+        let dual_factorisations = dual_report.as_ref().map_or(0, |d| d.full_factorisations);
         Ok(ReducedTet {
             sliding,
             build: crate::reduced::ReducedReport {
                 sliding,
                 basis_size: basis.size(),
-                full_factorisations: basis.full_factorisations + cost.full_factorisations,
+                full_factorisations: basis.full_factorisations + dual_factorisations,
                 reference_solves: basis.riesz_solves + lanczos + 3 * training.outputs.len(),
                 cg_iterations: basis.cg_iterations,
                 offline_seconds: start.elapsed().as_secs_f64(),
                 face_gain,
                 greedy: basis.history,
-                dual: Some(dual_report),
+                dual: dual_report,
             },
             form: basis.form,
             terms,
@@ -197,6 +187,35 @@ impl System<'_> {
             .collect();
         (rhs, z)
     }
+}
+
+/// Each output's dual basis (three components: its columns l_j and adjoints X⁻¹ l_j), and
+/// what they cost.
+fn dual_bases(
+    ctx: &DualContext,
+    (columns, adjoints): (&[Vec<f64>], &[Vec<f64>]),
+    train: &[Vec<f64>],
+    greedy: DualGreedy,
+) -> Result<(Vec<DualForm>, DualReport)> {
+    let start = std::time::Instant::now();
+    let mut cost = DualCost::default();
+    let duals = columns
+        .chunks(3)
+        .zip(adjoints.chunks(3))
+        .map(|(l, z)| dual::build(ctx, l, z, train, greedy, &mut cost))
+        .collect::<Result<Vec<_>>>()?;
+    let report = DualReport {
+        sizes: duals.iter().map(DualForm::size).collect(),
+        largest_relative_bound: duals
+            .iter()
+            .filter_map(|d| d.greedy.last().map(|g| g.1))
+            .fold(0.0, f64::max),
+        cg_iterations: cost.cg_iterations,
+        reference_solves: cost.reference_solves,
+        full_factorisations: cost.full_factorisations,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((duals, report))
 }
 
 /// Each output's gain ρ: ρ² the largest eigenvalue of its 3×3 block of L X⁻¹ Lᵀ, from its
