@@ -545,18 +545,18 @@ mod tests {
             .collect()
     }
 
-    /// The block's basis (a deliberately small one, so its error is well above round-off),
-    /// its output columns, their adjoints at θ̄ and the factor of X.
-    fn dual_setup(
-        n: usize,
-    ) -> (
-        Affine,
-        Vec<f64>,
-        Basis,
-        Vec<Vec<f64>>,
-        Vec<Vec<f64>>,
-        crate::fem::cholesky::Cholesky<f64>,
-    ) {
+    /// The block's system, θ̄, a deliberately small basis (so its error is well above
+    /// round-off), the output columns, their adjoints at θ̄ and the factor of X.
+    struct DualSetup {
+        sys: Affine,
+        th: Vec<f64>,
+        b: Basis,
+        l: Vec<Vec<f64>>,
+        z: Vec<Vec<f64>>,
+        x: crate::fem::cholesky::Cholesky<f64>,
+    }
+
+    fn dual_setup(n: usize) -> DualSetup {
         let (m, slot, holds) = block(n);
         let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
         let sys = affine_of(&m, &slot, &vec![1.0; slot.len()], &holds);
@@ -570,7 +570,14 @@ mod tests {
         let (b, x) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
         let l = output_columns(&sys);
         let z = affine::solve_columns(&x, &l);
-        (sys, th, b, l, z, x)
+        DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        }
     }
 
     /// θ at a pseudo-random point of the box: moduli 4× either way, ν 0.45–0.49.
@@ -602,7 +609,14 @@ mod tests {
 
     #[test]
     fn with_the_exact_adjoint_in_its_space_the_corrected_output_is_exact() {
-        let (sys, th, b, l, z, x) = dual_setup(4);
+        let DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        } = dual_setup(4);
         let ctx = dual::DualContext {
             sys: &sys,
             x: &x,
@@ -661,7 +675,14 @@ mod tests {
 
     #[test]
     fn the_primal_dual_bound_holds_and_is_far_below_the_energy_norms() {
-        let (sys, th, b, l, z, x) = dual_setup(5);
+        let DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        } = dual_setup(5);
         let ctx = dual::DualContext {
             sys: &sys,
             x: &x,

@@ -293,6 +293,9 @@ pub(crate) fn sample_stored(
     sample_reduced(run, &reduced, analysis, case, obs)
 }
 
+/// A sample's face displacement per vertex.
+type Displacement<'a> = Box<dyn Fn(usize) -> [f64; 3] + 'a>;
+
 /// Rows of the Sobol matrices A and B: N (d + 2) reduced solves (d ≤ 4 parameters: ≤ 6144).
 const SOBOL_BASE: usize = 1024;
 
@@ -332,7 +335,7 @@ fn sensitivity(
         .unwrap_or_default();
     let f = |x: &[f64]| -> Vec<f64> {
         let c = draw_at(&params, &|k, _| x[k]).apply(case);
-        let (disp, bounds): (Box<dyn Fn(usize) -> [f64; 3]>, Option<Bounds>) =
+        let (disp, bounds): (Displacement, Option<Bounds>) =
             if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
                 (
                     Box::new(|v: usize| sub(run.face_post[v], skin.vertices[v])),
