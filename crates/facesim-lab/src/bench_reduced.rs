@@ -664,10 +664,13 @@ fn online(models: &ReducedModels, case: &Case, n: usize) -> Result<Online> {
     })
 }
 
+/// A soft landmark as weights on face vertices (`uncertainty::reduced::landmark_outputs`).
+type Output = Vec<(usize, f64)>;
+
 /// The reduced face against full solves at `k` random θ of the box.
 fn errors(
     (p, scene, models): (&Prediction, &Scene, &ReducedModels),
-    (outputs, labels): (&[Vec<(usize, f64)>], &[String]),
+    (outputs, labels): (&[Output], &[String]),
     case: &Case,
     k: usize,
     progress: &dyn Observer,
