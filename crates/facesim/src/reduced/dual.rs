@@ -1,5 +1,5 @@
-//! Primal–dual output bounds (Pierce & Giles 2000; Rozza, Huynh & Patera 2008 §4.3,
-//! eq. 4.29–4.33; docs/design/reduced.md "Primal–dual output bounds"): for an output
+//! Primal–dual output bounds (Pierce & Giles 2000; Rozza, Huynh & Patera 2008 §4, the
+//! bound for a non-compliant output; docs/design/reduced.md "Primal–dual output bounds"): for an output
 //! s(θ) = lᵀ u(θ), a linear functional of the free unknowns, the adjoint problem
 //! A(θ) ψ = l (A symmetric) has its own reduced basis W. With the primal residual
 //! r(θ) = f(θ) − A(θ) u_N and the dual residual r_du(θ) = l − A(θ) ψ_N,
