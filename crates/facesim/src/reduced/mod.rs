@@ -708,6 +708,7 @@ mod tests {
             .zip(&z)
             .map(|(a, b)| basis::dot(a, b).sqrt())
             .collect();
+        let mut ratios = Vec::new();
         for i in 200..220 {
             let t = box_point(&mats, i);
             let o = b.solve(&t).unwrap();
