@@ -67,7 +67,7 @@ impl Sizes {
             band_samples: if quick { 1_000 } else { 10_000 },
             full_band_samples: if quick { 2 } else { 8 },
             online_samples: 1_000,
-            error_samples: if quick { 2 } else { 6 },
+            error_samples: if quick { 2 } else { 24 },
             full_solve_repeats: 3,
         }
     }
@@ -193,6 +193,20 @@ pub struct ErrorRow {
     /// The largest displacement of the face at θ (mm), for scale.
     pub max_displacement_mm: f64,
     pub full_solve_s: f64,
+    /// Per soft landmark: its primal–dual bound against the full solve.
+    pub landmarks: Vec<LandmarkError>,
+}
+
+/// One landmark's displacement at one θ: the error of the reduced face's value (uncorrected)
+/// and of the dual-corrected one, against the full solve, and the certified bound on the
+/// corrected one (mm); bound ÷ corrected error.
+#[derive(Clone, Debug, Serialize)]
+pub struct LandmarkError {
+    pub label: String,
+    pub uncorrected_mm: f64,
+    pub corrected_mm: f64,
+    pub bound_mm: f64,
+    pub effectivity: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -387,7 +401,14 @@ pub fn run(
     let online = online(&models, case, sizes.online_samples)?;
 
     progress.started("bench reduced: reduced against full solves");
-    let errors = errors(&p, &scene, &models, case, sizes.error_samples, progress)?;
+    let labels = facesim::uncertainty::reduced::landmark_output_labels(&analysis);
+    let errors = errors(
+        (&p, &scene, &models),
+        (&outputs, &labels),
+        case,
+        sizes.error_samples,
+        progress,
+    )?;
 
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
     let mut b = ReducedBench {
@@ -643,11 +664,13 @@ fn online(models: &ReducedModels, case: &Case, n: usize) -> Result<Online> {
     })
 }
 
+/// A soft landmark as weights on face vertices (`uncertainty::reduced::landmark_outputs`).
+type Output = Vec<(usize, f64)>;
+
 /// The reduced face against full solves at `k` random θ of the box.
 fn errors(
-    p: &Prediction,
-    scene: &Scene,
-    models: &ReducedModels,
+    (p, scene, models): (&Prediction, &Scene, &ReducedModels),
+    (outputs, labels): (&[Output], &[String]),
     case: &Case,
     k: usize,
     progress: &dyn Observer,
@@ -674,7 +697,37 @@ fn errors(
             max_disp = max_disp.max(norm(truth));
         }
         let l2 = sq.sqrt();
+        let landmarks = outputs
+            .iter()
+            .zip(labels)
+            .enumerate()
+            .map(|(k, (w, label))| {
+                let at = |d: &dyn Fn(usize) -> [f64; 3]| -> [f64; 3] {
+                    let mut y = [0.0; 3];
+                    for (v, a) in w {
+                        let dv = d(*v);
+                        for i in 0..3 {
+                            y[i] += a * dv[i];
+                        }
+                    }
+                    y
+                };
+                let truth = at(&|v| sub(full[v], p.skin.vertices[v]));
+                let face = at(&|v| ours.displacement[v]);
+                let c = ours.landmark_corrections[k];
+                let corrected = [face[0] + c[0], face[1] + c[1], face[2] + c[2]];
+                let e = norm(sub(truth, corrected));
+                LandmarkError {
+                    label: label.clone(),
+                    uncorrected_mm: norm(sub(truth, face)),
+                    corrected_mm: e,
+                    bound_mm: ours.landmark_bounds_mm[k],
+                    effectivity: ours.landmark_bounds_mm[k] / e,
+                }
+            })
+            .collect();
         rows.push(ErrorRow {
+            landmarks,
             draw,
             sliding: m.sliding,
             max_vertex_mm: max,
@@ -890,6 +943,7 @@ pub fn summary(b: &ReducedBench) -> String {
             e.max_displacement_mm
         );
     }
+    md += &landmark_summary(&b.errors);
     md += &format!(
         "\nCertified face bound over the {} online θ: median {:.3} mm, largest {:.3} mm.\n\n| target | measured | met |\n|---|---|---|\n",
         on.samples, on.median_face_bound_mm, on.largest_face_bound_mm
@@ -900,6 +954,35 @@ pub fn summary(b: &ReducedBench) -> String {
             t.target,
             t.measured,
             if t.met { "met" } else { "**not met**" }
+        );
+    }
+    md
+}
+
+/// Per landmark over the error θ: the primal–dual bound (largest), the corrected and
+/// uncorrected errors (largest) and the bound's effectivity (min, median, max).
+fn landmark_summary(errors: &[ErrorRow]) -> String {
+    let labels: Vec<&str> = errors
+        .first()
+        .map(|e| e.landmarks.iter().map(|l| l.label.as_str()).collect())
+        .unwrap_or_default();
+    let mut md = String::from(
+        "\n| landmark | largest bound (mm) | largest corrected error (mm) | largest uncorrected error (mm) | effectivity min / median / max |\n|---|---|---|---|---|\n",
+    );
+    for (k, label) in labels.iter().enumerate() {
+        let rows: Vec<&LandmarkError> = errors.iter().filter_map(|e| e.landmarks.get(k)).collect();
+        let largest =
+            |f: &dyn Fn(&LandmarkError) -> f64| rows.iter().map(|r| f(r)).fold(0.0, f64::max);
+        let mut eff: Vec<f64> = rows.iter().map(|r| r.effectivity).collect();
+        eff.sort_by(f64::total_cmp);
+        md += &format!(
+            "| {label} | {:.2e} | {:.2e} | {:.2e} | {:.1} / {:.1} / {:.1} |\n",
+            largest(&|r| r.bound_mm),
+            largest(&|r| r.corrected_mm),
+            largest(&|r| r.uncorrected_mm),
+            eff.first().copied().unwrap_or(f64::NAN),
+            median(&eff),
+            eff.last().copied().unwrap_or(f64::NAN),
         );
     }
     md

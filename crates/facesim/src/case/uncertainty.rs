@@ -120,6 +120,11 @@ pub struct Uncertainty {
     pub method: Method,
     #[serde(default = "one")]
     pub seed: u64,
+    /// The reduced method: rounds of each soft landmark's dual greedy (primal–dual output
+    /// bounds, docs/design/reduced.md); 0: none, the landmarks keep the bound through the
+    /// Riesz representer.
+    #[serde(default)]
+    pub landmark_dual_rounds: usize,
     /// Model tet: the Poisson ratio of every soft tissue.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub poisson: Option<Range>,
@@ -136,6 +141,9 @@ pub struct Uncertainty {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spring_scale: Option<Range>,
 }
+
+/// `landmark_dual_rounds` at most: 12 rounds are 39 adjoint vectors per landmark.
+const MAX_DUAL_ROUNDS: usize = 12;
 
 fn one() -> u64 {
     1
@@ -283,6 +291,12 @@ impl Uncertainty {
                 } else {
                     ""
                 }
+            ));
+        }
+        if self.landmark_dual_rounds > MAX_DUAL_ROUNDS {
+            return bad(format!(
+                "[uncertainty] landmark_dual_rounds = {}: at most {MAX_DUAL_ROUNDS} (each round adds three snapshots per landmark to the reduced models' build)",
+                self.landmark_dual_rounds
             ));
         }
         for p in Parameter::ALL {

@@ -56,6 +56,20 @@ const REDUCED_MAX_SIZE: usize = 16;
 /// solves, which cost about a quarter per column in a block of four (docs/design/reduced.md).
 const REDUCED_BATCH: usize = 4;
 
+/// The landmarks' dual greedy (docs/design/reduced.md "Primal–dual output bounds") for
+/// `[uncertainty] landmark_dual_rounds` rounds (0: none): each round adds the three adjoints at
+/// the training point of the largest relative dual bound, their conjugate gradients stopped at
+/// 1e-2 of the reduced dual bound there (the snapshot shapes the space; the bound is computed
+/// from the full dual residual whatever it is), and stops early below a relative dual bound of
+/// 1e-2.
+fn dual_greedy(rounds: usize) -> Option<crate::reduced::dual::DualGreedy> {
+    (rounds > 0).then_some(crate::reduced::dual::DualGreedy {
+        tolerance: 1e-2,
+        rounds,
+        snapshot_accuracy: 1e-2,
+    })
+}
+
 /// The predicted face and the model that predicted it.
 pub type Prediction = Predicted<Solved>;
 
@@ -182,6 +196,7 @@ impl Prediction {
                 cases: &t,
                 greedy,
                 outputs,
+                dual: dual_greedy(case.uncertainty.landmark_dual_rounds),
             };
             v.reduced(scene, &c, &training, progress)
         };

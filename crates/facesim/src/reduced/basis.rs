@@ -281,91 +281,35 @@ impl Basis {
         x: &Cholesky<f64>,
         points: &[&[f64]],
     ) -> Result<Vec<Vec<f64>>> {
-        struct Column {
-            /// Index in `points`.
-            at: usize,
-            values: Vec<f64>,
-            u: Vec<f64>,
-            r: Vec<f64>,
-            p: Vec<f64>,
-            rz: f64,
-            alpha: f64,
-            tol: f64,
-        }
-        impl Column {
-            /// ‖r‖_X' = √(rᵀ X⁻¹ r), and ‖u − u_k‖_X ≤ ‖r‖_X' / α_LB (as the online bound).
-            fn converged(&self) -> bool {
-                self.rz.max(0.0).sqrt() / self.alpha <= self.tol
-            }
-        }
-        let mut out: Vec<Option<Vec<f64>>> = vec![None; points.len()];
-        let mut cols = Vec::with_capacity(points.len());
-        for (at, t) in points.iter().enumerate() {
+        let mut problems = Vec::with_capacity(points.len());
+        let mut at = Vec::with_capacity(points.len());
+        for (i, t) in points.iter().enumerate() {
             // A point the reduced system cannot answer (not positive definite in round-off)
             // has no start and no bound to stop at: it is factorised below.
             let Ok(o) = self.solve(t) else { continue };
-            let values = sys.values_at(t);
-            let u = self.expand(&o.coefficients);
-            let au = sys.apply_values(&values, &u);
-            let r: Vec<f64> = sys.rhs(t).iter().zip(&au).map(|(b, a)| b - a).collect();
-            cols.push(Column {
-                at,
-                values,
-                u,
-                r,
-                p: Vec::new(),
-                rz: 0.0,
+            problems.push(Problem {
+                theta: t,
+                rhs: sys.rhs(t),
+                start: self.expand(&o.coefficients),
                 alpha: o.alpha,
-                tol: SNAPSHOT_ACCURACY * o.energy_bound,
+                tolerance: SNAPSHOT_ACCURACY * o.energy_bound,
             });
+            at.push(i);
         }
-        // z = X⁻¹ r for every column still iterating, in one solve.
-        let precondition = |cols: &[Column], basis: &mut Basis| {
-            let rs: Vec<Vec<f64>> = cols.iter().map(|c| c.r.clone()).collect();
-            basis.riesz_solves += rs.len();
-            solve_columns(x, &rs)
-        };
-        let zs = precondition(&cols, self);
-        for (c, z) in cols.iter_mut().zip(zs) {
-            c.rz = dot(&c.r, &z);
-            c.p = z;
-        }
-        for _ in 0..CG_ITERATIONS {
-            let (done, going): (Vec<Column>, Vec<Column>) =
-                cols.into_iter().partition(Column::converged);
-            for c in done {
-                out[c.at] = Some(c.u);
-            }
-            cols = going;
-            if cols.is_empty() {
-                break;
-            }
-            for c in cols.iter_mut() {
-                let ap = sys.apply_values(&c.values, &c.p);
-                let a = c.rz / dot(&c.p, &ap);
-                c.u.iter_mut().zip(&c.p).for_each(|(x, y)| *x += a * y);
-                c.r.iter_mut().zip(&ap).for_each(|(x, y)| *x -= a * y);
-                self.cg_iterations += 1;
-            }
-            let zs = precondition(&cols, self);
-            for (c, z) in cols.iter_mut().zip(zs) {
-                let rz = dot(&c.r, &z);
-                let beta = rz / c.rz;
-                c.rz = rz;
-                c.p.iter_mut().zip(&z).for_each(|(x, y)| *x = y + beta * *x);
-            }
-        }
-        for c in cols.into_iter().filter(Column::converged) {
-            out[c.at] = Some(c.u);
+        let solved = conjugate_gradients(sys, x, problems);
+        self.cg_iterations += solved.iterations;
+        self.riesz_solves += solved.preconditioner_solves;
+        let mut out: Vec<Option<Vec<f64>>> = vec![None; points.len()];
+        for (i, u) in at.into_iter().zip(solved.solutions) {
+            out[i] = u;
         }
         out.into_iter()
             .zip(points)
             .map(|(u, t)| match u {
                 Some(u) => Ok(u),
                 None => {
-                    let k = sys.factor(t)?;
                     self.full_factorisations += 1;
-                    Ok(solve_columns(&k, &[sys.rhs(t)]).remove(0))
+                    solve_factorised(sys, t, &sys.rhs(t))
                 }
             })
             .collect()
@@ -487,13 +431,22 @@ impl OnlineForm {
 /// (ρ_j = Σ_i t_ij e_i), with X e_i to take inner products of new vectors without applying X;
 /// each stored column after column in one array (n × k, column-major), so that a block of new
 /// vectors meets all of them in matrix products.
-struct RieszSpace {
+pub(super) struct RieszSpace {
     n: usize,
     e: Vec<f64>,
     xe: Vec<f64>,
 }
 
 impl RieszSpace {
+    /// An empty space of vectors of `n` values.
+    pub(super) fn new(n: usize) -> RieszSpace {
+        RieszSpace {
+            n,
+            e: Vec::new(),
+            xe: Vec::new(),
+        }
+    }
+
     fn len(&self) -> usize {
         self.e.len().checked_div(self.n).unwrap_or(0)
     }
@@ -511,7 +464,11 @@ impl RieszSpace {
     /// as matrix products, then twice against the block's own earlier columns; a direction
     /// already spanned adds no new e. The products use the current thread pool
     /// (`Prediction::reduced` gives each of several builds its own).
-    fn push(&mut self, mut r: faer::Mat<f64>, mut gm: faer::Mat<f64>) -> Vec<(Vec<f64>, f64)> {
+    pub(super) fn push(
+        &mut self,
+        mut r: faer::Mat<f64>,
+        mut gm: faer::Mat<f64>,
+    ) -> Vec<(Vec<f64>, f64)> {
         use faer::{Mat, MatRef};
         let (n, m) = (self.n, r.ncols());
         let norm0: Vec<f64> = (0..m)
@@ -589,12 +546,12 @@ fn sweep(
 /// A snapshot's certified error, relative to the reduced model's bound at its point, at which
 /// its conjugate gradients stop. The bound overestimates the basis's true error 10–50×
 /// (docs/design/reduced.md), so this keeps the snapshot's error well below it.
-const SNAPSHOT_ACCURACY: f64 = 1e-3;
+pub(super) const SNAPSHOT_ACCURACY: f64 = 1e-3;
 
 /// Conjugate-gradient iterations before a snapshot falls back to its own factorisation. The
 /// preconditioned iteration divides the error by about 2 each (the parameter box's moduli
 /// span a condition number of X⁻¹ A(θ) of order 10); 30 iterations is twice what the real CT needs.
-const CG_ITERATIONS: usize = 30;
+pub(super) const CG_ITERATIONS: usize = 30;
 
 /// Up to `count` training points to add as snapshots: the largest bound first, then the next
 /// largest that lie apart from those picked (a quarter of the box's diagonal in log θ), so one
@@ -642,6 +599,121 @@ fn pick<'a>(train: &'a [Vec<f64>], bounds: &[(usize, f64)], count: usize) -> Vec
         }
     }
     picked.into_iter().map(|(t, _)| t).collect()
+}
+
+/// One system A(θ) u = b for [`conjugate_gradients`]: its start, α_LB(θ) and the certified
+/// error ‖u − u_k‖_X ≤ ‖r_k‖_X' / α_LB at which it stops.
+pub(super) struct Problem<'a> {
+    pub theta: &'a [f64],
+    pub rhs: Vec<f64>,
+    pub start: Vec<f64>,
+    pub alpha: f64,
+    pub tolerance: f64,
+}
+
+/// What [`conjugate_gradients`] did: per problem its solution (None: not converged in
+/// [`CG_ITERATIONS`]), the iterations (products with A(θ)) and the preconditioner solves.
+pub(super) struct Solved {
+    pub solutions: Vec<Option<Vec<f64>>>,
+    pub iterations: usize,
+    pub preconditioner_solves: usize,
+}
+
+/// Conjugate gradients on each A(θ) u = b, preconditioned with X's factor: the preconditioned
+/// operator X⁻¹A(θ) has its spectrum in [α_LB, γ_UB], so the rate is set by the parameter box,
+/// not by the mesh. The problems still iterating share one block solve with X's factor per
+/// iteration. Each stops when ‖r‖_X' / α_LB(θ) (‖r‖_X' = √(rᵀ X⁻¹ r), which the iteration
+/// computes) is below its tolerance.
+pub(super) fn conjugate_gradients(
+    sys: &Affine,
+    x: &Cholesky<f64>,
+    problems: Vec<Problem>,
+) -> Solved {
+    struct Column {
+        at: usize,
+        values: Vec<f64>,
+        u: Vec<f64>,
+        r: Vec<f64>,
+        p: Vec<f64>,
+        rz: f64,
+        alpha: f64,
+        tol: f64,
+    }
+    impl Column {
+        fn converged(&self) -> bool {
+            self.rz.max(0.0).sqrt() / self.alpha <= self.tol
+        }
+    }
+    let mut solved = Solved {
+        solutions: vec![None; problems.len()],
+        iterations: 0,
+        preconditioner_solves: 0,
+    };
+    let mut cols: Vec<Column> = problems
+        .into_iter()
+        .enumerate()
+        .map(|(at, p)| {
+            let values = sys.values_at(p.theta);
+            let au = sys.apply_values(&values, &p.start);
+            let r = p.rhs.iter().zip(&au).map(|(b, a)| b - a).collect();
+            Column {
+                at,
+                values,
+                u: p.start,
+                r,
+                p: Vec::new(),
+                rz: 0.0,
+                alpha: p.alpha,
+                tol: p.tolerance,
+            }
+        })
+        .collect();
+    let precondition = |cols: &[Column], solves: &mut usize| {
+        let rs: Vec<Vec<f64>> = cols.iter().map(|c| c.r.clone()).collect();
+        *solves += rs.len();
+        solve_columns(x, &rs)
+    };
+    let zs = precondition(&cols, &mut solved.preconditioner_solves);
+    for (c, z) in cols.iter_mut().zip(zs) {
+        c.rz = dot(&c.r, &z);
+        c.p = z;
+    }
+    for _ in 0..CG_ITERATIONS {
+        let (done, going): (Vec<Column>, Vec<Column>) =
+            cols.into_iter().partition(Column::converged);
+        for c in done {
+            solved.solutions[c.at] = Some(c.u);
+        }
+        cols = going;
+        if cols.is_empty() {
+            break;
+        }
+        for c in cols.iter_mut() {
+            let ap = sys.apply_values(&c.values, &c.p);
+            let a = c.rz / dot(&c.p, &ap);
+            c.u.iter_mut().zip(&c.p).for_each(|(x, y)| *x += a * y);
+            c.r.iter_mut().zip(&ap).for_each(|(x, y)| *x -= a * y);
+            solved.iterations += 1;
+        }
+        let zs = precondition(&cols, &mut solved.preconditioner_solves);
+        for (c, z) in cols.iter_mut().zip(zs) {
+            let rz = dot(&c.r, &z);
+            let beta = rz / c.rz;
+            c.rz = rz;
+            c.p.iter_mut().zip(&z).for_each(|(x, y)| *x = y + beta * *x);
+        }
+    }
+    for c in cols.into_iter().filter(Column::converged) {
+        solved.solutions[c.at] = Some(c.u);
+    }
+    solved
+}
+
+/// A(θ) u = b with A(θ)'s own factorisation: a problem whose conjugate gradients did not
+/// converge.
+pub(super) fn solve_factorised(sys: &Affine, theta: &[f64], b: &[f64]) -> Result<Vec<f64>> {
+    let k = sys.factor(theta)?;
+    Ok(solve_columns(&k, &[b.to_vec()]).remove(0))
 }
 
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {

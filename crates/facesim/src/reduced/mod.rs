@@ -5,10 +5,13 @@
 //!
 //! - [`affine`]: A(θ) = Σ θ_q A_q, f(θ) = Σ θ_q f_q on the free unknowns (holds in node frames);
 //! - [`basis`]: the greedy, the online solve and the bound (min-θ coercivity, residual dual norm);
+//! - [`dual`]: primal–dual output bounds: a dual reduced basis per output, its corrected output
+//!   and the bound on it;
 //! - [`norm`]: the largest gain from the energy norm to the face's displacement (mm), by Lanczos.
 
 pub mod affine;
 pub mod basis;
+pub mod dual;
 pub mod norm;
 
 pub use affine::Affine;
@@ -200,6 +203,26 @@ pub struct ReducedReport {
     /// σ: ‖face error‖₂ ≤ σ ‖e‖_X.
     pub face_gain: f64,
     pub greedy: Vec<GreedyStep>,
+    /// The landmarks' dual bases (primal–dual output bounds; absent in a model stored before
+    /// them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dual: Option<DualReport>,
+}
+
+/// report.json `uncertainty.reduced[].dual`: how the outputs' dual bases were built.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DualReport {
+    /// dim W per output (three adjoints at θ̄, then three per greedy round).
+    pub sizes: Vec<usize>,
+    /// The largest relative dual bound ‖r_du‖_X' / (α_LB ‖ψ_N‖_X) over the training set and
+    /// the outputs, at the end.
+    pub largest_relative_bound: f64,
+    pub cg_iterations: usize,
+    /// Solves with X's factor (one per column): the snapshots' preconditioner and the Riesz
+    /// representers of A_q w.
+    pub reference_solves: usize,
+    pub full_factorisations: usize,
+    pub seconds: f64,
 }
 
 #[cfg(test)]
@@ -503,6 +526,212 @@ mod tests {
                 gain * o.energy_bound
             );
         }
+    }
+
+    /// A three-component output of the block: the displacement components of free unknowns
+    /// near the top (each column a unit functional, or a sum of two).
+    fn output_columns(sys: &Affine) -> Vec<Vec<f64>> {
+        let n = sys.unknowns();
+        let picks = [[n - 1, n - 1], [n - 5, n - 9], [n / 2, n - 14]];
+        picks
+            .iter()
+            .map(|p| {
+                let mut l = vec![0.0; n];
+                for i in p {
+                    l[*i] += 1.0;
+                }
+                l
+            })
+            .collect()
+    }
+
+    /// The block's system, θ̄, a deliberately small basis (so its error is well above
+    /// round-off), the output columns, their adjoints at θ̄ and the factor of X.
+    struct DualSetup {
+        sys: Affine,
+        th: Vec<f64>,
+        b: Basis,
+        l: Vec<Vec<f64>>,
+        z: Vec<Vec<f64>>,
+        x: crate::fem::cholesky::Cholesky<f64>,
+    }
+
+    fn dual_setup(n: usize) -> DualSetup {
+        let (m, slot, holds) = block(n);
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let sys = affine_of(&m, &slot, &vec![1.0; slot.len()], &holds);
+        let th = theta(&mats);
+        let train: Vec<Vec<f64>> = (0..40).map(|i| box_point(&mats, i)).collect();
+        let greedy = Greedy {
+            tolerance: 0.0,
+            max_size: 3,
+            batch: 1,
+        };
+        let (b, x) = Basis::build(&sys, &th, &train, greedy, &|_| {}).unwrap();
+        let l = output_columns(&sys);
+        let z = affine::solve_columns(&x, &l);
+        DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        }
+    }
+
+    /// θ at a pseudo-random point of the box: moduli 4× either way, ν 0.45–0.49.
+    fn box_point(mats: &[TissueElastic; 3], i: usize) -> Vec<f64> {
+        let x = |k: u64| ((i as u64 * 2_654_435_761 + k * 40_503) % 1000) as f64 / 999.0;
+        let nu = 0.45 + 0.04 * x(1);
+        theta(&[
+            tissue(mats[0].youngs_kpa * 4f64.powf(2.0 * x(2) - 1.0), nu),
+            tissue(mats[1].youngs_kpa * 4f64.powf(2.0 * x(3) - 1.0), nu),
+            tissue(mats[2].youngs_kpa * 4f64.powf(2.0 * x(4) - 1.0), nu),
+        ])
+    }
+
+    /// lᵀ u(θ) by factorising A(θ), and lᵀ u_N of the basis's answer `o`.
+    fn outputs_at(
+        sys: &Affine,
+        b: &Basis,
+        l: &[Vec<f64>],
+        t: &[f64],
+        o: &basis::Online,
+    ) -> (Vec<f64>, Vec<f64>) {
+        let truth = affine::solve_columns(&sys.factor(t).unwrap(), &[sys.rhs(t)]).remove(0);
+        let un = b.expand(&o.coefficients);
+        (
+            l.iter().map(|lj| basis::dot(lj, &truth)).collect(),
+            l.iter().map(|lj| basis::dot(lj, &un)).collect(),
+        )
+    }
+
+    #[test]
+    fn with_the_exact_adjoint_in_its_space_the_corrected_output_is_exact() {
+        let DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        } = dual_setup(4);
+        let ctx = dual::DualContext {
+            sys: &sys,
+            x: &x,
+            theta_bar: &th,
+            primal: &b,
+        };
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let at = box_point(&mats, 777);
+        // One round at θ* with the snapshots solved to the end (accuracy 0: conjugate gradients
+        // never stop early, so each is factorised): W holds A(θ*)⁻¹ l_j exactly.
+        let greedy = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 1,
+            snapshot_accuracy: 0.0,
+        };
+        let mut cost = dual::DualCost::default();
+        let d = dual::build(&ctx, &l, &z, std::slice::from_ref(&at), greedy, &mut cost).unwrap();
+        assert_eq!(d.size(), 6);
+        assert_eq!(cost.full_factorisations, 3);
+        let o = b.solve(&at).unwrap();
+        let (truth, reduced) = outputs_at(&sys, &b, &l, &at, &o);
+        let a = d.answer(&at, &o).unwrap();
+        for j in 0..3 {
+            let before = (truth[j] - reduced[j]).abs();
+            let after = (truth[j] - reduced[j] - a.correction[j]).abs();
+            // ψᵀ r = lᵀ e exactly when ψ_N = ψ: the corrected output is the full model's to
+            // the round-off of the reduced sums.
+            assert!(
+                before > 1e-6 * truth[j].abs(),
+                "component {j}: the basis must be inexact here ({before:.3e})"
+            );
+            assert!(
+                after <= 1e-9 * before + 1e-13 * truth[j].abs(),
+                "component {j}: corrected error {after:.3e}, uncorrected {before:.3e}"
+            );
+            assert!(
+                after <= a.bound[j],
+                "{after:.3e} > bound {:.3e}",
+                a.bound[j]
+            );
+        }
+        // With no snapshot (W = the adjoints at θ̄ alone) the same point is not exact.
+        let only_theta_bar = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 0,
+            snapshot_accuracy: 0.0,
+        };
+        let mut cost0 = dual::DualCost::default();
+        let d0 = dual::build(&ctx, &l, &z, &[], only_theta_bar, &mut cost0).unwrap();
+        let a0 = d0.answer(&at, &o).unwrap();
+        let worst0 = (0..3)
+            .map(|j| (truth[j] - reduced[j] - a0.correction[j]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst0 > 1e-6 * truth.iter().map(|t| t.abs()).fold(0.0, f64::max));
+    }
+
+    #[test]
+    fn the_primal_dual_bound_holds_and_is_far_below_the_energy_norms() {
+        let DualSetup {
+            sys,
+            th,
+            b,
+            l,
+            z,
+            x,
+        } = dual_setup(5);
+        let ctx = dual::DualContext {
+            sys: &sys,
+            x: &x,
+            theta_bar: &th,
+            primal: &b,
+        };
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        let train: Vec<Vec<f64>> = (0..40).map(|i| box_point(&mats, i)).collect();
+        let greedy = dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 3,
+            snapshot_accuracy: 1e-3,
+        };
+        let mut cost = dual::DualCost::default();
+        let d = dual::build(&ctx, &l, &z, &train, greedy, &mut cost).unwrap();
+        assert_eq!(d.size(), 12);
+        let g: Vec<f64> = d.greedy.iter().map(|s| s.1).collect();
+        assert!(g[3] < 0.1 * g[0], "the dual greedy's bound falls: {g:?}");
+        assert!(cost.cg_iterations > 0 && cost.full_factorisations == 0);
+        // ‖l_j‖_X' : |lᵀ e| ≤ ‖l‖_X' ‖e‖_X ≤ ‖l‖_X' Δ, the energy norm's output bound.
+        let dual_norms: Vec<f64> = l
+            .iter()
+            .zip(&z)
+            .map(|(a, b)| basis::dot(a, b).sqrt())
+            .collect();
+        let mut ratios = Vec::new();
+        for i in 200..220 {
+            let t = box_point(&mats, i);
+            let o = b.solve(&t).unwrap();
+            let (truth, reduced) = outputs_at(&sys, &b, &l, &t, &o);
+            let a = d.answer(&t, &o).unwrap();
+            for j in 0..3 {
+                let err = (truth[j] - reduced[j] - a.correction[j]).abs();
+                assert!(
+                    err <= a.bound[j],
+                    "θ {i}, component {j}: corrected error {err:.3e} > bound {:.3e}",
+                    a.bound[j]
+                );
+                ratios.push(a.bound[j] / (dual_norms[j] * o.energy_bound));
+            }
+        }
+        // Far below the energy norm's output bound: a dual that corrected nothing would give
+        // about 1 (‖r_du‖_X' ≈ ‖l‖_X').
+        ratios.sort_by(f64::total_cmp);
+        let (median, max) = (ratios[ratios.len() / 2], ratios[ratios.len() - 1]);
+        assert!(
+            median < 0.15 && max < 0.5,
+            "primal–dual ÷ energy-norm bound: median {median:.3}, max {max:.3}"
+        );
     }
 
     #[test]

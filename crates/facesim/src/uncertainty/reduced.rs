@@ -110,28 +110,28 @@ pub(crate) fn sample_reduced(
     };
     let trackers = trackers(analysis);
     // Each soft landmark's position on each sample's face.
+    // (A reduced sample's landmark is corrected by its dual: the primal–dual output, whose
+    // error the landmark bound certifies.)
+    let mut soft = 0;
     let positions: Vec<Option<Vec<[f64; 3]>>> = trackers
         .iter()
         .map(|(_, t)| match t {
-            Tracker::Soft(a, _) => Some(
-                (0..n)
-                    .into_par_iter()
-                    .map(|s| match &solved[s].0 {
-                        Face::Nominal => a.place(&skin.triangles, run.face_post),
-                        Face::Reduced(..) => {
-                            // The anchor's triangle on this sample's face, placed as on any face.
-                            let tri = skin.triangles[a.triangle as usize];
-                            let corners = tri.map(|v| {
-                                let (p, d) =
-                                    (skin.vertices[v as usize], displacement(s, v as usize));
-                                [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
-                            });
-                            let local = crate::landmarks::SurfaceAnchor { triangle: 0, ..*a };
-                            local.place(&[[0, 1, 2]], &corners)
-                        }
-                    })
-                    .collect(),
-            ),
+            Tracker::Soft(a, _) => {
+                let k = soft;
+                soft += 1;
+                Some(
+                    (0..n)
+                        .into_par_iter()
+                        .map(|s| match &solved[s] {
+                            (Face::Nominal, _) => a.place(&skin.triangles, run.face_post),
+                            (Face::Reduced(..), b) => {
+                                let on_face = place_on(skin, a, &|v| displacement(s, v));
+                                corrected(on_face, b.as_ref(), k)
+                            }
+                        })
+                        .collect(),
+                )
+            }
             Tracker::Fixed(_) => None,
         })
         .collect();
@@ -226,6 +226,31 @@ pub(crate) fn sample_reduced(
     })
 }
 
+/// The anchor's position on a face of displacement `disp` per vertex (placed as on any face:
+/// its triangle's corners moved).
+fn place_on(
+    skin: &crate::mesh::Mesh,
+    a: &crate::landmarks::SurfaceAnchor,
+    disp: &dyn Fn(usize) -> [f64; 3],
+) -> [f64; 3] {
+    let tri = skin.triangles[a.triangle as usize];
+    let corners = tri.map(|v| {
+        let (p, d) = (skin.vertices[v as usize], disp(v as usize));
+        [p[0] + d[0], p[1] + d[1], p[2] + d[2]]
+    });
+    let local = crate::landmarks::SurfaceAnchor { triangle: 0, ..*a };
+    local.place(&[[0, 1, 2]], &corners)
+}
+
+/// A reduced landmark position with its output's dual correction ψ_Nᵀ r added (the k-th soft
+/// landmark; none for the nominal face, the run's own).
+fn corrected(at: [f64; 3], bounds: Option<&Bounds>, k: usize) -> [f64; 3] {
+    match bounds.and_then(|b| b.corrections.get(k)) {
+        Some(c) => [at[0] + c[0], at[1] + c[1], at[2] + c[2]],
+        None => at,
+    }
+}
+
 /// Per face vertex: exactly still in every sample — no face field moves it and the nominal face
 /// leaves it in place — so its displacement is zero, its band is zero and it adds zero to its
 /// regions' sums (most of a face: the held skin and what lies beyond the modelled region).
@@ -268,6 +293,9 @@ pub(crate) fn sample_stored(
     sample_reduced(run, &reduced, analysis, case, obs)
 }
 
+/// A sample's face displacement per vertex.
+type Displacement<'a> = Box<dyn Fn(usize) -> [f64; 3] + 'a>;
+
 /// Rows of the Sobol matrices A and B: N (d + 2) reduced solves (d ≤ 4 parameters: ≤ 6144).
 const SOBOL_BASE: usize = 1024;
 
@@ -307,25 +335,27 @@ fn sensitivity(
         .unwrap_or_default();
     let f = |x: &[f64]| -> Vec<f64> {
         let c = draw_at(&params, &|k, _| x[k]).apply(case);
-        let disp: Box<dyn Fn(usize) -> [f64; 3]> =
+        let (disp, bounds): (Displacement, Option<Bounds>) =
             if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
-                Box::new(|v: usize| sub(run.face_post[v], skin.vertices[v]))
+                (
+                    Box::new(|v: usize| sub(run.face_post[v], skin.vertices[v])),
+                    None,
+                )
             } else {
                 match (reduced.solve)(&c) {
-                    Ok((m, coef, _)) => Box::new(move |v: usize| reduced.faces[m].at(v, &coef)),
+                    Ok((m, coef, b)) => (
+                        Box::new(move |v: usize| reduced.faces[m].at(v, &coef)),
+                        Some(b),
+                    ),
                     Err(_) => return vec![f64::NAN; soft.len() + members.len()],
                 }
             };
         let mut out: Vec<f64> = soft
             .iter()
-            .map(|(_, a, pre)| {
-                let tri = skin.triangles[a.triangle as usize];
-                let corners = tri.map(|v| {
-                    let (p, dv) = (skin.vertices[v as usize], disp(v as usize));
-                    [p[0] + dv[0], p[1] + dv[1], p[2] + dv[2]]
-                });
-                let local = crate::landmarks::SurfaceAnchor { triangle: 0, ..**a };
-                norm(sub(local.place(&[[0, 1, 2]], &corners), *pre))
+            .enumerate()
+            .map(|(k, (_, a, pre))| {
+                let at = corrected(place_on(skin, a, &disp), bounds.as_ref(), k);
+                norm(sub(at, *pre))
             })
             .collect();
         out.extend(

@@ -79,6 +79,113 @@ fn reduced_run() -> &'static Outcome {
 
 use common::{band_columns, report_json as json};
 
+/// Primal–dual output bounds (docs/design/reduced.md "Primal–dual output bounds"): with a
+/// dual basis per output, each output's corrected displacement (the face's value plus ψ_Nᵀ r)
+/// is within its certified bound of the full solve at parameters not trained on, and the dual
+/// greedy's bound falls round by round.
+#[test]
+fn the_corrected_outputs_are_within_their_primal_dual_bounds_of_the_full_model() {
+    let case = case();
+    let scene = prepare_case(&case, &Quiet).unwrap();
+    let mut rec = Recorder::new(&Quiet);
+    let p = predict(&scene, &case, &CaseFiles::in_memory(&case), &mut rec).unwrap();
+    let Solved::Tet(Some(v)) = &p.solved else {
+        panic!("the jaws sample solves the volumetric model")
+    };
+    let train = draws(&case, 128, 99, true);
+    // Outputs: a landmark-like triangle of weights at each of the 4 most-moved vertices'
+    // neighbourhoods (the vertex and two others of one of its triangles).
+    let mut moved: Vec<(usize, f64)> = p
+        .skin
+        .vertices
+        .iter()
+        .zip(&p.face_post.vertices)
+        .map(|(a, b)| norm(sub(*b, *a)))
+        .enumerate()
+        .collect();
+    moved.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let outputs: Vec<Vec<(usize, f64)>> = moved[..4]
+        .iter()
+        .map(|(v, _)| {
+            let t = p
+                .skin
+                .triangles
+                .iter()
+                .find(|t| t.contains(&(*v as u32)))
+                .unwrap();
+            vec![
+                (t[0] as usize, 0.5),
+                (t[1] as usize, 0.3),
+                (t[2] as usize, 0.2),
+            ]
+        })
+        .collect();
+    let training = Training {
+        cases: &train,
+        greedy: Greedy {
+            tolerance: 1e-4,
+            max_size: 8,
+            batch: 4,
+        },
+        outputs: &outputs,
+        dual: Some(facesim::reduced::dual::DualGreedy {
+            tolerance: 0.0,
+            rounds: 3,
+            snapshot_accuracy: 1e-3,
+        }),
+    };
+    let r = v.reduced(&scene, &case, &training, &|_| {}).unwrap();
+    for d in &r.duals {
+        let g: Vec<f64> = d.greedy.iter().map(|s| s.1).collect();
+        assert!(
+            g.last().unwrap() < &(0.5 * g[0]),
+            "the dual greedy's bound falls: {g:?}"
+        );
+    }
+    let report = r.report();
+    assert_eq!(report.dual.as_ref().unwrap().sizes, vec![12; 4]);
+    let mut effectivity = Vec::new();
+    // The run's own sample draws (seed 1), not trained on and inside the trained box.
+    for c in draws(&case, 6, 1, true) {
+        let full = p.resolve(&scene, &c).unwrap();
+        let ours = r.face(&c).unwrap();
+        for (k, w) in outputs.iter().enumerate() {
+            let at = |d: &dyn Fn(usize) -> [f64; 3]| -> [f64; 3] {
+                let mut y = [0.0; 3];
+                for (v, a) in w {
+                    let dv = d(*v);
+                    for i in 0..3 {
+                        y[i] += a * dv[i];
+                    }
+                }
+                y
+            };
+            let truth = at(&|v| sub(full[v], p.skin.vertices[v]));
+            let face = at(&|v| ours.displacement[v]);
+            let corr = ours.landmark_corrections[k];
+            let corrected = [face[0] + corr[0], face[1] + corr[1], face[2] + corr[2]];
+            let e = norm(sub(truth, corrected));
+            let b = ours.landmark_bounds_mm[k];
+            eprintln!(
+                "output {k}: uncorrected error {:.3e} mm, corrected {e:.3e}, bound {b:.3e}",
+                norm(sub(truth, face))
+            );
+            assert!(
+                e <= b,
+                "output {k}: corrected error {e:.3e} > bound {b:.3e}"
+            );
+            effectivity.push(b / e);
+        }
+    }
+    effectivity.sort_by(f64::total_cmp);
+    eprintln!(
+        "effectivity min {:.1}, median {:.1}, max {:.1}",
+        effectivity[0],
+        effectivity[effectivity.len() / 2],
+        effectivity.last().unwrap()
+    );
+}
+
 #[test]
 fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
     let case = case();
@@ -111,6 +218,7 @@ fn the_reduced_face_is_within_its_certified_bound_of_the_full_model() {
         cases: &train,
         greedy,
         outputs: &outputs,
+        dual: None,
     };
     let r = v
         .reduced(&scene, &case, &training, &|m| {

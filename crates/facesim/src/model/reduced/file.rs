@@ -4,7 +4,7 @@
 //! ```text
 //! magic   "FSREDUC\0", format FORMAT_VERSION, facesim version, JSON header:
 //!         vertices, face_checksum, tissues (the run's [tet.*]), sliding (the run's), models
-//!         [{sliding, terms, form, theta_box, face_bound, output_bounds, build}]
+//!         [{sliding, terms, form, theta_box, face_bound, output_bounds, duals, build}]
 //! arrays  per model: the lift, then each of its N face columns: vertices × 3 f64 (LPS mm)
 //! ```
 //!
@@ -16,6 +16,7 @@ use super::ReducedTet;
 use crate::case::TissueElastic;
 use crate::error::{Error, Result};
 use crate::output::write_bytes_atomic;
+use crate::reduced::dual::DualForm;
 use crate::reduced::{LinearFace, OnlineForm, OutputBound, ReducedReport};
 use crate::stored;
 use serde::{Deserialize, Serialize};
@@ -23,7 +24,8 @@ use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"FSREDUC\0";
 /// 2: the bounds through the Riesz representer (`face_bound`, `output_bounds`).
-const FORMAT_VERSION: u32 = 2;
+/// 3: the outputs' dual bases (`duals`, primal–dual output bounds).
+const FORMAT_VERSION: u32 = 3;
 /// The file's name in a run's output directory.
 pub const FILE_NAME: &str = "reduced_model.bin";
 const KIND: &str = "reduced model";
@@ -73,6 +75,7 @@ struct ModelHeader {
     theta_box: [Vec<f64>; 2],
     face_bound: OutputBound,
     output_bounds: Vec<OutputBound>,
+    duals: Vec<DualForm>,
     build: ReducedReport,
 }
 
@@ -105,6 +108,7 @@ pub fn write(path: &Path, stored: &StoredReduced) -> Result<()> {
                 theta_box: m.theta_box.clone(),
                 face_bound: m.face_bound.clone(),
                 output_bounds: m.output_bounds.clone(),
+                duals: m.duals.clone(),
                 build: m.build.clone(),
             })
             .collect(),
@@ -162,6 +166,10 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             || std::iter::once(&m.face_bound)
                 .chain(&m.output_bounds)
                 .any(|b| !b.consistent())
+            || !(m.duals.is_empty() || m.duals.len() == m.output_bounds.len())
+            || m.duals
+                .iter()
+                .any(|d| d.components() != 3 || !d.consistent(q, m.form.size()))
         {
             return Err(Error::input(
                 path,
@@ -182,6 +190,7 @@ pub fn read(path: &Path, face_pre: &[[f64; 3]]) -> Result<StoredReduced> {
             face: LinearFace::new(lift, columns),
             face_bound: m.face_bound,
             output_bounds: m.output_bounds,
+            duals: m.duals,
             build: m.build,
         });
     }

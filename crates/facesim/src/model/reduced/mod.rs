@@ -7,6 +7,7 @@ pub mod file;
 
 use crate::case::{Case, Tet, TissueElastic};
 use crate::error::{Error, Result};
+use crate::reduced::dual::{DualForm, DualGreedy};
 use crate::reduced::{LinearFace, OnlineForm, OutputBound, ReducedReport};
 
 /// The reduced model of one sliding state (sliding changes the holds, not a coefficient): all
@@ -32,16 +33,24 @@ pub struct ReducedTet {
     /// ρ ‖e‖_X (ρ² the largest eigenvalue of the output's 3×3 block of L X⁻¹ Lᵀ, three solves
     /// with X's factor) and the output's images.
     pub output_bounds: Vec<OutputBound>,
+    /// Per output, its dual reduced basis (`reduced::dual`): the correction of the output's
+    /// reduced value and the primal–dual bound on the corrected value (empty: a model stored
+    /// before them, whose outputs keep `output_bounds`).
+    pub duals: Vec<DualForm>,
     /// How it was built (report.json `uncertainty.reduced[]`).
     pub build: ReducedReport,
 }
 
 /// The certified bounds of one reduced answer (mm): on the Euclidean norm of the face's error
-/// over all vertices (so every vertex too), and per output (landmark) on its error.
+/// over all vertices (so every vertex too), and per output (landmark) on the error of its
+/// corrected displacement: the face's value plus `corrections` (zero for a model without dual
+/// bases, whose bound is then the energy norm's).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Bounds {
     pub face_mm: f64,
     pub landmarks_mm: Vec<f64>,
+    /// Per output: ψ_Nᵀ r per component (mm), to add to the displacement the face gives.
+    pub corrections: Vec<[f64; 3]>,
 }
 
 /// One answer of the reduced model and its certificate.
@@ -54,9 +63,11 @@ pub struct ReducedFace {
     pub bound_mm: f64,
     /// The energy-norm bound relative to the reduced solution's energy norm.
     pub relative_energy_bound: f64,
-    /// Per output the model was built with (the landmarks), the bound on its displacement's
-    /// error (mm).
+    /// Per output the model was built with (the landmarks), the bound on its corrected
+    /// displacement's error (mm), and the correction to add to the displacement the face gives
+    /// there.
     pub landmark_bounds_mm: Vec<f64>,
+    pub landmark_corrections: Vec<[f64; 3]>,
 }
 
 impl ReducedTet {
@@ -73,15 +84,41 @@ impl ReducedTet {
     /// The reduced coefficients with `case`'s tissue parameters (its `[tet] sliding` must be
     /// this model's) and the certified bounds on their face's error.
     pub fn coefficients(&self, case: &Case) -> Result<(Vec<f64>, Bounds)> {
+        let theta = self.theta(&case.tet);
         let o = self.solve(case)?;
-        Ok((o.coefficients.iter().copied().collect(), self.bounds(&o)))
+        Ok((
+            o.coefficients.iter().copied().collect(),
+            self.bounds(&theta, &o),
+        ))
     }
 
-    /// The certified bounds of an online answer (mm).
-    fn bounds(&self, o: &crate::reduced::Online) -> Bounds {
+    /// The certified bounds of an online answer at θ (mm). Per output with a dual basis, on
+    /// its corrected displacement s_N = face value + ψ_Nᵀ r: the smaller of the primal–dual
+    /// bound (the Euclidean norm of its components' ‖r‖_X' ‖r_du‖_X' / α_LB) and the bound on
+    /// the face value through the Riesz representer plus |ψ_Nᵀ r| (the triangle inequality);
+    /// without one (or where its dual system fails), that bound on the face value alone.
+    fn bounds(&self, theta: &[f64], o: &crate::reduced::Online) -> Bounds {
+        let mut landmarks_mm = Vec::with_capacity(self.output_bounds.len());
+        let mut corrections = Vec::with_capacity(self.output_bounds.len());
+        for (k, b) in self.output_bounds.iter().enumerate() {
+            let plain = b.bound(o);
+            match self.duals.get(k).map(|d| d.answer(theta, o)) {
+                Some(Ok(a)) if a.correction.len() == 3 => {
+                    let c = [a.correction[0], a.correction[1], a.correction[2]];
+                    let dual = a.bound.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    landmarks_mm.push(dual.min(plain + crate::vec3::norm(c)));
+                    corrections.push(c);
+                }
+                _ => {
+                    landmarks_mm.push(plain);
+                    corrections.push([0.0; 3]);
+                }
+            }
+        }
         Bounds {
             face_mm: self.face_bound.bound(o),
-            landmarks_mm: self.output_bounds.iter().map(|b| b.bound(o)).collect(),
+            landmarks_mm,
+            corrections,
         }
     }
 
@@ -141,14 +178,16 @@ impl ReducedTet {
 
     /// The face displacement for the tissues' materials (`Tet::tissues` order) and its bound.
     pub(crate) fn face_of(&self, tissues: &[TissueElastic; 4]) -> Result<ReducedFace> {
-        let o = self.solve_theta(&self.theta_of(tissues))?;
+        let theta = self.theta_of(tissues);
+        let o = self.solve_theta(&theta)?;
         let c: Vec<f64> = o.coefficients.iter().copied().collect();
-        let b = self.bounds(&o);
+        let b = self.bounds(&theta, &o);
         Ok(ReducedFace {
             displacement: self.face.all(&c),
             bound_mm: b.face_mm,
             relative_energy_bound: o.energy_bound / o.energy_norm.max(1e-300),
             landmark_bounds_mm: b.landmarks_mm,
+            landmark_corrections: b.corrections,
         })
     }
 
@@ -211,6 +250,8 @@ pub struct Training<'a> {
     /// Outputs with their own bound: weights on face vertices (a landmark's triangle), whose
     /// weighted displacement is the output.
     pub outputs: &'a [Vec<(usize, f64)>],
+    /// The outputs' dual greedy (primal–dual output bounds); None: no dual bases.
+    pub dual: Option<DualGreedy>,
 }
 
 /// The reduced models a sampling needs: one per sliding state it draws.

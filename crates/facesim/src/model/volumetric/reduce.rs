@@ -10,7 +10,10 @@ use crate::error::{Error, Result};
 use crate::fem::cholesky::Cholesky;
 use crate::model::reduced::{FaceMap, ReducedTet, Training, theta_of};
 use crate::pipeline::Scene;
-use crate::reduced::{Affine, Basis, OutputBound, affine::solve_columns, norm::largest_eigenvalue};
+use crate::reduced::dual::{self, DualContext, DualCost, DualForm, DualGreedy};
+use crate::reduced::{
+    Affine, Basis, DualReport, OutputBound, affine::solve_columns, norm::largest_eigenvalue,
+};
 
 impl Volumetric {
     /// The certified reduced model of this linear model for `case`'s sliding state
@@ -76,7 +79,8 @@ impl Volumetric {
         };
         progress("reduced model: the face's gain");
         let (face_gain, lanczos) = sys.face_gain();
-        let output_gains = sys.output_gains(training.outputs);
+        let (columns, adjoints) = sys.output_columns(training.outputs);
+        let output_gains = output_gains(&columns, &adjoints);
         // The face's and each output's images of the Riesz space's vectors, for the bounds
         // through the Riesz representer (`reduced::OutputBound`); then the space is dropped.
         progress("reduced model: the bounds' images");
@@ -86,17 +90,34 @@ impl Volumetric {
             .collect();
         let output_bounds = output_bounds(training.outputs, output_gains, &faces);
         let face_bound = face_bound(&face_map, face_gain, faces);
+        let (duals, dual_report) = match training.dual {
+            Some(greedy) => {
+                progress("reduced model: the landmarks' dual bases");
+                let ctx = DualContext {
+                    sys: &affine,
+                    x: &x,
+                    theta_bar: &theta_bar,
+                    primal: &basis,
+                };
+                let (duals, report) = dual_bases(&ctx, (&columns, &adjoints), &train, greedy)?;
+                (duals, Some(report))
+            }
+            None => (Vec::new(), None),
+        };
+        drop((columns, adjoints));
+        let dual_factorisations = dual_report.as_ref().map_or(0, |d| d.full_factorisations);
         Ok(ReducedTet {
             sliding,
             build: crate::reduced::ReducedReport {
                 sliding,
                 basis_size: basis.size(),
-                full_factorisations: basis.full_factorisations,
+                full_factorisations: basis.full_factorisations + dual_factorisations,
                 reference_solves: basis.riesz_solves + lanczos + 3 * training.outputs.len(),
                 cg_iterations: basis.cg_iterations,
                 offline_seconds: start.elapsed().as_secs_f64(),
                 face_gain,
                 greedy: basis.history,
+                dual: dual_report,
             },
             form: basis.form,
             terms,
@@ -104,6 +125,7 @@ impl Volumetric {
             face,
             face_bound,
             output_bounds,
+            duals,
         })
     }
 }
@@ -139,9 +161,10 @@ impl System<'_> {
         (gain2.max(0.0).sqrt(), lanczos.get())
     }
 
-    /// Each output's gain: its 3×3 block of L X⁻¹ Lᵀ, the outputs' columns solved in blocks (a
-    /// block of columns costs a fraction of as many single solves).
-    fn output_gains(&self, outputs: &[Vec<(usize, f64)>]) -> Vec<f64> {
+    /// Each output's three components as functionals of the free unknowns, l_j (the
+    /// transpose of the face's map applied to the output's weights), and their adjoints at θ̄,
+    /// X⁻¹ l_j, solved in blocks (a block of columns costs a fraction of as many single solves).
+    fn output_columns(&self, outputs: &[Vec<(usize, f64)>]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
         let nv = self.face_map.cell.len();
         let mut rhs: Vec<Vec<f64>> = Vec::with_capacity(3 * outputs.len());
         for w in outputs {
@@ -162,16 +185,50 @@ impl System<'_> {
             .chunks(12)
             .flat_map(|b| solve_columns(self.x, b))
             .collect();
-        rhs.chunks(3)
-            .zip(z.chunks(3))
-            .map(|(rhs, z)| {
-                let g =
-                    nalgebra::Matrix3::from_fn(|i, j| crate::reduced::basis::dot(&rhs[i], &z[j]));
-                let g = (g + g.transpose()) * 0.5;
-                g.symmetric_eigenvalues().max().max(0.0).sqrt()
-            })
-            .collect()
+        (rhs, z)
     }
+}
+
+/// Each output's dual basis (three components: its columns l_j and adjoints X⁻¹ l_j), and
+/// what they cost.
+fn dual_bases(
+    ctx: &DualContext,
+    (columns, adjoints): (&[Vec<f64>], &[Vec<f64>]),
+    train: &[Vec<f64>],
+    greedy: DualGreedy,
+) -> Result<(Vec<DualForm>, DualReport)> {
+    let start = std::time::Instant::now();
+    let mut cost = DualCost::default();
+    let duals = columns
+        .chunks(3)
+        .zip(adjoints.chunks(3))
+        .map(|(l, z)| dual::build(ctx, l, z, train, greedy, &mut cost))
+        .collect::<Result<Vec<_>>>()?;
+    let report = DualReport {
+        sizes: duals.iter().map(DualForm::size).collect(),
+        largest_relative_bound: duals
+            .iter()
+            .filter_map(|d| d.greedy.last().map(|g| g.1))
+            .fold(0.0, f64::max),
+        cg_iterations: cost.cg_iterations,
+        reference_solves: cost.reference_solves,
+        full_factorisations: cost.full_factorisations,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((duals, report))
+}
+
+/// Each output's gain ρ: ρ² the largest eigenvalue of its 3×3 block of L X⁻¹ Lᵀ, from its
+/// columns l_j and adjoints X⁻¹ l_j ([`System::output_columns`]).
+fn output_gains(rhs: &[Vec<f64>], z: &[Vec<f64>]) -> Vec<f64> {
+    rhs.chunks(3)
+        .zip(z.chunks(3))
+        .map(|(rhs, z)| {
+            let g = nalgebra::Matrix3::from_fn(|i, j| crate::reduced::basis::dot(&rhs[i], &z[j]));
+            let g = (g + g.transpose()) * 0.5;
+            g.symmetric_eigenvalues().max().max(0.0).sqrt()
+        })
+        .collect()
 }
 
 /// Each output's bound: its gain and its images of the Riesz space's vectors (`faces`).
