@@ -896,7 +896,7 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
             if let Some((label, _)) = still {
                 row.why = Some(match depth(label) {
                     Some(d) if d < 0.0 => format!(
-                        "{label} did not move: it lies {:.1} mm outside the face region (the moved bone's box grown by [tet] margin_mm; report.json tet.region), whose face stays",
+                        "{label} did not move: it lies {:.1} mm outside the face region (the moved bone's box grown by [tet] margin_mm; report.json tet.region), past which the face follows the mesh only where it holds free skin",
                         -d
                     ),
                     _ => format!(
@@ -911,7 +911,7 @@ fn rows_of_run(info: &CaseInfo, s: Surgery, run: Result<RunLandmarks>) -> Vec<Ro
                 .filter_map(|(label, _)| {
                     let d = depth(label)?;
                     (d < NEAR_REGION_EDGE_MM).then(|| {
-                        format!("{label} is {d:.1} mm from the face region's edge (report.json tet.region), beyond which the face stays")
+                        format!("{label} is {d:.1} mm from the face region's edge (report.json tet.region), beyond which the face fades with the mesh")
                     })
                 })
                 .collect();
