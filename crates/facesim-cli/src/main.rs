@@ -8,6 +8,7 @@ use progress::Progress;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+mod bench;
 mod progress;
 mod render;
 
@@ -213,6 +214,9 @@ enum Cmd {
         #[arg(long, default_value_t = 800)]
         size: usize,
     },
+    /// Benchmarks of the product against another engine (docs/design/crosscheck.md).
+    #[command(subcommand)]
+    Bench(BenchCmd),
     /// Distances between two meshes (OBJ, PLY, STL, VTK or VTP).
     Compare {
         a: PathBuf,
@@ -232,6 +236,27 @@ enum Cmd {
         /// With --landmarks: a PNG of A (registered) coloured by its distance to B, from the front.
         #[arg(long, requires = "landmarks", value_name = "PNG")]
         picture: Option<PathBuf>,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCmd {
+    /// A case's whole run timed beside CalculiX's solve of the mesh it built, with the ratio
+    /// and the two engines' agreement at the free nodes (needs `ccx`: scripts/test-setup.sh).
+    ///
+    /// Writes OUT/run (the run's outputs) and OUT/crosscheck.json; exits non-zero when the
+    /// engines differ by more than 1e-6 of the largest displacement.
+    Crosscheck {
+        case_dir: PathBuf,
+        /// Where the run and crosscheck.json go (default CASE_DIR/crosscheck).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Runs of each engine; the medians are compared.
+        #[arg(long, default_value_t = 3)]
+        repeat: usize,
+        /// Override a case key as `run --set` does (repeatable).
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        set: Vec<String>,
     },
 }
 
@@ -331,6 +356,7 @@ fn main() -> ExitCode {
         Cmd::Validate { out, .. } => Some(format!("the validation into {}", out.display())),
         Cmd::Calibrate { out, .. } => Some(format!("the calibration into {}", out.display())),
         Cmd::Landmarks { mesh, .. } => Some(mesh.display().to_string()),
+        Cmd::Bench(BenchCmd::Crosscheck { case_dir, .. }) => Some(case_dir.display().to_string()),
     };
     if let Some(s) = subject {
         let _ = SUBJECT.set(s);
@@ -340,7 +366,7 @@ fn main() -> ExitCode {
             .num_threads(n.max(1))
             .build_global();
     }
-    match std::panic::catch_unwind(|| dispatch(cli.cmd)) {
+    match std::panic::catch_unwind(|| dispatch(cli.cmd, cli.threads)) {
         Ok(Ok(())) => ExitCode::SUCCESS,
         Ok(Err(e)) => {
             eprintln!("facesim: {e}");
@@ -414,7 +440,7 @@ impl TableArgs {
 }
 
 /// One line per subcommand: the work is in the `cmd_*` functions below.
-fn dispatch(cmd: Cmd) -> Result<()> {
+fn dispatch(cmd: Cmd, threads: Option<usize>) -> Result<()> {
     match cmd {
         Cmd::Run { case_dir, out, set } => cmd_run(&case_dir, out.as_deref(), &set),
         Cmd::Estimate { case_dir, set } => cmd_estimate(&case_dir, &set),
@@ -599,6 +625,18 @@ fn dispatch(cmd: Cmd) -> Result<()> {
             view,
             size,
         } => cmd_render(&meshes, &out, view, size),
+        Cmd::Bench(BenchCmd::Crosscheck {
+            case_dir,
+            out,
+            repeat,
+            set,
+        }) => bench::crosscheck(&bench::Options {
+            out: out.unwrap_or_else(|| case_dir.join("crosscheck")),
+            case_dir: &case_dir,
+            repeat,
+            threads: threads.unwrap_or_else(rayon::current_num_threads),
+            set: &set,
+        }),
         Cmd::Compare {
             a,
             b,

@@ -13,7 +13,7 @@ pub mod bench_fem;
 pub mod bench_linearisation;
 pub mod bench_reduced;
 pub mod bench_replan;
-pub mod calculix;
+pub use facesim_calculix as calculix;
 pub mod dynamics;
 pub mod scaling;
 pub mod study;

@@ -7,6 +7,7 @@ mod cli;
 #[path = "../../../facesim/tests/common/mod.rs"]
 mod common;
 
+mod bench;
 mod calibrate;
 mod cli_run;
 mod cluster;

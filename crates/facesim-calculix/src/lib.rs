@@ -364,20 +364,39 @@ pub fn solve_precise(p: &Problem) -> Result<Solution> {
     })
 }
 
-/// Run `ccx` on a deck in a scratch directory (removed on success, kept and named on failure).
+/// Run `ccx` on a deck in a scratch directory (removed on success, kept and named on failure),
+/// on one thread: the tests' machine is shared, and the answer should not depend on scheduling.
 pub fn run(deck: &str, nodes: usize) -> Result<Solution> {
+    run_timed(deck, nodes, 1).map(|(solution, _)| solution)
+}
+
+/// What one `ccx` run cost: wall-clock seconds of the process (input read, assembly, SPOOLES
+/// factor and solve, output written) and the CPU seconds it used, user + system.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunCost {
+    pub wall_s: f64,
+    pub cpu_s: f64,
+}
+
+/// [`run`] on `threads` threads (`OMP_NUM_THREADS` and `CCX_NPROC_EQUATION_SOLVER`, the
+/// variables CalculiX reads), with what the run cost. The CPU time is that of waited-for
+/// children (`getrusage(RUSAGE_CHILDREN)`) before and after, so it is exact only when no other
+/// child of this process ends meanwhile.
+pub fn run_timed(deck: &str, nodes: usize, threads: usize) -> Result<(Solution, RunCost)> {
     static COUNTER: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
     let k = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let dir = std::env::temp_dir().join(format!("facesim-ccx-{}-{k}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| Error::output(&dir, e))?;
     let inp = dir.join("job.inp");
     std::fs::write(&inp, deck).map_err(|e| Error::output(&inp, e))?;
+    let threads = threads.max(1).to_string();
+    let cpu_before = children_cpu_s();
+    let start = std::time::Instant::now();
     let out = std::process::Command::new("ccx")
         .args(["-i", "job"])
         .current_dir(&dir)
-        // One thread: the machine is shared, and the answer should not depend on scheduling.
-        .env("OMP_NUM_THREADS", "1")
-        .env("CCX_NPROC_EQUATION_SOLVER", "1")
+        .env("OMP_NUM_THREADS", &threads)
+        .env("CCX_NPROC_EQUATION_SOLVER", &threads)
         .output()
         .map_err(|e| match e.kind() {
             std::io::ErrorKind::NotFound => {
@@ -385,6 +404,10 @@ pub fn run(deck: &str, nodes: usize) -> Result<Solution> {
             }
             _ => Error::config(format!("CalculiX (ccx) could not be started: {e}")),
         })?;
+    let cost = RunCost {
+        wall_s: start.elapsed().as_secs_f64(),
+        cpu_s: children_cpu_s() - cpu_before,
+    };
     let log = String::from_utf8_lossy(&out.stdout);
     // ccx reports errors on stdout; its exit status is not always non-zero.
     if let Some(line) = log
@@ -398,7 +421,18 @@ pub fn run(deck: &str, nodes: usize) -> Result<Solution> {
     let text = std::fs::read_to_string(&dat).map_err(|e| Error::input(&dat, e))?;
     let solution = parse_dat(&text, nodes).map_err(|m| Error::input(&dat, m))?;
     let _ = std::fs::remove_dir_all(&dir);
-    Ok(solution)
+    Ok((solution, cost))
+}
+
+/// User + system CPU seconds of every child this process has waited for.
+pub fn children_cpu_s() -> f64 {
+    // SAFETY: getrusage writes one rusage struct, which is zero-initialised here.
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    if unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut u) } != 0 {
+        return f64::NAN;
+    }
+    let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+    s(u.ru_utime) + s(u.ru_stime)
 }
 
 fn failure(dir: &Path, line: &str) -> Error {
