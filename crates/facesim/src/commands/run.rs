@@ -95,7 +95,21 @@ fn finish(
     let name = run_name(&inputs, files);
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
-    let prediction = crate::model::predict(&scene, case, files, &mut rec)?;
+    // The discretisation-error estimate's coarse solve needs the scene alone: it runs beside the
+    // run's own solve, whose factorisation is sequential at a head's size (fem/cholesky.rs), so
+    // it costs the run little wall time (docs/lab/performance.md "Stage table").
+    let (prediction, coarse) = rayon::join(
+        || crate::model::predict(&scene, case, files, &mut rec),
+        || {
+            let started = std::time::Instant::now();
+            case.tet
+                .error_estimate
+                .then(|| crate::model::coarse_face(&scene, case))
+                .flatten()
+                .map(|c| (c, started.elapsed().as_secs_f64()))
+        },
+    );
+    let prediction = prediction?;
     let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
     let mut analysis = locate_landmarks(&scene, &prediction, files, &mut rec)?;
     let (band, reduced) = sample_band(&scene, &prediction, &analysis, &mut rec)?;
@@ -107,7 +121,7 @@ fn finish(
         sliding_matters: m.sliding_matters,
         models: m.models,
     });
-    let (discretisation, coarse) = discretisation_error(&scene, &prediction, &analysis, &mut rec);
+    let (discretisation, coarse) = discretisation_error(&prediction, coarse, &analysis, &mut rec);
     band_published(
         &scene,
         &prediction,
@@ -352,32 +366,30 @@ fn sample_band(
 /// The discretisation error: the case again at twice the element size (Richardson), with the
 /// coarse mesh's face; none unless `[tet] error_estimate`, a failed coarse solve a warning.
 fn discretisation_error(
-    scene: &Scene,
     prediction: &crate::model::Prediction,
+    coarse: Option<(Result<(f64, Vec<[f64; 3]>)>, f64)>,
     analysis: &crate::landmarks::Analysis,
     rec: &mut Recorder,
 ) -> (
     Option<crate::model::discretisation::DiscretisationError>,
     Option<Vec<[f64; 3]>>,
 ) {
-    if !scene.case.tet.error_estimate {
+    if !prediction.solved_by_tet() {
         return (None, None);
     }
-    let started = std::time::Instant::now();
-    rec.obs.started("estimating the discretisation error");
-    match prediction.coarse_face(scene, &scene.case) {
-        Some(Ok((size, coarse))) => (
+    match coarse {
+        Some((Ok((size, coarse)), seconds)) => (
             Some(crate::model::discretisation::estimate(
                 &prediction.skin.vertices,
                 &prediction.face_post.vertices,
                 &coarse,
                 &analysis.region_of,
                 size,
-                started.elapsed().as_secs_f64(),
+                seconds,
             )),
             Some(coarse),
         ),
-        Some(Err(e)) => {
+        Some((Err(e), _)) => {
             rec.warn(format!(
                 "no discretisation-error estimate: the solve at twice the element size failed ({e})"
             ));

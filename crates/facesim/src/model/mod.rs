@@ -97,6 +97,30 @@ pub fn predict(
     }
 }
 
+/// The face solved again at twice the element size, for the discretisation-error estimate
+/// ([`discretisation`]), with its element size; None for the C1 models (their surface is the
+/// skin's own mesh). It needs the scene alone, so a run solves it beside its own solve and keeps
+/// it when that solve moved the face ([`Prediction::solved_by_tet`]). Inverted elements in the
+/// coarse solve are accepted: it is a yardstick.
+pub(crate) fn coarse_face(scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
+    if crate::solve::Method::of(case.solve.model).is_some() {
+        return None;
+    }
+    let skin = volumetric::face_mesh(scene);
+    let mut coarse = case.clone();
+    coarse.tet.skin_size_mm *= 2.0;
+    coarse.tet.deep_size_mm *= 2.0;
+    coarse.tet.accept_inverted = true;
+    coarse.uncertainty.samples = 0;
+    let mut rec = Recorder::new(&crate::observe::Quiet);
+    Some(
+        volumetric::predict(scene, &coarse, skin, &mut rec).map(|o| {
+            let face = o.map_or_else(|| skin.vertices.clone(), |(_, post)| post);
+            (coarse.tet.skin_size_mm, face)
+        }),
+    )
+}
+
 impl Prediction {
     /// The face (face_post's vertex order) predicted with `case`'s tissue parameters (moduli,
     /// Poisson ratios, sliding; the C1 spring constants) on what this prediction built: the
@@ -249,29 +273,10 @@ impl Prediction {
         Some(build())
     }
 
-    /// The face solved again at twice the element size, for the discretisation-error estimate
-    /// ([`discretisation`]); None for the C1 models (their surface is the skin's own mesh) and
-    /// when nothing moves. Inverted elements in the coarse solve are accepted: it is a yardstick.
-    pub(crate) fn coarse_face(
-        &self,
-        scene: &Scene,
-        case: &Case,
-    ) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
-        let Solved::Tet(Some(_)) = &self.solved else {
-            return None;
-        };
-        let mut coarse = case.clone();
-        coarse.tet.skin_size_mm *= 2.0;
-        coarse.tet.deep_size_mm *= 2.0;
-        coarse.tet.accept_inverted = true;
-        coarse.uncertainty.samples = 0;
-        let mut rec = Recorder::new(&crate::observe::Quiet);
-        Some(
-            volumetric::predict(scene, &coarse, &self.skin, &mut rec).map(|o| {
-                let face = o.map_or_else(|| self.skin.vertices.clone(), |(_, post)| post);
-                (coarse.tet.skin_size_mm, face)
-            }),
-        )
+    /// Whether the volumetric model solved and moved the face (what the discretisation-error
+    /// estimate compares against; [`coarse_face`]).
+    pub(crate) fn solved_by_tet(&self) -> bool {
+        matches!(self.solved, Solved::Tet(Some(_)))
     }
 
     /// The hyperelastic run's linear face under the same holds (None for linear models).

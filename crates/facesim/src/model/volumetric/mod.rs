@@ -166,7 +166,7 @@ pub(super) fn predict_face(
     case: &Case,
     rec: &mut Recorder,
 ) -> Result<Predicted<Option<Volumetric>>> {
-    let skin = scene.face.fine.as_ref().unwrap_or(&scene.face.skin).clone();
+    let skin = face_mesh(scene).clone();
     let mut face_post = skin.clone();
     face_post.colors = None;
     let mut basis = None;
@@ -194,6 +194,11 @@ pub(super) fn predict_face(
         basis,
         solved: volumetric,
     })
+}
+
+/// The face the volumetric model carries: the fine face when the case asks for one.
+pub(super) fn face_mesh(scene: &Scene) -> &Mesh {
+    scene.face.fine.as_ref().unwrap_or(&scene.face.skin)
 }
 
 /// Mesh, hold, solve and carry the face; None when the plan moves no bone.

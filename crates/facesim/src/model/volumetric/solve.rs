@@ -59,18 +59,22 @@ pub(super) fn solve(inp: &Inputs, linear: TetMesh, holds: Holds, t: &Tet) -> Res
     let nodes = inp.kind.len();
     // The linear mesh's node ordering, once for every factor of this run and its re-solves (the
     // 10-node element orders its own DOFs).
-    let order = match inp.quadratic {
-        None => {
-            let solved: Vec<bool> = holds
-                .hold
-                .iter()
-                .map(|h| !matches!(h, Hold::Fixed(_)))
-                .collect();
-            NodeOrder::of_tets(&solved, &linear.tets).map(MeshAnalyses::new)
-        }
-        Some(_) => None,
-    };
-    let k = stiffness(inp.quadratic, &linear)?;
+    // METIS is sequential: it runs beside the element assembly, which it does not depend on.
+    let (order, k) = rayon::join(
+        || match inp.quadratic {
+            None => {
+                let solved: Vec<bool> = holds
+                    .hold
+                    .iter()
+                    .map(|h| !matches!(h, Hold::Fixed(_)))
+                    .collect();
+                NodeOrder::of_tets(&solved, &linear.tets).map(MeshAnalyses::new)
+            }
+            Some(_) => None,
+        },
+        || stiffness(inp.quadratic, &linear),
+    );
+    let k = k?;
     let f = Loads::none().nodal_vector(nodes)?;
     let c = constrain(inp.quadratic, &k, &holds.hold, ordering(&order))?;
     let u = c.solve(&[(&holds.hold, &f)])?.remove(0);
