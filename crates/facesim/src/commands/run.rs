@@ -363,11 +363,14 @@ fn sample_band(
     Ok((Some(band), reduced))
 }
 
+/// The element size of the discretisation-error estimate's coarse solve and its face.
+type CoarseFace = (f64, Vec<[f64; 3]>);
+
 /// The discretisation error: the case again at twice the element size (Richardson), with the
 /// coarse mesh's face; none unless `[tet] error_estimate`, a failed coarse solve a warning.
 fn discretisation_error(
     prediction: &crate::model::Prediction,
-    coarse: Option<(Result<(f64, Vec<[f64; 3]>)>, f64)>,
+    coarse: Option<(Result<CoarseFace>, f64)>,
     analysis: &crate::landmarks::Analysis,
     rec: &mut Recorder,
 ) -> (
