@@ -29,7 +29,8 @@ use super::quality::Quality;
 use super::stuffing::{self, NodeKind as StuffKind};
 use crate::error::{Error, Result};
 use crate::segment::{BONE, MUSCLE, Segmentation};
-use crate::volume::{Volume, sample_field};
+use crate::volume::blocks::BlockRange;
+use crate::volume::{Volume, VoxelMap, sample_field};
 use rayon::prelude::*;
 
 /// Lattice sizes (mm): `skin_size_mm` at the skin, doubling with depth up to `deep_size_mm`
@@ -77,8 +78,34 @@ pub struct SoftTissueMesh {
     pub dropped_volume_mm3: f64,
 }
 
+/// Samples per axis of the grading's range test: 4 samples span about three skin elements,
+/// eight voxels of a head CT.
+const SAMPLE_CHUNK: usize = 4;
+
 /// HU given to samples outside the CT: air for the skin field, no bone for the bone field.
 const OUTSIDE_HU: f32 = -1024.0;
+
+/// What `decide` says of the voxels every trilinear sample inside the LPS box `corners` reads
+/// (None when a sample there may fall outside the grid). The box's voxel-coordinate
+/// extent is that of its eight corners (the map is affine), widened by 1e-6 voxels for points
+/// inside it computed another way.
+fn one_sided(
+    map: &VoxelMap,
+    grid: &BlockRange,
+    corners: [[f64; 3]; 2],
+    decide: impl Fn([usize; 3], [usize; 3]) -> Option<bool>,
+) -> Option<bool> {
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for k in 0..8 {
+        let c = map.to_voxel(std::array::from_fn(|a| corners[(k >> a) & 1][a]));
+        for a in 0..3 {
+            lo[a] = lo[a].min(c[a]);
+            hi[a] = hi[a].max(c[a]);
+        }
+    }
+    grid.voxels_read(lo, hi, 1e-6)
+        .and_then(|(first, last)| decide(first, last))
+}
 
 /// Mesh the soft tissue of `vol` inside `roi` (an LPS box, mm; widened by `p.margin_mm`).
 pub fn soft_tissue(
@@ -131,19 +158,64 @@ pub fn soft_tissue(
     let m = if levels == 0 {
         stuffing::stuff(&f, lo, hi, h)?
     } else {
+        let (skin_range, bone_range) = (BlockRange::new(&skin, dims), BlockRange::new(&bone, dims));
+        // Whether f < 0 (soft tissue) at every sample of an LPS box, at none, or either.
+        let side_of_box = |corners: [[f64; 3]; 2]| {
+            one_sided(&map, &skin_range, corners, |lo, hi| {
+                let (skin_lo, skin_hi) = skin_range.range(lo, hi);
+                let (bone_lo, bone_hi) = bone_range.range(lo, hi);
+                if f64::from(skin_lo) > skin_iso && f64::from(bone_hi) < bone_iso {
+                    Some(true)
+                } else if f64::from(skin_hi) <= skin_iso || f64::from(bone_lo) >= bone_iso {
+                    Some(false)
+                } else {
+                    None
+                }
+            })
+        };
+        // f(q) < 0, the skin's term first: the bone's is not needed where the skin's is not
+        // below zero.
+        let tissue_at = |q: [f64; 3]| {
+            let c = map.to_voxel(q);
+            skin_iso - (sample_field(&skin, dims, c, OUTSIDE_HU) as f64) < 0.0
+                && (sample_field(&bone, dims, c, OUTSIDE_HU) as f64) - bone_iso < 0.0
+        };
         let surface_near = |a: [f64; 3], b: [f64; 3]| {
             let s = b[0] - a[0];
             let n = (3.0 * s / h).ceil() as usize;
+            let sample = |ijk: [usize; 3]| {
+                [0, 1, 2].map(|ax| a[ax] - s + 3.0 * s * ijk[ax] as f64 / n as f64)
+            };
+            // The samples' lattice in chunks of SAMPLE_CHUNK per axis: a chunk whose fields'
+            // ranges keep f on one side of zero is that side at every sample without sampling
+            // it (the samples are convex combinations of the voxels the range covers), so the
+            // answer, a crossing or none, is the same as sampling every point.
             let (mut inside, mut outside) = (false, false);
-            for k in 0..=n {
-                for j in 0..=n {
-                    for i in 0..=n {
-                        let ijk = [i, j, k];
-                        let q = [0, 1, 2].map(|ax| a[ax] - s + 3.0 * s * ijk[ax] as f64 / n as f64);
-                        if f(q) < 0.0 {
-                            inside = true;
-                        } else {
-                            outside = true;
+            let chunks = n / SAMPLE_CHUNK + 1;
+            for ck in 0..chunks {
+                for cj in 0..chunks {
+                    for ci in 0..chunks {
+                        let first = [ci, cj, ck].map(|c| c * SAMPLE_CHUNK);
+                        let last = first.map(|f| (f + SAMPLE_CHUNK - 1).min(n));
+                        match side_of_box([sample(first), sample(last)]) {
+                            Some(true) => inside = true,
+                            Some(false) => outside = true,
+                            None => {
+                                for k in first[2]..=last[2] {
+                                    for j in first[1]..=last[1] {
+                                        for i in first[0]..=last[0] {
+                                            if tissue_at(sample([i, j, k])) {
+                                                inside = true;
+                                            } else {
+                                                outside = true;
+                                            }
+                                            if inside && outside {
+                                                return h;
+                                            }
+                                        }
+                                    }
+                                }
+                            }
                         }
                         if inside && outside {
                             return h;

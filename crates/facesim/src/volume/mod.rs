@@ -3,6 +3,7 @@
 //! Readers for NIfTI, NRRD, DICOM series, InVesalius projects and vtk.js dataset folders all produce a [`Volume`]; everything
 //! downstream works in the LPS world frame (docs/reference/case.md "Frames and units").
 
+pub(crate) mod blocks;
 pub mod dicom_io;
 pub(crate) mod dicom_syntax;
 mod grid;
