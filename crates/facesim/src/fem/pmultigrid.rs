@@ -321,6 +321,9 @@ impl Operator {
 
     /// The held DOFs' entries of k interleaved vectors set to zero.
     fn zero_held(&self, x: &mut [f64], k: usize) {
+        if k == 0 {
+            return;
+        }
         x.par_chunks_mut(k)
             .zip(self.free.par_iter())
             .for_each(|(x, f)| {
@@ -420,19 +423,24 @@ impl TwoLevel {
         x
     }
 
-    /// A x = b on the free DOFs (b's held entries ignored; x zero there), to
-    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error.
-    pub(crate) fn solve(&self, b: &[f64]) -> Result<Solved> {
-        let mut s = self.solve_many(&[b.to_vec()])?;
-        Ok(s.remove(0))
-    }
-
-    /// [`TwoLevel::solve`] for several right-hand sides at once: conjugate gradients run on each
+    /// A x = b on the free DOFs for each b (b's held entries ignored; x zero there), to
+    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error. The
+    /// right-hand sides are solved together: conjugate gradients run on each
     /// in lockstep (its own step lengths, its own stop), so that every product and
     /// preconditioner cycle serves all the vectors still iterating in one pass over the
     /// operator and the coarse factor. Each vector's iterates are those of its own solve: the
     /// batch changes the cost, not the result.
-    pub(crate) fn solve_many(&self, bs: &[Vec<f64>]) -> Result<Vec<Solved>> {
+    ///
+    /// `guess`: a start for each vector (its held entries ignored), e.g. the previous round's
+    /// solution when a few nodes were freed: CG from x₀ minimises the same error norm over
+    /// x₀ + the Krylov space of r₀ = b − A x₀, and stops at the same ‖b − A x‖ ≤ tol ‖b‖, so
+    /// a start near the solution saves the iterations that take ‖r‖ from ‖b‖ down to ‖r₀‖. A
+    /// start with ‖r₀‖ ≥ ‖b‖ is no better than zero, which is taken instead.
+    pub(crate) fn solve_many(
+        &self,
+        bs: &[Vec<f64>],
+        guess: Option<&[Vec<f64>]>,
+    ) -> Result<Vec<Solved>> {
         let level = &self.fine;
         let n = level.free.len();
         let total = bs.len();
@@ -450,6 +458,23 @@ impl TwoLevel {
         let keep_b = |active: &[usize]| select(&b, total, active);
         let mut r = keep_b(&active);
         let mut x = vec![0.0; n * k];
+        if let Some(g) =
+            guess.filter(|g| k > 0 && g.len() == total && g.iter().all(|g| g.len() == n))
+        {
+            let mut x0 = select(&interleave(g), total, &active);
+            level.zero_held(&mut x0, k);
+            let ax0 = level.product(&x0, k);
+            let r0: Vec<f64> = r.par_iter().zip(&ax0).map(|(r, a)| r - a).collect();
+            let r0_norm = column_norms(&r0, k);
+            for a in 0..k {
+                if r0_norm[a] < b_norm[active[a]] {
+                    for e in 0..n {
+                        x[e * k + a] = x0[e * k + a];
+                        r[e * k + a] = r0[e * k + a];
+                    }
+                }
+            }
+        }
         let mut z = if k > 0 {
             self.precondition(&r, k)
         } else {
