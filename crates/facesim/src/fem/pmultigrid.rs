@@ -32,9 +32,10 @@
 //! block.
 
 use super::assembly::System;
-use super::block_sparse::{Block, SymmetricBlocks, congruence, times, transposed};
+use super::block_sparse::{
+    Block, SymmetricBlocks, column, congruence, interleave, times, transposed,
+};
 use super::cholesky::Ordering;
-use super::pcg::pcg;
 use crate::error::{Error, NumericalKind, Result};
 use rayon::prelude::*;
 
@@ -92,32 +93,43 @@ impl Transfer {
     }
 
     /// P x_c.
+    #[cfg(test)]
     pub(crate) fn prolong(&self, xc: &[f64]) -> Vec<f64> {
-        let mut x = vec![0.0; 3 * self.parents.len()];
-        x.par_chunks_mut(3)
+        self.prolong_many(xc, 1)
+    }
+
+    /// P X_c for k vectors interleaved (entry (DOF d, vector v) at d k + v).
+    fn prolong_many(&self, xc: &[f64], k: usize) -> Vec<f64> {
+        let mut x = vec![0.0; 3 * k * self.parents.len()];
+        x.par_chunks_mut(3 * k)
             .zip(self.parents.par_iter())
             .for_each(|(xi, p)| {
                 for (a, s) in p.all() {
-                    let a = *a as usize;
+                    let xa = &xc[3 * k * *a as usize..3 * k * (*a as usize + 1)];
                     for r in 0..3 {
-                        xi[r] += s[3 * r] * xc[3 * a]
-                            + s[3 * r + 1] * xc[3 * a + 1]
-                            + s[3 * r + 2] * xc[3 * a + 2];
+                        for v in 0..k {
+                            xi[r * k + v] += s[3 * r] * xa[v]
+                                + s[3 * r + 1] * xa[k + v]
+                                + s[3 * r + 2] * xa[2 * k + v];
+                        }
                     }
                 }
             });
         x
     }
 
-    /// Pᵀ r.
-    pub(crate) fn restrict(&self, r: &[f64]) -> Vec<f64> {
-        let mut rc = vec![0.0; self.coarse_free.len()];
+    /// Pᵀ R for k vectors interleaved.
+    fn restrict_many(&self, r: &[f64], k: usize) -> Vec<f64> {
+        let mut rc = vec![0.0; self.coarse_free.len() * k];
         for (i, p) in self.parents.iter().enumerate() {
+            let ri = &r[3 * k * i..3 * k * (i + 1)];
             for (a, s) in p.all() {
-                let a = *a as usize;
+                let ra = &mut rc[3 * k * *a as usize..3 * k * (*a as usize + 1)];
                 for c in 0..3 {
-                    rc[3 * a + c] +=
-                        s[c] * r[3 * i] + s[3 + c] * r[3 * i + 1] + s[6 + c] * r[3 * i + 2];
+                    for v in 0..k {
+                        ra[c * k + v] +=
+                            s[c] * ri[v] + s[3 + c] * ri[k + v] + s[6 + c] * ri[2 * k + v];
+                    }
                 }
             }
         }
@@ -205,7 +217,7 @@ impl Smoother {
             .collect();
         let mut lambda = 0.0;
         for _ in 0..POWER_ITERATIONS {
-            let w = s.jacobi(&level.product(&v));
+            let w = s.jacobi(&level.product(&v, 1), 1);
             let (nw, nv) = (norm(&w), norm(&v));
             if !(nw > 0.0 && nv > 0.0) {
                 break;
@@ -224,35 +236,39 @@ impl Smoother {
         Ok(s)
     }
 
-    /// D⁻¹ r.
-    fn jacobi(&self, r: &[f64]) -> Vec<f64> {
+    /// D⁻¹ R for k vectors interleaved.
+    fn jacobi(&self, r: &[f64], k: usize) -> Vec<f64> {
         let mut z = vec![0.0; r.len()];
-        z.par_chunks_mut(3)
-            .zip(r.par_chunks(3))
+        z.par_chunks_mut(3 * k)
+            .zip(r.par_chunks(3 * k))
             .zip(self.inverse.par_iter())
             .for_each(|((z, r), m)| {
                 for a in 0..3 {
-                    z[a] = m[3 * a] * r[0] + m[3 * a + 1] * r[1] + m[3 * a + 2] * r[2];
+                    for v in 0..k {
+                        z[a * k + v] =
+                            m[3 * a] * r[v] + m[3 * a + 1] * r[k + v] + m[3 * a + 2] * r[2 * k + v];
+                    }
                 }
             });
         z
     }
 
     /// The Chebyshev iteration for A x = r from x = 0, `DEGREE` steps (Saad, "Iterative
-    /// methods for sparse linear systems", 2nd ed., Algorithm 12.1, preconditioned by D).
-    fn smooth(&self, level: &Operator, r: &[f64]) -> Vec<f64> {
+    /// methods for sparse linear systems", 2nd ed., Algorithm 12.1, preconditioned by D), for
+    /// k right-hand sides interleaved (the same polynomial for each).
+    fn smooth(&self, level: &Operator, r: &[f64], k: usize) -> Vec<f64> {
         let theta = 0.5 * (self.hi + self.lo);
         let delta = 0.5 * (self.hi - self.lo);
         let sigma = theta / delta;
         let mut rho = 1.0 / sigma;
-        let mut d: Vec<f64> = self.jacobi(r).iter().map(|z| z / theta).collect();
+        let mut d: Vec<f64> = self.jacobi(r, k).iter().map(|z| z / theta).collect();
         let mut x = d.clone();
         let mut res = r.to_vec();
         for _ in 1..DEGREE {
-            let ad = level.product(&d);
+            let ad = level.product(&d, k);
             res.par_iter_mut().zip(&ad).for_each(|(r, a)| *r -= a);
             let rho_next = 1.0 / (2.0 * sigma - rho);
-            let z = self.jacobi(&res);
+            let z = self.jacobi(&res, k);
             d.par_iter_mut().zip(&z).for_each(|(d, z)| {
                 *d = rho_next * rho * *d + 2.0 * rho_next / delta * z;
             });
@@ -293,18 +309,28 @@ struct Operator {
 }
 
 impl Operator {
-    /// A x on the free DOFs (x's held entries ignored, the result's zero).
-    fn product(&self, x: &[f64]) -> Vec<f64> {
-        let xf: Vec<f64> = x
-            .par_iter()
-            .zip(&self.free)
-            .map(|(x, f)| if *f { *x } else { 0.0 })
-            .collect();
-        let mut y = self.a.apply(&xf);
-        y.par_iter_mut()
-            .zip(&self.free)
-            .for_each(|(y, f)| *y = if *f { *y } else { 0.0 });
+    /// A X on the free DOFs for k vectors interleaved (X's held entries ignored, the
+    /// result's zero).
+    fn product(&self, x: &[f64], k: usize) -> Vec<f64> {
+        let mut xf = x.to_vec();
+        self.zero_held(&mut xf, k);
+        let mut y = self.a.apply_many(&xf, k);
+        self.zero_held(&mut y, k);
         y
+    }
+
+    /// The held DOFs' entries of k interleaved vectors set to zero.
+    fn zero_held(&self, x: &mut [f64], k: usize) {
+        if k == 0 {
+            return;
+        }
+        x.par_chunks_mut(k)
+            .zip(self.free.par_iter())
+            .for_each(|(x, f)| {
+                if !*f {
+                    x.iter_mut().for_each(|x| *x = 0.0);
+                }
+            });
     }
 }
 
@@ -365,10 +391,10 @@ impl TwoLevel {
         Self::new(fine.a, free, transfer, pairs)
     }
 
-    /// A x over every DOF (x's held entries included): the held values' part of a right-hand
-    /// side.
-    pub(crate) fn full_product(&self, x: &[f64]) -> Vec<f64> {
-        self.fine.a.apply(x)
+    /// A X over every DOF for k vectors interleaved (X's held entries included): the held
+    /// values' part of the right-hand sides.
+    pub(crate) fn full_product_many(&self, x: &[f64], k: usize) -> Vec<f64> {
+        self.fine.a.apply_many(x, k)
     }
 
     /// Nonzeros of the coarse factor.
@@ -376,48 +402,87 @@ impl TwoLevel {
         self.coarse.factor_nnz().unwrap_or(0)
     }
 
-    /// The cycle applied to the residual r.
-    fn precondition(&self, r: &[f64]) -> Vec<f64> {
+    /// The cycle applied to k residuals R interleaved (each vector's cycle is the
+    /// single-vector one; the coarse solves are one multi-column solve on the factor).
+    fn precondition(&self, r: &[f64], k: usize) -> Vec<f64> {
         let level = &self.fine;
-        let mut x = self.smoother.smooth(level, r);
-        let ax = level.product(&x);
+        let mut x = self.smoother.smooth(level, r, k);
+        let ax = level.product(&x, k);
         let r1: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
-        let rc = self.transfer.restrict(&r1);
-        let zeros = vec![0.0; rc.len()];
-        let ec = self.coarse.solve(&[rc], &[zeros]).remove(0);
-        let e = self.transfer.prolong(&ec);
-        x.par_iter_mut()
-            .zip(&e)
-            .zip(&level.free)
-            .for_each(|((x, e), f)| {
-                if *f {
-                    *x += e
-                }
-            });
-        let ax = level.product(&x);
+        let rc = self.transfer.restrict_many(&r1, k);
+        let columns: Vec<Vec<f64>> = (0..k).map(|v| column(&rc, k, v)).collect();
+        let zeros = vec![vec![0.0; rc.len() / k]; k];
+        let ec = interleave(&self.coarse.solve(&columns, &zeros));
+        let e = self.transfer.prolong_many(&ec, k);
+        x.par_iter_mut().zip(&e).for_each(|(x, e)| *x += e);
+        level.zero_held(&mut x, k);
+        let ax = level.product(&x, k);
         let r2: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
-        let post = self.smoother.smooth(level, &r2);
+        let post = self.smoother.smooth(level, &r2, k);
         x.par_iter_mut().zip(&post).for_each(|(x, p)| *x += p);
         x
     }
 
-    /// A x = b on the free DOFs (b's held entries ignored; x zero there), to
-    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error.
-    pub(crate) fn solve(&self, b: &[f64]) -> Result<Solved> {
+    /// A x = b on the free DOFs for each b (b's held entries ignored; x zero there), to
+    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error. The
+    /// right-hand sides are solved together: conjugate gradients run on each
+    /// in lockstep (its own step lengths, its own stop), so that every product and
+    /// preconditioner cycle serves all the vectors still iterating in one pass over the
+    /// operator and the coarse factor. Each vector's iterates are those of its own solve: the
+    /// batch changes the cost, not the result.
+    ///
+    /// `guess`: a start for each vector (its held entries ignored), e.g. the previous round's
+    /// solution when a few nodes were freed: CG from x₀ minimises the same error norm over
+    /// x₀ + the Krylov space of r₀ = b − A x₀, and stops at the same ‖b − A x‖ ≤ tol ‖b‖, so
+    /// a start near the solution saves the iterations that take ‖r‖ from ‖b‖ down to ‖r₀‖. A
+    /// start with ‖r₀‖ ≥ ‖b‖ is no better than zero, which is taken instead.
+    pub(crate) fn solve_many(
+        &self,
+        bs: &[Vec<f64>],
+        guess: Option<&[Vec<f64>]>,
+    ) -> Result<Vec<Solved>> {
         let level = &self.fine;
-        let b: Vec<f64> = b
-            .iter()
-            .zip(&level.free)
-            .map(|(b, f)| if *f { *b } else { 0.0 })
-            .collect();
-        let (x, iterations) = pcg(
-            |v| level.product(v),
-            |r| self.precondition(r),
-            &b,
-            TOLERANCE,
-            MAX_ITERATIONS,
-        )
-        .ok_or_else(|| {
+        let n = level.free.len();
+        let total = bs.len();
+        let b = {
+            let mut b = interleave(bs);
+            level.zero_held(&mut b, total);
+            b
+        };
+        let b_norm = column_norms(&b, total);
+        let mut x_done: Vec<Vec<f64>> = vec![vec![0.0; n]; total];
+        let mut iterations = vec![0usize; total];
+        // The vectors still iterating (their columns in r, d, x below, in this order).
+        let mut active: Vec<usize> = (0..total).filter(|v| b_norm[*v] > 0.0).collect();
+        let mut k = active.len();
+        let keep_b = |active: &[usize]| select(&b, total, active);
+        let mut r = keep_b(&active);
+        let mut x = vec![0.0; n * k];
+        if let Some(g) =
+            guess.filter(|g| k > 0 && g.len() == total && g.iter().all(|g| g.len() == n))
+        {
+            let mut x0 = select(&interleave(g), total, &active);
+            level.zero_held(&mut x0, k);
+            let ax0 = level.product(&x0, k);
+            let r0: Vec<f64> = r.par_iter().zip(&ax0).map(|(r, a)| r - a).collect();
+            let r0_norm = column_norms(&r0, k);
+            for a in 0..k {
+                if r0_norm[a] < b_norm[active[a]] {
+                    for e in 0..n {
+                        x[e * k + a] = x0[e * k + a];
+                        r[e * k + a] = r0[e * k + a];
+                    }
+                }
+            }
+        }
+        let mut z = if k > 0 {
+            self.precondition(&r, k)
+        } else {
+            Vec::new()
+        };
+        let mut d = z.clone();
+        let mut rz = column_dots(&r, &z, k);
+        let not_converged = || {
             Error::numerical(
                 NumericalKind::NotConverged,
                 format!(
@@ -425,17 +490,127 @@ impl TwoLevel {
                     level.free.iter().filter(|f| **f).count()
                 ),
             )
-        })?;
-        let ax = level.product(&x);
-        let rr: f64 = b.iter().zip(&ax).map(|(b, a)| (b - a) * (b - a)).sum();
-        let bb: f64 = b.iter().map(|b| b * b).sum();
-        let relative_residual = if bb > 0.0 { (rr / bb).sqrt() } else { 0.0 };
-        Ok(Solved {
-            x,
-            iterations,
-            relative_residual,
-        })
+        };
+        let mut it = 0;
+        while k > 0 {
+            it += 1;
+            if it > MAX_ITERATIONS {
+                return Err(not_converged());
+            }
+            let ad = level.product(&d, k);
+            let curv = column_dots(&d, &ad, k);
+            // A not positive definite along d (the CG of fem/pcg.rs refuses it likewise).
+            if curv.iter().any(|c| !(*c > 0.0)) {
+                return Err(not_converged());
+            }
+            let alpha: Vec<f64> = rz.iter().zip(&curv).map(|(a, c)| a / c).collect();
+            x.par_chunks_mut(k).zip(d.par_chunks(k)).for_each(|(x, d)| {
+                x.iter_mut()
+                    .zip(d)
+                    .zip(&alpha)
+                    .for_each(|((x, d), a)| *x += a * d)
+            });
+            r.par_chunks_mut(k)
+                .zip(ad.par_chunks(k))
+                .for_each(|(r, ad)| {
+                    r.iter_mut()
+                        .zip(ad)
+                        .zip(&alpha)
+                        .for_each(|((r, ad), a)| *r -= a * ad)
+                });
+            let r_norm = column_norms(&r, k);
+            if r_norm.iter().any(|v| !v.is_finite()) {
+                return Err(not_converged());
+            }
+            let going: Vec<usize> = (0..k)
+                .filter(|a| r_norm[*a] > TOLERANCE * b_norm[active[*a]])
+                .collect();
+            if going.len() < k {
+                for a in (0..k).filter(|a| !going.contains(a)) {
+                    x_done[active[a]] = column(&x, k, a);
+                    iterations[active[a]] = it;
+                }
+                x = select(&x, k, &going);
+                r = select(&r, k, &going);
+                d = select(&d, k, &going);
+                rz = going.iter().map(|a| rz[*a]).collect();
+                active = going.iter().map(|a| active[*a]).collect();
+                k = active.len();
+                if k == 0 {
+                    break;
+                }
+            }
+            z = self.precondition(&r, k);
+            let rz_new = column_dots(&r, &z, k);
+            let beta: Vec<f64> = rz_new.iter().zip(&rz).map(|(n, o)| n / o).collect();
+            rz = rz_new;
+            d.par_chunks_mut(k).zip(z.par_chunks(k)).for_each(|(d, z)| {
+                d.iter_mut()
+                    .zip(z)
+                    .zip(&beta)
+                    .for_each(|((d, z), b)| *d = z + b * *d)
+            });
+        }
+        // The residuals from the solutions, not the recurrence's.
+        let xs = interleave(&x_done);
+        let ax = level.product(&xs, total);
+        let rb: Vec<f64> = b.par_iter().zip(&ax).map(|(b, a)| b - a).collect();
+        let r_norm = column_norms(&rb, total);
+        Ok(x_done
+            .into_iter()
+            .enumerate()
+            .map(|(v, x)| Solved {
+                x,
+                iterations: iterations[v],
+                relative_residual: if b_norm[v] > 0.0 {
+                    r_norm[v] / b_norm[v]
+                } else {
+                    0.0
+                },
+            })
+            .collect())
     }
+}
+
+/// Per vector, u · v over k interleaved vectors.
+fn column_dots(u: &[f64], w: &[f64], k: usize) -> Vec<f64> {
+    if k == 0 {
+        return Vec::new();
+    }
+    u.par_chunks(k * 1024)
+        .zip(w.par_chunks(k * 1024))
+        .map(|(u, w)| {
+            let mut s = vec![0.0; k];
+            for (e, (a, b)) in u.iter().zip(w).enumerate() {
+                s[e % k] += a * b;
+            }
+            s
+        })
+        .reduce(
+            || vec![0.0; k],
+            |mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(a, b)| *a += b);
+                a
+            },
+        )
+}
+
+/// Per vector, its Euclidean norm.
+fn column_norms(u: &[f64], k: usize) -> Vec<f64> {
+    column_dots(u, u, k).into_iter().map(f64::sqrt).collect()
+}
+
+/// The vectors `keep` (indices into k interleaved vectors), interleaved.
+fn select(u: &[f64], k: usize, keep: &[usize]) -> Vec<f64> {
+    let m = keep.len();
+    let mut out = vec![0.0; u.len() / k.max(1) * m];
+    if m == 0 {
+        return out;
+    }
+    out.par_chunks_mut(m)
+        .zip(u.par_chunks(k))
+        .for_each(|(o, u)| o.iter_mut().zip(keep).for_each(|(o, a)| *o = u[*a]));
+    out
 }
 
 /// The 3×3 identity restricted to the DOFs `free` marks.

@@ -419,11 +419,7 @@ impl Constrained {
     fn solve_frames(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
         match &self.solver {
             Solver::Direct(sys) => Ok(sys.solve(rhs, prescribed)),
-            Solver::Iterative(it) => rhs
-                .iter()
-                .zip(prescribed)
-                .map(|(f, p)| it.solve(f, p))
-                .collect(),
+            Solver::Iterative(it) => it.solve_many(rhs, prescribed),
         }
     }
 
