@@ -136,6 +136,18 @@ pub fn materials(mesh: &TetMesh) -> Vec<Material> {
     mesh.material.iter().map(|m| Material::linear(*m)).collect()
 }
 
+/// Linear materials from per-cell Young's moduli (kPa) and Poisson ratios, as tets.vtu holds them.
+pub fn linear_materials(youngs_kpa: &[f64], poisson: &[f64]) -> Vec<Material> {
+    youngs_kpa
+        .iter()
+        .zip(poisson)
+        .map(|(&youngs_kpa, &poisson)| Material::Linear {
+            youngs_kpa,
+            poisson,
+        })
+        .collect()
+}
+
 /// Every component of the prescribed nodes (facesim's `solve_linear` convention) as held dofs.
 pub fn held_nodes(prescribed: &[Option<[f64; 3]>]) -> Vec<Dof> {
     prescribed

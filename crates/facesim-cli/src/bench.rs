@@ -8,7 +8,7 @@
 
 use facesim::error::{Error, Result};
 use facesim::tet::vtu;
-use facesim_calculix::{self as calculix, Dof, Material, Problem, RunCost, Step};
+use facesim_calculix::{self as calculix, Dof, Problem, RunCost, Step};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -150,15 +150,7 @@ pub fn crosscheck(o: &Options) -> Result<()> {
     check_linear(&run_dir.join("report.json"))?;
     let mesh_path = run_dir.join("tets.vtu");
     let f = vtu::read(&mesh_path)?;
-    let material: Vec<Material> = f
-        .youngs_kpa
-        .iter()
-        .zip(&f.poisson)
-        .map(|(&youngs_kpa, &poisson)| Material::Linear {
-            youngs_kpa,
-            poisson,
-        })
-        .collect();
+    let material = calculix::linear_materials(&f.youngs_kpa, &f.poisson);
     let free = |n: usize| f.constraint[n] == vtu::FREE;
     let held: Vec<Dof> = (0..f.nodes.len())
         .filter(|&n| !free(n))

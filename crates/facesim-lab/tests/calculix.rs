@@ -192,15 +192,7 @@ fn tets_vtu_free_nodes_are_reproduced_by_calculix() {
     let f = vtu::read(&path).unwrap();
     assert_eq!(f.nodes, m.nodes);
     assert_eq!(f.displacement, displacement, "bit-exact round trip");
-    let material: Vec<Material> = f
-        .youngs_kpa
-        .iter()
-        .zip(&f.poisson)
-        .map(|(&youngs_kpa, &poisson)| Material::Linear {
-            youngs_kpa,
-            poisson,
-        })
-        .collect();
+    let material = calculix::linear_materials(&f.youngs_kpa, &f.poisson);
     let d = &f.displacement;
     let held: Vec<Dof> = (0..f.nodes.len())
         .filter(|&n| f.constraint[n] == vtu::FIXED || f.constraint[n] == vtu::MOVED)

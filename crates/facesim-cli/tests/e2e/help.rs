@@ -40,7 +40,10 @@ fn help_gives_one_short_line_per_command_and_details_under_each_command() {
     }
     // The lab's benchmarks and study are `facesim-lab`'s. `facesim bench` holds only the
     // product's own comparison with the peer engine, `crosscheck`.
-    assert!(!names.contains(&"study"), "the lab's study is listed: {names:?}");
+    assert!(
+        !names.contains(&"study"),
+        "the lab's study is listed: {names:?}"
+    );
     let bench = facesim(&["bench", "--help"]);
     assert_eq!(bench.code, 0, "{}", bench.stderr);
     let benches: Vec<String> = commands(&bench.stdout)

@@ -140,14 +140,10 @@ impl SymmetricBlocks {
         out
     }
 
-    /// y = A x (x with 3 entries per node). The rows are split among the threads in runs of
-    /// about equal block counts, each adding into its own y (a lower block scatters into the
-    /// column node's rows too), the parts summed.
-    pub(crate) fn apply(&self, x: &[f64]) -> Vec<f64> {
-        let n = x.len();
+    /// Row boundaries splitting the rows among the threads in runs of about equal block counts.
+    fn row_runs(&self) -> Vec<usize> {
         let parts = rayon::current_num_threads().max(1);
         let per = self.col.len().div_ceil(parts).max(1);
-        // Row boundaries at about every `per` blocks.
         let mut bounds = vec![0usize];
         for i in 0..self.nodes() {
             if self.ptr[i + 1] >= per * bounds.len() {
@@ -157,6 +153,15 @@ impl SymmetricBlocks {
         if *bounds.last().unwrap_or(&0) != self.nodes() {
             bounds.push(self.nodes());
         }
+        bounds
+    }
+
+    /// y = A x (x with 3 entries per node). The rows are split among the threads in runs of
+    /// about equal block counts, each adding into its own y (a lower block scatters into the
+    /// column node's rows too), the parts summed.
+    pub(crate) fn apply(&self, x: &[f64]) -> Vec<f64> {
+        let n = x.len();
+        let bounds = self.row_runs();
         let partial: Vec<Vec<f64>> = bounds
             .par_windows(2)
             .map(|w| {
@@ -216,17 +221,7 @@ impl SymmetricBlocks {
 
     fn apply_k<const K: usize>(&self, x: &[f64]) -> Vec<f64> {
         let n = x.len();
-        let parts = rayon::current_num_threads().max(1);
-        let per = self.col.len().div_ceil(parts).max(1);
-        let mut bounds = vec![0usize];
-        for i in 0..self.nodes() {
-            if self.ptr[i + 1] >= per * bounds.len() {
-                bounds.push(i + 1);
-            }
-        }
-        if *bounds.last().unwrap_or(&0) != self.nodes() {
-            bounds.push(self.nodes());
-        }
+        let bounds = self.row_runs();
         let at = |i: usize| -> [[f64; K]; 3] {
             std::array::from_fn(|c| std::array::from_fn(|v| x[(3 * i + c) * K + v]))
         };
