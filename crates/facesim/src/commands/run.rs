@@ -95,20 +95,33 @@ fn finish(
     let name = run_name(&inputs, files);
     let scene = prepare(inputs, &mut rec)?;
     let case = &scene.case;
-    // The discretisation-error estimate's coarse solve needs the scene alone: it runs beside the
-    // run's own solve, whose factorisation is sequential at a head's size (fem/cholesky.rs), so
-    // it costs the run little wall time (docs/lab/performance.md "Stage table").
-    let (prediction, coarse) = rayon::join(
-        || crate::model::predict(&scene, case, files, &mut rec),
-        || {
-            let started = std::time::Instant::now();
-            case.tet
-                .error_estimate
-                .then(|| crate::model::coarse_face(&scene, case))
-                .flatten()
-                .map(|c| (c, started.elapsed().as_secs_f64()))
-        },
-    );
+    // The discretisation-error estimate's coarse solve needs the scene alone. On a CT of up to
+    // BESIDE_MAX_VOXELS it runs beside the run's own solve, whose factorisation is sequential at
+    // a head's size (fem/cholesky.rs), so it costs little wall time; on a larger CT it runs
+    // after, since its mesher's two whole-volume fields (8 bytes a voxel) would otherwise add to
+    // the run's peak (docs/lab/performance.md "Against CalculiX").
+    let coarse_face = || {
+        let started = std::time::Instant::now();
+        case.tet
+            .error_estimate
+            .then(|| crate::model::coarse_face(&scene, case))
+            .flatten()
+            .map(|c| (c, started.elapsed().as_secs_f64()))
+    };
+    let (prediction, coarse) = if scene.vol.data.len() <= BESIDE_MAX_VOXELS {
+        rayon::join(
+            || crate::model::predict(&scene, case, files, &mut rec),
+            coarse_face,
+        )
+    } else {
+        let prediction = crate::model::predict(&scene, case, files, &mut rec);
+        let coarse = prediction
+            .as_ref()
+            .is_ok_and(|p| p.solved_by_tet())
+            .then(coarse_face)
+            .flatten();
+        (prediction, coarse)
+    };
     let prediction = prediction?;
     let dist = outputs::displacement(&prediction.skin, &prediction.face_post);
     let mut analysis = locate_landmarks(&scene, &prediction, files, &mut rec)?;
@@ -362,6 +375,10 @@ fn sample_band(
     })?;
     Ok((Some(band), reduced))
 }
+
+/// The largest CT (voxels) whose coarse solve runs beside the run's own: its mesher's fields, 0.26
+/// GB here, stay below the run's peak (the 106 M-voxel phantom's 0.85 GB raised it 1.75 → 2.57 GB).
+const BESIDE_MAX_VOXELS: usize = 32 << 20;
 
 /// The element size of the discretisation-error estimate's coarse solve and its face.
 type CoarseFace = (f64, Vec<[f64; 3]>);
