@@ -189,14 +189,7 @@ impl SymmetricBlocks {
                 y
             })
             .collect();
-        let mut parts = partial.into_iter();
-        let mut y = parts.next().unwrap_or_else(|| vec![0.0; n]);
-        for p in parts {
-            y.par_iter_mut()
-                .zip(p.par_iter())
-                .for_each(|(a, b)| *a += b);
-        }
-        y
+        sum_parts(partial, n)
     }
 }
 
@@ -263,14 +256,7 @@ impl SymmetricBlocks {
                 y
             })
             .collect();
-        let mut parts = partial.into_iter();
-        let mut y = parts.next().unwrap_or_else(|| vec![0.0; n]);
-        for p in parts {
-            y.par_iter_mut()
-                .zip(p.par_iter())
-                .for_each(|(a, b)| *a += b);
-        }
-        y
+        sum_parts(partial, n)
     }
 }
 
@@ -308,6 +294,18 @@ pub(crate) fn transposed(a: &Block) -> Block {
 /// aᵀ b c.
 pub(crate) fn congruence(a: &Block, b: &Block, c: &Block) -> Block {
     times(&transposed(a), &times(b, c))
+}
+
+/// The threads' partial products summed into one vector of `n` entries.
+fn sum_parts(partial: Vec<Vec<f64>>, n: usize) -> Vec<f64> {
+    let mut parts = partial.into_iter();
+    let mut y = parts.next().unwrap_or_else(|| vec![0.0; n]);
+    for p in parts {
+        y.par_iter_mut()
+            .zip(p.par_iter())
+            .for_each(|(a, b)| *a += b);
+    }
+    y
 }
 
 #[cfg(test)]
