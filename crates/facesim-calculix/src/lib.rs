@@ -136,6 +136,19 @@ pub fn materials(mesh: &TetMesh) -> Vec<Material> {
     mesh.material.iter().map(|m| Material::linear(*m)).collect()
 }
 
+/// max |a − b| ÷ max |b| over the components of the nodes where `keep` holds (the difference
+/// itself where b is zero there): how far one engine's displacement is from the other's.
+pub fn relative_difference(a: &[[f64; 3]], b: &[[f64; 3]], keep: impl Fn(usize) -> bool) -> f64 {
+    let (mut diff, mut size) = (0.0_f64, 0.0_f64);
+    for i in (0..a.len()).filter(|&i| keep(i)) {
+        for c in 0..3 {
+            diff = diff.max((a[i][c] - b[i][c]).abs());
+            size = size.max(b[i][c].abs());
+        }
+    }
+    if size > 0.0 { diff / size } else { diff }
+}
+
 /// Linear materials from per-cell Young's moduli (kPa) and Poisson ratios, as tets.vtu holds them.
 pub fn linear_materials(youngs_kpa: &[f64], poisson: &[f64]) -> Vec<Material> {
     youngs_kpa

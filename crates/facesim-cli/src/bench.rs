@@ -118,17 +118,6 @@ fn check_linear(report: &Path) -> Result<()> {
     }
 }
 
-/// max |a − b| ÷ max |b| over the nodes `keep` selects.
-fn relative(a: &[[f64; 3]], b: &[[f64; 3]], keep: impl Fn(usize) -> bool) -> f64 {
-    let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    let (mut diff, mut size) = (0.0_f64, 0.0_f64);
-    for n in (0..b.len()).filter(|&n| keep(n)) {
-        diff = diff.max(norm(std::array::from_fn(|c| a[n][c] - b[n][c])));
-        size = size.max(norm(b[n]));
-    }
-    if size > 0.0 { diff / size } else { diff }
-}
-
 pub fn crosscheck(o: &Options) -> Result<()> {
     if o.repeat == 0 {
         return Err(Error::config(
@@ -185,7 +174,7 @@ pub fn crosscheck(o: &Options) -> Result<()> {
     }
     eprintln!("CalculiX's answer refined for the agreement");
     let precise = calculix::solve_precise(&problem)?.displacement;
-    let agreement = relative(&precise, &f.displacement, free);
+    let agreement = calculix::relative_difference(&precise, &f.displacement, free);
     let (run, ccx) = (timings(&run_costs), timings(&ccx_costs));
     let result = Crosscheck {
         case: o.case_dir.display().to_string(),

@@ -28,16 +28,9 @@ const MUSCLE: TissueElastic = TissueElastic {
     poisson: 0.3,
 };
 
-/// max |a − b| / max |b| over the nodes where `keep` holds.
+/// facesim-calculix's measure of two engines' difference.
 fn relative(a: &[[f64; 3]], b: &[[f64; 3]], keep: &dyn Fn(usize) -> bool) -> f64 {
-    let (mut diff, mut size) = (0.0_f64, 0.0_f64);
-    for i in (0..a.len()).filter(|&i| keep(i)) {
-        for c in 0..3 {
-            diff = diff.max((a[i][c] - b[i][c]).abs());
-            size = size.max(b[i][c].abs());
-        }
-    }
-    diff / size
+    calculix::relative_difference(a, b, keep)
 }
 
 /// The cube's bottom (z = 0) held still and its top moved by a displacement that is not a
