@@ -117,8 +117,11 @@ fn finish(
         let prediction = crate::model::predict(&scene, case, files, &mut rec);
         let coarse = prediction
             .as_ref()
-            .is_ok_and(|p| p.solved_by_tet())
-            .then(coarse_face)
+            .is_ok_and(|p| p.solved_by_tet() && case.tet.error_estimate)
+            .then(|| {
+                rec.obs.started("estimating the discretisation error");
+                coarse_face()
+            })
             .flatten();
         (prediction, coarse)
     };
@@ -380,14 +383,11 @@ fn sample_band(
 /// GB here, stay below the run's peak (the 106 M-voxel phantom's 0.85 GB raised it 1.75 → 2.57 GB).
 const BESIDE_MAX_VOXELS: usize = 32 << 20;
 
-/// The element size of the discretisation-error estimate's coarse solve and its face.
-type CoarseFace = (f64, Vec<[f64; 3]>);
-
 /// The discretisation error: the case again at twice the element size (Richardson), with the
 /// coarse mesh's face; none unless `[tet] error_estimate`, a failed coarse solve a warning.
 fn discretisation_error(
     prediction: &crate::model::Prediction,
-    coarse: Option<(Result<CoarseFace>, f64)>,
+    coarse: Option<(Result<crate::model::CoarseFace>, f64)>,
     analysis: &crate::landmarks::Analysis,
     rec: &mut Recorder,
 ) -> (

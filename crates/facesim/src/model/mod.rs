@@ -97,12 +97,15 @@ pub fn predict(
     }
 }
 
+/// The element size of the discretisation-error estimate's coarse solve and its face.
+pub(crate) type CoarseFace = (f64, Vec<[f64; 3]>);
+
 /// The face solved again at twice the element size, for the discretisation-error estimate
 /// ([`discretisation`]), with its element size; None for the C1 models (their surface is the
 /// skin's own mesh). It needs the scene alone, so a run solves it beside its own solve and keeps
 /// it when that solve moved the face ([`Prediction::solved_by_tet`]). Inverted elements in the
 /// coarse solve are accepted: it is a yardstick.
-pub(crate) fn coarse_face(scene: &Scene, case: &Case) -> Option<Result<(f64, Vec<[f64; 3]>)>> {
+pub(crate) fn coarse_face(scene: &Scene, case: &Case) -> Option<Result<CoarseFace>> {
     if crate::solve::Method::of(case.solve.model).is_some() {
         return None;
     }
