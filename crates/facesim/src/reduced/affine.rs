@@ -218,6 +218,20 @@ impl Affine {
             .collect()
     }
 
+    /// A_q x for each x of `xs`, in one pass over the term's entries (the product streams the
+    /// matrix from memory; several vectors share that stream).
+    pub(crate) fn apply_many(&self, q: usize, xs: &[&[f64]]) -> Vec<Vec<f64>> {
+        let t = &self.terms[q];
+        rows_times(self.free.len(), xs, |r, x, out| {
+            for e in &t.entries[t.start[r]..t.start[r + 1]] {
+                let c = e.col as usize;
+                for (o, xj) in out.iter_mut().zip(x) {
+                    *o += e.value * xj[c];
+                }
+            }
+        })
+    }
+
     /// The values of A(θ) = Σ θ_q A_q on the pattern of [`Self::apply_values`]: one pass applies
     /// it where Q passes would apply the terms one by one.
     pub(crate) fn values_at(&self, theta: &[f64]) -> Vec<f64> {
@@ -236,6 +250,18 @@ impl Affine {
                     .sum()
             })
             .collect()
+    }
+
+    /// The matrix with values `v` times each x of `xs`, in one pass over the pattern.
+    pub(crate) fn apply_values_many(&self, v: &[f64], xs: &[&[f64]]) -> Vec<Vec<f64>> {
+        rows_times(self.free.len(), xs, |r, x, out| {
+            for s in self.start[r]..self.start[r + 1] {
+                let c = self.cols[s] as usize;
+                for (o, xj) in out.iter_mut().zip(x) {
+                    *o += v[s] * xj[c];
+                }
+            }
+        })
     }
 
     /// f_q.
@@ -297,6 +323,28 @@ impl Affine {
 }
 
 /// Σ_q θ_q A_q's values on a pattern of `len` entries.
+/// Rows 0..n of a product with the vectors `xs`, `row(r, xs, out)` adding row r's entries to
+/// `out` (one per vector); returned as one vector per x. Rows in parallel chunks.
+fn rows_times(
+    n: usize,
+    xs: &[&[f64]],
+    row: impl Fn(usize, &[&[f64]], &mut [f64]) + Sync,
+) -> Vec<Vec<f64>> {
+    use rayon::prelude::*;
+    let k = xs.len();
+    if k == 0 {
+        return Vec::new();
+    }
+    let mut flat = vec![0.0; n * k];
+    flat.par_chunks_mut(k)
+        .with_min_len(4096)
+        .enumerate()
+        .for_each(|(r, out)| row(r, xs, out));
+    (0..k)
+        .map(|j| flat.iter().skip(j).step_by(k).copied().collect())
+        .collect()
+}
+
 fn values_of(terms: &[Term], len: usize, theta: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; len];
     for (t, term) in theta.iter().zip(terms) {

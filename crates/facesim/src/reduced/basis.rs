@@ -631,7 +631,9 @@ pub(super) fn conjugate_gradients(
 ) -> Solved {
     struct Column {
         at: usize,
-        values: Vec<f64>,
+        /// Its θ's place in `values`: the components of one output share a θ, so A(θ)'s values
+        /// and each product's pass over them.
+        group: usize,
         u: Vec<f64>,
         r: Vec<f64>,
         p: Vec<f64>,
@@ -649,16 +651,25 @@ pub(super) fn conjugate_gradients(
         iterations: 0,
         preconditioner_solves: 0,
     };
+    let mut thetas: Vec<&[f64]> = Vec::new();
+    let mut values: Vec<Vec<f64>> = Vec::new();
     let mut cols: Vec<Column> = problems
         .into_iter()
         .enumerate()
         .map(|(at, p)| {
-            let values = sys.values_at(p.theta);
-            let au = sys.apply_values(&values, &p.start);
+            let group = match thetas.iter().position(|t| *t == p.theta) {
+                Some(g) => g,
+                None => {
+                    thetas.push(p.theta);
+                    values.push(sys.values_at(p.theta));
+                    values.len() - 1
+                }
+            };
+            let au = sys.apply_values(&values[group], &p.start);
             let r = p.rhs.iter().zip(&au).map(|(b, a)| b - a).collect();
             Column {
                 at,
-                values,
+                group,
                 u: p.start,
                 r,
                 p: Vec::new(),
@@ -688,8 +699,9 @@ pub(super) fn conjugate_gradients(
         if cols.is_empty() {
             break;
         }
-        for c in cols.iter_mut() {
-            let ap = sys.apply_values(&c.values, &c.p);
+        let jobs: Vec<(usize, &[f64])> = cols.iter().map(|c| (c.group, c.p.as_slice())).collect();
+        let aps = products(sys, &values, &jobs);
+        for (c, ap) in cols.iter_mut().zip(aps) {
             let a = c.rz / dot(&c.p, &ap);
             c.u.iter_mut().zip(&c.p).for_each(|(x, y)| *x += a * y);
             c.r.iter_mut().zip(&ap).for_each(|(x, y)| *x -= a * y);
@@ -707,6 +719,23 @@ pub(super) fn conjugate_gradients(
         solved.solutions[c.at] = Some(c.u);
     }
     solved
+}
+
+/// A(θ) p for each (θ's group, an index into `values`; p) of `jobs`: one pass over a group's
+/// values for all its vectors.
+fn products(sys: &Affine, values: &[Vec<f64>], jobs: &[(usize, &[f64])]) -> Vec<Vec<f64>> {
+    let mut out = vec![Vec::new(); jobs.len()];
+    for (g, v) in values.iter().enumerate() {
+        let members: Vec<usize> = (0..jobs.len()).filter(|i| jobs[*i].0 == g).collect();
+        if members.is_empty() {
+            continue;
+        }
+        let xs: Vec<&[f64]> = members.iter().map(|i| jobs[*i].1).collect();
+        for (i, y) in members.iter().zip(sys.apply_values_many(v, &xs)) {
+            out[*i] = y;
+        }
+    }
+    out
 }
 
 /// A(θ) u = b with A(θ)'s own factorisation: a problem whose conjugate gradients did not

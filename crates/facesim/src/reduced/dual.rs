@@ -237,6 +237,7 @@ pub fn build(
         ctx,
         x_values: sys.values_at(ctx.theta_bar),
         vectors: Vec::new(),
+        x_vectors: Vec::new(),
         space: RieszSpace::new(sys.unknowns()),
         form: DualForm {
             matrices: vec![Vec::new(); q],
@@ -283,6 +284,8 @@ struct DualBuilder<'a> {
     ctx: &'a DualContext<'a>,
     x_values: Vec<f64>,
     vectors: Vec<Vec<f64>>,
+    /// X w for each w of W.
+    x_vectors: Vec<Vec<f64>>,
     space: RieszSpace,
     form: DualForm,
 }
@@ -376,34 +379,25 @@ impl DualBuilder<'_> {
     fn add(&mut self, l: &[Vec<f64>], new: Vec<Vec<f64>>, cost: &mut DualCost) -> usize {
         let sys = self.ctx.sys;
         let q = sys.terms();
-        let xu = |v: &[f64]| sys.apply_values(&self.x_values, v);
+        let first = self.vectors.len();
+        for w in new {
+            self.orthonormalise_in(w);
+        }
+        let fresh: Vec<&[f64]> = self.vectors[first..].iter().map(Vec::as_slice).collect();
+        // Per term, its products with the new vectors in one pass over its entries.
+        let mut by_term: Vec<Vec<Vec<f64>>> = (0..q).map(|k| sys.apply_many(k, &fresh)).collect();
         let mut images: Vec<Vec<f64>> = Vec::new();
-        for mut w in new {
-            let norm0 = dot(&w, &xu(&w)).sqrt();
-            for _ in 0..2 {
-                let xw = xu(&w);
-                for v in &self.vectors {
-                    let p = dot(v, &xw);
-                    w.iter_mut().zip(v).for_each(|(a, b)| *a -= p * b);
-                }
-            }
-            let norm = dot(&w, &xu(&w)).sqrt();
-            if !(norm > 1e-10 * norm0 && norm.is_finite()) {
-                continue;
-            }
-            w.iter_mut().for_each(|a| *a /= norm);
-            let n = self.vectors.len();
+        for (i, n) in (first..self.vectors.len()).enumerate() {
             let m = n + 1;
-            let aw: Vec<Vec<f64>> = (0..q).map(|k| sys.apply(k, &w)).collect();
-            self.vectors.push(w);
             let w = &self.vectors[n];
-            for (k, awk) in aw.iter().enumerate() {
+            for (k, terms) in by_term.iter().enumerate() {
+                let awk = &terms[i];
                 let old = &self.form.matrices[k];
                 let mut a = vec![0.0; m * m];
-                for i in 0..n {
-                    a[i * m..i * m + n].copy_from_slice(&old[i * n..(i + 1) * n]);
+                for r in 0..n {
+                    a[r * m..r * m + n].copy_from_slice(&old[r * n..(r + 1) * n]);
                 }
-                for (j, v) in self.vectors.iter().enumerate() {
+                for (j, v) in self.vectors[..m].iter().enumerate() {
                     let e = dot(v, awk);
                     a[n * m + j] = e;
                     a[j * m + n] = e;
@@ -416,7 +410,10 @@ impl DualBuilder<'_> {
             for (o, lj) in self.form.outputs.iter_mut().zip(l) {
                 o.push(dot(w, lj));
             }
-            images.extend(aw);
+        }
+        // The Riesz solves' right-hand sides, vector after vector, term after term.
+        for i in 0..self.vectors.len() - first {
+            images.extend(by_term.iter_mut().map(|t| std::mem::take(&mut t[i])));
         }
         let added = images.len() / q.max(1);
         if added > 0 {
@@ -425,5 +422,28 @@ impl DualBuilder<'_> {
             self.push_riesz_solved(&images, &rho);
         }
         added
+    }
+
+    /// Gram–Schmidt twice in X of `w` against W, then added to W unless nothing of it is left.
+    /// X w is applied once and carried along (X(w − p v) = X w − p X v, with X v kept per
+    /// vector), where applying X at each sweep cost three more products per vector.
+    fn orthonormalise_in(&mut self, mut w: Vec<f64>) {
+        let mut xw = self.ctx.sys.apply_values(&self.x_values, &w);
+        let norm0 = dot(&w, &xw).sqrt();
+        for _ in 0..2 {
+            for (v, xv) in self.vectors.iter().zip(&self.x_vectors) {
+                let p = dot(v, &xw);
+                w.iter_mut().zip(v).for_each(|(a, b)| *a -= p * b);
+                xw.iter_mut().zip(xv).for_each(|(a, b)| *a -= p * b);
+            }
+        }
+        let norm = dot(&w, &xw).max(0.0).sqrt();
+        if !(norm > 1e-10 * norm0 && norm.is_finite()) {
+            return;
+        }
+        w.iter_mut().for_each(|a| *a /= norm);
+        xw.iter_mut().for_each(|a| *a /= norm);
+        self.vectors.push(w);
+        self.x_vectors.push(xw);
     }
 }

@@ -332,6 +332,33 @@ mod tests {
     }
 
     #[test]
+    fn products_with_several_vectors_equal_the_products_one_at_a_time() {
+        let (mut m, slot, holds) = block(4);
+        let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
+        m.material = slot.iter().map(|s| mats[*s]).collect();
+        let sys = affine_of(&m, &slot, &vec![1.0; slot.len()], &holds);
+        let n = sys.unknowns();
+        let xs: Vec<Vec<f64>> = (0..3)
+            .map(|j| {
+                (0..n)
+                    .map(|i| ((i * 31 + j * 17) % 13) as f64 - 6.0)
+                    .collect()
+            })
+            .collect();
+        let refs: Vec<&[f64]> = xs.iter().map(Vec::as_slice).collect();
+        let values = sys.values_at(&theta(&mats));
+        let together = sys.apply_values_many(&values, &refs);
+        for q in 0..sys.terms() {
+            for (x, y) in xs.iter().zip(sys.apply_many(q, &refs)) {
+                assert_eq!(y, sys.apply(q, x), "term {q}");
+            }
+        }
+        for (x, y) in xs.iter().zip(together) {
+            assert_eq!(y, sys.apply_values(&values, x));
+        }
+    }
+
+    #[test]
     fn the_affine_sum_is_the_assembled_model_and_the_bound_holds() {
         let (mut m, slot, holds) = block(5);
         let mats = [tissue(30.0, 0.45), tissue(10.0, 0.47), tissue(2.0, 0.46)];
