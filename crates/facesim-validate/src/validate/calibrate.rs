@@ -320,14 +320,21 @@ impl Calibrand {
                     d[k] += w * u[k];
                 }
             }
-            let post = facesim::vec3::add(pre, d);
-            c.post = Some(post);
-            c.change_mm = Some(facesim::vec3::norm(d));
-            let b = self
+            // A landmark with its own output takes the model's correction (zero without a dual
+            // basis): its bound is on the corrected displacement, not on the face's value.
+            let output = self
                 .outputs
                 .iter()
                 .find(|(l, _)| *l == c.label)
-                .and_then(|(_, i)| f.landmark_bounds_mm.get(*i).copied())
+                .map(|o| o.1);
+            if let Some(k) = output.and_then(|i| f.landmark_corrections.get(i)) {
+                d = facesim::vec3::add(d, *k);
+            }
+            let post = facesim::vec3::add(pre, d);
+            c.post = Some(post);
+            c.change_mm = Some(facesim::vec3::norm(d));
+            let b = output
+                .and_then(|i| f.landmark_bounds_mm.get(i).copied())
                 .unwrap_or(f.bound_mm);
             bound_of.insert(c.label.clone(), b);
         }
