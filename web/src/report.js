@@ -15,7 +15,7 @@ import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
 import { midsagittalCut, facialPart, pathData } from "./profile.js";
 import { STYLE } from "./style.js";
-import { materials, theta as thetaOf, outside, solveOnline, outputBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
+import { materials, theta as thetaOf, outside, solveOnline, outputBound, dualAnswer, faceValueBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -996,7 +996,14 @@ function main() {
     // shown − full = [reduced(θ) − full(θ)] − [reduced(θ̄) − full(θ̄)] at the run's plan.
     const refBound = tissue.ref.energyBound;
     const landmarkBounds = {};
-    td.landmarks.forEach((label, i) => (landmarkBounds[label] = outputBound(model.output_bounds[i], o) + outputBound(tissue.run.output_bounds[i], tissue.ref)));
+    // Per landmark, at θ and at θ̄: the bound on the face's value there (with a dual basis, the
+    // smaller of the Riesz route and the correction plus the primal–dual bound).
+    const landmarkAt = (m, i, th, ans) => {
+      const d = m.duals && m.duals[i];
+      const dual = d && d.outputs.length && d.outputs[0].length ? dualAnswer(d, th, ans) : null;
+      return faceValueBound(outputBound(m.output_bounds[i], ans), dual);
+    };
+    td.landmarks.forEach((label, i) => (landmarkBounds[label] = landmarkAt(model, i, th, o) + landmarkAt(tissue.run, i, tissue.run.form.theta_bar, tissue.ref)));
     return {
       materials: mats,
       theta: th,

@@ -153,6 +153,77 @@ export function outputBound(b, o) {
   return Math.min(split, plain);
 }
 
+/** A landmark's dual answer at θ for the primal answer `o` of `solveOnline` (the same θ), as
+ *  crates/facesim/src/reduced/dual.rs `DualForm::answer`: per component j the correction
+ *  ψ_Nᵀ r to add to the face's value and the bound ‖r‖_X' ‖r_du,j‖_X' / α_LB plus the
+ *  correction's round-off. `d` = {matrices, outputs, loads, coupling, riesz, riesz_norms,
+ *  unknowns} (a `DualForm`); throws when its reduced system is not positive definite. */
+export function dualAnswer(d, th, o) {
+  const q = th.length;
+  const m = d.outputs.length ? d.outputs[0].length : 0;
+  const comps = d.outputs.length;
+  const c = o.coefficients;
+  const n = c.length;
+  const a = new Float64Array(m * m);
+  for (let k = 0; k < q; k++) for (let i = 0; i < m * m; i++) a[i] += th[k] * d.matrices[k][i];
+  if (!cholesky(a, m)) throw new Error("reduced model: the dual reduced system is not positive definite");
+  // Wᵀ r(θ) = Σ_q θ_q (Wᵀ f_q − Wᵀ A_q V c), and its terms' magnitudes for the round-off.
+  const wr = new Float64Array(m);
+  const wrAbs = new Float64Array(m);
+  for (let k = 0; k < q; k++) {
+    for (let i = 0; i < m; i++) {
+      let avc = 0;
+      let mag = 0;
+      for (let j = 0; j < n; j++) {
+        const x = d.coupling[k][i * n + j] * c[j];
+        avc += x;
+        mag += Math.abs(x);
+      }
+      wr[i] += th[k] * (d.loads[k][i] - avc);
+      wrAbs[i] += th[k] * (Math.abs(d.loads[k][i]) + mag);
+    }
+  }
+  let rows = 0;
+  for (const col of d.riesz) rows = Math.max(rows, col.length);
+  const eps = (d.unknowns + m + n) * Number.EPSILON;
+  const correction = [];
+  const bound = [];
+  for (let j = 0; j < comps; j++) {
+    const phi = choleskySolve(a, m, d.outputs[j]);
+    // X⁻¹ r_du = ρ(l_j) − Σ_{n,q} φ_n θ_q ρ(A_q w_n).
+    const y = new Float64Array(rows);
+    let floor = 0;
+    const add = (col, w) => {
+      const r = d.riesz[col];
+      for (let i = 0; i < r.length; i++) y[i] += w * r[i];
+      floor += Math.abs(w) * d.riesz_norms[col];
+    };
+    add(j, 1);
+    for (let i = 0; i < m; i++) for (let k = 0; k < q; k++) add(comps + i * q + k, -phi[i] * th[k]);
+    let yy = 0;
+    for (let i = 0; i < rows; i++) yy += y[i] * y[i];
+    const residual = Math.sqrt(yy) + d.unknowns * Number.EPSILON * floor;
+    let corr = 0;
+    let round = 0;
+    for (let i = 0; i < m; i++) {
+      corr += phi[i] * wr[i];
+      round += Math.abs(phi[i]) * wrAbs[i];
+    }
+    correction.push(corr);
+    bound.push((o.residual * residual) / o.alpha + eps * round);
+  }
+  return { correction, bound };
+}
+
+/** The bound on a landmark's displacement as the face shows it (mm): `plain`, its bound through
+ *  the Riesz representer, or with a dual answer the correction's length plus the primal–dual
+ *  bound (the face's value is the corrected one less the correction), whichever is smaller. */
+export function faceValueBound(plain, dual) {
+  if (!dual) return plain;
+  const len = (v) => Math.sqrt(v.reduce((s, x) => s + x * x, 0));
+  return Math.min(plain, len(dual.correction) + len(dual.bound));
+}
+
 /** out = lift + Σ_n c_n columns_n (float64), the face fields each `len` values long, the
  *  columns one after another in `columns`. */
 export function reducedFace(lift, columns, c, out = new Float64Array(lift.length)) {

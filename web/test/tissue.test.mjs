@@ -6,7 +6,7 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
-import { lame, materials, theta, outside, cholesky, choleskySolve, solveOnline, outputBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "../src/tissue.js";
+import { lame, materials, theta, outside, cholesky, choleskySolve, solveOnline, outputBound, dualAnswer, faceValueBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "../src/tissue.js";
 
 const close = (a, b, rel, what) => assert.ok(Math.abs(a - b) <= rel * Math.max(Math.abs(a), Math.abs(b), 1e-300), `${what}: ${a} vs ${b}`);
 
@@ -134,5 +134,13 @@ test("the online solve equals Rust's OnlineForm::solve for the same θ", { skip:
     // The output's bound through the Riesz representer, as reduced::OutputBound::bound.
     close(outputBound(k.output, o), k.output_bound, 1e-8, `${what} output bound`);
     assert.ok(outputBound(k.output, o) <= k.output_plain * (1 + 1e-12), `${what}: above g Δ`);
+    // A landmark's dual answer, as reduced::dual::DualForm::answer.
+    const d = dualAnswer(k.dual, k.theta, o);
+    const cScale = Math.max(...k.dual_correction.map(Math.abs));
+    k.dual_correction.forEach((c, j) => assert.ok(Math.abs(d.correction[j] - c) <= 1e-9 * cScale, `${what} correction ${j}: ${d.correction[j]} vs ${c}`));
+    k.dual_bound.forEach((b, j) => close(d.bound[j], b, 1e-8, `${what} dual bound ${j}`));
+    const len = (v) => Math.hypot(...v);
+    close(faceValueBound(1e9, d), len(d.correction) + len(d.bound), 1e-15, `${what} face value`);
+    assert.equal(faceValueBound(1e-9, d), 1e-9);
   }
 });

@@ -133,6 +133,10 @@ pub struct PageReduced<'a> {
     /// (`reduced::OutputBound`: the gain and the images' factor).
     pub face_bound: &'a crate::reduced::OutputBound,
     pub output_bounds: &'a [crate::reduced::OutputBound],
+    /// Per soft landmark its dual reduced basis (`[uncertainty] landmark_dual_rounds`; empty
+    /// without): the page bounds the face's value there by its correction plus the primal–dual
+    /// bound where that is smaller.
+    pub duals: &'a [crate::reduced::dual::DualForm],
     /// The face displacement: lift + Σ c_n columns\[n\] (mm per face vertex).
     pub face: &'a crate::reduced::LinearFace,
 }
@@ -393,9 +397,13 @@ fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Valu
             || m.terms.len() != q
             || m.theta_box.iter().any(|b| b.len() != q)
             || m.output_bounds.len() != t.landmarks.len()
+            || !(m.duals.is_empty() || m.duals.len() == t.landmarks.len())
+            || m.duals
+                .iter()
+                .any(|d| d.size() > 0 && !d.consistent(q, f.columns.len()))
         {
             return Err(
-                "reduced model: terms, box, face columns or landmark gains do not match its form"
+                "reduced model: terms, box, face columns, landmark gains or duals do not match its form"
                     .into(),
             );
         }
@@ -424,6 +432,7 @@ fn tissue_json(t: &PageTissue, n: usize) -> std::result::Result<serde_json::Valu
                 "theta_box": m.theta_box,
                 "face_bound": m.face_bound,
                 "output_bounds": m.output_bounds,
+                "duals": m.duals,
                 "lift": base64(&f32_bytes(&field(&m.face.lift))),
                 "columns": base64(&f32_bytes(&columns)),
             })

@@ -372,6 +372,7 @@ fn page_tissue<'a>(
                 theta_box: &m.theta_box,
                 face_bound: &m.face_bound,
                 output_bounds: &m.output_bounds,
+                duals: &m.duals,
                 face: &m.face,
             })
             .collect(),

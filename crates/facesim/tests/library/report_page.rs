@@ -1431,7 +1431,10 @@ fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
                 factor: (0..3 * o.coordinates.len()).map(|_| 0.1 * rand()).collect(),
                 rows: 3,
             };
+            let dual = random_dual(&mut rand, q, n);
+            let answer = dual.answer(&theta, &o).unwrap();
             cases.push(json!({
+                "dual": dual, "dual_correction": answer.correction, "dual_bound": answer.bound,
                 "form": form, "theta": theta,
                 "coefficients": o.coefficients.iter().collect::<Vec<_>>(),
                 "residual": o.residual, "alpha": o.alpha, "gamma": o.gamma,
@@ -1458,6 +1461,59 @@ fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
     );
 }
 
+/// A landmark's dual form for a primal of `q` terms and `n` vectors: m = 4 dual vectors, three
+/// components, SPD terms (the first with the identity added), ragged Riesz columns.
+fn random_dual(
+    rand: &mut impl FnMut() -> f64,
+    q: usize,
+    n: usize,
+) -> facesim::reduced::dual::DualForm {
+    let (m, comps) = (4, 3);
+    let matrices = (0..q)
+        .map(|k| {
+            let b: Vec<f64> = (0..m * m).map(|_| rand()).collect();
+            let mut a = vec![0.0; m * m];
+            for i in 0..m {
+                for j in 0..m {
+                    a[i * m + j] = (0..m).map(|r| b[i * m + r] * b[j * m + r]).sum();
+                }
+                if k == 0 {
+                    a[i * m + i] += 1.0;
+                }
+            }
+            a
+        })
+        .collect();
+    let mut vectors = |count: usize, len: usize| -> Vec<Vec<f64>> {
+        (0..count)
+            .map(|_| (0..len).map(|_| rand()).collect())
+            .collect()
+    };
+    let outputs = vectors(comps, m);
+    let loads = vectors(q, m);
+    let coupling = vectors(q, m * n);
+    let cols = comps + q * m;
+    let riesz: Vec<Vec<f64>> = (0..cols)
+        .map(|j| (0..(j + 1).min(cols)).map(|_| rand()).collect())
+        .collect();
+    let riesz_norms = riesz
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt() * 1.5)
+        .collect();
+    let d = facesim::reduced::dual::DualForm {
+        matrices,
+        outputs,
+        loads,
+        coupling,
+        riesz,
+        riesz_norms,
+        unknowns: 50_000,
+        greedy: Vec::new(),
+    };
+    assert!(d.consistent(q, n));
+    d
+}
+
 /// The first sample (the jaws phantom, BSSO 5 mm) meshed coarse, sampled by the reduced method,
 /// so that its page carries the tissue sliders; the page against the run's reduced_model.bin
 /// solved in Rust.
@@ -1473,6 +1529,9 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     case.tet.error_estimate = false;
     case.uncertainty.samples = 8;
     case.uncertainty.method = Method::Reduced;
+    // One round of the landmarks' duals: the page bounds the face's value at each landmark by
+    // the correction plus the primal–dual bound where that is smaller.
+    case.uncertainty.landmark_dual_rounds = 1;
     let dir = common::out_dir("facesim-page-tissue");
     let o = facesim::commands::run_case(case.clone(), &dir, &Quiet).unwrap();
     let html = o.out_dir.join("report.html");
@@ -1569,6 +1628,34 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
             (fb - face_bound).abs() <= 1e-8 * face_bound,
             "face bound {fb} vs {face_bound}"
         );
+        // Each landmark's bound on the face's value, at θ and at θ̄ (as sets: the page keys
+        // them by label).
+        let face_value = |k: usize, th: &[f64], at: &facesim::reduced::Online| {
+            let plain = run_model.output_bounds[k].bound(at);
+            let a = run_model.duals[k].answer(th, at).unwrap();
+            let len = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            plain.min(len(&a.correction) + len(&a.bound))
+        };
+        let mut expected: Vec<f64> = (0..run_model.output_bounds.len())
+            .map(|k| {
+                face_value(k, &theta, &rust) + face_value(k, &run_model.form.theta_bar, &at_nominal)
+            })
+            .collect();
+        let mut page: Vec<f64> = t["landmark_bounds_mm"]
+            .as_object()
+            .unwrap()
+            .values()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        expected.sort_by(f64::total_cmp);
+        page.sort_by(f64::total_cmp);
+        assert_eq!(page.len(), expected.len(), "{t}");
+        for (a, b) in page.iter().zip(&expected) {
+            assert!((a - b).abs() <= 1e-8 * b.abs(), "landmark bound {a} vs {b}");
+        }
+        let used_dual = (0..run_model.output_bounds.len())
+            .any(|k| face_value(k, &theta, &rust) < run_model.output_bounds[k].bound(&rust));
+        println!("tissue step {k}: landmark bounds {page:?} (a dual bound used: {used_dual})");
         let text = t["text"].as_str().unwrap();
         assert!(
             text.contains(&format!("{face_bound:.2} mm")) && text.contains("Prn within"),
