@@ -1383,28 +1383,11 @@ fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
                 } else {
                     n
                 };
-                let b: Vec<f64> = (0..n * rank).map(|_| rand()).collect();
-                let mut m = vec![0.0; n * n];
-                for i in 0..n {
-                    for j in 0..n {
-                        m[i * n + j] = (0..rank).map(|r| b[i * rank + r] * b[j * rank + r]).sum();
-                    }
-                    if k == 0 {
-                        m[i * n + i] += 1.0;
-                    }
-                }
-                m
+                gram(&mut rand, n, rank, k == 0)
             })
             .collect();
         let loads: Vec<Vec<f64>> = (0..q).map(|_| (0..n).map(|_| rand()).collect()).collect();
-        let cols = q * (n + 1);
-        let riesz: Vec<Vec<f64>> = (0..cols)
-            .map(|j| (0..(j + 1).min(cols)).map(|_| rand()).collect())
-            .collect();
-        let riesz_norms = riesz
-            .iter()
-            .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt() * 1.5)
-            .collect();
+        let (riesz, riesz_norms) = ragged_riesz(&mut rand, q * (n + 1));
         let form = OnlineForm {
             theta_bar: (0..q).map(|_| 1.0 + rand().abs() * 10.0).collect(),
             matrices,
@@ -1461,6 +1444,34 @@ fn the_page_solves_the_reduced_model_as_the_rust_online_form_does() {
     );
 }
 
+/// B Bᵀ (n × n, row-major) for a random n × `rank` matrix B, plus the identity if `identity`.
+fn gram(rand: &mut impl FnMut() -> f64, n: usize, rank: usize, identity: bool) -> Vec<f64> {
+    let b: Vec<f64> = (0..n * rank).map(|_| rand()).collect();
+    let mut m = vec![0.0; n * n];
+    for i in 0..n {
+        for j in 0..n {
+            m[i * n + j] = (0..rank).map(|r| b[i * rank + r] * b[j * rank + r]).sum();
+        }
+        if identity {
+            m[i * n + i] += 1.0;
+        }
+    }
+    m
+}
+
+/// `cols` random Riesz columns of coordinates, column j of j + 1 of them (ragged, as stored),
+/// and norms above their coordinates' (a representer's norm includes the round-off).
+fn ragged_riesz(rand: &mut impl FnMut() -> f64, cols: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
+    let riesz: Vec<Vec<f64>> = (0..cols)
+        .map(|j| (0..(j + 1).min(cols)).map(|_| rand()).collect())
+        .collect();
+    let norms = riesz
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt() * 1.5)
+        .collect();
+    (riesz, norms)
+}
+
 /// A landmark's dual form for a primal of `q` terms and `n` vectors: m = 4 dual vectors, three
 /// components, SPD terms (the first with the identity added), ragged Riesz columns.
 fn random_dual(
@@ -1469,21 +1480,7 @@ fn random_dual(
     n: usize,
 ) -> facesim::reduced::dual::DualForm {
     let (m, comps) = (4, 3);
-    let matrices = (0..q)
-        .map(|k| {
-            let b: Vec<f64> = (0..m * m).map(|_| rand()).collect();
-            let mut a = vec![0.0; m * m];
-            for i in 0..m {
-                for j in 0..m {
-                    a[i * m + j] = (0..m).map(|r| b[i * m + r] * b[j * m + r]).sum();
-                }
-                if k == 0 {
-                    a[i * m + i] += 1.0;
-                }
-            }
-            a
-        })
-        .collect();
+    let matrices = (0..q).map(|k| gram(rand, m, m, k == 0)).collect();
     let mut vectors = |count: usize, len: usize| -> Vec<Vec<f64>> {
         (0..count)
             .map(|_| (0..len).map(|_| rand()).collect())
@@ -1492,14 +1489,7 @@ fn random_dual(
     let outputs = vectors(comps, m);
     let loads = vectors(q, m);
     let coupling = vectors(q, m * n);
-    let cols = comps + q * m;
-    let riesz: Vec<Vec<f64>> = (0..cols)
-        .map(|j| (0..(j + 1).min(cols)).map(|_| rand()).collect())
-        .collect();
-    let riesz_norms = riesz
-        .iter()
-        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt() * 1.5)
-        .collect();
+    let (riesz, riesz_norms) = ragged_riesz(rand, comps + q * m);
     let d = facesim::reduced::dual::DualForm {
         matrices,
         outputs,
