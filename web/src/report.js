@@ -15,7 +15,7 @@ import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
 import { midsagittalCut, facialPart, pathData } from "./profile.js";
 import { STYLE } from "./style.js";
-import { materials, theta as thetaOf, outside, solveOnline, outputBound, dualAnswer, faceValueBound, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
+import { materials, theta as thetaOf, outside, solveOnline, outputBound, dualAnswer, faceValueBound, unpackDual, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -38,6 +38,7 @@ function decode(b64, Type) {
 }
 const f32 = (b64) => decode(b64, Float32Array);
 const u32 = (b64) => decode(b64, Uint32Array);
+const f64 = (b64) => decode(b64, Float64Array);
 
 const el = (tag, attrs = {}, text) => {
   const e = document.createElement(tag);
@@ -962,7 +963,7 @@ function main() {
   /** The models as the page uses them: face fields decoded, the run's model and its answer at
    *  θ̄ (the reference the tissue change is taken from). */
   function tissueModels(t) {
-    const models = t.models.map((m) => ({ ...m, liftF: f32(m.lift), columnsF: f32(m.columns) }));
+    const models = t.models.map((m) => ({ ...m, liftF: f32(m.lift), columnsF: f32(m.columns), duals: (m.duals || []).map((d) => unpackDual(d, f64)) }));
     const run = models.find((m) => m.sliding === t.sliding) || models[0];
     const ref = solveOnline(run.form, run.form.theta_bar);
     const refFace = reducedFace(run.liftF, run.columnsF, ref.coefficients);
@@ -1000,7 +1001,7 @@ function main() {
     // smaller of the Riesz route and the correction plus the primal–dual bound).
     const landmarkAt = (m, i, th, ans) => {
       const d = m.duals && m.duals[i];
-      const dual = d && d.outputs.length && d.outputs[0].length ? dualAnswer(d, th, ans) : null;
+      const dual = d ? dualAnswer(d, th, ans) : null;
       return faceValueBound(outputBound(m.output_bounds[i], ans), dual);
     };
     td.landmarks.forEach((label, i) => (landmarkBounds[label] = landmarkAt(model, i, th, o) + landmarkAt(tissue.run, i, tissue.run.form.theta_bar, tissue.ref)));

@@ -153,6 +153,38 @@ export function outputBound(b, o) {
   return Math.min(split, plain);
 }
 
+/** A landmark's dual form as report.html carries it (crates/facesim/src/report_page.rs
+ *  `dual_json`: m, unknowns, each array's parts as one Float64Array, the Riesz columns with their
+ *  lengths) back in `DualForm`'s shape for `dualAnswer`; null for a landmark without one. */
+export function unpackDual(j, f64) {
+  if (!j || !j.m) return null;
+  const m = j.m;
+  const split = (flat, len) => {
+    const parts = [];
+    for (let at = 0; at < flat.length; at += len) parts.push(flat.subarray(at, at + len));
+    return parts;
+  };
+  const matrices = split(f64(j.matrices), m * m);
+  const q = matrices.length;
+  const coupling = f64(j.coupling);
+  const riesz = [];
+  const flat = f64(j.riesz);
+  let at = 0;
+  for (const len of j.riesz_lengths) {
+    riesz.push(flat.subarray(at, at + len));
+    at += len;
+  }
+  return {
+    matrices,
+    outputs: split(f64(j.outputs), m),
+    loads: split(f64(j.loads), m),
+    coupling: split(coupling, coupling.length / q),
+    riesz,
+    riesz_norms: j.riesz_norms,
+    unknowns: j.unknowns,
+  };
+}
+
 /** A landmark's dual answer at θ for the primal answer `o` of `solveOnline` (the same θ), as
  *  crates/facesim/src/reduced/dual.rs `DualForm::answer`: per component j the correction
  *  ψ_Nᵀ r to add to the face's value and the bound ‖r‖_X' ‖r_du,j‖_X' / α_LB plus the
