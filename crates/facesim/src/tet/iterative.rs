@@ -132,17 +132,20 @@ impl Iterative {
         })
     }
 
-    /// Other holds on the same frames' axes (nodes freed, or held again): the preconditioner
-    /// made again, the operator kept.
+    /// Other holds on the same frames' axes (nodes freed, or held again): the operator kept,
+    /// the preconditioner's coarse level too while no DOF it was made on is held
+    /// (`TwoLevel::with_holds`).
     pub(crate) fn set_holds(&mut self, frames: &[NodeFrame]) -> Result<()> {
         let level = self.level.take().ok_or_else(|| {
             crate::error::Error::config("the iterative solve lost its preconditioner")
         })?;
-        let (t, free) = transfer(frames, self.corners, &self.edges);
-        let edges = &self.edges;
-        self.level = Some(level.with_holds(free, t, || {
-            edges.iter().map(|e| (e[1] as usize, e[0] as usize))
-        })?);
+        let free = frames.iter().flat_map(|f| f.free()).collect();
+        let (corners, edges) = (self.corners, &self.edges);
+        self.level = Some(level.with_holds(
+            free,
+            || transfer(frames, corners, edges).0,
+            || edges.iter().map(|e| (e[1] as usize, e[0] as usize)),
+        )?);
         Ok(())
     }
 
