@@ -520,7 +520,7 @@ impl TwoLevel {
     }
 
     /// A x = b on the free DOFs for each b (b's held entries ignored; x zero there), to
-    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error. The
+    /// ‖b − A x‖ ≤ `tolerance` ‖b‖ ([`TOLERANCE`] unless the caller needs less); not converging in [`MAX_ITERATIONS`] is an error. The
     /// right-hand sides are solved together: conjugate gradients run on each
     /// in lockstep (its own step lengths, its own stop), so that every product and
     /// preconditioner cycle serves all the vectors still iterating in one pass over the
@@ -536,6 +536,7 @@ impl TwoLevel {
         &self,
         bs: &[Vec<f64>],
         guess: Option<&[Vec<f64>]>,
+        tolerance: f64,
     ) -> Result<Vec<Solved>> {
         let level = &self.fine;
         let n = level.free.len();
@@ -584,7 +585,7 @@ impl TwoLevel {
             Error::numerical(
                 NumericalKind::NotConverged,
                 format!(
-                    "the iterative solve of {} unknowns (conjugate gradients, p-multigrid) did not reach a relative residual of {TOLERANCE:e} in {MAX_ITERATIONS} iterations",
+                    "the iterative solve of {} unknowns (conjugate gradients, p-multigrid) did not reach a relative residual of {tolerance:e} in {MAX_ITERATIONS} iterations",
                     level.free.iter().filter(|f| **f).count()
                 ),
             )
@@ -622,7 +623,7 @@ impl TwoLevel {
                 return Err(not_converged());
             }
             let going: Vec<usize> = (0..k)
-                .filter(|a| r_norm[*a] > TOLERANCE * b_norm[active[*a]])
+                .filter(|a| r_norm[*a] > tolerance * b_norm[active[*a]])
                 .collect();
             if going.len() < k {
                 for a in (0..k).filter(|a| !going.contains(a)) {
