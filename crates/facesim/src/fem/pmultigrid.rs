@@ -683,8 +683,10 @@ fn column_dots(u: &[f64], w: &[f64], k: usize) -> Vec<f64> {
         .zip(w.par_chunks(k * 1024))
         .map(|(u, w)| {
             let mut s = vec![0.0; k];
-            for (e, (a, b)) in u.iter().zip(w).enumerate() {
-                s[e % k] += a * b;
+            for (u, w) in u.chunks_exact(k).zip(w.chunks_exact(k)) {
+                s.iter_mut()
+                    .zip(u.iter().zip(w))
+                    .for_each(|(s, (a, b))| *s += a * b);
             }
             s
         })
