@@ -99,7 +99,9 @@ fn finish(
     // BESIDE_MAX_VOXELS it runs beside the run's own solve, whose factorisation is sequential at
     // a head's size (fem/cholesky.rs), so it costs little wall time; on a larger CT it runs
     // after, since its mesher's two whole-volume fields (8 bytes a voxel) would otherwise add to
-    // the run's peak (docs/lab/performance.md "Against CalculiX").
+    // the run's peak (docs/lab/performance.md "Against CalculiX"). Nor beside the 10-node
+    // element's: its symbolic analysis (the direct factor's size, 3.8 GB on the real CT) and
+    // the coarse 10-node factor together took the real CT's peak to 4.6 GB.
     let coarse_face = || {
         let started = std::time::Instant::now();
         case.tet
@@ -108,7 +110,9 @@ fn finish(
             .flatten()
             .map(|c| (c, started.elapsed().as_secs_f64()))
     };
-    let (prediction, coarse) = if scene.vol.data.len() <= BESIDE_MAX_VOXELS {
+    let beside = scene.vol.data.len() <= BESIDE_MAX_VOXELS
+        && case.tet.element != crate::case::TetElement::Quadratic;
+    let (prediction, coarse) = if beside {
         rayon::join(
             || crate::model::predict(&scene, case, files, &mut rec),
             coarse_face,

@@ -9,12 +9,18 @@ use rayon::prelude::*;
 /// A 3×3 block, row-major: entry (r, c) at 3 r + c.
 pub(crate) type Block = [f64; 9];
 
-pub(crate) struct SymmetricBlocks {
+/// A stored entry: f64, or f32 for a copy that only a preconditioner reads (half the memory
+/// traffic of its products; the arithmetic is f64 either way).
+pub(crate) trait Entry: Copy + Send + Sync + Into<f64> {}
+impl Entry for f64 {}
+impl Entry for f32 {}
+
+pub(crate) struct SymmetricBlocks<T = f64> {
     /// Per row node i, its blocks ptr[i]..ptr[i + 1]: column nodes j ≤ i ascending, the
     /// diagonal block last (stored whole).
     ptr: Vec<usize>,
     col: Vec<u32>,
-    val: Vec<Block>,
+    val: Vec<[T; 9]>,
 }
 
 impl SymmetricBlocks {
@@ -78,8 +84,13 @@ impl SymmetricBlocks {
         m
     }
 
-    pub(crate) fn nodes(&self) -> usize {
-        self.ptr.len() - 1
+    /// The same matrix with its entries rounded to f32.
+    pub(crate) fn to_f32(&self) -> SymmetricBlocks<f32> {
+        SymmetricBlocks {
+            ptr: self.ptr.clone(),
+            col: self.col.clone(),
+            val: self.val.par_iter().map(|b| b.map(|v| v as f32)).collect(),
+        }
     }
 
     /// Block (i, j), i ≥ j, if in the pattern.
@@ -139,6 +150,18 @@ impl SymmetricBlocks {
         });
         out
     }
+}
+
+/// The per-thread partial products of [`SymmetricBlocks::apply_many_into`], kept from one
+/// product to the next: allocated anew each time, their pages were mapped and zeroed by the
+/// kernel at every product (a fifth of the 10-node solve's time was system time).
+#[derive(Default)]
+pub(crate) struct Partials(Vec<Vec<f64>>);
+
+impl<T: Entry> SymmetricBlocks<T> {
+    pub(crate) fn nodes(&self) -> usize {
+        self.ptr.len() - 1
+    }
 
     /// Row boundaries splitting the rows among the threads in runs of about equal block counts.
     fn row_runs(&self) -> Vec<usize> {
@@ -156,107 +179,142 @@ impl SymmetricBlocks {
         bounds
     }
 
-    /// y = A x (x with 3 entries per node). The rows are split among the threads in runs of
-    /// about equal block counts, each adding into its own y (a lower block scatters into the
-    /// column node's rows too), the parts summed.
+    /// y = A x (x with 3 entries per node).
+    #[cfg(test)]
     pub(crate) fn apply(&self, x: &[f64]) -> Vec<f64> {
-        let n = x.len();
-        let bounds = self.row_runs();
-        let partial: Vec<Vec<f64>> = bounds
-            .par_windows(2)
-            .map(|w| {
-                let mut y = vec![0.0; n];
-                for i in w[0]..w[1] {
-                    let xi = [x[3 * i], x[3 * i + 1], x[3 * i + 2]];
-                    let mut yi = [0.0; 3];
-                    for p in self.ptr[i]..self.ptr[i + 1] {
-                        let j = self.col[p] as usize;
-                        let b = &self.val[p];
-                        let xj = [x[3 * j], x[3 * j + 1], x[3 * j + 2]];
-                        for r in 0..3 {
-                            yi[r] += b[3 * r] * xj[0] + b[3 * r + 1] * xj[1] + b[3 * r + 2] * xj[2];
-                        }
-                        if j != i {
-                            for c in 0..3 {
-                                y[3 * j + c] += b[c] * xi[0] + b[3 + c] * xi[1] + b[6 + c] * xi[2];
-                            }
-                        }
-                    }
-                    for r in 0..3 {
-                        y[3 * i + r] += yi[r];
-                    }
-                }
-                y
-            })
-            .collect();
-        sum_parts(partial, n)
+        self.apply_many(x, 1)
     }
-}
 
-impl SymmetricBlocks {
     /// Y = A X for `k` vectors at once, interleaved: entry (DOF d, vector v) at d k + v. One
     /// pass over the blocks serves every vector, so the matrix (the solve's memory traffic) is
-    /// read once for the k products instead of k times (the plan basis's 12 right-hand sides).
+    /// read once for the k products instead of k times (the plan basis's right-hand sides).
     pub(crate) fn apply_many(&self, x: &[f64], k: usize) -> Vec<f64> {
+        let mut y = vec![0.0; x.len()];
+        self.apply_many_into(x, k, &mut y, &mut Partials::default());
+        y
+    }
+
+    /// [`SymmetricBlocks::apply_many`] into `y` (overwritten), with the threads' partial
+    /// products in `partials`.
+    pub(crate) fn apply_many_into(
+        &self,
+        x: &[f64],
+        k: usize,
+        y: &mut [f64],
+        partials: &mut Partials,
+    ) {
         // The vector count as a constant, so that the inner loops over it unroll.
         macro_rules! dispatch {
             ($($n:literal)*) => {
                 match k {
-                    $($n => self.apply_k::<$n>(x),)*
-                    _ => interleave(
-                        &(0..k).map(|v| self.apply(&column(x, k, v))).collect::<Vec<_>>(),
-                    ),
+                    $($n => self.apply_k::<$n>(x, y, partials),)*
+                    _ => {
+                        for v in 0..k {
+                            let yv = self.apply_many(&column(x, k, v), 1);
+                            y.iter_mut().skip(v).step_by(k).zip(yv).for_each(|(y, a)| *y = a);
+                        }
+                    }
                 }
             };
         }
-        dispatch!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        dispatch!(1 2 3 4 5 6 7 8)
     }
 
-    fn apply_k<const K: usize>(&self, x: &[f64]) -> Vec<f64> {
-        let n = x.len();
+    /// The rows are split among the threads in runs of about equal block counts. A lower block
+    /// scatters into its column node's rows too, all before the run's end: the last run adds
+    /// into y itself, each other run into its own partial vector up to its end, the partials
+    /// then summed into y.
+    fn apply_k<const K: usize>(&self, x: &[f64], y: &mut [f64], partials: &mut Partials) {
         let bounds = self.row_runs();
+        let runs = bounds.len() - 1;
+        partials.0.resize_with(runs.saturating_sub(1), Vec::new);
+        for (p, w) in partials.0.iter_mut().zip(bounds.windows(2)) {
+            p.resize(3 * K * w[1], 0.0);
+        }
+        let mut outs: Vec<&mut [f64]> = partials
+            .0
+            .iter_mut()
+            .zip(bounds.windows(2))
+            .map(|(p, w)| &mut p[..3 * K * w[1]])
+            .collect();
+        outs.push(y);
+        outs.par_iter_mut()
+            .zip(bounds.par_windows(2))
+            .for_each(|(out, w)| {
+                out.fill(0.0);
+                self.rows_k::<K>(x, w[0]..w[1], out);
+            });
+        let y = outs.pop().unwrap_or_default();
+        for p in outs {
+            y[..p.len()]
+                .par_iter_mut()
+                .zip(p.par_iter())
+                .for_each(|(a, b)| *a += b);
+        }
+    }
+
+    /// The `rows`' blocks' part of A X added into `y` (rows and their column nodes), with
+    /// 256-bit vector instructions where the processor has them: the build targets the x86-64
+    /// baseline, whose 128-bit registers hold half of a four-vector row (so the kernel spilled
+    /// to the stack), and the block products are most of the iterative solve's time.
+    fn rows_k<const K: usize>(&self, x: &[f64], rows: std::ops::Range<usize>, y: &mut [f64]) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2, checked just above.
+            unsafe { self.rows_k_avx2::<K>(x, rows, y) };
+            return;
+        }
+        self.rows_k_portable::<K>(x, rows, y);
+    }
+
+    /// [`Self::rows_k`] compiled for AVX2: the same operations in the same order (Rust contracts
+    /// no multiply and add into an FMA), four vectors' entries to a register.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn rows_k_avx2<const K: usize>(&self, x: &[f64], rows: std::ops::Range<usize>, y: &mut [f64]) {
+        self.rows_k_portable::<K>(x, rows, y);
+    }
+
+    #[inline(always)]
+    fn rows_k_portable<const K: usize>(
+        &self,
+        x: &[f64],
+        rows: std::ops::Range<usize>,
+        y: &mut [f64],
+    ) {
         let at = |i: usize| -> [[f64; K]; 3] {
             std::array::from_fn(|c| std::array::from_fn(|v| x[(3 * i + c) * K + v]))
         };
-        let partial: Vec<Vec<f64>> = bounds
-            .par_windows(2)
-            .map(|w| {
-                let mut y = vec![0.0; n];
-                for i in w[0]..w[1] {
-                    let xi = at(i);
-                    let mut yi = [[0.0; K]; 3];
-                    for p in self.ptr[i]..self.ptr[i + 1] {
-                        let j = self.col[p] as usize;
-                        let b = &self.val[p];
-                        let xj = at(j);
-                        for r in 0..3 {
-                            for v in 0..K {
-                                yi[r][v] += b[3 * r] * xj[0][v]
-                                    + b[3 * r + 1] * xj[1][v]
-                                    + b[3 * r + 2] * xj[2][v];
-                            }
-                        }
-                        if j != i {
-                            let yj = &mut y[3 * j * K..3 * (j + 1) * K];
-                            for c in 0..3 {
-                                for v in 0..K {
-                                    yj[c * K + v] +=
-                                        b[c] * xi[0][v] + b[3 + c] * xi[1][v] + b[6 + c] * xi[2][v];
-                                }
-                            }
-                        }
+        for i in rows {
+            let xi = at(i);
+            let mut yi = [[0.0; K]; 3];
+            for p in self.ptr[i]..self.ptr[i + 1] {
+                let j = self.col[p] as usize;
+                let b: [f64; 9] = self.val[p].map(Into::into);
+                let xj = at(j);
+                for r in 0..3 {
+                    for v in 0..K {
+                        yi[r][v] +=
+                            b[3 * r] * xj[0][v] + b[3 * r + 1] * xj[1][v] + b[3 * r + 2] * xj[2][v];
                     }
-                    let yi_out = &mut y[3 * i * K..3 * (i + 1) * K];
-                    for r in 0..3 {
+                }
+                if j != i {
+                    let yj = &mut y[3 * j * K..3 * (j + 1) * K];
+                    for c in 0..3 {
                         for v in 0..K {
-                            yi_out[r * K + v] += yi[r][v];
+                            yj[c * K + v] +=
+                                b[c] * xi[0][v] + b[3 + c] * xi[1][v] + b[6 + c] * xi[2][v];
                         }
                     }
                 }
-                y
-            })
-            .collect();
-        sum_parts(partial, n)
+            }
+            let yi_out = &mut y[3 * i * K..3 * (i + 1) * K];
+            for r in 0..3 {
+                for v in 0..K {
+                    yi_out[r * K + v] += yi[r][v];
+                }
+            }
+        }
     }
 }
 
@@ -294,18 +352,6 @@ pub(crate) fn transposed(a: &Block) -> Block {
 /// aᵀ b c.
 pub(crate) fn congruence(a: &Block, b: &Block, c: &Block) -> Block {
     times(&transposed(a), &times(b, c))
-}
-
-/// The threads' partial products summed into one vector of `n` entries.
-fn sum_parts(partial: Vec<Vec<f64>>, n: usize) -> Vec<f64> {
-    let mut parts = partial.into_iter();
-    let mut y = parts.next().unwrap_or_else(|| vec![0.0; n]);
-    for p in parts {
-        y.par_iter_mut()
-            .zip(p.par_iter())
-            .for_each(|(a, b)| *a += b);
-    }
-    y
 }
 
 #[cfg(test)]

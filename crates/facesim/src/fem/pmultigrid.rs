@@ -33,7 +33,7 @@
 
 use super::assembly::System;
 use super::block_sparse::{
-    Block, SymmetricBlocks, column, congruence, interleave, times, transposed,
+    Block, Partials, SymmetricBlocks, column, congruence, interleave, times, transposed,
 };
 use super::cholesky::Ordering;
 use crate::error::{Error, NumericalKind, Result};
@@ -99,8 +99,15 @@ impl Transfer {
     }
 
     /// P X_c for k vectors interleaved (entry (DOF d, vector v) at d k + v).
+    #[cfg(test)]
     fn prolong_many(&self, xc: &[f64], k: usize) -> Vec<f64> {
         let mut x = vec![0.0; 3 * k * self.parents.len()];
+        self.add_prolonged(xc, k, &mut x);
+        x
+    }
+
+    /// x += P X_c for k vectors interleaved.
+    fn add_prolonged(&self, xc: &[f64], k: usize, x: &mut [f64]) {
         x.par_chunks_mut(3 * k)
             .zip(self.parents.par_iter())
             .for_each(|(xi, p)| {
@@ -115,7 +122,6 @@ impl Transfer {
                     }
                 }
             });
-        x
     }
 
     /// Pᵀ R for k vectors interleaved.
@@ -215,15 +221,18 @@ impl Smoother {
                 }
             })
             .collect();
+        let (mut av, mut w) = (vec![0.0; v.len()], vec![0.0; v.len()]);
+        let mut partials = Partials::default();
         let mut lambda = 0.0;
         for _ in 0..POWER_ITERATIONS {
-            let w = s.jacobi(&level.product(&v, 1), 1);
+            level.cycle_product(&v, 1, &mut av, &mut partials);
+            s.jacobi(&av, 1, &mut w);
             let (nw, nv) = (norm(&w), norm(&v));
             if !(nw > 0.0 && nv > 0.0) {
                 break;
             }
             lambda = nw / nv;
-            v = w.iter().map(|x| x / nw).collect();
+            v.iter_mut().zip(&w).for_each(|(v, w)| *v = w / nw);
         }
         if !(lambda.is_finite() && lambda > 0.0) {
             return Err(Error::numerical(
@@ -236,9 +245,8 @@ impl Smoother {
         Ok(s)
     }
 
-    /// D⁻¹ R for k vectors interleaved.
-    fn jacobi(&self, r: &[f64], k: usize) -> Vec<f64> {
-        let mut z = vec![0.0; r.len()];
+    /// z = D⁻¹ R for k vectors interleaved (zero on the held DOFs).
+    fn jacobi(&self, r: &[f64], k: usize, z: &mut [f64]) {
         z.par_chunks_mut(3 * k)
             .zip(r.par_chunks(3 * k))
             .zip(self.inverse.par_iter())
@@ -250,32 +258,67 @@ impl Smoother {
                     }
                 }
             });
-        z
     }
 
-    /// The Chebyshev iteration for A x = r from x = 0, `DEGREE` steps (Saad, "Iterative
+    /// x = the Chebyshev iteration for A x = r from x = 0, `DEGREE` steps (Saad, "Iterative
     /// methods for sparse linear systems", 2nd ed., Algorithm 12.1, preconditioned by D), for
-    /// k right-hand sides interleaved (the same polynomial for each).
-    fn smooth(&self, level: &Operator, r: &[f64], k: usize) -> Vec<f64> {
+    /// k right-hand sides interleaved (the same polynomial for each); x is zero on the held
+    /// DOFs.
+    fn smooth(&self, level: &Operator, r: &[f64], k: usize, x: &mut [f64], w: &mut SmoothWork) {
+        let n = r.len();
+        let (res, d, ad) = (&mut w.res[..n], &mut w.d[..n], &mut w.ad[..n]);
         let theta = 0.5 * (self.hi + self.lo);
         let delta = 0.5 * (self.hi - self.lo);
         let sigma = theta / delta;
         let mut rho = 1.0 / sigma;
-        let mut d: Vec<f64> = self.jacobi(r, k).iter().map(|z| z / theta).collect();
-        let mut x = d.clone();
-        let mut res = r.to_vec();
+        self.jacobi(r, k, d);
+        d.par_iter_mut().for_each(|d| *d /= theta);
+        x.copy_from_slice(d);
+        res.copy_from_slice(r);
         for _ in 1..DEGREE {
-            let ad = level.product(&d, k);
-            res.par_iter_mut().zip(&ad).for_each(|(r, a)| *r -= a);
+            level.cycle_product(d, k, ad, &mut w.partials);
+            res.par_iter_mut().zip(&*ad).for_each(|(r, a)| *r -= a);
             let rho_next = 1.0 / (2.0 * sigma - rho);
-            let z = self.jacobi(&res, k);
-            d.par_iter_mut().zip(&z).for_each(|(d, z)| {
+            // D⁻¹ res into ad, whose product is spent.
+            self.jacobi(res, k, ad);
+            d.par_iter_mut().zip(&*ad).for_each(|(d, z)| {
                 *d = rho_next * rho * *d + 2.0 * rho_next / delta * z;
             });
-            x.par_iter_mut().zip(&d).for_each(|(x, d)| *x += d);
+            x.par_iter_mut().zip(&*d).for_each(|(x, d)| *x += d);
             rho = rho_next;
         }
-        x
+    }
+}
+
+/// The smoother's work vectors (each for the largest batch), kept across the cycles.
+struct SmoothWork {
+    res: Vec<f64>,
+    d: Vec<f64>,
+    ad: Vec<f64>,
+    partials: Partials,
+}
+
+/// The cycle's work vectors.
+struct CycleWork {
+    smooth: SmoothWork,
+    t1: Vec<f64>,
+    t2: Vec<f64>,
+}
+
+impl CycleWork {
+    /// For k vectors of n DOFs.
+    fn new(n: usize, k: usize) -> CycleWork {
+        let v = || vec![0.0; n * k];
+        CycleWork {
+            smooth: SmoothWork {
+                res: v(),
+                d: v(),
+                ad: v(),
+                partials: Partials::default(),
+            },
+            t1: v(),
+            t2: v(),
+        }
     }
 }
 
@@ -298,6 +341,11 @@ fn masked_inverse(b: &Block, free: &[bool]) -> Option<Block> {
     }))
 }
 
+/// Whether every DOF `inner` marks is marked in `outer`.
+fn covers(outer: &[bool], inner: &[bool]) -> bool {
+    outer.len() == inner.len() && outer.iter().zip(inner).all(|(o, i)| *o || !*i)
+}
+
 fn norm(v: &[f64]) -> f64 {
     v.par_iter().map(|x| x * x).sum::<f64>().sqrt()
 }
@@ -305,18 +353,31 @@ fn norm(v: &[f64]) -> f64 {
 /// The fine operator and its unknowns.
 struct Operator {
     a: SymmetricBlocks,
+    /// A rounded to f32, for the cycle's products alone (smoothing and its residuals): the
+    /// cycle stays a fixed symmetric positive definite preconditioner (the same operator in
+    /// each of its products), and its products read half the bytes; conjugate gradients take
+    /// theirs with A.
+    a32: SymmetricBlocks<f32>,
     free: Vec<bool>,
 }
 
 impl Operator {
-    /// A X on the free DOFs for k vectors interleaved (X's held entries ignored, the
-    /// result's zero).
-    fn product(&self, x: &[f64], k: usize) -> Vec<f64> {
-        let mut xf = x.to_vec();
-        self.zero_held(&mut xf, k);
-        let mut y = self.a.apply_many(&xf, k);
-        self.zero_held(&mut y, k);
-        y
+    fn new(a: SymmetricBlocks, free: Vec<bool>) -> Operator {
+        let a32 = a.to_f32();
+        Operator { a, a32, free }
+    }
+
+    /// y = A X on the free DOFs for k vectors interleaved, X zero on the held DOFs (y is zero
+    /// there).
+    fn product(&self, x: &[f64], k: usize, y: &mut [f64], partials: &mut Partials) {
+        self.a.apply_many_into(x, k, y, partials);
+        self.zero_held(y, k);
+    }
+
+    /// The same with A rounded to f32 (the cycle's products).
+    fn cycle_product(&self, x: &[f64], k: usize, y: &mut [f64], partials: &mut Partials) {
+        self.a32.apply_many_into(x, k, y, partials);
+        self.zero_held(y, k);
     }
 
     /// The held DOFs' entries of k interleaved vectors set to zero.
@@ -348,6 +409,8 @@ pub(crate) struct TwoLevel {
     transfer: Transfer,
     coarse: System,
     smoother: Smoother,
+    /// The fine DOFs free when the coarse level was made: P maps into them.
+    coarse_within: Vec<bool>,
 }
 
 impl TwoLevel {
@@ -360,7 +423,15 @@ impl TwoLevel {
         transfer: Transfer,
         pairs: impl Fn() -> I,
     ) -> Result<TwoLevel> {
-        let fine = Operator { a, free };
+        Self::over(Operator::new(a, free), transfer, pairs)
+    }
+
+    /// The same over the operator `fine`.
+    fn over<I: Iterator<Item = (usize, usize)>>(
+        fine: Operator,
+        transfer: Transfer,
+        pairs: impl Fn() -> I,
+    ) -> Result<TwoLevel> {
         let galerkin = transfer.galerkin(&fine.a, pairs)?;
         let fixed: Vec<bool> = transfer.coarse_free.iter().map(|f| !f).collect();
         let coarse = System::with_ordering(
@@ -370,25 +441,50 @@ impl TwoLevel {
             Ordering::NestedDissection,
         )?;
         let smoother = Smoother::new(&fine)?;
+        let coarse_within = fine.free.clone();
         Ok(TwoLevel {
             fine,
             transfer,
             coarse,
             smoother,
+            coarse_within,
         })
     }
 
-    /// The same operator with other unknowns and prolongation (nodes freed or held again).
+    /// The same operator with other unknowns `free` (nodes freed or held again). While every
+    /// DOF free when the coarse level was made is still free (the rounds free nodes and hold
+    /// only those again), that level is kept: P still maps into unknowns, and Pᵀ A P, which
+    /// reads A on those DOFs alone, is unchanged, so the cycle is the Galerkin two-level one
+    /// over a coarse space that leaves out the freed DOFs (the smoother reaches them). Only
+    /// the smoother is made again. Otherwise the coarse level is made anew with
+    /// `transfer()`'s prolongation.
     pub(crate) fn with_holds<I: Iterator<Item = (usize, usize)>>(
         self,
         free: Vec<bool>,
-        transfer: Transfer,
+        transfer: impl FnOnce() -> Transfer,
         pairs: impl Fn() -> I,
     ) -> Result<TwoLevel> {
-        let TwoLevel { fine, coarse, .. } = self;
+        let TwoLevel {
+            fine,
+            transfer: kept,
+            coarse,
+            coarse_within,
+            ..
+        } = self;
+        let fine = Operator { free, ..fine };
+        if covers(&fine.free, &coarse_within) {
+            let smoother = Smoother::new(&fine)?;
+            return Ok(TwoLevel {
+                fine,
+                transfer: kept,
+                coarse,
+                smoother,
+                coarse_within,
+            });
+        }
         // The old coarse factor goes before the new one is made.
         drop(coarse);
-        Self::new(fine.a, free, transfer, pairs)
+        Self::over(fine, transfer(), pairs)
     }
 
     /// A X over every DOF for k vectors interleaved (X's held entries included): the held
@@ -402,29 +498,29 @@ impl TwoLevel {
         self.coarse.factor_nnz().unwrap_or(0)
     }
 
-    /// The cycle applied to k residuals R interleaved (each vector's cycle is the
+    /// z = the cycle applied to k residuals R interleaved (each vector's cycle is the
     /// single-vector one; the coarse solves are one multi-column solve on the factor).
-    fn precondition(&self, r: &[f64], k: usize) -> Vec<f64> {
+    fn precondition(&self, r: &[f64], k: usize, z: &mut [f64], w: &mut CycleWork) {
         let level = &self.fine;
-        let mut x = self.smoother.smooth(level, r, k);
-        let ax = level.product(&x, k);
-        let r1: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
-        let rc = self.transfer.restrict_many(&r1, k);
+        let n = r.len();
+        let (t1, t2) = (&mut w.t1[..n], &mut w.t2[..n]);
+        self.smoother.smooth(level, r, k, z, &mut w.smooth);
+        level.cycle_product(z, k, t1, &mut w.smooth.partials);
+        t1.par_iter_mut().zip(r).for_each(|(t, r)| *t = r - *t);
+        let rc = self.transfer.restrict_many(t1, k);
         let columns: Vec<Vec<f64>> = (0..k).map(|v| column(&rc, k, v)).collect();
         let zeros = vec![vec![0.0; rc.len() / k]; k];
         let ec = interleave(&self.coarse.solve(&columns, &zeros));
-        let e = self.transfer.prolong_many(&ec, k);
-        x.par_iter_mut().zip(&e).for_each(|(x, e)| *x += e);
-        level.zero_held(&mut x, k);
-        let ax = level.product(&x, k);
-        let r2: Vec<f64> = r.par_iter().zip(&ax).map(|(r, a)| r - a).collect();
-        let post = self.smoother.smooth(level, &r2, k);
-        x.par_iter_mut().zip(&post).for_each(|(x, p)| *x += p);
-        x
+        self.transfer.add_prolonged(&ec, k, z);
+        level.zero_held(z, k);
+        level.cycle_product(z, k, t1, &mut w.smooth.partials);
+        t1.par_iter_mut().zip(r).for_each(|(t, r)| *t = r - *t);
+        self.smoother.smooth(level, t1, k, t2, &mut w.smooth);
+        z.par_iter_mut().zip(&*t2).for_each(|(z, p)| *z += p);
     }
 
     /// A x = b on the free DOFs for each b (b's held entries ignored; x zero there), to
-    /// ‖b − A x‖ ≤ [`TOLERANCE`] ‖b‖; not converging in [`MAX_ITERATIONS`] is an error. The
+    /// ‖b − A x‖ ≤ `tolerance` ‖b‖ ([`TOLERANCE`] unless the caller needs less); not converging in [`MAX_ITERATIONS`] is an error. The
     /// right-hand sides are solved together: conjugate gradients run on each
     /// in lockstep (its own step lengths, its own stop), so that every product and
     /// preconditioner cycle serves all the vectors still iterating in one pass over the
@@ -440,6 +536,7 @@ impl TwoLevel {
         &self,
         bs: &[Vec<f64>],
         guess: Option<&[Vec<f64>]>,
+        tolerance: f64,
     ) -> Result<Vec<Solved>> {
         let level = &self.fine;
         let n = level.free.len();
@@ -455,16 +552,19 @@ impl TwoLevel {
         // The vectors still iterating (their columns in r, d, x below, in this order).
         let mut active: Vec<usize> = (0..total).filter(|v| b_norm[*v] > 0.0).collect();
         let mut k = active.len();
-        let keep_b = |active: &[usize]| select(&b, total, active);
-        let mut r = keep_b(&active);
+        // Allocated once for the batch: the kernel maps and zeroes a fresh vector's pages.
+        let mut work = CycleWork::new(n, k);
+        let mut partials = Partials::default();
+        let mut ad = vec![0.0; n * k];
+        let mut r = select(&b, total, &active);
         let mut x = vec![0.0; n * k];
         if let Some(g) =
             guess.filter(|g| k > 0 && g.len() == total && g.iter().all(|g| g.len() == n))
         {
             let mut x0 = select(&interleave(g), total, &active);
             level.zero_held(&mut x0, k);
-            let ax0 = level.product(&x0, k);
-            let r0: Vec<f64> = r.par_iter().zip(&ax0).map(|(r, a)| r - a).collect();
+            level.product(&x0, k, &mut ad, &mut partials);
+            let r0: Vec<f64> = r.par_iter().zip(&ad).map(|(r, a)| r - a).collect();
             let r0_norm = column_norms(&r0, k);
             for a in 0..k {
                 if r0_norm[a] < b_norm[active[a]] {
@@ -475,18 +575,17 @@ impl TwoLevel {
                 }
             }
         }
-        let mut z = if k > 0 {
-            self.precondition(&r, k)
-        } else {
-            Vec::new()
-        };
+        let mut z = vec![0.0; n * k];
+        if k > 0 {
+            self.precondition(&r, k, &mut z, &mut work);
+        }
         let mut d = z.clone();
         let mut rz = column_dots(&r, &z, k);
         let not_converged = || {
             Error::numerical(
                 NumericalKind::NotConverged,
                 format!(
-                    "the iterative solve of {} unknowns (conjugate gradients, p-multigrid) did not reach a relative residual of {TOLERANCE:e} in {MAX_ITERATIONS} iterations",
+                    "the iterative solve of {} unknowns (conjugate gradients, p-multigrid) did not reach a relative residual of {tolerance:e} in {MAX_ITERATIONS} iterations",
                     level.free.iter().filter(|f| **f).count()
                 ),
             )
@@ -497,8 +596,9 @@ impl TwoLevel {
             if it > MAX_ITERATIONS {
                 return Err(not_converged());
             }
-            let ad = level.product(&d, k);
-            let curv = column_dots(&d, &ad, k);
+            let ad = &mut ad[..n * k];
+            level.product(&d, k, ad, &mut partials);
+            let curv = column_dots(&d, ad, k);
             // A not positive definite along d (the CG of fem/pcg.rs refuses it likewise).
             if curv.iter().any(|c| !(*c > 0.0)) {
                 return Err(not_converged());
@@ -523,7 +623,7 @@ impl TwoLevel {
                 return Err(not_converged());
             }
             let going: Vec<usize> = (0..k)
-                .filter(|a| r_norm[*a] > TOLERANCE * b_norm[active[*a]])
+                .filter(|a| r_norm[*a] > tolerance * b_norm[active[*a]])
                 .collect();
             if going.len() < k {
                 for a in (0..k).filter(|a| !going.contains(a)) {
@@ -540,8 +640,9 @@ impl TwoLevel {
                     break;
                 }
             }
-            z = self.precondition(&r, k);
-            let rz_new = column_dots(&r, &z, k);
+            let z = &mut z[..n * k];
+            self.precondition(&r, k, z, &mut work);
+            let rz_new = column_dots(&r, z, k);
             let beta: Vec<f64> = rz_new.iter().zip(&rz).map(|(n, o)| n / o).collect();
             rz = rz_new;
             d.par_chunks_mut(k).zip(z.par_chunks(k)).for_each(|(d, z)| {
@@ -553,7 +654,8 @@ impl TwoLevel {
         }
         // The residuals from the solutions, not the recurrence's.
         let xs = interleave(&x_done);
-        let ax = level.product(&xs, total);
+        let mut ax = vec![0.0; n * total];
+        level.product(&xs, total, &mut ax, &mut partials);
         let rb: Vec<f64> = b.par_iter().zip(&ax).map(|(b, a)| b - a).collect();
         let r_norm = column_norms(&rb, total);
         Ok(x_done
@@ -581,8 +683,10 @@ fn column_dots(u: &[f64], w: &[f64], k: usize) -> Vec<f64> {
         .zip(w.par_chunks(k * 1024))
         .map(|(u, w)| {
             let mut s = vec![0.0; k];
-            for (e, (a, b)) in u.iter().zip(w).enumerate() {
-                s[e % k] += a * b;
+            for (u, w) in u.chunks_exact(k).zip(w.chunks_exact(k)) {
+                s.iter_mut()
+                    .zip(u.iter().zip(w))
+                    .for_each(|(s, (a, b))| *s += a * b);
             }
             s
         })

@@ -19,6 +19,7 @@ use super::iterative::{Iterative, IterativeSolve, NodeFrame};
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::{MAX_FACTOR_BYTES, System};
 use crate::fem::cholesky::Ordering;
+use crate::fem::pmultigrid::TOLERANCE;
 use crate::vec3::{cross, dot};
 
 /// A node's boundary condition (displacements in mm, LPS).
@@ -416,10 +417,15 @@ impl Constrained {
     }
 
     /// K u = f in the local frames for each (loads, prescribed values) pair.
-    fn solve_frames(&self, rhs: &[Vec<f64>], prescribed: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+    fn solve_frames(
+        &self,
+        rhs: &[Vec<f64>],
+        prescribed: &[Vec<f64>],
+        tolerance: f64,
+    ) -> Result<Vec<Vec<f64>>> {
         match &self.solver {
             Solver::Direct(sys) => Ok(sys.solve(rhs, prescribed)),
-            Solver::Iterative(it) => it.solve_many(rhs, prescribed),
+            Solver::Iterative(it) => it.solve_many(rhs, prescribed, tolerance),
         }
     }
 
@@ -484,7 +490,7 @@ impl Constrained {
     /// model's factor as the preconditioner of a nonlinear tangent (`tet::newton_krylov`).
     /// (An iterative solve that fails gives non-finite values, which the caller refuses.)
     pub(crate) fn solve_local(&self, r: &[f64]) -> Vec<f64> {
-        self.solve_frames(&[r.to_vec()], &[vec![0.0; r.len()]])
+        self.solve_frames(&[r.to_vec()], &[vec![0.0; r.len()]], TOLERANCE)
             .map_or_else(|_| vec![f64::NAN; r.len()], |mut u| u.remove(0))
     }
 
@@ -492,6 +498,16 @@ impl Constrained {
     /// must constrain the same components along the same axes as at construction (their values
     /// may differ).
     pub fn solve(&self, cases: &[(&[Hold], &[f64])]) -> Result<Vec<Vec<[f64; 3]>>> {
+        self.solve_to(cases, TOLERANCE)
+    }
+
+    /// As [`Constrained::solve`], an iterative solve stopping at the relative residual
+    /// `tolerance` instead of [`TOLERANCE`] (a factor solves exactly either way).
+    pub(crate) fn solve_to(
+        &self,
+        cases: &[(&[Hold], &[f64])],
+        tolerance: f64,
+    ) -> Result<Vec<Vec<[f64; 3]>>> {
         let n = self.frames.len();
         let mut rhs = Vec::with_capacity(cases.len());
         let mut prescribed = Vec::with_capacity(cases.len());
@@ -519,7 +535,7 @@ impl Constrained {
             rhs.push(b);
             prescribed.push(p);
         }
-        let solved = self.solve_frames(&rhs, &prescribed)?;
+        let solved = self.solve_frames(&rhs, &prescribed, tolerance)?;
         solved
             .into_iter()
             .map(|u| {

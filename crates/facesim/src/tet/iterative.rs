@@ -132,17 +132,20 @@ impl Iterative {
         })
     }
 
-    /// Other holds on the same frames' axes (nodes freed, or held again): the preconditioner
-    /// made again, the operator kept.
+    /// Other holds on the same frames' axes (nodes freed, or held again): the operator kept,
+    /// the preconditioner's coarse level too while no DOF it was made on is held
+    /// (`TwoLevel::with_holds`).
     pub(crate) fn set_holds(&mut self, frames: &[NodeFrame]) -> Result<()> {
         let level = self.level.take().ok_or_else(|| {
             crate::error::Error::config("the iterative solve lost its preconditioner")
         })?;
-        let (t, free) = transfer(frames, self.corners, &self.edges);
-        let edges = &self.edges;
-        self.level = Some(level.with_holds(free, t, || {
-            edges.iter().map(|e| (e[1] as usize, e[0] as usize))
-        })?);
+        let free = frames.iter().flat_map(|f| f.free()).collect();
+        let (corners, edges) = (self.corners, &self.edges);
+        self.level = Some(level.with_holds(
+            free,
+            || transfer(frames, corners, edges).0,
+            || edges.iter().map(|e| (e[1] as usize, e[0] as usize)),
+        )?);
         Ok(())
     }
 
@@ -154,17 +157,19 @@ impl Iterative {
 
     /// K u = f in the local frames for each (loads, held values) pair: `rhs` the loads (read
     /// on the free DOFs), `prescribed` the held DOFs' values (zero on the free ones); u equals
-    /// the prescribed values on the held DOFs. The pairs are solved together
+    /// the prescribed values on the held DOFs; to a relative residual of `tolerance`. The pairs
+    /// are solved together
     /// (`TwoLevel::solve_many`: one pass over the operator per iteration for all of them).
     pub(crate) fn solve_many(
         &self,
         rhs: &[Vec<f64>],
         prescribed: &[Vec<f64>],
+        tolerance: f64,
     ) -> Result<Vec<Vec<f64>>> {
         if rhs.len() > BATCH {
             let mut out = Vec::with_capacity(rhs.len());
             for (f, p) in rhs.chunks(BATCH).zip(prescribed.chunks(BATCH)) {
-                out.extend(self.solve_many(f, p)?);
+                out.extend(self.solve_many(f, p, tolerance)?);
             }
             return Ok(out);
         }
@@ -188,7 +193,7 @@ impl Iterative {
             (1, Some(u)) if u.len() == prescribed[0].len() => Some(vec![u]),
             _ => None,
         };
-        let solved = level.solve_many(&bs, guess.as_deref())?;
+        let solved = level.solve_many(&bs, guess.as_deref(), tolerance)?;
         if let Ok(mut last) = self.last.lock() {
             // The batch's slowest solve.
             *last = solved

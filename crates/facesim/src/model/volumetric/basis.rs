@@ -20,6 +20,15 @@ pub(super) struct BasisInputs<'a> {
     pub(super) run_face_displacement: &'a [[f64; 3]],
 }
 
+/// The plan basis's iterative solves (the 10-node element's) stop at this relative residual,
+/// the run's own at `fem::pmultigrid::TOLERANCE` (1e-10): each decade costs some four
+/// iterations of the basis's twelve solves per segment. It keeps the basis's faces within 1e-6
+/// mm, the bound a basis that gives the run's own face back must meet (`run_plan_error_mm`
+/// below): on the real CT's 10-node basis that difference was 1.3e-9 mm at 1e-10 and 8.7e-8
+/// mm at 1e-8, each column within 6.3e-8 of its largest entry of the 1e-10 column. A factor
+/// solves exactly either way.
+const BASIS_TOLERANCE: f64 = 1e-8;
+
 /// 12 solves per segment on the run's factor (only the held values change: segment s's bone
 /// moved by E_k·[x; 1], the rest held still), each carried to the face like the run's own.
 pub(super) fn plan_basis(
@@ -42,7 +51,7 @@ pub(super) fn plan_basis(
         .iter()
         .map(|h| (h.as_slice(), zero.as_slice()))
         .collect();
-    let mut solved = b.factor.solve(&cases)?.into_iter();
+    let mut solved = b.factor.solve_to(&cases, BASIS_TOLERANCE)?.into_iter();
     let segments = case
         .osteotomy
         .iter()
