@@ -322,7 +322,6 @@ impl Affine {
     }
 }
 
-/// Σ_q θ_q A_q's values on a pattern of `len` entries.
 /// Rows 0..n of a product with the vectors `xs`, `row(r, xs, out)` adding row r's entries to
 /// `out` (one per vector); returned as one vector per x. Rows in parallel chunks.
 fn rows_times(
@@ -345,6 +344,7 @@ fn rows_times(
         .collect()
 }
 
+/// Σ_q θ_q A_q's values on a pattern of `len` entries.
 fn values_of(terms: &[Term], len: usize, theta: &[f64]) -> Vec<f64> {
     let mut out = vec![0.0; len];
     for (t, term) in theta.iter().zip(terms) {
