@@ -15,7 +15,7 @@ import { StaticCache, STATIC_LAYER } from "./frame_cache.js";
 import { placeLandmarks, regionStats } from "./landmarks.js";
 import { midsagittalCut, facialPart, pathData } from "./profile.js";
 import { STYLE } from "./style.js";
-import { materials, theta as thetaOf, outside, solveOnline, outputBound, dualAnswer, faceValueBound, unpackDual, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
+import { materials, theta as thetaOf, outside, solveOnline, outputBound, landmarkBound, unpackDual, reducedFace, rangeAt, rangeFraction, rangeWith } from "./tissue.js";
 
 // While a slider or the view is being dragged the scene is drawn at this pixel ratio (a quarter
 // of the pixels); DRAG_SETTLE_MS after the last move it is drawn once more at full resolution.
@@ -972,6 +972,8 @@ function main() {
       run,
       ref,
       refFace,
+      // Each landmark's bound at θ̄, the reference every tissue change is taken from.
+      refLandmarkBounds: t.landmarks.map((_, i) => landmarkBound(run, i, run.form.theta_bar, ref)),
       vertices: u32(t.vertices),
       work: new Float64Array(run.liftF.length),
       modelFor: (sliding) => models.find((m) => m.sliding === sliding) || (t.sliding_matters ? null : models[0]),
@@ -997,14 +999,7 @@ function main() {
     // shown − full = [reduced(θ) − full(θ)] − [reduced(θ̄) − full(θ̄)] at the run's plan.
     const refBound = tissue.ref.energyBound;
     const landmarkBounds = {};
-    // Per landmark, at θ and at θ̄: the bound on the face's value there (with a dual basis, the
-    // smaller of the Riesz route and the correction plus the primal–dual bound).
-    const landmarkAt = (m, i, th, ans) => {
-      const d = m.duals && m.duals[i];
-      const dual = d ? dualAnswer(d, th, ans) : null;
-      return faceValueBound(outputBound(m.output_bounds[i], ans), dual);
-    };
-    td.landmarks.forEach((label, i) => (landmarkBounds[label] = landmarkAt(model, i, th, o) + landmarkAt(tissue.run, i, tissue.run.form.theta_bar, tissue.ref)));
+    td.landmarks.forEach((label, i) => (landmarkBounds[label] = landmarkBound(model, i, th, o) + tissue.refLandmarkBounds[i]));
     return {
       materials: mats,
       theta: th,

@@ -108,20 +108,7 @@ export function solveOnline(form, th) {
   const w = new Float64Array(q * (n + 1));
   for (let k = 0; k < q; k++) w[k] = th[k];
   for (let i = 0; i < n; i++) for (let k = 0; k < q; k++) w[q + i * q + k] = -c[i] * th[k];
-  let rows = 0;
-  for (const col of form.riesz) rows = Math.max(rows, col.length);
-  const y = new Float64Array(rows);
-  let floor = 0;
-  for (let j = 0; j < w.length; j++) {
-    const col = form.riesz[j];
-    const wj = w[j];
-    for (let i = 0; i < col.length; i++) y[i] += wj * col[i];
-    floor += Math.abs(wj) * form.riesz_norms[j];
-  }
-  let yy = 0;
-  for (let i = 0; i < rows; i++) yy += y[i] * y[i];
-  const roundoff = form.unknowns * Number.EPSILON * floor;
-  const residual = Math.sqrt(yy) + roundoff;
+  const r = rieszCombination(form, w);
   let alpha = Infinity;
   let gamma = 0;
   for (let k = 0; k < q; k++) {
@@ -130,7 +117,28 @@ export function solveOnline(form, th) {
   }
   let cc = 0;
   for (let i = 0; i < n; i++) cc += c[i] * c[i];
-  return { coefficients: c, residual, alpha, gamma, energyBound: residual / alpha, energyNorm: Math.sqrt(cc), coordinates: y, floor: roundoff };
+  return { coefficients: c, residual: r.norm, alpha, gamma, energyBound: r.norm / alpha, energyNorm: Math.sqrt(cc), coordinates: r.coordinates, floor: r.floor };
+}
+
+/** Σ_j w_j ρ_j for Riesz representers kept as coordinates in an X-orthonormal basis
+ *  (`f.riesz`, ragged columns, with their norms `f.riesz_norms`): its coordinates, its norm
+ *  plus the round-off floor unknowns · ε · Σ_j |w_j| ‖ρ_j‖, and that floor. The primal's
+ *  residual (`solveOnline`) and a landmark's dual residual (`dualAnswer`) alike. */
+function rieszCombination(f, w) {
+  let rows = 0;
+  for (const col of f.riesz) rows = Math.max(rows, col.length);
+  const y = new Float64Array(rows);
+  let sum = 0;
+  for (let j = 0; j < w.length; j++) {
+    const col = f.riesz[j];
+    const wj = w[j];
+    for (let i = 0; i < col.length; i++) y[i] += wj * col[i];
+    sum += Math.abs(wj) * f.riesz_norms[j];
+  }
+  let yy = 0;
+  for (let i = 0; i < rows; i++) yy += y[i] * y[i];
+  const floor = f.unknowns * Number.EPSILON * sum;
+  return { coordinates: y, norm: Math.sqrt(yy) + floor, floor };
 }
 
 /** An output's certified bound (mm) for the answer `o` of `solveOnline`, as
@@ -215,26 +223,16 @@ export function dualAnswer(d, th, o) {
       wrAbs[i] += th[k] * (Math.abs(d.loads[k][i]) + mag);
     }
   }
-  let rows = 0;
-  for (const col of d.riesz) rows = Math.max(rows, col.length);
   const eps = (d.unknowns + m + n) * Number.EPSILON;
   const correction = [];
   const bound = [];
   for (let j = 0; j < comps; j++) {
     const phi = choleskySolve(a, m, d.outputs[j]);
     // X⁻¹ r_du = ρ(l_j) − Σ_{n,q} φ_n θ_q ρ(A_q w_n).
-    const y = new Float64Array(rows);
-    let floor = 0;
-    const add = (col, w) => {
-      const r = d.riesz[col];
-      for (let i = 0; i < r.length; i++) y[i] += w * r[i];
-      floor += Math.abs(w) * d.riesz_norms[col];
-    };
-    add(j, 1);
-    for (let i = 0; i < m; i++) for (let k = 0; k < q; k++) add(comps + i * q + k, -phi[i] * th[k]);
-    let yy = 0;
-    for (let i = 0; i < rows; i++) yy += y[i] * y[i];
-    const residual = Math.sqrt(yy) + d.unknowns * Number.EPSILON * floor;
+    const w = new Float64Array(comps + m * q);
+    w[j] = 1;
+    for (let i = 0; i < m; i++) for (let k = 0; k < q; k++) w[comps + i * q + k] = -phi[i] * th[k];
+    const residual = rieszCombination(d, w).norm;
     let corr = 0;
     let round = 0;
     for (let i = 0; i < m; i++) {
@@ -245,6 +243,14 @@ export function dualAnswer(d, th, o) {
     bound.push((o.residual * residual) / o.alpha + eps * round);
   }
   return { correction, bound };
+}
+
+/** Landmark `i`'s bound on the face's value (mm) by model `m` at θ `th` with its answer `o`
+ *  there: through the Riesz representer, or with the landmark's dual form the smaller of that
+ *  and `faceValueBound`'s. */
+export function landmarkBound(m, i, th, o) {
+  const d = m.duals && m.duals[i];
+  return faceValueBound(outputBound(m.output_bounds[i], o), d ? dualAnswer(d, th, o) : null);
 }
 
 /** The bound on a landmark's displacement as the face shows it (mm): `plain`, its bound through
