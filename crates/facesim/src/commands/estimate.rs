@@ -41,9 +41,16 @@ pub struct System {
     pub nodes: usize,
     pub elements: usize,
     pub unknowns: usize,
+    /// `direct`, or `pcg-pmultigrid` for a 10-node system whose factor would exceed 2 GB (as
+    /// report.json `tet.solver`).
+    pub solver: String,
+    /// The factor's nonzeros: the run's, or with `pcg-pmultigrid` its coarse level's.
     pub factor_nonzeros: usize,
     /// Floating-point operations of one numeric factorisation (10⁹).
     pub factor_gflop: f64,
+    /// With `pcg-pmultigrid`: the 10-node operator's 3 × 3 blocks (lower triangle).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub operator_blocks: Option<usize>,
 }
 
 /// The fitted memory model, times [`MEMORY_MARGIN`]: a fixed part (the program, the landmarks, the
@@ -55,6 +62,18 @@ pub struct System {
 const BASE_MB: f64 = 239.0;
 const BYTES_PER_VOXEL: f64 = 8.0;
 const BYTES_PER_FACTOR_NONZERO: f64 = 9.28;
+/// A 10-node system solved iteratively (`pcg-pmultigrid`): its memory is the operator, not a
+/// factor. Per 3 × 3 lower block: the assembled stiffness's nine (at the diagonal six) triplets
+/// of 24 bytes, the block in f64 and its index (80), its f32 copy for the cycle (36) and the
+/// conjugate-gradient batches' vectors (about 70 per block at 13 blocks a node): 400 bytes;
+/// the coarse level's factor as a direct factor. Against the two runs measured (jaws and the
+/// real CT at the default size, peak resident 2.92 and 2.20 GB) the fit without the margin
+/// gives 1.05 and 0.99 of them.
+const BYTES_PER_OPERATOR_BLOCK: f64 = 400.0;
+/// Its wall time per 3 × 3 block: the conjugate-gradient products and the cycle over the run's
+/// solves and the plan basis's; measured 16.0 µs (jaws, 4.94 M blocks, 79 s) and 13.2 µs (real
+/// CT, 3.80 M blocks, 50 s) on the 2-core machine of docs/guide/cohort.md: the larger.
+const SECONDS_PER_OPERATOR_BLOCK: f64 = 16.0e-6;
 /// The C1 models: their factor is the face's (tens of MB), their peak 100–330 MB on every
 /// sample and phantom measured (docs/guide/cohort.md): the largest per model, with no size term.
 const EQUILIBRIUM_MB: f64 = 290.0;
@@ -98,12 +117,35 @@ pub fn estimate(case_path: &Path, overrides: &toml::Table, obs: &dyn Observer) -
             nodes: s.nodes,
             elements: s.elements,
             unknowns: s.unknowns,
+            solver: if s.iterative_blocks.is_some() {
+                "pcg-pmultigrid"
+            } else {
+                "direct"
+            }
+            .into(),
             factor_nonzeros: s.factor_nonzeros,
             factor_gflop: s.factor_flops / 1e9,
+            operator_blocks: s.iterative_blocks,
         })
     };
     let vox = ct_voxels as f64;
     let (mem_mb, wall_s) = match &system {
+        Some(sys) if sys.operator_blocks.is_some() => {
+            // The 10-node system solved iteratively. `[uncertainty] samples` re-solve it one at
+            // a time beside the run (`Volumetric::solves_at_once`). Not measured: a bound that
+            // counts each sample as a second operator in memory and a whole run in time.
+            let blocks = sys.operator_blocks.unwrap_or(0) as f64;
+            let samples = case.uncertainty.samples as f64;
+            let operators = if samples > 0.0 { 2.0 } else { 1.0 };
+            let run_s = blocks * SECONDS_PER_OPERATOR_BLOCK;
+            (
+                BASE_MB
+                    + vox * BYTES_PER_VOXEL / 1e6
+                    + sys.factor_nonzeros as f64 * BYTES_PER_FACTOR_NONZERO / 1e6
+                    + operators * blocks * BYTES_PER_OPERATOR_BLOCK / 1e6,
+                SECONDS_BASE + (1.0 + samples) * run_s,
+            )
+        }
         Some(sys) => {
             // `[uncertainty] samples` re-solve the model, several factors side by side (as many
             // as `fem::cholesky::factorisations_at_once`), each beside the run's own. Not

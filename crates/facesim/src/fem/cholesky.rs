@@ -505,20 +505,32 @@ pub(crate) fn pattern_of_elements<'e>(
     Pattern::analyse_with(lower.as_ref(), ordering, &dofs)
 }
 
-/// The nonzeros of [`pattern_of_elements`]'s factor in nested dissection, estimated from the
-/// node graph alone (one unknown per solved node): the DOF ordering keeps a node's three DOFs
-/// together (METIS orders the graph of nodes either way), so each nonzero of the node factor
-/// stands for a 3 × 3 block. Its pattern has a ninth of the DOF pattern's entries, so the
-/// 10-node model decides whether its factor fits without allocating the DOF-level analysis
-/// (on the jaws sample that analysis set the run's peak: 4.5 GB against 2.9 GB without it).
-/// Nodes with a held component count whole, so the estimate errs high by their share.
-pub(crate) fn block_factor_nnz_estimate<'e>(
+/// [`pattern_of_elements`]'s system seen from its node graph (one unknown per solved node).
+pub(crate) struct NodeGraphSize {
+    /// The nonzeros of the DOF factor in nested dissection, estimated: the DOF ordering keeps a
+    /// node's three DOFs together (METIS orders the graph of nodes either way), so each nonzero
+    /// of the node factor stands for a 3 × 3 block. Nodes with a held component count whole, so
+    /// the estimate errs high by their share.
+    pub(crate) factor_nnz: usize,
+    /// The 3 × 3 blocks of the stiffness's lower triangle (node pairs sharing an element, each
+    /// node with itself): what the iterative solve stores.
+    pub(crate) lower_blocks: usize,
+}
+
+/// [`NodeGraphSize`] of a stiffness on `elements` restricted to the nodes `solved`. Its pattern
+/// has a ninth of the DOF pattern's entries, so the 10-node model decides whether its factor
+/// fits without allocating the DOF-level analysis (on the jaws sample that analysis set the
+/// run's peak: 4.5 GB against 2.9 GB without it).
+pub(crate) fn node_graph_size<'e>(
     solved: &[bool],
     elements: impl Iterator<Item = &'e [u32]> + Clone,
-) -> Result<usize, FaerError> {
+) -> Result<NodeGraphSize, FaerError> {
     let (lower, _) = lower_pattern_of_elements(solved, elements, 1);
     let nodes = Pattern::analyse_with(lower.as_ref(), Ordering::NestedDissection, &[])?;
-    Ok(9 * nodes.factor_nnz())
+    Ok(NodeGraphSize {
+        factor_nnz: 9 * nodes.factor_nnz(),
+        lower_blocks: lower.compute_nnz(),
+    })
 }
 
 /// The lower pattern of a matrix with `components` unknowns per node on `elements`, restricted
@@ -773,7 +785,7 @@ mod tests {
         let exact = pattern_of_elements(&solved, elements(), Ordering::NestedDissection)
             .unwrap()
             .factor_nnz() as f64;
-        let estimate = block_factor_nnz_estimate(&solved, elements()).unwrap() as f64;
+        let estimate = node_graph_size(&solved, elements()).unwrap().factor_nnz as f64;
         assert!(
             estimate >= exact && estimate <= 1.1 * exact,
             "estimate {estimate} against the DOF-level analysis's {exact}"

@@ -19,7 +19,7 @@ use super::iterative::{Iterative, IterativeSolve, NodeFrame};
 use super::quadratic::Tet10Mesh;
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::{MAX_FACTOR_BYTES, System};
-use crate::fem::cholesky::{Ordering, block_factor_nnz_estimate};
+use crate::fem::cholesky::{Ordering, node_graph_size};
 use crate::fem::pmultigrid::TOLERANCE;
 use crate::vec3::{cross, dot};
 
@@ -352,7 +352,7 @@ impl Constrained {
     /// as [`Constrained::ordered`] where the factor takes at most [`QUADRATIC_DIRECT_BYTES`],
     /// else solved by conjugate gradients with the p-multigrid preconditioner
     /// ([`Constrained::iterative`]). The node graph's estimate of the factor decides first
-    /// (`block_factor_nnz_estimate`, within 1 % of the DOF-level analysis and never under it on
+    /// (`fem::cholesky::node_graph_size`, within 1 % of the DOF-level analysis and never under it on
     /// a block of 10-node elements); only a factor it finds within the limit is analysed at the
     /// DOF level, whose pattern would otherwise set the run's peak memory.
     pub(crate) fn quadratic(
@@ -362,10 +362,11 @@ impl Constrained {
         ordering: Ordering<'_>,
     ) -> Result<Constrained> {
         let solved: Vec<bool> = holds.iter().map(|h| !matches!(h, Hold::Fixed(_))).collect();
-        let estimate = block_factor_nnz_estimate(&solved, mesh.tets.iter().map(|t| &t[..]))
+        let estimate = node_graph_size(&solved, mesh.tets.iter().map(|t| &t[..]))
             .map_err(|e| {
                 Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
-            })?;
+            })?
+            .factor_nnz;
         let (corners, edges) = (mesh.corners, &mesh.edges);
         if estimate.saturating_mul(std::mem::size_of::<f64>()) > QUADRATIC_DIRECT_BYTES {
             return Self::iterative(k, holds, corners, edges);

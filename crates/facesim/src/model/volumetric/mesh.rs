@@ -176,8 +176,12 @@ pub(crate) struct SystemSize {
     pub(crate) nodes: usize,
     pub(crate) elements: usize,
     pub(crate) unknowns: usize,
+    /// The factor's nonzeros and operations: the run's factor, or with the 10-node element
+    /// solved iteratively its coarse level's (the 4-node mesh's).
     pub(crate) factor_nonzeros: usize,
     pub(crate) factor_flops: f64,
+    /// The 10-node system solved iteratively: its operator's 3 × 3 lower blocks.
+    pub(crate) iterative_blocks: Option<usize>,
 }
 
 /// [`SystemSize`] of `case` on `scene`; None when the plan moves no bone.
@@ -199,42 +203,67 @@ pub(crate) fn system_size(scene: &Scene, case: &Case) -> Result<Option<SystemSiz
             format!("symbolic Cholesky: {e:?}"),
         )
     };
-    let (nodes, elements, pattern) = if t.element == TetElement::Quadratic {
-        let linear = TetMesh {
-            nodes: mesh.nodes.clone(),
-            tets: mesh.tets.clone(),
-            material: materials(&mesh.tissue, t),
-        };
-        let q = Tet10Mesh::from_linear(&linear, Rule::Full);
-        // A midpoint is solved when either end is.
-        let mut solved = corner_solved.clone();
-        solved.extend(
-            q.edges
-                .iter()
-                .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
-        );
-        let pattern = crate::fem::cholesky::pattern_of_elements(
-            &solved,
-            q.tets.iter().map(|t| &t[..]),
-            Ordering::NestedDissection,
-        )
-        .map_err(failed)?;
-        (q.nodes.len(), q.tets.len(), pattern)
-    } else {
+    // The 4-node mesh's factor: the run's own with the linear element, the coarse level's
+    // with the 10-node element solved iteratively.
+    let linear_pattern = || {
         let order = NodeOrder::of_tets(&corner_solved, &mesh.tets).map(MeshAnalyses::new);
-        let pattern = crate::fem::cholesky::pattern_of_elements(
+        crate::fem::cholesky::pattern_of_elements(
             &corner_solved,
             mesh.tets.iter().map(|t| &t[..]),
             ordering(&order),
         )
-        .map_err(failed)?;
-        (mesh.nodes.len(), mesh.tets.len(), pattern)
+        .map_err(failed)
     };
+    if t.element != TetElement::Quadratic {
+        let pattern = linear_pattern()?;
+        return Ok(Some(SystemSize {
+            nodes: mesh.nodes.len(),
+            elements: mesh.tets.len(),
+            unknowns: pattern.columns(),
+            factor_nonzeros: pattern.factor_nnz(),
+            factor_flops: pattern.factor_flops(),
+            iterative_blocks: None,
+        }));
+    }
+    let linear = TetMesh {
+        nodes: mesh.nodes.clone(),
+        tets: mesh.tets.clone(),
+        material: materials(&mesh.tissue, t),
+    };
+    let q = Tet10Mesh::from_linear(&linear, Rule::Full);
+    // A midpoint is solved when either end is.
+    let mut solved = corner_solved.clone();
+    solved.extend(
+        q.edges
+            .iter()
+            .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
+    );
+    let elements = || q.tets.iter().map(|t| &t[..]);
+    // As the run decides (`tet::Constrained::quadratic`): the node graph first.
+    let graph = crate::fem::cholesky::node_graph_size(&solved, elements()).map_err(failed)?;
+    let unknowns = 3 * solved.iter().filter(|s| **s).count();
+    if graph.factor_nnz.saturating_mul(std::mem::size_of::<f64>())
+        > crate::tet::holds::QUADRATIC_DIRECT_BYTES
+    {
+        let coarse = linear_pattern()?;
+        return Ok(Some(SystemSize {
+            nodes: q.nodes.len(),
+            elements: q.tets.len(),
+            unknowns,
+            factor_nonzeros: coarse.factor_nnz(),
+            factor_flops: coarse.factor_flops(),
+            iterative_blocks: Some(graph.lower_blocks),
+        }));
+    }
+    let pattern =
+        crate::fem::cholesky::pattern_of_elements(&solved, elements(), Ordering::NestedDissection)
+            .map_err(failed)?;
     Ok(Some(SystemSize {
-        nodes,
-        elements,
+        nodes: q.nodes.len(),
+        elements: q.tets.len(),
         unknowns: pattern.columns(),
         factor_nonzeros: pattern.factor_nnz(),
         factor_flops: pattern.factor_flops(),
+        iterative_blocks: None,
     }))
 }
