@@ -395,22 +395,9 @@ impl OnlineForm {
         })
     }
 
-    /// The coordinates of Σ_j w_j ρ_j and their round-off in the X-norm: the coordinates carry
-    /// ε ‖ρ_j‖ per unknown summed (Higham 2002 §3.1, γ_n), so the floor is n ε Σ |w_j| ‖ρ_j‖_X.
+    /// The coordinates of Σ_j w_j ρ_j and their round-off ([`riesz_combination`]).
     fn residual_coordinates(&self, w: &[f64]) -> (Vec<f64>, f64) {
-        let rows = self.riesz.iter().map(Vec::len).max().unwrap_or(0);
-        let mut y = vec![0.0; rows];
-        for (wj, col) in w.iter().zip(&self.riesz) {
-            for (a, b) in y.iter_mut().zip(col) {
-                *a += wj * b;
-            }
-        }
-        let floor: f64 = w
-            .iter()
-            .zip(&self.riesz_norms)
-            .map(|(a, b)| a.abs() * b)
-            .sum();
-        (y, self.unknowns as f64 * f64::EPSILON * floor)
+        riesz_combination(&self.riesz, &self.riesz_norms, self.unknowns, w)
     }
 
     /// Whether the arrays have the sizes N and Q imply (a stored model is checked on read).
@@ -747,6 +734,32 @@ pub(super) fn solve_factorised(sys: &Affine, theta: &[f64], b: &[f64]) -> Result
 
 pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The coordinates of Σ_j w_j ρ_j, a residual's Riesz representer from the Riesz columns ρ_j
+/// (`riesz`, of norms `norms` in the X-norm), and their round-off in the X-norm: the
+/// coordinates carry ε ‖ρ_j‖ per unknown summed (Higham 2002 §3.1, γ_n), so the floor is
+/// n ε Σ |w_j| ‖ρ_j‖_X with n the full model's `unknowns`. Columns of weight 0 are skipped
+/// (a landmark's dual residual weighs one output column of several).
+pub(super) fn riesz_combination(
+    riesz: &[Vec<f64>],
+    norms: &[f64],
+    unknowns: usize,
+    w: &[f64],
+) -> (Vec<f64>, f64) {
+    let rows = riesz.iter().map(Vec::len).max().unwrap_or(0);
+    let mut y = vec![0.0; rows];
+    let mut floor = 0.0;
+    for ((wj, col), norm) in w.iter().zip(riesz).zip(norms) {
+        if *wj == 0.0 {
+            continue;
+        }
+        for (a, b) in y.iter_mut().zip(col) {
+            *a += wj * b;
+        }
+        floor += wj.abs() * norm;
+    }
+    (y, unknowns as f64 * f64::EPSILON * floor)
 }
 
 #[cfg(test)]

@@ -18,7 +18,8 @@
 
 use super::affine::{Affine, solve_columns};
 use super::basis::{
-    Basis, Online, Problem, RieszSpace, conjugate_gradients, dot, solve_factorised,
+    Basis, Online, Problem, RieszSpace, conjugate_gradients, dot, riesz_combination,
+    solve_factorised,
 };
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::cholesky::Cholesky;
@@ -140,25 +141,18 @@ impl DualForm {
         let cc = self.components();
         let mut phi = Vec::with_capacity(cc);
         let mut residuals = Vec::with_capacity(cc);
-        let rows = self.riesz.iter().map(Vec::len).max().unwrap_or(0);
         for j in 0..cc {
             let p = chol.solve(&DVector::from_column_slice(&self.outputs[j]));
             // X⁻¹ r_du = ρ(l_j) − Σ_{n,q} φ_n θ_q ρ(A_q w_n).
-            let mut y = vec![0.0; rows];
-            let mut floor = 0.0;
-            let mut add = |col: usize, w: f64| {
-                for (a, b) in y.iter_mut().zip(&self.riesz[col]) {
-                    *a += w * b;
-                }
-                floor += w.abs() * self.riesz_norms[col];
-            };
-            add(j, 1.0);
+            let mut w = vec![0.0; self.riesz.len()];
+            w[j] = 1.0;
             for (nn, pn) in p.iter().enumerate() {
                 for (k, t) in theta.iter().enumerate() {
-                    add(cc + nn * q + k, -pn * t);
+                    w[cc + nn * q + k] = -pn * t;
                 }
             }
-            residuals.push(dot(&y, &y).sqrt() + self.unknowns as f64 * f64::EPSILON * floor);
+            let (y, floor) = riesz_combination(&self.riesz, &self.riesz_norms, self.unknowns, &w);
+            residuals.push(dot(&y, &y).sqrt() + floor);
             phi.push(p);
         }
         Ok(DualSolution { phi, residuals })
