@@ -775,12 +775,7 @@ mod tests {
         );
         // The corners of the bottom layer held; a midpoint is solved when either end is.
         let corner_solved: Vec<bool> = (0..q.corners).map(|n| n / (m * m) != 0).collect();
-        let mut solved = corner_solved.clone();
-        solved.extend(
-            q.edges
-                .iter()
-                .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
-        );
+        let solved = q.solved_nodes(&corner_solved);
         let elements = || q.tets.iter().map(|t| &t[..]);
         let exact = pattern_of_elements(&solved, elements(), Ordering::NestedDissection)
             .unwrap()

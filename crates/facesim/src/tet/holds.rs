@@ -16,7 +16,6 @@
 //! solves any number of hold values and loads (the plan basis: 12 right-hand sides per segment).
 
 use super::iterative::{Iterative, IterativeSolve, NodeFrame};
-use super::quadratic::Tet10Mesh;
 use crate::error::{Error, NumericalKind, Result};
 use crate::fem::assembly::{MAX_FACTOR_BYTES, System};
 use crate::fem::cholesky::{Ordering, node_graph_size};
@@ -348,7 +347,8 @@ impl Constrained {
         })
     }
 
-    /// A 10-node model's system (`mesh`'s nodes: the corners, then the edge midpoints): factored
+    /// A 10-node model's system (nodes: the `corners`, then the midpoint of `edges[e]` at node
+    /// `corners + e`; `tets` its elements, corners then midpoints): factored
     /// as [`Constrained::ordered`] where the factor takes at most [`QUADRATIC_DIRECT_BYTES`],
     /// else solved by conjugate gradients with the p-multigrid preconditioner
     /// ([`Constrained::iterative`]). The node graph's estimate of the factor decides first
@@ -358,16 +358,15 @@ impl Constrained {
     pub(crate) fn quadratic(
         k: &[(usize, usize, f64)],
         holds: &[Hold],
-        mesh: &Tet10Mesh,
+        (corners, edges, tets): (usize, &[[u32; 2]], &[[u32; 10]]),
         ordering: Ordering<'_>,
     ) -> Result<Constrained> {
         let solved: Vec<bool> = holds.iter().map(|h| !matches!(h, Hold::Fixed(_))).collect();
-        let estimate = node_graph_size(&solved, mesh.tets.iter().map(|t| &t[..]))
+        let estimate = node_graph_size(&solved, tets.iter().map(|t| &t[..]))
             .map_err(|e| {
                 Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
             })?
             .factor_nnz;
-        let (corners, edges) = (mesh.corners, &mesh.edges);
         if estimate.saturating_mul(std::mem::size_of::<f64>()) > QUADRATIC_DIRECT_BYTES {
             return Self::iterative(k, holds, corners, edges);
         }

@@ -99,6 +99,17 @@ pub(crate) fn element_stiffness(
 }
 
 impl Tet10Mesh {
+    /// Which nodes are solved, from which corners are: a midpoint is when either end is.
+    pub(crate) fn solved_nodes(&self, corner_solved: &[bool]) -> Vec<bool> {
+        let mut solved = corner_solved.to_vec();
+        solved.extend(
+            self.edges
+                .iter()
+                .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
+        );
+        solved
+    }
+
     /// Adds a midpoint node on every edge of `m`; corner nodes keep their indices.
     pub fn from_linear(m: &TetMesh, rule: Rule) -> Tet10Mesh {
         let corners = m.nodes.len();

@@ -231,13 +231,7 @@ pub(crate) fn system_size(scene: &Scene, case: &Case) -> Result<Option<SystemSiz
         material: materials(&mesh.tissue, t),
     };
     let q = Tet10Mesh::from_linear(&linear, Rule::Full);
-    // A midpoint is solved when either end is.
-    let mut solved = corner_solved.clone();
-    solved.extend(
-        q.edges
-            .iter()
-            .map(|[a, b]| corner_solved[*a as usize] || corner_solved[*b as usize]),
-    );
+    let solved = q.solved_nodes(&corner_solved);
     let elements = || q.tets.iter().map(|t| &t[..]);
     // As the run decides (`tet::Constrained::quadratic`): the node graph first.
     let graph = crate::fem::cholesky::node_graph_size(&solved, elements()).map_err(failed)?;

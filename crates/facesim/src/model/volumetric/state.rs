@@ -31,7 +31,7 @@ pub(super) fn constrain(
     ordering: Ordering<'_>,
 ) -> Result<Constrained> {
     match quadratic {
-        Some(q) => Constrained::quadratic(k, hold, q, ordering),
+        Some(q) => Constrained::quadratic(k, hold, (q.corners, &q.edges, &q.tets), ordering),
         None => Constrained::ordered(k, hold, hold.len(), ordering),
     }
 }
