@@ -352,8 +352,8 @@ impl Constrained {
     /// as [`Constrained::ordered`] where the factor takes at most [`QUADRATIC_DIRECT_BYTES`],
     /// else solved by conjugate gradients with the p-multigrid preconditioner
     /// ([`Constrained::iterative`]). The node graph's estimate of the factor decides first
-    /// (`fem::cholesky::node_graph_size`, within 1 % of the DOF-level analysis and never under it on
-    /// a block of 10-node elements); only a factor it finds within the limit is analysed at the
+    /// (`fem::cholesky::node_graph_size`: on its unit test's block of 10-node elements 0.5 % over
+    /// the DOF-level analysis); only a factor it finds within the limit is analysed at the
     /// DOF level, whose pattern would otherwise set the run's peak memory.
     pub(crate) fn quadratic(
         k: &[(usize, usize, f64)],
