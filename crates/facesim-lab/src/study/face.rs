@@ -187,9 +187,12 @@ fn tet_ladder(quick: bool, case: &Case) -> Vec<(f64, TetMaterial, TetElement)> {
 
 /// The full study's reference (converged in size and element order) is the
 /// 10-node model at the finest of these sizes whose 4-node mesh has at most [`REFERENCE_TETS`]
-/// tetrahedra. Measured on the study's 24 GB machine: the real CT at 4 mm (212 856 tetrahedra)
-/// takes 9.8 GB; the phantom at 6 mm (123 533) 7.4 GB and 41 s, at 5 mm (213 403) more than
-/// 17 GB, so 5 mm is not a candidate. The quick study's reference is its first row.
+/// tetrahedra. Chosen when the 10-node model was factored directly (the real CT at 4 mm,
+/// 212 856 tetrahedra: 9.8 GB; the phantom at 5 mm, 213 403: more than 17 GB). Solved
+/// iteratively, the finer meshes now fit (the real CT at 3 mm 4.9 GB and 236 s, the phantom at
+/// 4 mm 3.6 GB and 170 s: docs/lab/study.md "A finer reference, now affordable"); the ladder
+/// stays until their inverted elements (11 and 4) are looked at. The quick study's reference is
+/// its first row.
 const REFERENCE_SIZES: [f64; 2] = [4.0, 6.0];
 const REFERENCE_TETS: usize = 250_000;
 
