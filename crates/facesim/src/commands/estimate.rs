@@ -130,11 +130,16 @@ pub fn estimate(case_path: &Path, overrides: &toml::Table, obs: &dyn Observer) -
     };
     let vox = ct_voxels as f64;
     let (mem_mb, wall_s) = match &system {
-        Some(sys) if sys.operator_blocks.is_some() => {
+        Some(
+            sys @ System {
+                operator_blocks: Some(blocks),
+                ..
+            },
+        ) => {
             // The 10-node system solved iteratively. `[uncertainty] samples` re-solve it one at
             // a time beside the run (`Volumetric::solves_at_once`). Not measured: a bound that
             // counts each sample as a second operator in memory and a whole run in time.
-            let blocks = sys.operator_blocks.unwrap_or(0) as f64;
+            let blocks = *blocks as f64;
             let samples = case.uncertainty.samples as f64;
             let operators = if samples > 0.0 { 2.0 } else { 1.0 };
             let run_s = blocks * SECONDS_PER_OPERATOR_BLOCK;

@@ -267,6 +267,12 @@ pub fn frames(holds: &[Hold], nodes: usize) -> Result<Vec<Frame>> {
 /// solve").
 pub const QUADRATIC_DIRECT_BYTES: usize = 2 << 30;
 
+/// Whether a 10-node factor of `factor_nnz` nonzeros is made directly (at most
+/// [`QUADRATIC_DIRECT_BYTES`]); the run and `facesim estimate` decide by it.
+pub(crate) fn quadratic_factor_fits(factor_nnz: usize) -> bool {
+    factor_nnz.saturating_mul(std::mem::size_of::<f64>()) <= QUADRATIC_DIRECT_BYTES
+}
+
 /// A stiffness matrix with its holds, factored once in the nodes' local frames (or, for a
 /// 10-node model whose factor would not fit, solved by preconditioned conjugate gradients:
 /// [`Constrained::quadratic`]).
@@ -367,7 +373,7 @@ impl Constrained {
                 Error::numerical(NumericalKind::Singular, format!("symbolic Cholesky: {e:?}"))
             })?
             .factor_nnz;
-        if estimate.saturating_mul(std::mem::size_of::<f64>()) > QUADRATIC_DIRECT_BYTES {
+        if !quadratic_factor_fits(estimate) {
             return Self::iterative(k, holds, corners, edges);
         }
         match Self::factored_within(k, holds, holds.len(), ordering, QUADRATIC_DIRECT_BYTES) {

@@ -236,9 +236,7 @@ pub(crate) fn system_size(scene: &Scene, case: &Case) -> Result<Option<SystemSiz
     // As the run decides (`tet::Constrained::quadratic`): the node graph first.
     let graph = crate::fem::cholesky::node_graph_size(&solved, elements()).map_err(failed)?;
     let unknowns = 3 * solved.iter().filter(|s| **s).count();
-    if graph.factor_nnz.saturating_mul(std::mem::size_of::<f64>())
-        > crate::tet::holds::QUADRATIC_DIRECT_BYTES
-    {
+    if !crate::tet::holds::quadratic_factor_fits(graph.factor_nnz) {
         let coarse = linear_pattern()?;
         return Ok(Some(SystemSize {
             nodes: q.nodes.len(),
