@@ -312,6 +312,17 @@ impl<T: ComplexField + Copy> Cholesky<T> {
     }
 }
 
+impl Cholesky<f64> {
+    /// The factor with its entries rounded to f32: a preconditioner's coarse solve, which reads
+    /// half the bytes (fem/pmultigrid.rs).
+    pub(crate) fn to_f32(&self) -> Cholesky<f32> {
+        Cholesky {
+            pattern: self.pattern.clone(),
+            values: self.values.iter().map(|v| *v as f32).collect(),
+        }
+    }
+}
+
 /// The factor's two triangular sweeps taken apart, A = Pᵀ L Lᵀ P: the forward sweep's
 /// result L⁻¹ P b lives in the factor's own row order (its "positions"). A bordered system
 /// needs them apart: its Schur complement is C − Gᵀ G with G = L⁻¹ P B, and a solve runs the

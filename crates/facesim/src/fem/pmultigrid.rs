@@ -7,8 +7,8 @@
 //! midpoint the mean of its two corners (a linear field is its own quadratic interpolant), in
 //! each node's own frame with its held components dropped (the caller's [`Transfer`]). The
 //! coarse operator is the Galerkin product A_c = Pᵀ A P, on the linear stiffness's pattern,
-//! factored once with the sparse Cholesky (fem/cholesky.rs): it is a tenth of the fine problem
-//! on the real CT. The fine level is smoothed by Chebyshev polynomials in the 3×3 node-block
+//! factored once with the sparse Cholesky (fem/cholesky.rs) and kept in f32 (`CoarseFactor`):
+//! it is a tenth of the fine problem on the real CT. The fine level is smoothed by Chebyshev polynomials in the 3×3 node-block
 //! Jacobi preconditioned operator D⁻¹A.
 //!
 //! One cycle, from a residual r (symmetric, so an admissible CG preconditioner; Tatebe 1993,
@@ -19,13 +19,14 @@
 //! Rønquist & Patera 1987, Helenbrook, Mavriplis & Atkins 2003) bounds the iterations
 //! independently of the mesh size.
 //!
-//! Smoother: Chebyshev of degree 2 over [λ_max/30, 1.1 λ_max] of D⁻¹A (Adams, Brezina, Hu &
+//! Smoother: Chebyshev of degree 4 over [λ_max/30, 1.1 λ_max] of D⁻¹A (Adams, Brezina, Hu &
 //! Tuminaro 2003, "Parallel multigrid smoothing: polynomial versus Gauss–Seidel"): symmetric by
 //! construction, built from products alone (no sweep order, so it runs on every core, where a
 //! symmetric Gauss–Seidel sweep is sequential and needs the matrix by rows and by columns,
-//! which the lower block triangle stored here gives only by columns). Degree and interval are
-//! Adams et al.'s usual ones, not tuned here; measured with them: 36 iterations to 1e-10 on
-//! the 10-node real CT (docs/design/pipeline.md "The 10-node solve").
+//! which the lower block triangle stored here gives only by columns). The interval is Adams et
+//! al.'s usual one. The degree is chosen by time to solution: on the 10-node real CT, degrees
+//! 2, 3 and 4 take 36, 27 and 22 iterations to 1e-10, and degree 4 the least time, as on the
+//! jaws sample, where 3 and 4 tie (docs/lab/performance.md "The coarse solve in f32").
 //!
 //! Held DOFs: the operator is given on every DOF, and `free` marks the unknowns; the iterates
 //! are zero on the others and products are taken with them zeroed, so A below is the free–free
@@ -35,7 +36,7 @@ use super::assembly::System;
 use super::block_sparse::{
     Block, Partials, SymmetricBlocks, column, congruence, interleave, times, transposed,
 };
-use super::cholesky::Ordering;
+use super::cholesky::{Cholesky, Ordering};
 use crate::error::{Error, NumericalKind, Result};
 use rayon::prelude::*;
 
@@ -46,7 +47,7 @@ pub(crate) const TOLERANCE: f64 = 1e-10;
 /// Iterations before the solve is refused as not converging (the real CT takes tens).
 pub(crate) const MAX_ITERATIONS: usize = 2000;
 /// The Chebyshev smoother's degree and the lower end of its interval (a fraction of λ_max).
-const DEGREE: usize = 2;
+const DEGREE: usize = 4;
 const SMOOTHED_FRACTION: f64 = 1.0 / 30.0;
 /// Power iterations for λ_max(D⁻¹A) and the safety factor on the estimate (from below).
 const POWER_ITERATIONS: usize = 20;
@@ -350,6 +351,68 @@ fn norm(v: &[f64]) -> f64 {
     v.par_iter().map(|x| x * x).sum::<f64>().sqrt()
 }
 
+/// The coarse level's factor, its entries rounded to f32, and its unknowns. The factor is made
+/// in f64 and rounded once: L₃₂ L₃₂ᵀ is still symmetric positive definite, so the cycle stays
+/// an admissible preconditioner, and the rounding (relative 6e-8) is far below the two-level
+/// cycle's own error: the iterations to 1e-10 were the same to the one on the real CT's and
+/// the jaws' 10-node runs (docs/lab/performance.md "The coarse solve in f32"). The sweeps read
+/// half the bytes, and the factor kept is half the size.
+struct CoarseFactor {
+    /// The coarse DOFs that are unknowns, in the factor's column order.
+    free: Vec<usize>,
+    llt: Cholesky<f32>,
+    nnz: usize,
+}
+
+impl CoarseFactor {
+    fn new(system: System) -> CoarseFactor {
+        let nnz = system.factor_nnz().unwrap_or(0);
+        let (free, llt) = system.into_factor();
+        CoarseFactor {
+            free,
+            llt: llt.to_f32(),
+            nnz,
+        }
+    }
+
+    /// A_c⁻¹ R for k vectors interleaved over every coarse DOF (zero on the held ones). The
+    /// columns are split between two threads: a triangular sweep runs on one core, and the
+    /// cycle has nothing else to do meanwhile.
+    fn solve(&self, r: &[f64], k: usize) -> Vec<f64> {
+        let half = k / 2;
+        let (a, b) = rayon::join(
+            || self.solve_columns(r, k, 0..half),
+            || self.solve_columns(r, k, half..k),
+        );
+        let mut x = vec![0.0; r.len()];
+        for (part, cols) in [(a, 0..half), (b, half..k)] {
+            let m = cols.len();
+            for (i, &g) in self.free.iter().enumerate() {
+                x[g * k + cols.start..g * k + cols.end].copy_from_slice(&part[i * m..(i + 1) * m]);
+            }
+        }
+        x
+    }
+
+    /// The solves of the vectors `cols` of k interleaved ones, interleaved over the unknowns.
+    fn solve_columns(&self, r: &[f64], k: usize, cols: std::ops::Range<usize>) -> Vec<f64> {
+        let (nf, m) = (self.free.len(), cols.len());
+        if m == 0 {
+            return Vec::new();
+        }
+        let mut b =
+            faer::Mat::<f32>::from_fn(nf, m, |i, c| r[self.free[i] * k + cols.start + c] as f32);
+        self.llt.solve_in_place(b.as_mut());
+        let mut out = vec![0.0; nf * m];
+        for (i, o) in out.chunks_exact_mut(m).enumerate() {
+            o.iter_mut()
+                .enumerate()
+                .for_each(|(c, o)| *o = f64::from(b[(i, c)]));
+        }
+        out
+    }
+}
+
 /// The fine operator and its unknowns.
 struct Operator {
     a: SymmetricBlocks,
@@ -407,7 +470,7 @@ pub(crate) struct Solved {
 pub(crate) struct TwoLevel {
     fine: Operator,
     transfer: Transfer,
-    coarse: System,
+    coarse: CoarseFactor,
     smoother: Smoother,
     /// The fine DOFs free when the coarse level was made: P maps into them.
     coarse_within: Vec<bool>,
@@ -434,12 +497,12 @@ impl TwoLevel {
     ) -> Result<TwoLevel> {
         let galerkin = transfer.galerkin(&fine.a, pairs)?;
         let fixed: Vec<bool> = transfer.coarse_free.iter().map(|f| !f).collect();
-        let coarse = System::with_ordering(
+        let coarse = CoarseFactor::new(System::with_ordering(
             fixed.len(),
             galerkin.lower_triplets(),
             &fixed,
             Ordering::NestedDissection,
-        )?;
+        )?);
         let smoother = Smoother::new(&fine)?;
         let coarse_within = fine.free.clone();
         Ok(TwoLevel {
@@ -495,7 +558,7 @@ impl TwoLevel {
 
     /// Nonzeros of the coarse factor.
     pub(crate) fn coarse_factor_nnz(&self) -> usize {
-        self.coarse.factor_nnz().unwrap_or(0)
+        self.coarse.nnz
     }
 
     /// z = the cycle applied to k residuals R interleaved (each vector's cycle is the
@@ -508,9 +571,7 @@ impl TwoLevel {
         level.cycle_product(z, k, t1, &mut w.smooth.partials);
         t1.par_iter_mut().zip(r).for_each(|(t, r)| *t = r - *t);
         let rc = self.transfer.restrict_many(t1, k);
-        let columns: Vec<Vec<f64>> = (0..k).map(|v| column(&rc, k, v)).collect();
-        let zeros = vec![vec![0.0; rc.len() / k]; k];
-        let ec = interleave(&self.coarse.solve(&columns, &zeros));
+        let ec = self.coarse.solve(&rc, k);
         self.transfer.add_prolonged(&ec, k, z);
         level.zero_held(z, k);
         level.cycle_product(z, k, t1, &mut w.smooth.partials);
