@@ -114,6 +114,7 @@ pub(crate) fn coarse_face(scene: &Scene, case: &Case) -> Option<Result<CoarseFac
     coarse.tet.skin_size_mm *= 2.0;
     coarse.tet.deep_size_mm *= 2.0;
     coarse.tet.accept_inverted = true;
+    coarse.tet.solved_once = true;
     coarse.uncertainty.samples = 0;
     let mut rec = Recorder::new(&crate::observe::Quiet);
     Some(

@@ -58,7 +58,7 @@ impl Volumetric {
             .map(|_| Tet10Mesh::from_linear(&linear, Rule::Full));
         let u = if r.linear_solve {
             let k = stiffness(quadratic.as_ref(), &linear)?;
-            let c = constrain(quadratic.as_ref(), &k, &hold, r.ordering())?;
+            let c = constrain(quadratic.as_ref(), &k, &hold, r.ordering(), false)?;
             let f = Loads::none().nodal_vector(nodes.len())?;
             c.solve(&[(&hold, &f)])?.remove(0)
         } else {
