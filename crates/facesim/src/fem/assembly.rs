@@ -604,13 +604,13 @@ impl System {
         border.factor_unknown()
     }
 
-    /// Nonzeros of the Cholesky factor L (for reports).
     /// The free DOFs (global indices, in the factor's column order) and the factor, for a
     /// caller that solves with zero prescribed values alone (a preconditioner's coarse level).
     pub(crate) fn into_factor(self) -> (Vec<usize>, Cholesky<f64>) {
         (self.free, self.llt)
     }
 
+    /// Nonzeros of the Cholesky factor L (for reports).
     pub fn factor_nnz(&self) -> Result<usize> {
         Ok(self.llt.pattern().factor_nnz())
     }

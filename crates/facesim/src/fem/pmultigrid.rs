@@ -8,8 +8,8 @@
 //! each node's own frame with its held components dropped (the caller's [`Transfer`]). The
 //! coarse operator is the Galerkin product A_c = Pᵀ A P, on the linear stiffness's pattern,
 //! factored once with the sparse Cholesky (fem/cholesky.rs) and kept in f32 (`CoarseFactor`):
-//! it is a tenth of the fine problem on the real CT. The fine level is smoothed by Chebyshev polynomials in the 3×3 node-block
-//! Jacobi preconditioned operator D⁻¹A.
+//! it is a tenth of the fine problem on the real CT. The fine level is smoothed by Chebyshev
+//! polynomials in the 3×3 node-block Jacobi preconditioned operator D⁻¹A.
 //!
 //! One cycle, from a residual r (symmetric, so an admissible CG preconditioner; Tatebe 1993,
 //! "The multigrid preconditioned conjugate gradient method"):
@@ -361,17 +361,14 @@ struct CoarseFactor {
     /// The coarse DOFs that are unknowns, in the factor's column order.
     free: Vec<usize>,
     llt: Cholesky<f32>,
-    nnz: usize,
 }
 
 impl CoarseFactor {
     fn new(system: System) -> CoarseFactor {
-        let nnz = system.factor_nnz().unwrap_or(0);
         let (free, llt) = system.into_factor();
         CoarseFactor {
             free,
             llt: llt.to_f32(),
-            nnz,
         }
     }
 
@@ -558,7 +555,7 @@ impl TwoLevel {
 
     /// Nonzeros of the coarse factor.
     pub(crate) fn coarse_factor_nnz(&self) -> usize {
-        self.coarse.nnz
+        self.coarse.llt.pattern().factor_nnz()
     }
 
     /// z = the cycle applied to k residuals R interleaved (each vector's cycle is the

@@ -371,40 +371,40 @@ fn finish(
         .map_or(SolverUsed::Direct, Constrained::solver_used);
     let run_factor = solved.factor.take();
     // A case solved for its face alone (the discretisation estimate's) needs no basis.
-    let basis = (!case.tet.solved_once)
-        .then(|| {
-            rec.time(Stage::PlanBasis, "building the plan basis", || {
-                // The nonlinear material slides on the moved bone's normals: where a rotation turned
-                // them, the basis (the linear model at rest) needs its own factor.
-                let rest: Vec<Hold> = solved.linear_hold.iter().map(|l| l.hold(&[])).collect();
-                let factor = match run_factor {
-                    Some(c) if c.takes(&rest) => c,
-                    run_factor => {
-                        // The run's factor goes before the basis's is made: two at once would set the
-                        // run's peak memory.
-                        drop(run_factor);
-                        let k = state::stiffness(run.quadratic.as_ref(), &solved.linear)?;
-                        state::constrain(
-                            run.quadratic.as_ref(),
-                            &k,
-                            &rest,
-                            mesh::ordering(&solved.order),
-                            false,
-                        )?
-                    }
-                };
-                let inputs = basis::BasisInputs {
-                    factor: &factor,
-                    linear_hold: &solved.linear_hold,
-                    overlapping_segments: &run.overlapping_segments,
-                    nonlinear: !run.linear_solve,
-                    skin,
-                    run_face_displacement: &carried,
-                };
-                basis::plan_basis(&inputs, case, |u| carrier.carry(u))
-            })
-        })
-        .transpose()?;
+    let basis = if case.tet.solved_once {
+        None
+    } else {
+        Some(rec.time(Stage::PlanBasis, "building the plan basis", || {
+            // The nonlinear material slides on the moved bone's normals: where a rotation turned
+            // them, the basis (the linear model at rest) needs its own factor.
+            let rest: Vec<Hold> = solved.linear_hold.iter().map(|l| l.hold(&[])).collect();
+            let factor = match run_factor {
+                Some(c) if c.takes(&rest) => c,
+                run_factor => {
+                    // The run's factor goes before the basis's is made: two at once would set
+                    // the run's peak memory.
+                    drop(run_factor);
+                    let k = state::stiffness(run.quadratic.as_ref(), &solved.linear)?;
+                    state::constrain(
+                        run.quadratic.as_ref(),
+                        &k,
+                        &rest,
+                        mesh::ordering(&solved.order),
+                        false,
+                    )?
+                }
+            };
+            let inputs = basis::BasisInputs {
+                factor: &factor,
+                linear_hold: &solved.linear_hold,
+                overlapping_segments: &run.overlapping_segments,
+                nonlinear: !run.linear_solve,
+                skin,
+                run_face_displacement: &carried,
+            };
+            basis::plan_basis(&inputs, case, |u| carrier.carry(u))
+        })?)
+    };
     let report = tet_report(&run, &solved, case, factor_nonzeros, solver);
     let face_post = face::displaced(skin, &carried);
     let linear_face = solved
