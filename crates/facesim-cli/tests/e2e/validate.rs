@@ -130,9 +130,9 @@ fn a_coarse_phantom_bsso_advance_reports_the_runs_own_ratios_and_the_documented_
             "--set",
             "tet.fat_dark.youngs_kpa=2.5",
             "--keep-runs",
-            // Eight full solves: the band's wiring, not the reduced model (its own tests).
+            // Four full solves: the band's wiring, not the reduced model (its own tests).
             "--band-samples",
-            "8",
+            "4",
         ],
     );
     for f in ["validation.md", "validation.csv", "validation.svg"] {
