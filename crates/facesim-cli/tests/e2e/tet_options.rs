@@ -12,11 +12,11 @@ struct Face {
     post: Vec<[f64; 3]>,
 }
 
-/// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
 /// The discretisation-error estimate off, for tests that compare the face alone: it is a
 /// second solve on a coarser mesh and does not change the face (`model::discretisation`).
 const NO_ESTIMATE: &str = "tet.error_estimate=false";
 
+/// `facesim run CASE --out <fresh> --set …`, which must exit 0; the face and report.json.
 fn run_case(case: &Path, name: &str, sets: &[&str]) -> (Face, serde_json::Value) {
     let out = common::out_dir(name);
     let report = cli::run_ok(case, &out, sets);
