@@ -414,11 +414,6 @@ pub struct Tet {
     /// Estimate the discretisation error on the face by solving again at twice the element
     /// size (report.json `discretisation_error`; `model::discretisation`).
     pub error_estimate: bool,
-    /// Not a case.toml key: set on the discretisation estimate's case, which is solved for its
-    /// face alone. It then builds no plan basis, and its 10-node system iterates even where its
-    /// factor would fit: one solve does not repay a factorisation (`model::coarse_face`).
-    #[serde(skip)]
-    pub(crate) solved_once: bool,
     /// Element edge length (mm) at the skin inside the region the plan reaches.
     pub skin_size_mm: f64,
     /// Element edge length (mm) deep in the tissue and far from the moved bone.

@@ -114,11 +114,17 @@ pub(crate) fn coarse_face(scene: &Scene, case: &Case) -> Option<Result<CoarseFac
     coarse.tet.skin_size_mm *= 2.0;
     coarse.tet.deep_size_mm *= 2.0;
     coarse.tet.accept_inverted = true;
-    coarse.tet.solved_once = true;
     coarse.uncertainty.samples = 0;
     let mut rec = Recorder::new(&crate::observe::Quiet);
     Some(
-        volumetric::predict(scene, &coarse, skin, &mut rec).map(|o| {
+        volumetric::predict_for(
+            scene,
+            &coarse,
+            skin,
+            volumetric::Purpose::FaceOnly,
+            &mut rec,
+        )
+        .map(|o| {
             let face = o.map_or_else(|| skin.vertices.clone(), |(_, post)| post);
             (coarse.tet.skin_size_mm, face)
         }),

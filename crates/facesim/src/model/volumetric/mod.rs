@@ -201,11 +201,34 @@ pub(super) fn face_mesh(scene: &Scene) -> &Mesh {
     scene.face.fine.as_ref().unwrap_or(&scene.face.skin)
 }
 
-/// Mesh, hold, solve and carry the face; None when the plan moves no bone.
+/// What a volumetric solve is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Purpose {
+    /// A run: the face, and the plan basis on the run's factor.
+    Run,
+    /// The face alone (the discretisation estimate's coarse solve, `model::coarse_face`): no
+    /// plan basis, and a 10-node system iterates even where its factor would fit, since one
+    /// solve does not repay a factorisation.
+    FaceOnly,
+}
+
+/// Mesh, hold, solve and carry the face, and build the plan basis; None when the plan moves no
+/// bone.
 pub fn predict(
     scene: &Scene,
     case: &Case,
     skin: &Mesh,
+    rec: &mut Recorder,
+) -> Result<Option<(Volumetric, Vec<[f64; 3]>)>> {
+    predict_for(scene, case, skin, Purpose::Run, rec)
+}
+
+/// [`predict`] for `purpose`.
+pub(crate) fn predict_for(
+    scene: &Scene,
+    case: &Case,
+    skin: &Mesh,
+    purpose: Purpose,
     rec: &mut Recorder,
 ) -> Result<Option<(Volumetric, Vec<[f64; 3]>)>> {
     let t = &case.tet;
@@ -272,7 +295,7 @@ pub fn predict(
         raised: &anatomy.raised,
         carries_face: &carries_face,
         linear_solve,
-        solved_once: t.solved_once,
+        face_only: purpose == Purpose::FaceOnly,
         tears: t.tear_gap && quadratic.is_none() && largest <= holds::LARGE_MOVE_MM,
     };
     let solved = rec.time(Stage::Solve, "solving the volumetric model", || {
@@ -317,7 +340,7 @@ pub fn predict(
         damage,
         linear_solve,
     };
-    finish(run, solved, case, skin, rec).map(Some)
+    finish(run, solved, case, skin, purpose, rec).map(Some)
 }
 
 /// What the stages before the face hand on to it.
@@ -343,6 +366,7 @@ fn finish(
     mut solved: solve::Solution,
     case: &Case,
     skin: &Mesh,
+    purpose: Purpose,
     rec: &mut Recorder,
 ) -> Result<(Volumetric, Vec<[f64; 3]>)> {
     let face_still = face::still(&face::Stillness {
@@ -370,8 +394,7 @@ fn finish(
         .as_ref()
         .map_or(SolverUsed::Direct, Constrained::solver_used);
     let run_factor = solved.factor.take();
-    // A case solved for its face alone (the discretisation estimate's) needs no basis.
-    let basis = if case.tet.solved_once {
+    let basis = if purpose == Purpose::FaceOnly {
         None
     } else {
         Some(rec.time(Stage::PlanBasis, "building the plan basis", || {

@@ -49,8 +49,8 @@ pub(super) struct Inputs<'a> {
     pub(super) carries_face: &'a [bool],
     /// The linear models (any quadratic element, or the linear material) solve K u = f once.
     pub(super) linear_solve: bool,
-    /// Solved for its face alone (`[tet]`'s `solved_once`): a 10-node system iterates.
-    pub(super) solved_once: bool,
+    /// Solved for its face alone (`Purpose::FaceOnly`): a 10-node system iterates.
+    pub(super) face_only: bool,
     /// The tissue may tear (`[tet] tear_gap`, the 4-node element, an orthognathic move).
     pub(super) tears: bool,
 }
@@ -83,14 +83,14 @@ pub(super) fn solve(inp: &Inputs, linear: TetMesh, holds: Holds, t: &Tet) -> Res
         &k,
         &holds.hold,
         ordering(&order),
-        inp.solved_once,
+        inp.face_only,
     )?;
     let u = c.solve(&[(&holds.hold, &f)])?.remove(0);
     let mut s = Solving {
         nodes,
         kind: inp.kind,
         quadratic: inp.quadratic,
-        solved_once: inp.solved_once,
+        face_only: inp.face_only,
         order,
         f,
         torn: vec![false; linear.tets.len()],

@@ -23,17 +23,17 @@ pub(super) fn stiffness(
 
 /// The solved mesh's system under `hold`: the 10-node one factored where its factor fits, else
 /// solved by conjugate gradients with the p-multigrid preconditioner (`Constrained::quadratic`);
-/// the 4-node one factored. A 10-node system `solved_once` (no plan basis to share a factor
-/// with) always iterates.
+/// the 4-node one factored. A 10-node system solved for its face alone (`face_only`: no plan
+/// basis to share a factor with) always iterates.
 pub(super) fn constrain(
     quadratic: Option<&Tet10Mesh>,
     k: &[(usize, usize, f64)],
     hold: &[Hold],
     ordering: Ordering<'_>,
-    solved_once: bool,
+    face_only: bool,
 ) -> Result<Constrained> {
     match quadratic {
-        Some(q) if solved_once => Constrained::iterative(k, hold, q.corners, &q.edges),
+        Some(q) if face_only => Constrained::iterative(k, hold, q.corners, &q.edges),
         Some(q) => Constrained::quadratic(k, hold, (q.corners, &q.edges, &q.tets), ordering),
         None => Constrained::ordered(k, hold, hold.len(), ordering),
     }
@@ -46,7 +46,7 @@ pub(super) struct Solving<'a> {
     pub(super) kind: &'a [NodeKind],
     pub(super) quadratic: Option<&'a Tet10Mesh>,
     /// A 10-node system iterates even where its factor fits (`constrain`).
-    pub(super) solved_once: bool,
+    pub(super) face_only: bool,
     pub(super) order: Option<MeshAnalyses>,
     pub(super) f: Vec<f64>,
     /// The 4-node mesh and its materials (torn tetrahedra a trace).
@@ -92,7 +92,7 @@ impl Solving<'_> {
             &k,
             &self.hold,
             ordering(&self.order),
-            self.solved_once,
+            self.face_only,
         )?);
         Ok(())
     }
