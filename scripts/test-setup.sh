@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Install what the tests need on a fresh Debian machine (README's test command runs this first).
+# Install what the tests need on a fresh Debian machine, building the tests meanwhile (README's test
+# command runs this first).
 # Idempotent and quiet when everything is already there. One function per need, so later needs
 # (a browser, npm packages, a Python venv) are one more function and one more line at the bottom.
 set -euo pipefail
@@ -138,6 +139,16 @@ need_slurm() {
   [ "${#missing[@]}" = 0 ] || apt_install slurmctld slurmd slurm-client munge
 }
 
+# The tests' build needs only the Rust toolchain: it runs while the packages below download,
+# and `cargo test --release` then finds it done. Its output goes to target/test-setup-build.log;
+# a failed build is left for `cargo test` to report.
+prebuild_tests() {
+  mkdir -p "$root/target"
+  (cd "$root" && cargo test --release --no-run >"$root/target/test-setup-build.log" 2>&1) &
+  build_pid=$!
+}
+
+prebuild_tests
 need_calculix
 need_dicom_tools
 need_real_ct
@@ -148,3 +159,4 @@ need_npm
 need_python_venv
 need_cohort_tools
 need_slurm
+wait "$build_pid" || echo "test-setup: the tests' build failed (target/test-setup-build.log); cargo test reports it"

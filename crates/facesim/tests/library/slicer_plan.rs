@@ -238,7 +238,8 @@ fn surface_and_plane_regions_select_what_a_box_and_a_half_space_select() {
 /// and a segment surface) predict the same face; the face is also written as .vtp and .stl.
 #[test]
 fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
-    // A coarse phantom (3 mm voxels) keeps the two runs short; the comparison is exact anyway.
+    // A coarse phantom (3 mm voxels) on an 8/16 mm mesh, with no discretisation estimate,
+    // keeps the two runs short; the comparison is exact on any mesh.
     let phantom = common::kept_dir("facesim-slicer-phantom");
     let opts = facesim_validate::phantom::PhantomOptions {
         spacing: [3.0; 3],
@@ -249,7 +250,7 @@ fn a_run_planned_with_slicer_files_equals_the_run_planned_with_numbers() {
     facesim_validate::phantom::write_case(&phantom, &opts).unwrap();
     let (min, max) = ([-70.05, -75.05, -125.05], [70.05, -1.45, -26.45]);
     let head = format!(
-        "[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n[surface]\nmovable = {{ sphere = {{ center = [0.0, -60.0, -45.0], radius = 70.0 }} }}\n",
+        "[ct]\npath = \"{}\"\n[skin]\npath = \"{}\"\n[surface]\nmovable = {{ sphere = {{ center = [0.0, -60.0, -45.0], radius = 70.0 }} }}\n[tet]\nskin_size_mm = 8.0\ndeep_size_mm = 16.0\nerror_estimate = false\n",
         phantom.join("ct.nii.gz").display(),
         phantom.join("face.ply").display()
     );
