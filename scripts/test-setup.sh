@@ -141,11 +141,13 @@ need_slurm() {
 
 # The tests' build needs only the Rust toolchain: it runs while the packages below download,
 # and `cargo test --release` then finds it done. Its output goes to target/test-setup-build.log;
-# a failed build is left for `cargo test` to report.
+# a failed build is left for `cargo test` to report. If a need below fails, the build is
+# stopped with the script (`exec`: the background job is cargo itself).
 prebuild_tests() {
   mkdir -p "$root/target"
-  (cd "$root" && cargo test --release --no-run >"$root/target/test-setup-build.log" 2>&1) &
+  (cd "$root" && exec cargo test --release --no-run >"$root/target/test-setup-build.log" 2>&1) &
   build_pid=$!
+  trap 'kill "$build_pid" 2>/dev/null || true' EXIT
 }
 
 prebuild_tests

@@ -79,10 +79,9 @@ pivot = {pivot:?}
 /// mesher leaves pieces hinged by a node or an edge; held still, they put the face of a
 /// translated skull 23.6 % of the move off the rigid translation, so each follows its
 /// bone. Translation: every element and material is exact (0 strain). Rotation: the linear
-/// material's small-strain error is of order θ × the move (3° ≈ 5 %; 1.2 % measured on the default
-/// mesh); the
-/// neo-Hookean material is exact for it (through the Newton–Krylov solve and the stable energy;
-/// without them it failed after 14 minutes).
+/// material's small-strain error is of order θ × the move (3° ≈ 5 %; 1.2 % measured on the
+/// default mesh); the neo-Hookean material is exact for it (through the Newton–Krylov solve and
+/// the stable energy; without them it failed after 14 minutes).
 #[test]
 fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
     const COARSE_SKIN: &str = "tet.skin_size_mm=6";
