@@ -11,6 +11,7 @@ use cli::{CliResult, assert_clean_failure, facesim, read_csv};
 use serde_json::Value;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
@@ -113,6 +114,27 @@ fn validate_one_phantom(dir: &str, surgery: &str, extra: &[&str]) -> PathBuf {
     ];
     args.extend_from_slice(extra);
     validate_into(dir, &args).0
+}
+
+/// The coarse phantom's Le Fort I advance with the defaults, validated once for the tests that
+/// read it (the nose in the region, the hollow nose's passages).
+fn phantom_le_fort_advance() -> &'static Path {
+    static OUT: OnceLock<PathBuf> = OnceLock::new();
+    OUT.get_or_init(|| validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]))
+}
+
+/// The coarse phantom's BSSO advance with `[tet] degloved_maxilla = true` (the chin's approach
+/// at its default), validated once for the tests that read it: a BSSO raises neither the tissue
+/// over the maxilla nor that over the chin.
+fn phantom_bsso_degloved_maxilla() -> &'static Path {
+    static OUT: OnceLock<PathBuf> = OnceLock::new();
+    OUT.get_or_init(|| {
+        validate_one_phantom(
+            "facesim-validate-degloved-bsso",
+            "bsso-advance",
+            &["--set", "tet.degloved_maxilla=true"],
+        )
+    })
 }
 
 /// The report.json of one run of a validation in `out`.
@@ -361,8 +383,8 @@ fn an_impaction_closes_the_mandible_and_the_run_still_reads_as_an_impaction() {
 /// tip follows the advance by the published fraction.
 #[test]
 fn a_le_fort_advance_takes_in_the_whole_nose() {
-    let out = validate_one_phantom("facesim-validate-nose", "lefort-advance", &[]);
-    let run = run_report(&out, "phantom01", "lefort-advance");
+    let out = phantom_le_fort_advance();
+    let run = run_report(out, "phantom01", "lefort-advance");
     // A Le Fort I advance treats Class III: its phantom is built with the mandible ahead
     // (docs/guide/validation.md "What was compared"), and validation.md says so.
     let built: Vec<PathBuf> = std::fs::read_dir(out.join("phantoms"))
@@ -441,7 +463,7 @@ fn hollow_phantom_noses_are_asked_for_and_the_segmentation_finds_their_passages(
         let run = run_report(out, "phantom01", "lefort-advance");
         run["segmentation"]["cavity_voxels"].as_f64().unwrap()
     };
-    let hollow = validate_one_phantom("facesim-validate-hollow-nose", "lefort-advance", &[]);
+    let hollow = phantom_le_fort_advance();
     let solid = validate_one_phantom(
         "facesim-validate-solid-nose",
         "lefort-advance",
@@ -450,11 +472,11 @@ fn hollow_phantom_noses_are_asked_for_and_the_segmentation_finds_their_passages(
     let shape = |out: &Path| {
         std::fs::read_to_string(out.join("phantoms/phantom01-class-iii/phantom.toml")).unwrap()
     };
-    assert!(shape(&hollow).contains("\nnasal_passages = true\n"));
+    assert!(shape(hollow).contains("\nnasal_passages = true\n"));
     assert!(!shape(&solid).contains("nasal_passages"));
     // 3 mm voxels: 27 mm^3 each; the passages hold about 8 ml (docs/design/phantom.md), of which the
     // voxels wholly inside, with 4 mm walls, are well over 1 ml.
-    let (h, s) = (cavity(&hollow), cavity(&solid));
+    let (h, s) = (cavity(hollow), cavity(&solid));
     assert!(h - s > 1000.0 / 27.0, "cavity voxels {h} hollow, {s} solid");
     let md = std::fs::read_to_string(solid.join("validation.md")).unwrap();
     assert!(
@@ -601,12 +623,7 @@ fn a_degloved_maxilla_rests_on_its_bone_one_way_and_a_setback_leaves_the_lip_beh
     let (lo, hi) = ranges[&("lefort-setback".to_string(), "Sn".to_string())];
     println!("setback Sn {sn_setback} (published {lo}–{hi})");
 
-    let bsso = validate_one_phantom(
-        "facesim-validate-degloved-bsso",
-        "bsso-advance",
-        &["--set", "tet.degloved_maxilla=true"],
-    );
-    let run = run_report(&bsso, "phantom01", "bsso-advance");
+    let run = run_report(phantom_bsso_degloved_maxilla(), "phantom01", "bsso-advance");
     assert_eq!(run["tet"]["degloved_nodes"], 0, "{}", run["tet"]);
     assert_eq!(run["tet"]["lifted_in_tension"], 0, "{}", run["tet"]);
     // The bundled phantom's face has no lip profile (no Sn, Ls or Sto found): its mandibular
@@ -793,8 +810,7 @@ fn a_genioplasty_raises_the_chin_by_default_and_the_soft_chin_follows_further() 
     println!("headsq genioplasty Pog'/Pog {raised:.3} (published 0.57–1.0)");
     assert!(raised > 0.3 && raised < 1.2, "{raised}");
 
-    let bsso = validate_one_phantom("facesim-degloved-chin-bsso", "bsso-advance", &[]);
-    let run = run_report(&bsso, "phantom01", "bsso-advance");
+    let run = run_report(phantom_bsso_degloved_maxilla(), "phantom01", "bsso-advance");
     assert_eq!(run["tet"]["degloved_chin_nodes"], 0, "{}", run["tet"]);
     assert!(
         run["tet"]["degloved_chin_not_applied"].is_null(),
