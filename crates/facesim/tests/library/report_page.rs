@@ -1514,8 +1514,8 @@ fn tissue_sliders_resolve_the_reduced_model_live_within_its_bound() {
     let sample = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data-samples/jaws");
     let (mut case, _) = Case::load(&sample).unwrap();
     // As crates/facesim/tests/library/reduced.rs: coarser than the default, to keep the test short.
-    case.tet.skin_size_mm = 6.0;
-    case.tet.deep_size_mm = 12.0;
+    case.tet.skin_size_mm = 8.0;
+    case.tet.deep_size_mm = 16.0;
     case.tet.error_estimate = false;
     case.uncertainty.samples = 8;
     case.uncertainty.method = Method::Reduced;
