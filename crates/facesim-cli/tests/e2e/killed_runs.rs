@@ -191,11 +191,12 @@ fn a_killed_run_leaves_one_complete_run_or_none_and_the_next_run_cleans_up() {
     eprintln!("write stage {write_s:.3} s; kill points from seed {seed}");
     let mut rng = Rng(seed);
 
-    // Kill runs at random points from the start of the write stage to a little past its end.
+    // Kill runs at random points from the start of the write stage to a little past its end: at
+    // least 6, then as many as 20 s allow, at most 16.
     let began = Instant::now();
     let mut state = Some(1); // the output holds the run of PLANS[1]
     let (mut kills, mut stale_left, mut outcomes) = (0, 0, [0usize; 3]);
-    while kills < 16 && (kills < 6 || began.elapsed() < Duration::from_secs(35)) {
+    while kills < 16 && (kills < 6 || began.elapsed() < Duration::from_secs(20)) {
         let next = state.map_or(0, |s| 1 - s);
         let mut child = start(&cases[next], &out);
         if !wait_for_write_stage(&mut child, &parent, &out) {
