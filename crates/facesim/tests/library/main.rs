@@ -10,6 +10,7 @@ mod common;
 #[path = "../common/tet_grid.rs"]
 mod tet_grid;
 
+mod build_features;
 mod c1_plates;
 mod c1_preload;
 mod dicom_codecs;
