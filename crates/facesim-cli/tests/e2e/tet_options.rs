@@ -175,9 +175,9 @@ fn rigid_moves_of_all_bone_give_the_rigid_face_on_the_real_ct() {
 }
 
 /// Every [tet] option through `facesim run` on both bundled samples, on a 9/18 mm mesh (the
-/// 10-node runs take seconds; at 10/20 mm one element of the capsule's 10-node mesh turns
-/// inside out, too coarse to tell the options apart): the capsule with its 6 mm advance and the jaws phantom
-/// (README's first command) with its 5 mm BSSO advance. Each option follows the move (the face
+/// 10-node runs take seconds; at 10/20 mm the capsule's 10-node run turns one element inside
+/// out and is refused): the capsule with its 6 mm advance and the jaws phantom (README's first
+/// command) with its 5 mm BSSO advance. Each option follows the move (the face
 /// moves 5/6–13/12 of it at most), exits 0, turns no element inside out, and agrees with the
 /// default combination within what the model difference explains — element order and material
 /// (0.5 mm mean at a 6 mm move, the required bound), and sliding (a few tenths of a millimetre on
