@@ -447,7 +447,7 @@ fn impossible_plans_and_empty_cts_are_refused() {
     assert!(
         r.stderr.contains("moves bone up to 40 mm")
             && r.stderr.contains("translate (mm)")
-            && r.stderr.contains("tetrahedra inside out"),
+            && r.stderr.contains("inside out: not a valid prediction"),
         "{}",
         r.stderr
     );

@@ -339,7 +339,11 @@ fn the_largest_advance_tears_the_gap_tissue_and_leaves_no_element_inverted() {
         "tet.tear_gap=false",
     ]);
     assert_eq!(r.code, 1, "{}", r.stderr);
-    assert!(r.stderr.contains("tetrahedra inside out"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("inside out: not a valid prediction"),
+        "{}",
+        r.stderr
+    );
     let (pre, post) = cli::face_positions(&kept);
     let kept = Face { pre, post };
     let worst = face

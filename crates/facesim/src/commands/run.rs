@@ -457,7 +457,12 @@ fn inverted_error(inverted: usize, out_dir: &Path) -> crate::error::Error {
     crate::error::Error::numerical(
         crate::error::NumericalKind::DegenerateElement,
         format!(
-            "the solved displacement turns {inverted} tetrahedra inside out: not a valid prediction (the outputs in {} are written for inspection; [tet] accept_inverted = true accepts them)",
+            "the solved displacement turns {inverted} {} inside out: not a valid prediction (the outputs in {} are written for inspection; [tet] accept_inverted = true accepts them)",
+            if inverted == 1 {
+                "tetrahedron"
+            } else {
+                "tetrahedra"
+            },
             out_dir.display()
         ),
     )
