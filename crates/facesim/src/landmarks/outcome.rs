@@ -86,108 +86,15 @@ pub fn compare_faces(a: &Mesh, a_path: &Path, b: &Mesh, b_path: &Path) -> Result
     let fa = landmarks_of(a, FrameFrom::Shape).map_err(|e| Error::input(a_path, e))?;
     let fb = landmarks_of(b, FrameFrom::Shape).map_err(|e| Error::input(b_path, e))?;
     let (am, bm) = (in_mm(a, &fa), in_mm(b, &fb));
-    // Start: A's head frame onto B's, A's soft nasion (else its nose tip) onto B's.
-    let axes = |f: &FaceLandmarks| [f.frame.lateral, f.frame.vertical, f.frame.anterior];
-    let (xa, xb) = (axes(&fa), axes(&fb));
-    let rotation = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| xb[k][i] * xa[k][j]).sum()));
-    let anchor = ["N'", "Prn"]
-        .into_iter()
-        .find_map(|l| Some((found(&fa, l)?, found(&fb, l)?)))
-        .ok_or_else(|| {
-            Error::input(
-                a_path,
-                format!(
-                    "shares neither a soft nasion nor a pronasale with {} to start the fit from",
-                    b_path.display()
-                ),
-            )
-        })?;
-    let mut motion = Transform {
-        rotation,
-        translation: [0.0; 3],
-        scale: 1.0,
-        rms_residual: 0.0,
-        max_residual: 0.0,
-    };
-    motion.translation = sub(anchor.1, motion.apply(anchor.0));
-    // The stable skin of A: above pronasale by STABLE_ABOVE_PRN_MM in A's frame.
-    let prn = found(&fa, "Prn").ok_or_else(|| Error::input(a_path, "no pronasale"))?;
-    let v_prn = dot(prn, fa.frame.vertical);
-    let stable: Vec<[f64; 3]> = am
-        .vertices
-        .iter()
-        .filter(|p| dot(**p, fa.frame.vertical) > v_prn + STABLE_ABOVE_PRN_MM)
-        .copied()
-        .collect();
-    if stable.len() < 100 {
-        return Err(Error::input(
-            a_path,
-            format!(
-                "{} vertices more than {STABLE_ABOVE_PRN_MM} mm above its nose tip: too little forehead and nasal bridge to register on",
-                stable.len()
-            ),
-        ));
-    }
-    let step = (stable.len() / 3000).max(1);
-    let stable: Vec<[f64; 3]> = stable.into_iter().step_by(step).collect();
-    let index = SurfaceIndex::new(&bm);
-    // ICP: each stable point, moved, to its closest point on B; the better 90 % of the pairs
-    // give the next motion (the least-squares rigid fit of `register::fit`, from A's own points).
-    let mut rms = f64::NAN;
-    let mut iterations = 0;
-    for it in 0..60 {
-        iterations = it + 1;
-        let mut pairs: Vec<([f64; 3], [f64; 3], f64)> = stable
-            .iter()
-            .map(|p| {
-                let (d, q) = index.closest(motion.apply(*p));
-                (*p, q, d)
-            })
-            .collect();
-        pairs.sort_by(|x, y| x.2.total_cmp(&y.2));
-        pairs.truncate((pairs.len() * 9).div_ceil(10));
-        rms = (pairs.iter().map(|x| x.2 * x.2).sum::<f64>() / pairs.len() as f64).sqrt();
-        let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|x| (x.0, x.1)).unzip();
-        let next = fit(&from, &to, false)?;
-        let shift = from
-            .iter()
-            .map(|p| norm(sub(next.apply(*p), motion.apply(*p))))
-            .fold(0.0, f64::max);
-        motion = next;
-        if shift < 1e-4 {
-            break;
-        }
-    }
+    let start = starting_motion(&fa, a_path, &fb, b_path)?;
+    let stable = stable_skin(&am, &fa, a_path)?;
+    let (motion, rms, iterations) = icp(&stable, &SurfaceIndex::new(&bm), start)?;
     let a_on_b: Vec<[f64; 3]> = am.vertices.iter().map(|p| motion.apply(*p)).collect();
     let lms_a: Vec<(String, [f64; 3])> = positions(&fa.landmarks)
         .into_iter()
         .map(|(l, p)| (l, motion.apply(scale(p, fa.unit.mm_per_unit))))
         .collect();
-    let mut landmarks = Ordered::default();
-    for l in &fa.landmarks {
-        let why = |f: &FaceLandmarks, which: &str| {
-            f.landmarks
-                .iter()
-                .find(|x| x.label == l.label)
-                .and_then(|x: &Landmark| x.missing.clone())
-                .map(|m| format!("not found on {which}: {m}"))
-        };
-        let pa = lms_a.iter().find(|(k, _)| *k == l.label).map(|x| x.1);
-        let pb = found(&fb, &l.label);
-        landmarks.0.push((
-            l.label.clone(),
-            match (pa, pb) {
-                (Some(p), Some(q)) => LandmarkDistance {
-                    distance_mm: Some(norm(sub(p, q))),
-                    missing: None,
-                },
-                _ => LandmarkDistance {
-                    distance_mm: None,
-                    missing: why(&fa, "A").or_else(|| why(&fb, "B")),
-                },
-            },
-        ));
-    }
+    let landmarks = landmark_distances(&fa, &lms_a, &fb);
     // Regions of A (registered), in B's head frame.
     let frame_b = super::HeadFrame {
         origin: scale(fb.frame.origin, fb.unit.mm_per_unit),
@@ -229,4 +136,132 @@ pub fn compare_faces(a: &Mesh, a_path: &Path, b: &Mesh, b_path: &Path) -> Result
         landmarks,
         regions,
     })
+}
+
+/// The fit's start: A's head frame onto B's, A's soft nasion (else its nose tip) onto B's.
+fn starting_motion(
+    fa: &FaceLandmarks,
+    a_path: &Path,
+    fb: &FaceLandmarks,
+    b_path: &Path,
+) -> Result<Transform> {
+    let axes = |f: &FaceLandmarks| [f.frame.lateral, f.frame.vertical, f.frame.anterior];
+    let (xa, xb) = (axes(fa), axes(fb));
+    let rotation = [0, 1, 2].map(|i| [0, 1, 2].map(|j| (0..3).map(|k| xb[k][i] * xa[k][j]).sum()));
+    let anchor = ["N'", "Prn"]
+        .into_iter()
+        .find_map(|l| Some((found(fa, l)?, found(fb, l)?)))
+        .ok_or_else(|| {
+            Error::input(
+                a_path,
+                format!(
+                    "shares neither a soft nasion nor a pronasale with {} to start the fit from",
+                    b_path.display()
+                ),
+            )
+        })?;
+    let mut motion = Transform {
+        rotation,
+        translation: [0.0; 3],
+        scale: 1.0,
+        rms_residual: 0.0,
+        max_residual: 0.0,
+    };
+    motion.translation = sub(anchor.1, motion.apply(anchor.0));
+    Ok(motion)
+}
+
+/// The stable skin of A (`am`, in mm): above pronasale by STABLE_ABOVE_PRN_MM in A's frame,
+/// thinned to about 3000 points.
+fn stable_skin(am: &Mesh, fa: &FaceLandmarks, a_path: &Path) -> Result<Vec<[f64; 3]>> {
+    let prn = found(fa, "Prn").ok_or_else(|| Error::input(a_path, "no pronasale"))?;
+    let v_prn = dot(prn, fa.frame.vertical);
+    let stable: Vec<[f64; 3]> = am
+        .vertices
+        .iter()
+        .filter(|p| dot(**p, fa.frame.vertical) > v_prn + STABLE_ABOVE_PRN_MM)
+        .copied()
+        .collect();
+    if stable.len() < 100 {
+        return Err(Error::input(
+            a_path,
+            format!(
+                "{} vertices more than {STABLE_ABOVE_PRN_MM} mm above its nose tip: too little forehead and nasal bridge to register on",
+                stable.len()
+            ),
+        ));
+    }
+    let step = (stable.len() / 3000).max(1);
+    Ok(stable.into_iter().step_by(step).collect())
+}
+
+/// ICP from `motion`: each stable point, moved, to its closest point on B; the better 90 % of
+/// the pairs give the next motion (the least-squares rigid fit of `register::fit`, from A's own
+/// points). The motion, the last RMS distance (mm) and the iterations.
+fn icp(
+    stable: &[[f64; 3]],
+    index: &SurfaceIndex,
+    mut motion: Transform,
+) -> Result<(Transform, f64, usize)> {
+    let mut rms = f64::NAN;
+    let mut iterations = 0;
+    for it in 0..60 {
+        iterations = it + 1;
+        let mut pairs: Vec<([f64; 3], [f64; 3], f64)> = stable
+            .iter()
+            .map(|p| {
+                let (d, q) = index.closest(motion.apply(*p));
+                (*p, q, d)
+            })
+            .collect();
+        pairs.sort_by(|x, y| x.2.total_cmp(&y.2));
+        pairs.truncate((pairs.len() * 9).div_ceil(10));
+        rms = (pairs.iter().map(|x| x.2 * x.2).sum::<f64>() / pairs.len() as f64).sqrt();
+        let (from, to): (Vec<_>, Vec<_>) = pairs.iter().map(|x| (x.0, x.1)).unzip();
+        let next = fit(&from, &to, false)?;
+        let shift = from
+            .iter()
+            .map(|p| norm(sub(next.apply(*p), motion.apply(*p))))
+            .fold(0.0, f64::max);
+        motion = next;
+        if shift < 1e-4 {
+            break;
+        }
+    }
+    Ok((motion, rms, iterations))
+}
+
+/// Per landmark of A, its distance (mm) between A registered (`lms_a`) and B, or why it is
+/// missing.
+fn landmark_distances(
+    fa: &FaceLandmarks,
+    lms_a: &[(String, [f64; 3])],
+    fb: &FaceLandmarks,
+) -> Ordered<LandmarkDistance> {
+    let mut landmarks = Ordered::default();
+    for l in &fa.landmarks {
+        let why = |f: &FaceLandmarks, which: &str| {
+            f.landmarks
+                .iter()
+                .find(|x| x.label == l.label)
+                .and_then(|x: &Landmark| x.missing.clone())
+                .map(|m| format!("not found on {which}: {m}"))
+        };
+        let pa = lms_a.iter().find(|(k, _)| *k == l.label).map(|x| x.1);
+        let pb = found(fb, &l.label);
+        landmarks.0.push((
+            l.label.clone(),
+            match (pa, pb) {
+                (Some(p), Some(q)) => LandmarkDistance {
+                    distance_mm: Some(norm(sub(p, q))),
+                    missing: None,
+                },
+                _ => LandmarkDistance {
+                    distance_mm: None,
+                    missing: why(fa, "A").or_else(|| why(fb, "B")),
+                },
+            },
+        ));
+    }
+    landmarks
 }

@@ -114,155 +114,17 @@ pub fn soft_tissue(
     roi: ([f64; 3], [f64; 3]),
     p: &MeshParams,
 ) -> Result<SoftTissueMesh> {
-    if !(p.skin_size_mm.is_finite() && p.skin_size_mm > 0.0) {
-        return Err(Error::config(format!(
-            "tetrahedral mesh: skin size must be positive, got {} mm",
-            p.skin_size_mm
-        )));
-    }
-    if !(p.margin_mm.is_finite() && p.margin_mm >= 0.0) {
-        return Err(Error::config(format!(
-            "tetrahedral mesh: margin must be ≥ 0, got {} mm",
-            p.margin_mm
-        )));
-    }
+    check_params(p)?;
     let lo = roi.0.map(|x| x - p.margin_mm);
     let hi = roi.1.map(|x| x + p.margin_mm);
-    let skin = seg.skin_field(vol);
-    let bone = seg.bone_field(vol);
-    let (skin_iso, bone_iso) = (seg.windows.head_threshold, seg.windows.bone);
-    let map = vol.voxel_map();
-    let dims = vol.dims;
-    let parts = |q: [f64; 3]| {
-        let c = map.to_voxel(q);
-        (
-            skin_iso - sample_field(&skin, dims, c, OUTSIDE_HU) as f64,
-            sample_field(&bone, dims, c, OUTSIDE_HU) as f64 - bone_iso,
-        )
-    };
-    let f = |q: [f64; 3]| {
-        let (s, b) = parts(q);
-        s.max(b)
-    };
-    // Grading: a cube of size s = h·2^l stays whole unless the skin or the bone iso-surface
-    // crosses the cube grown by s on every side (sampled every h), so the size doubles about
-    // every cube-width of distance from both surfaces, up to the deep size. Both surfaces stay
-    // in the finest uniform lattice (`graded`: size changes away from every surface keep
-    // stuffing's angle bounds); only tissue away from them coarsens.
-    let h = p.skin_size_mm;
-    let levels = if p.deep_size_mm > h {
-        ((p.deep_size_mm / h).log2().floor() as u32).min(4)
-    } else {
-        0
-    };
-    let m = if levels == 0 {
-        stuffing::stuff(&f, lo, hi, h)?
-    } else {
-        let (skin_range, bone_range) = (BlockRange::new(&skin, dims), BlockRange::new(&bone, dims));
-        // Whether f < 0 (soft tissue) at every sample of an LPS box, at none, or either.
-        let side_of_box = |corners: [[f64; 3]; 2]| {
-            one_sided(&map, &skin_range, corners, |lo, hi| {
-                let (skin_lo, skin_hi) = skin_range.range(lo, hi);
-                let (bone_lo, bone_hi) = bone_range.range(lo, hi);
-                if f64::from(skin_lo) > skin_iso && f64::from(bone_hi) < bone_iso {
-                    Some(true)
-                } else if f64::from(skin_hi) <= skin_iso || f64::from(bone_lo) >= bone_iso {
-                    Some(false)
-                } else {
-                    None
-                }
-            })
-        };
-        // f(q) < 0, the skin's term first: the bone's is not needed where the skin's is not
-        // below zero.
-        let tissue_at = |q: [f64; 3]| {
-            let c = map.to_voxel(q);
-            skin_iso - (sample_field(&skin, dims, c, OUTSIDE_HU) as f64) < 0.0
-                && (sample_field(&bone, dims, c, OUTSIDE_HU) as f64) - bone_iso < 0.0
-        };
-        let surface_near = |a: [f64; 3], b: [f64; 3]| {
-            let s = b[0] - a[0];
-            let n = (3.0 * s / h).ceil() as usize;
-            let sample = |ijk: [usize; 3]| {
-                [0, 1, 2].map(|ax| a[ax] - s + 3.0 * s * ijk[ax] as f64 / n as f64)
-            };
-            // The samples' lattice in chunks of SAMPLE_CHUNK per axis: a chunk whose fields'
-            // ranges keep f on one side of zero is that side at every sample without sampling
-            // it (the samples are convex combinations of the voxels the range covers), so the
-            // answer, a crossing or none, is the same as sampling every point.
-            let (mut inside, mut outside) = (false, false);
-            let chunks = n / SAMPLE_CHUNK + 1;
-            for ck in 0..chunks {
-                for cj in 0..chunks {
-                    for ci in 0..chunks {
-                        let first = [ci, cj, ck].map(|c| c * SAMPLE_CHUNK);
-                        let last = first.map(|f| (f + SAMPLE_CHUNK - 1).min(n));
-                        match side_of_box([sample(first), sample(last)]) {
-                            Some(true) => inside = true,
-                            Some(false) => outside = true,
-                            None => {
-                                for k in first[2]..=last[2] {
-                                    for j in first[1]..=last[1] {
-                                        for i in first[0]..=last[0] {
-                                            if tissue_at(sample([i, j, k])) {
-                                                inside = true;
-                                            } else {
-                                                outside = true;
-                                            }
-                                            if inside && outside {
-                                                return h;
-                                            }
-                                        }
-                                    }
-                                }
-                            }
-                        }
-                        if inside && outside {
-                            return h;
-                        }
-                    }
-                }
-            }
-            f64::INFINITY
-        };
-        let bg = graded::background(lo, hi, h, levels, &surface_near)?;
-        graded::stuff_graded(&f, &bg)?
-    };
+    let fields = Fields::new(vol, seg);
+    let m = stuff_tissue(&fields, lo, hi, p)?;
     if m.tets.is_empty() {
         return Err(Error::config(format!(
             "tetrahedral mesh: no soft tissue inside the region {lo:?} .. {hi:?} (LPS mm)"
         )));
     }
-    // The CT's outermost voxel centres: past them the fields jump to air, and the tissue ends
-    // where the scan does.
-    let (first, last) = vol.bounds();
-    let kind: Vec<NodeKind> = m
-        .nodes
-        .par_iter()
-        .zip(&m.kind)
-        .map(|(q, k)| match k {
-            StuffKind::Interior => NodeKind::Interior,
-            StuffKind::Cut => NodeKind::Cut,
-            StuffKind::Surface => {
-                let on_bone = if crate::volume::past_scan_end((first, last), *q) {
-                    // The scan's end: neither iso-surface, both terms below zero, so their
-                    // order says nothing. Bone only where bone reaches the last slice; the rest
-                    // is the tissue's free surface where the scan ends.
-                    let on_last = std::array::from_fn(|a| q[a].clamp(first[a], last[a]));
-                    parts(on_last).1 >= 0.0
-                } else {
-                    // On f = 0 one of the two terms is zero and the other is not above it.
-                    let (s, b) = parts(*q);
-                    b >= s
-                };
-                if on_bone {
-                    NodeKind::Bone
-                } else {
-                    NodeKind::Skin
-                }
-            }
-        })
-        .collect();
+    let kind = node_kinds(&fields, vol.bounds(), &m.nodes, &m.kind);
     let (nodes, tets, kind, dropped_volume_mm3) = keep_skin_components(m.nodes, m.tets, kind);
     let m = stuffing::Stuffed {
         nodes,
@@ -270,20 +132,19 @@ pub fn soft_tissue(
         kind: Vec::new(),
         ..m
     };
-    let labels: Vec<Option<u8>> = m
-        .tets
-        .par_iter()
-        .map(|t| {
-            let c = [0, 1, 2].map(|a| t.iter().map(|n| m.nodes[*n as usize][a]).sum::<f64>() / 4.0);
-            tissue_near(vol, seg, map.to_voxel(c))
-        })
-        .collect();
-    let tissue_fallbacks = labels.iter().filter(|l| l.is_none()).count();
-    let tissue = labels.into_iter().map(|l| l.unwrap_or(MUSCLE)).collect();
+    let (tissue, tissue_fallbacks) = tissue_labels(vol, seg, &fields.map, &m.nodes, &m.tets);
     let quality = Quality::of(&m.nodes, &m.tets);
     // The box as meshed: rounded up to whole cubes of the coarsest size.
     let (lo, hi) = m.bounds;
-    let voxel_volume_mm3 = voxel_volume(vol, &skin, &bone, skin_iso, bone_iso, lo, hi);
+    let voxel_volume_mm3 = voxel_volume(
+        vol,
+        &fields.skin,
+        &fields.bone,
+        fields.skin_iso,
+        fields.bone_iso,
+        lo,
+        hi,
+    );
     Ok(SoftTissueMesh {
         nodes: m.nodes,
         tets: m.tets,
@@ -296,6 +157,240 @@ pub fn soft_tissue(
         flattened: m.flattened,
         dropped_volume_mm3,
     })
+}
+
+fn check_params(p: &MeshParams) -> Result<()> {
+    if !(p.skin_size_mm.is_finite() && p.skin_size_mm > 0.0) {
+        return Err(Error::config(format!(
+            "tetrahedral mesh: skin size must be positive, got {} mm",
+            p.skin_size_mm
+        )));
+    }
+    if !(p.margin_mm.is_finite() && p.margin_mm >= 0.0) {
+        return Err(Error::config(format!(
+            "tetrahedral mesh: margin must be ≥ 0, got {} mm",
+            p.margin_mm
+        )));
+    }
+    Ok(())
+}
+
+/// The skin and bone fields of a CT with their iso-values, sampled trilinearly at LPS points.
+struct Fields {
+    skin: Vec<f32>,
+    bone: Vec<f32>,
+    skin_iso: f64,
+    bone_iso: f64,
+    map: VoxelMap,
+    dims: [usize; 3],
+}
+
+impl Fields {
+    fn new(vol: &Volume, seg: &Segmentation) -> Fields {
+        Fields {
+            skin: seg.skin_field(vol),
+            bone: seg.bone_field(vol),
+            skin_iso: seg.windows.head_threshold,
+            bone_iso: seg.windows.bone,
+            map: vol.voxel_map(),
+            dims: vol.dims,
+        }
+    }
+
+    /// The implicit's two terms at `q`: the skin's and the bone's.
+    fn parts(&self, q: [f64; 3]) -> (f64, f64) {
+        let c = self.map.to_voxel(q);
+        (
+            self.skin_iso - sample_field(&self.skin, self.dims, c, OUTSIDE_HU) as f64,
+            sample_field(&self.bone, self.dims, c, OUTSIDE_HU) as f64 - self.bone_iso,
+        )
+    }
+
+    /// The implicit: negative in soft tissue.
+    fn f(&self, q: [f64; 3]) -> f64 {
+        let (s, b) = self.parts(q);
+        s.max(b)
+    }
+
+    /// f(q) < 0, the skin's term first: the bone's is not needed where the skin's is not
+    /// below zero.
+    fn tissue_at(&self, q: [f64; 3]) -> bool {
+        let c = self.map.to_voxel(q);
+        self.skin_iso - (sample_field(&self.skin, self.dims, c, OUTSIDE_HU) as f64) < 0.0
+            && (sample_field(&self.bone, self.dims, c, OUTSIDE_HU) as f64) - self.bone_iso < 0.0
+    }
+}
+
+/// Stuff the box `lo`..`hi`: a uniform lattice of the skin size, or a graded one when the deep
+/// size allows coarser cubes.
+fn stuff_tissue(
+    fields: &Fields,
+    lo: [f64; 3],
+    hi: [f64; 3],
+    p: &MeshParams,
+) -> Result<stuffing::Stuffed> {
+    let f = |q: [f64; 3]| fields.f(q);
+    // Grading: a cube of size s = h·2^l stays whole unless the skin or the bone iso-surface
+    // crosses the cube grown by s on every side (sampled every h), so the size doubles about
+    // every cube-width of distance from both surfaces, up to the deep size. Both surfaces stay
+    // in the finest uniform lattice (`graded`: size changes away from every surface keep
+    // stuffing's angle bounds); only tissue away from them coarsens.
+    let h = p.skin_size_mm;
+    let levels = if p.deep_size_mm > h {
+        ((p.deep_size_mm / h).log2().floor() as u32).min(4)
+    } else {
+        0
+    };
+    if levels == 0 {
+        stuffing::stuff(&f, lo, hi, h)
+    } else {
+        let grading = Grading {
+            fields,
+            skin_range: BlockRange::new(&fields.skin, fields.dims),
+            bone_range: BlockRange::new(&fields.bone, fields.dims),
+            h,
+        };
+        let surface_near = |a: [f64; 3], b: [f64; 3]| grading.surface_near(a, b);
+        let bg = graded::background(lo, hi, h, levels, &surface_near)?;
+        graded::stuff_graded(&f, &bg)
+    }
+}
+
+/// The grading's test: whether an iso-surface passes near a cube, from the fields' block
+/// ranges where they decide it and from samples where they do not.
+struct Grading<'a> {
+    fields: &'a Fields,
+    skin_range: BlockRange,
+    bone_range: BlockRange,
+    /// The skin size (mm).
+    h: f64,
+}
+
+impl Grading<'_> {
+    /// Whether f < 0 (soft tissue) at every sample of an LPS box, at none, or either.
+    fn side_of_box(&self, corners: [[f64; 3]; 2]) -> Option<bool> {
+        let (skin_iso, bone_iso) = (self.fields.skin_iso, self.fields.bone_iso);
+        one_sided(&self.fields.map, &self.skin_range, corners, |lo, hi| {
+            let (skin_lo, skin_hi) = self.skin_range.range(lo, hi);
+            let (bone_lo, bone_hi) = self.bone_range.range(lo, hi);
+            if f64::from(skin_lo) > skin_iso && f64::from(bone_hi) < bone_iso {
+                Some(true)
+            } else if f64::from(skin_hi) <= skin_iso || f64::from(bone_lo) >= bone_iso {
+                Some(false)
+            } else {
+                None
+            }
+        })
+    }
+
+    /// The wanted size of the cube `a`..`b`: the skin size when f changes sign in the cube
+    /// grown by its size on every side (sampled every skin size), else no limit.
+    fn surface_near(&self, a: [f64; 3], b: [f64; 3]) -> f64 {
+        let h = self.h;
+        let s = b[0] - a[0];
+        let n = (3.0 * s / h).ceil() as usize;
+        let sample =
+            |ijk: [usize; 3]| [0, 1, 2].map(|ax| a[ax] - s + 3.0 * s * ijk[ax] as f64 / n as f64);
+        // The samples' lattice in chunks of SAMPLE_CHUNK per axis: a chunk whose fields'
+        // ranges keep f on one side of zero is that side at every sample without sampling
+        // it (the samples are convex combinations of the voxels the range covers), so the
+        // answer, a crossing or none, is the same as sampling every point.
+        let (mut inside, mut outside) = (false, false);
+        let chunks = n / SAMPLE_CHUNK + 1;
+        for ck in 0..chunks {
+            for cj in 0..chunks {
+                for ci in 0..chunks {
+                    let first = [ci, cj, ck].map(|c| c * SAMPLE_CHUNK);
+                    let last = first.map(|f| (f + SAMPLE_CHUNK - 1).min(n));
+                    match self.side_of_box([sample(first), sample(last)]) {
+                        Some(true) => inside = true,
+                        Some(false) => outside = true,
+                        None => {
+                            for k in first[2]..=last[2] {
+                                for j in first[1]..=last[1] {
+                                    for i in first[0]..=last[0] {
+                                        if self.fields.tissue_at(sample([i, j, k])) {
+                                            inside = true;
+                                        } else {
+                                            outside = true;
+                                        }
+                                        if inside && outside {
+                                            return h;
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                    }
+                    if inside && outside {
+                        return h;
+                    }
+                }
+            }
+        }
+        f64::INFINITY
+    }
+}
+
+/// Per stuffed node its kind: surface nodes on the bone or the skin. `scan` is the CT's
+/// outermost voxel centres: past them the fields jump to air, and the tissue ends where the
+/// scan does.
+fn node_kinds(
+    fields: &Fields,
+    scan: ([f64; 3], [f64; 3]),
+    nodes: &[[f64; 3]],
+    kind: &[StuffKind],
+) -> Vec<NodeKind> {
+    nodes
+        .par_iter()
+        .zip(kind)
+        .map(|(q, k)| match k {
+            StuffKind::Interior => NodeKind::Interior,
+            StuffKind::Cut => NodeKind::Cut,
+            StuffKind::Surface => surface_kind(fields, scan, *q),
+        })
+        .collect()
+}
+
+/// A surface node's kind: Bone where the bone's term decides f, else Skin.
+fn surface_kind(fields: &Fields, (first, last): ([f64; 3], [f64; 3]), q: [f64; 3]) -> NodeKind {
+    let on_bone = if crate::volume::past_scan_end((first, last), q) {
+        // The scan's end: neither iso-surface, both terms below zero, so their
+        // order says nothing. Bone only where bone reaches the last slice; the rest
+        // is the tissue's free surface where the scan ends.
+        let on_last = std::array::from_fn(|a| q[a].clamp(first[a], last[a]));
+        fields.parts(on_last).1 >= 0.0
+    } else {
+        // On f = 0 one of the two terms is zero and the other is not above it.
+        let (s, b) = fields.parts(q);
+        b >= s
+    };
+    if on_bone {
+        NodeKind::Bone
+    } else {
+        NodeKind::Skin
+    }
+}
+
+/// Per tetrahedron the soft label near its centroid (muscle where none is found), and how
+/// many fell back to muscle.
+fn tissue_labels(
+    vol: &Volume,
+    seg: &Segmentation,
+    map: &VoxelMap,
+    nodes: &[[f64; 3]],
+    tets: &[[u32; 4]],
+) -> (Vec<u8>, usize) {
+    let labels: Vec<Option<u8>> = tets
+        .par_iter()
+        .map(|t| {
+            let c = [0, 1, 2].map(|a| t.iter().map(|n| nodes[*n as usize][a]).sum::<f64>() / 4.0);
+            tissue_near(vol, seg, map.to_voxel(c))
+        })
+        .collect();
+    let tissue_fallbacks = labels.iter().filter(|l| l.is_none()).count();
+    let tissue = labels.into_iter().map(|l| l.unwrap_or(MUSCLE)).collect();
+    (tissue, tissue_fallbacks)
 }
 
 /// Nodes, tetrahedra, node kinds and the volume left out (mm³).

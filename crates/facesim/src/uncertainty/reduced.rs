@@ -13,6 +13,7 @@ use crate::case::Case;
 use crate::error::Result;
 use crate::landmarks::Analysis;
 use crate::landmarks::Ordered;
+use crate::landmarks::face_regions::Regions;
 use crate::model::reduced::Bounds;
 use crate::observe::Observer;
 use crate::reduced::{LinearFace, ReducedReport};
@@ -79,115 +80,29 @@ pub(crate) fn sample_reduced(
     let start = std::time::Instant::now();
     let skin = run.skin;
     let draws: Vec<Draw> = draws(case);
-    let nominal = solve_key(case, run.sliding_matters);
     obs.started(&format!("uncertainty: {n} reduced solves"));
     let t = std::time::Instant::now();
-    // Per sample: its face and bounds (none for the nominal face, which is the run's own).
-    let solved: Vec<Result<(Face, Option<Bounds>)>> = draws
-        .par_iter()
-        .map(|d| {
-            let c = d.apply(case);
-            if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
-                return Ok((Face::Nominal, None));
-            }
-            let (m, coefficients, bounds) = (reduced.solve)(&c)?;
-            Ok((Face::Reduced(m, coefficients), Some(bounds)))
-        })
-        .collect();
+    let solved = solve_samples(run, reduced, case, &draws);
     let solve_s = t.elapsed().as_secs_f64();
-    let solved: Vec<(Face, Option<Bounds>)> = solved.into_iter().collect::<Result<_>>()?;
-    let bound = |s: usize, of: &dyn Fn(&Bounds) -> f64| solved[s].1.as_ref().map_or(0.0, of);
-    let largest = (0..n).map(|s| bound(s, &|b| b.face_mm)).fold(0.0, f64::max);
+    let solved: Vec<Solved> = solved.into_iter().collect::<Result<_>>()?;
+    let largest = (0..n)
+        .map(|s| bound(&solved[s], &|b| b.face_mm))
+        .fold(0.0, f64::max);
     let solves = solved
         .iter()
         .filter(|s| matches!(s.0, Face::Reduced(..)))
         .count();
-    let displacement = |s: usize, v: usize| -> [f64; 3] {
-        match &solved[s].0 {
-            Face::Nominal => sub(run.face_post[v], skin.vertices[v]),
-            Face::Reduced(m, c) => reduced.faces[*m].at(v, c),
-        }
-    };
     let trackers = trackers(analysis);
-    // Each soft landmark's position on each sample's face.
-    // (A reduced sample's landmark is corrected by its dual: the primal–dual output, whose
-    // error the landmark bound certifies.)
-    let mut soft = 0;
-    let positions: Vec<Option<Vec<[f64; 3]>>> = trackers
-        .iter()
-        .map(|(_, t)| match t {
-            Tracker::Soft(a, _) => {
-                let k = soft;
-                soft += 1;
-                Some(
-                    (0..n)
-                        .into_par_iter()
-                        .map(|s| match &solved[s] {
-                            (Face::Nominal, _) => a.place(&skin.triangles, run.face_post),
-                            (Face::Reduced(..), b) => {
-                                let on_face = place_on(skin, a, &|v| displacement(s, v));
-                                corrected(on_face, b.as_ref(), k)
-                            }
-                        })
-                        .collect(),
-                )
-            }
-            Tracker::Fixed(_) => None,
-        })
-        .collect();
-    let at_landmarks: Vec<Vec<f64>> = trackers
-        .iter()
-        .zip(&positions)
-        .map(|((_, t), at)| match (t, at) {
-            (Tracker::Soft(_, pre), Some(at)) => at.iter().map(|p| norm(sub(*p, *pre))).collect(),
-            (Tracker::Fixed(m), _) => vec![*m; n],
-            (Tracker::Soft(..), None) => unreachable!("a soft tracker has its positions"),
-        })
-        .collect();
+    let positions = soft_landmark_positions(run, reduced, &trackers, &solved, n);
+    let at_landmarks = landmark_changes(&trackers, &positions, n);
     obs.started("uncertainty: the band per vertex");
     let regions = regions(analysis, skin);
     let members: Vec<&[bool]> = regions
         .as_ref()
         .map(|r| r.members.iter().flatten().map(Vec::as_slice).collect())
         .unwrap_or_default();
-    let mut sums = vec![vec![0.0; n]; members.len()];
-    let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
-    let still = still(run, reduced);
-    const ZERO: Band = Band {
-        mean: 0.0,
-        p05: 0.0,
-        p95: 0.0,
-    };
-    for lo in (0..skin.vertices.len()).step_by(CHUNK) {
-        let hi = (lo + CHUNK).min(skin.vertices.len());
-        let mags: Vec<Option<Vec<f64>>> = (lo..hi)
-            .into_par_iter()
-            .map(|v| (!still[v]).then(|| (0..n).map(|s| norm(displacement(s, v))).collect()))
-            .collect();
-        bands.par_extend(mags.par_iter().map(|m| m.as_deref().map_or(ZERO, Band::of)));
-        // Region sums in vertex order, as the full path's (the nominal gives its figures).
-        for (r, sum) in members.iter().zip(&mut sums) {
-            sum.par_iter_mut().enumerate().for_each(|(s, acc)| {
-                for v in lo..hi {
-                    if let (true, Some(m)) = (r[v], &mags[v - lo]) {
-                        *acc += m[s];
-                    }
-                }
-            });
-        }
-    }
-    let mut in_regions: Vec<Vec<f64>> =
-        vec![Vec::new(); crate::landmarks::face_regions::NAMES.len()];
-    if let Some(r) = &regions {
-        let mut k = 0;
-        for (i, m) in r.members.iter().enumerate() {
-            if let Some(m) = m {
-                let count = m.iter().filter(|b| **b).count() as f64;
-                in_regions[i] = sums[k].iter().map(|x| x / count).collect();
-                k += 1;
-            }
-        }
-    }
+    let (bands, sums) = bands_and_region_sums(run, reduced, &solved, &members, n);
+    let in_regions = region_means(regions.as_ref(), &sums);
     let mut report = assemble(Tallies {
         case,
         draws,
@@ -201,20 +116,9 @@ pub(crate) fn sample_reduced(
     });
     report.method = "reduced".into();
     report.largest_bound_mm = Some(largest);
-    // Per soft landmark, the largest bound over the samples.
-    let mut soft = 0;
-    let mut per_landmark = Vec::new();
-    for (label, t) in &trackers {
-        if let Tracker::Soft(..) = t {
-            let k = soft;
-            soft += 1;
-            let b = (0..n)
-                .map(|s| bound(s, &|b| b.landmarks_mm[k]))
-                .fold(0.0, f64::max);
-            per_landmark.push((label.clone(), b));
-        }
-    }
-    report.landmark_bounds_mm = Some(crate::landmarks::Ordered(per_landmark));
+    report.landmark_bounds_mm = Some(crate::landmarks::Ordered(landmark_bounds(
+        &trackers, &solved, n,
+    )));
     report.reduced = Some(reduced.reports.clone());
     obs.started("uncertainty: Sobol indices");
     report.sensitivity = Some(sensitivity(run, reduced, analysis, case, &trackers));
@@ -224,6 +128,182 @@ pub(crate) fn sample_reduced(
         report,
         soft_positions,
     })
+}
+
+/// One sample's face and bounds (none for the nominal face, which is the run's own).
+type Solved = (Face, Option<Bounds>);
+
+/// Per draw, its reduced solve, or the nominal face where the draw solves as the run did.
+fn solve_samples(
+    run: &Nominal,
+    reduced: &Reduced,
+    case: &Case,
+    draws: &[Draw],
+) -> Vec<Result<Solved>> {
+    let nominal = solve_key(case, run.sliding_matters);
+    draws
+        .par_iter()
+        .map(|d| {
+            let c = d.apply(case);
+            if !run.moves || solve_key(&c, run.sliding_matters) == nominal {
+                return Ok((Face::Nominal, None));
+            }
+            let (m, coefficients, bounds) = (reduced.solve)(&c)?;
+            Ok((Face::Reduced(m, coefficients), Some(bounds)))
+        })
+        .collect()
+}
+
+/// A sample's bound `of` (zero for the nominal face).
+fn bound(sample: &Solved, of: &dyn Fn(&Bounds) -> f64) -> f64 {
+    sample.1.as_ref().map_or(0.0, of)
+}
+
+/// Face vertex `v`'s displacement on a sample's face.
+fn displacement(run: &Nominal, reduced: &Reduced, face: &Face, v: usize) -> [f64; 3] {
+    match face {
+        Face::Nominal => sub(run.face_post[v], run.skin.vertices[v]),
+        Face::Reduced(m, c) => reduced.faces[*m].at(v, c),
+    }
+}
+
+/// Each soft landmark's position on each sample's face (None for the fixed landmarks).
+/// (A reduced sample's landmark is corrected by its dual: the primal–dual output, whose
+/// error the landmark bound certifies.)
+fn soft_landmark_positions(
+    run: &Nominal,
+    reduced: &Reduced,
+    trackers: &[(String, Tracker)],
+    solved: &[Solved],
+    n: usize,
+) -> Vec<Option<Vec<[f64; 3]>>> {
+    let skin = run.skin;
+    let mut soft = 0;
+    trackers
+        .iter()
+        .map(|(_, t)| match t {
+            Tracker::Soft(a, _) => {
+                let k = soft;
+                soft += 1;
+                Some(
+                    (0..n)
+                        .into_par_iter()
+                        .map(|s| match &solved[s] {
+                            (Face::Nominal, _) => a.place(&skin.triangles, run.face_post),
+                            (face @ Face::Reduced(..), b) => {
+                                let disp = |v| displacement(run, reduced, face, v);
+                                let on_face = place_on(skin, a, &disp);
+                                corrected(on_face, b.as_ref(), k)
+                            }
+                        })
+                        .collect(),
+                )
+            }
+            Tracker::Fixed(_) => None,
+        })
+        .collect()
+}
+
+/// Per landmark, its change (mm) in each sample: a soft landmark's distance from its
+/// pre-operative position, a fixed one's change as the run measured it.
+fn landmark_changes(
+    trackers: &[(String, Tracker)],
+    positions: &[Option<Vec<[f64; 3]>>],
+    n: usize,
+) -> Vec<Vec<f64>> {
+    trackers
+        .iter()
+        .zip(positions)
+        .map(|((_, t), at)| match (t, at) {
+            (Tracker::Soft(_, pre), Some(at)) => at.iter().map(|p| norm(sub(*p, *pre))).collect(),
+            (Tracker::Fixed(m), _) => vec![*m; n],
+            (Tracker::Soft(..), None) => unreachable!("a soft tracker has its positions"),
+        })
+        .collect()
+}
+
+/// The band per face vertex and, per present region (`members`), each sample's sum of its
+/// vertices' displacement magnitudes: reduced in chunks of CHUNK vertices.
+fn bands_and_region_sums(
+    run: &Nominal,
+    reduced: &Reduced,
+    solved: &[Solved],
+    members: &[&[bool]],
+    n: usize,
+) -> (Vec<Band>, Vec<Vec<f64>>) {
+    let skin = run.skin;
+    let mut sums = vec![vec![0.0; n]; members.len()];
+    let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
+    let still = still(run, reduced);
+    const ZERO: Band = Band {
+        mean: 0.0,
+        p05: 0.0,
+        p95: 0.0,
+    };
+    for lo in (0..skin.vertices.len()).step_by(CHUNK) {
+        let hi = (lo + CHUNK).min(skin.vertices.len());
+        let mags: Vec<Option<Vec<f64>>> = (lo..hi)
+            .into_par_iter()
+            .map(|v| {
+                (!still[v]).then(|| {
+                    (0..n)
+                        .map(|s| norm(displacement(run, reduced, &solved[s].0, v)))
+                        .collect()
+                })
+            })
+            .collect();
+        bands.par_extend(mags.par_iter().map(|m| m.as_deref().map_or(ZERO, Band::of)));
+        // Region sums in vertex order, as the full path's (the nominal gives its figures).
+        for (r, sum) in members.iter().zip(&mut sums) {
+            sum.par_iter_mut().enumerate().for_each(|(s, acc)| {
+                for v in lo..hi {
+                    if let (true, Some(m)) = (r[v], &mags[v - lo]) {
+                        *acc += m[s];
+                    }
+                }
+            });
+        }
+    }
+    (bands, sums)
+}
+
+/// Per region of `face_regions::NAMES`, each sample's mean displacement magnitude (empty for
+/// an absent region), from the present regions' `sums`.
+fn region_means(regions: Option<&Regions>, sums: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let mut in_regions: Vec<Vec<f64>> =
+        vec![Vec::new(); crate::landmarks::face_regions::NAMES.len()];
+    if let Some(r) = regions {
+        let mut k = 0;
+        for (i, m) in r.members.iter().enumerate() {
+            if let Some(m) = m {
+                let count = m.iter().filter(|b| **b).count() as f64;
+                in_regions[i] = sums[k].iter().map(|x| x / count).collect();
+                k += 1;
+            }
+        }
+    }
+    in_regions
+}
+
+/// Per soft landmark, the largest bound over the samples.
+fn landmark_bounds(
+    trackers: &[(String, Tracker)],
+    solved: &[Solved],
+    n: usize,
+) -> Vec<(String, f64)> {
+    let mut soft = 0;
+    let mut per_landmark = Vec::new();
+    for (label, t) in trackers {
+        if let Tracker::Soft(..) = t {
+            let k = soft;
+            soft += 1;
+            let b = (0..n)
+                .map(|s| bound(&solved[s], &|b| b.landmarks_mm[k]))
+                .fold(0.0, f64::max);
+            per_landmark.push((label.clone(), b));
+        }
+    }
+    per_landmark
 }
 
 /// The anchor's position on a face of displacement `disp` per vertex (placed as on any face:
