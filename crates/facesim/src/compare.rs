@@ -126,6 +126,11 @@ impl<'a> SurfaceIndex<'a> {
         }
     }
 
+    /// Each point's distance to the surface (mm).
+    pub(crate) fn distances(&self, points: &[[f64; 3]]) -> Vec<f64> {
+        points.par_iter().map(|p| self.closest(*p).0).collect()
+    }
+
     /// Distance from p to the surface and the closest point.
     pub fn closest(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
         let (d, q, _) = self.closest_triangle(p);
@@ -232,8 +237,7 @@ pub struct Comparison {
 }
 
 pub(crate) fn point_to_surface(points: &[[f64; 3]], surface: &Mesh) -> Vec<f64> {
-    let idx = SurfaceIndex::new(surface);
-    points.par_iter().map(|p| idx.closest(*p).0).collect()
+    SurfaceIndex::new(surface).distances(points)
 }
 
 pub fn compare(a: &Mesh, b: &Mesh) -> Comparison {

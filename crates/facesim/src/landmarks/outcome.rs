@@ -7,7 +7,7 @@
 use super::face_regions::{self, RegionDistance};
 use super::landmark::{Landmark, Ordered, positions};
 use super::scan::{FaceLandmarks, FrameFrom, landmarks_of};
-use crate::compare::{SurfaceIndex, point_to_surface};
+use crate::compare::SurfaceIndex;
 use crate::error::{Error, Result};
 use crate::mesh::Mesh;
 use crate::surface::register::{Transform, fit};
@@ -88,7 +88,8 @@ pub fn compare_faces(a: &Mesh, a_path: &Path, b: &Mesh, b_path: &Path) -> Result
     let (am, bm) = (in_mm(a, &fa), in_mm(b, &fb));
     let start = starting_motion(&fa, a_path, &fb, b_path)?;
     let stable = stable_skin(&am, &fa, a_path)?;
-    let (motion, rms, iterations) = icp(&stable, &SurfaceIndex::new(&bm), start)?;
+    let on_b = SurfaceIndex::new(&bm);
+    let (motion, rms, iterations) = icp(&stable, &on_b, start)?;
     let a_on_b: Vec<[f64; 3]> = am.vertices.iter().map(|p| motion.apply(*p)).collect();
     let lms_a: Vec<(String, [f64; 3])> = positions(&fa.landmarks)
         .into_iter()
@@ -104,7 +105,7 @@ pub fn compare_faces(a: &Mesh, a_path: &Path, b: &Mesh, b_path: &Path) -> Result
         symmetry_residual_mm: fb.frame.symmetry_residual_mm,
     };
     let r = face_regions::regions(&a_on_b, &frame_b, &lms_a);
-    let distances = point_to_surface(&a_on_b, &bm);
+    let distances = on_b.distances(&a_on_b);
     let regions = face_regions::distance_stats(&r, &distances);
     let a_in_frame = Mesh::new(
         a_on_b

@@ -136,15 +136,7 @@ pub fn soft_tissue(
     let quality = Quality::of(&m.nodes, &m.tets);
     // The box as meshed: rounded up to whole cubes of the coarsest size.
     let (lo, hi) = m.bounds;
-    let voxel_volume_mm3 = voxel_volume(
-        vol,
-        &fields.skin,
-        &fields.bone,
-        fields.skin_iso,
-        fields.bone_iso,
-        lo,
-        hi,
-    );
+    let voxel_volume_mm3 = voxel_volume(vol, &fields, lo, hi);
     Ok(SoftTissueMesh {
         nodes: m.nodes,
         tets: m.tets,
@@ -477,22 +469,14 @@ fn tissue_near(vol: &Volume, seg: &Segmentation, c: [f64; 3]) -> Option<u8> {
 
 /// Soft-tissue volume (mm³) of the voxels whose centres lie in the box: inside the skin
 /// iso-surface and outside the bone's.
-fn voxel_volume(
-    vol: &Volume,
-    skin: &[f32],
-    bone: &[f32],
-    skin_iso: f64,
-    bone_iso: f64,
-    lo: [f64; 3],
-    hi: [f64; 3],
-) -> f64 {
+fn voxel_volume(vol: &Volume, fields: &Fields, lo: [f64; 3], hi: [f64; 3]) -> f64 {
     let count = (0..vol.len())
         .into_par_iter()
         .filter(|&i| {
             let p = vol.to_world(vol.ijk(i).map(|x| x as f64));
             (0..3).all(|a| p[a] >= lo[a] && p[a] <= hi[a])
-                && skin[i] as f64 >= skin_iso
-                && (bone[i] as f64) < bone_iso
+                && fields.skin[i] as f64 >= fields.skin_iso
+                && (fields.bone[i] as f64) < fields.bone_iso
         })
         .count();
     count as f64 * vol.voxel_volume()

@@ -85,15 +85,16 @@ pub(crate) fn sample_reduced(
     let solved = solve_samples(run, reduced, case, &draws);
     let solve_s = t.elapsed().as_secs_f64();
     let solved: Vec<Solved> = solved.into_iter().collect::<Result<_>>()?;
-    let largest = (0..n)
-        .map(|s| bound(&solved[s], &|b| b.face_mm))
+    let largest = solved
+        .iter()
+        .map(|s| bound(s, &|b| b.face_mm))
         .fold(0.0, f64::max);
     let solves = solved
         .iter()
         .filter(|s| matches!(s.0, Face::Reduced(..)))
         .count();
     let trackers = trackers(analysis);
-    let positions = soft_landmark_positions(run, reduced, &trackers, &solved, n);
+    let positions = soft_landmark_positions(run, reduced, &trackers, &solved);
     let at_landmarks = landmark_changes(&trackers, &positions, n);
     obs.started("uncertainty: the band per vertex");
     let regions = regions(analysis, skin);
@@ -101,7 +102,7 @@ pub(crate) fn sample_reduced(
         .as_ref()
         .map(|r| r.members.iter().flatten().map(Vec::as_slice).collect())
         .unwrap_or_default();
-    let (bands, sums) = bands_and_region_sums(run, reduced, &solved, &members, n);
+    let (bands, sums) = bands_and_region_sums(run, reduced, &solved, &members);
     let in_regions = region_means(regions.as_ref(), &sums);
     let mut report = assemble(Tallies {
         case,
@@ -117,7 +118,7 @@ pub(crate) fn sample_reduced(
     report.method = "reduced".into();
     report.largest_bound_mm = Some(largest);
     report.landmark_bounds_mm = Some(crate::landmarks::Ordered(landmark_bounds(
-        &trackers, &solved, n,
+        &trackers, &solved,
     )));
     report.reduced = Some(reduced.reports.clone());
     obs.started("uncertainty: Sobol indices");
@@ -175,7 +176,6 @@ fn soft_landmark_positions(
     reduced: &Reduced,
     trackers: &[(String, Tracker)],
     solved: &[Solved],
-    n: usize,
 ) -> Vec<Option<Vec<[f64; 3]>>> {
     let skin = run.skin;
     let mut soft = 0;
@@ -186,9 +186,9 @@ fn soft_landmark_positions(
                 let k = soft;
                 soft += 1;
                 Some(
-                    (0..n)
-                        .into_par_iter()
-                        .map(|s| match &solved[s] {
+                    solved
+                        .par_iter()
+                        .map(|s| match s {
                             (Face::Nominal, _) => a.place(&skin.triangles, run.face_post),
                             (face @ Face::Reduced(..), b) => {
                                 let disp = |v| displacement(run, reduced, face, v);
@@ -229,9 +229,9 @@ fn bands_and_region_sums(
     reduced: &Reduced,
     solved: &[Solved],
     members: &[&[bool]],
-    n: usize,
 ) -> (Vec<Band>, Vec<Vec<f64>>) {
     let skin = run.skin;
+    let n = solved.len();
     let mut sums = vec![vec![0.0; n]; members.len()];
     let mut bands: Vec<Band> = Vec::with_capacity(skin.vertices.len());
     let still = still(run, reduced);
@@ -286,19 +286,16 @@ fn region_means(regions: Option<&Regions>, sums: &[Vec<f64>]) -> Vec<Vec<f64>> {
 }
 
 /// Per soft landmark, the largest bound over the samples.
-fn landmark_bounds(
-    trackers: &[(String, Tracker)],
-    solved: &[Solved],
-    n: usize,
-) -> Vec<(String, f64)> {
+fn landmark_bounds(trackers: &[(String, Tracker)], solved: &[Solved]) -> Vec<(String, f64)> {
     let mut soft = 0;
     let mut per_landmark = Vec::new();
     for (label, t) in trackers {
         if let Tracker::Soft(..) = t {
             let k = soft;
             soft += 1;
-            let b = (0..n)
-                .map(|s| bound(&solved[s], &|b| b.landmarks_mm[k]))
+            let b = solved
+                .iter()
+                .map(|s| bound(s, &|b| b.landmarks_mm[k]))
                 .fold(0.0, f64::max);
             per_landmark.push((label.clone(), b));
         }
